@@ -1,0 +1,130 @@
+"""Aisle settings: ``AISLE_*`` environment variables and an optional TOML file.
+
+Nested groups use ``__`` in variable names, e.g. ``AISLE_OCCUPANCY__RESOLUTION_M=0.05``.
+The TOML file is named by ``AISLE_CONFIG_FILE``; environment variables win over it.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, Field, field_validator, model_validator
+from pydantic_settings import (
+    BaseSettings,
+    PydanticBaseSettingsSource,
+    SettingsConfigDict,
+    TomlConfigSettingsSource,
+)
+
+STAGES = ("occupancy_mapping",)
+"""Stage workers that ``aisle run`` starts, in start order."""
+
+
+class ZenohSettings(BaseModel):
+    """How the zenoh session connects; defaults give an isolated loopback peer."""
+
+    mode: Literal["peer", "client", "router"] = "peer"
+    connect: list[str] = Field(default_factory=list, description="Endpoints to connect to, e.g. tcp/host:7447.")
+    listen: list[str] = Field(
+        default_factory=lambda: ["tcp/127.0.0.1:7447"],
+        description="Endpoints to listen on; 7447 is where rmw_zenoh nodes look for a router by default.",
+    )
+    multicast_scouting: bool = False
+    config_file: Path | None = Field(None, description="A zenoh JSON5 config to start from.")
+
+    @field_validator("connect", "listen")
+    @classmethod
+    def _endpoints_have_protocol(cls, value: list[str]) -> list[str]:
+        for endpoint in value:
+            if "/" not in endpoint:
+                raise ValueError(f"zenoh endpoint {endpoint!r} needs a protocol, e.g. tcp/127.0.0.1:7447")
+        return value
+
+
+class OccupancySettings(BaseModel):
+    """The occupancy-mapping stage."""
+
+    resolution_m: float = Field(0.05, gt=0.0, le=1.0)
+    store_period_s: float = Field(5.0, gt=0.0)
+    publish_period_s: float = Field(2.0, gt=0.0)
+    scan_topic: str = "scan"
+    odom_topic: str = "odom"
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    max_range_m: float = Field(30.0, gt=0.0, description="Returns beyond this are not marked occupied.")
+    layer: str = "occupancy"
+
+
+class Settings(BaseSettings):
+    """All Aisle settings; build once with :func:`get_settings` and pass it in."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="AISLE_",
+        env_nested_delimiter="__",
+        extra="forbid",
+    )
+
+    data_dir: Path = Path("var")
+    database_url: str = Field(
+        "", description="SQLAlchemy URL; empty means a SQLite file aisle.db in data_dir."
+    )
+    map_name: str = Field("site", min_length=1, max_length=64)
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
+    ros_domain_id: int = Field(0, ge=0, le=232)
+    robot_namespaces: list[str] = Field(
+        default_factory=lambda: ["*"],
+        description='Robot namespaces to listen to: "*" for every robot, "" for the root namespace.',
+    )
+    api_host: str = "127.0.0.1"
+    api_port: int = Field(8000, ge=0, le=65535)
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
+    occupancy: OccupancySettings = Field(default_factory=OccupancySettings)
+
+    @field_validator("robot_namespaces")
+    @classmethod
+    def _namespaces_are_names(cls, value: list[str]) -> list[str]:
+        cleaned = [ns.strip("/") for ns in value]
+        for ns in cleaned:
+            if ns != "*" and not all(part.replace("_", "a").isalnum() for part in ns.split("/") if part):
+                raise ValueError(f"robot namespace {ns!r} is not a ROS name")
+        return cleaned
+
+    @field_validator("log_level", mode="before")
+    @classmethod
+    def _upper(cls, value: object) -> object:
+        return value.upper() if isinstance(value, str) else value
+
+    @model_validator(mode="after")
+    def _default_database(self) -> Settings:
+        if not self.database_url:
+            self.database_url = f"sqlite:///{self.data_dir / 'aisle.db'}"
+        elif not self.database_url.startswith(("sqlite", "postgresql")):
+            raise ValueError(f"database_url {self.database_url!r}: only sqlite and postgresql are supported")
+        return self
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        sources: list[PydanticBaseSettingsSource] = [init_settings, env_settings]
+        config_file = os.environ.get("AISLE_CONFIG_FILE")
+        if config_file:
+            if not Path(config_file).is_file():
+                raise FileNotFoundError(f"AISLE_CONFIG_FILE={config_file} does not exist")
+            sources.append(TomlConfigSettingsSource(settings_cls, toml_file=config_file))
+        return tuple(sources)
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    """The process-wide settings, read once from the environment."""
+    return Settings()

@@ -1,0 +1,35 @@
+"""The layered map store."""
+
+from shared.store.records import (
+    FEATURE_KINDS,
+    Feature,
+    GridLayer,
+    MapInfo,
+    Revision,
+    RevisionWrite,
+    StoredFeature,
+    StoredLayer,
+    StoreError,
+    TopologyEdge,
+    TopologyNode,
+    WorkerInfo,
+)
+from shared.store.store import MapStore, StoreUnavailable, layer_to_npy
+
+__all__ = [
+    "FEATURE_KINDS",
+    "Feature",
+    "GridLayer",
+    "MapInfo",
+    "MapStore",
+    "Revision",
+    "RevisionWrite",
+    "StoreError",
+    "StoreUnavailable",
+    "StoredFeature",
+    "StoredLayer",
+    "TopologyEdge",
+    "TopologyNode",
+    "WorkerInfo",
+    "layer_to_npy",
+]

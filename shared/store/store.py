@@ -1,0 +1,352 @@
+"""The layered map store on SQLite (WAL) or PostgreSQL.
+
+Every stage write is one revision in one transaction: its layers, features and topology land
+together or not at all. Features and topology are versioned by revision (``revision_id`` made
+them, ``retired_revision_id`` superseded them), so any revision of the map can be read back.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import io
+import os
+import socket
+import zlib
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy import event
+from sqlalchemy.engine import Connection, Engine
+
+from shared.store import schema
+from shared.store.records import (
+    Feature,
+    GridLayer,
+    MapInfo,
+    Revision,
+    RevisionWrite,
+    StoredFeature,
+    StoredLayer,
+    StoreError,
+    TopologyEdge,
+    TopologyNode,
+    WorkerInfo,
+    bounds,
+)
+
+MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+
+
+class StoreUnavailable(StoreError):
+    """The database cannot be reached right now; the caller may retry later."""
+
+
+def _now() -> dt.datetime:
+    return dt.datetime.now(dt.UTC)
+
+
+def _aware(value: dt.datetime) -> dt.datetime:
+    return value if value.tzinfo else value.replace(tzinfo=dt.UTC)
+
+
+def _encode(data: np.ndarray[Any, Any]) -> bytes:
+    return zlib.compress(np.ascontiguousarray(data).tobytes(), 1)
+
+
+def _decode(blob: bytes, dtype: str, height: int, width: int) -> np.ndarray[Any, Any]:
+    return np.frombuffer(zlib.decompress(blob), dtype=np.dtype(dtype)).reshape(height, width).copy()
+
+
+def _live_at(table: sa.Table, revision: int | None) -> sa.ColumnElement[bool]:
+    if revision is None:
+        return table.c.retired_revision_id.is_(None)
+    return sa.and_(
+        table.c.revision_id <= revision,
+        sa.or_(table.c.retired_revision_id.is_(None), table.c.retired_revision_id > revision),
+    )
+
+
+def create_store_engine(url: str) -> Engine:
+    """An engine for ``url``; SQLite gets WAL, a busy timeout and foreign keys."""
+    if url.startswith("sqlite"):
+        path = sa.make_url(url).database
+        if path and path != ":memory:":
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+        engine = sa.create_engine(url, connect_args={"timeout": 30, "check_same_thread": False})
+
+        @event.listens_for(engine, "connect")
+        def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
+            cursor = dbapi_connection.cursor()
+            cursor.execute("PRAGMA journal_mode=WAL")
+            cursor.execute("PRAGMA synchronous=NORMAL")
+            cursor.execute("PRAGMA foreign_keys=ON")
+            cursor.close()
+
+        return engine
+    return sa.create_engine(url, pool_pre_ping=True, pool_size=5, max_overflow=10)
+
+
+class MapStore:
+    """Typed access to the layered map; build one per process and share it between threads."""
+
+    def __init__(self, url: str, *, layer_history: int = 20) -> None:
+        self.url = url
+        self.engine = create_store_engine(url)
+        self.layer_history = layer_history
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    # -- schema ---------------------------------------------------------------------------
+    def upgrade(self) -> None:
+        """Bring the schema to the newest Alembic revision."""
+        from alembic import command
+        from alembic.config import Config
+
+        config = Config()
+        config.set_main_option("script_location", str(MIGRATIONS_DIR))
+        with self._begin() as connection:
+            config.attributes["connection"] = connection
+            command.upgrade(config, "head")
+
+    @contextmanager
+    def _begin(self) -> Iterator[Connection]:
+        try:
+            with self.engine.begin() as connection:
+                yield connection
+        except sa.exc.OperationalError as err:
+            raise StoreUnavailable(f"database unavailable: {err.orig}") from err
+        except sa.exc.InterfaceError as err:
+            raise StoreUnavailable(f"database unavailable: {err.orig}") from err
+
+    @contextmanager
+    def _read(self) -> Iterator[Connection]:
+        try:
+            with self.engine.connect() as connection:
+                yield connection
+        except (sa.exc.OperationalError, sa.exc.InterfaceError) as err:
+            raise StoreUnavailable(f"database unavailable: {err.orig}") from err
+
+    def ping(self) -> None:
+        """Raise :class:`StoreUnavailable` unless the database answers."""
+        with self._read() as connection:
+            connection.execute(sa.text("SELECT 1"))
+
+    # -- maps and revisions ---------------------------------------------------------------
+    def ensure_map(self, name: str, *, frame_id: str = "map") -> MapInfo:
+        """The map called ``name``, created on first use."""
+        found = self.get_map(name)
+        if found is not None:
+            return found
+        try:
+            with self._begin() as connection:
+                connection.execute(schema.maps.insert().values(name=name, frame_id=frame_id, created_at=_now()))
+        except sa.exc.IntegrityError:
+            pass  # another process created it first
+        created = self.get_map(name)
+        assert created is not None
+        return created
+
+    def get_map(self, name_or_id: str | int) -> MapInfo | None:
+        column = schema.maps.c.id if isinstance(name_or_id, int) else schema.maps.c.name
+        with self._read() as connection:
+            row = connection.execute(sa.select(schema.maps).where(column == name_or_id)).first()
+        return None if row is None else MapInfo(row.id, row.name, row.frame_id, _aware(row.created_at))
+
+    def maps(self) -> list[MapInfo]:
+        with self._read() as connection:
+            rows = connection.execute(sa.select(schema.maps).order_by(schema.maps.c.id)).all()
+        return [MapInfo(r.id, r.name, r.frame_id, _aware(r.created_at)) for r in rows]
+
+    def revisions(self, map_id: int, *, after_id: int = 0, limit: int = 100) -> list[Revision]:
+        """Revisions of a map with id > ``after_id``, oldest first."""
+        table = schema.revisions
+        query = (sa.select(table).where(table.c.map_id == map_id, table.c.id > after_id)
+                 .order_by(table.c.id).limit(limit))
+        with self._read() as connection:
+            return [self._revision(r) for r in connection.execute(query)]
+
+    def latest_revision(self, map_id: int) -> Revision | None:
+        table = schema.revisions
+        query = sa.select(table).where(table.c.map_id == map_id).order_by(table.c.id.desc()).limit(1)
+        with self._read() as connection:
+            row = connection.execute(query).first()
+        return None if row is None else self._revision(row)
+
+    @staticmethod
+    def _revision(row: Any) -> Revision:
+        return Revision(row.id, row.map_id, row.stage, _aware(row.created_at), row.input_start_ns,
+                        row.input_end_ns, row.summary)
+
+    # -- writing --------------------------------------------------------------------------
+    def write_revision(self, map_id: int, write: RevisionWrite) -> Revision:
+        """Store everything in ``write`` as one new revision, atomically."""
+        with self._begin() as connection:
+            created_at = _now()
+            revision_id = connection.execute(
+                schema.revisions.insert().values(
+                    map_id=map_id, stage=write.stage, created_at=created_at, input_start_ns=write.input_start_ns,
+                    input_end_ns=write.input_end_ns, summary={},
+                ).returning(schema.revisions.c.id)
+            ).scalar_one()
+            summary: dict[str, Any] = dict(write.summary)
+            summary["layers_updated"] = [layer.name for layer in write.layers]
+            for layer in write.layers:
+                self._insert_layer(connection, map_id, revision_id, layer)
+            summary["features"] = {
+                kind: self._replace_features(connection, map_id, revision_id, write.stage, kind, items)
+                for kind, items in write.features.items()
+            }
+            summary["topology_changed"] = write.topology is not None
+            if write.topology is not None:
+                self._replace_topology(connection, map_id, revision_id, write.stage, *write.topology)
+            connection.execute(
+                schema.revisions.update().where(schema.revisions.c.id == revision_id).values(summary=summary)
+            )
+        return Revision(revision_id, map_id, write.stage, created_at, write.input_start_ns, write.input_end_ns,
+                        summary)
+
+    def _insert_layer(self, connection: Connection, map_id: int, revision_id: int, layer: GridLayer) -> None:
+        table = schema.layers
+        connection.execute(table.insert().values(
+            map_id=map_id, revision_id=revision_id, name=layer.name, dtype=layer.data.dtype.str,
+            height=layer.data.shape[0], width=layer.data.shape[1], resolution_m=layer.resolution_m,
+            origin_x_m=layer.origin_x_m, origin_y_m=layer.origin_y_m, data=_encode(layer.data),
+            meta=dict(layer.meta),
+        ))
+        keep = (sa.select(table.c.id).where(table.c.map_id == map_id, table.c.name == layer.name)
+                .order_by(table.c.revision_id.desc()).limit(self.layer_history))
+        connection.execute(table.delete().where(
+            table.c.map_id == map_id, table.c.name == layer.name, table.c.id.not_in(keep.scalar_subquery())
+        ))
+
+    @staticmethod
+    def _replace_features(connection: Connection, map_id: int, revision_id: int, stage: str, kind: str,
+                          items: Sequence[Feature]) -> dict[str, int]:
+        table = schema.features
+        live = sa.and_(table.c.map_id == map_id, table.c.stage == stage, table.c.kind == kind,
+                       table.c.retired_revision_id.is_(None))
+        previous = {row.key: (row.geometry, row.properties)
+                    for row in connection.execute(sa.select(table.c.key, table.c.geometry, table.c.properties)
+                                                  .where(live))}
+        connection.execute(table.update().where(live).values(retired_revision_id=revision_id))
+        rows = []
+        for item in items:
+            min_x, min_y, max_x, max_y = bounds(item.geometry)
+            rows.append({
+                "map_id": map_id, "revision_id": revision_id, "stage": stage, "kind": kind, "key": item.key,
+                "geometry": dict(item.geometry), "min_x": min_x, "min_y": min_y, "max_x": max_x, "max_y": max_y,
+                "confidence": item.confidence, "properties": dict(item.properties),
+            })
+        if rows:
+            connection.execute(table.insert(), rows)
+        keys = {item.key for item in items}
+        moved = sum(1 for item in items if item.key in previous
+                    and previous[item.key][0] != dict(item.geometry))
+        return {"added": len(keys - previous.keys()), "removed": len(previous.keys() - keys), "moved": moved,
+                "total": len(keys)}
+
+    @staticmethod
+    def _replace_topology(connection: Connection, map_id: int, revision_id: int, stage: str,
+                          nodes: Sequence[TopologyNode], edges: Sequence[TopologyEdge]) -> None:
+        for table in (schema.topology_nodes, schema.topology_edges):
+            connection.execute(table.update().where(
+                table.c.map_id == map_id, table.c.stage == stage, table.c.retired_revision_id.is_(None)
+            ).values(retired_revision_id=revision_id))
+        if nodes:
+            connection.execute(schema.topology_nodes.insert(), [
+                {"map_id": map_id, "revision_id": revision_id, "stage": stage, "key": n.key, "kind": n.kind,
+                 "x_m": n.x_m, "y_m": n.y_m, "attributes": dict(n.attributes)} for n in nodes])
+        if edges:
+            connection.execute(schema.topology_edges.insert(), [
+                {"map_id": map_id, "revision_id": revision_id, "stage": stage, "source": e.source,
+                 "target": e.target, "attributes": dict(e.attributes)} for e in edges])
+
+    # -- reading --------------------------------------------------------------------------
+    def layer_names(self, map_id: int) -> list[str]:
+        table = schema.layers
+        with self._read() as connection:
+            return list(connection.execute(
+                sa.select(table.c.name).where(table.c.map_id == map_id).distinct().order_by(table.c.name)
+            ).scalars())
+
+    def layer(self, map_id: int, name: str, *, revision: int | None = None) -> StoredLayer | None:
+        """The newest version of layer ``name`` (at or before ``revision`` if given)."""
+        table = schema.layers
+        query = sa.select(table).where(table.c.map_id == map_id, table.c.name == name)
+        if revision is not None:
+            query = query.where(table.c.revision_id <= revision)
+        with self._read() as connection:
+            row = connection.execute(query.order_by(table.c.revision_id.desc()).limit(1)).first()
+        if row is None:
+            return None
+        data = _decode(row.data, row.dtype, row.height, row.width)
+        layer = GridLayer(row.name, data, row.resolution_m, row.origin_x_m, row.origin_y_m, row.meta)
+        return StoredLayer(row.revision_id, layer)
+
+    def features(
+        self,
+        map_id: int,
+        *,
+        kinds: Sequence[str] | None = None,
+        bbox: tuple[float, float, float, float] | None = None,
+        revision: int | None = None,
+        limit: int | None = None,
+        offset: int = 0,
+    ) -> list[StoredFeature]:
+        """Features live at ``revision`` (default: now), optionally of ``kinds`` and touching ``bbox``."""
+        table = schema.features
+        query = sa.select(table).where(table.c.map_id == map_id, _live_at(table, revision))
+        if kinds:
+            query = query.where(table.c.kind.in_(list(kinds)))
+        if bbox is not None:
+            min_x, min_y, max_x, max_y = bbox
+            query = query.where(table.c.max_x >= min_x, table.c.min_x <= max_x,
+                                table.c.max_y >= min_y, table.c.min_y <= max_y)
+        query = query.order_by(table.c.id).offset(offset)
+        if limit is not None:
+            query = query.limit(limit)
+        with self._read() as connection:
+            rows = connection.execute(query).all()
+        return [StoredFeature(r.id, r.revision_id, r.stage,
+                              Feature(r.kind, r.key, r.geometry, r.properties, r.confidence)) for r in rows]
+
+    def topology(self, map_id: int, *, revision: int | None = None
+                 ) -> tuple[list[TopologyNode], list[TopologyEdge]]:
+        nodes_t, edges_t = schema.topology_nodes, schema.topology_edges
+        with self._read() as connection:
+            nodes = [TopologyNode(r.key, r.kind, r.x_m, r.y_m, r.attributes) for r in connection.execute(
+                sa.select(nodes_t).where(nodes_t.c.map_id == map_id, _live_at(nodes_t, revision))
+                .order_by(nodes_t.c.id))]
+            edges = [TopologyEdge(r.source, r.target, r.attributes) for r in connection.execute(
+                sa.select(edges_t).where(edges_t.c.map_id == map_id, _live_at(edges_t, revision))
+                .order_by(edges_t.c.id))]
+        return nodes, edges
+
+    # -- workers --------------------------------------------------------------------------
+    def heartbeat(self, name: str, counters: dict[str, int], *, started_at: dt.datetime) -> None:
+        """Record that worker ``name`` is running, with its counters."""
+        table = schema.workers
+        values = {"host": socket.gethostname(), "pid": os.getpid(), "started_at": started_at,
+                  "heartbeat_at": _now(), "counters": counters}
+        with self._begin() as connection:
+            updated = connection.execute(table.update().where(table.c.name == name).values(**values)).rowcount
+            if not updated:
+                connection.execute(table.insert().values(name=name, **values))
+
+    def workers(self) -> list[WorkerInfo]:
+        with self._read() as connection:
+            rows = connection.execute(sa.select(schema.workers).order_by(schema.workers.c.name)).all()
+        return [WorkerInfo(r.name, r.host, r.pid, _aware(r.started_at), _aware(r.heartbeat_at), r.counters)
+                for r in rows]
+
+
+def layer_to_npy(layer: GridLayer) -> bytes:
+    """The layer's values as a ``.npy`` file."""
+    buffer = io.BytesIO()
+    np.save(buffer, layer.data, allow_pickle=False)
+    return buffer.getvalue()
