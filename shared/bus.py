@@ -106,6 +106,12 @@ class Subscription:
             self._ring = collections.deque(maxlen=maxsize)
         self._handles: list[Any] = []
 
+    def close(self) -> None:
+        """Stop receiving; queued samples stay readable."""
+        for handle in self._handles:
+            handle.undeclare()
+        self._handles.clear()
+
     def _on_sample(self, sample: zenoh.Sample) -> None:
         raw = _Raw(
             key=str(sample.key_expr),
@@ -206,7 +212,7 @@ class Bus:
         self.counters = counters if counters is not None else Counters()
         self._zid = str(session.zid())
         self._entity_ids = itertools.count()
-        self._subscribers: list[Any] = []
+        self._subscriptions: list[Subscription] = []
 
     @classmethod
     @contextmanager
@@ -224,9 +230,9 @@ class Bus:
             bus.close()
 
     def close(self) -> None:
-        for subscriber in self._subscribers:
-            subscriber.undeclare()
-        self._subscribers.clear()
+        for subscription in self._subscriptions:
+            subscription.close()
+        self._subscriptions.clear()
         if not self.session.is_closed():
             self.session.close()
 
@@ -260,7 +266,8 @@ class Bus:
                                     counters=self.counters)
         for namespace in namespaces:
             selector = topic_selector(self.domain_id, namespace, topic, msgtype)
-            self._subscribers.append(self.session.declare_subscriber(selector, subscription._on_sample))
+            subscription._handles.append(self.session.declare_subscriber(selector, subscription._on_sample))
+        self._subscriptions.append(subscription)
         return subscription
 
     def declare_worker(self, name: str) -> zenoh.LivelinessToken:

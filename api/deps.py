@@ -1,0 +1,90 @@
+"""Request dependencies: the app's store, settings and bus, and the map and revision a route reads."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Path, Query, Request, status
+
+from shared.bus import Bus
+from shared.settings import Settings
+from shared.store import MapInfo, MapStore, Revision
+
+
+@dataclass(frozen=True, slots=True)
+class ApiContext:
+    """What :func:`api.app.create_app` was built with; kept on ``app.state.context``."""
+
+    store: MapStore
+    settings: Settings
+    bus: Bus | None
+    expected_workers: Sequence[str]
+
+
+def get_context(request: Request) -> ApiContext:
+    context = request.app.state.context
+    if not isinstance(context, ApiContext):
+        raise TypeError("app.state.context is not set; build the app with api.app.create_app")
+    return context
+
+
+ContextDep = Annotated[ApiContext, Depends(get_context)]
+
+
+def get_store(context: ContextDep) -> MapStore:
+    return context.store
+
+
+def get_settings(context: ContextDep) -> Settings:
+    return context.settings
+
+
+StoreDep = Annotated[MapStore, Depends(get_store)]
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+
+
+def get_map(
+    map_name: Annotated[str, Path(description="Name of the map, e.g. `site`.", max_length=64)],
+    store: StoreDep,
+) -> MapInfo:
+    """The map named in the path, or 404 naming the maps that do exist."""
+    found = store.get_map(map_name)
+    if found is None:
+        known = [info.name for info in store.maps()]
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no map named {map_name!r}; known maps: {known}")
+    return found
+
+
+MapDep = Annotated[MapInfo, Depends(get_map)]
+
+
+def find_revision(store: MapStore, map_info: MapInfo, revision_id: int) -> Revision | None:
+    """Revision ``revision_id`` if it belongs to the map, else None."""
+    found = store.revisions(map_info.id, after_id=revision_id - 1, limit=1)
+    return found[0] if found and found[0].id == revision_id else None
+
+
+def get_revision(
+    map_info: MapDep,
+    store: StoreDep,
+    revision: Annotated[
+        int | None,
+        Query(ge=1, description="Read the map as it was at this revision id (default: now)."),
+    ] = None,
+) -> int | None:
+    """The ``?revision=`` to read at, after checking it is a revision of the map (404 otherwise)."""
+    if revision is None:
+        return None
+    if find_revision(store, map_info, revision) is None:
+        latest = store.latest_revision(map_info.id)
+        newest = "it has no revisions yet" if latest is None else f"its newest is {latest.id}"
+        raise HTTPException(
+            status.HTTP_404_NOT_FOUND,
+            f"revision {revision} is not a revision of map {map_info.name!r}; {newest}",
+        )
+    return revision
+
+
+RevisionQuery = Annotated[int | None, Depends(get_revision)]

@@ -1,0 +1,71 @@
+"""Grid layers as greyscale images for people to look at."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+UNKNOWN_GREY = 205
+"""Grey of unknown occupancy cells, as map_server's map_saver writes them."""
+
+
+class RenderError(ValueError):
+    """A layer whose values cannot be shown as an image."""
+
+
+def layer_image(data: npt.NDArray[Any]) -> npt.NDArray[np.uint8]:
+    """A greyscale image of a grid layer, north up.
+
+    Parameters
+    ----------
+    data : (rows, cols) array
+        Layer values, row 0 the lowest y. ``int8`` is read as occupancy (nav_msgs/OccupancyGrid):
+        -1 unknown (grey 205), 0 free (white) to 100 occupied (black), shaded linearly in between;
+        values outside -1..100 are shown as unknown. Other numeric dtypes are scaled min-max to
+        0..255 over their finite values; non-finite cells are black.
+
+    Returns
+    -------
+    (rows, cols) uint8 array
+        Row 0 is the top of the image, i.e. the highest y.
+
+    Examples
+    --------
+    >>> layer_image(np.array([[0], [100], [-1]], dtype=np.int8))[:, 0].tolist()
+    [205, 0, 255]
+    """
+    if data.ndim != 2:
+        raise RenderError(f"only 2-D layers can be rendered, not shape {data.shape}")
+    grey = _occupancy_grey(data) if data.dtype == np.int8 else _scaled_grey(data)
+    return np.ascontiguousarray(grey[::-1])
+
+
+def _occupancy_grey(data: npt.NDArray[np.int8]) -> npt.NDArray[np.uint8]:
+    grey = np.full(data.shape, UNKNOWN_GREY, dtype=np.uint8)
+    known = (data >= 0) & (data <= 100)
+    grey[known] = np.round(255.0 - data[known].astype(np.float64) * 2.55).astype(np.uint8)
+    return grey
+
+
+def _scaled_grey(data: npt.NDArray[Any]) -> npt.NDArray[np.uint8]:
+    if data.dtype.kind not in "biuf":
+        raise RenderError(f"layers of dtype {data.dtype.name} cannot be rendered; fetch their values instead")
+    values = data.astype(np.float64)
+    finite = np.isfinite(values)
+    grey = np.zeros(data.shape, dtype=np.uint8)
+    if finite.any():
+        low, high = values[finite].min(), values[finite].max()
+        if high > low:
+            grey[finite] = np.round((values[finite] - low) / (high - low) * 255.0).astype(np.uint8)
+    return grey
+
+
+def encode_png(image: npt.NDArray[np.uint8]) -> bytes:
+    """PNG file bytes of a greyscale uint8 image."""
+    ok, buffer = cv2.imencode(".png", image)
+    if not ok:
+        raise RenderError(f"PNG encoding failed for an image of shape {image.shape}")
+    return bytes(buffer.tobytes())

@@ -1,0 +1,80 @@
+"""Maps and their revisions."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Path, Query, status
+
+from api.deps import MapDep, StoreDep, find_revision
+from api.models import ErrorOut, MapDetail, MapSummary, RevisionOut, RevisionPage
+from shared.store import MapInfo, MapStore, Revision
+
+router = APIRouter(prefix="/v1/maps", tags=["maps"])
+
+_NOT_FOUND = {status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map or revision."}}
+
+
+def revision_out(revision: Revision) -> RevisionOut:
+    return RevisionOut(
+        id=revision.id,
+        stage=revision.stage,
+        created_at=revision.created_at,
+        input_start_ns=revision.input_start_ns,
+        input_end_ns=revision.input_end_ns,
+        summary=dict(revision.summary),
+    )
+
+
+def _summary(store: MapStore, map_info: MapInfo, latest: Revision | None) -> MapSummary:
+    return MapSummary(
+        name=map_info.name,
+        frame_id=map_info.frame_id,
+        created_at=map_info.created_at,
+        latest_revision_id=None if latest is None else latest.id,
+        layers=store.layer_names(map_info.id),
+    )
+
+
+@router.get("", summary="List maps")
+def list_maps(store: StoreDep) -> list[MapSummary]:
+    """Every map with its newest revision id and the names of its grid layers."""
+    return [_summary(store, info, store.latest_revision(info.id)) for info in store.maps()]
+
+
+@router.get("/{map_name}", summary="Describe a map", responses=_NOT_FOUND)
+def get_map(map_info: MapDep, store: StoreDep) -> MapDetail:
+    """One map with its newest revision and the names of its grid layers."""
+    latest = store.latest_revision(map_info.id)
+    return MapDetail(
+        **_summary(store, map_info, latest).model_dump(),
+        latest_revision=None if latest is None else revision_out(latest),
+    )
+
+
+@router.get("/{map_name}/revisions", summary="List revisions", responses=_NOT_FOUND)
+def list_revisions(
+    map_info: MapDep,
+    store: StoreDep,
+    after: Annotated[int, Query(ge=0, description="Only revisions with a larger id (a page cursor).")] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000, description="Page size.")] = 100,
+) -> RevisionPage:
+    """Revisions of the map, oldest first, one page at a time."""
+    revisions = store.revisions(map_info.id, after_id=after, limit=limit)
+    next_after = revisions[-1].id if len(revisions) == limit else None
+    return RevisionPage(revisions=[revision_out(r) for r in revisions], next_after=next_after)
+
+
+@router.get("/{map_name}/revisions/{revision_id}", summary="Describe a revision", responses=_NOT_FOUND)
+def get_revision(
+    map_info: MapDep,
+    store: StoreDep,
+    revision_id: Annotated[int, Path(ge=1)],
+) -> RevisionOut:
+    """One revision of the map: which stage wrote it, when, from which input, and what changed."""
+    found = find_revision(store, map_info, revision_id)
+    if found is None:
+        raise HTTPException(
+            status.HTTP_404_NOT_FOUND, f"revision {revision_id} is not a revision of map {map_info.name!r}"
+        )
+    return revision_out(found)

@@ -1,0 +1,159 @@
+"""``aisle``: one command for every way Aisle runs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import threading
+from collections.abc import Sequence
+from functools import partial
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from pydantic import ValidationError
+
+from shared.settings import STAGES, Settings, get_settings
+
+if TYPE_CHECKING:
+    from shared.bus import Bus
+
+log = logging.getLogger("aisle")
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text} is not a positive number")
+    return value
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="aisle", description=__doc__)
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = commands.add_parser("run", help="all stages and the API in one process")
+    run.add_argument("--replay", type=Path, metavar="BAG", help="also replay this rosbag2 onto the bus")
+    run.add_argument("--rate", type=_positive, default=1.0, help="replay speed factor")
+    run.add_argument("--loop", action="store_true", help="replay in a loop")
+
+    worker = commands.add_parser("worker", help="one stage worker")
+    worker.add_argument("stage", choices=STAGES)
+
+    commands.add_parser("serve", help="the API only")
+    db = commands.add_parser("db", help="database schema")
+    db.add_argument("action", choices=["upgrade"])
+    commands.add_parser("settings", help="print the effective settings as JSON")
+
+    replay = commands.add_parser("replay", help="publish a rosbag2 file onto the bus with its timing")
+    replay.add_argument("bag", type=Path)
+    replay.add_argument("--rate", type=_positive, default=1.0)
+    replay.add_argument("--loop", action="store_true")
+    replay.add_argument("--namespace", default="", help="extra ROS namespace to publish under")
+
+    record = commands.add_parser("record", help="record bus traffic to an MCAP rosbag2")
+    record.add_argument("out", type=Path)
+
+    carmen = commands.add_parser("import-carmen", help="convert a CARMEN log (FLASER) to rosbag2")
+    carmen.add_argument("log", type=Path)
+    carmen.add_argument("out", type=Path)
+
+    build = commands.add_parser("map-build", help="build an occupancy map offline from a rosbag2")
+    build.add_argument("bag", type=Path)
+    build.add_argument("--out", type=Path, required=True, help="map_server YAML to write (PGM beside it)")
+    build.add_argument("--resolution", type=_positive, default=None, help="metres per cell")
+    build.add_argument("--scan-topic", default=None)
+    return parser
+
+
+def _configure_logging(level: str) -> None:
+    logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        settings = get_settings()
+    except (ValidationError, FileNotFoundError) as err:
+        print(f"aisle: bad settings: {err}", file=sys.stderr)
+        return 2
+    _configure_logging(settings.log_level)
+    try:
+        return _dispatch(args, settings)
+    except (ValueError, OSError, ConnectionError) as err:
+        log.error("%s", err)
+        return 1
+
+
+def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
+    from services import runtime
+
+    stop = threading.Event()
+    match args.command:
+        case "run":
+            extra = []
+            if args.replay is not None:
+                extra.append(partial(_replay_job, bag=args.replay, rate=args.rate, loop=args.loop))
+            with runtime.stop_on_signals(stop):
+                runtime.run(settings, stages=STAGES, api=True, stop=stop, extra=extra)
+        case "worker":
+            with runtime.stop_on_signals(stop):
+                runtime.run(settings, stages=[args.stage], api=False, stop=stop)
+        case "serve":
+            with runtime.stop_on_signals(stop):
+                runtime.run(settings, stages=[], api=True, stop=stop)
+        case "db":
+            runtime.open_store(settings).close()
+            log.info("database schema is up to date (%s)", settings.database_url)
+        case "settings":
+            print(json.dumps(settings.model_dump(mode="json"), indent=2))
+        case "replay":
+            from shared.bus import Bus
+
+            with Bus.open(settings.zenoh, domain_id=settings.ros_domain_id) as bus, runtime.stop_on_signals(stop):
+                _replay_job(bus, stop, bag=args.bag, rate=args.rate, loop=args.loop, namespace=args.namespace)
+        case "record":
+            from services.replay import record
+            from shared.bus import Bus
+
+            with Bus.open(settings.zenoh, domain_id=settings.ros_domain_id) as bus, runtime.stop_on_signals(stop):
+                stats = record(bus, args.out, stop=stop, domain_id=settings.ros_domain_id)
+            log.info("recorded %s", stats)
+        case "import-carmen":
+            from services.replay import import_carmen
+
+            log.info("wrote %s: %s", args.out, import_carmen(args.log, args.out))
+        case "map-build":
+            return _map_build(args, settings)
+    return 0
+
+
+def _replay_job(bus: Bus, stop: threading.Event, *, bag: Path, rate: float, loop: bool,
+                namespace: str = "") -> None:
+    from services.replay import replay_bag
+
+    stats = replay_bag(bus, bag, rate=rate, loop=loop, stop=stop, namespace=namespace)
+    log.info("replay of %s finished: %s", bag, stats)
+
+
+def _map_build(args: argparse.Namespace, settings: Settings) -> int:
+    from services.occupancy_mapping import build_map, sharpness, write_map_yaml
+
+    occupancy_settings = settings.occupancy
+    grid = build_map(
+        args.bag,
+        resolution_m=args.resolution or occupancy_settings.resolution_m,
+        scan_topic=args.scan_topic or occupancy_settings.scan_topic,
+        max_range_m=occupancy_settings.max_range_m,
+    )
+    occupancy = grid.occupancy()
+    write_map_yaml(args.out, occupancy, resolution_m=grid.resolution_m, origin_x_m=grid.origin_x_m,
+                   origin_y_m=grid.origin_y_m)
+    log.info("wrote %s (%d x %d cells at %.3f m, sharpness %.3f)", args.out, occupancy.shape[1],
+             occupancy.shape[0], grid.resolution_m, sharpness(occupancy))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,103 @@
+"""Running Aisle: stage workers and the API in one process, or one stage per process."""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from types import FrameType
+
+from shared.bus import Bus
+from shared.settings import STAGES, Settings
+from shared.store import MapStore
+from shared.worker import StageFactory, run_stage
+
+log = logging.getLogger(__name__)
+
+
+def stage_factories() -> dict[str, StageFactory]:
+    """Every stage Aisle can run, by name (imported lazily: stages pull in heavy libraries)."""
+    from services.occupancy_mapping.worker import OccupancyStage
+
+    factories: dict[str, StageFactory] = {"occupancy_mapping": OccupancyStage}
+    assert set(factories) == set(STAGES)
+    return factories
+
+
+@contextmanager
+def stop_on_signals(stop: threading.Event) -> Iterator[None]:
+    """Set ``stop`` on SIGINT or SIGTERM for the duration of the block (main thread only)."""
+
+    def handler(signum: int, _frame: FrameType | None) -> None:
+        log.info("received %s, shutting down", signal.Signals(signum).name)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def open_store(settings: Settings) -> MapStore:
+    """The map store of ``settings``, its schema brought up to date."""
+    store = MapStore(settings.database_url, layer_history=settings.layer_history)
+    store.upgrade()
+    return store
+
+
+def run(
+    settings: Settings,
+    *,
+    stages: Sequence[str],
+    api: bool,
+    stop: threading.Event,
+    extra: Sequence[Callable[[Bus, threading.Event], None]] = (),
+) -> None:
+    """Run ``stages`` (and the API if ``api``) until ``stop`` is set; then shut down cleanly.
+
+    ``extra`` callables run in their own threads with the bus (e.g. a bag replay).
+    """
+    factories = stage_factories()
+    unknown = set(stages) - set(factories)
+    if unknown:
+        raise ValueError(f"unknown stage(s) {sorted(unknown)}; known: {sorted(factories)}")
+    store = open_store(settings)
+    with Bus.open(settings.zenoh, domain_id=settings.ros_domain_id) as bus:
+        threads = [
+            threading.Thread(target=run_stage, name=name, args=(name, factories[name]),
+                             kwargs={"bus": bus, "store": store, "settings": settings, "stop": stop})
+            for name in stages
+        ]
+        threads += [threading.Thread(target=job, args=(bus, stop), name=getattr(job, "__name__", "job"))
+                    for job in extra]
+        server = None
+        if api:
+            import uvicorn
+
+            from api.app import create_app
+
+            app = create_app(store=store, settings=settings, bus=bus, expected_workers=stages)
+            server = uvicorn.Server(uvicorn.Config(app, host=settings.api_host, port=settings.api_port,
+                                                   log_level=settings.log_level.lower(), access_log=False))
+            threads.append(threading.Thread(target=server.run, name="api"))
+        for thread in threads:
+            thread.start()
+        log.info("running %s%s", ", ".join(stages) or "no stages",
+                 f" and the API on http://{settings.api_host}:{settings.api_port}" if api else "")
+        try:
+            while not stop.wait(0.5):
+                if server is not None and not threads[-1].is_alive():
+                    log.error("the API server stopped (port %d taken?); shutting down", settings.api_port)
+                    stop.set()
+        finally:
+            stop.set()
+            if server is not None:
+                server.should_exit = True
+            for thread in threads:
+                thread.join()
+    store.close()
+    log.info("stopped cleanly")

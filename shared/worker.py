@@ -1,0 +1,134 @@
+"""Running a stage worker: liveliness, heartbeats, counted errors, atomic revisions, map events.
+
+A stage implements :class:`Stage`; :func:`run_stage` connects it to the bus and the store and
+keeps it alive until ``stop`` is set. Workers are thin: they decode, call pure functions,
+persist and publish.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from shared import messages
+from shared.bus import WORKER_NAMESPACE, Bus, Publisher
+from shared.metrics import Counters
+from shared.settings import Settings
+from shared.store import MapInfo, MapStore, Revision, RevisionWrite, StoreError, StoreUnavailable
+
+log = logging.getLogger(__name__)
+
+HEARTBEAT_PERIOD_S = 5.0
+MAP_EVENTS_TOPIC = "map_events"
+"""Map events go to ROS topic ``/aisle/map_events`` (aisle_msgs/msg/MapEvent)."""
+
+
+@dataclass
+class StageContext:
+    """What a stage gets to work with."""
+
+    name: str
+    bus: Bus
+    store: MapStore
+    settings: Settings
+    map: MapInfo
+    counters: Counters
+    started_at: dt.datetime = field(default_factory=lambda: dt.datetime.now(dt.UTC))
+    _events: Publisher | None = None
+
+    def count(self, what: str, amount: int = 1) -> None:
+        self.counters.incr(f"{self.name}.{what}", amount)
+
+    def commit(self, write: RevisionWrite) -> Revision | None:
+        """Store ``write`` as one revision and announce it; None (counted, logged) if the store is down.
+
+        Invalid content raises :class:`StoreError`: that is a bug in the stage, not bad input.
+        """
+        try:
+            revision = self.store.write_revision(self.map.id, write)
+        except StoreUnavailable as err:
+            self.count("store_unavailable")
+            log.warning("%s: revision not stored, will retry: %s", self.name, err)
+            return None
+        self.count("revisions")
+        self._announce(revision)
+        return revision
+
+    def _announce(self, revision: Revision) -> None:
+        if self._events is None:
+            self._events = self.bus.publisher(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespace=WORKER_NAMESPACE)
+        features = revision.summary.get("features", {})
+        now = time.time_ns()
+        event = messages.message_class(messages.MAP_EVENT)(
+            stamp=messages.message_class("builtin_interfaces/msg/Time")(sec=now // 10**9, nanosec=now % 10**9),
+            map_name=self.map.name,
+            revision_id=revision.id,
+            stage=revision.stage,
+            layers_updated=list(revision.summary.get("layers_updated", [])),
+            feature_kinds=sorted(features),
+            features_added=sum(f["added"] for f in features.values()),
+            features_removed=sum(f["removed"] for f in features.values()),
+            features_moved=sum(f["moved"] for f in features.values()),
+            topology_changed=bool(revision.summary.get("topology_changed", False)),
+        )
+        self._events.publish(event)
+
+
+class Stage(Protocol):
+    """One pipeline stage: subscribes in ``__init__``, works in ``run`` until ``stop`` is set."""
+
+    def run(self, stop: threading.Event) -> None: ...
+
+
+StageFactory = Callable[[StageContext], Stage]
+
+
+def _heartbeat(context: StageContext, stop: threading.Event) -> None:
+    while True:
+        try:
+            context.store.heartbeat(context.name, {**context.bus.counters.snapshot(),
+                                                   **context.counters.snapshot()},
+                                    started_at=context.started_at)
+        except StoreError as err:
+            context.count("heartbeat_failures")
+            log.debug("%s: heartbeat not stored: %s", context.name, err)
+        if stop.wait(HEARTBEAT_PERIOD_S):
+            return
+
+
+def run_stage(name: str, factory: StageFactory, *, bus: Bus, store: MapStore, settings: Settings,
+              stop: threading.Event, restart_delay_s: float = 2.0) -> None:
+    """Run stage ``name`` until ``stop``: announced on the bus, heartbeating into the store.
+
+    An unexpected exception inside the stage is logged and counted, and the stage is rebuilt
+    after ``restart_delay_s`` (its state comes back from the store).
+    """
+    map_info = None
+    while map_info is None:
+        try:
+            map_info = store.ensure_map(settings.map_name)
+        except StoreUnavailable as err:
+            log.warning("%s: waiting for the database: %s", name, err)
+            if stop.wait(restart_delay_s):
+                return
+    context = StageContext(name, bus, store, settings, map_info, Counters())
+    token = bus.declare_worker(name)
+    heart = threading.Thread(target=_heartbeat, args=(context, stop), name=f"{name}-heartbeat", daemon=True)
+    heart.start()
+    try:
+        while not stop.is_set():
+            try:
+                factory(context).run(stop)
+            except Exception:
+                context.count("crashes")
+                log.exception("%s: stage failed; restarting in %.1f s", name, restart_delay_s)
+                stop.wait(restart_delay_s)
+    finally:
+        token.undeclare()
+        heart.join(timeout=HEARTBEAT_PERIOD_S + 1)
+        log.info("%s: stopped", name)

@@ -1,0 +1,77 @@
+"""Fixtures shared by every test: real zenoh sessions on loopback, real SQLite and PostgreSQL stores."""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Iterator
+from contextlib import ExitStack
+from pathlib import Path
+
+import pytest
+import sqlalchemy as sa
+
+from shared.bus import Bus
+from shared.settings import ZenohSettings
+from shared.store import MapStore
+from tests.helpers import free_port
+
+POSTGRES_URL_ENV = "AISLE_TEST_POSTGRES_URL"
+
+
+@pytest.fixture
+def zenoh_listen() -> ZenohSettings:
+    """Settings for a peer listening on a free loopback port, scouting off."""
+    return ZenohSettings(listen=[f"tcp/127.0.0.1:{free_port()}"])
+
+
+@pytest.fixture
+def bus_pair(zenoh_listen: ZenohSettings) -> Iterator[tuple[Bus, Bus]]:
+    """Two connected zenoh sessions: the first listens, the second connects to it."""
+    other = ZenohSettings(listen=[], connect=zenoh_listen.listen)
+    with ExitStack() as stack:
+        first = stack.enter_context(Bus.open(zenoh_listen, domain_id=0))
+        second = stack.enter_context(Bus.open(other, domain_id=0))
+        yield first, second
+
+
+def _postgres_url() -> str:
+    url = os.environ.get(POSTGRES_URL_ENV)
+    if not url:
+        pytest.skip(f"PostgreSQL tests need {POSTGRES_URL_ENV}, e.g. postgresql+psycopg://postgres@127.0.0.1/test")
+    return url
+
+
+@pytest.fixture
+def postgres_url() -> Iterator[str]:
+    """A URL to a fresh, empty schema in the test PostgreSQL; dropped afterwards."""
+    base = _postgres_url()
+    schema_name = f"aisle_test_{uuid.uuid4().hex[:12]}"
+    admin = sa.create_engine(base)
+    with admin.begin() as connection:
+        connection.execute(sa.text(f'CREATE SCHEMA "{schema_name}"'))
+    separator = "&" if "?" in base else "?"
+    try:
+        yield f"{base}{separator}options=-csearch_path%3D{schema_name}"
+    finally:
+        with admin.begin() as connection:
+            connection.execute(sa.text(f'DROP SCHEMA "{schema_name}" CASCADE'))
+        admin.dispose()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """A database URL per backend: a SQLite file, or a fresh PostgreSQL schema."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'aisle.db'}"
+    url: str = request.getfixturevalue("postgres_url")
+    return url
+
+
+@pytest.fixture
+def store(store_url: str) -> Iterator[MapStore]:
+    """A migrated map store on each backend."""
+    map_store = MapStore(store_url, layer_history=3)
+    map_store.upgrade()
+    yield map_store
+    map_store.close()

@@ -1,0 +1,146 @@
+"""The layered map store on SQLite and PostgreSQL: atomic revisions, history, live reads."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+import sqlalchemy as sa
+
+from shared.store import (
+    Feature,
+    GridLayer,
+    MapStore,
+    RevisionWrite,
+    StoreError,
+    StoreUnavailable,
+    TopologyEdge,
+    TopologyNode,
+)
+
+
+def _bin(key: str, x: float, y: float) -> Feature:
+    return Feature("bin", key, {"type": "Point", "coordinates": [x, y]}, {"aisle": key[:2]}, 0.9)
+
+
+def _grid(value: int, shape: tuple[int, int] = (40, 60)) -> GridLayer:
+    return GridLayer("occupancy", np.full(shape, value, np.int8), 0.05, -1.0, -2.0, {"source": "test"})
+
+
+def test_layer_round_trips_with_geometry(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    data = np.arange(40 * 60, dtype=np.int16).reshape(40, 60) % 101
+    store.write_revision(site.id, RevisionWrite("occupancy_mapping", layers=[
+        GridLayer("occupancy", data.astype(np.int8), 0.05, -1.0, -2.0)]))
+    stored = store.layer(site.id, "occupancy")
+    assert stored is not None
+    np.testing.assert_array_equal(stored.layer.data, data.astype(np.int8))
+    assert (stored.layer.resolution_m, stored.layer.origin_x_m, stored.layer.origin_y_m) == (0.05, -1.0, -2.0)
+
+
+def test_old_layer_versions_are_pruned_but_readable_by_revision(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    revisions = [store.write_revision(site.id, RevisionWrite("occ", layers=[_grid(v)])).id for v in range(5)]
+    latest = store.layer(site.id, "occupancy")
+    assert latest is not None and latest.revision_id == revisions[-1] and latest.layer.data[0, 0] == 4
+    at_third = store.layer(site.id, "occupancy", revision=revisions[3])
+    assert at_third is not None and at_third.layer.data[0, 0] == 3
+    assert store.layer(site.id, "occupancy", revision=revisions[0]) is None  # history keeps 3 versions
+
+
+def test_features_are_replaced_per_stage_and_kind_with_history(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    first = store.write_revision(site.id, RevisionWrite("pillars", features={
+        "bin": [_bin("01-01", 1, 1), _bin("01-02", 2, 1)]}))
+    second = store.write_revision(site.id, RevisionWrite("pillars", features={
+        "bin": [_bin("01-02", 2.5, 1), _bin("01-03", 3, 1)]}))
+    assert second.summary["features"]["bin"] == {"added": 1, "removed": 1, "moved": 1, "total": 2}
+    assert sorted(f.feature.key for f in store.features(site.id, kinds=["bin"])) == ["01-02", "01-03"]
+    assert sorted(f.feature.key for f in store.features(site.id, revision=first.id)) == ["01-01", "01-02"]
+    inside = store.features(site.id, bbox=(2.2, 0.0, 2.8, 2.0))
+    assert [f.feature.key for f in inside] == ["01-02"]
+
+
+def test_other_stages_features_are_untouched(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    store.write_revision(site.id, RevisionWrite("pillars", features={"bin": [_bin("A", 0, 0)]}))
+    store.write_revision(site.id, RevisionWrite("wms_import", features={"bin": [_bin("B", 5, 5)]}))
+    assert sorted(f.feature.key for f in store.features(site.id)) == ["A", "B"]
+
+
+def test_a_failing_revision_leaves_nothing_behind(store: MapStore, monkeypatch: pytest.MonkeyPatch) -> None:
+    site = store.ensure_map("site")
+    store.write_revision(site.id, RevisionWrite("pillars", features={"bin": [_bin("A", 0, 0)]}))
+    broken = RevisionWrite("pillars", layers=[_grid(1)], features={"bin": [_bin("B", 1, 1)]},
+                           topology=([TopologyNode("n", "corridor")], []))
+
+    def fail_last_step(*args: object, **kwargs: object) -> None:
+        raise sa.exc.IntegrityError("INSERT", {}, Exception("failure after layers and features were written"))
+
+    monkeypatch.setattr(store, "_replace_topology", fail_last_step)
+    with pytest.raises(sa.exc.IntegrityError):
+        store.write_revision(site.id, broken)
+    assert [f.feature.key for f in store.features(site.id)] == ["A"]
+    assert store.layer(site.id, "occupancy") is None
+    assert len(store.revisions(site.id)) == 1
+
+
+def test_topology_is_versioned(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    first = store.write_revision(site.id, RevisionWrite("grid", topology=(
+        [TopologyNode("c1", "corridor", 1, 2), TopologyNode("j1", "junction", 3, 2)],
+        [TopologyEdge("c1", "j1", {"connection": "connected"})])))
+    store.write_revision(site.id, RevisionWrite("grid", topology=([TopologyNode("c2", "corridor")], [])))
+    nodes, edges = store.topology(site.id)
+    assert [n.key for n in nodes] == ["c2"] and edges == []
+    nodes, edges = store.topology(site.id, revision=first.id)
+    assert [n.key for n in nodes] == ["c1", "j1"] and edges[0].attributes == {"connection": "connected"}
+
+
+@pytest.mark.parametrize(("make", "match"), [
+    (lambda: Feature("shelf", "x", {"type": "Point", "coordinates": [0, 0]}), "unknown feature kind"),
+    (lambda: Feature("bin", "x", {"type": "Point", "coordinates": [float("nan"), 0]}), "finite"),
+    (lambda: Feature("bin", "x", {"coordinates": [0, 0]}), "GeoJSON"),
+    (lambda: GridLayer("occ", np.zeros((0, 3), np.int8), 0.05, 0, 0), "non-empty 2-D"),
+    (lambda: GridLayer("occ", np.zeros((3, 3), np.int8), -1.0, 0, 0), "resolution"),
+    (lambda: RevisionWrite("s", features={"bin": [_bin("A", 0, 0), _bin("A", 1, 1)]}), "unique"),
+])
+def test_bad_records_are_refused_before_touching_the_database(make: object, match: str) -> None:
+    with pytest.raises(StoreError, match=match):
+        make()  # type: ignore[operator]
+
+
+def test_readers_are_not_blocked_by_a_writer(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    store.write_revision(site.id, RevisionWrite("occ", layers=[_grid(1)]))
+    writer_inside = threading.Event()
+    release = threading.Event()
+    with store.engine.connect() as writer:
+        transaction = writer.begin()
+        writer.execute(sa.text("UPDATE maps SET frame_id = 'held' WHERE id = :id"), {"id": site.id})
+        writer_inside.set()
+        reader_result: list[object] = []
+        reader = threading.Thread(target=lambda: reader_result.append(store.layer(site.id, "occupancy")))
+        reader.start()
+        reader.join(timeout=5)
+        release.set()
+        transaction.rollback()
+    assert reader_result and reader_result[0] is not None
+
+
+def test_unreachable_database_is_reported_as_unavailable() -> None:
+    store = MapStore("postgresql+psycopg://nobody@127.0.0.1:1/none")
+    with pytest.raises(StoreUnavailable, match="unavailable"):
+        store.ping()
+    store.close()
+
+
+def test_heartbeats_upsert_worker_state(store: MapStore) -> None:
+    import datetime as dt
+
+    started = dt.datetime.now(dt.UTC)
+    store.heartbeat("occupancy_mapping", {"scans": 1}, started_at=started)
+    store.heartbeat("occupancy_mapping", {"scans": 5}, started_at=started)
+    (worker,) = store.workers()
+    assert worker.name == "occupancy_mapping" and worker.counters == {"scans": 5}
