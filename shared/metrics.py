@@ -24,3 +24,8 @@ class Counters:
     def snapshot(self) -> dict[str, int]:
         with self._lock:
             return dict(sorted(self._counts.items()))
+
+    def set(self, name: str, value: int) -> None:
+        """Set a counter kept elsewhere (e.g. a stage's own tally) to its current value."""
+        with self._lock:
+            self._counts[name] = value

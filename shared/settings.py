@@ -53,7 +53,6 @@ class OccupancySettings(BaseModel):
     scan_topic: str = "scan"
     odom_topic: str = "odom"
     map_frame: str = "map"
-    odom_frame: str = "odom"
     max_range_m: float = Field(30.0, gt=0.0, description="Returns beyond this are not marked occupied.")
     layer: str = "occupancy"
 

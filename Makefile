@@ -1,0 +1,33 @@
+# The two set-up commands of the README, and a few developer conveniences.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: run test test-fast lint bench clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+## run: install into .venv and start the embedded stack (all stages + API on 127.0.0.1:8000)
+run: $(STAMP)
+	$(BIN)/aisle run $(ARGS)
+
+## test: the whole test suite (PostgreSQL tests run when AISLE_TEST_POSTGRES_URL is set)
+test: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/mypy shared services api migrations bench
+	$(BIN)/pytest
+
+## test-fast: skip the slow end-to-end runs
+test-fast: $(STAMP)
+	$(BIN)/pytest -m "not slow"
+
+bench: $(STAMP)
+	for f in bench/bench_*.py; do $(BIN)/python $$f; done
+
+clean:
+	rm -rf $(VENV) var build *.egg-info

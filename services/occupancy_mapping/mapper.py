@@ -1,0 +1,157 @@
+"""Scans plus transforms in, occupancy grid out: the state machine shared by the live worker and
+offline map building.
+
+Each robot (ROS namespace) has its own transform tree. A scan waits until that tree has
+transforms at or after its stamp, so it is placed by interpolation, never by stale poses; scans
+that never get a pose within ``wait_s`` are dropped and counted.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from services.occupancy_mapping.errors import OccupancyMappingError
+from services.occupancy_mapping.grid import OccupancyGrid
+from services.occupancy_mapping.scan import ScanArrays, scan_arrays
+from shared.transforms import Pose2D, Transform, TransformBuffer, add_odometry, add_tf_message, sensor_pose_2d
+
+log = logging.getLogger(__name__)
+
+AUTO_FRAME = "auto"
+
+ScanCorrector = Callable[[OccupancyGrid, Pose2D, ScanArrays], Pose2D]
+"""Optional pose correction: given the grid so far, a predicted sensor pose and the scan, a better pose."""
+
+
+def sensor_pose(transform: Transform, angles: npt.NDArray[np.float64]) -> tuple[Pose2D, npt.NDArray[np.float64]]:
+    """Planar sensor pose and bearings; a sensor mounted upside down sweeps the other way."""
+    x, y, _, _ = transform.rotation
+    z_axis_up = 1.0 - 2.0 * (x * x + y * y)
+    return sensor_pose_2d(transform), (-angles if z_axis_up < 0 else angles)
+
+
+@dataclass
+class _Robot:
+    buffer: TransformBuffer
+    pending: deque[ScanArrays] = field(default_factory=deque)
+    tf_children: set[str] = field(default_factory=set)
+    frame: str | None = None
+
+
+class ScanMapper:
+    """Integrates laser scans from one or more robots into one :class:`OccupancyGrid`.
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+        The grid to update (e.g. resumed from the store).
+    fixed_frame : str
+        Frame the grid lives in; ``"auto"`` takes ``map`` when a robot's tree has it, else ``odom``.
+    max_range_m : float
+        Returns at or beyond this are not marked occupied.
+    wait_s : float
+        How long (in scan time) a scan may wait for its transforms before it is dropped.
+    corrector : callable, optional
+        Pose correction per scan before integration (e.g. scan-to-map matching).
+    """
+
+    def __init__(self, grid: OccupancyGrid, *, fixed_frame: str = AUTO_FRAME, max_range_m: float = 30.0,
+                 wait_s: float = 2.0, cache_s: float = 30.0, corrector: ScanCorrector | None = None) -> None:
+        self.grid = grid
+        self.fixed_frame = fixed_frame
+        self.max_range_m = max_range_m
+        self._wait_ns = round(wait_s * 1e9)
+        self._cache_s = cache_s
+        self._corrector = corrector
+        self._robots: dict[str, _Robot] = {}
+        self.counts: Counter[str] = Counter()
+        self.first_stamp_ns: int | None = None
+        self.last_stamp_ns: int | None = None
+
+    def _robot(self, namespace: str) -> _Robot:
+        if namespace not in self._robots:
+            self._robots[namespace] = _Robot(TransformBuffer(cache_s=self._cache_s))
+        return self._robots[namespace]
+
+    def add_tf(self, namespace: str, message: Any, *, static: bool = False) -> None:
+        """Feed a tf2_msgs/TFMessage of robot ``namespace``."""
+        robot = self._robot(namespace)
+        robot.tf_children.update(t.child_frame_id.lstrip("/") for t in message.transforms)
+        add_tf_message(robot.buffer, message, static=static)
+
+    def add_odometry(self, namespace: str, message: Any) -> None:
+        """Feed a nav_msgs/Odometry; ignored for frames the robot's TF already carries."""
+        robot = self._robot(namespace)
+        if message.child_frame_id.lstrip("/") not in robot.tf_children:
+            add_odometry(robot.buffer, message)
+
+    def add_scan(self, namespace: str, message: Any, *, fallback_stamp_ns: int = 0) -> None:
+        """Queue a sensor_msgs/LaserScan; raises :class:`OccupancyMappingError` if it is malformed."""
+        scan = scan_arrays(message)
+        if scan.stamp_ns == 0:
+            scan = scan._replace(stamp_ns=fallback_stamp_ns)
+        self._robot(namespace).pending.append(scan)
+
+    def drain(self, *, final: bool = False) -> int:
+        """Integrate every queued scan whose transforms are known; return how many were integrated.
+
+        With ``final`` every queued scan is decided now (integrated if possible, else dropped).
+        """
+        done = 0
+        for namespace, robot in self._robots.items():
+            while robot.pending:
+                scan = robot.pending[0]
+                robot.frame = robot.frame or self._choose_frame(namespace, robot.buffer)
+                newest = robot.buffer.newest_stamp_ns(robot.frame, scan.frame_id) if robot.frame else None
+                waiting = newest is None or newest < scan.stamp_ns
+                if waiting and not final and robot.pending[-1].stamp_ns - scan.stamp_ns < self._wait_ns:
+                    break
+                robot.pending.popleft()
+                done += self._integrate(robot, scan)
+        return done
+
+    def _choose_frame(self, namespace: str, buffer: TransformBuffer) -> str | None:
+        if self.fixed_frame != AUTO_FRAME:
+            return self.fixed_frame
+        for wanted in ("map", "odom"):
+            found = sorted(f for f in buffer.frames if f == wanted or f.endswith("/" + wanted))
+            if found:
+                if wanted == "odom":
+                    log.warning("robot %r has no map frame; mapping in its odometry frame %r", namespace or "/",
+                                found[0])
+                return found[0]
+        return None
+
+    def _integrate(self, robot: _Robot, scan: ScanArrays) -> int:
+        if robot.frame is None:
+            self.counts["scans_without_frame"] += 1
+            return 0
+        try:
+            transform = robot.buffer.lookup(robot.frame, scan.frame_id, scan.stamp_ns)
+        except LookupError as err:
+            self.counts["scans_without_pose"] += 1
+            log.debug("scan at %d ns dropped: %s", scan.stamp_ns, err)
+            return 0
+        pose, angles = sensor_pose(transform, scan.angles)
+        if self._corrector is not None:
+            pose = self._corrector(self.grid, pose, scan._replace(angles=angles))
+        try:
+            beams = self.grid.integrate(pose, scan.ranges, angles, range_min_m=scan.range_min_m,
+                                        range_max_m=scan.range_max_m, max_range_m=self.max_range_m)
+        except OccupancyMappingError as err:
+            self.counts["scans_rejected"] += 1
+            log.warning("scan at %d ns rejected: %s", scan.stamp_ns, err)
+            return 0
+        self.counts["scans_integrated"] += 1
+        self.counts["beams_used"] += beams
+        self.counts["beams_skipped"] += scan.ranges.size - beams
+        self.first_stamp_ns = scan.stamp_ns if self.first_stamp_ns is None else self.first_stamp_ns
+        self.last_stamp_ns = scan.stamp_ns
+        return 1

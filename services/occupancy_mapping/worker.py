@@ -1,0 +1,136 @@
+"""The occupancy-mapping worker: scans and poses from the bus in, the occupancy layer out.
+
+It integrates scans from every robot it listens to, stores the grid as a revision every
+``store_period_s`` and publishes it as nav_msgs/OccupancyGrid on ``/aisle/map`` every
+``publish_period_s``. On start it resumes from the stored layer, so a restart loses nothing
+that was committed.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+from services.occupancy_mapping.errors import OccupancyMappingError
+from services.occupancy_mapping.grid import OccupancyGrid
+from services.occupancy_mapping.mapper import AUTO_FRAME, ScanMapper
+from shared import messages
+from shared.bus import WORKER_NAMESPACE, DropPolicy, Subscription
+from shared.grids import occupancy_grid_message
+from shared.store import RevisionWrite, StoreUnavailable
+from shared.worker import StageContext
+
+log = logging.getLogger(__name__)
+
+MAP_TOPIC = "map"
+_BATCH = 50
+
+
+class OccupancyStage:
+    """Stage ``occupancy_mapping``; see the module docstring."""
+
+    def __init__(self, context: StageContext) -> None:
+        self.context = context
+        settings = context.settings
+        self.settings = settings.occupancy
+        namespaces = settings.robot_namespaces
+        bus = context.bus
+
+        def subscribe(topic: str, msgtype: str, maxsize: int) -> Subscription:
+            return bus.subscribe(topic, msgtype, namespaces=namespaces, policy=DropPolicy.BLOCK, maxsize=maxsize,
+                                 name=f"{context.name}.{topic}")
+
+        self.scans = subscribe(self.settings.scan_topic, messages.LASER_SCAN, 500)
+        self.odometry = subscribe(self.settings.odom_topic, messages.ODOMETRY, 2000)
+        self.tf = subscribe("tf", messages.TF_MESSAGE, 2000)
+        self.tf_static = subscribe("tf_static", messages.TF_MESSAGE, 100)
+        self._subscriptions = (self.scans, self.odometry, self.tf, self.tf_static)
+        self.mapper = ScanMapper(self._resume(), fixed_frame=AUTO_FRAME, max_range_m=self.settings.max_range_m)
+        self._publisher = bus.publisher(MAP_TOPIC, messages.OCCUPANCY_GRID, namespace=WORKER_NAMESPACE)
+        self._integrated_since_store = 0
+        self._integrated_since_publish = 0
+
+    def _resume(self) -> OccupancyGrid:
+        resolution = self.settings.resolution_m
+        try:
+            stored = self.context.store.layer(self.context.map.id, self.settings.layer)
+        except StoreUnavailable as err:
+            log.warning("cannot read the stored occupancy layer, starting empty: %s", err)
+            stored = None
+        if stored is None or abs(stored.layer.resolution_m - resolution) > 1e-9:
+            return OccupancyGrid(resolution_m=resolution)
+        layer = stored.layer
+        log.info("resuming occupancy layer of revision %d (%d x %d cells)", stored.revision_id, *layer.data.shape)
+        return OccupancyGrid.from_occupancy(layer.data, resolution_m=layer.resolution_m,
+                                            origin_x_m=layer.origin_x_m, origin_y_m=layer.origin_y_m)
+
+    def run(self, stop: threading.Event) -> None:
+        last_store = last_publish = time.monotonic()
+        try:
+            while not stop.is_set():
+                self._take_poses()
+                self._take_scans(timeout_s=0.05)
+                self._take_poses()
+                integrated = self.mapper.drain()
+                self._integrated_since_store += integrated
+                self._integrated_since_publish += integrated
+                self._sync_counts()
+                now = time.monotonic()
+                if now - last_store >= self.settings.store_period_s:
+                    last_store = now
+                    self._store()
+                if now - last_publish >= self.settings.publish_period_s:
+                    last_publish = now
+                    self._publish()
+        finally:
+            self._take_poses()
+            self._take_scans(timeout_s=0.0)
+            self._integrated_since_store += self.mapper.drain(final=True)
+            self._sync_counts()
+            self._store()
+            for subscription in self._subscriptions:
+                subscription.close()
+
+    def _take_poses(self) -> None:
+        for subscription, static in ((self.tf_static, True), (self.tf, False)):
+            while (item := subscription.receive()) is not None:
+                self.mapper.add_tf(item.namespace, item.message, static=static)
+        while (item := self.odometry.receive()) is not None:
+            self.mapper.add_odometry(item.namespace, item.message)
+
+    def _take_scans(self, *, timeout_s: float) -> None:
+        item = self.scans.receive(timeout_s)
+        taken = 0
+        while item is not None and taken < _BATCH:
+            try:
+                self.mapper.add_scan(item.namespace, item.message, fallback_stamp_ns=item.received_ns)
+            except OccupancyMappingError as err:
+                self.context.count("malformed_scans")
+                log.warning("scan from %r skipped: %s", item.namespace or "/", err)
+            taken += 1
+            item = self.scans.receive() if taken < _BATCH else None
+
+    def _sync_counts(self) -> None:
+        for name, value in self.mapper.counts.items():
+            self.context.counters.set(f"{self.context.name}.{name}", value)
+
+    def _store(self) -> None:
+        if self._integrated_since_store == 0:
+            return
+        grid = self.mapper.grid
+        layer = grid.to_layer(self.settings.layer)
+        write = RevisionWrite(self.context.name, layers=[layer], input_start_ns=self.mapper.first_stamp_ns,
+                              input_end_ns=self.mapper.last_stamp_ns,
+                              summary={"scans": self._integrated_since_store})
+        if self.context.commit(write) is not None:
+            self._integrated_since_store = 0
+
+    def _publish(self) -> None:
+        if self._integrated_since_publish == 0:
+            return
+        self._integrated_since_publish = 0
+        layer = self.mapper.grid.to_layer(self.settings.layer)
+        message = occupancy_grid_message(layer, stamp_ns=self.mapper.last_stamp_ns or time.time_ns(),
+                                         frame_id=self.settings.map_frame)
+        self._publisher.publish(message)
