@@ -88,15 +88,20 @@ class Stage(Protocol):
 StageFactory = Callable[[StageContext], Stage]
 
 
+def _beat(context: StageContext) -> None:
+    """Store the worker's liveness and counters (bus counters of its own topics included)."""
+    own = {k: v for k, v in context.bus.counters.snapshot().items() if k.startswith(f"{context.name}.")}
+    try:
+        context.store.heartbeat(context.name, {**own, **context.counters.snapshot()},
+                                started_at=context.started_at)
+    except StoreError as err:
+        context.count("heartbeat_failures")
+        log.debug("%s: heartbeat not stored: %s", context.name, err)
+
+
 def _heartbeat(context: StageContext, stop: threading.Event) -> None:
     while True:
-        try:
-            context.store.heartbeat(context.name, {**context.bus.counters.snapshot(),
-                                                   **context.counters.snapshot()},
-                                    started_at=context.started_at)
-        except StoreError as err:
-            context.count("heartbeat_failures")
-            log.debug("%s: heartbeat not stored: %s", context.name, err)
+        _beat(context)
         if stop.wait(HEARTBEAT_PERIOD_S):
             return
 
@@ -131,4 +136,5 @@ def run_stage(name: str, factory: StageFactory, *, bus: Bus, store: MapStore, se
     finally:
         token.undeclare()
         heart.join(timeout=HEARTBEAT_PERIOD_S + 1)
+        _beat(context)
         log.info("%s: stopped", name)

@@ -123,7 +123,11 @@ class OccupancyStage:
         write = RevisionWrite(self.context.name, layers=[layer], input_start_ns=self.mapper.first_stamp_ns,
                               input_end_ns=self.mapper.last_stamp_ns,
                               summary={"scans": self._integrated_since_store})
-        if self.context.commit(write) is not None:
+        revision = self.context.commit(write)
+        if revision is not None:
+            known = int((layer.data >= 0).sum()) * layer.resolution_m**2
+            log.info("revision %d: occupancy %d x %d cells, %.0f m² mapped, %d new scans", revision.id,
+                     layer.data.shape[1], layer.data.shape[0], known, self._integrated_since_store)
             self._integrated_since_store = 0
 
     def _publish(self) -> None:
