@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, cast
 
 from fastapi import Depends, HTTPException, Path, Query, Request, status
 
@@ -24,10 +24,7 @@ class ApiContext:
 
 
 def get_context(request: Request) -> ApiContext:
-    context = request.app.state.context
-    if not isinstance(context, ApiContext):
-        raise TypeError("app.state.context is not set; build the app with api.app.create_app")
-    return context
+    return cast(ApiContext, request.app.state.context)
 
 
 ContextDep = Annotated[ApiContext, Depends(get_context)]

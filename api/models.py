@@ -7,6 +7,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
+Responses = dict[int | str, dict[str, Any]]
+"""The type of a route's ``responses=`` (extra OpenAPI responses)."""
+
 
 class ErrorOut(BaseModel):
     detail: str = Field(description="What went wrong, and where possible what would work instead.")

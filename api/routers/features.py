@@ -8,7 +8,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, status
 
 from api.deps import MapDep, RevisionQuery, StoreDep
-from api.models import ErrorOut, FeatureCollection, GeoJSONFeature
+from api.models import ErrorOut, FeatureCollection, GeoJSONFeature, Responses
 from shared.store import FEATURE_KINDS, StoredFeature
 
 router = APIRouter(prefix="/v1/maps/{map_name}/features", tags=["features"])
@@ -18,7 +18,7 @@ MAX_BBOX_SIDE_M = 100_000.0
 
 BBox = tuple[float, float, float, float]
 
-_ERRORS = {
+_ERRORS: Responses = {
     status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map, revision or feature."},
     status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut, "description": "Bad kind, bbox or paging."},
 }

@@ -10,7 +10,7 @@ import numpy.typing as npt
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
 
 from api.deps import MapDep, RevisionQuery, StoreDep
-from api.models import ErrorOut, LayerOut, LayerValuesOut, Origin
+from api.models import ErrorOut, LayerOut, LayerValuesOut, Origin, Responses
 from api.rendering import RenderError, encode_png, layer_image
 from shared.store import StoredLayer, layer_to_npy
 
@@ -22,7 +22,7 @@ MAX_JSON_CELLS = 1_000_000
 REVISION_HEADER = "X-Aisle-Revision-Id"
 """Response header naming the revision that wrote the layer version returned."""
 
-_NOT_FOUND = {
+_NOT_FOUND: Responses = {
     status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map, revision or layer."},
 }
 

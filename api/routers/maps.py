@@ -7,12 +7,14 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Path, Query, status
 
 from api.deps import MapDep, StoreDep, find_revision
-from api.models import ErrorOut, MapDetail, MapSummary, RevisionOut, RevisionPage
+from api.models import ErrorOut, MapDetail, MapSummary, Responses, RevisionOut, RevisionPage
 from shared.store import MapInfo, MapStore, Revision
 
 router = APIRouter(prefix="/v1/maps", tags=["maps"])
 
-_NOT_FOUND = {status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map or revision."}}
+_NOT_FOUND: Responses = {
+    status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map or revision."},
+}
 
 
 def revision_out(revision: Revision) -> RevisionOut:
