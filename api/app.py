@@ -13,7 +13,7 @@ from api.deps import ApiContext
 from api.routers import features, health, layers, maps
 from shared.bus import Bus
 from shared.settings import Settings
-from shared.store import MapStore, StoreError, StoreUnavailable
+from shared.store import MapStore, StoreError, StoreUnavailableError
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,7 @@ def create_app(
     app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url="/docs")
     app.state.context = ApiContext(store=store, settings=settings, bus=bus,
                                    expected_workers=tuple(expected_workers))
-    app.add_exception_handler(StoreUnavailable, _store_unavailable)
+    app.add_exception_handler(StoreUnavailableError, _store_unavailable)
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
     for module in (health, maps, layers, features):

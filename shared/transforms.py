@@ -81,21 +81,25 @@ def _normalised(q: FloatArray) -> FloatArray:
 def _quat_multiply(a: FloatArray, b: FloatArray) -> FloatArray:
     ax, ay, az, aw = a
     bx, by, bz, bw = b
-    return np.array([
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    ])
+    return np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ]
+    )
 
 
 def _rotation_matrix(q: FloatArray) -> FloatArray:
     x, y, z, w = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def to_matrix(transform: Transform) -> FloatArray:
@@ -140,7 +144,7 @@ def invert(transform: Transform) -> Transform:
 
 
 def interpolate(a: Transform, b: Transform, fraction: float) -> Transform:
-    """Linear interpolation of translation and slerp of rotation; ``fraction`` 0 gives ``a``, 1 gives ``b``."""
+    """Lerp of translation and slerp of rotation; ``fraction`` 0 gives ``a``, 1 gives ``b``."""
     qa, qb = a.rotation, b.rotation
     dot = float(np.dot(qa, qb))
     if dot < 0.0:
@@ -188,7 +192,9 @@ class TransformBuffer:
 
     def __init__(self, *, cache_s: float = 30.0, extrapolation_s: float = 0.1) -> None:
         if not (cache_s > 0 and extrapolation_s >= 0):
-            raise ValueError(f"cache_s must be > 0 and extrapolation_s >= 0, got {cache_s}, {extrapolation_s}")
+            raise ValueError(
+                f"cache_s must be > 0 and extrapolation_s >= 0, got {cache_s}, {extrapolation_s}"
+            )
         self._cache_ns = round(cache_s * 1e9)
         self._tolerance_ns = round(extrapolation_s * 1e9)
         self._static: dict[str, tuple[str, Transform]] = {}
@@ -243,7 +249,9 @@ class TransformBuffer:
         chain = [frame]
         while True:
             link = self._static.get(chain[-1])
-            parent = link[0] if link else (self._dynamic[chain[-1]].parent if chain[-1] in self._dynamic else None)
+            parent = (
+                link[0] if link else (self._dynamic[chain[-1]].parent if chain[-1] in self._dynamic else None)
+            )
             if parent is None:
                 return chain
             if parent in chain:
@@ -279,8 +287,9 @@ class TransformBuffer:
             return history.transforms[nearest]
         when = "before the first" if i == 0 else "after the last"
         raise LookupError(
-            f"{history.parent} -> {child}: stamp {stamp_ns} ns is {abs(stamps[nearest] - stamp_ns) / 1e9:.3f} s "
-            f"{when} sample ({stamps[0]}..{stamps[-1]} ns), beyond the {self._tolerance_ns / 1e9:.3f} s tolerance"
+            f"{history.parent} -> {child}: stamp {stamp_ns} ns is "
+            f"{abs(stamps[nearest] - stamp_ns) / 1e9:.3f} s {when} sample ({stamps[0]}..{stamps[-1]} ns), "
+            f"beyond the {self._tolerance_ns / 1e9:.3f} s tolerance"
         )
 
     def lookup(self, target_frame: str, source_frame: str, stamp_ns: int | None) -> Transform:
@@ -334,7 +343,11 @@ def add_tf_message(buffer: TransformBuffer, message: Any, *, static: bool = Fals
         stamp_ns = item.header.stamp.sec * 1_000_000_000 + item.header.stamp.nanosec
         t, q = item.transform.translation, item.transform.rotation
         buffer.set_transform(
-            item.header.frame_id, item.child_frame_id, stamp_ns, (t.x, t.y, t.z), (q.x, q.y, q.z, q.w),
+            item.header.frame_id,
+            item.child_frame_id,
+            stamp_ns,
+            (t.x, t.y, t.z),
+            (q.x, q.y, q.z, q.w),
             static=static,
         )
     return len(message.transforms)
@@ -344,5 +357,6 @@ def add_odometry(buffer: TransformBuffer, message: Any) -> None:
     """Feed a nav_msgs/Odometry pose (``header.frame_id`` -> ``child_frame_id``) into ``buffer``."""
     stamp_ns = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
     p, q = message.pose.pose.position, message.pose.pose.orientation
-    buffer.set_transform(message.header.frame_id, message.child_frame_id, stamp_ns, (p.x, p.y, p.z),
-                         (q.x, q.y, q.z, q.w))
+    buffer.set_transform(
+        message.header.frame_id, message.child_frame_id, stamp_ns, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)
+    )

@@ -19,7 +19,7 @@ from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus, Publisher
 from shared.metrics import Counters
 from shared.settings import Settings
-from shared.store import MapInfo, MapStore, Revision, RevisionWrite, StoreError, StoreUnavailable
+from shared.store import MapInfo, MapStore, Revision, RevisionWrite, StoreError, StoreUnavailableError
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +51,7 @@ class StageContext:
         """
         try:
             revision = self.store.write_revision(self.map.id, write)
-        except StoreUnavailable as err:
+        except StoreUnavailableError as err:
             self.count("store_unavailable")
             log.warning("%s: revision not stored, will retry: %s", self.name, err)
             return None
@@ -117,7 +117,7 @@ def run_stage(name: str, factory: StageFactory, *, bus: Bus, store: MapStore, se
     while map_info is None:
         try:
             map_info = store.ensure_map(settings.map_name)
-        except StoreUnavailable as err:
+        except StoreUnavailableError as err:
             log.warning("%s: waiting for the database: %s", name, err)
             if stop.wait(restart_delay_s):
                 return

@@ -14,6 +14,7 @@ import math
 import os
 import struct
 import time
+from typing import Any
 
 import numpy as np
 import zenoh
@@ -46,26 +47,34 @@ class Talker:
         self.namespace = namespace
         self.publishers: dict[str, tuple[zenoh.Publisher, bytes, list[int]]] = {}
 
+    def declare(self, topic: str, msgtype: str) -> None:
+        publisher = self.session.declare_publisher(key(self.domain, self.namespace, topic, msgtype))
+        self.publishers[topic] = (publisher, os.urandom(16), [1])
+
+    def wait_for_subscribers(self, timeout_s: float = 15.0) -> None:
+        """Block until every declared topic has a matching subscriber (rmw_zenoh does not wait; we must)."""
+        deadline = time.monotonic() + timeout_s
+        while not all(p.matching_status.matching for p, _, _ in self.publishers.values()):  # type: ignore[attr-defined]
+            if time.monotonic() > deadline:
+                raise TimeoutError("no subscriber matched within the timeout")
+            time.sleep(0.02)
+
     def publish(self, topic: str, msgtype: str, message: object) -> None:
-        if topic not in self.publishers:
-            gid = os.urandom(16)
-            self.publishers[topic] = (self.session.declare_publisher(key(self.domain, self.namespace, topic, msgtype)),
-                                      gid, [1])
         publisher, gid, seq = self.publishers[topic]
         attachment = struct.pack("<qqB16s", seq[0], time.time_ns(), 16, gid)
         seq[0] += 1
         publisher.put(bytes(STORE.serialize_cdr(message, msgtype)), attachment=attachment)
 
 
-def stamp(ns: int) -> object:
+def stamp(ns: int) -> Any:
     return STORE.types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
 
 
-def header(ns: int, frame: str) -> object:
+def header(ns: int, frame: str) -> Any:
     return STORE.types["std_msgs/msg/Header"](stamp=stamp(ns), frame_id=frame)
 
 
-def transform(ns: int, parent: str, child: str, x: float, y: float, yaw: float) -> object:
+def transform(ns: int, parent: str, child: str, x: float, y: float, yaw: float) -> Any:
     t = STORE.types
     return t["geometry_msgs/msg/TransformStamped"](
         header=header(ns, parent), child_frame_id=child,
@@ -74,7 +83,7 @@ def transform(ns: int, parent: str, child: str, x: float, y: float, yaw: float) 
             rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))))
 
 
-def odometry(ns: int, x: float, y: float, yaw: float) -> object:
+def odometry(ns: int, x: float, y: float, yaw: float) -> Any:
     t = STORE.types
     zero = t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
     return t["nav_msgs/msg/Odometry"](
@@ -104,7 +113,10 @@ def main() -> None:
     t = STORE.types
     with zenoh.open(config) as session:
         talker = Talker(session, args.domain, args.namespace)
-        time.sleep(0.5)  # let the session connect before the first put
+        for topic, msgtype in (("tf_static", "tf2_msgs/msg/TFMessage"), ("odom", "nav_msgs/msg/Odometry"),
+                               ("scan", "sensor_msgs/msg/LaserScan")):
+            talker.declare(topic, msgtype)
+        talker.wait_for_subscribers()
         start = time.time_ns()
         talker.publish("tf_static", "tf2_msgs/msg/TFMessage", t["tf2_msgs/msg/TFMessage"](
             transforms=[transform(start, "base_link", "laser", 0.2, 0.0, 0.0)]))

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Response, status
 
 from api.deps import ContextDep, SettingsDep
 from api.models import BusHealth, DatabaseHealth, HealthOut, WorkerHealth
-from shared.store import MapStore, StoreUnavailable, WorkerInfo
+from shared.store import MapStore, StoreUnavailableError, WorkerInfo
 
 router = APIRouter(prefix="/v1/health", tags=["health"])
 
@@ -25,7 +25,7 @@ def _database(store: MapStore) -> tuple[DatabaseHealth, list[WorkerInfo]]:
     try:
         store.ping()
         workers = store.workers()
-    except StoreUnavailable as err:
+    except StoreUnavailableError as err:
         return DatabaseHealth(ok=False, detail=str(err), url=url), []
     return DatabaseHealth(ok=True, detail="reachable", url=url), workers
 

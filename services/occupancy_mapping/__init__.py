@@ -1,0 +1,27 @@
+"""Occupancy mapping: log-odds grids from laser scans, map files, offline building and map quality."""
+
+from services.occupancy_mapping.errors import OccupancyMappingError
+from services.occupancy_mapping.grid import OccupancyGrid
+from services.occupancy_mapping.mapio import MapImage, read_map_yaml, write_map_yaml
+from services.occupancy_mapping.offline import BuildStats, build_map, build_map_with_stats
+from services.occupancy_mapping.quality import WallAgreement, sharpness, wall_agreement
+from services.occupancy_mapping.raycast import RayCasting
+from services.occupancy_mapping.scan import ScanArrays, scan_angles, scan_arrays
+
+__all__ = [
+    "BuildStats",
+    "MapImage",
+    "OccupancyGrid",
+    "OccupancyMappingError",
+    "RayCasting",
+    "ScanArrays",
+    "WallAgreement",
+    "build_map",
+    "build_map_with_stats",
+    "read_map_yaml",
+    "scan_angles",
+    "scan_arrays",
+    "sharpness",
+    "wall_agreement",
+    "write_map_yaml",
+]

@@ -117,6 +117,7 @@ class OccupancyGrid:
         range_min_m: float,
         range_max_m: float,
         max_range_m: float,
+        no_return_clear_m: float = 5.0,
     ) -> int:
         """Add one scan taken from ``pose``; return how many beams were used.
 
@@ -127,14 +128,19 @@ class OccupancyGrid:
         ranges : (n,) array_like
             Ranges in metres. A return with ``range_min_m <= r < min(range_max_m, max_range_m)``
             marks its end cell occupied and the cells before it free; longer returns and ``+inf``
-            (no return) only clear free space up to ``min(range_max_m, max_range_m)``; NaN,
-            negative, ``-inf`` and too-short returns are skipped (``n`` minus the result).
+            (no return) never mark anything occupied and only clear free space up to
+            ``no_return_clear_m``; NaN, negative, ``-inf`` and too-short returns are skipped
+            (``n`` minus the result).
         angles : (n,) array_like
             Beam bearings in the sensor frame, radians.
         range_min_m, range_max_m : float
             The sensor's valid interval, as in sensor_msgs/LaserScan.
         max_range_m : float
             Returns at or beyond this are not trusted as obstacles.
+        no_return_clear_m : float
+            How far a beam without a usable return clears free space, metres (capped by the
+            range limits). Dropouts on dark or shiny surfaces also read as "no return", so a
+            short cap keeps them from erasing walls; 0 disables clearing by such beams.
 
         Returns
         -------
@@ -149,20 +155,29 @@ class OccupancyGrid:
             raise OccupancyMappingError(f"pose must be finite, got {pose}")
         if not np.all(np.isfinite(a)):
             raise OccupancyMappingError("beam angles must be finite")
-        if not (0.0 <= range_min_m < range_max_m and max_range_m > 0 and math.isfinite(max_range_m)):
+        if not (
+            0.0 <= range_min_m < range_max_m
+            and max_range_m > 0
+            and math.isfinite(max_range_m)
+            and no_return_clear_m >= 0.0
+        ):
             raise OccupancyMappingError(
-                f"need 0 <= range_min_m < range_max_m and finite max_range_m > 0, got "
-                f"{range_min_m}, {range_max_m}, {max_range_m}"
+                "need 0 <= range_min_m < range_max_m, finite max_range_m > 0 and no_return_clear_m >= 0, "
+                f"got "
+                f"{range_min_m}, {range_max_m}, {max_range_m}, {no_return_clear_m}"
             )
         limit = min(range_max_m, max_range_m)
         with np.errstate(invalid="ignore"):
             valid = (r >= range_min_m) & (r >= 0.0)  # False for NaN and -inf
             hit = valid & (r < limit)
-        usable = valid
+        no_return = valid & ~hit
+        if no_return_clear_m == 0.0:
+            no_return[:] = False
+        usable = hit | no_return
         n_used = int(np.count_nonzero(usable))
         if n_used == 0:
             return 0
-        free_len = np.where(hit, np.maximum(r - self._resolution, 0.0), limit)
+        free_len = np.where(hit, np.maximum(r - self._resolution, 0.0), min(limit, no_return_clear_m))
         free_len = np.where(usable, free_len, 0.0)
         bearing = a + pose.yaw_rad
         cos_b, sin_b = np.cos(bearing), np.sin(bearing)
@@ -184,7 +199,9 @@ class OccupancyGrid:
         c0, r0 = int(lo[0]) - self._origin_col, int(lo[1]) - self._origin_row
         c1, r1 = int(hi[0]) - self._origin_col + 1, int(hi[1]) - self._origin_row + 1
         shift = np.array([lo[0], lo[1]], dtype=np.float64)
-        free = free_space_mask(origin - shift, free_cr - shift, usable, (r1 - r0, c1 - c0), method=self._ray_casting)
+        free = free_space_mask(
+            origin - shift, free_cr - shift, hit, no_return, (r1 - r0, c1 - c0), method=self._ray_casting
+        )
         hits = np.zeros_like(free)
         hits[hit_cr[:, 1] - lo[1], hit_cr[:, 0] - lo[0]] = True
         free &= ~hits

@@ -29,12 +29,16 @@ class RayCasting(Enum):
 def free_space_mask(
     origin_cr: npt.NDArray[np.float64],
     ends_cr: npt.NDArray[np.float64],
-    usable: npt.NDArray[np.bool_],
+    returned: npt.NDArray[np.bool_],
+    no_return: npt.NDArray[np.bool_],
     shape: tuple[int, int],
     *,
     method: RayCasting = RayCasting.POLYGON,
 ) -> npt.NDArray[np.bool_]:
     """Cells swept by the beams from ``origin_cr`` to ``ends_cr``.
+
+    Beams without a return are always cast as single rays: a polygon through them and their
+    returned neighbours would sweep the space behind nearby obstacles.
 
     Parameters
     ----------
@@ -42,8 +46,11 @@ def free_space_mask(
         Sensor position, (col, row) in patch cells.
     ends_cr : (n, 2) float64
         Where each beam's free space ends, (col, row) in patch cells, in scan order.
-    usable : (n,) bool
-        Beams that clear free space; the others are ignored (the polygon closes back to the sensor).
+    returned : (n,) bool
+        Beams that ended on an obstacle.
+    no_return : (n,) bool
+        Beams that clear free space without an obstacle at their end; beams in neither mask are
+        ignored (the polygon closes back to the sensor across them).
     shape : (rows, cols)
         Patch shape; every point must lie inside it.
     method : RayCasting
@@ -54,8 +61,9 @@ def free_space_mask(
     (rows, cols) bool
     """
     if method is RayCasting.POLYGON:
-        return _polygon_mask(origin_cr, ends_cr, usable, shape)
-    return _sampled_mask(origin_cr, ends_cr, usable, shape)
+        polygon = _polygon_mask(origin_cr, ends_cr, returned, shape)
+        return polygon | _sampled_mask(origin_cr, ends_cr, no_return, shape) if no_return.any() else polygon
+    return _sampled_mask(origin_cr, ends_cr, returned | no_return, shape)
 
 
 def _polygon_mask(

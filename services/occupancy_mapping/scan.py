@@ -37,7 +37,8 @@ def scan_angles(angle_min_rad: float, angle_increment_rad: float, n: int) -> npt
         raise OccupancyMappingError(f"beam count must be >= 0, got {n}")
     if not (np.isfinite(angle_min_rad) and np.isfinite(angle_increment_rad)):
         raise OccupancyMappingError(
-            f"scan angles must be finite, got angle_min={angle_min_rad}, angle_increment={angle_increment_rad}"
+            f"scan angles must be finite, got angle_min={angle_min_rad}, "
+            f"angle_increment={angle_increment_rad}"
         )
     return angle_min_rad + angle_increment_rad * np.arange(n, dtype=np.float64)
 

@@ -18,7 +18,7 @@ from services.occupancy_mapping.mapper import AUTO_FRAME, ScanMapper
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, DropPolicy, Subscription
 from shared.grids import occupancy_grid_message
-from shared.store import RevisionWrite, StoreUnavailable
+from shared.store import RevisionWrite, StoreUnavailableError
 from shared.worker import StageContext
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,7 @@ class OccupancyStage:
         resolution = self.settings.resolution_m
         try:
             stored = self.context.store.layer(self.context.map.id, self.settings.layer)
-        except StoreUnavailable as err:
+        except StoreUnavailableError as err:
             log.warning("cannot read the stored occupancy layer, starting empty: %s", err)
             stored = None
         if stored is None or abs(stored.layer.resolution_m - resolution) > 1e-9:

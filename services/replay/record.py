@@ -122,9 +122,8 @@ def record(
         except queue.Full:
             count("dropped")
 
-    written: Counter[str] = Counter()
     with Writer(out, version=Writer.VERSION_LATEST, storage_plugin=_STORAGE_PLUGINS[storage]) as writer:
-        bag = _Bag(writer)
+        bag = _Bag(writer, count=count)
         with bus.session.declare_subscriber(f"{domain_id}/**", enqueue):
             log.info("recording domain %d to %s", domain_id, out)
             while not stop.is_set():
@@ -132,53 +131,75 @@ def record(
                     sample = pending.get(timeout=_POLL_S)
                 except queue.Empty:
                     continue
-                bag.write(sample, written, count)
+                bag.write(sample)
         while not pending.empty():
-            bag.write(pending.get_nowait(), written, count)
+            bag.write(pending.get_nowait())
     elapsed_s = time.monotonic() - started
-    stats = RecordStats(dict(written), counts.get("unknown_type"), counts.get("malformed"),
+    stats = RecordStats(dict(bag.written), counts.get("unknown_type"), counts.get("malformed"),
                         counts.get("dropped"), elapsed_s)
     log.info("recorded %d messages on %d topics to %s in %.1f s (%d unknown type, %d malformed, "
-             "%d dropped)", written.total(), len(written), out, elapsed_s, stats.unknown_type,
+             "%d dropped)", bag.written.total(), len(bag.written), out, elapsed_s, stats.unknown_type,
              stats.malformed, stats.dropped)
     return stats
 
 
 class _Bag:
-    """The open bag's connections, added as new topics and types turn up."""
+    """The open bag's connections, added as new topics and types turn up.
 
-    def __init__(self, writer: Writer) -> None:
+    Each distinct key is parsed and checked once; later samples cost a dictionary lookup.
+    """
+
+    def __init__(self, writer: Writer, *, count: Callable[[str], None]) -> None:
         self._writer = writer
-        self._connections: dict[tuple[str, str], Connection] = {}
-        self._refused: set[str] = set()
+        self._count = count
+        self.written: Counter[str] = Counter()
+        self._by_key: dict[str, Connection] = {}
+        self._by_topic: dict[tuple[str, str], Connection] = {}
+        self._refused: dict[str, str] = {}
 
-    def write(self, sample: _Sample, written: Counter[str], count: Callable[[str], None]) -> None:
-        try:
-            key = parse_topic_key(sample.key)
-        except MessageError as err:
-            self._refuse(sample.key, "malformed", str(err), count)
-            return
-        if key.msgtype not in TYPESTORE.fielddefs:
-            self._refuse(sample.key, "unknown_type", f"{key.msgtype} is not in our typestore", count)
-            return
-        if key.type_hash.startswith("RIHS01_") and key.type_hash != type_hash(key.msgtype):
-            self._refuse(sample.key, "unknown_type", f"{key.msgtype} differs from our definition", count)
-            return
-        name = _topic_name(key)
-        connection = self._connections.get((name, key.msgtype))
+    def write(self, sample: _Sample) -> None:
+        """Write ``sample`` under its topic, or count why not."""
+        connection = self._by_key.get(sample.key) or self._connect(sample.key)
         if connection is None:
-            connection = self._writer.add_connection(name, key.msgtype, typestore=TYPESTORE)
-            self._connections[name, key.msgtype] = connection
-            log.info("recording %s (%s)", name, key.msgtype)
+            self._count(self._refused[sample.key])
+            return
         self._writer.write(connection, sample.received_ns, sample.payload)
-        written[name] += 1
-        count("written")
+        self.written[connection.topic] += 1
+        self._count("written")
 
-    def _refuse(self, key: str, reason: str, detail: str, count: Callable[[str], None]) -> None:
-        count(reason)
-        if key not in self._refused:  # once per key, not once per sample
-            self._refused.add(key)
-            log.warning("not recording %s: %s", key, detail)
+    def _connect(self, key: str) -> Connection | None:
+        """The connection for samples on ``key``, or None (logged once) when they cannot be written."""
+        if key in self._refused:
+            return None
+        try:
+            parsed = parse_topic_key(key)
+        except MessageError as err:
+            self._refuse(key, "malformed", str(err))
+            return None
+        if (problem := _type_problem(parsed)) is not None:
+            self._refuse(key, "unknown_type", problem)
+            return None
+        name = _topic_name(parsed)
+        connection = self._by_topic.get((name, parsed.msgtype))
+        if connection is None:
+            connection = self._writer.add_connection(name, parsed.msgtype, typestore=TYPESTORE)
+            self._by_topic[name, parsed.msgtype] = connection
+            log.info("recording %s (%s)", name, parsed.msgtype)
+        self._by_key[key] = connection
+        return connection
+
+    def _refuse(self, key: str, reason: str, detail: str) -> None:
+        self._refused[key] = reason
+        log.warning("not recording %s: %s", key, detail)
+
+
+def _type_problem(key: TopicKey) -> str | None:
+    """Why samples on ``key`` cannot be written with our type definitions, if they cannot."""
+    if key.msgtype not in TYPESTORE.fielddefs:
+        return f"{key.msgtype} is not in our typestore"
+    if key.type_hash.startswith("RIHS01_") and key.type_hash != type_hash(key.msgtype):
+        return f"{key.msgtype} has hash {key.type_hash}, ours is {type_hash(key.msgtype)}"
+    return None
 
 
 def _topic_name(key: TopicKey) -> str:

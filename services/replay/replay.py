@@ -42,8 +42,8 @@ class ReplayStats:
     published: Mapping[str, int]
     """Messages sent per ROS topic name as published, e.g. ``{"/robot1/scan": 357}``."""
     skipped: Mapping[str, int]
-    """Messages not sent per bag topic: type not in the typestore, definition differing from
-    ours, or not CDR."""
+    """Messages left out per bag topic over the complete passes: type not in our typestore,
+    defined differently from ours, or not CDR."""
     passes: int
     """Complete passes through the bag (a replay stopped midway does not count its last one)."""
     elapsed_s: float
@@ -92,6 +92,21 @@ def _route(connection: Connection, reader: AnyReader, namespace: str) -> _Route 
     *bag_namespace, topic = connection.topic.strip("/").split("/")
     full_namespace = "/".join(part for part in (namespace.strip("/"), *bag_namespace) if part)
     return _Route(full_namespace, topic, msgtype)
+
+
+def _plan(reader: AnyReader, connections: Sequence[Connection], *, namespace: str
+          ) -> tuple[dict[int, _Route], Counter[str]]:
+    """Routes by connection id of the connections that can be sent; messages per pass of the rest."""
+    routes: dict[int, _Route] = {}
+    skipped: Counter[str] = Counter()
+    for connection in connections:
+        route = _route(connection, reader, namespace)
+        if isinstance(route, str):
+            log.warning("skipping %s (%d messages): %s", connection.topic, connection.msgcount, route)
+            skipped[connection.topic] += connection.msgcount
+        else:
+            routes[connection.id] = route
+    return routes, skipped
 
 
 def _select(reader: AnyReader, topics: Sequence[str] | None) -> list[Connection]:
@@ -147,10 +162,12 @@ def replay_bag(
         ``bag`` is missing, not a rosbag2 recording, lacks a requested topic, or cannot loop
         (it spans a single instant).
     ValueError
-        ``rate`` is not a positive finite number.
+        ``rate`` is not a positive finite number, or ``namespace`` is not a ROS namespace.
     """
     if not (math.isfinite(rate) and rate > 0.0):
         raise ValueError(f"rate must be a positive finite number, not {rate}")
+    if not all(part.replace("_", "a").isalnum() for part in namespace.strip("/").split("/") if part):
+        raise ValueError(f"namespace {namespace!r} is not a ROS namespace")
     started = time.monotonic()
     published: Counter[str] = Counter()
     skipped: Counter[str] = Counter()
@@ -158,16 +175,7 @@ def replay_bag(
     with _open_bag(bag) as reader:
         if loop and reader.duration <= 1:
             raise ReplayError(f"{bag} spans a single instant; it cannot be looped")
-        routes: dict[int, _Route] = {}
-        unplayable: list[Connection] = []
-        for connection in _select(reader, topics):
-            route = _route(connection, reader, namespace)
-            if isinstance(route, str):
-                log.warning("%s: skipping %s (%d messages): %s", bag, connection.topic,
-                            connection.msgcount, route)
-                unplayable.append(connection)
-            else:
-                routes[connection.id] = route
+        routes, skipped_per_pass = _plan(reader, _select(reader, topics), namespace=namespace)
         publishers = {route: bus.publisher(route.topic, route.msgtype, namespace=route.namespace)
                       for route in set(routes.values())}
         static = [c for c in reader.connections if c.id in routes and routes[c.id].topic == STATIC_TOPIC]
@@ -183,8 +191,7 @@ def replay_bag(
                 if timed and not _play(reader, timed, routes, publishers, published,
                                        origin_s=pass_start, rate=rate, stop=stop):
                     break
-                for connection in unplayable:
-                    skipped[connection.topic] += connection.msgcount
+                skipped.update(skipped_per_pass)
                 passes += 1
                 if not loop or stop.wait(max(0.0, pass_start + period_s - time.monotonic())):
                     break

@@ -14,7 +14,7 @@ from shared.store.records import (
     TopologyNode,
     WorkerInfo,
 )
-from shared.store.store import MapStore, StoreUnavailable, layer_to_npy
+from shared.store.store import MapStore, StoreUnavailableError, layer_to_npy
 
 __all__ = [
     "FEATURE_KINDS",
@@ -25,7 +25,7 @@ __all__ = [
     "Revision",
     "RevisionWrite",
     "StoreError",
-    "StoreUnavailable",
+    "StoreUnavailableError",
     "StoredFeature",
     "StoredLayer",
     "TopologyEdge",

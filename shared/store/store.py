@@ -41,7 +41,7 @@ from shared.store.records import (
 MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
 
 
-class StoreUnavailable(StoreError):
+class StoreUnavailableError(StoreError):
     """The database cannot be reached right now; the caller may retry later."""
 
 
@@ -119,9 +119,9 @@ class MapStore:
             with self.engine.begin() as connection:
                 yield connection
         except sa.exc.OperationalError as err:
-            raise StoreUnavailable(f"database unavailable: {err.orig}") from err
+            raise StoreUnavailableError(f"database unavailable: {err.orig}") from err
         except sa.exc.InterfaceError as err:
-            raise StoreUnavailable(f"database unavailable: {err.orig}") from err
+            raise StoreUnavailableError(f"database unavailable: {err.orig}") from err
 
     @contextmanager
     def _read(self) -> Iterator[Connection]:
@@ -129,10 +129,10 @@ class MapStore:
             with self.engine.connect() as connection:
                 yield connection
         except (sa.exc.OperationalError, sa.exc.InterfaceError) as err:
-            raise StoreUnavailable(f"database unavailable: {err.orig}") from err
+            raise StoreUnavailableError(f"database unavailable: {err.orig}") from err
 
     def ping(self) -> None:
-        """Raise :class:`StoreUnavailable` unless the database answers."""
+        """Raise :class:`StoreUnavailableError` unless the database answers."""
         with self._read() as connection:
             connection.execute(sa.text("SELECT 1"))
 

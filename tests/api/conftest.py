@@ -11,13 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fastapi.testclient import TestClient
 
 from api import create_app
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
-
-from fastapi.testclient import TestClient
 
 ClientFactory = Callable[..., TestClient]
 

@@ -111,7 +111,7 @@ def test_worker_alive_by_bus_liveliness(store: MapStore, bus: Bus,
         wait_for(lambda: client.get(URL).status_code == 200, what="the worker to show as alive")
         body = client.get(URL).json()
     finally:
-        token.undeclare()  # type: ignore[no-untyped-call]
+        token.undeclare()
 
     assert body["bus"]["ok"] is True
     assert body["bus"]["mode"] == "peer"

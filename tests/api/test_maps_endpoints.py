@@ -62,7 +62,7 @@ def test_revisions_are_paged_oldest_first(client: TestClient, site: dict[str, in
 @pytest.mark.parametrize(
     "params", [{"limit": 0}, {"limit": 1001}, {"limit": -1}, {"after": -1}, {"after": "x"}])
 def test_bad_revision_paging_is_422(client: TestClient, site: dict[str, int],
-                                    params: dict[str, object]) -> None:
+                                    params: dict[str, int | str]) -> None:
     response = client.get("/v1/maps/site/revisions", params=params)
 
     assert response.status_code == 422

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
 import pytest
 
 from shared import messages
-from shared.bus import Bus, DropPolicy
+from shared.bus import Bus, DropPolicy, Publisher, Subscription
 from shared.keyexpr import Attachment, topic_key
 from tests.helpers import wait_for
 
@@ -20,6 +21,17 @@ def _scan(stamp_s: int, n: int = 360) -> Any:
                                           frame_id="laser"),
         angle_min=-np.pi, angle_max=np.pi, angle_increment=2 * np.pi / n, time_increment=0.0, scan_time=0.1,
         range_min=0.1, range_max=20.0, ranges=np.full(n, 3.0, np.float32), intensities=np.zeros(0, np.float32))
+
+
+def _publish_and_receive(pub: Publisher, sub: Subscription) -> bool:
+    pub.publish(_scan(0))
+    return sub.receive(0.05) is not None
+
+
+def _publish_and_count(pub: Publisher, sub: Subscription) -> bool:
+    pub.publish(_scan(0))
+    time.sleep(0.02)
+    return sub.pending() > 0
 
 
 def test_subscriber_receives_every_robot_and_knows_which(bus_pair: tuple[Bus, Bus]) -> None:
@@ -47,7 +59,7 @@ def test_sequence_numbers_count_up_from_one(bus_pair: tuple[Bus, Bus]) -> None:
     listener, talker = bus_pair
     sub = listener.subscribe("odom_seq", messages.LASER_SCAN)
     pub = talker.publisher("odom_seq", messages.LASER_SCAN)
-    wait_for(lambda: (pub.publish(_scan(0)), sub.receive(0.05))[1] is not None, what="first message")
+    wait_for(lambda: _publish_and_receive(pub, sub), what="first message")
     for stamp in range(1, 6):
         pub.publish(_scan(stamp))
     got = [sub.receive(2.0) for _ in range(5)]
@@ -94,7 +106,7 @@ def test_keep_newest_drops_oldest_and_counts(bus_pair: tuple[Bus, Bus]) -> None:
     listener, talker = bus_pair
     sub = listener.subscribe("camera", messages.LASER_SCAN, policy=DropPolicy.KEEP_NEWEST, maxsize=3, name="camera")
     pub = talker.publisher("camera", messages.LASER_SCAN)
-    wait_for(lambda: (pub.publish(_scan(0)), sub.pending())[1] > 0, what="the first frame")
+    wait_for(lambda: _publish_and_count(pub, sub), what="the first frame")
     for stamp in range(1, 11):
         pub.publish(_scan(stamp))
     wait_for(lambda: listener.counters.get("camera.received") >= 11, what="all frames")
@@ -109,12 +121,17 @@ def test_block_policy_never_drops_silently(bus_pair: tuple[Bus, Bus]) -> None:
     listener, talker = bus_pair
     sub = listener.subscribe("poses", messages.LASER_SCAN, policy=DropPolicy.BLOCK, maxsize=2, name="poses")
     pub = talker.publisher("poses", messages.LASER_SCAN)
-    wait_for(lambda: (pub.publish(_scan(0)), sub.pending())[1] > 0, what="the first pose")
+    wait_for(lambda: _publish_and_count(pub, sub), what="the first pose")
     for stamp in range(1, 31):
         pub.publish(_scan(stamp))
-    stamps = []
-    wait_for(lambda: (stamps.extend(r.message.header.stamp.sec for r in iter(lambda: sub.receive(0.01), None)),
-                      30 in stamps)[1], what="every pose")
+    stamps: list[int] = []
+
+    def drain() -> bool:
+        while (item := sub.receive(0.01)) is not None:
+            stamps.append(item.message.header.stamp.sec)
+        return 30 in stamps
+
+    wait_for(drain, what="every pose")
     assert stamps[-30:] == list(range(1, 31))
     assert listener.counters.get("poses.dropped") == 0
 

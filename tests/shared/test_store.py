@@ -14,7 +14,7 @@ from shared.store import (
     MapStore,
     RevisionWrite,
     StoreError,
-    StoreUnavailable,
+    StoreUnavailableError,
     TopologyEdge,
     TopologyNode,
 )
@@ -131,7 +131,7 @@ def test_readers_are_not_blocked_by_a_writer(store: MapStore) -> None:
 
 def test_unreachable_database_is_reported_as_unavailable() -> None:
     store = MapStore("postgresql+psycopg://nobody@127.0.0.1:1/none")
-    with pytest.raises(StoreUnavailable, match="unavailable"):
+    with pytest.raises(StoreUnavailableError, match="unavailable"):
         store.ping()
     store.close()
 
