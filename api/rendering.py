@@ -10,6 +10,9 @@ import numpy.typing as npt
 
 UNKNOWN_GREY = 205
 """Grey of unknown occupancy cells, as map_server's map_saver writes them."""
+FREE_PERCENT = 25
+OCCUPIED_PERCENT = 65
+"""map_saver's default thresholds: at or below FREE_PERCENT is free, at or above OCCUPIED_PERCENT occupied."""
 
 
 class RenderError(ValueError):
@@ -23,8 +26,9 @@ def layer_image(data: npt.NDArray[Any]) -> npt.NDArray[np.uint8]:
     ----------
     data : (rows, cols) array
         Layer values, row 0 the lowest y. ``int8`` is read as occupancy (nav_msgs/OccupancyGrid):
-        -1 unknown (grey 205), 0 free (white) to 100 occupied (black), shaded linearly in between;
-        values outside -1..100 are shown as unknown. Other numeric dtypes are scaled min-max to
+        -1 unknown (grey 205); as map_saver thresholds them, 0..25 free (white) and 65..100
+        occupied (black), the undecided band shaded linearly in between; values outside -1..100
+        are shown as unknown. Other numeric dtypes are scaled min-max to
         0..255 over their finite values; non-finite cells are black.
 
     Returns
@@ -36,6 +40,8 @@ def layer_image(data: npt.NDArray[Any]) -> npt.NDArray[np.uint8]:
     --------
     >>> layer_image(np.array([[0], [100], [-1]], dtype=np.int8))[:, 0].tolist()
     [205, 0, 255]
+    >>> layer_image(np.array([[45]], dtype=np.int8)).tolist()
+    [[128]]
     """
     if data.ndim != 2:
         raise RenderError(f"only 2-D layers can be rendered, not shape {data.shape}")
@@ -46,7 +52,8 @@ def layer_image(data: npt.NDArray[Any]) -> npt.NDArray[np.uint8]:
 def _occupancy_grey(data: npt.NDArray[np.int8]) -> npt.NDArray[np.uint8]:
     grey = np.full(data.shape, UNKNOWN_GREY, dtype=np.uint8)
     known = (data >= 0) & (data <= 100)
-    grey[known] = np.round(255.0 - data[known].astype(np.float64) * 2.55).astype(np.uint8)
+    band = (data[known].astype(np.float64) - FREE_PERCENT) / (OCCUPIED_PERCENT - FREE_PERCENT)
+    grey[known] = np.round(255.0 * (1.0 - np.clip(band, 0.0, 1.0))).astype(np.uint8)
     return grey
 
 

@@ -9,10 +9,13 @@ import pytest
 from api.rendering import UNKNOWN_GREY, RenderError, encode_png, layer_image
 
 
-def test_occupancy_is_shaded_from_white_free_to_black_occupied() -> None:
-    occupancy = np.array([[0, 25, 50, 100]], dtype=np.int8)
+def test_occupancy_is_white_when_free_black_when_occupied_and_shaded_between() -> None:
+    occupancy = np.array([[0, 25, 35, 45, 55, 65, 100]], dtype=np.int8)
 
-    assert layer_image(occupancy).tolist() == [[255, 191, 128, 0]]
+    row = layer_image(occupancy)[0].tolist()
+
+    assert row[:2] == [255, 255] and row[-2:] == [0, 0]
+    assert row[1] > row[2] > row[3] > row[4] > row[5]
 
 
 def test_occupancy_outside_0_to_100_is_unknown_grey() -> None:
