@@ -12,9 +12,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
-## run: install into .venv and start the embedded stack (all stages + API on 127.0.0.1:8000)
+## run: install into .venv and start the embedded stack (all stages + API on 127.0.0.1:8000) with a demo robot
 run: $(STAMP)
-	$(BIN)/aisle run $(ARGS)
+	$(BIN)/aisle run --demo $(ARGS)
 
 ## test: the whole test suite (PostgreSQL tests run when AISLE_TEST_POSTGRES_URL is set)
 test: $(STAMP)

@@ -37,6 +37,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--replay", type=Path, metavar="BAG", help="also replay this rosbag2 onto the bus")
     run.add_argument("--rate", type=_positive, default=1.0, help="replay speed factor")
     run.add_argument("--loop", action="store_true", help="replay in a loop")
+    run.add_argument("--demo", action="store_true", help="also drive a simulated robot round a demo warehouse")
+    run.add_argument("--demo-rate", type=_positive, default=1.0, help="demo speed factor (1 = real time)")
 
     worker = commands.add_parser("worker", help="one stage worker")
     worker.add_argument("stage", choices=STAGES)
@@ -64,7 +66,31 @@ def _parser() -> argparse.ArgumentParser:
     build.add_argument("--out", type=Path, required=True, help="map_server YAML to write (PGM beside it)")
     build.add_argument("--resolution", type=_positive, default=None, help="metres per cell")
     build.add_argument("--scan-topic", default=None)
+    _add_sim(commands)
     return parser
+
+
+def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    sim = commands.add_parser("sim", help="the warehouse simulator").add_subparsers(
+        dest="sim_command", required=True, metavar="SIM_COMMAND")
+    world_help = "layout YAML file or preset (demo, hall); omit with --random"
+    world = sim.add_parser("world", help="build a world and write its ground truth")
+    world.add_argument("layout", nargs="?", help=world_help)
+    world.add_argument("--random", action="store_true", help="a random layout drawn with --seed")
+    world.add_argument("--seed", type=int, default=0)
+    world.add_argument("--out", type=Path, required=True, help="ground-truth folder")
+    world.add_argument("--resolution", type=_positive, default=0.05, help="ground-truth grid cell, metres")
+    run = sim.add_parser("run", help="simulate robots surveying a world, into a rosbag2 or live onto the bus")
+    run.add_argument("layout", nargs="?", help=world_help)
+    run.add_argument("--random", action="store_true")
+    run.add_argument("--seed", type=int, default=0)
+    target = run.add_mutually_exclusive_group(required=True)
+    target.add_argument("--out", type=Path, help="MCAP rosbag2 to write (ground truth beside it in OUT.truth/)")
+    target.add_argument("--live", action="store_true", help="publish onto the bus in real time")
+    run.add_argument("--robots", type=int, default=1)
+    run.add_argument("--speed", type=_positive, default=1.2, help="robot speed, m/s")
+    run.add_argument("--cameras", default="", help="comma-separated: fisheye,rgbd")
+    run.add_argument("--rate", type=_positive, default=1.0, help="live speed factor")
 
 
 def _configure_logging(level: str) -> None:
@@ -95,6 +121,10 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             extra = []
             if args.replay is not None:
                 extra.append(partial(_replay_job, bag=args.replay, rate=args.rate, loop=args.loop))
+            if args.demo:
+                from services.simulator import run_demo
+
+                extra.append(partial(run_demo, rate=args.demo_rate))
             with runtime.stop_on_signals(stop):
                 runtime.run(settings, stages=STAGES, api=True, stop=stop, extra=extra)
         case "worker":
@@ -126,7 +156,31 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             log.info("wrote %s: %s", args.out, import_carmen(args.log, args.out))
         case "map-build":
             return _map_build(args, settings)
+        case "sim":
+            _sim(args, settings, stop)
     return 0
+
+
+def _sim(args: argparse.Namespace, settings: Settings, stop: threading.Event) -> None:
+    from services import runtime
+    from services.simulator import load_world, sim_live, sim_run, sim_world
+    from shared.bus import Bus
+
+    if args.random == (args.layout is not None):
+        raise ValueError("name a layout (file or preset) or pass --random, not both")
+    if args.sim_command == "world":
+        written = sim_world(args.layout, args.out, seed=args.seed, resolution_m=args.resolution)
+        log.info("wrote %s", ", ".join(str(path) for path in written.values()))
+        return
+    world = load_world(args.layout, seed=args.seed)
+    cameras = [name for name in args.cameras.split(",") if name]
+    if args.live:
+        with Bus.open(settings.zenoh, domain_id=settings.ros_domain_id) as bus, runtime.stop_on_signals(stop):
+            sim_live(bus, stop, world, robots=args.robots, speed_mps=args.speed, seed=args.seed, cameras=cameras,
+                     rate=args.rate)
+        return
+    counts = sim_run(world, args.out, robots=args.robots, speed_mps=args.speed, seed=args.seed, cameras=cameras)
+    log.info("wrote %s: %d messages (%s)", args.out, counts.total(), dict(counts))
 
 
 def _replay_job(bus: Bus, stop: threading.Event, *, bag: Path, rate: float, loop: bool,
