@@ -1,0 +1,59 @@
+"""The ``aisle`` command: subcommands do their job and bad input ends with a message, not a traceback."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from services.cli import main
+from shared.settings import get_settings
+from tests.helpers import free_port
+
+
+@pytest.fixture(autouse=True)
+def _fresh_settings(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("AISLE_DATA_DIR", str(tmp_path / "var"))
+    monkeypatch.setenv("AISLE_ZENOH__LISTEN", f'["tcp/127.0.0.1:{free_port()}"]')
+    get_settings.cache_clear()
+
+
+def test_settings_prints_the_effective_configuration(capsys: pytest.CaptureFixture[str],
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("AISLE_MAP_NAME", "dc-east")
+    assert main(["settings"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["map_name"] == "dc-east" and printed["database_url"].endswith("aisle.db")
+
+
+def test_bad_settings_end_with_exit_code_2(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("AISLE_API_PORT", "not-a-port")
+    assert main(["settings"]) == 2
+    assert "bad settings" in capsys.readouterr().err
+
+
+def test_db_upgrade_creates_the_schema(tmp_path: Path) -> None:
+    assert main(["db", "upgrade"]) == 0
+    assert (tmp_path / "var" / "aisle.db").is_file()
+
+
+def test_sim_world_writes_ground_truth(tmp_path: Path) -> None:
+    assert main(["sim", "world", "demo", "--out", str(tmp_path / "demo")]) == 0
+    geojson = json.loads((tmp_path / "demo" / "world.geojson").read_text())
+    kinds = {feature["properties"]["kind"] for feature in geojson["features"]}
+    assert {"wall", "pillar", "bin", "rack_row"} <= kinds
+    assert (tmp_path / "demo" / "labels.png").is_file()
+
+
+def test_missing_inputs_are_reported_not_raised(tmp_path: Path) -> None:
+    assert main(["map-build", str(tmp_path / "nothing"), "--out", str(tmp_path / "m.yaml")]) == 1
+    assert main(["import-carmen", str(tmp_path / "nothing.log"), str(tmp_path / "out")]) == 1
+    assert main(["replay", str(tmp_path / "nothing")]) == 1
+    assert main(["sim", "world", "--out", str(tmp_path / "w")]) == 1  # neither a layout nor --random
+
+
+def test_unknown_subcommand_exits_with_usage() -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["fly"])
+    assert exit_info.value.code == 2
