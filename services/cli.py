@@ -66,6 +66,8 @@ def _parser() -> argparse.ArgumentParser:
     build.add_argument("--out", type=Path, required=True, help="map_server YAML to write (PGM beside it)")
     build.add_argument("--resolution", type=_positive, default=None, help="metres per cell")
     build.add_argument("--scan-topic", default=None)
+    build.add_argument("--scan-matching", action="store_true",
+                       help="correct odometry drift by matching scans to the map (for logs without corrected poses)")
     _add_sim(commands)
     return parser
 
@@ -192,14 +194,16 @@ def _replay_job(bus: Bus, stop: threading.Event, *, bag: Path, rate: float, loop
 
 
 def _map_build(args: argparse.Namespace, settings: Settings) -> int:
-    from services.occupancy_mapping import build_map, sharpness, write_map_yaml
+    from services.occupancy_mapping import ScanMatcher, build_map, sharpness, write_map_yaml
 
     occupancy_settings = settings.occupancy
+    max_range_m = occupancy_settings.max_range_m
     grid = build_map(
         args.bag,
         resolution_m=args.resolution or occupancy_settings.resolution_m,
         scan_topic=args.scan_topic or occupancy_settings.scan_topic,
-        max_range_m=occupancy_settings.max_range_m,
+        max_range_m=max_range_m,
+        corrector=ScanMatcher(max_range_m=max_range_m) if args.scan_matching else None,
     )
     occupancy = grid.occupancy()
     write_map_yaml(args.out, occupancy, resolution_m=grid.resolution_m, origin_x_m=grid.origin_x_m,

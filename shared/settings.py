@@ -55,6 +55,15 @@ class OccupancySettings(BaseModel):
     map_frame: str = "map"
     max_range_m: float = Field(30.0, gt=0.0, description="Returns beyond this are not marked occupied.")
     layer: str = "occupancy"
+    scan_matching: bool = Field(
+        True, description="Correct odometry drift by matching scans to the map (robots without a map frame)."
+    )
+    scan_matching_window_m: float = Field(
+        0.3, gt=0.0, le=2.0, description="Largest position error of a predicted scan pose that matching corrects."
+    )
+    scan_matching_window_rad: float = Field(
+        0.09, gt=0.0, le=0.5, description="Largest heading error of a predicted scan pose that matching corrects."
+    )
 
 
 class Settings(BaseSettings):

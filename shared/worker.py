@@ -122,19 +122,22 @@ def run_stage(name: str, factory: StageFactory, *, bus: Bus, store: MapStore, se
             if stop.wait(restart_delay_s):
                 return
     context = StageContext(name, bus, store, settings, map_info, Counters())
-    token = bus.declare_worker(name)
     heart = threading.Thread(target=_heartbeat, args=(context, stop), name=f"{name}-heartbeat", daemon=True)
     heart.start()
+    token = None
     try:
         while not stop.is_set():
             try:
-                factory(context).run(stop)
+                stage = factory(context)  # subscribes: only then is the worker announced as alive
+                token = token or bus.declare_worker(name)
+                stage.run(stop)
             except Exception:
                 context.count("crashes")
                 log.exception("%s: stage failed; restarting in %.1f s", name, restart_delay_s)
                 stop.wait(restart_delay_s)
     finally:
-        token.undeclare()
+        if token is not None:
+            token.undeclare()
         heart.join(timeout=HEARTBEAT_PERIOD_S + 1)
         _beat(context)
         log.info("%s: stopped", name)

@@ -7,17 +7,22 @@ from services.occupancy_mapping.offline import BuildStats, build_map, build_map_
 from services.occupancy_mapping.quality import WallAgreement, sharpness, wall_agreement
 from services.occupancy_mapping.raycast import RayCasting
 from services.occupancy_mapping.scan import ScanArrays, scan_angles, scan_arrays
+from services.occupancy_mapping.scanmatch import MatchResult, ScanMatcher, likelihood_field, match_scan
 
 __all__ = [
     "BuildStats",
     "MapImage",
+    "MatchResult",
     "OccupancyGrid",
     "OccupancyMappingError",
     "RayCasting",
     "ScanArrays",
+    "ScanMatcher",
     "WallAgreement",
     "build_map",
     "build_map_with_stats",
+    "likelihood_field",
+    "match_scan",
     "read_map_yaml",
     "scan_angles",
     "scan_arrays",

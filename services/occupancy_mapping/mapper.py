@@ -30,6 +30,10 @@ ScanCorrector = Callable[[OccupancyGrid, Pose2D, ScanArrays], Pose2D]
 """Optional pose correction: given the grid so far, a predicted sensor pose and the scan, a better pose."""
 
 
+def _is_map_frame(frame: str) -> bool:
+    return frame == "map" or frame.endswith("/map")
+
+
 def sensor_pose(transform: Transform, angles: npt.NDArray[np.float64]) -> tuple[Pose2D, npt.NDArray[np.float64]]:
     """Planar sensor pose and bearings; a sensor mounted upside down sweeps the other way."""
     x, y, _, _ = transform.rotation
@@ -59,7 +63,8 @@ class ScanMapper:
     wait_s : float
         How long (in scan time) a scan may wait for its transforms before it is dropped.
     corrector : callable, optional
-        Pose correction per scan before integration (e.g. scan-to-map matching).
+        Pose correction per scan before integration (e.g. scan-to-map matching), applied to robots
+        mapped in their odometry frame; robots that publish a ``map`` frame are localised already.
     """
 
     def __init__(self, grid: OccupancyGrid, *, fixed_frame: str = AUTO_FRAME, max_range_m: float = 30.0,
@@ -114,7 +119,7 @@ class ScanMapper:
                 if waiting and not final and robot.pending[-1].stamp_ns - scan.stamp_ns < self._wait_ns:
                     break
                 robot.pending.popleft()
-                done += self._integrate(robot, scan)
+                done += self._integrate(namespace, robot, scan)
         return done
 
     def _choose_frame(self, namespace: str, buffer: TransformBuffer) -> str | None:
@@ -129,7 +134,7 @@ class ScanMapper:
                 return found[0]
         return None
 
-    def _integrate(self, robot: _Robot, scan: ScanArrays) -> int:
+    def _integrate(self, namespace: str, robot: _Robot, scan: ScanArrays) -> int:
         if robot.frame is None:
             self.counts["scans_without_frame"] += 1
             return 0
@@ -140,8 +145,11 @@ class ScanMapper:
             log.debug("scan at %d ns dropped: %s", scan.stamp_ns, err)
             return 0
         pose, angles = sensor_pose(transform, scan.angles)
-        if self._corrector is not None:
-            pose = self._corrector(self.grid, pose, scan._replace(angles=angles))
+        if self._corrector is not None and not _is_map_frame(robot.frame):
+            # a localised robot (map frame) is trusted; odometry-only robots get drift-corrected.
+            # Correctors track drift per sensor: the frame name is qualified by the robot's namespace
+            frame = f"{namespace.strip('/')}/{scan.frame_id}" if namespace.strip("/") else scan.frame_id
+            pose = self._corrector(self.grid, pose, scan._replace(angles=angles, frame_id=frame))
         try:
             beams = self.grid.integrate(pose, scan.ranges, angles, range_min_m=scan.range_min_m,
                                         range_max_m=scan.range_max_m, max_range_m=self.max_range_m)

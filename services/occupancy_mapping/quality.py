@@ -23,13 +23,16 @@ class WallAgreement(NamedTuple):
     ``fraction`` of the reference's occupied cells within tolerance of one of ours, after mapping
     ours into the reference frame with ``ours_to_reference`` (``p_ref = R(yaw) p_ours + (x, y)``);
     ``fraction_in_view`` counts only the reference cells that fall within tolerance of a cell our
-    map has observed (known), i.e. the part of the reference our data could have seen.
+    map has observed (known), i.e. the part of the reference our data could have seen;
+    ``precision`` is the other direction: the fraction of our occupied cells within tolerance of
+    a reference wall (low when we invent or misplace walls, or see things the reference lacks).
     """
 
     fraction: float
     ours_to_reference: Pose2D
     reference_cells: int
     fraction_in_view: float
+    precision: float
 
 
 def _check(occupancy: npt.NDArray[np.int8], what: str) -> npt.NDArray[np.int8]:
@@ -200,4 +203,13 @@ def wall_agreement(
     in_view_fraction = float(agree[in_view].mean()) if in_view.any() else 0.0
     # p_ours = R(yaw) p_ref + t, so p_ref = R(-yaw) p_ours - R(-yaw) t
     back = -_rotate(t[None, :], -yaw)[0]
-    return WallAgreement(score, Pose2D(float(back[0]), float(back[1]), -yaw), len(ref_pts), in_view_fraction)
+    ours_in_ref = _rotate(ours_pts, -yaw) + back
+    ref_lo = ref_pts.min(axis=0) - 1.0
+    ref_idx = np.floor((ref_pts - ref_lo) / reference.resolution_m).astype(np.intp)
+    ref_free = np.ones((ref_idx[:, 1].max() + int(2.0 / reference.resolution_m),
+                        ref_idx[:, 0].max() + int(2.0 / reference.resolution_m)), np.uint8)
+    ref_free[ref_idx[:, 1], ref_idx[:, 0]] = 0
+    to_ref_wall = (cv2.distanceTransform(ref_free, cv2.DIST_L2, 5) * reference.resolution_m).astype(np.float32)
+    precision = float(_within(ours_in_ref, to_ref_wall, ref_lo, reference.resolution_m, tolerance_m).mean())
+    return WallAgreement(score, Pose2D(float(back[0]), float(back[1]), -yaw), len(ref_pts), in_view_fraction,
+                         precision)

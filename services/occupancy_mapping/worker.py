@@ -15,6 +15,7 @@ import time
 from services.occupancy_mapping.errors import OccupancyMappingError
 from services.occupancy_mapping.grid import OccupancyGrid
 from services.occupancy_mapping.mapper import AUTO_FRAME, ScanMapper
+from services.occupancy_mapping.scanmatch import ScanMatcher
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, DropPolicy, Subscription
 from shared.grids import occupancy_grid_message
@@ -46,7 +47,14 @@ class OccupancyStage:
         self.tf = subscribe("tf", messages.TF_MESSAGE, 2000)
         self.tf_static = subscribe("tf_static", messages.TF_MESSAGE, 100)
         self._subscriptions = (self.scans, self.odometry, self.tf, self.tf_static)
-        self.mapper = ScanMapper(self._resume(), fixed_frame=AUTO_FRAME, max_range_m=self.settings.max_range_m)
+        self.matcher = (
+            ScanMatcher(window_m=self.settings.scan_matching_window_m,
+                        window_rad=self.settings.scan_matching_window_rad, max_range_m=self.settings.max_range_m)
+            if self.settings.scan_matching
+            else None
+        )
+        self.mapper = ScanMapper(self._resume(), fixed_frame=AUTO_FRAME, max_range_m=self.settings.max_range_m,
+                                 corrector=self.matcher)
         self._publisher = bus.publisher(MAP_TOPIC, messages.OCCUPANCY_GRID, namespace=WORKER_NAMESPACE)
         self._integrated_since_store = 0
         self._integrated_since_publish = 0
@@ -112,7 +120,8 @@ class OccupancyStage:
             item = self.scans.receive() if taken < _BATCH else None
 
     def _sync_counts(self) -> None:
-        for name, value in self.mapper.counts.items():
+        counts = self.mapper.counts + self.matcher.counts if self.matcher else self.mapper.counts
+        for name, value in counts.items():
             self.context.counters.set(f"{self.context.name}.{name}", value)
 
     def _store(self) -> None:
