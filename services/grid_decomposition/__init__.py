@@ -1,0 +1,83 @@
+"""Grid decomposition: dominant orientations, radiogram lines, cells, place labels and regions."""
+
+from services.grid_decomposition.cogency import EdgeCogency, close_doorways, edge_cogency, wall_evidence
+from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.evaluation import IpaScores, ground_truth_rooms, ipa_scores
+from services.grid_decomposition.faces import FaceGeometry, face_geometry
+from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
+from services.grid_decomposition.mapfile import (
+    decompose_map_file,
+    layout_features,
+    parse_label_overrides,
+    read_map_file,
+    write_outputs,
+)
+from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
+from services.grid_decomposition.overview import overview_image
+from services.grid_decomposition.pipeline import Decomposition, Resolution, decompose
+from services.grid_decomposition.places import cast_rays, categorize_places, raycast_features
+from services.grid_decomposition.radiogram import Line, Radiogram, line_offsets, radiogram
+from services.grid_decomposition.regions import RegionInfo, face_regions, region_topology
+from services.grid_decomposition.semantics import (
+    LABEL_TABLE,
+    Connection,
+    Label,
+    LabelSemantics,
+    link_connection,
+    parse_label,
+)
+from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
+from services.grid_decomposition.templates import Template, match_templates
+from services.grid_decomposition.texture import gabor_features, segment_texture_regions
+
+__all__ = [
+    "LABEL_TABLE",
+    "Connection",
+    "Decomposition",
+    "DecompositionError",
+    "EdgeCogency",
+    "FaceGeometry",
+    "FaceLabels",
+    "Gradients",
+    "IpaScores",
+    "Label",
+    "LabelSemantics",
+    "Line",
+    "LineGroup",
+    "Radiogram",
+    "RegionInfo",
+    "Resolution",
+    "Subdivision",
+    "Template",
+    "assign_labels",
+    "cast_rays",
+    "categorize_places",
+    "close_doorways",
+    "decompose",
+    "decompose_map_file",
+    "dominant_orientations",
+    "edge_cogency",
+    "evidence_labels",
+    "face_categories",
+    "face_geometry",
+    "face_regions",
+    "gabor_features",
+    "ground_truth_rooms",
+    "ipa_scores",
+    "layout_features",
+    "line_offsets",
+    "link_connection",
+    "match_templates",
+    "oriented_gradients",
+    "overview_image",
+    "parse_label",
+    "parse_label_overrides",
+    "radiogram",
+    "raycast_features",
+    "read_map_file",
+    "region_topology",
+    "segment_texture_regions",
+    "subdivide",
+    "wall_evidence",
+    "write_outputs",
+]

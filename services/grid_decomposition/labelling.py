@@ -1,0 +1,149 @@
+"""Place labels of faces: geometric and template evidence, categories mapped to labels by vote."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import NamedTuple
+
+import networkx as nx
+import numpy as np
+import numpy.typing as npt
+
+from services.grid_decomposition.faces import FaceGeometry
+from services.grid_decomposition.semantics import Label
+from services.grid_decomposition.templates import Template, match_templates
+
+
+class FaceLabels(NamedTuple):
+    """Labels of faces, index 0 unused.
+
+    Attributes
+    ----------
+    evidence : (F + 1,) int64
+        :class:`Label` value each face gets from geometry and the templates alone.
+    category : (F + 1,) int64
+        Place category by vote of the face's samples, -1 where it has none.
+    label : (F + 1,) int64
+        Final :class:`Label` value.
+    category_labels : dict
+        The category -> label assignment used (automatic, then overridden by a person).
+    """
+
+    evidence: npt.NDArray[np.int64]
+    category: npt.NDArray[np.int64]
+    label: npt.NDArray[np.int64]
+    category_labels: dict[int, Label]
+
+
+def face_categories(
+    face_image: npt.NDArray[np.int32],
+    n_faces: int,
+    rows: npt.NDArray[np.int64],
+    cols: npt.NDArray[np.int64],
+    category: npt.NDArray[np.int64],
+    n_categories: int,
+) -> npt.NDArray[np.int64]:
+    """Category of each face as the statistical mode of its samples' categories (-1 without any)."""
+    faces = face_image[rows, cols].astype(np.int64)
+    votes = np.zeros((n_faces + 1, max(n_categories, 1)), dtype=np.int64)
+    np.add.at(votes, (faces, category), 1)
+    out: npt.NDArray[np.int64] = np.argmax(votes, axis=1).astype(np.int64)
+    out[votes.sum(axis=1) == 0] = -1
+    out[0] = -1
+    return out
+
+
+def evidence_labels(
+    graph: nx.Graph,
+    geometry: FaceGeometry,
+    component: npt.NDArray[np.int64],
+    component_elongation: npt.NDArray[np.float64],
+    face_free_px: npt.NDArray[np.int64],
+    *,
+    resolution_m: float,
+    storage_max_depth_m: float = 1.6,
+    storage_max_width_m: float = 3.0,
+    storage_min_width_m: float = 1.8,
+    storage_max_walled: float = 0.3,
+    corridor_max_width_m: float = 4.0,
+    corridor_min_elongation: float = 4.0,
+    open_area_min_m2: float = 150.0,
+) -> npt.NDArray[np.int64]:
+    """Label evidence per face from its geometry and the paper-B templates.
+
+    Storage: a small rectangle (short side <= ``storage_max_depth_m``, long side <=
+    ``storage_max_width_m`` and >= ``storage_min_width_m``: a bay) with at least three corners
+    on obstacles (uprights) and an outline mostly open (at most ``storage_max_walled`` of it
+    touching obstacles). Faces of a compact connected component (elongation below
+    ``corridor_min_elongation`` and no storage) are one room (or open area above
+    ``open_area_min_m2``). In the other components (networks of
+    aisles or corridors) the templates run on the graph of non-storage faces: T/X junctions, and
+    corridor pieces (two branches or a dead end, short side <= ``corridor_max_width_m``); the
+    rest is open area.
+    """
+    n = geometry.short_m.size
+    ev = np.full(n, Label.NONE.value, dtype=np.int64)
+    is_free = face_free_px > 0
+    storage = (
+        is_free
+        & (geometry.corners_on_obstacle >= 3)
+        & (geometry.short_m <= storage_max_depth_m)
+        & (geometry.long_m <= storage_max_width_m)
+        & (geometry.long_m >= storage_min_width_m)
+        & (geometry.walled_fraction <= storage_max_walled)
+    )
+    ev[storage] = Label.STORAGE.value
+    has_storage = np.zeros(component_elongation.size, dtype=bool)
+    has_storage[component[storage]] = True
+    area_m2 = np.bincount(component, weights=face_free_px, minlength=has_storage.size) * resolution_m**2
+    network = has_storage | (component_elongation >= corridor_min_elongation)
+    compact = is_free & ~storage & ~network[component]
+    ev[compact] = np.where(area_m2[component[compact]] >= open_area_min_m2, Label.OPEN_AREA, Label.ROOM)
+    drivable = graph.subgraph([f for f in graph.nodes if is_free[f] and not storage[f] and network[component[f]]])
+    for face, template in match_templates(nx.Graph(drivable)).items():
+        if template in (Template.T_JUNCTION, Template.X_JUNCTION):
+            ev[face] = Label.JUNCTION.value
+        elif template in (Template.CORRIDOR, Template.DEAD_END) and geometry.short_m[face] <= corridor_max_width_m:
+            ev[face] = Label.CORRIDOR.value
+        else:
+            ev[face] = Label.OPEN_AREA.value
+    return ev
+
+
+def assign_labels(
+    evidence: npt.NDArray[np.int64],
+    category: npt.NDArray[np.int64],
+    face_free_px: npt.NDArray[np.int64],
+    *,
+    overrides: Mapping[int, Label] | None = None,
+    min_purity: float = 0.9,
+) -> FaceLabels:
+    """Map place categories to labels and label faces.
+
+    Each category gets the label most of its faces' free area has as evidence (its purity is
+    that share); ``overrides`` (category -> label, a person's choice) replace the automatic
+    assignment. A face takes its category's label when the category was overridden or is at
+    least ``min_purity`` pure; otherwise (mixed categories, or no category) it keeps its own
+    evidence, since the ray-cast shape of an aisle piece and of a pallet cell can coincide.
+    """
+    n_cat = int(category.max()) + 1 if category.size else 0
+    votes = np.zeros((max(n_cat, 1), len(Label)), dtype=np.float64)
+    has = category >= 0
+    np.add.at(votes, (category[has], evidence[has]), face_free_px[has].astype(np.float64))
+    votes[:, Label.NONE.value] = 0.0
+    total = votes.sum(axis=1)
+    purity = np.divide(votes.max(axis=1), total, out=np.zeros_like(total), where=total > 0)
+    mapping: dict[int, Label] = {}
+    for c in range(n_cat):
+        mapping[c] = Label(int(np.argmax(votes[c]))) if total[c] > 0 else Label.UNIDENTIFIED
+    trusted = purity >= min_purity
+    for c, label in (overrides or {}).items():
+        mapping[c] = label
+        if 0 <= c < trusted.size:
+            trusted[c] = True
+    lut = np.array([mapping.get(c, Label.UNIDENTIFIED).value for c in range(max(n_cat, 1))], dtype=np.int64)
+    use = has & trusted[np.maximum(category, 0)]
+    final = np.where(use, lut[np.maximum(category, 0)], evidence).astype(np.int64)
+    final[(final == Label.NONE.value) & (face_free_px > 0)] = Label.UNIDENTIFIED.value
+    final[face_free_px == 0] = Label.NONE.value
+    return FaceLabels(evidence, category, final, mapping)

@@ -1,0 +1,243 @@
+"""Offline decomposition of a map file: read YAML/PNG/PGM, decompose, write images, GeoJSON, topology."""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import cv2
+import networkx as nx
+import numpy as np
+import numpy.typing as npt
+from PIL import Image, UnidentifiedImageError
+from scipy import ndimage
+
+from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.overview import overview_image
+from services.grid_decomposition.pipeline import Decomposition, decompose
+from services.grid_decomposition.semantics import Label, parse_label
+from services.grid_decomposition.subdivision import line_endpoints
+from services.occupancy_mapping.errors import OccupancyMappingError
+from services.occupancy_mapping.mapio import read_map_yaml
+
+logger = logging.getLogger(__name__)
+
+_IMAGE_SUFFIXES = {".png", ".pgm", ".ppm", ".bmp", ".tif", ".tiff", ".jpg", ".jpeg"}
+
+
+def read_map_file(
+    map_path: Path, *, resolution_m: float | None = None
+) -> tuple[npt.NDArray[np.int8], float, tuple[float, float]]:
+    """Occupancy (GridLayer order), resolution and origin of a map_server YAML or a bare image.
+
+    A bare image is read with map_server's trinary thresholds (occupied above 0.65, free below
+    0.196 of darkness) and needs ``resolution_m``; its origin is (0, 0). For a YAML,
+    ``resolution_m`` (if given) must match the file's.
+    """
+    path = Path(map_path)
+    if not path.exists():
+        raise DecompositionError(f"map file {path} does not exist")
+    if path.suffix.lower() in {".yaml", ".yml"}:
+        try:
+            image = read_map_yaml(path)
+        except OccupancyMappingError as err:
+            raise DecompositionError(str(err)) from err
+        if resolution_m is not None and not math.isclose(resolution_m, image.resolution_m, rel_tol=1e-6):
+            raise DecompositionError(
+                f"--resolution {resolution_m} m disagrees with {path}'s resolution {image.resolution_m} m"
+            )
+        return image.occupancy, image.resolution_m, (image.origin_x_m, image.origin_y_m)
+    if path.suffix.lower() not in _IMAGE_SUFFIXES:
+        raise DecompositionError(
+            f"map file {path} is neither a map_server YAML nor an image ({sorted(_IMAGE_SUFFIXES)})"
+        )
+    if resolution_m is None:
+        raise DecompositionError(f"map image {path} has no YAML: give its resolution in metres per pixel")
+    try:
+        with Image.open(path) as im:
+            grey = np.asarray(im.convert("L"), dtype=np.float64)
+    except (OSError, UnidentifiedImageError) as err:
+        raise DecompositionError(f"map image {path} is not a readable image: {err}") from err
+    p = (255.0 - grey) / 255.0
+    occ = np.full(grey.shape, -1, dtype=np.int8)
+    occ[p > 0.65] = 100
+    occ[p < 0.196] = 0
+    return occ[::-1].copy(), float(resolution_m), (0.0, 0.0)
+
+
+def parse_label_overrides(text: str) -> dict[int, Label]:
+    """``"0=corridor,3=storage"`` -> {0: CORRIDOR, 3: STORAGE} (the CLI's ``--labels``)."""
+    out: dict[int, Label] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip().lstrip("-").isdigit():
+            raise DecompositionError(f"label override {item!r} is not CATEGORY=LABEL (e.g. 3=storage)")
+        out[int(key)] = parse_label(value)
+    return out
+
+
+def _to_metres(points_px: npt.NDArray[np.float64], decomposition: Decomposition) -> list[list[float]]:
+    """(x = column, y = row) grid pixel coordinates (cell corners) to map metres."""
+    ox, oy = decomposition.origin_xy_m
+    res = decomposition.resolution_m
+    return [[round(ox + float(x) * res, 4), round(oy + float(y) * res, 4)] for x, y in points_px]
+
+
+def layout_features(decomposition: Decomposition) -> dict[str, Any]:
+    """GeoJSON FeatureCollection of regions (polygons), walls (cogent edges) and decomposition lines."""
+    features: list[dict[str, Any]] = []
+    seg = decomposition.segments
+    for sid, box in enumerate(ndimage.find_objects(seg), start=1):
+        if box is None or sid not in decomposition.regions:
+            continue
+        info = decomposition.regions[sid]
+        mask = np.pad((seg[box] == sid).astype(np.uint8), 1)
+        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        polys = []
+        for c in contours:
+            if len(c) < 3:
+                continue
+            pts = c.reshape(-1, 2).astype(np.float64) - 1 + [box[1].start, box[0].start] + 0.5
+            ring = _to_metres(pts, decomposition)
+            polys.append([[*ring, ring[0]]])
+        if not polys:
+            continue
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "MultiPolygon", "coordinates": polys},
+                "properties": {
+                    "kind": "region",
+                    "id": sid,
+                    "label": info.label.name.lower(),
+                    "category": info.category,
+                    "area_m2": round(info.area_m2, 3),
+                },
+            }
+        )
+    sub, cog = decomposition.subdivision, decomposition.cogency
+    for e in np.flatnonzero(cog.cogent):
+        ends = sub.edge_ends_px[e] + 0.5
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "LineString", "coordinates": _to_metres(ends, decomposition)},
+                "properties": {
+                    "kind": "wall",
+                    "id": int(e),
+                    "label": "door" if cog.door[e] else "wall",
+                    "category": None,
+                },
+            }
+        )
+    h, w = seg.shape
+    n_line = 0
+    for g_index, group in enumerate(decomposition.line_groups):
+        for line in group.lines:
+            seg_pts = _clip_line(line_endpoints(line, (h, w)), group.mask, (h, w))
+            for p0, p1 in seg_pts:
+                features.append(
+                    {
+                        "type": "Feature",
+                        "geometry": {
+                            "type": "LineString",
+                            "coordinates": _to_metres(np.array([p0, p1], dtype=np.float64) + 0.5, decomposition),
+                        },
+                        "properties": {
+                            "kind": "line",
+                            "id": n_line,
+                            "label": "coarse" if line.coarse else "fine",
+                            "category": g_index,
+                            "angle_rad": round(line.angle_rad, 6),
+                            "support_m": round(line.support_m, 3),
+                        },
+                    }
+                )
+                n_line += 1
+    return {"type": "FeatureCollection", "features": features}
+
+
+def _clip_line(
+    ends: tuple[tuple[int, int], tuple[int, int]], mask: npt.NDArray[np.bool_] | None, shape: tuple[int, int]
+) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The pieces of a line inside the image (and inside ``mask``), as end-point pairs (x, y)."""
+    h, w = shape
+    (x0, y0), (x1, y1) = ends
+    n = int(math.hypot(x1 - x0, y1 - y0)) + 1
+    xs, ys = np.linspace(x0, x1, n), np.linspace(y0, y1, n)
+    xi, yi = np.rint(xs).astype(np.int64), np.rint(ys).astype(np.int64)
+    inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+    if mask is not None:
+        inside[inside] = mask[yi[inside], xi[inside]]
+    d = np.diff(np.r_[0, inside.astype(np.int8), 0])
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+    return [((xs[a], ys[a]), (xs[b], ys[b])) for a, b in zip(starts, stops, strict=True) if b > a]
+
+
+def topology_json(graph: nx.Graph) -> dict[str, Any]:
+    """networkx node-link JSON of the region graph."""
+    data: dict[str, Any] = nx.node_link_data(graph, edges="links")
+    return data
+
+
+def write_outputs(decomposition: Decomposition, out_dir: Path) -> dict[str, Path]:
+    """Write labels.png, segments.png, layout.geojson, topology.json and overview.png into ``out_dir``.
+
+    Images are in the input image's row order (top row = highest y).
+    """
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise DecompositionError(f"cannot create output folder {out}: {err}") from err
+    paths = {
+        "labels": out / "labels.png",
+        "segments": out / "segments.png",
+        "layout": out / "layout.geojson",
+        "topology": out / "topology.json",
+        "overview": out / "overview.png",
+    }
+    if decomposition.segments.max() > np.iinfo(np.uint16).max:
+        raise DecompositionError(f"{decomposition.segments.max()} regions do not fit a 16-bit segments.png")
+    Image.fromarray(np.ascontiguousarray(decomposition.labels[::-1])).save(paths["labels"])
+    cv2.imwrite(str(paths["segments"]), np.ascontiguousarray(decomposition.segments[::-1].astype(np.uint16)))
+    paths["layout"].write_text(json.dumps(layout_features(decomposition)))
+    paths["topology"].write_text(json.dumps(topology_json(decomposition.topology)))
+    Image.fromarray(overview_image(decomposition)).save(paths["overview"])
+    return paths
+
+
+def decompose_map_file(
+    map_path: Path,
+    out_dir: Path,
+    *,
+    resolution_m: float | None = None,
+    label_overrides: Mapping[int, Label] | None = None,
+) -> Decomposition:
+    """Decompose a map file and write its outputs (the ``aisle decompose`` command).
+
+    Parameters
+    ----------
+    map_path : Path
+        map_server YAML, or a bare PNG/PGM image (then ``resolution_m`` is required).
+    out_dir : Path
+        Folder for labels.png, segments.png, layout.geojson, topology.json, overview.png.
+    resolution_m : float, optional
+        Metres per pixel of a bare image (must agree with a YAML's if given).
+    label_overrides : mapping, optional
+        Place category -> label, replacing the automatic assignment.
+
+    Raises
+    ------
+    DecompositionError
+        Missing, unreadable or malformed map files, maps without free space, bad overrides.
+    """
+    occ, res, origin = read_map_file(Path(map_path), resolution_m=resolution_m)
+    result = decompose(occ, resolution_m=res, origin_xy_m=origin, label_overrides=label_overrides)
+    write_outputs(result, Path(out_dir))
+    logger.info("decomposed %s: %d regions into %s", map_path, len(result.regions), out_dir)
+    return result

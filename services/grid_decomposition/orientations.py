@@ -1,0 +1,149 @@
+"""Dominant orientations of an occupancy map: weighted HOG, Gaussian-mixture smoothing, CWT peaks."""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from scipy.signal import find_peaks_cwt
+from sklearn.mixture import GaussianMixture
+
+from services.grid_decomposition.errors import DecompositionError
+
+_BINS = 180
+
+
+class Gradients(NamedTuple):
+    """Oriented gradients of the edge pixels of an obstacle mask.
+
+    ``rows``/``cols`` locate the pixels with a non-negligible gradient, ``magnitude`` is the Sobel
+    magnitude of the lightly blurred mask there, and ``direction`` the direction of the line the
+    gradient is normal to, radians in [-pi/2, pi/2) (x = column, y = row).
+    """
+
+    shape: tuple[int, int]
+    rows: npt.NDArray[np.int64]
+    cols: npt.NDArray[np.int64]
+    magnitude: npt.NDArray[np.float64]
+    direction: npt.NDArray[np.float64]
+
+
+def oriented_gradients(obstacle: npt.NDArray[np.bool_]) -> Gradients:
+    """Gradients of a (H, W) bool obstacle mask at its edge pixels (see :class:`Gradients`)."""
+    mask = np.asarray(obstacle, dtype=bool)
+    if mask.ndim != 2 or mask.size == 0:
+        raise DecompositionError(f"obstacle mask must be a non-empty 2-D array, got shape {mask.shape}")
+    image = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.0)
+    gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)
+    magnitude, phase = cv2.cartToPolar(gx, gy)
+    rows, cols = np.nonzero(magnitude > 0.05)
+    direction = phase[rows, cols].astype(np.float64) + math.pi / 2
+    direction = (direction + math.pi / 2) % math.pi - math.pi / 2
+    return Gradients(
+        (int(mask.shape[0]), int(mask.shape[1])),
+        rows.astype(np.int64),
+        cols.astype(np.int64),
+        magnitude[rows, cols].astype(np.float64),
+        direction,
+    )
+
+
+def _gmm_smooth(hist: npt.NDArray[np.float64], max_components: int) -> npt.NDArray[np.float64]:
+    """The histogram modelled by a 1-D Gaussian mixture chosen by BIC (circular, via a shift)."""
+    shift = int(np.argmin(np.convolve(np.r_[hist, hist[:4]], np.ones(5), "valid")[:_BINS]))
+    rolled = np.roll(hist, -shift)
+    counts = np.rint(rolled / rolled.sum() * 1500).astype(np.int64)
+    samples = np.repeat(np.arange(_BINS, dtype=np.float64), counts)
+    samples = samples + np.tile(np.linspace(-0.45, 0.45, 7), samples.size // 7 + 1)[: samples.size]
+    x = samples.reshape(-1, 1)
+    best: GaussianMixture | None = None
+    best_bic = math.inf
+    for k in range(1, max_components + 1):
+        gmm = GaussianMixture(k, random_state=0, reg_covar=0.5, init_params="k-means++", n_init=1).fit(x)
+        bic = float(gmm.bic(x))
+        if bic < best_bic:
+            best, best_bic = gmm, bic
+    assert best is not None
+    grid = np.arange(_BINS, dtype=np.float64).reshape(-1, 1)
+    density = np.exp(best.score_samples(grid))
+    return np.roll(density, shift)
+
+
+def _refine(angle_rad: float, rows: npt.NDArray[np.float64], cols: npt.NDArray[np.float64], span_rad: float) -> float:
+    """The angle near ``angle_rad`` whose projection of the points is sharpest (max sum of squares)."""
+    best, best_score = angle_rad, -1.0
+    for a in angle_rad + np.linspace(-span_rad, span_rad, 31):
+        s = -math.sin(a) * cols + math.cos(a) * rows
+        hist = np.bincount(np.rint(s - s.min()).astype(np.int64))
+        score = float(np.dot(hist, hist))
+        if score > best_score:
+            best, best_score = float(a), score
+    return (best + math.pi / 2) % math.pi - math.pi / 2
+
+
+def dominant_orientations(
+    gradients: Gradients,
+    *,
+    max_orientations: int = 6,
+    min_peak_ratio: float = 0.12,
+    min_separation_rad: float = math.radians(10.0),
+) -> npt.NDArray[np.float64]:
+    """Directions of the straight structure in a map, any number at any angles.
+
+    A histogram of gradient orientations weighted by gradient magnitude (1 degree bins) is modelled
+    by a Gaussian mixture (number of components by BIC), which merges spikes into the orientation
+    they flank; peaks of the smooth curve are found by continuous-wavelet (Ricker) peak detection and
+    kept when at least ``min_peak_ratio`` of the highest. Each is then refined to the angle whose
+    projection of the edge pixels is sharpest, so long walls stay on one line.
+
+    Parameters
+    ----------
+    gradients : Gradients
+        From :func:`oriented_gradients` of the obstacle mask (occupied, or occupied and unknown).
+    max_orientations : int
+        Upper bound on mixture components (and so on orientations).
+    min_peak_ratio : float
+        Peaks lower than this fraction of the highest peak are noise.
+    min_separation_rad : float
+        Peaks closer than this (radians) are one orientation.
+
+    Returns
+    -------
+    (K,) float64
+        Line directions in radians, [-pi/2, pi/2), x = column and y = row, strongest first.
+    """
+    if gradients.magnitude.size == 0:
+        return np.zeros(0)
+    strong = gradients.magnitude > 0.25 * gradients.magnitude.max()
+    direction = gradients.direction[strong]
+    bins = np.floor((direction + math.pi / 2) / math.pi * _BINS).astype(np.int64) % _BINS
+    hist = np.bincount(bins, weights=gradients.magnitude[strong], minlength=_BINS).astype(np.float64)
+    smooth = _gmm_smooth(hist, max_orientations)
+    tripled = np.r_[smooth, smooth, smooth]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        found = find_peaks_cwt(tripled, np.arange(1, 8))
+    peaks = [int(p) - _BINS for p in found if _BINS <= p < 2 * _BINS]
+    if not peaks:
+        peaks = [int(np.argmax(smooth))]
+    heights = smooth[peaks]
+    keep = [p for p, h in zip(peaks, heights, strict=True) if h >= min_peak_ratio * heights.max()]
+    keep.sort(key=lambda p: -smooth[p])
+    rows, cols = gradients.rows[strong], gradients.cols[strong]
+    if rows.size > 60000:
+        pick = np.random.default_rng(0).choice(rows.size, 60000, replace=False)
+        rows, cols = rows[pick], cols[pick]
+    angles: list[float] = []
+    for p in keep:
+        a = _refine(
+            (p + 0.5) / _BINS * math.pi - math.pi / 2,
+            rows.astype(np.float64),
+            cols.astype(np.float64),
+            math.radians(2.0),
+        )
+        if all(abs((a - b + math.pi / 2) % math.pi - math.pi / 2) >= min_separation_rad for b in angles):
+            angles.append(a)
+    return np.asarray(angles, dtype=np.float64)

@@ -1,0 +1,358 @@
+"""The whole decomposition of an occupancy grid: lines, cells, cogency, places, labels and regions."""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import cv2
+import networkx as nx
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
+from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.faces import face_geometry
+from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
+from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
+from services.grid_decomposition.places import categorize_places
+from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
+from services.grid_decomposition.regions import RegionInfo, face_regions, link_components, region_topology
+from services.grid_decomposition.segments import fill_from_neighbours, segment_image
+from services.grid_decomposition.semantics import Label
+from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
+from services.grid_decomposition.texture import segment_texture_regions
+
+logger = logging.getLogger(__name__)
+
+FREE_PERCENT = 25
+OCCUPIED_PERCENT = 65
+
+
+class Resolution(enum.Enum):
+    """Which line set decomposes the map (paper B: peak amplitude and width set the resolution)."""
+
+    COARSE = "coarse"
+    FINE = "fine"
+
+
+@dataclass(frozen=True)
+class Decomposition:
+    """Everything :func:`decompose` found, in grid order (row 0 = lowest y).
+
+    Attributes
+    ----------
+    labels : (H, W) uint8
+        :class:`Label` code per pixel, 0 off free space.
+    segments : (H, W) int32
+        Region id per pixel, 0 where no region.
+    regions : dict[int, RegionInfo]
+    topology : networkx.Graph
+        Regions linked with attribute ``connection``.
+    line_groups : tuple[LineGroup, ...]
+        Lines per texture region (all lines, ``coarse`` flag set); the decomposition used
+        ``resolution``.
+    subdivision : Subdivision
+        Faces are the free parts of the polygonal cells.
+    cogency : EdgeCogency
+    face_labels : FaceLabels
+    texture_regions : (H, W) int32
+    resolution : Resolution
+    resolution_m : float
+    origin_xy_m : tuple[float, float]
+    """
+
+    labels: npt.NDArray[np.uint8]
+    segments: npt.NDArray[np.int32]
+    regions: dict[int, RegionInfo]
+    topology: nx.Graph
+    line_groups: tuple[LineGroup, ...]
+    subdivision: Subdivision
+    cogency: EdgeCogency
+    face_labels: FaceLabels
+    texture_regions: npt.NDArray[np.int32]
+    resolution: Resolution
+    resolution_m: float
+    origin_xy_m: tuple[float, float]
+
+
+def _check(occupancy: npt.NDArray[np.integer], resolution_m: float) -> npt.NDArray[np.int16]:
+    occ = np.asarray(occupancy)
+    if occ.ndim != 2 or min(occ.shape, default=0) < 2:
+        raise DecompositionError(f"occupancy must be a 2-D grid of at least 2 x 2 cells, got shape {occ.shape}")
+    if not np.issubdtype(occ.dtype, np.integer):
+        raise DecompositionError(f"occupancy must be integer (-1 unknown, 0..100), got dtype {occ.dtype}")
+    if not (math.isfinite(resolution_m) and resolution_m > 0):
+        raise DecompositionError(f"resolution_m must be a positive number of metres, got {resolution_m}")
+    occ16 = occ.astype(np.int16)
+    if occ16.min() < -1 or occ16.max() > 100:
+        raise DecompositionError(f"occupancy values must be -1 or 0..100, got {occ16.min()}..{occ16.max()}")
+    if not np.any((occ16 >= 0) & (occ16 < FREE_PERCENT)):
+        raise DecompositionError("occupancy has no free cell: nothing to decompose")
+    return occ16
+
+
+def _masked(gradients: Gradients, mask: npt.NDArray[np.bool_]) -> Gradients:
+    keep = mask[gradients.rows, gradients.cols]
+    return Gradients(
+        gradients.shape,
+        gradients.rows[keep],
+        gradients.cols[keep],
+        gradients.magnitude[keep],
+        gradients.direction[keep],
+    )
+
+
+def _families(angles: npt.NDArray[np.float64], tolerance_rad: float) -> list[list[float]]:
+    """Orientations grouped into orthogonal families (angle modulo 90 degrees)."""
+    families: list[list[float]] = []
+    for a in angles:
+        folded = a % (math.pi / 2)
+        for fam in families:
+            d = abs((fam[0] % (math.pi / 2)) - folded)
+            if min(d, math.pi / 2 - d) < tolerance_rad:
+                fam.append(float(a))
+                break
+        else:
+            families.append([float(a)])
+    return families
+
+
+def _lines(gradients: Gradients, mask: npt.NDArray[np.bool_] | None, resolution_m: float) -> dict[float, list[Line]]:
+    """Lines per dominant orientation of the gradients inside ``mask``."""
+    grads = gradients if mask is None else _masked(gradients, mask)
+    return {
+        float(a): line_offsets(radiogram(grads, float(a)), resolution_m=resolution_m)
+        for a in dominant_orientations(grads)
+    }
+
+
+def _texture_count(lines: dict[float, list[Line]]) -> int:
+    """Number of texture regions: orthogonal orientation families with substantial line support."""
+    families = _families(np.array(list(lines)), math.radians(5.0))
+    if len(families) < 2:
+        return 1
+    support = [sum(ln.support_m for a in fam for ln in lines[a] if ln.coarse) for fam in families]
+    strong = [s for s in support if s >= 0.1 * max(support)]
+    return max(1, len(strong))
+
+
+def _elongation(
+    component: npt.NDArray[np.int64],
+    face_image: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    resolution_m: float,
+) -> npt.NDArray[np.float64]:
+    """Area / clearance^2 of each component (clearance = twice the largest distance to an obstacle)."""
+    dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3)
+    comp_px = component[face_image]
+    n = int(component.max()) + 1
+    width = np.zeros(n)
+    if n > 1:
+        width[1:] = ndimage.maximum(dist, comp_px, np.arange(1, n))
+    area = np.bincount(comp_px.ravel(), minlength=n).astype(np.float64)
+    elongation: npt.NDArray[np.float64] = area / np.maximum(2.0 * width, 1.0) ** 2
+    return elongation
+
+
+def decompose(
+    occupancy: npt.NDArray[np.integer],
+    *,
+    resolution_m: float,
+    origin_xy_m: tuple[float, float] = (0.0, 0.0),
+    resolution: Resolution = Resolution.COARSE,
+    n_texture_regions: int | None = None,
+    n_categories: int = 8,
+    label_overrides: Mapping[int, Label] | None = None,
+    door_max_width_m: float = 1.3,
+    wall_min_length_m: float = 0.5,
+    door_depth_m: float = 0.5,
+    wall_tolerance_m: float = 0.1,
+    face_disparity_threshold: float = 0.5,
+    edge_occupancy_threshold: float = 0.5,
+    min_region_area_m2: float = 0.3,
+    seed: int = 0,
+) -> Decomposition:
+    """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
+
+    Parameters
+    ----------
+    occupancy : (H, W) integer
+        -1 unknown, 0..100 occupancy percent; row 0 = lowest y (GridLayer order). Free is below
+        25, occupied above 65; uncertain cells count as obstacles for lines and ray casting.
+    resolution_m : float
+        Metres per cell.
+    origin_xy_m : (float, float)
+        Map coordinates of the lower-left corner of cell (0, 0), metres.
+    resolution : Resolution
+        Coarse (strong, narrow radiogram peaks only) or fine line set.
+    n_texture_regions : int, optional
+        Regions of different pattern (Gabor segmentation); ``None`` = as many as orthogonal
+        orientation families with substantial support.
+    n_categories : int
+        k of the k-means place categorisation.
+    label_overrides : mapping, optional
+        Place category -> :class:`Label`, replacing the automatic assignment.
+    door_max_width_m, wall_min_length_m, wall_tolerance_m : float
+        Doorway closing along lines: gaps up to ``door_max_width_m`` between wall runs of at least
+        ``wall_min_length_m`` are closed, unless both jambs go on ``door_depth_m`` along the
+        normal (a passage between blocks); walls within ``wall_tolerance_m`` of a line are on it.
+    face_disparity_threshold, edge_occupancy_threshold : float
+        t1, t2 of the cogency test.
+    min_region_area_m2 : float
+        Smaller pieces of free space join a neighbouring region.
+    seed : int
+        Seed of the clusterings.
+
+    Returns
+    -------
+    Decomposition
+
+    Raises
+    ------
+    DecompositionError
+        For grids that are not 2-D, too small, out of range, or without free space.
+    """
+    occ = _check(occupancy, resolution_m)
+    if n_categories < 1:
+        raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
+    free = (occ >= 0) & (occ < FREE_PERCENT)
+    known = occ >= 0
+    obstacle = ~free
+    occupied = known & (occ > OCCUPIED_PERCENT)
+    occupancy01 = np.where(known, occ / 100.0, 1.0)
+    gradients = oriented_gradients(obstacle)
+    global_lines = _lines(gradients, None, resolution_m)
+    n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
+    texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
+    groups: list[LineGroup] = []
+    for t in range(n_tex):
+        mask = None if n_tex == 1 else texture == t
+        if mask is not None and not mask.any():
+            continue
+        per_angle = global_lines if mask is None else _lines(gradients, mask, resolution_m)
+        groups.append(LineGroup(tuple(ln for lines in per_angle.values() for ln in lines), mask))
+    used = [
+        LineGroup(tuple(ln for ln in g.lines if resolution is Resolution.FINE or ln.coarse), g.mask) for g in groups
+    ]
+    logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
+    sub = subdivide(used, occ.shape, domain=free)
+    wall, door = wall_evidence(
+        occupied | (~known & ~free),
+        used,
+        tolerance_px=max(1, round(wall_tolerance_m / resolution_m)),
+        min_wall_px=max(1, round(wall_min_length_m / resolution_m)),
+        max_door_px=max(1, round(door_max_width_m / resolution_m)),
+        door_depth_px=max(1, round(door_depth_m / resolution_m)),
+    )
+    cog = edge_cogency(
+        sub,
+        occupancy01,
+        free,
+        wall,
+        door,
+        face_disparity_threshold=face_disparity_threshold,
+        edge_occupancy_threshold=edge_occupancy_threshold,
+    )
+    is_face = cog.face_free_px > 0
+    connected = sub.edge_faces[~cog.cogent]
+    component = link_components(sub.n_faces + 1, connected, is_face)
+    graph = nx.Graph()
+    graph.add_nodes_from(np.flatnonzero(is_face).tolist())
+    graph.add_edges_from(connected.tolist())
+    geometry = face_geometry(sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m)
+    elongation = _elongation(component, sub.face_image, free, resolution_m)
+    evidence = evidence_labels(graph, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
+    rows, cols, cats = categorize_places(
+        obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
+    )
+    face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
+    face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
+    region_of_face = face_regions(sub, cog, component, cog.face_free_px, face_labels.label)
+    segments = segment_image(
+        sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
+    )
+    regions, labels = _region_records(segments, sub, region_of_face, face_labels, resolution_m, origin_xy_m)
+    face_region_final = _final_face_regions(segments, sub)
+    topology = region_topology(sub, cog, face_region_final, regions)
+    return Decomposition(
+        labels=labels,
+        segments=segments,
+        regions=regions,
+        topology=topology,
+        line_groups=tuple(groups),
+        subdivision=sub,
+        cogency=cog,
+        face_labels=face_labels,
+        texture_regions=texture,
+        resolution=resolution,
+        resolution_m=resolution_m,
+        origin_xy_m=origin_xy_m,
+    )
+
+
+def _final_face_regions(segments: npt.NDArray[np.int32], sub: Subdivision) -> npt.NDArray[np.int64]:
+    """Region of each face after segment cleaning (majority of its pixels)."""
+    n = sub.n_faces + 1
+    f = sub.face_image.ravel()
+    s = segments.ravel()
+    ok = (f > 0) & (s > 0)
+    order = np.lexsort((s[ok], f[ok]))
+    fo, so = f[ok][order], s[ok][order]
+    out = np.zeros(n, dtype=np.int64)
+    if fo.size:
+        pair = fo.astype(np.int64) * (int(s.max()) + 1) + so
+        upair, counts = np.unique(pair, return_counts=True)
+        pf, ps = upair // (int(s.max()) + 1), upair % (int(s.max()) + 1)
+        best = np.zeros(n)
+        for face, seg, c in zip(pf, ps, counts, strict=True):
+            if c > best[face]:
+                best[face], out[face] = c, seg
+    return out
+
+
+def _region_records(
+    segments: npt.NDArray[np.int32],
+    sub: Subdivision,
+    region_of_face: npt.NDArray[np.int64],
+    face_labels: FaceLabels,
+    resolution_m: float,
+    origin_xy_m: tuple[float, float],
+) -> tuple[dict[int, RegionInfo], npt.NDArray[np.uint8]]:
+    """Region records (label: its faces' majority) and the label image (each face's own label)."""
+    n_seg = int(segments.max()) + 1
+    flat_seg = segments.ravel()
+    face_px = sub.face_image.ravel()
+    ok = flat_seg > 0
+    lab_px = face_labels.label[face_px[ok]]
+    cat_px = face_labels.category[face_px[ok]]
+    lab_votes = np.zeros((n_seg, len(Label)), dtype=np.int64)
+    np.add.at(lab_votes, (flat_seg[ok], lab_px), 1)
+    lab_votes[:, 0] = 0
+    seg_label = np.argmax(lab_votes, axis=1)
+    seg_label[lab_votes.sum(axis=1) == 0] = Label.UNIDENTIFIED.value
+    n_cat = int(max(face_labels.category.max(), 0)) + 2
+    cat_votes = np.zeros((n_seg, n_cat), dtype=np.int64)
+    np.add.at(cat_votes, (flat_seg[ok], cat_px + 1), 1)
+    seg_cat = np.argmax(cat_votes, axis=1) - 1
+    area = np.bincount(flat_seg, minlength=n_seg).astype(np.float64)
+    ys, xs = np.divmod(np.flatnonzero(ok), segments.shape[1])
+    sx = np.bincount(flat_seg[ok], xs, n_seg)
+    sy = np.bincount(flat_seg[ok], ys, n_seg)
+    regions: dict[int, RegionInfo] = {}
+    for sid in range(1, n_seg):
+        if area[sid] == 0:
+            continue
+        cx = origin_xy_m[0] + (sx[sid] / area[sid] + 0.5) * resolution_m
+        cy = origin_xy_m[1] + (sy[sid] / area[sid] + 0.5) * resolution_m
+        regions[sid] = RegionInfo(
+            sid, Label(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
+        )
+    labels = np.where(segments > 0, face_labels.label[sub.face_image], 0).astype(np.int32)
+    labels = fill_from_neighbours(labels, segments > 0)
+    labels = np.where(labels > 0, labels, np.where(segments > 0, seg_label[segments], 0))
+    return regions, labels.astype(np.uint8)

@@ -1,0 +1,151 @@
+"""Unsupervised place categorisation (paper C): ray-cast features per free pixel, k-means clusters."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from scipy.stats import kurtosis
+from sklearn.cluster import KMeans
+from sklearn.preprocessing import StandardScaler
+from threadpoolctl import threadpool_limits
+
+N_FEATURES = 13
+
+
+def cast_rays(
+    obstacle: npt.NDArray[np.bool_],
+    rows: npt.NDArray[np.int64],
+    cols: npt.NDArray[np.int64],
+    *,
+    n_beams: int,
+    max_range_px: float,
+) -> npt.NDArray[np.float64]:
+    """Simulated laser ranges from given pixels, by sphere tracing on the obstacle distance map.
+
+    Returns
+    -------
+    (N, n_beams) float64
+        Range in pixels of each beam (beam ``k`` at ``2 pi k / n_beams``), capped at ``max_range_px``.
+    """
+    dist = cv2.distanceTransform((~obstacle).astype(np.uint8), cv2.DIST_L2, 3)
+    h, w = obstacle.shape
+    angles = np.arange(n_beams) * (2 * math.pi / n_beams)
+    dx, dy = np.cos(angles).astype(np.float32), np.sin(angles).astype(np.float32)
+    n = rows.size
+    x0 = np.repeat(cols.astype(np.float32), n_beams)
+    y0 = np.repeat(rows.astype(np.float32), n_beams)
+    ux, uy = np.tile(dx, n), np.tile(dy, n)
+    t = np.zeros(n * n_beams, dtype=np.float32)
+    active = np.arange(n * n_beams)
+    for _ in range(64):
+        if active.size == 0:
+            break
+        xi = np.rint(x0[active] + t[active] * ux[active]).astype(np.int64)
+        yi = np.rint(y0[active] + t[active] * uy[active]).astype(np.int64)
+        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        d = np.zeros(active.size, dtype=np.float32)
+        d[inside] = dist[yi[inside], xi[inside]]
+        go = inside & (d >= 1.0) & (t[active] < max_range_px)
+        t[active[go]] += np.maximum(d[go] - 0.5, 1.0)
+        active = active[go]
+    return np.minimum(t, max_range_px).reshape(n, n_beams).astype(np.float64)
+
+
+def raycast_features(ranges: npt.NDArray[np.float64], *, gap_threshold: float) -> npt.NDArray[np.float64]:
+    """The thirteen geometric features of paper C's Table I (after Mozos et al.) per scan.
+
+    Mean and standard deviation of the ranges; mean and standard deviation of the differences
+    between consecutive ranges; area, perimeter and perimeter^2 / area of the scan polygon;
+    number of gaps (consecutive differences above ``gap_threshold``); kurtosis of the ranges;
+    the two principal-component variances of the end points, their ratio, and the distance from
+    the scan origin to the end points' centroid.
+
+    Parameters
+    ----------
+    ranges : (N, B) float64
+        Ranges (any length unit; ``gap_threshold`` in the same unit), beams evenly spaced over 2 pi.
+
+    Returns
+    -------
+    (N, 13) float64
+    """
+    n, b = ranges.shape
+    angles = np.arange(b) * (2 * math.pi / b)
+    diff = np.abs(ranges - np.roll(ranges, -1, axis=1))
+    x, y = ranges * np.cos(angles), ranges * np.sin(angles)
+    area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
+    perimeter = np.sum(np.hypot(x - np.roll(x, -1, axis=1), y - np.roll(y, -1, axis=1)), axis=1)
+    mx, my = x.mean(axis=1), y.mean(axis=1)
+    cxx = ((x - mx[:, None]) ** 2).mean(axis=1)
+    cyy = ((y - my[:, None]) ** 2).mean(axis=1)
+    cxy = ((x - mx[:, None]) * (y - my[:, None])).mean(axis=1)
+    half_tr, det = (cxx + cyy) / 2, cxx * cyy - cxy**2
+    root = np.sqrt(np.maximum(half_tr**2 - det, 0.0))
+    pc1, pc2 = half_tr + root, np.maximum(half_tr - root, 1e-9)
+    flat = np.ptp(ranges, axis=1) == 0
+    kurt = np.zeros(n)
+    if (~flat).any():
+        kurt[~flat] = kurtosis(ranges[~flat], axis=1)
+    return np.stack(
+        [
+            ranges.mean(axis=1),
+            ranges.std(axis=1),
+            diff.mean(axis=1),
+            diff.std(axis=1),
+            area,
+            perimeter,
+            perimeter**2 / np.maximum(area, 1e-9),
+            (diff > gap_threshold).sum(axis=1).astype(np.float64),
+            kurt,
+            pc1,
+            pc2,
+            pc1 / pc2,
+            np.hypot(mx, my),
+        ],
+        axis=1,
+    )
+
+
+def categorize_places(
+    obstacle: npt.NDArray[np.bool_],
+    free: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    n_categories: int = 8,
+    sample_spacing_m: float = 0.4,
+    n_beams: int = 32,
+    max_range_m: float = 12.0,
+    gap_threshold_m: float = 1.0,
+    seed: int = 0,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Cluster free pixels into place categories by the shape of simulated scans (k-means).
+
+    Free pixels on a grid of ``sample_spacing_m`` are ray-cast, described by
+    :func:`raycast_features` (lengths in metres, log-compressed where heavy-tailed, standardised)
+    and clustered into ``n_categories`` with k-means; categories are renumbered by mean range so
+    that the numbering is stable (0 = most confined).
+
+    Returns
+    -------
+    rows, cols, category : (N,) int64
+        The sampled pixels and their category.
+    """
+    step = max(1, round(sample_spacing_m / resolution_m))
+    grid = np.zeros_like(free)
+    grid[step // 2 :: step, step // 2 :: step] = True
+    rows, cols = np.nonzero(grid & free)
+    if rows.size == 0:
+        return rows.astype(np.int64), cols.astype(np.int64), np.zeros(0, np.int64)
+    ranges = cast_rays(obstacle, rows, cols, n_beams=n_beams, max_range_px=max_range_m / resolution_m)
+    feats = raycast_features(ranges * resolution_m, gap_threshold=gap_threshold_m)
+    for k in (4, 5, 6, 9, 10, 11):
+        feats[:, k] = np.log1p(feats[:, k])
+    k = min(n_categories, rows.size)
+    with threadpool_limits(1):
+        scaled = StandardScaler().fit_transform(feats)
+        model = KMeans(k, n_init=3, random_state=seed).fit(scaled)
+    order = np.argsort(np.argsort(model.cluster_centers_[:, 0]))
+    return rows.astype(np.int64), cols.astype(np.int64), order[model.labels_].astype(np.int64)

@@ -1,0 +1,106 @@
+"""Regions: faces merged into room, corridor, junction and storage instances, and their topology."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import networkx as nx
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from services.grid_decomposition.cogency import EdgeCogency
+from services.grid_decomposition.semantics import Label, link_connection
+from services.grid_decomposition.subdivision import Subdivision
+
+
+def link_components(n_nodes: int, links: npt.NDArray[np.int64], keep: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
+    """Connected-component id (1-based) of every node over ``links`` (L, 2); 0 where ``keep`` is False."""
+    ok = keep[links[:, 0]] & keep[links[:, 1]] if links.size else np.zeros(0, dtype=bool)
+    e = links[ok]
+    m = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_nodes, n_nodes))
+    _, comp = connected_components(m, directed=False)
+    _, dense = np.unique(comp, return_inverse=True)
+    return np.where(keep, dense + 1, 0).astype(np.int64)
+
+
+def face_regions(
+    sub: Subdivision,
+    cogency: EdgeCogency,
+    component: npt.NDArray[np.int64],
+    face_free_px: npt.NDArray[np.int64],
+    face_label: npt.NDArray[np.int64],
+    *,
+    min_storage_share: float = 0.2,
+) -> npt.NDArray[np.int64]:
+    """Region id per face (0 = none).
+
+    A connected component (faces joined by connected links) is one region, unless storage faces
+    make up at least ``min_storage_share`` of its free area (a warehouse floor): then it is split
+    into pallet cells (each storage face alone), junctions (adjacent junction faces together) and
+    aisles (adjacent faces of one drivable label together).
+    """
+    n = sub.n_faces + 1
+    n_comp = int(component.max()) + 1
+    area = np.bincount(component, weights=face_free_px, minlength=n_comp)
+    stored = np.bincount(component, weights=face_free_px * (face_label == Label.STORAGE.value), minlength=n_comp)
+    has_storage = stored >= min_storage_share * np.maximum(area, 1)
+    has_storage[0] = False
+    split = has_storage[component]
+    a, b = sub.edge_faces[:, 0], sub.edge_faces[:, 1]
+    same = (component[a] == component[b]) & ~cogency.cogent & (component[a] > 0)
+    join = same & (~split[a] | ((face_label[a] == face_label[b]) & (face_label[a] != Label.STORAGE.value)))
+    return link_components(n, sub.edge_faces[join], component > 0)
+
+
+class RegionInfo(NamedTuple):
+    """One region of the map.
+
+    ``label`` and ``category`` are the area-weighted majority of its faces; area in square
+    metres; centroid in map metres.
+    """
+
+    region_id: int
+    label: Label
+    category: int
+    area_m2: float
+    centroid_xy_m: tuple[float, float]
+
+
+def region_topology(
+    sub: Subdivision,
+    cogency: EdgeCogency,
+    face_region: npt.NDArray[np.int64],
+    regions: dict[int, RegionInfo],
+) -> nx.Graph:
+    """Graph of regions; an edge per touching pair with attribute ``connection`` (a Connection value).
+
+    Regions touching across at least one non-cogent edge are linked by their labels
+    (:func:`link_connection`); touching only across cogent edges, by a door when a doorway was
+    closed on one of them, else they are disconnected.
+    """
+    graph = nx.Graph()
+    for info in regions.values():
+        graph.add_node(
+            info.region_id,
+            label=info.label.name.lower(),
+            category=info.category,
+            area_m2=round(info.area_m2, 3),
+            x=round(info.centroid_xy_m[0], 3),
+            y=round(info.centroid_xy_m[1], 3),
+        )
+    ra, rb = face_region[sub.edge_faces[:, 0]], face_region[sub.edge_faces[:, 1]]
+    ok = (ra > 0) & (rb > 0) & (ra != rb)
+    pairs: dict[tuple[int, int], list[int]] = {}
+    for e in np.flatnonzero(ok):
+        key = (int(min(ra[e], rb[e])), int(max(ra[e], rb[e])))
+        pairs.setdefault(key, []).append(int(e))
+    for (p, q), edges in pairs.items():
+        if p not in regions or q not in regions:
+            continue
+        open_edges = [e for e in edges if not cogency.cogent[e]]
+        door = bool(cogency.door[edges].any())
+        conn = link_connection(regions[p].label, regions[q].label, cogent=not open_edges, door=door)
+        graph.add_edge(p, q, connection=conn.value)
+    return graph

@@ -1,0 +1,54 @@
+"""Doorway closing along lines, cell decomposition and edge cogency."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from services.grid_decomposition import Line, LineGroup, close_doorways, edge_cogency, subdivide, wall_evidence
+
+
+def test_close_doorways_bridges_a_door_between_walls_but_not_furniture_legs() -> None:
+    profile = np.zeros(60, dtype=bool)
+    profile[0:20] = True  # wall
+    profile[38:60] = True  # wall after an 18-cell door
+    profile[25] = True  # a chair leg in the doorway
+    wall, g0, g1 = close_doorways(profile, min_wall_px=5, max_door_px=20)
+    assert wall[:20].all() and wall[38:].all() and not wall[20:38].any()
+    assert (g0.tolist(), g1.tolist()) == ([20], [38])
+    _, g0, _ = close_doorways(profile, min_wall_px=5, max_door_px=10)
+    assert g0.size == 0
+
+
+def test_subdivide_two_crossing_lines_gives_four_faces_and_four_edges() -> None:
+    lines = (Line(0.0, 50.0, 1.0, 0.1, True), Line(math.pi / 2, -40.0, 1.0, 0.1, True))
+    sub = subdivide([LineGroup(lines, None)], (100, 80))
+    assert sub.n_faces == 4
+    assert sub.n_edges == 4
+    assert len(sub.vertices_px) == 1
+    assert np.allclose(sub.vertices_px[0], (40.0, 50.0))
+    degree = np.bincount(sub.edge_faces.ravel(), minlength=5)[1:]
+    assert (degree == 2).all()
+
+
+def test_wall_with_a_door_is_cogent_and_an_open_line_is_not() -> None:
+    occ = np.zeros((100, 100), dtype=bool)
+    occ[:, 50] = True
+    occ[40:58, 50] = False  # 18 px door
+    free = ~occ
+    lines = (Line(math.pi / 2, -50.0, 5.0, 0.1, True), Line(0.0, 20.0, 5.0, 0.1, True))
+    groups = [LineGroup(lines, None)]
+    sub = subdivide(groups, occ.shape, domain=free)
+    wall, door = wall_evidence(occ, groups, tolerance_px=1, min_wall_px=5, max_door_px=25, door_depth_px=10)
+    cog = edge_cogency(sub, occ.astype(float), free, wall, door)
+    assert sub.n_edges >= 3
+    crosses_wall = np.array(
+        [
+            abs(sub.edge_ends_px[e, 0, 0] - 50) < 2 and abs(sub.edge_ends_px[e, 1, 0] - 50) < 2
+            for e in range(sub.n_edges)
+        ]
+    )
+    assert cog.cogent[crosses_wall].all()
+    assert cog.door[crosses_wall].any()
+    assert not cog.cogent[~crosses_wall].any()

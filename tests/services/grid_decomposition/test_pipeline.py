@@ -1,0 +1,97 @@
+"""The whole decomposition on literal offices and seeded synthetic warehouses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.grid_decomposition import Connection, DecompositionError, Label, Resolution, decompose
+from tests.services.grid_decomposition.warehouse import synthetic_warehouse
+
+
+def _two_rooms_and_a_door() -> np.ndarray:
+    """8 x 4 m at 5 cm: two rooms split by a wall with a 0.9 m door; unknown border."""
+    occ = np.full((100, 180), -1, dtype=np.int8)
+    occ[5:95, 5:175] = 100
+    occ[8:92, 8:172] = 0
+    occ[8:92, 88:91] = 100
+    occ[40:58, 88:91] = 0
+    return occ
+
+
+def test_decompose_splits_two_rooms_at_their_door() -> None:
+    d = decompose(_two_rooms_and_a_door(), resolution_m=0.05)
+    assert len(d.regions) == 2
+    left, right = d.segments[50, 40], d.segments[50, 140]
+    assert left > 0 and right > 0 and left != right
+    assert d.topology.edges[left, right]["connection"] == Connection.DOOR.value
+    assert {info.label for info in d.regions.values()} == {Label.ROOM}
+
+
+def test_segments_and_labels_cover_exactly_the_free_space() -> None:
+    occ = _two_rooms_and_a_door()
+    d = decompose(occ, resolution_m=0.05, origin_xy_m=(-2.0, 3.0))
+    free = occ == 0
+    assert ((d.segments > 0) == free).all()
+    assert ((d.labels > 0) == free).all()
+    assert d.segments.shape == d.labels.shape == occ.shape
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_decompose_finds_every_cross_aisle_junction_of_a_warehouse(seed: int) -> None:
+    wh = synthetic_warehouse(seed, n_double_rows=3, n_sections=2, bays_per_section=5)
+    d = decompose(wh.occupancy, resolution_m=wh.resolution_m)
+    found = [d.labels[round(y), round(x)] == Label.JUNCTION.value for x, y in wh.junctions_px]
+    assert sum(found) >= len(found) - 2  # honest slack: the T at a perimeter end is sometimes a corridor
+    free = wh.occupancy == 0
+    storage = free & (wh.truth == Label.STORAGE.value)
+    assert (d.labels[storage] == Label.STORAGE.value).mean() > 0.9
+    corridor = free & (wh.truth == Label.CORRIDOR.value)
+    assert (d.labels[corridor] == Label.CORRIDOR.value).mean() > 0.9
+
+
+def test_warehouse_regions_are_aisles_junctions_and_pallet_cells() -> None:
+    wh = synthetic_warehouse(4, n_double_rows=2, n_sections=2, bays_per_section=4)
+    d = decompose(wh.occupancy, resolution_m=wh.resolution_m)
+    labels = [info.label for info in d.regions.values()]
+    assert labels.count(Label.STORAGE) > labels.count(Label.CORRIDOR) > 1
+    assert Label.JUNCTION in labels
+    kinds = {data["connection"] for _, _, data in d.topology.edges(data=True)}
+    assert Connection.STORAGE_ACCESS.value in kinds
+
+
+def test_fine_resolution_has_at_least_as_many_faces_as_coarse() -> None:
+    wh = synthetic_warehouse(5, n_double_rows=2, n_sections=1, bays_per_section=4)
+    coarse = decompose(wh.occupancy, resolution_m=wh.resolution_m, resolution=Resolution.COARSE)
+    fine = decompose(wh.occupancy, resolution_m=wh.resolution_m, resolution=Resolution.FINE)
+    assert fine.subdivision.n_faces >= coarse.subdivision.n_faces
+
+
+def test_label_overrides_relabel_a_category() -> None:
+    occ = _two_rooms_and_a_door()
+    auto = decompose(occ, resolution_m=0.05, n_categories=3)
+    category = int(auto.face_labels.category[auto.subdivision.face_image[50, 40]])
+    forced = decompose(occ, resolution_m=0.05, n_categories=3, label_overrides={category: Label.STORAGE})
+    assert forced.labels[50, 40] == Label.STORAGE.value
+    assert forced.face_labels.category_labels[category] is Label.STORAGE
+
+
+@pytest.mark.parametrize(
+    ("occupancy", "message"),
+    [
+        (np.zeros((0, 0), np.int8), "at least 2 x 2"),
+        (np.zeros((1, 1), np.int8), "at least 2 x 2"),
+        (np.full((20, 20), -1, np.int8), "no free cell"),
+        (np.full((20, 20), 100, np.int8), "no free cell"),
+        (np.full((20, 20), 120, np.int16), "values must be"),
+        (np.zeros((4, 4), np.float32), "integer"),
+    ],
+)
+def test_bad_grids_raise_decomposition_error(occupancy: np.ndarray, message: str) -> None:
+    with pytest.raises(DecompositionError, match=message):
+        decompose(occupancy, resolution_m=0.05)
+
+
+def test_bad_resolution_raises_decomposition_error() -> None:
+    with pytest.raises(DecompositionError, match="resolution_m"):
+        decompose(_two_rooms_and_a_door(), resolution_m=0.0)
