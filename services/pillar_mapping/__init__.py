@@ -1,0 +1,76 @@
+"""Pillar mapping: uprights seen by a downward fisheye, mapped by bearing-only EKF, fitted with rows and bins."""
+
+from services.pillar_mapping.bag import PillarMapResult, image_bgr, map_pillars_from_bag
+from services.pillar_mapping.bins import StorageBin, storage_bins
+from services.pillar_mapping.camera import (
+    FisheyeCamera,
+    camera_from_info,
+    pixel_angles,
+    pixel_rays,
+    project_angles,
+    read_camera_info_yaml,
+)
+from services.pillar_mapping.detection import (
+    BearingSignal,
+    PillarDetections,
+    bearing_signal,
+    detect_pillars,
+    detect_pillars_file,
+)
+from services.pillar_mapping.errors import PillarMappingError
+from services.pillar_mapping.frequency import Periodicity, dominant_spacing, projection_spectrum
+from services.pillar_mapping.hough import HoughPairs, dominant_orientations, hough_pairs, segment_aligned
+from services.pillar_mapping.landmark_io import read_landmarks_csv, write_landmarks_csv
+from services.pillar_mapping.layout import RackLayout, fit_layout, fit_racks, layout_features, layout_geojson
+from services.pillar_mapping.mapper import BearingOnlyMapper, FrameReport, LandmarkMap
+from services.pillar_mapping.mount import CameraMount, default_mount, mount_from_transform, vehicle_bearings
+from services.pillar_mapping.paint import PaintModel, paint_likelihood
+from services.pillar_mapping.rows import RackRow, fit_rack_rows
+from services.pillar_mapping.triangulation import Triangulation, triangulate_bearings
+
+__all__ = [
+    "BearingOnlyMapper",
+    "BearingSignal",
+    "CameraMount",
+    "FisheyeCamera",
+    "FrameReport",
+    "HoughPairs",
+    "LandmarkMap",
+    "PaintModel",
+    "Periodicity",
+    "PillarDetections",
+    "PillarMapResult",
+    "PillarMappingError",
+    "RackLayout",
+    "RackRow",
+    "StorageBin",
+    "Triangulation",
+    "bearing_signal",
+    "camera_from_info",
+    "default_mount",
+    "detect_pillars",
+    "detect_pillars_file",
+    "dominant_orientations",
+    "dominant_spacing",
+    "fit_layout",
+    "fit_rack_rows",
+    "fit_racks",
+    "hough_pairs",
+    "image_bgr",
+    "layout_features",
+    "layout_geojson",
+    "map_pillars_from_bag",
+    "mount_from_transform",
+    "paint_likelihood",
+    "pixel_angles",
+    "pixel_rays",
+    "project_angles",
+    "projection_spectrum",
+    "read_camera_info_yaml",
+    "read_landmarks_csv",
+    "segment_aligned",
+    "storage_bins",
+    "triangulate_bearings",
+    "vehicle_bearings",
+    "write_landmarks_csv",
+]

@@ -1,0 +1,137 @@
+"""The fitted rack layout as GeoJSON and as map-store features; ``aisle racks fit`` end to end."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from services.pillar_mapping.bins import StorageBin, storage_bins
+from services.pillar_mapping.errors import PillarMappingError
+from services.pillar_mapping.landmark_io import read_landmarks_csv
+from services.pillar_mapping.rows import RackRow, fit_rack_rows
+from shared.store import Feature
+
+logger = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class RackLayout(NamedTuple):
+    """Rows, bins, and the input landmarks no row explains (``outliers`` (K, 2) metres)."""
+
+    rows: list[RackRow]
+    bins: list[StorageBin]
+    outliers: FloatArray
+
+
+def _point(xy: FloatArray) -> dict[str, Any]:
+    return {"type": "Point", "coordinates": [float(xy[0]), float(xy[1])]}
+
+
+def layout_features(layout: RackLayout) -> dict[str, list[Feature]]:
+    """Map-store features of a layout, by kind (``pillar``, ``rack_row``, ``bin``), for one RevisionWrite.
+
+    Keys are stable across rebuilds where the layout is: bins by id, rows by region and
+    position in it, pillars by row and index (outliers by rounded position).
+    """
+    pillars: list[Feature] = []
+    rows: list[Feature] = []
+    rank: dict[int, int] = {}
+    for row in layout.rows:
+        k = rank[row.region] = rank.get(row.region, 0) + 1
+        key = f"r{row.region}-{k:03d}"
+        rows.append(
+            Feature(
+                "rack_row",
+                key,
+                {"type": "LineString", "coordinates": row.uprights.tolist()},
+                {
+                    "kind": "rack_row",
+                    "n": row.n,
+                    "d": row.d_m,
+                    "theta": row.theta_rad,
+                    "x": row.x_m,
+                    "y": row.y_m,
+                    "region": row.region,
+                },
+                float(row.observed.mean()),
+            )
+        )
+        for j, (xy, seen) in enumerate(zip(row.uprights, row.observed, strict=True)):
+            pillars.append(
+                Feature("pillar", f"{key}-{j:03d}", _point(xy), {"kind": "pillar", "observed": bool(seen), "row": key})
+            )
+    for xy in layout.outliers:
+        pillars.append(
+            Feature(
+                "pillar", f"p{xy[0]:.2f}_{xy[1]:.2f}", _point(xy), {"kind": "pillar", "observed": True, "row": None}
+            )
+        )
+    row_keys = [f.key for f in rows]
+    bins = [
+        Feature(
+            "bin",
+            b.id,
+            {"type": "Polygon", "coordinates": [[*b.footprint.tolist(), b.footprint[0].tolist()]]},
+            {
+                "kind": "bin",
+                "id": b.id,
+                "aisle": b.aisle,
+                "bay": b.bay,
+                "level": None,
+                "access_pose": list(b.access_pose),
+                "row": row_keys[b.row],
+                "back_row": row_keys[b.back_row],
+                "centre": b.centre.tolist(),
+            },
+        )
+        for b in layout.bins
+    ]
+    unique = {f.key: f for f in pillars}
+    return {"pillar": list(unique.values()), "rack_row": rows, "bin": bins}
+
+
+def layout_geojson(layout: RackLayout) -> dict[str, Any]:
+    """A GeoJSON FeatureCollection (map metres) of a layout; ``properties.kind`` tells the feature kind."""
+    features = [
+        {"type": "Feature", "id": f.key, "geometry": dict(f.geometry), "properties": dict(f.properties)}
+        for kind in ("rack_row", "pillar", "bin")
+        for f in layout_features(layout)[kind]
+    ]
+    return {"type": "FeatureCollection", "features": features}
+
+
+def fit_layout(landmarks: npt.ArrayLike, **row_options: Any) -> RackLayout:
+    """Rows (:func:`~services.pillar_mapping.rows.fit_rack_rows`) and bins of a landmark table (N, 5)."""
+    table = np.asarray(landmarks, dtype=np.float64)
+    rows = fit_rack_rows(table, **row_options)
+    claimed = np.zeros(len(table), dtype=bool)
+    for row in rows:
+        claimed[row.members] = True
+    outliers = table[~claimed, :2] if table.ndim == 2 and len(table) else np.zeros((0, 2))
+    return RackLayout(rows, storage_bins(rows), outliers)
+
+
+def fit_racks(landmarks: Path | npt.ArrayLike, out_dir: Path | None = None, **row_options: Any) -> RackLayout:
+    """``aisle racks fit PILLARS.csv --out DIR``: fit a layout and write ``DIR/racks.geojson``.
+
+    ``landmarks`` is a CSV path (``x,y,sxx,sxy,syy``) or an (N, 5) array.
+    """
+    table = read_landmarks_csv(Path(landmarks)) if isinstance(landmarks, str | Path) else landmarks
+    layout = fit_layout(table, **row_options)
+    logger.info(
+        "fitted %d rows and %d bins; %d landmarks in no row", len(layout.rows), len(layout.bins), len(layout.outliers)
+    )
+    if out_dir is not None:
+        out = Path(out_dir)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "racks.geojson").write_text(json.dumps(layout_geojson(layout)))
+        except OSError as err:
+            raise PillarMappingError(f"cannot write {out / 'racks.geojson'}: {err}") from err
+    return layout

@@ -1,0 +1,323 @@
+"""Bearing-only EKF mapping of uprights with the vehicle pose from localisation (paper A, section 3).
+
+The state is the vehicle pose plus every landmark's position, as in Bailey's bearing-only
+SLAM; but the vehicle is neither predicted nor updated: its pose (and covariance, if given)
+comes from the localisation topic each frame. With the vehicle known, landmarks stay
+uncorrelated, so the joint covariance is kept as its 2x2 landmark blocks, and the vehicle
+covariance enters each update as a considered (not estimated) uncertainty. Estimating the
+vehicle as well (SLAM) would add the vehicle block and the vehicle-landmark cross terms.
+
+New landmarks are initialised in a delayed way: bearings that match no landmark wait in a
+pool until rays from at least ``min_views`` frames, spanning at least ``min_parallax_rad``,
+cross at one point; it is then triangulated and enters the filter with its covariance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from services.pillar_mapping.association import associate
+from services.pillar_mapping.errors import PillarMappingError
+from services.pillar_mapping.triangulation import triangulate_bearings, wrap
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+class LandmarkMap(NamedTuple):
+    """Mapped uprights: ``means`` (N, 2) metres, ``covs`` (N, 2, 2) m^2, ``observations`` (N,) updates each."""
+
+    means: FloatArray
+    covs: FloatArray
+    observations: IntArray
+
+
+class FrameReport(NamedTuple):
+    """What one frame did: bearings matched, ambiguous, pooled; landmarks initialised."""
+
+    matched: int
+    ambiguous: int
+    pooled: int
+    initialised: int
+
+
+@dataclass
+class _RayPool:
+    origins: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    angles: FloatArray = field(default_factory=lambda: np.zeros(0))
+    sigmas: FloatArray = field(default_factory=lambda: np.zeros(0))
+    frames: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    def add(self, origin: FloatArray, angles: FloatArray, sigmas: FloatArray, frame: int) -> None:
+        self.origins = np.vstack([self.origins, np.tile(origin, (angles.size, 1))])
+        self.angles = np.concatenate([self.angles, angles])
+        self.sigmas = np.concatenate([self.sigmas, sigmas])
+        self.frames = np.concatenate([self.frames, np.full(angles.size, frame, dtype=np.int64)])
+
+    def keep(self, mask: npt.NDArray[np.bool_]) -> None:
+        self.origins, self.angles = self.origins[mask], self.angles[mask]
+        self.sigmas, self.frames = self.sigmas[mask], self.frames[mask]
+
+
+class BearingOnlyMapper:
+    """EKF landmark map fed with bearings and externally known sensor poses.
+
+    Parameters
+    ----------
+    max_range_m : float
+        Landmarks farther than this from the sensor are not expected to be detected.
+    gate_sq : float
+        Chi-square gate on a bearing innovation (1 dof).
+    sigma_floor_rad : float
+        Least bearing standard deviation assumed, covering calibration and timing errors.
+    min_views : int
+        Frames whose rays must agree before a landmark is initialised.
+    min_parallax_rad : float
+        Least angle between those rays as seen from the landmark.
+    window_frames : int
+        How many frames unmatched bearings wait in the pool.
+    min_support_ratio : float
+        Least fraction of the pooled frames within range of a candidate that must have seen
+        it: ghosts where rays of different uprights happen to cross get few.
+    """
+
+    _CELL_M = 0.25
+
+    def __init__(
+        self,
+        *,
+        max_range_m: float = 8.0,
+        gate_sq: float = 9.0,
+        sigma_floor_rad: float = float(np.deg2rad(0.15)),
+        min_views: int = 4,
+        min_parallax_rad: float = float(np.deg2rad(10.0)),
+        window_frames: int = 40,
+        min_support_ratio: float = 0.6,
+    ) -> None:
+        if max_range_m <= 0 or gate_sq <= 0 or sigma_floor_rad <= 0:
+            raise PillarMappingError("max_range_m, gate_sq and sigma_floor_rad must be positive")
+        if min_views < 2 or window_frames < min_views:
+            raise PillarMappingError(
+                f"need min_views >= 2 and window_frames >= min_views, got {min_views}, {window_frames}"
+            )
+        self.max_range_m = max_range_m
+        self.gate_sq = gate_sq
+        self.sigma_floor_rad = sigma_floor_rad
+        self.min_views = min_views
+        self.min_parallax_rad = min_parallax_rad
+        self.window_frames = window_frames
+        self.min_support_ratio = min_support_ratio
+        self._frame_origins: dict[int, FloatArray] = {}
+        self._expected = np.zeros(0, dtype=np.int64)
+        self._means = np.zeros((0, 2))
+        self._covs = np.zeros((0, 2, 2))
+        self._counts = np.zeros(0, dtype=np.int64)
+        self._pool = _RayPool()
+        self._frame = 0
+        self.vehicle_pose = np.zeros(3)
+        self.vehicle_cov = np.zeros((3, 3))
+
+    @property
+    def landmarks(self) -> LandmarkMap:
+        """The current map (copies)."""
+        return LandmarkMap(self._means.copy(), self._covs.copy(), self._counts.copy())
+
+    def reliable_landmarks(self, *, min_hit_ratio: float = 0.3, min_observations: int = 6) -> LandmarkMap:
+        """The landmarks matched in at least ``min_hit_ratio`` of the frames that had them in range."""
+        ratio = self._counts / np.maximum(self._expected, 1)
+        keep = (ratio >= min_hit_ratio) & (self._counts >= min_observations)
+        return LandmarkMap(self._means[keep].copy(), self._covs[keep].copy(), self._counts[keep].copy())
+
+    def observe(
+        self,
+        sensor_pose: tuple[float, float, float],
+        bearings_rad: npt.ArrayLike,
+        sigmas_rad: npt.ArrayLike,
+        *,
+        pose_cov: FloatArray | None = None,
+    ) -> FrameReport:
+        """Fold one frame's bearings into the map.
+
+        Parameters
+        ----------
+        sensor_pose : (x, y, yaw)
+            Sensor position in the map frame (metres) and the heading bearings are measured
+            from (radians), from localisation.
+        bearings_rad, sigmas_rad : array_like, shape (K,)
+            Bearings relative to the sensor heading and their standard deviations, radians.
+        pose_cov : ndarray, shape (3, 3), optional
+            Localisation covariance of the sensor pose.
+        """
+        pose = np.asarray(sensor_pose, dtype=np.float64)
+        bearings = np.asarray(bearings_rad, dtype=np.float64).ravel()
+        sigmas = np.asarray(sigmas_rad, dtype=np.float64).ravel()
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise PillarMappingError(f"sensor pose must be 3 finite numbers, got {pose.tolist()}")
+        if bearings.shape != sigmas.shape or not (np.all(np.isfinite(bearings)) and np.all(sigmas > 0)):
+            raise PillarMappingError("bearings and sigmas must be finite, of equal length, sigmas positive")
+        self.vehicle_pose = pose
+        self.vehicle_cov = np.zeros((3, 3)) if pose_cov is None else np.asarray(pose_cov, dtype=np.float64)
+        self._frame += 1
+        self._frame_origins = {f: o for f, o in self._frame_origins.items() if f > self._frame - self.window_frames}
+        self._frame_origins[self._frame] = pose[:2].copy()
+        self._expected[self._visible()] += 1
+        sigmas = np.maximum(sigmas, self.sigma_floor_rad)
+        matches, ambiguous, gated_any = self._associate(bearings, sigmas)
+        self._update(bearings, sigmas, matches)
+        fresh = (matches < 0) & ~gated_any
+        self._pool.keep(self._pool.frames > self._frame - self.window_frames)
+        self._pool.add(pose[:2], wrap(pose[2] + bearings[fresh]), sigmas[fresh], self._frame)
+        born = self._initialise()
+        return FrameReport(int((matches >= 0).sum()), int(ambiguous.sum()), int(fresh.sum()), born)
+
+    def _innovations(
+        self, bearings: FloatArray, sigmas: FloatArray, index: IntArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Innovations (K, M), their variances (K, M) and landmark Jacobians (M, 2) for landmarks ``index``."""
+        x, y, yaw = self.vehicle_pose
+        delta = self._means[index] - np.array([x, y])
+        q = np.maximum(np.sum(delta**2, axis=1), 1e-9)
+        h_l = np.stack([-delta[:, 1] / q, delta[:, 0] / q], axis=1)
+        h_v = np.stack([delta[:, 1] / q, -delta[:, 0] / q, -np.ones(index.size)], axis=1)
+        predicted = wrap(np.arctan2(delta[:, 1], delta[:, 0]) - yaw)
+        var_l = np.einsum("mi,mij,mj->m", h_l, self._covs[index], h_l)
+        var_v = np.einsum("mi,ij,mj->m", h_v, self.vehicle_cov, h_v)
+        innovation = wrap(bearings[:, None] - predicted[None, :])
+        variance = sigmas[:, None] ** 2 + (var_l + var_v)[None, :]
+        return innovation, variance, h_l
+
+    def _visible(self) -> IntArray:
+        d = np.hypot(*(self._means - self.vehicle_pose[:2]).T) if len(self._means) else np.zeros(0)
+        return np.flatnonzero(d <= self.max_range_m)
+
+    def _associate(
+        self, bearings: FloatArray, sigmas: FloatArray
+    ) -> tuple[IntArray, npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+        index = self._visible()
+        innovation, variance, _ = self._innovations(bearings, sigmas, index)
+        d2 = innovation**2 / variance
+        local, ambiguous = associate(d2, gate_sq=self.gate_sq)
+        matches = np.where(local >= 0, index[np.maximum(local, 0)] if index.size else -1, -1)
+        gated: npt.NDArray[np.bool_] = np.asarray((d2 <= self.gate_sq).any(axis=1), dtype=bool)
+        return matches.astype(np.int64), ambiguous, gated
+
+    def _update(self, bearings: FloatArray, sigmas: FloatArray, matches: IntArray) -> None:
+        obs = np.flatnonzero(matches >= 0)
+        if obs.size == 0:
+            return
+        index = matches[obs]
+        innovation, variance, h_l = self._innovations(bearings[obs], sigmas[obs], index)
+        nu = innovation[np.arange(obs.size), np.arange(obs.size)]
+        s = variance[np.arange(obs.size), np.arange(obs.size)]
+        p = self._covs[index]
+        ph = np.einsum("mij,mj->mi", p, h_l)
+        gain = ph / s[:, None]
+        self._means[index] += gain * nu[:, None]
+        ikh = np.eye(2)[None] - gain[:, :, None] * h_l[:, None, :]
+        r = (s - np.einsum("mi,mi->m", h_l, ph))[:, None, None]
+        self._covs[index] = ikh @ p @ np.transpose(ikh, (0, 2, 1)) + r * gain[:, :, None] * gain[:, None, :]
+        self._counts[index] += 1
+
+    def _support(self, points: FloatArray) -> npt.NDArray[np.bool_]:
+        """(C, P) whether pool ray p passes through candidate point c within its gate."""
+        pool = self._pool
+        delta = points[:, None, :] - pool.origins[None, :, :]
+        dist = np.hypot(delta[..., 0], delta[..., 1])
+        seen = np.arctan2(delta[..., 1], delta[..., 0])
+        residual = np.abs(wrap(seen - pool.angles[None, :]))
+        limit = np.sqrt(self.gate_sq) * pool.sigmas[None, :]
+        ok: npt.NDArray[np.bool_] = (residual <= limit) & (dist <= self.max_range_m) & (dist > 0.05)
+        return ok
+
+    def _candidates(self) -> FloatArray:
+        """Crossings of this frame's pooled rays with older ones at a usable angle, (C, 2)."""
+        pool = self._pool
+        new = np.flatnonzero(pool.frames == self._frame)
+        old = np.flatnonzero(pool.frames < self._frame)
+        if new.size == 0 or old.size == 0:
+            return np.zeros((0, 2))
+        a1, a2 = pool.angles[new][:, None], pool.angles[old][None, :]
+        u1 = np.stack([np.cos(a1), np.sin(a1)], axis=-1)
+        u2 = np.stack([np.cos(a2), np.sin(a2)], axis=-1)
+        cross = u1[..., 0] * u2[..., 1] - u1[..., 1] * u2[..., 0]
+        usable = np.abs(cross) >= np.sin(0.25 * self.min_parallax_rad)
+        w = pool.origins[old][None, :, :] - pool.origins[new][:, None, :]
+        safe = np.where(usable, cross, 1.0)
+        t1 = (w[..., 0] * u2[..., 1] - w[..., 1] * u2[..., 0]) / safe
+        t2 = (w[..., 0] * u1[..., 1] - w[..., 1] * u1[..., 0]) / safe
+        ok = usable & (t1 > 0.1) & (t2 > 0.1) & (t1 <= self.max_range_m) & (t2 <= self.max_range_m)
+        points = pool.origins[new][:, None, :] + t1[..., None] * u1
+        which, other = np.nonzero(ok)
+        found = points[which, other]
+        # A landmark's crossings with one new ray pile up in one place, one per older frame:
+        # keep only places where enough older frames agree before the full support test.
+        cell = np.floor(found / self._CELL_M).astype(np.int64)
+        key = np.column_stack([which, cell])
+        _, place = np.unique(key, axis=0, return_inverse=True)
+        place = place.ravel()
+        frames = pool.frames[old][other]
+        pairs = np.unique(np.column_stack([place, frames]), axis=0)
+        views = np.bincount(pairs[:, 0], minlength=int(place.max()) + 1 if place.size else 0)
+        strong = views[place] >= self.min_views - 1
+        if not strong.any():
+            return np.zeros((0, 2))
+        _, first = np.unique(place[strong], return_index=True)
+        result: FloatArray = found[strong][first]
+        return result
+
+    def _initialise(self) -> int:
+        points = self._candidates()
+        born = 0
+        while points.shape[0]:
+            support = self._support(points)
+            frames = np.unique(self._pool.frames)
+            onehot = self._pool.frames[:, None] == frames[None, :]
+            views = (support.astype(np.float64) @ onehot.astype(np.float64) > 0).sum(axis=1)
+            origins = np.array([self._frame_origins[f] for f in sorted(self._frame_origins)])
+            in_range = (np.hypot(*(points[:, None, :] - origins[None]).transpose(2, 0, 1)) <= self.max_range_m).sum(
+                axis=1
+            )
+            views = np.where(views >= self.min_support_ratio * in_range, views, 0)
+            best = int(np.argmax(views))
+            if views[best] < self.min_views:
+                break
+            rays = self._one_per_frame(np.flatnonzero(support[best]), points[best])
+            used = np.zeros(self._pool.angles.size, dtype=bool)
+            used[rays] = True
+            points = np.delete(points, best, axis=0)
+            try:
+                tri = triangulate_bearings(self._pool.origins[rays], self._pool.angles[rays], self._pool.sigmas[rays])
+            except PillarMappingError:
+                continue
+            limit = np.sqrt(self.gate_sq) * self._pool.sigmas[rays]
+            if tri.parallax_rad < self.min_parallax_rad or np.any(np.abs(tri.residuals_rad) > limit):
+                continue
+            self._pool.keep(~used)
+            if not self._duplicate(tri.mean, tri.cov):
+                self._means = np.vstack([self._means, tri.mean])
+                self._covs = np.concatenate([self._covs, tri.cov[None]])
+                self._counts = np.append(self._counts, rays.size)
+                self._expected = np.append(self._expected, rays.size)
+                born += 1
+        return born
+
+    def _one_per_frame(self, rays: IntArray, point: FloatArray) -> IntArray:
+        """The best-fitting ray of each frame among ``rays``."""
+        delta = point - self._pool.origins[rays]
+        residual = np.abs(wrap(np.arctan2(delta[:, 1], delta[:, 0]) - self._pool.angles[rays]))
+        order = np.lexsort((residual, self._pool.frames[rays]))
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = self._pool.frames[rays][order][1:] != self._pool.frames[rays][order][:-1]
+        return rays[order[first]]
+
+    def _duplicate(self, mean: FloatArray, cov: FloatArray) -> bool:
+        if not len(self._means):
+            return False
+        diff = self._means - mean
+        total = self._covs + cov
+        d2 = np.einsum("ni,nij,nj->n", diff, np.linalg.inv(total), diff)
+        return bool(np.any(d2 <= 3.0 * self.gate_sq))

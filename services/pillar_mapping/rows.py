@@ -1,0 +1,410 @@
+"""Rack-row models fitted to a landmark map (paper A, sections 2 and 3.1).
+
+Each row is the model ``M(n, d, x, y, theta)``: ``n`` uprights ``d`` apart from ``(x, y)``
+along ``theta``. Rows are segmented by the closed-form Hough transform with DBSCAN, their
+spacing found by Fourier analysis, then global constraints are applied per region (rows of
+one orientation close together): the modal spacing, the dominant orientation and the
+initialisation (and end) lines through the rows' first (and last) uprights, which restore
+end uprights that were never seen. A last optimisation places each model on its landmarks.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.stats import theilslopes
+
+from services.pillar_mapping.errors import PillarMappingError
+from services.pillar_mapping.frequency import dominant_spacing
+from services.pillar_mapping.hough import (
+    dominant_orientations,
+    hough_pairs,
+    refine_orientation,
+    segment_aligned,
+    wrap_half,
+)
+
+logger = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+class RackRow(NamedTuple):
+    """One fitted row.
+
+    ``n`` uprights ``d_m`` apart from ``(x_m, y_m)`` along ``theta_rad`` in [-pi/2, pi/2);
+    ``uprights`` (n, 2) metres; ``observed`` (n,) whether a landmark supports each;
+    ``members`` indices of the input landmarks in the row; ``region`` its region number.
+    """
+
+    n: int
+    d_m: float
+    theta_rad: float
+    x_m: float
+    y_m: float
+    region: int
+    uprights: FloatArray
+    observed: npt.NDArray[np.bool_]
+    members: IntArray
+
+
+class _Row(NamedTuple):
+    members: IntArray
+    centre: FloatArray
+    direction: FloatArray
+    d: float
+    first: float
+    n: int
+    coherence: float
+    orientation: int
+
+
+def _validated(landmarks: npt.ArrayLike) -> FloatArray:
+    table = np.asarray(landmarks, dtype=np.float64)
+    if table.ndim != 2 or table.shape[1] not in (2, 5):
+        raise PillarMappingError(f"landmarks must be an (N, 5) x,y,sxx,sxy,syy table, got shape {table.shape}")
+    bad = np.flatnonzero(~np.all(np.isfinite(table), axis=1))
+    if bad.size:
+        raise PillarMappingError(f"landmarks {bad[:10].tolist()} have non-finite values")
+    if table.shape[1] == 2:
+        table = np.hstack([table, np.tile([1e-4, 0.0, 1e-4], (len(table), 1))])
+    covs = table[:, [2, 3, 3, 4]].reshape(-1, 2, 2)
+    if len(table) and np.any(np.linalg.eigvalsh(covs)[:, 0] < -1e-12):
+        raise PillarMappingError("landmark covariances must be positive semi-definite")
+    return table
+
+
+def _along(table: FloatArray, members: IntArray, centre: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+    s = (table[members, :2] - centre) @ u
+    var = table[members, 2] * u[0] ** 2 + 2 * table[members, 3] * u[0] * u[1] + table[members, 4] * u[1] ** 2
+    return s, np.sqrt(np.maximum(var, 1e-6))
+
+
+def _phase(s: FloatArray, d: float) -> tuple[float, IntArray]:
+    """Along-row position of the first upright and each landmark's slot, for spacing ``d``."""
+    angle = np.angle(np.mean(np.exp(2j * np.pi * s / d)))
+    offset = angle / (2 * np.pi) * d
+    slots = np.rint((s - offset) / d).astype(np.int64)
+    slots -= slots.min()
+    first = float(np.mean(s - slots * d))
+    return first, slots
+
+
+def _fit(table: FloatArray, members: IntArray, u0: FloatArray, orientation: int, pitch: tuple[float, float]) -> _Row:
+    pts = table[members, :2]
+    centre = pts.mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov((pts - centre).T))
+    u = vecs[:, 1] if vecs[:, 1] @ u0 >= 0 else -vecs[:, 1]
+    s, sigma = _along(table, members, centre, u)
+    period = dominant_spacing(s, sigma, min_spacing_m=pitch[0], max_spacing_m=pitch[1])
+    first, slots = _phase(s, period.d_m)
+    return _Row(members, centre, u, period.d_m, first, int(slots.max()) + 1, period.coherence, orientation)
+
+
+def _split(table: FloatArray, members: IntArray, u: FloatArray, max_gap_m: float) -> list[IntArray]:
+    s = table[members, :2] @ u
+    order = np.argsort(s)
+    cuts = np.flatnonzero(np.diff(s[order]) > max_gap_m) + 1
+    return [members[part] for part in np.split(order, cuts)]
+
+
+def _line_rms(pts: FloatArray) -> float:
+    """RMS distance of points from their total-least-squares line, metres."""
+    centred = pts - pts.mean(axis=0)
+    return float(np.sqrt(np.linalg.eigvalsh(centred.T @ centred / len(pts))[0]))
+
+
+def _merge_collinear(
+    pts: FloatArray, labels: IntArray, u: FloatArray, *, window_m: float = 0.6, max_rms_m: float = 0.06
+) -> IntArray:
+    """Join sets lying on one line (DBSCAN splits a row where several uprights are missing).
+
+    Sets whose offsets across ``u`` differ by less than ``window_m`` are joined when the union
+    still fits one line to ``max_rms_m``.
+    """
+    found = np.unique(labels[labels >= 0])
+    if found.size < 2:
+        return labels
+    normal = np.array([-u[1], u[0]])
+    offset = np.array([np.median(pts[labels == lab] @ normal) for lab in found])
+    order = np.argsort(offset)
+    groups = {int(lab): np.flatnonzero(labels == lab) for lab in found}
+    owner = {int(lab): int(lab) for lab in found}
+    for a_pos, a in enumerate(order):
+        for b in order[a_pos + 1 :]:
+            if offset[b] - offset[a] > window_m:
+                break
+            ra, rb = owner[int(found[a])], owner[int(found[b])]
+            if ra == rb:
+                continue
+            union = np.concatenate([groups[ra], groups[rb]])
+            if _line_rms(pts[union]) <= max_rms_m:
+                groups[ra] = union
+                for lab, o in owner.items():
+                    if o == rb:
+                        owner[lab] = ra
+                del groups[rb]
+    out = np.full(len(labels), -1, dtype=np.int64)
+    for root, members in groups.items():
+        out[members] = root
+    return out
+
+
+def _segment(
+    table: FloatArray,
+    pitch: tuple[float, float],
+    *,
+    min_uprights: int,
+    min_coherence: float,
+    max_missing_run: int,
+    min_fill: float,
+) -> list[_Row]:
+    """Regular aligned sets along every dominant orientation; each landmark kept in the longest."""
+    pts = table[:, :2]
+    pairs = hough_pairs(pts, min_length_m=0.9 * pitch[0], max_length_m=2.2 * pitch[1])
+    candidates: list[_Row] = []
+    for k, peak in enumerate(dominant_orientations(pairs.alpha)):
+        alpha = refine_orientation(pts, pairs, float(peak))
+        u0 = np.array([np.cos(alpha), np.sin(alpha)])
+        labels = _merge_collinear(pts, segment_aligned(pts, pairs, float(alpha)), u0)
+        found: list[_Row] = []
+        for label in np.unique(labels[labels >= 0]):
+            for piece in _split(table, np.flatnonzero(labels == label), u0, (max_missing_run + 1.5) * pitch[1]):
+                if piece.size >= min_uprights:
+                    row = _fit(table, piece, u0, k, pitch)
+                    if row.coherence >= min_coherence and piece.size >= min_fill * row.n:
+                        found.append(row)
+        inside = sum(r.members.size for r in found)
+        if inside < 0.5 * int((labels >= 0).sum()):
+            logger.debug(
+                "orientation %.2f deg: %d of %d aligned landmarks in regular rows; not a row orientation",
+                np.rad2deg(alpha),
+                inside,
+                int((labels >= 0).sum()),
+            )
+            continue
+        candidates.extend(found)
+    return _claim(table, candidates, pitch, min_uprights=min_uprights, min_coherence=min_coherence)
+
+
+def _claim(
+    table: FloatArray, candidates: list[_Row], pitch: tuple[float, float], *, min_uprights: int, min_coherence: float
+) -> list[_Row]:
+    """Give each landmark to one row: orientations in turn, the one whose regular sets of still-free
+    landmarks are longest (sum of squared sizes) first, so a region's rows come before the
+    diagonals of its lattice; within an orientation the longest sets first."""
+    claimed = np.zeros(len(table), dtype=bool)
+    rows: list[_Row] = []
+    pending = {o: [r for r in candidates if r.orientation == o] for o in {r.orientation for r in candidates}}
+
+    def usable(row: _Row) -> npt.NDArray[np.int64]:
+        free = row.members[~claimed[row.members]]
+        return free if free.size >= max(min_uprights, 0.8 * row.members.size) else free[:0]
+
+    while pending:
+        score = {o: sum(usable(r).size ** 2 for r in group) for o, group in pending.items()}
+        best = max(score, key=lambda o: score[o])
+        if score[best] == 0:
+            break
+        for row in sorted(pending.pop(best), key=lambda r: -r.members.size):
+            free = usable(row)
+            if free.size == 0:
+                continue
+            kept = row if free.size == row.members.size else _fit(table, free, row.direction, row.orientation, pitch)
+            if kept.coherence < min_coherence:
+                continue
+            claimed[kept.members] = True
+            rows.append(kept)
+    return rows
+
+
+def _extent(row: _Row, u: FloatArray) -> tuple[float, float]:
+    a = float(row.centre @ u + row.first * (row.direction @ u))
+    b = a + (row.n - 1) * row.d * float(row.direction @ u)
+    return min(a, b), max(a, b)
+
+
+def _regions(rows: list[_Row], gap_m: float) -> IntArray:
+    """Region label per row: rows of one orientation within ``gap_m`` of each other, overlapping along."""
+    count = len(rows)
+    src, dst = [], []
+    for i in range(count):
+        for j in range(i + 1, count):
+            a, b = rows[i], rows[j]
+            if a.orientation != b.orientation:
+                continue
+            u = a.direction
+            v = np.array([-u[1], u[0]])
+            (lo_a, hi_a), (lo_b, hi_b) = _extent(a, u), _extent(b, u)
+            if abs((b.centre - a.centre) @ v) <= gap_m and min(hi_a, hi_b) - max(lo_a, lo_b) > -gap_m:
+                src.append(i)
+                dst.append(j)
+    graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(count, count))
+    _, labels = connected_components(graph, directed=False)
+    out: IntArray = np.asarray(labels, dtype=np.int64)
+    return out
+
+
+def _constrain(
+    table: FloatArray, rows: list[_Row], *, spacing_tolerance: float, angle_tolerance_rad: float, max_restored: int
+) -> list[_Row]:
+    """Apply the region's modal spacing, dominant orientation and initialisation/end lines."""
+    thetas = np.array([np.arctan2(r.direction[1], r.direction[0]) for r in rows])
+    theta0 = float(np.median(thetas))
+    u0 = np.array([np.cos(theta0), np.sin(theta0)])
+    ds = np.array([r.d for r in rows])
+    hist, edges = np.histogram(ds, bins=np.arange(ds.min() - 0.005, ds.max() + 0.015, 0.01))
+    mode = 0.5 * (edges[np.argmax(hist)] + edges[np.argmax(hist) + 1])
+    d0 = float(np.median(ds[np.abs(ds - mode) <= spacing_tolerance * mode]))
+    out = []
+    for r in rows:
+        u = (
+            u0
+            if abs(wrap_half(np.arctan2(r.direction[1], r.direction[0]) - theta0)) <= angle_tolerance_rad
+            else r.direction
+        )
+        d = d0 if abs(r.d - d0) <= spacing_tolerance * d0 else r.d
+        s, _ = _along(table, r.members, r.centre, u)
+        first, slots = _phase(s, d)
+        out.append(r._replace(direction=u, d=d, first=first, n=int(slots.max()) + 1))
+    if len(out) < 3:
+        return out
+    v0 = np.array([-u0[1], u0[0]])
+    w = np.array([r.centre @ v0 for r in out])
+    starts = np.array([r.centre @ u0 + r.first for r in out])
+    ends = starts + np.array([(r.n - 1) * r.d for r in out])
+    for line, sign in ((starts, -1), (ends, 1)):
+        slope, intercept, _, _ = theilslopes(line, w)
+        predicted = intercept + slope * w
+        for i, r in enumerate(out):
+            if r.d != d0:
+                continue
+            missing = sign * (predicted[i] - line[i]) / r.d
+            m = int(np.rint(missing))
+            if 1 <= m <= max_restored and abs(missing - m) <= 0.25:
+                out[i] = r._replace(first=r.first - m * r.d if sign < 0 else r.first, n=r.n + m)
+    return out
+
+
+def _place(table: FloatArray, row: _Row, sigma_floor_m: float) -> FloatArray:
+    """Translate the model to maximise the landmark densities at its uprights (eq. 7).
+
+    With each landmark's density dominated by its nearest model upright, the objective's
+    maximum is the weighted least-squares shift of the uprights onto their landmarks.
+    """
+    base = row.centre + (row.first + np.arange(row.n)[:, None] * row.d) * row.direction
+    mu = table[row.members, :2]
+    slots = np.clip(np.rint(((mu - row.centre) @ row.direction - row.first) / row.d).astype(np.int64), 0, row.n - 1)
+    inv = np.linalg.inv(table[row.members][:, [2, 3, 3, 4]].reshape(-1, 2, 2) + sigma_floor_m**2 * np.eye(2))
+    shift = np.linalg.solve(inv.sum(axis=0), np.einsum("kij,kj->i", inv, mu - base[slots]))
+    return np.asarray(base + shift)
+
+
+def fit_rack_rows(
+    landmarks: npt.ArrayLike,
+    *,
+    min_bay_pitch_m: float = 1.5,
+    max_bay_pitch_m: float = 4.5,
+    min_row_uprights: int = 4,
+    min_coherence: float = 0.8,
+    max_missing_run: int = 2,
+    min_fill: float = 0.6,
+    max_restored_uprights: int = 5,
+    region_gap_m: float = 8.0,
+    spacing_tolerance: float = 0.05,
+    angle_tolerance_rad: float = float(np.deg2rad(1.0)),
+    sigma_floor_m: float = 0.03,
+) -> list[RackRow]:
+    """Rack-row models of a landmark map.
+
+    Parameters
+    ----------
+    landmarks : array_like, shape (N, 5) or (N, 2)
+        ``x, y, sxx, sxy, syy`` per upright, metres and m^2 (or just ``x, y``).
+    min_bay_pitch_m, max_bay_pitch_m : float
+        Range of upright spacings along a row.
+    min_row_uprights : int
+        Fewest landmarks of a row.
+    min_coherence : float
+        Least regularity (Fourier coherence, 0..1) of a row's landmarks at its spacing.
+    max_missing_run : int
+        Most consecutive unseen uprights inside a row.
+    min_fill : float
+        Least fraction of a row's uprights that must have been seen.
+    max_restored_uprights : int
+        Most unseen uprights restored at a row's end from its region's initialisation or end line.
+    region_gap_m : float
+        Rows of one orientation closer than this (across) belong to one region.
+    spacing_tolerance : float
+        Relative spacing difference within which a row takes its region's modal spacing.
+    angle_tolerance_rad : float
+        Angle within which a row takes its region's dominant orientation.
+    sigma_floor_m : float
+        Added to landmark standard deviations when placing the models.
+
+    Returns
+    -------
+    list of RackRow
+        Sorted by region, then offset across the rows. Empty when there are no rows.
+
+    Raises
+    ------
+    PillarMappingError
+        On a malformed table, non-finite values or a bad pitch range.
+    """
+    if not 0 < min_bay_pitch_m < max_bay_pitch_m:
+        raise PillarMappingError(f"bay pitch range [{min_bay_pitch_m}, {max_bay_pitch_m}] m is empty")
+    table = _validated(landmarks)
+    if len(table) < min_row_uprights:
+        return []
+    pitch = (min_bay_pitch_m, max_bay_pitch_m)
+    rows = _segment(
+        table,
+        pitch,
+        min_uprights=min_row_uprights,
+        min_coherence=min_coherence,
+        max_missing_run=max_missing_run,
+        min_fill=min_fill,
+    )
+    if not rows:
+        return []
+    regions = _regions(rows, region_gap_m)
+    out: list[RackRow] = []
+    order = sorted(
+        range(int(regions.max()) + 1),
+        key=lambda g: tuple(np.mean([rows[i].centre for i in np.flatnonzero(regions == g)], axis=0).round(1)),
+    )
+    for number, g in enumerate(order):
+        group = _constrain(
+            table,
+            [rows[i] for i in np.flatnonzero(regions == g)],
+            spacing_tolerance=spacing_tolerance,
+            angle_tolerance_rad=angle_tolerance_rad,
+            max_restored=max_restored_uprights,
+        )
+        v = np.array([-group[0].direction[1], group[0].direction[0]])
+        for row in sorted(group, key=lambda r: float(r.centre @ v)):
+            uprights = _place(table, row, sigma_floor_m)
+            mu = table[row.members, :2]
+            gap = np.min(np.hypot(*(uprights[:, None, :] - mu[None]).transpose(2, 0, 1)), axis=1)
+            theta = float(np.arctan2(row.direction[1], row.direction[0]))
+            out.append(
+                RackRow(
+                    row.n,
+                    row.d,
+                    theta,
+                    float(uprights[0, 0]),
+                    float(uprights[0, 1]),
+                    number,
+                    uprights,
+                    gap <= min(0.25 * row.d, 0.3),
+                    row.members,
+                )
+            )
+    return out

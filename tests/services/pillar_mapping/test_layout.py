@@ -1,0 +1,54 @@
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.pillar_mapping import (
+    PillarMappingError,
+    fit_racks,
+    layout_features,
+    read_landmarks_csv,
+    write_landmarks_csv,
+)
+from services.pillar_mapping.synthetic import noisy_landmarks, rack_region
+from shared.store import RevisionWrite
+
+
+def test_fit_racks_writes_geojson_of_pillars_rows_and_bins(tmp_path: Path) -> None:
+    layout = rack_region(aisles=2, bays=6)
+    table, _ = noisy_landmarks(layout, np.random.default_rng(0))
+    csv = tmp_path / "pillars.csv"
+    write_landmarks_csv(csv, table[:, :2], table[:, [2, 3, 3, 4]].reshape(-1, 2, 2))
+    result = fit_racks(csv, tmp_path / "out")
+    collection = json.loads((tmp_path / "out" / "racks.geojson").read_text())
+    kinds = {f["properties"]["kind"]: f["geometry"]["type"] for f in collection["features"]}
+    assert kinds == {"pillar": "Point", "rack_row": "LineString", "bin": "Polygon"}
+    rows = [f for f in collection["features"] if f["properties"]["kind"] == "rack_row"]
+    assert {"n", "d", "theta", "x", "y"} <= rows[0]["properties"].keys()
+    unseen = [f for f in collection["features"] if f["properties"].get("observed") is False]
+    assert len(unseen) == len(layout.uprights) - len(table)
+    assert len(result.bins) == len(layout.bin_centres)
+
+
+def test_layout_features_fit_one_revision_write() -> None:
+    table, _ = noisy_landmarks(rack_region(aisles=2, bays=5), np.random.default_rng(1))
+    features = layout_features(fit_racks(table))
+    write = RevisionWrite(stage="pillar_mapping", features=features)
+    assert set(write.features) == {"pillar", "rack_row", "bin"}
+    assert all(len(v) > 0 for v in write.features.values())
+
+
+def test_landmark_csv_round_trips(tmp_path: Path) -> None:
+    means = np.array([[1.0, 2.0], [3.5, -4.25]])
+    covs = np.array([[[1e-3, 2e-4], [2e-4, 3e-3]], [[4e-4, 0.0], [0.0, 4e-4]]])
+    write_landmarks_csv(tmp_path / "p.csv", means, covs)
+    table = read_landmarks_csv(tmp_path / "p.csv")
+    assert np.allclose(table, [[1.0, 2.0, 1e-3, 2e-4, 3e-3], [3.5, -4.25, 4e-4, 0.0, 4e-4]])
+
+
+def test_read_landmarks_csv_names_the_bad_line(tmp_path: Path) -> None:
+    path = tmp_path / "p.csv"
+    path.write_text("x,y,sxx,sxy,syy\n1,2,3\n")
+    with pytest.raises(PillarMappingError, match=r"p.csv:2"):
+        read_landmarks_csv(path)
