@@ -69,6 +69,27 @@ def _parser() -> argparse.ArgumentParser:
     build.add_argument("--scan-matching", action="store_true",
                        help="correct odometry drift by matching scans to the map (for logs without corrected poses)")
     _add_sim(commands)
+
+    decompose = commands.add_parser("decompose", help="corridors, junctions, storage and rooms of an occupancy map")
+    decompose.add_argument("map", type=Path, help="map_server YAML, or a bare PNG/PGM with --resolution")
+    decompose.add_argument("--out", type=Path, required=True, help="folder for labels, segments, layout, topology")
+    decompose.add_argument("--resolution", type=_positive, default=None, help="metres per pixel of a bare image")
+    decompose.add_argument("--labels", default="", help="category overrides, e.g. 0=corridor,3=storage")
+
+    pillars = commands.add_parser("pillars", help="rack uprights from a downward fisheye camera").add_subparsers(
+        dest="pillars_command", required=True, metavar="PILLARS_COMMAND")
+    detect = pillars.add_parser("detect", help="print bearings to the uprights in one image")
+    detect.add_argument("image", type=Path)
+    detect.add_argument("--camera-info", type=Path, required=True, help="calibration YAML (equidistant model)")
+    pillar_map = pillars.add_parser("map", help="detect and map uprights over a rosbag2")
+    pillar_map.add_argument("bag", type=Path)
+    pillar_map.add_argument("--out", type=Path, required=True)
+
+    racks = commands.add_parser("racks", help="rack rows and storage bins").add_subparsers(
+        dest="racks_command", required=True, metavar="RACKS_COMMAND")
+    fit = racks.add_parser("fit", help="fit rack rows and bins to upright landmarks (CSV x,y,sxx,sxy,syy)")
+    fit.add_argument("pillars", type=Path)
+    fit.add_argument("--out", type=Path, required=True)
     return parser
 
 
@@ -160,7 +181,33 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             return _map_build(args, settings)
         case "sim":
             _sim(args, settings, stop)
+        case "decompose":
+            from services.grid_decomposition import decompose_map_file, parse_label_overrides
+
+            overrides = parse_label_overrides(args.labels) if args.labels else None
+            decompose_map_file(args.map, args.out, resolution_m=args.resolution, label_overrides=overrides)
+            log.info("wrote the decomposition of %s to %s", args.map, args.out)
+        case "pillars" | "racks":
+            _pillars(args)
     return 0
+
+
+def _pillars(args: argparse.Namespace) -> None:
+    import math
+
+    from services import pillar_mapping
+
+    if args.command == "racks":
+        layout = pillar_mapping.fit_racks(args.pillars, args.out)
+        log.info("%d rack rows, %d bins -> %s", len(layout.rows), len(layout.bins), args.out / "racks.geojson")
+    elif args.pillars_command == "detect":
+        found = pillar_mapping.detect_pillars_file(args.image, args.camera_info)
+        for bearing, sigma, strength in zip(found.bearings_rad, found.sigmas_rad, found.strengths, strict=True):
+            print(f"{math.degrees(bearing):9.3f} deg  sigma {math.degrees(sigma):6.3f} deg  snr {strength:6.1f}")
+    else:
+        result = pillar_mapping.map_pillars_from_bag(args.bag, args.out)
+        log.info("mapped %d landmarks from %d frames (%d skipped) -> %s", len(result.landmarks.means),
+                 result.frames_used, result.frames_skipped, args.out)
 
 
 def _sim(args: argparse.Namespace, settings: Settings, stop: threading.Event) -> None:

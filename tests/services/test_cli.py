@@ -57,3 +57,23 @@ def test_unknown_subcommand_exits_with_usage() -> None:
     with pytest.raises(SystemExit) as exit_info:
         main(["fly"])
     assert exit_info.value.code == 2
+
+
+def test_racks_fit_turns_upright_landmarks_into_rows_and_bins(tmp_path: Path) -> None:
+    assert main(["sim", "world", "demo", "--out", str(tmp_path / "demo")]) == 0
+    lines = (tmp_path / "demo" / "uprights.csv").read_text().splitlines()[1:]
+    landmarks = tmp_path / "pillars.csv"
+    landmarks.write_text("x,y,sxx,sxy,syy\n" + "".join(
+        f"{line.split(',')[1]},{line.split(',')[2]},0.0009,0,0.0009\n" for line in lines))
+    assert main(["racks", "fit", str(landmarks), "--out", str(tmp_path / "racks")]) == 0
+    features = json.loads((tmp_path / "racks" / "racks.geojson").read_text())["features"]
+    kinds = [feature["properties"]["kind"] for feature in features]
+    assert kinds.count("rack_row") >= 2 and kinds.count("bin") > 0
+
+
+def test_decompose_writes_every_output(tmp_path: Path) -> None:
+    assert main(["sim", "world", "demo", "--out", str(tmp_path / "demo")]) == 0
+    assert main(["decompose", str(tmp_path / "demo" / "occupancy.yaml"), "--out", str(tmp_path / "dec")]) == 0
+    for name in ("labels.png", "segments.png", "layout.geojson", "topology.json", "overview.png"):
+        assert (tmp_path / "dec" / name).is_file()
+    assert main(["decompose", str(tmp_path / "demo" / "world.geojson"), "--out", str(tmp_path / "bad")]) == 1
