@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from typing import Any
 
 import cv2
@@ -76,3 +77,10 @@ def encode_png(image: npt.NDArray[np.uint8]) -> bytes:
     if not ok:
         raise RenderError(f"PNG encoding failed for an image of shape {image.shape}")
     return bytes(buffer.tobytes())
+
+
+def encode_npy(data: npt.NDArray[Any]) -> bytes:
+    """``.npy`` file bytes of a layer's values (no pickled objects)."""
+    buffer = io.BytesIO()
+    np.save(buffer, data, allow_pickle=False)
+    return buffer.getvalue()

@@ -11,8 +11,8 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, st
 
 from api.deps import MapDep, RevisionQuery, StoreDep
 from api.models import ErrorOut, LayerOut, LayerValuesOut, Origin, Responses
-from api.rendering import RenderError, encode_png, layer_image
-from shared.store import StoredLayer, layer_to_npy
+from api.rendering import RenderError, encode_npy, encode_png, layer_image
+from shared.store import StoredLayer
 
 router = APIRouter(prefix="/v1/maps/{map_name}/layers", tags=["layers"])
 
@@ -129,7 +129,7 @@ def layer_values(
     if value_format is ValuesFormat.NPY:
         filename = f"{map_info.name}_{layer.name}_r{stored.revision_id}.npy"
         return Response(
-            layer_to_npy(layer),
+            encode_npy(layer.data),
             media_type="application/x-npy",
             headers={REVISION_HEADER: str(stored.revision_id),
                      "Content-Disposition": f'attachment; filename="{filename}"'},

@@ -14,7 +14,7 @@ from shared.store.records import (
     TopologyNode,
     WorkerInfo,
 )
-from shared.store.store import MapStore, StoreUnavailableError, layer_to_npy
+from shared.store.store import MapStore, StoreUnavailableError
 
 __all__ = [
     "FEATURE_KINDS",
@@ -31,5 +31,4 @@ __all__ = [
     "TopologyEdge",
     "TopologyNode",
     "WorkerInfo",
-    "layer_to_npy",
 ]

@@ -8,7 +8,6 @@ them, ``retired_revision_id`` superseded them), so any revision of the map can b
 from __future__ import annotations
 
 import datetime as dt
-import io
 import os
 import socket
 import zlib
@@ -344,9 +343,3 @@ class MapStore:
         return [WorkerInfo(r.name, r.host, r.pid, _aware(r.started_at), _aware(r.heartbeat_at), r.counters)
                 for r in rows]
 
-
-def layer_to_npy(layer: GridLayer) -> bytes:
-    """The layer's values as a ``.npy`` file."""
-    buffer = io.BytesIO()
-    np.save(buffer, layer.data, allow_pickle=False)
-    return buffer.getvalue()
