@@ -148,3 +148,23 @@ def test_database_outage_is_survived(zenoh_listen: ZenohSettings, postgres_url: 
         assert worker.counters.get("occupancy_mapping.store_unavailable", 0) >= 1
         assert len(store.revisions(site.id)) > first
         store.close()
+
+
+def test_map_and_map_events_are_published_for_ros_tools(zenoh_listen: ZenohSettings, tmp_path: Path) -> None:
+    from shared.grids import layer_from_occupancy_grid
+
+    store = MapStore(f"sqlite:///{tmp_path / 'a.db'}")
+    store.upgrade()
+    settings = _settings(zenoh_listen, store.url)
+    with running_stage(settings, store) as bus:
+        grids = bus.subscribe("map", messages.OCCUPANCY_GRID, namespaces=["aisle"], name="test.map")
+        events = bus.subscribe("map_events", messages.MAP_EVENT, namespaces=["aisle"], name="test.events")
+        _talk(zenoh_listen)
+        wait_for(lambda: grids.pending() > 0 and events.pending() > 0, what="a map and a map event")
+        grid, event = grids.receive(1.0), events.receive(1.0)
+    assert grid is not None and event is not None
+    layer = layer_from_occupancy_grid(grid.message, name="occupancy")
+    assert grid.message.header.frame_id == "map" and int((layer.data > 50).sum()) > 0
+    assert event.message.map_name == "site" and event.message.stage == "occupancy_mapping"
+    assert list(event.message.layers_updated) == ["occupancy"]
+    assert store.revisions(store.ensure_map("site").id)[0].id == event.message.revision_id
