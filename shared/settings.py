@@ -52,6 +52,11 @@ class OccupancySettings(BaseModel):
     publish_period_s: float = Field(2.0, gt=0.0)
     scan_topic: str = "scan"
     odom_topic: str = "odom"
+    pose_topic: str = Field(
+        "", description="A geometry_msgs/PoseStamped topic with the robot's pose in the map frame (localisation); "
+        "empty: use TF and odometry only."
+    )
+    base_frame: str = Field("base_link", description="The robot frame that pose_topic places.")
     map_frame: str = "map"
     max_range_m: float = Field(30.0, gt=0.0, description="Returns beyond this are not marked occupied.")
     layer: str = "occupancy"

@@ -208,6 +208,14 @@ class TransformBuffer:
         names |= {history.parent for history in self._dynamic.values()}
         return frozenset(names)
 
+    def parent(self, frame: str) -> str | None:
+        """The frame ``frame`` hangs under, or None for a root or unknown frame."""
+        frame = _frame(frame)
+        if frame in self._static:
+            return self._static[frame][0]
+        history = self._dynamic.get(frame)
+        return None if history is None else history.parent
+
     def set_transform(
         self,
         parent: str,

@@ -20,7 +20,16 @@ import numpy.typing as npt
 from services.occupancy_mapping.errors import OccupancyMappingError
 from services.occupancy_mapping.grid import OccupancyGrid
 from services.occupancy_mapping.scan import ScanArrays, scan_arrays
-from shared.transforms import Pose2D, Transform, TransformBuffer, add_odometry, add_tf_message, sensor_pose_2d
+from shared.transforms import (
+    Pose2D,
+    Transform,
+    TransformBuffer,
+    add_odometry,
+    add_tf_message,
+    compose,
+    invert,
+    sensor_pose_2d,
+)
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +105,31 @@ class ScanMapper:
         robot = self._robot(namespace)
         if message.child_frame_id.lstrip("/") not in robot.tf_children:
             add_odometry(robot.buffer, message)
+
+    def add_map_pose(self, namespace: str, message: Any, *, base_frame: str) -> None:
+        """Feed a geometry_msgs/PoseStamped: the robot's ``base_frame`` in a map frame (localisation).
+
+        If the base hangs under an odometry frame, the pose becomes the map -> odom correction, as a
+        localisation node would publish it; otherwise it links the map frame to the base directly.
+        """
+        robot = self._robot(namespace)
+        stamp_ns = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+        p, q = message.pose.position, message.pose.orientation
+        pose = Transform(np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w]))
+        map_frame = message.header.frame_id.lstrip("/")
+        base = next((f for f in sorted(robot.buffer.frames) if f == base_frame or f.endswith("/" + base_frame)),
+                    base_frame)
+        parent = robot.buffer.parent(base)
+        if parent is None or parent == map_frame:
+            robot.buffer.set_transform(map_frame, base, stamp_ns, pose.translation, pose.rotation)
+            return
+        try:
+            odometry = robot.buffer.lookup(parent, base, stamp_ns)
+        except LookupError:
+            self.counts["poses_without_odometry"] += 1
+            return
+        correction = compose(pose, invert(odometry))
+        robot.buffer.set_transform(map_frame, parent, stamp_ns, correction.translation, correction.rotation)
 
     def add_scan(self, namespace: str, message: Any, *, fallback_stamp_ns: int = 0) -> None:
         """Queue a sensor_msgs/LaserScan; raises :class:`OccupancyMappingError` if it is malformed."""

@@ -46,7 +46,9 @@ class OccupancyStage:
         self.odometry = subscribe(self.settings.odom_topic, messages.ODOMETRY, 2000)
         self.tf = subscribe("tf", messages.TF_MESSAGE, 2000)
         self.tf_static = subscribe("tf_static", messages.TF_MESSAGE, 100)
-        self._subscriptions = (self.scans, self.odometry, self.tf, self.tf_static)
+        pose_topic = self.settings.pose_topic
+        self.poses = subscribe(pose_topic, messages.POSE_STAMPED, 2000) if pose_topic else None
+        self._subscriptions = tuple(s for s in (self.scans, self.odometry, self.tf, self.tf_static, self.poses) if s)
         self.matcher = (
             ScanMatcher(window_m=self.settings.scan_matching_window_m,
                         window_rad=self.settings.scan_matching_window_rad, max_range_m=self.settings.max_range_m)
@@ -106,6 +108,8 @@ class OccupancyStage:
                 self.mapper.add_tf(item.namespace, item.message, static=static)
         while (item := self.odometry.receive()) is not None:
             self.mapper.add_odometry(item.namespace, item.message)
+        while self.poses is not None and (item := self.poses.receive()) is not None:
+            self.mapper.add_map_pose(item.namespace, item.message, base_frame=self.settings.base_frame)
 
     def _take_scans(self, *, timeout_s: float) -> None:
         item = self.scans.receive(timeout_s)
