@@ -27,7 +27,7 @@ test-fast: $(STAMP)
 	$(BIN)/pytest -m "not slow"
 
 bench: $(STAMP)
-	for f in bench/bench_*.py; do $(BIN)/python $$f; done
+	for f in bench/bench_*.py; do PYTHONPATH=. $(BIN)/python $$f; done
 
 clean:
 	rm -rf $(VENV) var build *.egg-info

