@@ -1,0 +1,59 @@
+"""Semantic fusion: labelled scans on a keyframe pose graph into a sparse semantic grid, with inference."""
+
+from services.semantic_fusion.classes import (
+    CLASS_COLOURS,
+    DISTRIBUTION_CLASSES,
+    DYNAMIC_CLASSES,
+    N_CLASSES,
+    SemanticClass,
+    class_columns,
+)
+from services.semantic_fusion.errors import SemanticFusionError
+from services.semantic_fusion.evaluation import LabelAccuracy, absolute_trajectory_error, label_accuracy
+from services.semantic_fusion.fusion import FusionSettings, SemanticFusion
+from services.semantic_fusion.grid import GridCells, SemanticGrid, cell_indices, evidence_weights
+from services.semantic_fusion.inference import (
+    NO_ENTROPY,
+    CellLabels,
+    SemanticLayers,
+    infer_labels,
+    normalised_entropy,
+    rasterise,
+)
+from services.semantic_fusion.pose_graph import Constraint, PoseGraph
+from services.semantic_fusion.render import render_labels
+from services.semantic_fusion.scan import ScanObservation, observation_from_arrays, observation_from_message
+from services.semantic_fusion.scan_matching import ScanMatch, match_scans
+
+__all__ = [
+    "CLASS_COLOURS",
+    "DISTRIBUTION_CLASSES",
+    "DYNAMIC_CLASSES",
+    "NO_ENTROPY",
+    "N_CLASSES",
+    "CellLabels",
+    "Constraint",
+    "FusionSettings",
+    "GridCells",
+    "LabelAccuracy",
+    "PoseGraph",
+    "ScanMatch",
+    "ScanObservation",
+    "SemanticClass",
+    "SemanticFusion",
+    "SemanticFusionError",
+    "SemanticGrid",
+    "SemanticLayers",
+    "absolute_trajectory_error",
+    "cell_indices",
+    "class_columns",
+    "evidence_weights",
+    "infer_labels",
+    "label_accuracy",
+    "match_scans",
+    "normalised_entropy",
+    "observation_from_arrays",
+    "observation_from_message",
+    "rasterise",
+    "render_labels",
+]

@@ -1,0 +1,232 @@
+"""Annotated scans in, semantic grid out: keyframes, loop closures, re-projection.
+
+The state machine the live worker and offline runs share. Each scan attaches to the newest keyframe
+(a new one starts when the camera has moved ``keyframe_distance_m`` or turned ``keyframe_angle_rad``
+since the last), its points are kept in that keyframe's frame and added to the grid at the
+keyframe's current pose estimate. When a keyframe is complete, its neighbourhood is matched against
+earlier, far-in-time keyframes close by in space; accepted matches become loop closures, the pose
+graph is re-optimised and every keyframe that moved is re-projected: its points are taken out of the
+grid at their old cells and added at their new ones.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from services.semantic_fusion import se2
+from services.semantic_fusion.classes import N_CLASSES, dynamic_columns
+from services.semantic_fusion.errors import SemanticFusionError
+from services.semantic_fusion.grid import SemanticGrid, evidence_weights
+from services.semantic_fusion.inference import SemanticLayers, infer_labels, rasterise
+from services.semantic_fusion.observations import ObservationStore
+from services.semantic_fusion.pose_graph import PoseGraph
+from services.semantic_fusion.scan import ScanObservation
+from services.semantic_fusion.scan_matching import match_scans
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class FusionSettings:
+    """Tuning of :class:`SemanticFusion` (units in the names)."""
+
+    resolution_m: float = 0.05
+    max_confidence: float = 0.9
+    dynamic_half_life_s: float = 20.0
+    keyframe_distance_m: float = 0.5
+    keyframe_angle_rad: float = 0.3
+    loop_min_separation_keyframes: int = 40
+    loop_candidate_radius_m: float = 4.0
+    loop_search_radius_m: float = 2.0
+    loop_search_angle_rad: float = 0.1
+    loop_submap_keyframes: int = 20
+    loop_min_inlier_fraction: float = 0.93
+    loop_max_rmse_m: float = 0.06
+    loop_min_points: int = 300
+    loop_max_candidates: int = 2
+    loop_max_ambiguity: float = 0.95
+    loop_every_keyframes: int = 3
+    loop_cooldown_keyframes: int = 10
+    reproject_min_shift_m: float = 0.01
+    max_point_range_m: float = 8.0
+
+    def __post_init__(self) -> None:
+        positive = {name: getattr(self, name) for name in (
+            "resolution_m", "dynamic_half_life_s", "keyframe_distance_m", "keyframe_angle_rad",
+            "loop_candidate_radius_m", "loop_max_rmse_m", "reproject_min_shift_m", "max_point_range_m")}
+        bad = {name: value for name, value in positive.items() if not (math.isfinite(value) and value > 0)}
+        if bad:
+            raise SemanticFusionError(f"settings must be positive and finite: {bad}")
+        if self.loop_min_separation_keyframes < 1 or self.loop_submap_keyframes < 0 or min(
+                self.loop_every_keyframes, self.loop_max_candidates) < 1 or self.loop_cooldown_keyframes < 0:
+            raise SemanticFusionError("loop keyframe counts must be >= 1 (submap and cooldown >= 0)")
+
+
+class SemanticFusion:
+    """Fuses validated annotated scans of one robot into a :class:`SemanticGrid`.
+
+    Parameters
+    ----------
+    settings : FusionSettings
+        Tuning.
+    pose_graph : PoseGraph, optional
+        The graph to extend (default: a new one with default noise).
+    detect_loops : bool
+        Whether completed keyframes are matched against earlier ones.
+    """
+
+    def __init__(self, settings: FusionSettings | None = None, *, pose_graph: PoseGraph | None = None,
+                 detect_loops: bool = True) -> None:
+        self.settings = settings or FusionSettings()
+        self.graph = pose_graph or PoseGraph()
+        if self.graph.n_keyframes:
+            raise SemanticFusionError("the pose graph must start empty")
+        self.grid = SemanticGrid(resolution_m=self.settings.resolution_m,
+                                 dynamic_half_life_s=self.settings.dynamic_half_life_s)
+        self.store = ObservationStore()
+        self.detect_loops = detect_loops
+        self._keyframe_stamps_ns: list[int] = []
+        self._last_stamp_ns: int | None = None
+        self._dynamic = np.zeros(N_CLASSES, dtype=bool)
+        self._dynamic[dynamic_columns()] = True
+
+    @property
+    def keyframe_stamps_ns(self) -> npt.NDArray[np.int64]:
+        """Stamp of the scan that started each keyframe, (n,) int64 nanoseconds."""
+        return np.asarray(self._keyframe_stamps_ns, dtype=np.int64)
+
+    @property
+    def last_stamp_ns(self) -> int | None:
+        """Stamp of the newest scan taken, for the out-of-order check."""
+        return self._last_stamp_ns
+
+    def add_scan(self, scan: ScanObservation) -> int:
+        """Take one scan; return the number of loop closures it led to (0 almost always)."""
+        if self._last_stamp_ns is not None and scan.stamp_ns <= self._last_stamp_ns:
+            raise SemanticFusionError(
+                f"scan stamp {scan.stamp_ns} ns is not after the previous scan's {self._last_stamp_ns} ns")
+        closures = 0
+        n = self.graph.n_keyframes
+        if not n or self._moved(self.graph.odometry_pose(n - 1), scan.camera_pose):
+            if n and self.detect_loops:
+                closures = self._close_loops(n - 1)
+            self.graph.add_keyframe(scan.camera_pose)
+            self.store.start_keyframe()
+            self._keyframe_stamps_ns.append(scan.stamp_ns)
+        key = self.graph.n_keyframes - 1
+        local = se2.transform_points(se2.between(self.graph.odometry_pose(key), scan.camera_pose), scan.points_xy)
+        world = se2.transform_points(self.graph.pose(key), local)
+        weights = evidence_weights(scan.confidences, max_confidence=self.settings.max_confidence)
+        rows = self.grid.rows_of(world)
+        stamp_s = scan.stamp_ns * 1e-9
+        self.grid.accumulate(rows, scan.columns, weights, scan.heights, np.full(rows.size, stamp_s))
+        self.store.append(local, scan.columns, weights, scan.heights, stamp_s, rows)
+        self._last_stamp_ns = scan.stamp_ns
+        return closures
+
+    def _moved(self, keyframe_pose: npt.NDArray[np.float64], pose: npt.NDArray[np.float64]) -> bool:
+        step = se2.between(keyframe_pose, pose)
+        return bool(math.hypot(step[0], step[1]) >= self.settings.keyframe_distance_m
+                    or abs(step[2]) >= self.settings.keyframe_angle_rad)
+
+    def _submap(self, centre: int, lo: int, hi: int) -> npt.NDArray[np.float64]:
+        """Static-class points of keyframes ``lo..hi`` in keyframe ``centre``'s frame."""
+        keys = np.arange(max(lo, 0), min(hi, self.graph.n_keyframes - 1) + 1)
+        batch = self.store.batch(keys)
+        static = ~self._dynamic[batch.columns]
+        poses = self.graph.poses
+        relative = se2.between(poses[centre], poses[keys])[np.searchsorted(keys, batch.keyframes)]
+        xy = batch.xy.astype(np.float64)
+        c, s = np.cos(relative[:, 2]), np.sin(relative[:, 2])
+        out = np.stack([relative[:, 0] + c * xy[:, 0] - s * xy[:, 1], relative[:, 1] + s * xy[:, 0] + c * xy[:, 1]], 1)
+        return np.asarray(out[static])
+
+    def _close_loops(self, key: int) -> int:
+        cfg = self.settings
+        if key < cfg.loop_min_separation_keyframes or key % cfg.loop_every_keyframes:
+            return 0
+        if self.graph.loop_closures and key - self.graph.loop_closures[-1].to_key < cfg.loop_cooldown_keyframes:
+            return 0
+        poses = self.graph.poses
+        earlier = poses[: key - cfg.loop_min_separation_keyframes + 1]
+        distance = np.hypot(*(earlier[:, :2] - poses[key, :2]).T)
+        candidates = np.argsort(distance)[: cfg.loop_max_candidates]
+        candidates = candidates[distance[candidates] <= cfg.loop_candidate_radius_m]
+        if not candidates.size:
+            return 0
+        source = self._submap(key, key - cfg.loop_submap_keyframes, key)
+        if source.shape[0] < cfg.loop_min_points:
+            return 0
+        accepted = 0
+        for j in candidates.tolist():
+            target = self._submap(j, j - cfg.loop_submap_keyframes, j + cfg.loop_submap_keyframes)
+            if target.shape[0] < cfg.loop_min_points:
+                continue
+            match = match_scans(source, target, initial_pose=se2.between(poses[j], poses[key]),
+                                search_radius_m=cfg.loop_search_radius_m,
+                                search_angle_rad=cfg.loop_search_angle_rad)
+            if (match.inlier_fraction >= cfg.loop_min_inlier_fraction and match.rmse_m <= cfg.loop_max_rmse_m
+                    and match.ambiguity <= cfg.loop_max_ambiguity):
+                self.graph.add_loop_closure(j, key, match.pose)
+                accepted += 1
+                log.debug("loop closure %d -> %d: inliers %.2f rmse %.3f m ambiguity %.2f", j, key,
+                          match.inlier_fraction, match.rmse_m, match.ambiguity)
+        if accepted:
+            self._optimise_and_reproject()
+        return accepted
+
+    def add_pose_correction(self, stamp_ns: int, pose: npt.ArrayLike, *,
+                            sigmas: tuple[float, float, float] = (0.05, 0.05, 0.02)) -> int:
+        """Accept a corrected camera pose (map frame) the robot published for ``stamp_ns``.
+
+        It becomes a prior on the keyframe nearest in time, the graph is re-optimised and moved
+        keyframes are re-projected; returns the number of keyframes re-projected.
+        """
+        if not self._keyframe_stamps_ns:
+            raise SemanticFusionError("no keyframes yet to correct")
+        stamps = np.asarray(self._keyframe_stamps_ns)
+        key = int(np.argmin(np.abs(stamps - stamp_ns)))
+        self.graph.add_pose_prior(key, pose, sigmas=sigmas)
+        return self._optimise_and_reproject()
+
+    def _optimise_and_reproject(self) -> int:
+        before = self.graph.poses
+        after = self.graph.optimise()
+        step = se2.between(before, after)
+        shift = np.hypot(step[:, 0], step[:, 1]) + np.abs(step[:, 2]) * self.settings.max_point_range_m
+        moved = np.flatnonzero(shift >= self.settings.reproject_min_shift_m)
+        self.reproject(moved)
+        return int(moved.size)
+
+    def reproject(self, keyframes: npt.ArrayLike | None = None) -> int:
+        """Move the points of ``keyframes`` (default all) to their keyframes' current poses; return points moved."""
+        keys = np.arange(self.graph.n_keyframes) if keyframes is None else np.asarray(keyframes, dtype=np.int64)
+        if not keys.size:
+            return 0
+        batch = self.store.batch(keys)
+        self.grid.accumulate(batch.rows, batch.columns, batch.weights, batch.heights, batch.stamps_s, sign=-1.0)
+        pose = self.graph.poses[batch.keyframes]
+        xy = batch.xy.astype(np.float64)
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        world = np.stack([pose[:, 0] + c * xy[:, 0] - s * xy[:, 1], pose[:, 1] + s * xy[:, 0] + c * xy[:, 1]], 1)
+        rows = self.grid.rows_of(world)
+        self.grid.accumulate(rows, batch.columns, batch.weights, batch.heights, batch.stamps_s)
+        self.store.set_rows(keys, rows)
+        return int(rows.size)
+
+    def layers(self, *, now_ns: int | None = None, min_hits: float = 2.0, confident_entropy: float = 0.45,
+               unconfident_entropy: float = 0.9, neighbour_radius_cells: int = 2,
+               max_height_difference_m: float = 0.5) -> SemanticLayers:
+        """Label and entropy rasters as of ``now_ns`` (default: the newest scan's stamp)."""
+        now = now_ns if now_ns is not None else (self._last_stamp_ns or 0)
+        cells = self.grid.cells(now_s=now * 1e-9)
+        result = infer_labels(cells, min_hits=min_hits, confident_entropy=confident_entropy,
+                              unconfident_entropy=unconfident_entropy,
+                              neighbour_radius_cells=neighbour_radius_cells,
+                              max_height_difference_m=max_height_difference_m)
+        return rasterise(cells, result, resolution_m=self.grid.resolution_m)

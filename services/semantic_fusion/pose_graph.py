@@ -1,0 +1,175 @@
+"""A 2-D pose graph of keyframes, optimised as nonlinear least squares with GTSAM.
+
+Vertices are keyframe poses (x, y, yaw) in the map frame. Edges: odometry between consecutive
+keyframes (noise growing with the distance driven), loop closures from scan matching (optionally
+behind a Cauchy kernel; off by default, since the kernel also mutes the first, large correction
+after a long drift, the one that matters most -- matches are vetted before they get here), and
+absolute priors: the first keyframe's pose anchors the map frame, and corrected poses the robot
+publishes enter as priors on their keyframes.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import gtsam
+import numpy as np
+import numpy.typing as npt
+
+from services.semantic_fusion import se2
+from services.semantic_fusion.errors import SemanticFusionError
+
+
+class Constraint(NamedTuple):
+    """A relative-pose edge: pose of keyframe ``to_key`` in the frame of ``from_key`` (x, y m, yaw rad)."""
+
+    from_key: int
+    to_key: int
+    relative: tuple[float, float, float]
+    sigmas: tuple[float, float, float]
+
+
+def _pose3(pose: npt.ArrayLike, what: str) -> npt.NDArray[np.float64]:
+    p = np.asarray(pose, dtype=np.float64).reshape(-1)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise SemanticFusionError(f"{what} must be 3 finite numbers (x, y, yaw), got {p.tolist()}")
+    return p
+
+
+def _sigmas(sigmas: tuple[float, float, float], what: str) -> gtsam.noiseModel.Diagonal:
+    s = np.asarray(sigmas, dtype=np.float64)
+    if s.shape != (3,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
+        raise SemanticFusionError(f"{what} sigmas must be 3 positive numbers, got {s.tolist()}")
+    return gtsam.noiseModel.Diagonal.Sigmas(s)
+
+
+class PoseGraph:
+    """Keyframe poses with odometry, loop-closure and prior constraints.
+
+    Parameters
+    ----------
+    odometry_sigma_per_m : float
+        Translation noise of odometry per metre driven (fraction), at least ``min_sigma_m``.
+    odometry_yaw_sigma_per_m : float
+        Heading noise of odometry per metre driven, radians per metre, at least ``min_yaw_sigma_rad``.
+    loop_sigmas : (float, float, float)
+        Default loop-closure noise (x m, y m, yaw rad).
+    loop_kernel : float, optional
+        Cauchy kernel width on whitened loop-closure residuals; ``None`` for plain least squares.
+    """
+
+    def __init__(
+        self,
+        *,
+        odometry_sigma_per_m: float = 0.02,
+        odometry_yaw_sigma_per_m: float = 0.005,
+        min_sigma_m: float = 0.005,
+        min_yaw_sigma_rad: float = 0.001,
+        loop_sigmas: tuple[float, float, float] = (0.05, 0.05, 0.01),
+        loop_kernel: float | None = None,
+    ) -> None:
+        if min(odometry_sigma_per_m, odometry_yaw_sigma_per_m, min_sigma_m, min_yaw_sigma_rad,
+               1.0 if loop_kernel is None else loop_kernel) <= 0:
+            raise SemanticFusionError("odometry noise, minimum sigmas and loop_kernel must be positive")
+        _sigmas(loop_sigmas, "loop_sigmas")
+        self._per_m = (odometry_sigma_per_m, odometry_yaw_sigma_per_m)
+        self._min = (min_sigma_m, min_yaw_sigma_rad)
+        self._loop_sigmas = loop_sigmas
+        self._kernel = loop_kernel
+        self._graph = gtsam.NonlinearFactorGraph()
+        self._odometry = np.zeros((64, 3))
+        self._estimate = np.zeros((64, 3))
+        self._n = 0
+        self.loop_closures: list[Constraint] = []
+
+    @property
+    def n_keyframes(self) -> int:
+        """Number of keyframes."""
+        return self._n
+
+    @property
+    def poses(self) -> npt.NDArray[np.float64]:
+        """Current pose estimates, (n, 3) float64 (x, y metres, yaw radians), a copy."""
+        return self._estimate[: self._n].copy()
+
+    @property
+    def odometry_poses(self) -> npt.NDArray[np.float64]:
+        """Keyframe poses as odometry gave them, (n, 3) float64, a copy."""
+        return self._odometry[: self._n].copy()
+
+    def pose(self, key: int) -> npt.NDArray[np.float64]:
+        """Current estimate of keyframe ``key``, (3,) float64."""
+        self._check_key(key)
+        return np.array(self._estimate[key], dtype=np.float64)
+
+    def odometry_pose(self, key: int) -> npt.NDArray[np.float64]:
+        """Odometry pose of keyframe ``key``, (3,) float64."""
+        self._check_key(key)
+        return np.array(self._odometry[key], dtype=np.float64)
+
+    def add_keyframe(self, odometry_pose: npt.ArrayLike) -> int:
+        """Add a keyframe at ``odometry_pose`` (map frame as the robot estimates it); return its key.
+
+        Its estimate continues from the previous keyframe's current estimate by the odometry step,
+        so keyframes after a loop closure start where the closure put the trajectory.
+        """
+        pose = _pose3(odometry_pose, "odometry pose")
+        key = self.n_keyframes
+        if key == 0:
+            anchor = _sigmas((self._min[0], self._min[0], self._min[1]), "anchor")
+            self._graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*pose), anchor))
+            estimate = pose
+        else:
+            step = se2.between(self._odometry[key - 1], pose)
+            dist = math.hypot(step[0], step[1]) + 0.5 * abs(step[2])
+            sig = max(self._per_m[0] * dist, self._min[0])
+            yaw_sig = max(self._per_m[1] * dist, self._min[1])
+            self._graph.add(gtsam.BetweenFactorPose2(key - 1, key, gtsam.Pose2(*step),
+                                                     _sigmas((sig, sig, yaw_sig), "odometry")))
+            estimate = se2.compose(self._estimate[key - 1], step)
+        if key == self._odometry.shape[0]:
+            self._odometry = np.vstack([self._odometry, np.zeros_like(self._odometry)])
+            self._estimate = np.vstack([self._estimate, np.zeros_like(self._estimate)])
+        self._odometry[key], self._estimate[key] = pose, estimate
+        self._n = key + 1
+        return key
+
+    def _check_key(self, key: int) -> None:
+        if not 0 <= key < self.n_keyframes:
+            raise SemanticFusionError(f"keyframe {key} does not exist (have {self.n_keyframes})")
+
+    def add_loop_closure(self, from_key: int, to_key: int, relative_pose: npt.ArrayLike, *,
+                         sigmas: tuple[float, float, float] | None = None) -> None:
+        """Constrain keyframe ``to_key``'s pose in ``from_key``'s frame to ``relative_pose``."""
+        self._check_key(from_key)
+        self._check_key(to_key)
+        if from_key == to_key:
+            raise SemanticFusionError(f"a loop closure needs two keyframes, got {from_key} twice")
+        rel = _pose3(relative_pose, "relative pose")
+        chosen = sigmas or self._loop_sigmas
+        noise: gtsam.noiseModel.Base = _sigmas(chosen, "loop closure")
+        if self._kernel is not None:
+            noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(self._kernel), noise)
+        self._graph.add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel), noise))
+        self.loop_closures.append(Constraint(from_key, to_key, (rel[0], rel[1], rel[2]), chosen))
+
+    def add_pose_prior(self, key: int, pose: npt.ArrayLike, *, sigmas: tuple[float, float, float]) -> None:
+        """Constrain keyframe ``key`` to a corrected map-frame ``pose`` (as a robot's localiser publishes)."""
+        self._check_key(key)
+        self._graph.add(gtsam.PriorFactorPose2(key, gtsam.Pose2(*_pose3(pose, "pose prior")),
+                                               _sigmas(sigmas, "pose prior")))
+
+    def optimise(self, *, max_iterations: int = 100) -> npt.NDArray[np.float64]:
+        """Re-optimise every pose (Levenberg-Marquardt from the current estimates); return (n, 3) poses."""
+        if self.n_keyframes == 0:
+            return self.poses
+        initial = gtsam.Values()
+        for key, pose in enumerate(self._estimate[: self._n]):
+            initial.insert(key, gtsam.Pose2(*pose))
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(max_iterations)
+        result = gtsam.LevenbergMarquardtOptimizer(self._graph, initial, params).optimize()
+        optimised = np.asarray(gtsam.utilities.extractPose2(result), dtype=np.float64).reshape(-1, 3)
+        self._estimate[: self._n] = optimised
+        return self.poses

@@ -1,0 +1,78 @@
+import numpy as np
+import pytest
+
+from services.semantic_fusion import (
+    DYNAMIC_CLASSES,
+    FusionSettings,
+    SemanticFusion,
+    SemanticFusionError,
+    absolute_trajectory_error,
+    infer_labels,
+    label_accuracy,
+    rasterise,
+    se2,
+)
+from services.semantic_fusion import synthetic as syn
+
+
+@pytest.fixture(scope="module")
+def small_run() -> tuple[syn.Warehouse, syn.SimulatedRun]:
+    warehouse = syn.make_warehouse(length_m=30.0, width_m=18.0, seed=3)
+    return warehouse, syn.simulate_run(warehouse, seed=4, max_scans=400)
+
+
+def test_reprojection_matches_a_grid_built_at_the_final_poses(small_run) -> None:  # type: ignore[no-untyped-def]
+    _, run = small_run
+    fusion = SemanticFusion(detect_loops=False)
+    for scan in run.scans[:300]:
+        fusion.add_scan(scan)
+    keys = np.arange(10, fusion.graph.n_keyframes)
+    fusion.add_pose_correction(int(fusion.keyframe_stamps_ns[-1]), fusion.graph.poses[-1] + [0.4, -0.2, 0.03],
+                               sigmas=(0.01, 0.01, 0.001))
+    stamps = fusion.keyframe_stamps_ns
+    fresh = SemanticFusion(detect_loops=False)  # fed the corrected poses from the start
+    for scan in run.scans[:300]:
+        k = int(np.searchsorted(stamps, scan.stamp_ns, side="right")) - 1
+        corrected = se2.compose(fusion.graph.poses[k], se2.between(fusion.graph.odometry_poses[k], scan.camera_pose))
+        fresh.add_scan(scan._replace(camera_pose=corrected))
+    now = fusion.last_stamp_ns * 1e-9  # type: ignore[operator]
+    a, b = fusion.layers(), fresh.layers()
+    assert keys.size and a.labels.shape == b.labels.shape
+    assert np.mean(a.labels == b.labels) > 0.999
+    cells_a, cells_b = fusion.grid.cells(now_s=now), fresh.grid.cells(now_s=now)
+    assert np.isclose(cells_a.hits.sum(), cells_b.hits.sum(), rtol=1e-5)
+
+
+def test_fusion_rejects_scans_out_of_order(small_run) -> None:  # type: ignore[no-untyped-def]
+    _, run = small_run
+    fusion = SemanticFusion(detect_loops=False)
+    fusion.add_scan(run.scans[1])
+    with pytest.raises(SemanticFusionError, match="not after"):
+        fusion.add_scan(run.scans[0])
+
+
+def test_fusion_settings_reject_nonsense() -> None:
+    with pytest.raises(SemanticFusionError, match="positive"):
+        FusionSettings(resolution_m=-0.05)
+
+
+@pytest.mark.slow
+def test_loop_closure_and_inference_on_a_simulated_run() -> None:
+    warehouse = syn.make_warehouse(length_m=30.0, width_m=18.0, seed=0)
+    run = syn.simulate_run(warehouse, seed=100)
+    truth = syn.truth_labels(warehouse, resolution_m=0.05)
+    fusion = SemanticFusion()
+    for scan in run.scans:
+        fusion.add_scan(scan)
+    stamps = np.array([s.stamp_ns for s in run.scans])
+    truth_kf = run.true_poses[np.searchsorted(stamps, fusion.keyframe_stamps_ns)]
+    assert fusion.graph.loop_closures
+    assert absolute_trajectory_error(fusion.graph.poses, truth_kf) < 0.5 * absolute_trajectory_error(
+        fusion.graph.odometry_poses, truth_kf)
+    cells = fusion.grid.cells(now_s=fusion.last_stamp_ns * 1e-9)  # type: ignore[operator]
+    result = infer_labels(cells)
+    inferred = label_accuracy(rasterise(cells, result, resolution_m=0.05), truth, exclude=DYNAMIC_CLASSES)
+    raw = label_accuracy(rasterise(cells, result._replace(labels=result.raw_labels), resolution_m=0.05), truth,
+                         exclude=DYNAMIC_CLASSES)
+    assert inferred.fraction >= raw.fraction
+    assert inferred.fraction > 0.9
