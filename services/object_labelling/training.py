@@ -251,6 +251,4 @@ def evaluate_classifier(
         auc[name] = float(roc_auc_score(truth, scene_scores[:, i])) if 0 < truth.sum() < truth.size else float("nan")
         accuracy[name] = float(((scene_scores[:, i] >= 0) == truth).mean())
     counts["scene images"] = len(images)
-    result = Evaluation(auc, rows, cols, matrix.astype(np.int64), accuracy, counts)
-    log.info("held-out evaluation of %s:\n%s", model_path, result.markdown())
-    return result
+    return Evaluation(auc, rows, cols, matrix.astype(np.int64), accuracy, counts)
