@@ -12,6 +12,7 @@ from services.grid_decomposition.mapfile import (
     read_map_file,
     write_outputs,
 )
+from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.overview import overview_image
 from services.grid_decomposition.pipeline import Decomposition, Resolution, decompose
@@ -27,7 +28,7 @@ from services.grid_decomposition.semantics import (
     parse_label,
 )
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
-from services.grid_decomposition.templates import Template, match_templates
+from services.grid_decomposition.templates import Template, match_templates, template_branches
 from services.grid_decomposition.texture import gabor_features, segment_texture_regions
 
 __all__ = [
@@ -77,7 +78,9 @@ __all__ = [
     "read_map_file",
     "region_topology",
     "segment_texture_regions",
+    "split_at_necks",
     "subdivide",
+    "template_branches",
     "wall_evidence",
     "write_outputs",
 ]

@@ -1,4 +1,4 @@
-"""Per-face geometry: bounding rectangle and how many of its corners stand on obstacles."""
+"""Per-face geometry: oriented bounding rectangle and how many of its corners stand on obstacles."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
+
+from services.grid_decomposition.errors import DecompositionError
 
 
 class FaceGeometry(NamedTuple):
@@ -16,7 +17,7 @@ class FaceGeometry(NamedTuple):
     Attributes
     ----------
     short_m, long_m : (F + 1,) float64
-        Sides of the minimum-area rectangle around the face, metres.
+        Sides of the face's bounding rectangle along its orientation, metres.
     corners_on_obstacle : (F + 1,) int64
         How many of that rectangle's four corners lie within the tolerance of an obstacle.
     walled_fraction : (F + 1,) float64
@@ -39,37 +40,72 @@ def face_geometry(
     obstacle: npt.NDArray[np.bool_],
     *,
     resolution_m: float,
+    face_angle_rad: npt.NDArray[np.float64] | None = None,
     corner_tolerance_m: float = 0.25,
 ) -> FaceGeometry:
-    """Minimum-area rectangles of faces and obstacles at their corners (rack uprights)."""
+    """Bounding rectangles of faces along their orientation and obstacles at their corners (uprights).
+
+    All faces at once: the extremes of a face along two axes lie on its outline, so only outline
+    pixels (a 4-neighbour in another face) are projected and reduced per face.
+
+    Parameters
+    ----------
+    face_image : (H, W) int32
+        Face id per pixel, 1..n_faces, 0 elsewhere.
+    n_faces : int
+    obstacle : (H, W) bool
+    resolution_m : float
+        Metres per pixel.
+    face_angle_rad : (n_faces + 1,) float64, optional
+        Direction of each face's rectangle (the lines that cut it), radians, x = column, y = row;
+        default 0 (axis-aligned).
+    corner_tolerance_m : float
+        A corner within this distance of an obstacle stands on it.
+    """
     n = n_faces + 1
-    short = np.zeros(n)
-    long = np.zeros(n)
-    corners = np.zeros(n, dtype=np.int64)
-    centroid = np.zeros((n, 2))
-    walled = np.zeros(n)
+    angle = np.zeros(n) if face_angle_rad is None else np.asarray(face_angle_rad, dtype=np.float64)
+    if angle.shape != (n,):
+        raise DecompositionError(f"face_angle_rad must have shape ({n},), got {angle.shape}")
+    h, w = face_image.shape
+    padded = np.pad(face_image, 1)
+    inner = padded[1:-1, 1:-1]
+    edge = (
+        (inner != padded[:-2, 1:-1])
+        | (inner != padded[2:, 1:-1])
+        | (inner != padded[1:-1, :-2])
+        | (inner != padded[1:-1, 2:])
+    ) & (inner > 0)
+    faces = face_image.ravel()
+    count = np.bincount(faces, minlength=n).astype(np.float64)
+    ys, xs = np.divmod(np.arange(faces.size, dtype=np.int64), w)
+    safe = np.maximum(count, 1.0)
+    centroid = np.stack([np.bincount(faces, xs, n) / safe, np.bincount(faces, ys, n) / safe], axis=1)
+    centroid[0] = 0.0
+    oy, ox = np.nonzero(edge)
+    of = face_image[oy, ox].astype(np.int64)
+    c, s = np.cos(angle), np.sin(angle)
+    u = ox * c[of] + oy * s[of]
+    v = -ox * s[of] + oy * c[of]
+    lo_u, hi_u, lo_v, hi_v = (np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.inf), np.full(n, -np.inf))
+    np.minimum.at(lo_u, of, u)
+    np.maximum.at(hi_u, of, u)
+    np.minimum.at(lo_v, of, v)
+    np.maximum.at(hi_v, of, v)
+    has = np.isfinite(lo_u)
+    ext_u = np.where(has, hi_u - lo_u + 1.0, 0.0)
+    ext_v = np.where(has, hi_v - lo_v + 1.0, 0.0)
+    short = np.minimum(ext_u, ext_v) * resolution_m
+    long = np.maximum(ext_u, ext_v) * resolution_m
     t = max(2, round(0.1 / resolution_m))
     touch = cv2.dilate(obstacle.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * t + 1,) * 2)) > 0
+    n_out = np.bincount(of, minlength=n).astype(np.float64)
+    walled = np.bincount(of, touch[oy, ox].astype(np.float64), n) / np.maximum(n_out, 1.0)
     r = max(1, round(corner_tolerance_m / resolution_m))
     near = cv2.dilate(obstacle.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1,) * 2)) > 0
-    h, w = face_image.shape
-    for fid, box in enumerate(ndimage.find_objects(face_image, max_label=n_faces), start=1):
-        if box is None:
-            continue
-        mask = (face_image[box] == fid).astype(np.uint8)
-        m = cv2.moments(mask, binaryImage=True)
-        if m["m00"] > 0:
-            centroid[fid] = (box[1].start + m["m10"] / m["m00"], box[0].start + m["m01"] / m["m00"])
-        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        outline = np.concatenate(contours).reshape(-1, 2) + np.array([box[1].start, box[0].start])
-        walled[fid] = float(touch[outline[:, 1], outline[:, 0]].mean())
-        pts = outline.astype(np.float32)
-        rect = cv2.minAreaRect(pts)
-        (sw, sh) = rect[1]
-        short[fid] = (min(sw, sh) + 1) * resolution_m
-        long[fid] = (max(sw, sh) + 1) * resolution_m
-        box_pts = np.rint(cv2.boxPoints(rect)).astype(np.int64)
-        cx = box_pts[:, 0].clip(0, w - 1)
-        cy = box_pts[:, 1].clip(0, h - 1)
-        corners[fid] = int(near[cy, cx].sum())
+    corners = np.zeros(n, dtype=np.int64)
+    ids = np.flatnonzero(has)
+    for cu, cv in ((lo_u, lo_v), (lo_u, hi_v), (hi_u, lo_v), (hi_u, hi_v)):
+        x = np.rint(cu[ids] * c[ids] - cv[ids] * s[ids]).astype(np.int64).clip(0, w - 1)
+        y = np.rint(cu[ids] * s[ids] + cv[ids] * c[ids]).astype(np.int64).clip(0, h - 1)
+        corners[ids] += near[y, x]
     return FaceGeometry(short, long, corners, walled, centroid)

@@ -5,13 +5,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import NamedTuple
 
-import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.faces import FaceGeometry
 from services.grid_decomposition.semantics import Label
-from services.grid_decomposition.templates import Template, match_templates
+from services.grid_decomposition.templates import template_branches
 
 
 class FaceLabels(NamedTuple):
@@ -54,7 +53,7 @@ def face_categories(
 
 
 def evidence_labels(
-    graph: nx.Graph,
+    links: npt.NDArray[np.int64],
     geometry: FaceGeometry,
     component: npt.NDArray[np.int64],
     component_elongation: npt.NDArray[np.float64],
@@ -80,6 +79,11 @@ def evidence_labels(
     aisles or corridors) the templates run on the graph of non-storage faces: T/X junctions, and
     corridor pieces (two branches or a dead end, short side <= ``corridor_max_width_m``); the
     rest is open area.
+
+    Parameters
+    ----------
+    links : (L, 2) int64
+        Connected (non-cogent) links between faces, ids 1..F.
     """
     n = geometry.short_m.size
     ev = np.full(n, Label.NONE.value, dtype=np.int64)
@@ -99,14 +103,15 @@ def evidence_labels(
     network = has_storage | (component_elongation >= corridor_min_elongation)
     compact = is_free & ~storage & ~network[component]
     ev[compact] = np.where(area_m2[component[compact]] >= open_area_min_m2, Label.OPEN_AREA, Label.ROOM)
-    drivable = graph.subgraph([f for f in graph.nodes if is_free[f] and not storage[f] and network[component[f]]])
-    for face, template in match_templates(nx.Graph(drivable)).items():
-        if template in (Template.T_JUNCTION, Template.X_JUNCTION):
-            ev[face] = Label.JUNCTION.value
-        elif template in (Template.CORRIDOR, Template.DEAD_END) and geometry.short_m[face] <= corridor_max_width_m:
-            ev[face] = Label.CORRIDOR.value
-        else:
-            ev[face] = Label.OPEN_AREA.value
+    drivable = is_free & ~storage & network[component]
+    e = np.asarray(links, dtype=np.int64).reshape(-1, 2)
+    e = e[drivable[e[:, 0]] & drivable[e[:, 1]]]
+    branches = template_branches(n, e)
+    junction = drivable & (branches >= 3) & (branches <= 4)
+    corridor = drivable & (branches >= 1) & (branches <= 2) & (geometry.short_m <= corridor_max_width_m)
+    ev[drivable] = Label.OPEN_AREA.value
+    ev[junction] = Label.JUNCTION.value
+    ev[corridor] = Label.CORRIDOR.value
     return ev
 
 

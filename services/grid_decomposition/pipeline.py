@@ -12,12 +12,12 @@ import cv2
 import networkx as nx
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
+from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
@@ -122,13 +122,29 @@ def _families(angles: npt.NDArray[np.float64], tolerance_rad: float) -> list[lis
     return families
 
 
-def _lines(gradients: Gradients, mask: npt.NDArray[np.bool_] | None, resolution_m: float) -> dict[float, list[Line]]:
-    """Lines per dominant orientation of the gradients inside ``mask``."""
+def _lines(
+    gradients: Gradients,
+    structure: Gradients,
+    mask: npt.NDArray[np.bool_] | None,
+    resolution_m: float,
+) -> dict[float, list[Line]]:
+    """Lines per dominant orientation inside ``mask``: directions from ``structure``, radiograms from all."""
     grads = gradients if mask is None else _masked(gradients, mask)
+    struct = structure if mask is None else _masked(structure, mask)
+    if struct.magnitude.size < 0.05 * max(grads.magnitude.size, 1):
+        struct = grads
     return {
         float(a): line_offsets(radiogram(grads, float(a)), resolution_m=resolution_m)
-        for a in dominant_orientations(grads)
+        for a in dominant_orientations(struct)
     }
+
+
+def _structure(obstacle: npt.NDArray[np.bool_], min_area_px: int) -> npt.NDArray[np.bool_]:
+    """Pixels near obstacle components of at least ``min_area_px`` (walls, blocks), not furniture or uprights."""
+    _, parts, stats, _ = cv2.connectedComponentsWithStats(obstacle.astype(np.uint8), connectivity=8)
+    big = stats[:, cv2.CC_STAT_AREA] >= min_area_px
+    big[0] = False
+    return np.asarray(cv2.dilate(big[parts].astype(np.uint8), np.ones((5, 5), np.uint8)), dtype=bool)
 
 
 def _texture_count(lines: dict[float, list[Line]]) -> int:
@@ -151,12 +167,31 @@ def _elongation(
     dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3)
     comp_px = component[face_image]
     n = int(component.max()) + 1
-    width = np.zeros(n)
-    if n > 1:
-        width[1:] = ndimage.maximum(dist, comp_px, np.arange(1, n))
+    width = np.zeros(n, dtype=np.float32)
+    np.maximum.at(width, comp_px.ravel(), dist.ravel())
+    width[0] = 0.0
     area = np.bincount(comp_px.ravel(), minlength=n).astype(np.float64)
-    elongation: npt.NDArray[np.float64] = area / np.maximum(2.0 * width, 1.0) ** 2
+    elongation: npt.NDArray[np.float64] = area / np.maximum(2.0 * width.astype(np.float64), 1.0) ** 2
     return elongation
+
+
+def _face_angles(sub: Subdivision, groups: list[LineGroup]) -> npt.NDArray[np.float64]:
+    """Direction of each face's cutting lines: the best-supported line direction of the group holding most of it."""
+    n = sub.n_faces + 1
+    angle = np.zeros(n)
+    best = np.zeros(n, dtype=np.int64)
+    for group in groups:
+        if not group.lines:
+            continue
+        support: dict[float, float] = {}
+        for ln in group.lines:
+            support[ln.angle_rad] = support.get(ln.angle_rad, 0.0) + ln.support_m
+        main = max(support, key=lambda a: support[a])
+        pixels = sub.face_image if group.mask is None else sub.face_image[group.mask]
+        count = np.bincount(pixels.ravel(), minlength=n)
+        more = count > best
+        angle[more], best[more] = main, count[more]
+    return angle
 
 
 def decompose(
@@ -175,6 +210,8 @@ def decompose(
     face_disparity_threshold: float = 0.5,
     edge_occupancy_threshold: float = 0.5,
     min_region_area_m2: float = 0.3,
+    structure_min_area_m2: float = 0.5,
+    neck_half_width_m: float = 0.5,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -205,6 +242,13 @@ def decompose(
         t1, t2 of the cogency test.
     min_region_area_m2 : float
         Smaller pieces of free space join a neighbouring region.
+    neck_half_width_m : float
+        A region whose free space falls apart when shrunk by this half-width is split into the
+        rooms its necks join (:func:`split_at_necks`); 0 turns it off.
+    structure_min_area_m2 : float
+        Dominant orientations come from the edges of obstacle components at least this large
+        (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
+        way and whose lattices line up along diagonals, still vote in the radiograms.
     seed : int
         Seed of the clusterings.
 
@@ -226,7 +270,8 @@ def decompose(
     occupied = known & (occ > OCCUPIED_PERCENT)
     occupancy01 = np.where(known, occ / 100.0, 1.0)
     gradients = oriented_gradients(obstacle)
-    global_lines = _lines(gradients, None, resolution_m)
+    structure = _masked(gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))))
+    global_lines = _lines(gradients, structure, None, resolution_m)
     n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
     texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
     groups: list[LineGroup] = []
@@ -234,7 +279,7 @@ def decompose(
         mask = None if n_tex == 1 else texture == t
         if mask is not None and not mask.any():
             continue
-        per_angle = global_lines if mask is None else _lines(gradients, mask, resolution_m)
+        per_angle = global_lines if mask is None else _lines(gradients, structure, mask, resolution_m)
         groups.append(LineGroup(tuple(ln for lines in per_angle.values() for ln in lines), mask))
     used = [
         LineGroup(tuple(ln for ln in g.lines if resolution is Resolution.FINE or ln.coarse), g.mask) for g in groups
@@ -261,12 +306,11 @@ def decompose(
     is_face = cog.face_free_px > 0
     connected = sub.edge_faces[~cog.cogent]
     component = link_components(sub.n_faces + 1, connected, is_face)
-    graph = nx.Graph()
-    graph.add_nodes_from(np.flatnonzero(is_face).tolist())
-    graph.add_edges_from(connected.tolist())
-    geometry = face_geometry(sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m)
+    geometry = face_geometry(
+        sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m, face_angle_rad=_face_angles(sub, used)
+    )
     elongation = _elongation(component, sub.face_image, free, resolution_m)
-    evidence = evidence_labels(graph, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
+    evidence = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
     rows, cols, cats = categorize_places(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )
@@ -276,6 +320,8 @@ def decompose(
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
+    if neck_half_width_m > 0:
+        segments = split_at_necks(segments, free, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
     regions, labels = _region_records(segments, sub, region_of_face, face_labels, resolution_m, origin_xy_m)
     face_region_final = _final_face_regions(segments, sub)
     topology = region_topology(sub, cog, face_region_final, regions)
@@ -298,20 +344,18 @@ def decompose(
 def _final_face_regions(segments: npt.NDArray[np.int32], sub: Subdivision) -> npt.NDArray[np.int64]:
     """Region of each face after segment cleaning (majority of its pixels)."""
     n = sub.n_faces + 1
-    f = sub.face_image.ravel()
-    s = segments.ravel()
+    f = sub.face_image.ravel().astype(np.int64)
+    s = segments.ravel().astype(np.int64)
     ok = (f > 0) & (s > 0)
-    order = np.lexsort((s[ok], f[ok]))
-    fo, so = f[ok][order], s[ok][order]
     out = np.zeros(n, dtype=np.int64)
-    if fo.size:
-        pair = fo.astype(np.int64) * (int(s.max()) + 1) + so
-        upair, counts = np.unique(pair, return_counts=True)
-        pf, ps = upair // (int(s.max()) + 1), upair % (int(s.max()) + 1)
-        best = np.zeros(n)
-        for face, seg, c in zip(pf, ps, counts, strict=True):
-            if c > best[face]:
-                best[face], out[face] = c, seg
+    if not ok.any():
+        return out
+    n_seg = int(s.max()) + 1
+    upair, counts = np.unique(f[ok] * n_seg + s[ok], return_counts=True)
+    face, seg = upair // n_seg, upair % n_seg
+    order = np.lexsort((-counts, face))
+    first = np.r_[True, face[order][1:] != face[order][:-1]]
+    out[face[order][first]] = seg[order][first]
     return out
 
 
@@ -330,14 +374,13 @@ def _region_records(
     ok = flat_seg > 0
     lab_px = face_labels.label[face_px[ok]]
     cat_px = face_labels.category[face_px[ok]]
-    lab_votes = np.zeros((n_seg, len(Label)), dtype=np.int64)
-    np.add.at(lab_votes, (flat_seg[ok], lab_px), 1)
+    n_lab = len(Label)
+    lab_votes = np.bincount(flat_seg[ok] * n_lab + lab_px, minlength=n_seg * n_lab).reshape(n_seg, n_lab)
     lab_votes[:, 0] = 0
     seg_label = np.argmax(lab_votes, axis=1)
     seg_label[lab_votes.sum(axis=1) == 0] = Label.UNIDENTIFIED.value
     n_cat = int(max(face_labels.category.max(), 0)) + 2
-    cat_votes = np.zeros((n_seg, n_cat), dtype=np.int64)
-    np.add.at(cat_votes, (flat_seg[ok], cat_px + 1), 1)
+    cat_votes = np.bincount(flat_seg[ok] * n_cat + cat_px + 1, minlength=n_seg * n_cat).reshape(n_seg, n_cat)
     seg_cat = np.argmax(cat_votes, axis=1) - 1
     area = np.bincount(flat_seg, minlength=n_seg).astype(np.float64)
     ys, xs = np.divmod(np.flatnonzero(ok), segments.shape[1])

@@ -116,6 +116,7 @@ def categorize_places(
     resolution_m: float,
     n_categories: int = 8,
     sample_spacing_m: float = 0.4,
+    max_samples: int = 8000,
     n_beams: int = 32,
     max_range_m: float = 12.0,
     gap_threshold_m: float = 1.0,
@@ -123,7 +124,8 @@ def categorize_places(
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Cluster free pixels into place categories by the shape of simulated scans (k-means).
 
-    Free pixels on a grid of ``sample_spacing_m`` are ray-cast, described by
+    Free pixels on a grid of ``sample_spacing_m`` (widened so that there are at most about
+    ``max_samples`` of them on large maps) are ray-cast, described by
     :func:`raycast_features` (lengths in metres, log-compressed where heavy-tailed, standardised)
     and clustered into ``n_categories`` with k-means; categories are renumbered by mean range so
     that the numbering is stable (0 = most confined).
@@ -133,7 +135,8 @@ def categorize_places(
     rows, cols, category : (N,) int64
         The sampled pixels and their category.
     """
-    step = max(1, round(sample_spacing_m / resolution_m))
+    spacing_m = max(sample_spacing_m, math.sqrt(float(np.count_nonzero(free)) / max(max_samples, 1)) * resolution_m)
+    step = max(1, round(spacing_m / resolution_m))
     grid = np.zeros_like(free)
     grid[step // 2 :: step, step // 2 :: step] = True
     rows, cols = np.nonzero(grid & free)

@@ -85,7 +85,7 @@ def line_offsets(
     fine_min_support_m: float = 0.3,
     coarse_min_support_m: float = 0.8,
     coarse_max_width_m: float = 0.6,
-    min_line_gap_m: float = 0.15,
+    min_line_gap_m: float = 0.25,
 ) -> list[Line]:
     """Lines from the Ricker-wavelet (CWT) peaks of a radiogram, with a coarse/fine flag.
 

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import enum
-import itertools
 
 import networkx as nx
+import numpy as np
+import numpy.typing as npt
+from scipy import sparse
 
 
 class Template(enum.Enum):
@@ -18,12 +20,52 @@ class Template(enum.Enum):
     NONE = "none"
 
 
+_BY_BRANCHES = {4: Template.X_JUNCTION, 3: Template.T_JUNCTION, 2: Template.CORRIDOR, 1: Template.DEAD_END}
+
+
+def template_branches(n_nodes: int, links: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    """Branch count of every node whose neighbours only meet at it, -1 elsewhere (Algorithm 1, vectorised).
+
+    A node is valid when no two of its neighbours are linked and no two share a neighbour other
+    than the node itself. With ``A`` the adjacency matrix and ``d`` the degrees: no triangle
+    through ``i`` means ``(A^3)_ii = 0``, and every pair of neighbours having exactly one common
+    neighbour means ``(A^4)_ii - (A d)_i = d_i (d_i - 1)`` (the sum of ``(A^2)_ab`` over ordered
+    pairs of distinct neighbours, each at least one).
+
+    Parameters
+    ----------
+    n_nodes : int
+        Nodes are 0..n_nodes-1.
+    links : (L, 2) int64
+        Undirected links; duplicates and self-links are ignored.
+
+    Returns
+    -------
+    (n_nodes,) int64
+        The degree of valid nodes (4 = X junction, 3 = T junction, 2 = corridor, 1 = dead end), -1
+        for nodes whose branches meet elsewhere.
+    """
+    e = np.asarray(links, dtype=np.int64).reshape(-1, 2)
+    e = e[e[:, 0] != e[:, 1]]
+    rows = np.r_[e[:, 0], e[:, 1]]
+    cols = np.r_[e[:, 1], e[:, 0]]
+    a = sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n_nodes, n_nodes))
+    a.data[:] = 1.0  # duplicate links were summed
+    degree = np.asarray(a.sum(axis=1)).ravel()
+    a2 = a @ a
+    triangles = np.asarray(a2.multiply(a).sum(axis=1)).ravel()
+    four = np.asarray(a2.multiply(a2).sum(axis=1)).ravel() - a @ degree
+    valid = (triangles == 0) & (np.rint(four) == degree * (degree - 1))
+    return np.where(valid, degree, -1).astype(np.int64)
+
+
 def match_templates(graph: nx.Graph) -> dict[int, Template]:
     """Match every node of a connectivity graph (valid links only) against the templates.
 
     A node with three (four) neighbours is a T (X) junction when no two of its neighbours share
     a neighbour other than itself (Algorithm 1: the branches only meet here). A node with two
     such neighbours is a corridor piece, with one a dead end; anything else matches nothing.
+    See :func:`template_branches` for the array form.
 
     Parameters
     ----------
@@ -35,23 +77,8 @@ def match_templates(graph: nx.Graph) -> dict[int, Template]:
     dict
         Template per node.
     """
-    out: dict[int, Template] = {}
-    for node in graph.nodes:
-        nbrs = list(graph.neighbors(node))
-        valid = all(
-            set(graph.neighbors(a)) & set(graph.neighbors(b)) <= {node} and not graph.has_edge(a, b)
-            for a, b in itertools.combinations(nbrs, 2)
-        )
-        if not valid:
-            out[node] = Template.NONE
-        elif len(nbrs) == 4:
-            out[node] = Template.X_JUNCTION
-        elif len(nbrs) == 3:
-            out[node] = Template.T_JUNCTION
-        elif len(nbrs) == 2:
-            out[node] = Template.CORRIDOR
-        elif len(nbrs) == 1:
-            out[node] = Template.DEAD_END
-        else:
-            out[node] = Template.NONE
-    return out
+    nodes = list(graph.nodes)
+    index = {node: i for i, node in enumerate(nodes)}
+    links = np.array([(index[u], index[v]) for u, v in graph.edges], dtype=np.int64).reshape(-1, 2)
+    branches = template_branches(len(nodes), links)
+    return {node: _BY_BRANCHES.get(int(b), Template.NONE) for node, b in zip(nodes, branches, strict=True)}

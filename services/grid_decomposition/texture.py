@@ -21,8 +21,13 @@ def gabor_features(
     resolution_m: float,
     wavelengths_m: tuple[float, ...] = (0.8, 1.6, 3.2, 6.4, 12.8),
     n_orientations: int = 8,
+    pixels_per_wavelength: float = 4.0,
 ) -> npt.NDArray[np.float32]:
     """Local energy of a Gabor filter bank (5 frequencies x 8 orientations by default).
+
+    Each wavelength is filtered on a copy averaged down to ``pixels_per_wavelength`` pixels a
+    wavelength (an image pyramid: long wavelengths cost no more than short ones), and its energy
+    is brought back to the input grid.
 
     Returns
     -------
@@ -30,9 +35,13 @@ def gabor_features(
         Magnitude of each complex Gabor response, smoothed over about two wavelengths.
     """
     image = obstacle.astype(np.float32)
+    h, w = image.shape
     channels: list[npt.NDArray[np.float32]] = []
     for wavelength_m in wavelengths_m:
-        lam = wavelength_m / resolution_m
+        scale = min(1.0, pixels_per_wavelength * resolution_m / wavelength_m)
+        size_wh = (max(4, round(w * scale)), max(4, round(h * scale)))
+        level = image if scale == 1.0 else cv2.resize(image, size_wh, interpolation=cv2.INTER_AREA)
+        lam = wavelength_m / (resolution_m * w / level.shape[1])
         sigma = 0.56 * lam
         size = int(2 * math.ceil(2.5 * sigma) + 1)
         for k in range(n_orientations):
@@ -40,8 +49,11 @@ def gabor_features(
             real = cv2.getGaborKernel((size, size), sigma, theta, lam, 0.5, 0.0, cv2.CV_32F)
             imag = cv2.getGaborKernel((size, size), sigma, theta, lam, 0.5, math.pi / 2, cv2.CV_32F)
             real -= real.mean()
-            energy = cv2.magnitude(cv2.filter2D(image, -1, real), cv2.filter2D(image, -1, imag))
-            channels.append(np.asarray(cv2.GaussianBlur(energy, (0, 0), 2.0 * lam), dtype=np.float32))
+            energy = cv2.magnitude(cv2.filter2D(level, -1, real), cv2.filter2D(level, -1, imag))
+            energy = cv2.GaussianBlur(energy, (0, 0), 2.0 * lam)
+            if level.shape != image.shape:
+                energy = cv2.resize(energy, (w, h), interpolation=cv2.INTER_LINEAR)
+            channels.append(np.asarray(energy, dtype=np.float32))
     return np.stack(channels, axis=-1)
 
 

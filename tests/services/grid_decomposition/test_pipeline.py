@@ -95,3 +95,9 @@ def test_bad_grids_raise_decomposition_error(occupancy: np.ndarray, message: str
 def test_bad_resolution_raises_decomposition_error() -> None:
     with pytest.raises(DecompositionError, match="resolution_m"):
         decompose(_two_rooms_and_a_door(), resolution_m=0.0)
+
+
+def test_rack_uprights_do_not_split_an_axis_aligned_warehouse_into_texture_regions() -> None:
+    wh = synthetic_warehouse(0)
+    d = decompose(wh.occupancy, resolution_m=wh.resolution_m)
+    assert d.texture_regions.max() == 0

@@ -1,0 +1,73 @@
+"""Splitting segments that are several rooms joined by narrow necks (doorways without a line)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from services.grid_decomposition.segments import fill_from_neighbours
+
+
+def split_at_necks(
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    neck_half_width_m: float = 0.5,
+    min_core_area_m2: float = 1.0,
+    max_growth_m: float = 3.0,
+) -> npt.NDArray[np.int32]:
+    """Split every segment whose free space, shrunk by ``neck_half_width_m``, falls into several cores.
+
+    Free pixels farther than ``neck_half_width_m`` from any obstacle form cores; a segment holding
+    two or more cores of at least ``min_core_area_m2`` is two rooms joined through a passage
+    narrower than twice that half-width (a doorway whose wall got no decomposition line). Its
+    pixels go to the core they reach first growing inside the segment (geodesic Voronoi).
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment id per pixel, 0 off free space.
+    free : (H, W) bool
+    resolution_m : float
+        Metres per pixel.
+
+    Returns
+    -------
+    (H, W) int32
+        Segment ids 1..N (consecutive), 0 where ``segments`` is 0.
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 5)
+    padded = np.pad(seg, 1, mode="edge")
+    border = (
+        (padded[:-2, 1:-1] != seg) | (padded[2:, 1:-1] != seg) | (padded[1:-1, :-2] != seg) | (padded[1:-1, 2:] != seg)
+    )
+    core = (dist > neck_half_width_m / resolution_m) & (seg > 0) & ~border
+    n, parts, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
+    big = stats[:, cv2.CC_STAT_AREA] >= min_core_area_m2 / resolution_m**2
+    big[0] = False
+    owner = np.zeros(n, dtype=np.int64)
+    owner[parts.ravel()] = seg.ravel()
+    n_seg = int(seg.max()) + 1
+    cores_per_seg = np.bincount(owner[big], minlength=n_seg)
+    split = cores_per_seg >= 2
+    split[0] = False
+    if not split.any():
+        return _renumber(seg)
+    in_split = split[seg]
+    marker = np.where(in_split & big[parts], parts + n_seg, 0).astype(np.int32)
+    grown = marker
+    for _ in range(max(1, round(max_growth_m / resolution_m / 10))):
+        grown = fill_from_neighbours(grown, in_split, max_iterations=10)
+        if not np.any(in_split & (grown == 0)):
+            break
+    out = np.where(in_split & (grown > 0), grown, seg)
+    return _renumber(out)
+
+
+def _renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    _, inverse = np.unique(seg, return_inverse=True)
+    dense = inverse.reshape(seg.shape).astype(np.int32)
+    return np.where(seg > 0, dense + (0 if seg.min() == 0 else 1), 0).astype(np.int32)
