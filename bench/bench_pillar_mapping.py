@@ -157,13 +157,16 @@ def bench_rows(name: str, layout_fn: Callable[[], HallLayout], seeds: int) -> No
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer frames and seeds")
+    parser.add_argument("--rows-only", action="store_true", help="only the row and bin fitting")
+    parser.add_argument("--seeds", type=int, default=None, help="landmark draws per hall (default 5, quick 2)")
     args = parser.parse_args()
     frames = 8 if args.quick else 30
-    seeds = 2 if args.quick else 5
-    p95 = bench_detection(frames, 640)
-    bench_detection(frames, 480)
-    bench_mapping_simulated(max(p95, float(np.deg2rad(0.1))))
-    bench_mapping_rendered(480, 0.5 if args.quick else 0.25)
+    seeds = args.seeds or (2 if args.quick else 5)
+    if not args.rows_only:
+        p95 = bench_detection(frames, 640)
+        bench_detection(frames, 480)
+        bench_mapping_simulated(max(p95, float(np.deg2rad(0.1))))
+        bench_mapping_rendered(480, 0.5 if args.quick else 0.25)
     bench_rows("hall_one_region", lambda: rack_region(aisles=19, bays=26), seeds)
     bench_rows(
         "hall_two_regions",

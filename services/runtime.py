@@ -20,8 +20,9 @@ log = logging.getLogger(__name__)
 def stage_factories() -> dict[str, StageFactory]:
     """Every stage Aisle can run, by name (imported lazily: stages pull in heavy libraries)."""
     from services.occupancy_mapping.worker import OccupancyStage
+    from services.pillar_mapping.worker import PillarStage
 
-    factories: dict[str, StageFactory] = {"occupancy_mapping": OccupancyStage}
+    factories: dict[str, StageFactory] = {"occupancy_mapping": OccupancyStage, "pillar_mapping": PillarStage}
     assert set(factories) == set(STAGES)
     return factories
 

@@ -83,6 +83,7 @@ class Subscription:
     def __init__(
         self,
         msgtype: str,
+        topic: str,
         name: str,
         *,
         policy: DropPolicy,
@@ -93,6 +94,7 @@ class Subscription:
         if maxsize < 1:
             raise ValueError("maxsize must be at least 1")
         self.msgtype = msgtype
+        self.topic = topic.strip("/")
         self.name = name
         self.policy = policy
         self._counters = counters
@@ -172,7 +174,7 @@ class Subscription:
                 log.warning("%s: skipped a malformed sample on %s: %s", self.name, raw.key, err)
 
     def _decode(self, raw: _Raw) -> Received:
-        key = parse_topic_key(raw.key)
+        key = parse_topic_key(raw.key, topic=self.topic)
         if key.msgtype != self.msgtype:
             raise MessageError(f"expected {self.msgtype}, key says {key.msgtype}")
         attachment = Attachment.decode(raw.attachment) if raw.attachment is not None else None
@@ -262,7 +264,7 @@ class Bus:
         name: str | None = None,
     ) -> Subscription:
         """Subscribe to ``topic`` of ``msgtype`` under each of ``namespaces`` ("*": every robot)."""
-        subscription = Subscription(msgtype, name or topic, policy=policy, maxsize=maxsize,
+        subscription = Subscription(msgtype, topic, name or topic, policy=policy, maxsize=maxsize,
                                     counters=self.counters)
         for namespace in namespaces:
             selector = topic_selector(self.domain_id, namespace, topic, msgtype)

@@ -67,19 +67,24 @@ def topic_selector(domain_id: int, namespace: str, topic: str, msgtype: str) -> 
     return f"{domain_id}/{name}/{dds_type_name(msgtype)}/*"
 
 
-def parse_topic_key(key: str) -> TopicKey:
+def parse_topic_key(key: str, *, topic: str | None = None) -> TopicKey:
     """Split a received key into domain, robot namespace, topic name, type and hash.
 
-    The topic name is taken to be its last path element (``scan`` in ``0/robot1/scan/...``);
-    everything between the domain and it is the robot namespace.
+    With ``topic`` (the name subscribed to, e.g. ``fisheye/image_raw``) the namespace is what
+    precedes it; without, the topic is taken to be the last path element (``scan`` in
+    ``0/robot1/scan/...``) and everything between the domain and it is the namespace.
     """
     chunks = key.split("/")
     if len(chunks) < 4 or not chunks[0].isdigit():
         raise MessageError(f"{key!r} is not an rmw_zenoh topic key")
+    name = chunks[1:-2]
+    topic_chunks = topic.strip("/").split("/") if topic else name[-1:]
+    if name[len(name) - len(topic_chunks):] != topic_chunks:
+        raise MessageError(f"{key!r} is not a key of topic {topic!r}")
     return TopicKey(
         domain_id=int(chunks[0]),
-        namespace="/".join(chunks[1:-3]),
-        topic=chunks[-3],
+        namespace="/".join(name[: len(name) - len(topic_chunks)]),
+        topic="/".join(topic_chunks),
         msgtype=ros_type_name(chunks[-2]),
         type_hash=chunks[-1],
     )

@@ -19,7 +19,7 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
-STAGES = ("occupancy_mapping",)
+STAGES = ("occupancy_mapping", "pillar_mapping")
 """Stage workers that ``aisle run`` starts, in start order."""
 
 
@@ -71,6 +71,28 @@ class OccupancySettings(BaseModel):
     )
 
 
+class PillarSettings(BaseModel):
+    """The pillar-mapping stage: uprights from the downward fisheye, rack rows and bins."""
+
+    store_period_s: float = Field(10.0, gt=0.0, description="How often the layout is fitted and stored.")
+    image_topic: str = "fisheye/image_raw"
+    info_topic: str = "fisheye/camera_info"
+    map_frame: str = "map"
+    base_frame: str = Field("base_link", description="The vehicle frame (prefixed with the robot namespace in tf).")
+    tf_wait_s: float = Field(
+        0.5, ge=0.0, le=10.0, description="How long an image waits for tf to reach its stamp before it is dropped."
+    )
+    max_range_m: float = Field(8.0, gt=0.0, description="Uprights farther than this are not expected in view.")
+    min_bay_pitch_m: float = Field(1.5, gt=0.0)
+    max_bay_pitch_m: float = Field(4.5, gt=0.0)
+
+    @model_validator(mode="after")
+    def _pitch_range(self) -> PillarSettings:
+        if self.min_bay_pitch_m >= self.max_bay_pitch_m:
+            raise ValueError(f"bay pitch range [{self.min_bay_pitch_m}, {self.max_bay_pitch_m}] m is empty")
+        return self
+
+
 class Settings(BaseSettings):
     """All Aisle settings; build once with :func:`get_settings` and pass it in."""
 
@@ -96,6 +118,7 @@ class Settings(BaseSettings):
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     occupancy: OccupancySettings = Field(default_factory=OccupancySettings)
+    pillars: PillarSettings = Field(default_factory=PillarSettings)
 
     @field_validator("robot_namespaces")
     @classmethod

@@ -40,16 +40,14 @@ def _frame(row: RackRow) -> tuple[FloatArray, FloatArray]:
     return u, np.array([-u[1], u[0]])
 
 
-def _overlap(a: RackRow, b: RackRow, u: FloatArray) -> float:
-    sa, sb = a.uprights @ u, b.uprights @ u
-    return float(min(sa.max(), sb.max()) - max(sa.min(), sb.min()))
+def _overlap(span: dict[int, tuple[float, float]], a: int, b: int) -> float:
+    """Length (metres) over which rows ``a`` and ``b`` overlap along the region, given each row's (lo, hi)."""
+    return min(span[a][1], span[b][1]) - max(span[a][0], span[b][0])
 
 
-def _gap(rows: list[RackRow], w: dict[int, float], i: int, side: float, u: FloatArray) -> float:
+def _gap(w: dict[int, float], span: dict[int, tuple[float, float]], i: int, side: float) -> float:
     """Distance from row ``i`` to the nearest overlapping row on ``side`` (+1 or -1 across), or inf."""
-    gaps = [
-        (w[j] - w[i]) * side for j in w if j != i and (w[j] - w[i]) * side > 0.05 and _overlap(rows[i], rows[j], u) > 0
-    ]
+    gaps = [(w[j] - w[i]) * side for j in w if j != i and (w[j] - w[i]) * side > 0.05 and _overlap(span, i, j) > 0]
     return min(gaps) if gaps else float("inf")
 
 
@@ -78,6 +76,8 @@ def storage_bins(
         index = [i for i, r in enumerate(rows) if r.region == region]
         u, v = _frame(rows[index[0]])
         w = {i: float(rows[i].uprights.mean(axis=0) @ v) for i in index}
+        along = {i: rows[i].uprights @ u for i in index}
+        span = {i: (float(s.min()), float(s.max())) for i, s in along.items()}
         order = sorted(index, key=lambda i: w[i])
 
         racks: list[tuple[int, int, float]] = []  # (front, back, side of the aisle from the front row)
@@ -86,10 +86,10 @@ def storage_bins(
             depth = w[b] - w[a]
             if a in used or b in used or not min_rack_depth_m <= depth <= max_rack_depth_m:
                 continue
-            if _overlap(rows[a], rows[b], u) <= 0:
+            if _overlap(span, a, b) <= 0:
                 continue
             used |= {a, b}
-            gap_a, gap_b = _gap(rows, w, a, -1.0, u), _gap(rows, w, b, 1.0, u)
+            gap_a, gap_b = _gap(w, span, a, -1.0), _gap(w, span, b, 1.0)
             open_a = np.isfinite(gap_a) and gap_a >= min_aisle_width_m
             open_b = np.isfinite(gap_b) and gap_b >= min_aisle_width_m
             front_is_b = (open_b and not open_a) or (open_a and open_b and gap_b < gap_a)
@@ -97,7 +97,7 @@ def storage_bins(
         aisle_centres: list[float] = []
         assignments = []
         for front, back, side in racks:
-            gap = _gap(rows, w, front, side, u)
+            gap = _gap(w, span, front, side)
             width = gap if np.isfinite(gap) and gap >= min_aisle_width_m else default_aisle_width_m
             centre = w[front] + side * 0.5 * width
             match = [k for k, c in enumerate(aisle_centres) if abs(c - centre) < 0.5 * min_aisle_width_m]

@@ -126,6 +126,23 @@ class BearingOnlyMapper:
         """The current map (copies)."""
         return LandmarkMap(self._means.copy(), self._covs.copy(), self._counts.copy())
 
+    def seed(self, landmarks: LandmarkMap) -> None:
+        """Start from known landmarks (e.g. from the map store after a restart).
+
+        Each counts as seen in every frame that had it in range so far, so it stays reliable.
+        """
+        means = np.asarray(landmarks.means, dtype=np.float64).reshape(-1, 2)
+        covs = np.asarray(landmarks.covs, dtype=np.float64).reshape(-1, 2, 2)
+        counts = np.asarray(landmarks.observations, dtype=np.int64).ravel()
+        if not (len(means) == len(covs) == len(counts)) or not np.all(np.isfinite(means)) or np.any(counts < 0):
+            raise PillarMappingError("seed landmarks need finite means, one covariance and a count >= 0 each")
+        if len(means) and np.any(np.linalg.eigvalsh(covs)[:, 0] <= 0):
+            raise PillarMappingError("seed landmark covariances must be positive definite")
+        self._means = np.vstack([self._means, means])
+        self._covs = np.concatenate([self._covs, covs])
+        self._counts = np.concatenate([self._counts, counts])
+        self._expected = np.concatenate([self._expected, counts])
+
     def reliable_landmarks(self, *, min_hit_ratio: float = 0.3, min_observations: int = 6) -> LandmarkMap:
         """The landmarks matched in at least ``min_hit_ratio`` of the frames that had them in range."""
         ratio = self._counts / np.maximum(self._expected, 1)

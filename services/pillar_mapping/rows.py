@@ -2,7 +2,8 @@
 
 Each row is the model ``M(n, d, x, y, theta)``: ``n`` uprights ``d`` apart from ``(x, y)``
 along ``theta``. Rows are segmented by the closed-form Hough transform with DBSCAN, their
-spacing found by Fourier analysis, then global constraints are applied per region (rows of
+spacing found by Fourier analysis, pieces of one row joined and leftover landmarks on a row's
+lattice pulled in (:mod:`services.pillar_mapping.join`), then global constraints are applied per region (rows of
 one orientation close together): the modal spacing, the dominant orientation and the
 initialisation (and end) lines through the rows' first (and last) uprights, which restore
 end uprights that were never seen. A last optimisation places each model on its landmarks.
@@ -20,7 +21,6 @@ from scipy.sparse.csgraph import connected_components
 from scipy.stats import theilslopes
 
 from services.pillar_mapping.errors import PillarMappingError
-from services.pillar_mapping.frequency import dominant_spacing
 from services.pillar_mapping.hough import (
     dominant_orientations,
     hough_pairs,
@@ -28,6 +28,8 @@ from services.pillar_mapping.hough import (
     segment_aligned,
     wrap_half,
 )
+from services.pillar_mapping.join import join_rows
+from services.pillar_mapping.rowmodel import RowModel, along_line, fit_model, lattice_phase, validated_landmarks
 
 logger = logging.getLogger(__name__)
 
@@ -52,59 +54,6 @@ class RackRow(NamedTuple):
     uprights: FloatArray
     observed: npt.NDArray[np.bool_]
     members: IntArray
-
-
-class _Row(NamedTuple):
-    members: IntArray
-    centre: FloatArray
-    direction: FloatArray
-    d: float
-    first: float
-    n: int
-    coherence: float
-    orientation: int
-
-
-def _validated(landmarks: npt.ArrayLike) -> FloatArray:
-    table = np.asarray(landmarks, dtype=np.float64)
-    if table.ndim != 2 or table.shape[1] not in (2, 5):
-        raise PillarMappingError(f"landmarks must be an (N, 5) x,y,sxx,sxy,syy table, got shape {table.shape}")
-    bad = np.flatnonzero(~np.all(np.isfinite(table), axis=1))
-    if bad.size:
-        raise PillarMappingError(f"landmarks {bad[:10].tolist()} have non-finite values")
-    if table.shape[1] == 2:
-        table = np.hstack([table, np.tile([1e-4, 0.0, 1e-4], (len(table), 1))])
-    covs = table[:, [2, 3, 3, 4]].reshape(-1, 2, 2)
-    if len(table) and np.any(np.linalg.eigvalsh(covs)[:, 0] < -1e-12):
-        raise PillarMappingError("landmark covariances must be positive semi-definite")
-    return table
-
-
-def _along(table: FloatArray, members: IntArray, centre: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
-    s = (table[members, :2] - centre) @ u
-    var = table[members, 2] * u[0] ** 2 + 2 * table[members, 3] * u[0] * u[1] + table[members, 4] * u[1] ** 2
-    return s, np.sqrt(np.maximum(var, 1e-6))
-
-
-def _phase(s: FloatArray, d: float) -> tuple[float, IntArray]:
-    """Along-row position of the first upright and each landmark's slot, for spacing ``d``."""
-    angle = np.angle(np.mean(np.exp(2j * np.pi * s / d)))
-    offset = angle / (2 * np.pi) * d
-    slots = np.rint((s - offset) / d).astype(np.int64)
-    slots -= slots.min()
-    first = float(np.mean(s - slots * d))
-    return first, slots
-
-
-def _fit(table: FloatArray, members: IntArray, u0: FloatArray, orientation: int, pitch: tuple[float, float]) -> _Row:
-    pts = table[members, :2]
-    centre = pts.mean(axis=0)
-    _, vecs = np.linalg.eigh(np.cov((pts - centre).T))
-    u = vecs[:, 1] if vecs[:, 1] @ u0 >= 0 else -vecs[:, 1]
-    s, sigma = _along(table, members, centre, u)
-    period = dominant_spacing(s, sigma, min_spacing_m=pitch[0], max_spacing_m=pitch[1])
-    first, slots = _phase(s, period.d_m)
-    return _Row(members, centre, u, period.d_m, first, int(slots.max()) + 1, period.coherence, orientation)
 
 
 def _split(table: FloatArray, members: IntArray, u: FloatArray, max_gap_m: float) -> list[IntArray]:
@@ -164,20 +113,20 @@ def _segment(
     min_coherence: float,
     max_missing_run: int,
     min_fill: float,
-) -> list[_Row]:
+) -> list[RowModel]:
     """Regular aligned sets along every dominant orientation; each landmark kept in the longest."""
     pts = table[:, :2]
     pairs = hough_pairs(pts, min_length_m=0.9 * pitch[0], max_length_m=2.2 * pitch[1])
-    candidates: list[_Row] = []
+    candidates: list[RowModel] = []
     for k, peak in enumerate(dominant_orientations(pairs.alpha)):
         alpha = refine_orientation(pts, pairs, float(peak))
         u0 = np.array([np.cos(alpha), np.sin(alpha)])
         labels = _merge_collinear(pts, segment_aligned(pts, pairs, float(alpha)), u0)
-        found: list[_Row] = []
+        found: list[RowModel] = []
         for label in np.unique(labels[labels >= 0]):
             for piece in _split(table, np.flatnonzero(labels == label), u0, (max_missing_run + 1.5) * pitch[1]):
                 if piece.size >= min_uprights:
-                    row = _fit(table, piece, u0, k, pitch)
+                    row = fit_model(table, piece, u0, k, pitch)
                     if row.coherence >= min_coherence and piece.size >= min_fill * row.n:
                         found.append(row)
         inside = sum(r.members.size for r in found)
@@ -194,16 +143,21 @@ def _segment(
 
 
 def _claim(
-    table: FloatArray, candidates: list[_Row], pitch: tuple[float, float], *, min_uprights: int, min_coherence: float
-) -> list[_Row]:
+    table: FloatArray,
+    candidates: list[RowModel],
+    pitch: tuple[float, float],
+    *,
+    min_uprights: int,
+    min_coherence: float,
+) -> list[RowModel]:
     """Give each landmark to one row: orientations in turn, the one whose regular sets of still-free
     landmarks are longest (sum of squared sizes) first, so a region's rows come before the
     diagonals of its lattice; within an orientation the longest sets first."""
     claimed = np.zeros(len(table), dtype=bool)
-    rows: list[_Row] = []
+    rows: list[RowModel] = []
     pending = {o: [r for r in candidates if r.orientation == o] for o in {r.orientation for r in candidates}}
 
-    def usable(row: _Row) -> npt.NDArray[np.int64]:
+    def usable(row: RowModel) -> npt.NDArray[np.int64]:
         free = row.members[~claimed[row.members]]
         return free if free.size >= max(min_uprights, 0.8 * row.members.size) else free[:0]
 
@@ -216,7 +170,9 @@ def _claim(
             free = usable(row)
             if free.size == 0:
                 continue
-            kept = row if free.size == row.members.size else _fit(table, free, row.direction, row.orientation, pitch)
+            kept = (
+                row if free.size == row.members.size else fit_model(table, free, row.direction, row.orientation, pitch)
+            )
             if kept.coherence < min_coherence:
                 continue
             claimed[kept.members] = True
@@ -224,13 +180,13 @@ def _claim(
     return rows
 
 
-def _extent(row: _Row, u: FloatArray) -> tuple[float, float]:
+def _extent(row: RowModel, u: FloatArray) -> tuple[float, float]:
     a = float(row.centre @ u + row.first * (row.direction @ u))
     b = a + (row.n - 1) * row.d * float(row.direction @ u)
     return min(a, b), max(a, b)
 
 
-def _regions(rows: list[_Row], gap_m: float) -> IntArray:
+def _regions(rows: list[RowModel], gap_m: float) -> IntArray:
     """Region label per row: rows of one orientation within ``gap_m`` of each other, overlapping along."""
     count = len(rows)
     src, dst = [], []
@@ -252,8 +208,8 @@ def _regions(rows: list[_Row], gap_m: float) -> IntArray:
 
 
 def _constrain(
-    table: FloatArray, rows: list[_Row], *, spacing_tolerance: float, angle_tolerance_rad: float, max_restored: int
-) -> list[_Row]:
+    table: FloatArray, rows: list[RowModel], *, spacing_tolerance: float, angle_tolerance_rad: float, max_restored: int
+) -> list[RowModel]:
     """Apply the region's modal spacing, dominant orientation and initialisation/end lines."""
     thetas = np.array([np.arctan2(r.direction[1], r.direction[0]) for r in rows])
     theta0 = float(np.median(thetas))
@@ -270,8 +226,8 @@ def _constrain(
             else r.direction
         )
         d = d0 if abs(r.d - d0) <= spacing_tolerance * d0 else r.d
-        s, _ = _along(table, r.members, r.centre, u)
-        first, slots = _phase(s, d)
+        s, _ = along_line(table, r.members, r.centre, u)
+        first, slots = lattice_phase(s, d)
         out.append(r._replace(direction=u, d=d, first=first, n=int(slots.max()) + 1))
     if len(out) < 3:
         return out
@@ -292,7 +248,7 @@ def _constrain(
     return out
 
 
-def _place(table: FloatArray, row: _Row, sigma_floor_m: float) -> FloatArray:
+def _place(table: FloatArray, row: RowModel, sigma_floor_m: float) -> FloatArray:
     """Translate the model to maximise the landmark densities at its uprights (eq. 7).
 
     With each landmark's density dominated by its nearest model upright, the objective's
@@ -360,7 +316,7 @@ def fit_rack_rows(
     """
     if not 0 < min_bay_pitch_m < max_bay_pitch_m:
         raise PillarMappingError(f"bay pitch range [{min_bay_pitch_m}, {max_bay_pitch_m}] m is empty")
-    table = _validated(landmarks)
+    table = validated_landmarks(landmarks)
     if len(table) < min_row_uprights:
         return []
     pitch = (min_bay_pitch_m, max_bay_pitch_m)
@@ -374,6 +330,14 @@ def fit_rack_rows(
     )
     if not rows:
         return []
+    rows = join_rows(
+        table,
+        rows,
+        pitch,
+        spacing_tolerance=spacing_tolerance,
+        max_gap_m=(max_missing_run + 1.5) * max_bay_pitch_m,
+        min_coherence=min_coherence,
+    )
     regions = _regions(rows, region_gap_m)
     out: list[RackRow] = []
     order = sorted(

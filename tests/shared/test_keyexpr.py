@@ -53,3 +53,13 @@ def test_malformed_attachment_is_refused(raw: bytes) -> None:
 def test_node_token_mangles_namespace_like_rmw_zenoh() -> None:
     token = node_token(0, "aac3178e146ba6f1fc6e6a4085e77f21", 4, "aisle", "occupancy_mapping")
     assert token == "@ros2_lv/0/aac3178e146ba6f1fc6e6a4085e77f21/4/4/NN/%/%aisle/occupancy_mapping"
+
+
+def test_multi_segment_topics_keep_their_namespace_apart() -> None:
+    key = topic_key(0, "robot1", "fisheye/image_raw", messages.IMAGE)
+    parsed = parse_topic_key(key, topic="fisheye/image_raw")
+    assert (parsed.namespace, parsed.topic) == ("robot1", "fisheye/image_raw")
+    assert parse_topic_key(topic_key(0, "", "rgbd/depth/image_raw", messages.IMAGE),
+                           topic="/rgbd/depth/image_raw").namespace == ""
+    with pytest.raises(MessageError, match="not a key of topic"):
+        parse_topic_key(key, topic="rgbd/color/image_raw")
