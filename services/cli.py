@@ -7,7 +7,7 @@ import json
 import logging
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -40,6 +40,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--loop", action="store_true", help="replay in a loop")
     run.add_argument("--demo", action="store_true", help="also drive a simulated robot round a demo warehouse")
     run.add_argument("--demo-rate", type=_positive, default=1.0, help="demo speed factor (1 = real time)")
+    run.add_argument("--demo-cameras", default="fisheye",
+                     help="cameras the demo robot carries, comma-separated (fisheye,rgbd; empty for none)")
 
     worker = commands.add_parser("worker", help="one stage worker")
     worker.add_argument("stage", choices=STAGES)
@@ -158,13 +160,11 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
     stop = threading.Event()
     match args.command:
         case "run":
-            extra = []
+            extra: list[Callable[[Bus, threading.Event], None]] = []
             if args.replay is not None:
                 extra.append(partial(_replay_job, bag=args.replay, rate=args.rate, loop=args.loop))
             if args.demo:
-                from services.simulator import run_demo
-
-                extra.append(partial(run_demo, rate=args.demo_rate))
+                extra.append(_demo_job(args.demo_cameras, rate=args.demo_rate))
             with runtime.stop_on_signals(stop):
                 runtime.run(settings, stages=STAGES, api=True, stop=stop, extra=extra)
         case "worker":
@@ -265,6 +265,17 @@ def _sim(args: argparse.Namespace, settings: Settings, stop: threading.Event) ->
         return
     counts = sim_run(world, args.out, robots=args.robots, speed_mps=args.speed, seed=args.seed, cameras=cameras)
     log.info("wrote %s: %d messages (%s)", args.out, counts.total(), dict(counts))
+
+
+def _demo_job(cameras: str, *, rate: float) -> Callable[[Bus, threading.Event], None]:
+    from services.simulator import fisheye_sensor, rgbd_sensor, run_demo
+
+    sensors = {"fisheye": lambda: fisheye_sensor(rate_hz=2.0), "rgbd": lambda: rgbd_sensor(rate_hz=2.0)}
+    names = [name for name in cameras.split(",") if name]
+    unknown = set(names) - set(sensors)
+    if unknown:
+        raise ValueError(f"unknown demo cameras {sorted(unknown)}; known: {sorted(sensors)}")
+    return partial(run_demo, rate=rate, cameras=tuple(sensors[name]() for name in names))
 
 
 def _replay_job(bus: Bus, stop: threading.Event, *, bag: Path, rate: float, loop: bool,
