@@ -21,8 +21,13 @@ def stage_factories() -> dict[str, StageFactory]:
     """Every stage Aisle can run, by name (imported lazily: stages pull in heavy libraries)."""
     from services.occupancy_mapping.worker import OccupancyStage
     from services.pillar_mapping.worker import PillarStage
+    from services.semantic_fusion.worker import fusion_stage
 
-    factories: dict[str, StageFactory] = {"occupancy_mapping": OccupancyStage, "pillar_mapping": PillarStage}
+    factories: dict[str, StageFactory] = {
+        "occupancy_mapping": OccupancyStage,
+        "pillar_mapping": PillarStage,
+        "semantic_fusion": fusion_stage,
+    }
     assert set(factories) == set(STAGES)
     return factories
 

@@ -19,7 +19,7 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
-STAGES = ("occupancy_mapping", "pillar_mapping")
+STAGES = ("occupancy_mapping", "pillar_mapping", "semantic_fusion")
 """Stage workers that ``aisle run`` starts, in start order."""
 
 
@@ -93,6 +93,30 @@ class PillarSettings(BaseModel):
         return self
 
 
+class SemanticFusionSettings(BaseModel):
+    """The semantic-fusion stage: annotated scans into label and entropy layers."""
+
+    scan_topic: str = "annotated_scan"
+    pose_topic: str = Field("", description="geometry_msgs/PoseStamped of the robot base in the map frame, taken as "
+                            "pose corrections (e.g. localization_pose); empty: none.")
+    camera_x_in_base_m: float = 0.0
+    camera_y_in_base_m: float = 0.0
+    camera_yaw_in_base_rad: float = Field(
+        0.0, ge=-3.1416, le=3.1416, description="Camera floor frame (AnnotatedScan camera_pose) in the base frame."
+    )
+    pose_correction_sigma_m: float = Field(0.05, gt=0.0)
+    pose_correction_sigma_rad: float = Field(0.02, gt=0.0)
+    pose_correction_period_s: float = Field(5.0, ge=0.0, description="Least time between corrections of one robot.")
+    store_period_s: float = Field(5.0, gt=0.0)
+    resolution_m: float = Field(0.05, gt=0.0, le=1.0)
+    dynamic_half_life_s: float = Field(20.0, gt=0.0)
+    detect_loops: bool = True
+    label_layer: str = "semantic_label"
+    entropy_layer: str = "semantic_entropy"
+    scan_queue_size: int = Field(2000, ge=1)
+    restart_after_out_of_order_scans: int = Field(50, ge=1)
+
+
 class Settings(BaseSettings):
     """All Aisle settings; build once with :func:`get_settings` and pass it in."""
 
@@ -119,6 +143,7 @@ class Settings(BaseSettings):
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     occupancy: OccupancySettings = Field(default_factory=OccupancySettings)
     pillars: PillarSettings = Field(default_factory=PillarSettings)
+    fusion: SemanticFusionSettings = Field(default_factory=SemanticFusionSettings)
 
     @field_validator("robot_namespaces")
     @classmethod

@@ -11,7 +11,7 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, st
 
 from api.deps import MapDep, RevisionQuery, StoreDep
 from api.models import ErrorOut, LayerOut, LayerValuesOut, Origin, Responses
-from api.rendering import RenderError, encode_npy, encode_png, layer_image
+from api.rendering import RenderError, encode_npy, encode_png, render_layer
 from shared.store import StoredLayer
 
 router = APIRouter(prefix="/v1/maps/{map_name}/layers", tags=["layers"])
@@ -83,19 +83,22 @@ def list_layers(map_info: MapDep, store: StoreDep, revision: RevisionQuery) -> l
     response_class=Response,
     responses={
         status.HTTP_200_OK: {"content": {"image/png": {}},
-                             "description": "Greyscale PNG, top row = highest y."},
+                             "description": "PNG, top row = highest y: colour with a legend for semantic "
+                                            "label layers, greyscale otherwise."},
         status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut, "description": "Layer cannot be drawn."},
         **_NOT_FOUND,
     },
 )
 def layer_png(stored: LayerDep) -> Response:
-    """The layer as a greyscale PNG, north up: the top row of the image is the highest y.
+    """The layer as a PNG, north up: the top row of the image is the highest y, one pixel a cell.
 
-    Occupancy (int8) is drawn as map_server does: unknown grey 205, free white, occupied black,
-    shaded by probability in between. Other layers are scaled min-max to black..white.
+    Semantic label layers (meta ``encoding`` = ``semantic_labels``) are drawn in their classes'
+    colours with a legend of the classes present to the right. Occupancy (int8) is drawn as
+    map_server does: unknown grey 205, free white, occupied black, shaded by probability in
+    between. Other layers are scaled min-max to black..white.
     """
     try:
-        png = encode_png(layer_image(stored.layer.data))
+        png = encode_png(render_layer(stored.layer.data, stored.layer.meta))
     except RenderError as err:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
     return Response(png, media_type="image/png", headers={REVISION_HEADER: str(stored.revision_id)})

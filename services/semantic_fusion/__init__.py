@@ -13,6 +13,8 @@ from services.semantic_fusion.evaluation import LabelAccuracy, absolute_trajecto
 from services.semantic_fusion.fusion import FusionSettings, SemanticFusion
 from services.semantic_fusion.grid import GridCells, SemanticGrid, cell_indices, evidence_weights
 from services.semantic_fusion.inference import (
+    ENTROPY_ENCODING,
+    LABEL_ENCODING,
     NO_ENTROPY,
     CellLabels,
     SemanticLayers,
@@ -22,6 +24,7 @@ from services.semantic_fusion.inference import (
 )
 from services.semantic_fusion.pose_graph import Constraint, PoseGraph
 from services.semantic_fusion.render import render_labels
+from services.semantic_fusion.resume import evidence_for_entropy, seed_grid
 from services.semantic_fusion.scan import ScanObservation, observation_from_arrays, observation_from_message
 from services.semantic_fusion.scan_matching import ScanMatch, match_scans
 
@@ -29,6 +32,8 @@ __all__ = [
     "CLASS_COLOURS",
     "DISTRIBUTION_CLASSES",
     "DYNAMIC_CLASSES",
+    "ENTROPY_ENCODING",
+    "LABEL_ENCODING",
     "NO_ENTROPY",
     "N_CLASSES",
     "CellLabels",
@@ -47,6 +52,7 @@ __all__ = [
     "absolute_trajectory_error",
     "cell_indices",
     "class_columns",
+    "evidence_for_entropy",
     "evidence_weights",
     "infer_labels",
     "label_accuracy",
@@ -56,4 +62,5 @@ __all__ = [
     "observation_from_message",
     "rasterise",
     "render_labels",
+    "seed_grid",
 ]

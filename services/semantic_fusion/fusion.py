@@ -78,16 +78,24 @@ class SemanticFusion:
         The graph to extend (default: a new one with default noise).
     detect_loops : bool
         Whether completed keyframes are matched against earlier ones.
+    grid : SemanticGrid, optional
+        The grid to write into (default: a new one from ``settings``). Several robots' fusions may
+        share one: every update is a sum, so each re-projects its own points without disturbing the
+        others'. Its resolution must be ``settings.resolution_m``.
     """
 
     def __init__(self, settings: FusionSettings | None = None, *, pose_graph: PoseGraph | None = None,
-                 detect_loops: bool = True) -> None:
+                 detect_loops: bool = True, grid: SemanticGrid | None = None) -> None:
         self.settings = settings or FusionSettings()
         self.graph = pose_graph or PoseGraph()
         if self.graph.n_keyframes:
             raise SemanticFusionError("the pose graph must start empty")
-        self.grid = SemanticGrid(resolution_m=self.settings.resolution_m,
-                                 dynamic_half_life_s=self.settings.dynamic_half_life_s)
+        if grid is not None and abs(grid.resolution_m - self.settings.resolution_m) > 1e-12:
+            raise SemanticFusionError(
+                f"grid resolution {grid.resolution_m} m differs from settings.resolution_m "
+                f"{self.settings.resolution_m} m")
+        self.grid = grid if grid is not None else SemanticGrid(
+            resolution_m=self.settings.resolution_m, dynamic_half_life_s=self.settings.dynamic_half_life_s)
         self.store = ObservationStore()
         self.detect_loops = detect_loops
         self._keyframe_stamps_ns: list[int] = []

@@ -20,13 +20,17 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from services.semantic_fusion.classes import DISTRIBUTION_CLASSES, N_CLASSES, SemanticClass
+from services.semantic_fusion.classes import CLASS_COLOURS, DISTRIBUTION_CLASSES, N_CLASSES, SemanticClass
 from services.semantic_fusion.errors import SemanticFusionError
 from services.semantic_fusion.grid import GridCells
 from shared.store.records import GridLayer
 
 NO_ENTROPY = -1.0
 """Entropy-layer value of cells with no evidence."""
+LABEL_ENCODING = "semantic_labels"
+"""``meta["encoding"]`` of label layers: uint8 codes, ``meta["classes"][code]`` names each."""
+ENTROPY_ENCODING = "normalised_entropy"
+"""``meta["encoding"]`` of entropy layers: float32 in [0, 1], :data:`NO_ENTROPY` where there is no data."""
 
 _CODES = np.array([int(c) for c in DISTRIBUTION_CLASSES], dtype=np.uint8)
 
@@ -58,13 +62,19 @@ class SemanticLayers(NamedTuple):
 
     def grid_layers(self, *, label_name: str = "semantic_label",
                     entropy_name: str = "semantic_entropy") -> tuple[GridLayer, GridLayer]:
-        """The two rasters as store layers; the label layer's meta lists the class codes."""
-        classes = {c.name.lower(): int(c) for c in SemanticClass}
+        """The two rasters as store layers, each described by its meta.
+
+        The label layer's meta is ``{"encoding": "semantic_labels", "classes": [name of code 0, 1,
+        ...], "colours": [[r, g, b] of code 0, 1, ...]}``, enough for a reader (the API's PNG) to
+        draw it without knowing :class:`SemanticClass`; the entropy layer's is
+        ``{"encoding": "normalised_entropy", "no_data": NO_ENTROPY}``.
+        """
         return (
             GridLayer(label_name, self.labels, self.resolution_m, self.origin_x_m, self.origin_y_m,
-                      {"classes": classes}),
+                      {"encoding": LABEL_ENCODING, "classes": [c.name.lower() for c in SemanticClass],
+                       "colours": [list(CLASS_COLOURS[c]) for c in SemanticClass]}),
             GridLayer(entropy_name, self.entropy, self.resolution_m, self.origin_x_m, self.origin_y_m,
-                      {"normalised": True, "no_data": NO_ENTROPY}),
+                      {"encoding": ENTROPY_ENCODING, "no_data": NO_ENTROPY}),
         )
 
 

@@ -4,6 +4,7 @@ import pytest
 from services.semantic_fusion import (
     DYNAMIC_CLASSES,
     FusionSettings,
+    ScanObservation,
     SemanticFusion,
     SemanticFusionError,
     absolute_trajectory_error,
@@ -76,3 +77,44 @@ def test_loop_closure_and_inference_on_a_simulated_run() -> None:
                          exclude=DYNAMIC_CLASSES)
     assert inferred.fraction >= raw.fraction
     assert inferred.fraction > 0.9
+
+
+def test_fusions_sharing_a_grid_reproject_only_their_own_points(small_run) -> None:  # type: ignore[no-untyped-def]
+    _, run = small_run
+    first, second = run.scans[:150], run.scans[150:300]
+    correction = [0.5, 0.3, 0.05]
+
+    def fill(fusion: SemanticFusion, scans: list[ScanObservation], *, correct: bool) -> None:
+        for scan in scans:
+            fusion.add_scan(scan)
+        if correct:  # optimise and re-project every moved keyframe, after the other robot wrote its points
+            fusion.add_pose_correction(int(fusion.keyframe_stamps_ns[-1]), fusion.graph.poses[-1] + correction,
+                                       sigmas=(0.01, 0.01, 0.001))
+
+    mover = SemanticFusion(detect_loops=False)
+    other = SemanticFusion(detect_loops=False, grid=mover.grid)
+    fill(mover, first, correct=False)
+    fill(other, second, correct=False)
+    fill(mover, [], correct=True)
+    mover_alone, other_alone = SemanticFusion(detect_loops=False), SemanticFusion(detect_loops=False)
+    fill(mover_alone, first, correct=True)
+    fill(other_alone, second, correct=False)
+
+    def totals(*fusions: SemanticFusion) -> dict[tuple[int, int], np.ndarray]:
+        out: dict[tuple[int, int], np.ndarray] = {}
+        for fusion in fusions:
+            cells = fusion.grid.cells(now_s=run.scans[299].stamp_ns * 1e-9)
+            values = np.column_stack([cells.log_evidence, cells.hits])
+            for rc, row in zip(map(tuple, cells.rows_cols.tolist()), values, strict=True):
+                out[rc] = out.get(rc, 0.0) + row
+        return {rc: v for rc, v in out.items() if v[-1] > 1e-3}
+
+    shared, separate = totals(mover), totals(mover_alone, other_alone)
+    assert shared.keys() == separate.keys()
+    np.testing.assert_allclose(np.array([shared[k] for k in separate]), np.array(list(separate.values())),
+                               atol=1e-3)
+
+
+def test_a_shared_grid_must_have_the_settings_resolution() -> None:
+    with pytest.raises(SemanticFusionError, match="grid resolution"):
+        SemanticFusion(FusionSettings(resolution_m=0.1), grid=SemanticFusion().grid)

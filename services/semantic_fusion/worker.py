@@ -1,0 +1,337 @@
+"""The semantic-fusion worker: annotated scans (and corrected poses) in, label and entropy layers out.
+
+Under every robot namespace it takes ``annotated_scan`` (aisle_msgs/AnnotatedScan) and, when
+``pose_topic`` is set, geometry_msgs/PoseStamped poses of the robot base in the map frame (a
+localisation's corrected pose, e.g. ``localization_pose``). Each robot has its own
+:class:`SemanticFusion` (keyframes, pose graph, loop closures); all of them write into one shared
+:class:`SemanticGrid`, which the core allows because every update is a sum: a robot re-projecting
+its own points after a loop closure leaves the others' evidence alone. Every ``store_period_s``
+one revision stores the label layer (uint8 :class:`SemanticClass` codes, meta
+``{"encoding": "semantic_labels", "classes": [...], "colours": [...]}``) and the entropy layer
+(float32). Dynamic classes decay in the grid as of the newest scan stamp.
+
+Zenoh callbacks only queue samples; all fusion work, loop closures and re-optimisation included,
+runs in the stage thread between batches of at most ``_BATCH`` scans. Scans use the BLOCK policy, so
+their queue is long (``scan_queue_size``) to ride out a slow optimisation without holding senders.
+
+Bad annotated scans (arrays of different lengths, non-finite values, label ids outside
+``class_names``, a bad pose) are counted as ``bad_scans`` and skipped; scans not newer than their
+robot's newest as ``scans_out_of_order``. After ``restart_after_out_of_order_scans`` in a row the
+robot is taken to have restarted (or a bag to be replayed): it gets a fresh fusion, and its earlier
+evidence stays in the grid.
+
+A corrected pose at stamp ``t`` becomes a camera pose through the fixed mount
+(``camera_*_in_base``), is carried to the keyframe nearest ``t`` by the robot's own motion between
+the two (interpolated from its recent scans' poses) and enters that robot's pose graph as a prior.
+Corrections wait until scans have passed their stamp and are applied at most once per
+``pose_correction_period_s`` per robot (the newest waiting one), since each costs an optimisation.
+
+On start the grid is seeded from the stored layers (:func:`seed_grid`): the map survives a restart.
+Pose graphs and attached observations are not stored, so evidence from before a restart no longer
+moves with later loop closures; nothing else is resumed.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from threadpoolctl import threadpool_limits
+
+from services.semantic_fusion import se2
+from services.semantic_fusion.errors import SemanticFusionError
+from services.semantic_fusion.fusion import FusionSettings, SemanticFusion
+from services.semantic_fusion.grid import SemanticGrid
+from services.semantic_fusion.inference import infer_labels, rasterise
+from services.semantic_fusion.resume import seed_grid
+from services.semantic_fusion.scan import observation_from_message
+from shared import messages
+from shared.bus import DropPolicy, Subscription
+from shared.store import RevisionWrite, StoreUnavailableError
+from shared.transforms import yaw_from_quaternion
+from shared.worker import StageContext
+
+log = logging.getLogger(__name__)
+
+_BATCH = 50
+_POSE_HISTORY = 1200
+"""Recent scan poses kept per robot to place corrections (two minutes at 10 Hz)."""
+_PENDING_CORRECTIONS = 200
+
+
+def _stamp_ns(header: Any) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+@dataclass
+class _Robot:
+    fusion: SemanticFusion
+    stamps_ns: collections.deque[int] = field(default_factory=lambda: collections.deque(maxlen=_POSE_HISTORY))
+    poses: collections.deque[npt.NDArray[np.float64]] = field(
+        default_factory=lambda: collections.deque(maxlen=_POSE_HISTORY))
+    corrections: collections.deque[tuple[int, npt.NDArray[np.float64]]] = field(
+        default_factory=lambda: collections.deque(maxlen=_PENDING_CORRECTIONS))
+    corrected_at: float = -float("inf")
+    out_of_order: int = 0
+
+    def pose_at(self, stamp_ns: int) -> npt.NDArray[np.float64] | None:
+        """The robot's own camera pose estimate at ``stamp_ns``, interpolated; None outside the history."""
+        stamps = np.fromiter(self.stamps_ns, dtype=np.int64, count=len(self.stamps_ns))
+        if not stamps.size or not stamps[0] <= stamp_ns <= stamps[-1]:
+            return None
+        i = int(np.searchsorted(stamps, stamp_ns))
+        if stamps[i] == stamp_ns:
+            return self.poses[i]
+        a, b = self.poses[i - 1], self.poses[i]
+        fraction = (stamp_ns - stamps[i - 1]) / (stamps[i] - stamps[i - 1])
+        return se2.compose(a, fraction * se2.between(a, b))
+
+
+class FusionStage:
+    """Stage ``semantic_fusion``; see the module docstring.
+
+    Parameters
+    ----------
+    context
+        The stage context (only ``settings.robot_namespaces`` is read from its settings).
+    scan_topic
+        AnnotatedScan topic under each robot namespace.
+    pose_topic
+        PoseStamped topic of the robot base in the map frame taken as pose corrections; "" for none.
+    camera_x_in_base_m, camera_y_in_base_m, camera_yaw_in_base_rad
+        The camera's floor frame (the frame of AnnotatedScan's camera pose) in the base frame.
+    pose_correction_sigma_m, pose_correction_sigma_rad
+        Standard deviations of a correction's prior, metres and radians.
+    pose_correction_period_s
+        Least time between two corrections applied to one robot, seconds.
+    store_period_s
+        How often a revision is committed when anything changed, seconds.
+    resolution_m, dynamic_half_life_s, detect_loops
+        Grid cell edge (metres), half-life of forklift and human evidence (seconds), loop closing.
+    label_layer, entropy_layer
+        Names of the stored layers.
+    scan_queue_size
+        Scans queued before the sender is held.
+    restart_after_out_of_order_scans
+        Out-of-order scans in a row after which a robot's trajectory starts afresh.
+    """
+
+    def __init__(
+        self,
+        context: StageContext,
+        *,
+        scan_topic: str = "annotated_scan",
+        pose_topic: str = "",
+        camera_x_in_base_m: float = 0.0,
+        camera_y_in_base_m: float = 0.0,
+        camera_yaw_in_base_rad: float = 0.0,
+        pose_correction_sigma_m: float = 0.05,
+        pose_correction_sigma_rad: float = 0.02,
+        pose_correction_period_s: float = 5.0,
+        store_period_s: float = 5.0,
+        resolution_m: float = 0.05,
+        dynamic_half_life_s: float = 20.0,
+        detect_loops: bool = True,
+        label_layer: str = "semantic_label",
+        entropy_layer: str = "semantic_entropy",
+        scan_queue_size: int = 2000,
+        restart_after_out_of_order_scans: int = 50,
+    ) -> None:
+        if min(store_period_s, pose_correction_sigma_m, pose_correction_sigma_rad) <= 0 or pose_correction_period_s < 0:
+            raise SemanticFusionError("store period and correction sigmas must be > 0, correction period >= 0")
+        if scan_queue_size < 1 or restart_after_out_of_order_scans < 1:
+            raise SemanticFusionError("scan_queue_size and restart_after_out_of_order_scans must be >= 1")
+        self.context = context
+        self.settings = FusionSettings(resolution_m=resolution_m, dynamic_half_life_s=dynamic_half_life_s)
+        self.detect_loops = detect_loops
+        self.mount = np.array([camera_x_in_base_m, camera_y_in_base_m, camera_yaw_in_base_rad], dtype=np.float64)
+        self.sigmas = (pose_correction_sigma_m, pose_correction_sigma_m, pose_correction_sigma_rad)
+        self.pose_correction_period_s = pose_correction_period_s
+        self.store_period_s = store_period_s
+        self.layer_names = (label_layer, entropy_layer)
+        self.restart_after = restart_after_out_of_order_scans
+        self.grid = SemanticGrid(resolution_m=resolution_m, dynamic_half_life_s=dynamic_half_life_s)
+        self._robots: dict[str, _Robot] = {}
+        self._first_stamp_ns: int | None = None
+        self._since_store = collections.Counter[str]()
+        self._resume()
+        namespaces = context.settings.robot_namespaces
+
+        def subscribe(topic: str, msgtype: str, maxsize: int) -> Subscription:
+            return context.bus.subscribe(topic, msgtype, namespaces=namespaces, policy=DropPolicy.BLOCK,
+                                         maxsize=maxsize, name=f"{context.name}.{topic}")
+
+        self.scans = subscribe(scan_topic, messages.ANNOTATED_SCAN, scan_queue_size)
+        self.poses = subscribe(pose_topic, messages.POSE_STAMPED, 2000) if pose_topic else None
+
+    def _resume(self) -> None:
+        store, map_id = self.context.store, self.context.map.id
+        try:
+            labels, entropy = (store.layer(map_id, name) for name in self.layer_names)
+        except StoreUnavailableError as err:
+            log.warning("cannot read the stored semantic layers, starting empty: %s", err)
+            return
+        if labels is None or entropy is None:
+            return
+        lab, ent = labels.layer, entropy.layer
+        if (labels.revision_id != entropy.revision_id or lab.data.shape != ent.data.shape
+                or abs(lab.resolution_m - self.grid.resolution_m) > 1e-9):
+            log.warning("stored semantic layers (revisions %d, %d; %s m) do not fit this grid (%s m): starting empty",
+                        labels.revision_id, entropy.revision_id, lab.resolution_m, self.grid.resolution_m)
+            return
+        cells = seed_grid(self.grid, lab.data, ent.data, origin_x_m=lab.origin_x_m, origin_y_m=lab.origin_y_m)
+        log.info("resumed %d labelled cells from revision %d", cells, labels.revision_id)
+
+    # -- loop -----------------------------------------------------------------------------------
+
+    def run(self, stop: threading.Event) -> None:
+        last_store = time.monotonic()
+        with threadpool_limits(limits=1, user_api="blas"):
+            try:
+                while not stop.is_set():
+                    self._take_scans(timeout_s=0.05)
+                    self._take_poses()
+                    self._apply_corrections()
+                    if time.monotonic() - last_store >= self.store_period_s:
+                        last_store = time.monotonic()
+                        self._store()
+            finally:
+                while self.scans.pending():
+                    self._take_scans(timeout_s=0.0)
+                self._store()
+                for subscription in (self.scans, self.poses):
+                    if subscription is not None:
+                        subscription.close()
+
+    def _robot(self, namespace: str) -> _Robot:
+        robot = self._robots.get(namespace)
+        if robot is None:
+            fusion = SemanticFusion(self.settings, detect_loops=self.detect_loops, grid=self.grid)
+            robot = self._robots[namespace] = _Robot(fusion)
+            self.context.counters.set(f"{self.context.name}.robots", len(self._robots))
+        return robot
+
+    def _take_scans(self, *, timeout_s: float) -> None:
+        item = self.scans.receive(timeout_s)
+        taken = 0
+        while item is not None:
+            self._add_scan(item.namespace, item.message)
+            taken += 1
+            item = self.scans.receive() if taken < _BATCH else None
+
+    def _add_scan(self, namespace: str, message: Any) -> None:
+        robot = self._robot(namespace)
+        stamp_ns = _stamp_ns(message.header)
+        newest = robot.fusion.last_stamp_ns
+        if newest is not None and stamp_ns <= newest:
+            robot.out_of_order += 1
+            if robot.out_of_order < self.restart_after:
+                self.context.count("scans_out_of_order")
+                log.warning("scan from %r at %d ns skipped: not after its newest (%d ns)", namespace or "/",
+                            stamp_ns, newest)
+                return
+            log.warning("robot %r: %d scans in a row before its newest: restarted or replayed; its trajectory "
+                        "starts afresh (earlier evidence stays)", namespace or "/", robot.out_of_order)
+            self.context.count("robot_restarts")
+            del self._robots[namespace]
+            robot = self._robot(namespace)
+        try:
+            observation = observation_from_message(message, previous_stamp_ns=robot.fusion.last_stamp_ns)
+        except SemanticFusionError as err:
+            self.context.count("bad_scans")
+            log.warning("scan from %r skipped: %s", namespace or "/", err)
+            return
+        robot.out_of_order = 0
+        closures = robot.fusion.add_scan(observation)
+        robot.stamps_ns.append(observation.stamp_ns)
+        robot.poses.append(observation.camera_pose)
+        if self._first_stamp_ns is None or observation.stamp_ns < self._first_stamp_ns:
+            self._first_stamp_ns = observation.stamp_ns
+        self._since_store.update(scans=1, loop_closures=closures)
+        self.context.count("scans_integrated")
+        if closures:
+            self.context.count("loop_closures", closures)
+
+    def _take_poses(self) -> None:
+        while self.poses is not None and (item := self.poses.receive()) is not None:
+            pose = item.message.pose
+            p, q = pose.position, pose.orientation
+            try:
+                yaw = yaw_from_quaternion((q.x, q.y, q.z, q.w))
+            except ValueError as err:
+                self.context.count("bad_poses")
+                log.warning("pose from %r skipped: %s", item.namespace or "/", err)
+                continue
+            base = np.array([p.x, p.y, yaw], dtype=np.float64)
+            if not np.all(np.isfinite(base)):
+                self.context.count("bad_poses")
+                log.warning("pose from %r skipped: not finite: %s", item.namespace or "/", base.tolist())
+                continue
+            camera = se2.compose(base, self.mount)
+            self._robot(item.namespace).corrections.append((_stamp_ns(item.message.header), camera))
+
+    def _apply_corrections(self) -> None:
+        now = time.monotonic()
+        for namespace, robot in self._robots.items():
+            newest = robot.fusion.last_stamp_ns
+            if newest is None or not robot.corrections or now - robot.corrected_at < self.pose_correction_period_s:
+                continue
+            ready = [c for c in robot.corrections if c[0] <= newest]
+            if not ready:
+                continue
+            waiting = [c for c in robot.corrections if c[0] > newest]
+            robot.corrections.clear()
+            robot.corrections.extend(waiting)
+            stamp_ns, camera = max(ready, key=lambda c: c[0])
+            self._correct(namespace, robot, stamp_ns, camera)
+            robot.corrected_at = now
+
+    def _correct(self, namespace: str, robot: _Robot, stamp_ns: int, camera: npt.NDArray[np.float64]) -> None:
+        estimate = robot.pose_at(stamp_ns)
+        if estimate is None:
+            self.context.count("pose_corrections_too_old")
+            log.warning("pose of %r at %d ns is older than its kept scan poses; skipped", namespace or "/", stamp_ns)
+            return
+        fusion = robot.fusion
+        keyframe_stamps = fusion.keyframe_stamps_ns
+        key = int(np.argmin(np.abs(keyframe_stamps - stamp_ns)))
+        corrected = se2.compose(camera, se2.between(estimate, fusion.graph.odometry_pose(key)))
+        moved = fusion.add_pose_correction(int(keyframe_stamps[key]), corrected, sigmas=self.sigmas)
+        self._since_store.update(pose_corrections=1)
+        self.context.count("pose_corrections")
+        log.debug("pose correction for %r keyframe %d re-projected %d keyframes", namespace or "/", key, moved)
+
+    # -- store ------------------------------------------------------------------------------------
+
+    def _store(self) -> None:
+        if not self._since_store:
+            return
+        stamps = [r.fusion.last_stamp_ns for r in self._robots.values() if r.fusion.last_stamp_ns is not None]
+        now_ns = max(stamps)
+        cells = self.grid.cells(now_s=now_ns * 1e-9)
+        layers = rasterise(cells, infer_labels(cells), resolution_m=self.grid.resolution_m)
+        labels, entropy = layers.grid_layers(label_name=self.layer_names[0], entropy_name=self.layer_names[1])
+        labelled = int(np.count_nonzero(labels.data))
+        summary = {**self._since_store, "robots": sorted(self._robots), "labelled_cells": labelled}
+        write = RevisionWrite(self.context.name, layers=[labels, entropy], input_start_ns=self._first_stamp_ns,
+                              input_end_ns=now_ns, summary=summary)
+        self.context.counters.set(f"{self.context.name}.grid_cells", self.grid.n_cells)
+        self.context.counters.set(f"{self.context.name}.keyframes",
+                                  sum(r.fusion.graph.n_keyframes for r in self._robots.values()))
+        revision = self.context.commit(write)
+        if revision is None:
+            return  # store down: counted by commit; tried again next period
+        log.info("revision %d: %d labelled cells (%d x %d), %s", revision.id, labelled, *labels.data.shape[::-1],
+                 dict(self._since_store))
+        self._since_store.clear()
+
+
+def fusion_stage(context: StageContext) -> FusionStage:
+    """The stage built from ``context.settings.fusion``."""
+    return FusionStage(context, **context.settings.fusion.model_dump())
