@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -14,30 +12,16 @@ import pytest
 
 from services.occupancy_mapping.worker import OccupancyStage
 from shared import messages
-from shared.bus import Bus
 from shared.keyexpr import Attachment, topic_key
 from shared.settings import Settings, ZenohSettings
 from shared.store import MapStore
-from shared.worker import run_stage
+from tests import stages
 from tests.helpers import wait_for
 
 TALKER = Path(__file__).resolve().parents[2] / "rmw_zenoh_talker.py"
 
 
-@contextmanager
-def running_stage(settings: Settings, store: MapStore) -> Iterator[Bus]:
-    stop = threading.Event()
-    with Bus.open(settings.zenoh, domain_id=settings.ros_domain_id) as bus:
-        thread = threading.Thread(target=run_stage, args=("occupancy_mapping", OccupancyStage),
-                                  kwargs={"bus": bus, "store": store, "settings": settings, "stop": stop})
-        thread.start()
-        try:
-            wait_for(lambda: bus.alive_workers() == ["occupancy_mapping"], what="the worker to come up")
-            yield bus
-        finally:
-            stop.set()
-            thread.join(timeout=30)
-            assert not thread.is_alive()
+running_stage = partial(stages.running_stage, "occupancy_mapping", OccupancyStage)
 
 
 def _settings(zenoh_listen: ZenohSettings, url: str) -> Settings:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -22,7 +21,7 @@ from shared import messages
 from shared.bus import Bus
 from shared.settings import Settings, ZenohSettings
 from shared.store import MapStore
-from shared.worker import run_stage
+from tests import stages
 from tests.helpers import wait_for
 
 SMALL_HALL = {
@@ -44,20 +43,7 @@ def store(tmp_path: Path) -> Iterator[MapStore]:
     map_store.close()
 
 
-@contextmanager
-def running_stage(settings: Settings, store: MapStore) -> Iterator[Bus]:
-    stop = threading.Event()
-    with Bus.open(settings.zenoh, domain_id=settings.ros_domain_id) as bus:
-        thread = threading.Thread(target=run_stage, args=("pillar_mapping", PillarStage),
-                                  kwargs={"bus": bus, "store": store, "settings": settings, "stop": stop})
-        thread.start()
-        try:
-            wait_for(lambda: bus.alive_workers() == ["pillar_mapping"], what="the worker to come up")
-            yield bus
-        finally:
-            stop.set()
-            thread.join(timeout=60)
-            assert not thread.is_alive()
+running_stage = partial(stages.running_stage, "pillar_mapping", PillarStage)
 
 
 def _settings(zenoh_listen: ZenohSettings, url: str) -> Settings:
