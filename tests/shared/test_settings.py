@@ -59,3 +59,11 @@ def test_nonsense_fails_fast(variable: str, value: str, monkeypatch: pytest.Monk
     monkeypatch.setenv(variable, value)
     with pytest.raises(ValidationError):
         Settings()
+
+
+def test_aisle_run_starts_only_known_stages(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("AISLE_STAGES", '["occupancy_mapping", "object_labelling"]')
+    assert Settings().stages == ["occupancy_mapping", "object_labelling"]
+    monkeypatch.setenv("AISLE_STAGES", '["occupancy_mapping", "teleportation"]')
+    with pytest.raises(ValidationError, match="unknown stages"):
+        Settings()
