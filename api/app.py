@@ -6,11 +6,16 @@ import logging
 from collections.abc import Sequence
 from importlib.metadata import version
 
-from fastapi import FastAPI, Request, status
+from fastapi import Depends, FastAPI, Request, status
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 
-from api.deps import ApiContext
-from api.routers import features, health, layers, maps
+from api.access import API_KEY_HEADER, AccessPolicy
+from api.deps import ApiContext, enforce_policy
+from api.errors import ApiConfigError
+from api.routers import bins, events, features, health, keys, layers, maps
+from api.routers.layers import REVISION_HEADER
+from api.streams import EventStreams
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import MapStore, StoreError, StoreUnavailableError
@@ -23,9 +28,16 @@ A live semantic map of the warehouse for a Warehouse Management System.
 * **maps**: the maps and their revisions (each stage write is one revision);
 * **layers**: grid layers (occupancy, ...) as metadata, PNG or raw values;
 * **features**: walls, rack rows, bins, docks, ... as GeoJSON in map-frame metres;
+* **bins**: storage bins by WMS id, with aisle, bay, level, footprint and access pose;
+* **events**: each new revision as a Server-Sent Event, resumable with `Last-Event-ID`;
+* **keys**: API keys (admin only);
 * **health**: database, bus and stage workers.
 
 Every read accepts `?revision=<id>` to see the map as it was then. Errors are JSON with a `detail`.
+
+Send an API key as `X-API-Key: <secret>` or `Authorization: Bearer <secret>`. Anything that changes
+something needs a `write` key (keys: `admin`); reads need a `read` key when the server requires keys
+for reads. Each key (or client address, without one) has a rate limit; over it, 429 with `Retry-After`.
 """
 
 
@@ -35,6 +47,12 @@ def create_app(
     settings: Settings,
     bus: Bus | None = None,
     expected_workers: Sequence[str] = (),
+    require_keys_for_reads: bool = False,
+    rate_limit_per_s: float | None = 100.0,
+    rate_limit_burst: int = 200,
+    cors_origins: Sequence[str] = (),
+    event_poll_s: float = 1.0,
+    event_heartbeat_s: float = 15.0,
 ) -> FastAPI:
     """The Aisle REST API over ``store``.
 
@@ -49,16 +67,50 @@ def create_app(
     expected_workers : sequence of str
         Stage workers that should be running (e.g. ``shared.settings.STAGES``); the health check
         is degraded while any of them is not alive.
+    require_keys_for_reads : bool
+        Whether reads need a ``read`` key too; writes always need a ``write`` key. Off suits the
+        embedded stack on localhost; turn it on wherever the API is reachable from a network.
+    rate_limit_per_s : float or None
+        Requests per second per API key (per client address without one); None: unlimited.
+    rate_limit_burst : int
+        Requests a caller may make at once after a quiet spell.
+    cors_origins : sequence of str
+        Browser origins allowed to call the API (``https://wms.example.com``, or ``*``); none by default.
+    event_poll_s, event_heartbeat_s : float
+        How often event streams look for new revisions, and how long they stay silent before a heartbeat.
     """
-    app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url="/docs")
+    _check_origins(cors_origins)
+    app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url="/docs",
+                  dependencies=[Depends(enforce_policy)])
+    access = AccessPolicy(require_keys_for_reads=require_keys_for_reads, rate_limit_per_s=rate_limit_per_s,
+                          rate_limit_burst=rate_limit_burst)
     app.state.context = ApiContext(store=store, settings=settings, bus=bus,
-                                   expected_workers=tuple(expected_workers))
+                                   expected_workers=tuple(expected_workers), access=access,
+                                   events=EventStreams(poll_s=event_poll_s, heartbeat_s=event_heartbeat_s))
     app.add_exception_handler(StoreUnavailableError, _store_unavailable)
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
-    for module in (health, maps, layers, features):
+    for module in (health, maps, layers, features, bins, events, keys):
         app.include_router(module.router)
+    if cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=list(cors_origins),
+            allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
+            allow_headers=[API_KEY_HEADER, "Authorization", "Content-Type", "Last-Event-ID"],
+            expose_headers=["Retry-After", REVISION_HEADER],
+            max_age=600,
+        )
     return app
+
+
+def _check_origins(origins: Sequence[str]) -> None:
+    for origin in origins:
+        if origin != "*" and (not origin.startswith(("http://", "https://")) or origin.endswith("/")):
+            raise ApiConfigError(
+                f"CORS origin {origin!r} must be '*' or scheme://host[:port] without a trailing slash, "
+                "e.g. https://wms.example.com"
+            )
 
 
 async def _store_unavailable(request: Request, exc: Exception) -> JSONResponse:

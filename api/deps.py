@@ -1,4 +1,5 @@
-"""Request dependencies: the app's store, settings and bus, and the map and revision a route reads."""
+"""Request dependencies: the app's store, settings and bus, the caller and their rights, and the map and
+revision a route reads."""
 
 from __future__ import annotations
 
@@ -6,11 +7,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Annotated, cast
 
-from fastapi import Depends, HTTPException, Path, Query, Request, status
+from fastapi import Depends, HTTPException, Path, Query, Request, Security, status
+from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
+from api.access import API_KEY_HEADER, AccessPolicy, Caller, check_role, required_role
+from api.streams import EventStreams
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore, Revision
+from shared.store.keys import Role
 
 
 @dataclass(frozen=True, slots=True)
@@ -21,6 +26,8 @@ class ApiContext:
     settings: Settings
     bus: Bus | None
     expected_workers: Sequence[str]
+    access: AccessPolicy
+    events: EventStreams
 
 
 def get_context(request: Request) -> ApiContext:
@@ -40,6 +47,41 @@ def get_settings(context: ContextDep) -> Settings:
 
 StoreDep = Annotated[MapStore, Depends(get_store)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
+
+_api_key_header = APIKeyHeader(name=API_KEY_HEADER, auto_error=False, scheme_name="ApiKey",
+                               description="An Aisle API key, `aisle_<id>_<secret>`.")
+_bearer = HTTPBearer(auto_error=False, scheme_name="Bearer", description="The same API key as a bearer token.")
+
+
+def get_caller(
+    request: Request,
+    context: ContextDep,
+    api_key: Annotated[str | None, Security(_api_key_header)],
+    bearer: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)],
+) -> Caller:
+    """The verified caller (401 for a bad key), charged to their rate limit (429 when spent)."""
+    secret = api_key if api_key is not None else (None if bearer is None else bearer.credentials)
+    address = request.client.host if request.client is not None else "unknown"
+    return context.access.authenticate(context.store, secret, address=address)
+
+
+CallerDep = Annotated[Caller, Depends(get_caller)]
+
+
+def enforce_policy(request: Request, caller: CallerDep, context: ContextDep) -> None:
+    """App-wide: writes need a ``write`` key, reads a ``read`` key when the app requires keys for reads."""
+    route_path = str(getattr(request.scope.get("route"), "path", request.url.path))
+    check_role(caller, required_role(request.method, route_path,
+                                     require_keys_for_reads=context.access.require_keys_for_reads))
+
+
+def require_admin(caller: CallerDep) -> Caller:
+    """The caller, if their key is an ``admin`` key (401/403 otherwise)."""
+    check_role(caller, Role.ADMIN)
+    return caller
+
+
+AdminDep = Annotated[Caller, Depends(require_admin)]
 
 
 def get_map(

@@ -94,6 +94,16 @@ def _parser() -> argparse.ArgumentParser:
     fit.add_argument("pillars", type=Path)
     fit.add_argument("--out", type=Path, required=True)
 
+    keys = commands.add_parser("keys", help="API keys").add_subparsers(
+        dest="keys_command", required=True, metavar="KEYS_COMMAND")
+    create = keys.add_parser("create", help="create a key; its secret is printed once")
+    create.add_argument("--role", choices=["read", "write", "admin"], required=True)
+    create.add_argument("--name", required=True, help="who or what the key is for, e.g. wms")
+    listing = keys.add_parser("list", help="list keys (never their secrets)")
+    listing.add_argument("--all", action="store_true", help="include revoked keys")
+    revoke = keys.add_parser("revoke", help="revoke a key")
+    revoke.add_argument("key_id")
+
     for name, what in (("train-classifier", "train the ROI and whole-image SVMs on CNN features"),
                        ("eval-classifier", "per-class ROC AUC and confusion matrix on the held-out photos")):
         classifier = commands.add_parser(name, help=what)
@@ -208,6 +218,30 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             _pillars(args)
         case "train-classifier" | "eval-classifier":
             _classifier(args)
+        case "keys":
+            return _keys(args, settings)
+    return 0
+
+
+def _keys(args: argparse.Namespace, settings: Settings) -> int:
+    from services import runtime
+    from shared.store import keys
+
+    store = runtime.open_store(settings)
+    try:
+        if args.keys_command == "create":
+            key_id, secret = keys.create_key(store, role=args.role, name=args.name)
+            print(f"{key_id} ({args.role}, {args.name}): {secret}")
+            print("Keep the secret now: it is stored only as a hash.", file=sys.stderr)
+        elif args.keys_command == "list":
+            for key in keys.list_keys(store, include_revoked=args.all):
+                revoked = f" revoked {key.revoked_at:%Y-%m-%d %H:%M}" if key.revoked_at else ""
+                print(f"{key.key_id}  {key.role:<5}  {key.name}  created {key.created_at:%Y-%m-%d %H:%M}{revoked}")
+        elif keys.revoke_key(store, key_id=args.key_id) is None:
+            log.error("no key %s", args.key_id)
+            return 1
+    finally:
+        store.close()
     return 0
 
 

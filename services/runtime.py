@@ -87,8 +87,17 @@ def run(
             import uvicorn
 
             from api.app import create_app
+            from shared.store.keys import ensure_admin_key
 
-            app = create_app(store=store, settings=settings, bus=bus, expected_workers=stages)
+            first_admin = ensure_admin_key(store)
+            if first_admin is not None:
+                log.warning("first admin API key, shown only now (create others with `aisle keys create`): %s",
+                            first_admin)
+            app = create_app(store=store, settings=settings, bus=bus, expected_workers=stages,
+                             require_keys_for_reads=settings.reads_need_key,
+                             rate_limit_per_s=settings.api_rate_limit_per_s,
+                             rate_limit_burst=settings.api_rate_limit_burst, cors_origins=settings.api_cors_origins,
+                             event_poll_s=settings.api_event_poll_s, event_heartbeat_s=settings.api_event_heartbeat_s)
             server = uvicorn.Server(uvicorn.Config(app, host=settings.api_host, port=settings.api_port,
                                                    log_level=settings.log_level.lower(), access_log=False))
             threads.append(threading.Thread(target=server.run, name="api"))

@@ -161,6 +161,14 @@ class Settings(BaseSettings):
     )
     api_host: str = "127.0.0.1"
     api_port: int = Field(8000, ge=0, le=65535)
+    api_require_keys_for_reads: bool | None = Field(
+        None, description="Whether reads need an API key too; None: only when the API listens beyond loopback."
+    )
+    api_rate_limit_per_s: float | None = Field(100.0, gt=0, description="Requests a second per key; None: no limit.")
+    api_rate_limit_burst: int = Field(200, ge=1)
+    api_cors_origins: list[str] = Field(default_factory=list, description="Browser origins allowed (CORS).")
+    api_event_poll_s: float = Field(1.0, gt=0, le=60, description="How often event streams look for new revisions.")
+    api_event_heartbeat_s: float = Field(15.0, gt=0)
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     occupancy: OccupancySettings = Field(default_factory=OccupancySettings)
@@ -201,6 +209,13 @@ class Settings(BaseSettings):
         elif not self.database_url.startswith(("sqlite", "postgresql")):
             raise ValueError(f"database_url {self.database_url!r}: only sqlite and postgresql are supported")
         return self
+
+    @property
+    def reads_need_key(self) -> bool:
+        """Reads need a key when configured so, or by default when the API is reachable beyond loopback."""
+        if self.api_require_keys_for_reads is not None:
+            return self.api_require_keys_for_reads
+        return self.api_host not in ("127.0.0.1", "localhost", "::1")
 
     @classmethod
     def settings_customise_sources(

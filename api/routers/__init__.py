@@ -1,5 +1,5 @@
 """One router per resource."""
 
-from api.routers import features, health, layers, maps
+from api.routers import bins, events, features, health, keys, layers, maps
 
-__all__ = ["features", "health", "layers", "maps"]
+__all__ = ["bins", "events", "features", "health", "keys", "layers", "maps"]

@@ -314,6 +314,19 @@ class MapStore:
         return [StoredFeature(r.id, r.revision_id, r.stage,
                               Feature(r.kind, r.key, r.geometry, r.properties, r.confidence)) for r in rows]
 
+    def feature(self, map_id: int, kind: str, key: str, revision: int | None = None) -> StoredFeature | None:
+        """The feature ``kind``/``key`` live at ``revision`` (default: now); the newest if several stages have it."""
+        table = schema.features
+        query = (sa.select(table).where(table.c.map_id == map_id, table.c.kind == kind, table.c.key == key,
+                                        _live_at(table, revision))
+                 .order_by(table.c.revision_id.desc(), table.c.id.desc()).limit(1))
+        with self._read() as connection:
+            r = connection.execute(query).first()
+        if r is None:
+            return None
+        return StoredFeature(r.id, r.revision_id, r.stage, Feature(r.kind, r.key, r.geometry, r.properties,
+                                                                    r.confidence))
+
     def topology(self, map_id: int, *, revision: int | None = None
                  ) -> tuple[list[TopologyNode], list[TopologyEdge]]:
         nodes_t, edges_t = schema.topology_nodes, schema.topology_edges

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,13 +24,17 @@ ClientFactory = Callable[..., TestClient]
 
 @pytest.fixture
 def make_client(tmp_path: Path) -> Iterator[ClientFactory]:
-    """Build a TestClient over a store, as ``make_client(store, bus=..., expected_workers=...)``."""
+    """Build a TestClient over a store, as ``make_client(store, bus=..., expected_workers=...)``.
+
+    Other keyword arguments (``require_keys_for_reads``, ``rate_limit_per_s``, ...) go to :func:`create_app`.
+    """
     clients: list[TestClient] = []
 
     def build(map_store: MapStore, *, bus: Bus | None = None, expected_workers: Sequence[str] = (),
-              raise_server_exceptions: bool = True) -> TestClient:
+              raise_server_exceptions: bool = True, **options: Any) -> TestClient:
         settings = Settings(data_dir=tmp_path, database_url=map_store.url)
-        app = create_app(store=map_store, settings=settings, bus=bus, expected_workers=expected_workers)
+        app = create_app(store=map_store, settings=settings, bus=bus, expected_workers=expected_workers,
+                         **options)
         client = TestClient(app, raise_server_exceptions=raise_server_exceptions)
         clients.append(client)
         return client

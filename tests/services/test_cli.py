@@ -77,3 +77,17 @@ def test_decompose_writes_every_output(tmp_path: Path) -> None:
     for name in ("labels.png", "segments.png", "layout.geojson", "topology.json", "overview.png"):
         assert (tmp_path / "dec" / name).is_file()
     assert main(["decompose", str(tmp_path / "demo" / "world.geojson"), "--out", str(tmp_path / "bad")]) == 1
+
+
+def test_keys_are_created_listed_and_revoked(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["keys", "create", "--role", "read", "--name", "wms"]) == 0
+    key_id, _, secret = capsys.readouterr().out.strip().partition(": ")
+    key_id = key_id.split()[0]
+    assert secret.startswith("aisle_") and key_id in secret
+    assert main(["keys", "list"]) == 0
+    listed = capsys.readouterr().out
+    assert key_id in listed and "wms" in listed and secret not in listed
+    assert main(["keys", "revoke", key_id]) == 0
+    assert main(["keys", "list"]) == 0
+    assert key_id not in capsys.readouterr().out
+    assert main(["keys", "revoke", "000000000000"]) == 1

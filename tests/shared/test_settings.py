@@ -67,3 +67,11 @@ def test_aisle_run_starts_only_known_stages(monkeypatch: pytest.MonkeyPatch) -> 
     monkeypatch.setenv("AISLE_STAGES", '["occupancy_mapping", "teleportation"]')
     with pytest.raises(ValidationError, match="unknown stages"):
         Settings()
+
+
+def test_reads_need_a_key_once_the_api_leaves_loopback(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert Settings().reads_need_key is False
+    monkeypatch.setenv("AISLE_API_HOST", "0.0.0.0")
+    assert Settings().reads_need_key is True
+    monkeypatch.setenv("AISLE_API_REQUIRE_KEYS_FOR_READS", "false")
+    assert Settings().reads_need_key is False

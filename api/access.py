@@ -1,0 +1,134 @@
+"""Who may call the API: API keys with roles, per-caller rate limits and which requests need which role.
+
+Reads (GET, HEAD, OPTIONS) need a ``read`` key only when the app requires keys for reads;
+everything that changes anything needs ``write`` (or ``admin``); key management needs ``admin``.
+A key comes in ``X-API-Key: <secret>`` or ``Authorization: Bearer <secret>``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import math
+import threading
+from typing import NamedTuple
+
+from fastapi import HTTPException, status
+
+from api.ratelimit import TokenBucketLimiter
+from shared.store import MapStore
+from shared.store.keys import ApiKey, Role, get_key, parse_key_id, verify_key
+
+READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+OPEN_READ_PATHS = frozenset({"/v1/health"})
+"""Route paths read without a key even when keys are required for reads (load balancer probes)."""
+API_KEY_HEADER = "X-API-Key"
+CHALLENGE = {"WWW-Authenticate": f'Bearer, ApiKey header="{API_KEY_HEADER}"'}
+
+
+class Caller(NamedTuple):
+    """Who made a request: their verified key, or None for an anonymous caller."""
+
+    key: ApiKey | None
+    address: str
+
+
+def required_role(method: str, path: str, *, require_keys_for_reads: bool) -> Role | None:
+    """The least role a request needs by its method and route path; None when anyone may make it."""
+    if method.upper() not in READ_METHODS:
+        return Role.WRITE
+    if not require_keys_for_reads or path in OPEN_READ_PATHS:
+        return None
+    return Role.READ
+
+
+def check_role(caller: Caller, required: Role | None) -> None:
+    """Raise 401 without a key and 403 with a key whose role is below ``required``."""
+    if required is None:
+        return
+    if caller.key is None:
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            f"this request needs an API key with role {required.value!r} or above; send it as "
+            f"'{API_KEY_HEADER}: <secret>' or 'Authorization: Bearer <secret>'",
+            headers=CHALLENGE,
+        )
+    if not caller.key.role.covers(required):
+        raise HTTPException(
+            status.HTTP_403_FORBIDDEN,
+            f"API key {caller.key.key_id} ({caller.key.name!r}) has role {caller.key.role.value!r}; "
+            f"this request needs {required.value!r} or above",
+        )
+
+
+class AccessPolicy:
+    """The app's access rules and their state: the rate limiter and keys already verified.
+
+    Verifying a secret costs a scrypt hash (tens of milliseconds), so a verified secret's SHA-256
+    is remembered per key id; the key's row is still read on every request, so a revoked key
+    stops working at once. Hashing an unverified secret is charged to the caller's address, so
+    guessing keys is rate limited too.
+
+    Parameters
+    ----------
+    require_keys_for_reads : bool
+        Whether reads need a ``read`` key too (writes always need a ``write`` key).
+    rate_limit_per_s : float or None
+        Requests per second allowed per key (anonymous callers: per address); None: no limit.
+    rate_limit_burst : int
+        Requests allowed at once after a quiet spell.
+    """
+
+    def __init__(self, *, require_keys_for_reads: bool, rate_limit_per_s: float | None,
+                 rate_limit_burst: int) -> None:
+        self.require_keys_for_reads = require_keys_for_reads
+        self.limiter = (None if rate_limit_per_s is None
+                        else TokenBucketLimiter(rate_per_s=rate_limit_per_s, burst=rate_limit_burst))
+        self._verified: dict[str, bytes] = {}
+        self._lock = threading.Lock()
+
+    def charge(self, bucket: str) -> None:
+        """Take one request from ``bucket``; 429 with Retry-After when it is empty."""
+        if self.limiter is None:
+            return
+        wait_s = self.limiter.take(bucket)
+        if wait_s > 0:
+            raise HTTPException(
+                status.HTTP_429_TOO_MANY_REQUESTS,
+                f"rate limit of {self.limiter.rate_per_s:g} requests/s (burst {self.limiter.burst}) exceeded; "
+                f"retry in {wait_s:.2f} s",
+                headers={"Retry-After": str(max(1, math.ceil(wait_s)))},
+            )
+
+    def authenticate(self, store: MapStore, secret: str | None, *, address: str) -> Caller:
+        """The caller of a request carrying ``secret`` (None: no key), charged to its rate bucket.
+
+        Raises 401 for a malformed, unknown, revoked or wrong key and 429 over the rate limit.
+        The detail names the key id at most, never the secret.
+        """
+        if secret is None:
+            self.charge(f"address:{address}")
+            return Caller(None, address)
+        key_id = parse_key_id(secret)
+        if key_id is None:
+            self.charge(f"address:{address}")
+            raise HTTPException(status.HTTP_401_UNAUTHORIZED,
+                                "malformed API key; keys look like aisle_<12 hex>_<43 characters>",
+                                headers=CHALLENGE)
+        key = get_key(store, key_id=key_id)
+        if key is None or not key.active:
+            self.charge(f"address:{address}")
+            state = "unknown" if key is None else "revoked"
+            raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"API key {key_id} is {state}", headers=CHALLENGE)
+        digest = hashlib.sha256(secret.encode()).digest()
+        with self._lock:
+            known = self._verified.get(key_id)
+        if known is None or not hmac.compare_digest(known, digest):
+            self.charge(f"address:{address}")
+            if verify_key(store, secret=secret) is None:
+                raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"wrong secret for API key {key_id}",
+                                    headers=CHALLENGE)
+            with self._lock:
+                self._verified[key_id] = digest
+        self.charge(f"key:{key_id}")
+        return Caller(key, address)
