@@ -16,6 +16,8 @@ FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
 """map_saver's default thresholds: at or below FREE_PERCENT is free, at or above OCCUPIED_PERCENT occupied."""
 SEMANTIC_LABELS = "semantic_labels"
+LABEL_ENCODINGS = frozenset({SEMANTIC_LABELS, "place_labels"})
+"""Layer encodings (``meta['encoding']``) drawn as classes in colour with a legend."""
 """``meta["encoding"]`` of label layers: integer codes, ``meta["classes"][code]`` naming each and an optional
 ``meta["colours"][code]`` giving its ``[r, g, b]``; code 0 means "no label"."""
 DEFAULT_LABEL_COLOURS = (
@@ -83,12 +85,14 @@ def _scaled_grey(data: npt.NDArray[Any]) -> npt.NDArray[np.uint8]:
 
 
 def render_layer(data: npt.NDArray[Any], meta: Mapping[str, Any]) -> npt.NDArray[np.uint8]:
-    """The image shown for a layer: :func:`label_image` if ``meta`` says semantic labels, else :func:`layer_image`."""
-    if meta.get("encoding") != SEMANTIC_LABELS:
+    """The image shown for a layer: :func:`label_image` for label layers (semantic classes, place labels),
+    else :func:`layer_image`."""
+    encoding = meta.get("encoding")
+    if encoding not in LABEL_ENCODINGS:
         return layer_image(data)
     names = meta.get("classes")
     if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-        raise RenderError(f"a {SEMANTIC_LABELS} layer needs meta['classes'], a list of class names by code")
+        raise RenderError(f"a {encoding} layer needs meta['classes'], a list of class names by code")
     return label_image(data, class_names=names, colours=meta.get("colours"))
 
 

@@ -19,6 +19,7 @@ log = logging.getLogger(__name__)
 
 def stage_factories() -> dict[str, StageFactory]:
     """Every stage Aisle can run, by name (imported lazily: stages pull in heavy libraries)."""
+    from services.grid_decomposition.worker import decomposition_stage
     from services.object_labelling.worker import labelling_stage
     from services.occupancy_mapping.worker import OccupancyStage
     from services.pillar_mapping.worker import PillarStage
@@ -26,6 +27,7 @@ def stage_factories() -> dict[str, StageFactory]:
 
     factories: dict[str, StageFactory] = {
         "occupancy_mapping": OccupancyStage,
+        "grid_decomposition": decomposition_stage,
         "pillar_mapping": PillarStage,
         "object_labelling": labelling_stage,
         "semantic_fusion": fusion_stage,

@@ -19,7 +19,7 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
-STAGES = ("occupancy_mapping", "pillar_mapping", "object_labelling", "semantic_fusion")
+STAGES = ("occupancy_mapping", "grid_decomposition", "pillar_mapping", "object_labelling", "semantic_fusion")
 """Every stage worker Aisle has (``aisle worker STAGE``)."""
 
 
@@ -139,6 +139,31 @@ class LabellingSettings(BaseModel):
     frame_queue_size: int = Field(4, ge=1)
 
 
+class DecompositionSettings(BaseModel):
+    """The grid-decomposition stage: the occupancy layer into place labels, regions and topology."""
+
+    source_layer: str = Field("occupancy", min_length=1, description="The occupancy layer decomposed.")
+    label_layer: str = Field("place_labels", min_length=1)
+    segment_layer: str = Field("place_segments", min_length=1)
+    min_change_fraction: float = Field(
+        0.02, ge=0.0, le=1.0, description="How much of the map must change before it is decomposed again: the "
+        "share of known cells newly known or forgotten, or of obstacle cells that changed class, whichever is larger."
+    )
+    min_period_s: float = Field(10.0, ge=0.0, description="Least time between two decompositions.")
+    poll_period_s: float = Field(2.0, gt=0.0, description="How often the store is checked for new occupancy.")
+    neck_half_width_m: float = Field(
+        0.5, ge=0.0, description="Regions that fall apart when shrunk by this half-width are split; 0: off."
+    )
+    door_max_width_m: float = Field(1.3, ge=0.0, description="Widest gap between wall runs closed as a doorway.")
+
+    @model_validator(mode="after")
+    def _distinct_layers(self) -> DecompositionSettings:
+        if len({self.source_layer, self.label_layer, self.segment_layer}) < 3:
+            raise ValueError(f"source_layer, label_layer and segment_layer must differ, got "
+                             f"{self.source_layer!r}, {self.label_layer!r}, {self.segment_layer!r}")
+        return self
+
+
 class Settings(BaseSettings):
     """All Aisle settings; build once with :func:`get_settings` and pass it in."""
 
@@ -175,8 +200,9 @@ class Settings(BaseSettings):
     pillars: PillarSettings = Field(default_factory=PillarSettings)
     fusion: SemanticFusionSettings = Field(default_factory=SemanticFusionSettings)
     labelling: LabellingSettings = Field(default_factory=LabellingSettings)
+    decomposition: DecompositionSettings = Field(default_factory=DecompositionSettings)
     stages: list[str] = Field(
-        default_factory=lambda: ["occupancy_mapping", "pillar_mapping", "semantic_fusion"],
+        default_factory=lambda: ["occupancy_mapping", "grid_decomposition", "pillar_mapping", "semantic_fusion"],
         description="Stages `aisle run` starts; object_labelling needs a model from `aisle train-classifier` first.",
     )
 

@@ -1,5 +1,6 @@
 """Grid decomposition: dominant orientations, radiogram lines, cells, place labels and regions."""
 
+from services.grid_decomposition.change import changed_fraction, occupancy_classes
 from services.grid_decomposition.cogency import EdgeCogency, close_doorways, edge_cogency, wall_evidence
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.evaluation import IpaScores, ground_truth_rooms, ipa_scores
@@ -18,6 +19,15 @@ from services.grid_decomposition.overview import overview_image
 from services.grid_decomposition.pipeline import Decomposition, Resolution, decompose
 from services.grid_decomposition.places import cast_rays, categorize_places, raycast_features
 from services.grid_decomposition.radiogram import Line, Radiogram, line_offsets, radiogram
+from services.grid_decomposition.records import (
+    PLACE_LABELS,
+    PLACE_SEGMENTS,
+    REGION_KINDS,
+    decomposition_features,
+    decomposition_layers,
+    decomposition_topology,
+    region_key,
+)
 from services.grid_decomposition.regions import RegionInfo, face_regions, region_topology
 from services.grid_decomposition.semantics import (
     LABEL_TABLE,
@@ -33,6 +43,9 @@ from services.grid_decomposition.texture import gabor_features, segment_texture_
 
 __all__ = [
     "LABEL_TABLE",
+    "PLACE_LABELS",
+    "PLACE_SEGMENTS",
+    "REGION_KINDS",
     "Connection",
     "Decomposition",
     "DecompositionError",
@@ -53,9 +66,13 @@ __all__ = [
     "assign_labels",
     "cast_rays",
     "categorize_places",
+    "changed_fraction",
     "close_doorways",
     "decompose",
     "decompose_map_file",
+    "decomposition_features",
+    "decomposition_layers",
+    "decomposition_topology",
     "dominant_orientations",
     "edge_cogency",
     "evidence_labels",
@@ -69,6 +86,7 @@ __all__ = [
     "line_offsets",
     "link_connection",
     "match_templates",
+    "occupancy_classes",
     "oriented_gradients",
     "overview_image",
     "parse_label",
@@ -76,6 +94,7 @@ __all__ = [
     "radiogram",
     "raycast_features",
     "read_map_file",
+    "region_key",
     "region_topology",
     "segment_texture_regions",
     "split_at_necks",

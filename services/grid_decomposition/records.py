@@ -1,0 +1,149 @@
+"""A decomposition as map-store records: label and segment layers, features, topology."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.mapfile import layout_features
+from services.grid_decomposition.overview import LABEL_COLOURS
+from services.grid_decomposition.pipeline import Decomposition
+from services.grid_decomposition.semantics import Label
+from shared.store import Feature, GridLayer, TopologyEdge, TopologyNode
+
+PLACE_LABELS = "place_labels"
+"""``meta["encoding"]`` of the label layer: uint8 :class:`Label` codes, ``meta["classes"][code]`` names each."""
+PLACE_SEGMENTS = "place_segments"
+"""``meta["encoding"]`` of the segment layer: uint16 region ids, 0 where no region."""
+
+REGION_KINDS: dict[Label, str] = {
+    Label.NONE: "region",
+    Label.CORRIDOR: "corridor",
+    Label.JUNCTION: "junction",
+    Label.STORAGE: "region",
+    Label.ROOM: "room",
+    Label.OPEN_AREA: "open_area",
+    Label.UNIDENTIFIED: "region",
+}
+"""Store feature kind of a region of each label; labels without a kind of their own are ``region``
+features whose ``label`` property names them (``storage``, ``unidentified``)."""
+
+FEATURE_KINDS = ("corridor", "junction", "line", "open_area", "region", "room", "wall")
+"""Every kind :func:`decomposition_features` returns (each key is always present)."""
+
+
+def region_key(region_id: int) -> str:
+    """Key of a region's feature and topology node."""
+    return f"r{region_id}"
+
+
+def decomposition_layers(
+    decomposition: Decomposition,
+    *,
+    label_layer: str = "place_labels",
+    segment_layer: str = "place_segments",
+    meta: Mapping[str, Any] | None = None,
+) -> list[GridLayer]:
+    """The label layer (uint8 :class:`Label` codes) and the segment layer (uint16 region ids).
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+        Its grids are in GridLayer order (row 0 = lowest y); the layers take its resolution and
+        origin.
+    label_layer, segment_layer : str
+        Layer names.
+    meta : mapping, optional
+        Added to both layers' meta (e.g. the source revision).
+
+    Returns
+    -------
+    [GridLayer, GridLayer]
+        Labels with meta ``{"encoding": "place_labels", "classes": [...], "colours": [...]}``,
+        segments with meta ``{"encoding": "place_segments", "regions": n}``.
+
+    Raises
+    ------
+    DecompositionError
+        More regions than a uint16 holds.
+    """
+    segments = decomposition.segments
+    if segments.max(initial=0) > np.iinfo(np.uint16).max:
+        raise DecompositionError(f"{segments.max()} regions do not fit a uint16 segment layer")
+    extra = dict(meta or {})
+    res, (ox, oy) = decomposition.resolution_m, decomposition.origin_xy_m
+    labels = GridLayer(label_layer, decomposition.labels.astype(np.uint8), res, ox, oy, {
+        "encoding": PLACE_LABELS,
+        "classes": [label.name.lower() for label in Label],
+        "colours": [list(LABEL_COLOURS[label]) for label in Label],
+        **extra,
+    })
+    segs = GridLayer(segment_layer, segments.astype(np.uint16), res, ox, oy,
+                     {"encoding": PLACE_SEGMENTS, "regions": len(decomposition.regions), **extra})
+    return [labels, segs]
+
+
+def decomposition_features(decomposition: Decomposition) -> dict[str, list[Feature]]:
+    """Regions, walls and decomposition lines as store features, geometry in map metres.
+
+    The geometry is that of ``layout.geojson`` (:func:`layout_features`). Regions become
+    ``corridor``, ``junction``, ``room`` or ``open_area`` features, storage (pallet cells) and
+    unidentified regions ``region`` features; every region has properties ``label``, ``region_id``,
+    ``category`` and ``area_m2``, and the key of its topology node (:func:`region_key`). Cogent edges
+    are ``wall`` features with ``label`` ``wall`` or ``door`` (a closed doorway); the lines that cut
+    the map are ``line`` features (``label`` ``coarse`` or ``fine``).
+
+    Returns
+    -------
+    dict
+        Every kind of :data:`FEATURE_KINDS`, each with its complete (possibly empty) list.
+    """
+    out: dict[str, list[Feature]] = {kind: [] for kind in FEATURE_KINDS}
+    for item in layout_features(decomposition)["features"]:
+        props = item["properties"]
+        kind, ident = props["kind"], int(props["id"])
+        if kind == "region":
+            label = Label[props["label"].upper()]
+            out[REGION_KINDS[label]].append(Feature(REGION_KINDS[label], region_key(ident), item["geometry"], {
+                "label": props["label"],
+                "region_id": ident,
+                "category": int(props["category"]),
+                "area_m2": float(props["area_m2"]),
+            }))
+        elif kind == "wall":
+            out["wall"].append(Feature("wall", f"e{ident}", item["geometry"], {"label": props["label"]}))
+        else:
+            out["line"].append(Feature("line", f"l{ident}", item["geometry"], {
+                "label": props["label"],
+                "texture_region": int(props["category"]),
+                "angle_rad": float(props["angle_rad"]),
+                "support_m": float(props["support_m"]),
+            }))
+    return out
+
+
+def decomposition_topology(decomposition: Decomposition) -> tuple[list[TopologyNode], list[TopologyEdge]]:
+    """The region graph as store topology.
+
+    Nodes are keyed :func:`region_key` (as the region features), kind = the region's label
+    (``corridor``, ``storage``...), at the region's centroid (map metres; for a concave region it
+    may lie outside it); attributes ``feature_kind``, ``category`` and ``area_m2``. Edges carry
+    ``connection`` (connected, storage_access, door or disconnected).
+    """
+    graph = decomposition.topology
+    nodes = [
+        TopologyNode(region_key(int(n)), data["label"], float(data["x"]), float(data["y"]), {
+            "feature_kind": REGION_KINDS[Label[data["label"].upper()]],
+            "category": int(data["category"]),
+            "area_m2": float(data["area_m2"]),
+        })
+        for n, data in sorted(graph.nodes(data=True))
+    ]
+    edges = [
+        TopologyEdge(region_key(int(a)), region_key(int(b)), {"connection": str(conn)})
+        for a, b, conn in sorted(graph.edges(data="connection"))
+    ]
+    return nodes, edges

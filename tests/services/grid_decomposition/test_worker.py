@@ -1,0 +1,175 @@
+"""The grid-decomposition stage as deployed: occupancy revisions in a real SQLite store, a real zenoh bus."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.grid_decomposition import DecompositionError
+from services.grid_decomposition.worker import DecompositionStage, decomposition_stage
+from shared.settings import Settings, ZenohSettings
+from shared.store import GridLayer, MapStore, Revision, RevisionWrite
+from shared.worker import StageContext
+from tests import stages
+from tests.helpers import wait_for
+from tests.services.grid_decomposition.warehouse import synthetic_warehouse
+
+STAGE = "grid_decomposition"
+RES_M = 0.1
+ORIGIN_XY_M = (-3.0, 2.0)
+REGION_KINDS = ("corridor", "junction", "room", "open_area", "region")
+CONNECTIONS = {"connected", "storage_access", "door", "disconnected"}
+TIMEOUT_S = 30.0
+
+
+class _Stages:
+    """A factory of quickly polling stages that keeps the one it built last, to read its counters."""
+
+    def __init__(self, **options: float) -> None:
+        self.options = {"min_period_s": 0.0, "poll_period_s": 0.05} | options
+        self.built: list[DecompositionStage] = []
+
+    def __call__(self, context: StageContext) -> DecompositionStage:
+        self.built.append(DecompositionStage(context, **self.options))  # type: ignore[arg-type]
+        return self.built[-1]
+
+    def count(self, what: str) -> int:
+        return self.built[-1].context.counters.get(f"{STAGE}.{what}") if self.built else 0
+
+
+@pytest.fixture
+def store(tmp_path: Path) -> Iterator[MapStore]:
+    map_store = MapStore(f"sqlite:///{tmp_path / 'aisle.db'}")
+    map_store.upgrade()
+    yield map_store
+    map_store.close()
+
+
+@pytest.fixture
+def settings(store: MapStore, zenoh_listen: ZenohSettings) -> Settings:
+    return Settings(database_url=store.url, zenoh=zenoh_listen)
+
+
+def _write_occupancy(store: MapStore, settings: Settings, occupancy: np.ndarray) -> Revision:
+    map_id = store.ensure_map(settings.map_name).id
+    layer = GridLayer("occupancy", occupancy.astype(np.int8), RES_M, *ORIGIN_XY_M)
+    return store.write_revision(map_id, RevisionWrite("occupancy_mapping", layers=[layer]))
+
+
+def _decompositions(store: MapStore, settings: Settings) -> list[Revision]:
+    map_id = store.ensure_map(settings.map_name).id
+    return [r for r in store.revisions(map_id, limit=1000) if r.stage == STAGE]
+
+
+def _wait_decompositions(store: MapStore, settings: Settings, n: int) -> Revision:
+    wait_for(lambda: len(_decompositions(store, settings)) >= n, timeout_s=TIMEOUT_S,
+             what=f"decomposition revision {n}")
+    return _decompositions(store, settings)[n - 1]
+
+
+def _add_obstacles(occupancy: np.ndarray, fraction: float, seed: int) -> np.ndarray:
+    """A copy with free cells turned occupied, as many as ``fraction`` of its obstacle cells."""
+    rng = np.random.default_rng(seed)
+    out = occupancy.copy()
+    free = np.flatnonzero(out.ravel() == 0)
+    n = math.ceil(fraction * np.count_nonzero(out > 0))
+    out.ravel()[rng.choice(free, size=n, replace=False)] = 100
+    return out
+
+
+def test_worker_decomposes_an_occupancy_revision_into_places_on_free_space(
+        store: MapStore, settings: Settings) -> None:
+    house = synthetic_warehouse(0, resolution_m=RES_M)
+    with stages.running_stage(STAGE, _Stages(), settings, store):
+        source = _write_occupancy(store, settings, house.occupancy)
+        revision = _wait_decompositions(store, settings, 1)
+    map_id = store.ensure_map(settings.map_name).id
+    assert revision.summary["source_revision"] == source.id
+    assert set(revision.summary["layers_updated"]) == {"place_labels", "place_segments"}
+    labels = store.layer(map_id, "place_labels")
+    assert labels is not None and labels.revision_id == revision.id
+    assert labels.layer.data.shape == house.occupancy.shape
+    assert (labels.layer.origin_x_m, labels.layer.origin_y_m) == ORIGIN_XY_M
+    assert labels.layer.meta["encoding"] == "place_labels"
+
+    features = [s.feature for s in store.features(map_id) if s.stage == STAGE]
+    kinds = {f.kind for f in features}
+    assert {"corridor", "junction", "region"} <= kinds
+    assert "storage" in {f.properties["label"] for f in features if f.kind == "region"}
+    free = (house.occupancy >= 0) & (house.occupancy < 25)
+    for feature in features:
+        if feature.kind not in REGION_KINDS:
+            continue
+        xy = np.array([p for poly in feature.geometry["coordinates"] for ring in poly for p in ring])
+        rows = np.floor((xy[:, 1] - ORIGIN_XY_M[1]) / RES_M).astype(int)
+        cols = np.floor((xy[:, 0] - ORIGIN_XY_M[0]) / RES_M).astype(int)
+        assert np.all((rows >= 0) & (rows < free.shape[0]) & (cols >= 0) & (cols < free.shape[1]))
+        assert np.all(free[rows, cols]), f"{feature.kind} {feature.key} has a vertex off free space"
+
+    nodes, edges = store.topology(map_id)
+    region_keys = {f.key for f in features if f.kind in REGION_KINDS}
+    assert {n.key for n in nodes} == region_keys
+    assert edges and {e.attributes["connection"] for e in edges} <= CONNECTIONS
+
+
+def test_worker_skips_a_small_change_and_takes_a_large_one(store: MapStore, settings: Settings) -> None:
+    house = synthetic_warehouse(1, resolution_m=RES_M)
+    factory = _Stages(min_change_fraction=0.02)
+    with stages.running_stage(STAGE, factory, settings, store):
+        _write_occupancy(store, settings, house.occupancy)
+        _wait_decompositions(store, settings, 1)
+        small = _add_obstacles(house.occupancy, 0.005, seed=1)
+        _write_occupancy(store, settings, small)
+        wait_for(lambda: factory.count("small_changes_skipped") == 1, timeout_s=TIMEOUT_S,
+                 what="the small change to be seen and skipped")
+        assert len(_decompositions(store, settings)) == 1
+        large = _add_obstacles(small, 0.1, seed=2)
+        source = _write_occupancy(store, settings, large)
+        revision = _wait_decompositions(store, settings, 2)
+        assert revision.summary["source_revision"] == source.id
+        assert factory.count("decompositions") == 2
+
+
+def test_worker_counts_an_unknown_grid_and_carries_on(store: MapStore, settings: Settings) -> None:
+    house = synthetic_warehouse(2, resolution_m=RES_M)
+    factory = _Stages()
+    with stages.running_stage(STAGE, factory, settings, store) as bus:
+        _write_occupancy(store, settings, np.full((40, 60), -1, dtype=np.int8))
+        wait_for(lambda: factory.count("decomposition_errors") == 1, timeout_s=TIMEOUT_S,
+                 what="the unknown grid to be counted")
+        source = _write_occupancy(store, settings, house.occupancy)
+        revision = _wait_decompositions(store, settings, 1)
+        assert revision.summary["source_revision"] == source.id
+        assert bus.alive_workers() == [STAGE]
+        assert factory.count("crashes") == 0
+        assert len(factory.built) == 1
+
+
+def test_restarted_worker_does_not_decompose_the_same_grid_again(store: MapStore, settings: Settings) -> None:
+    house = synthetic_warehouse(0, resolution_m=RES_M)
+    with stages.running_stage(STAGE, _Stages(), settings, store):
+        _write_occupancy(store, settings, house.occupancy)
+        _wait_decompositions(store, settings, 1)
+    factory = _Stages(min_change_fraction=0.02)
+    with stages.running_stage(STAGE, factory, settings, store):
+        _write_occupancy(store, settings, _add_obstacles(house.occupancy, 0.005, seed=3))
+        wait_for(lambda: factory.count("small_changes_skipped") == 1, timeout_s=TIMEOUT_S,
+                 what="the small change to be measured against the resumed grid")
+    assert len(_decompositions(store, settings)) == 1
+
+
+def test_stage_factory_starts_the_worker(store: MapStore, settings: Settings) -> None:
+    with stages.running_stage(STAGE, decomposition_stage, settings, store):
+        pass
+
+
+@pytest.mark.parametrize("options", [{"min_change_fraction": 1.5}, {"poll_period_s": 0.0},
+                                     {"source_layer": "place_labels"}, {"neck_half_width_m": -1.0}])
+def test_stage_rejects_nonsense_options(store: MapStore, settings: Settings, options: dict[str, object]) -> None:
+    context = StageContext(STAGE, None, store, settings, store.ensure_map(settings.map_name), None)  # type: ignore[arg-type]
+    with pytest.raises(DecompositionError):
+        DecompositionStage(context, **options)  # type: ignore[arg-type]
