@@ -88,13 +88,7 @@ class LayerOut(BaseModel):
     meta: dict[str, Any]
 
 
-class LayerValuesOut(BaseModel):
-    name: str
-    revision_id: int
-    dtype: str
-    shape: tuple[int, int]
-    resolution_m: float
-    origin: Origin
+class LayerValuesOut(LayerOut):
     data: list[list[Any]] = Field(description="data[row][col], row 0 the lowest y; non-finite as null.")
 
 

@@ -143,16 +143,7 @@ def layer_values(
             f"layer {layer.name!r} has {layer.data.size} cells, more than {MAX_JSON_CELLS} allowed as JSON; "
             "use ?format=npy",
         )
-    rows, cols = layer.data.shape
-    return LayerValuesOut(
-        name=layer.name,
-        revision_id=stored.revision_id,
-        dtype=layer.data.dtype.name,
-        shape=(rows, cols),
-        resolution_m=layer.resolution_m,
-        origin=Origin(x_m=layer.origin_x_m, y_m=layer.origin_y_m),
-        data=_json_values(layer.data),
-    )
+    return LayerValuesOut(**layer_out(stored).model_dump(), data=_json_values(layer.data))
 
 
 def _json_values(data: npt.NDArray[Any]) -> list[list[Any]]:
