@@ -12,6 +12,7 @@ from shared.store.records import (
     StoreError,
     TopologyEdge,
     TopologyNode,
+    WmsBin,
     WorkerInfo,
 )
 from shared.store.store import MapStore, StoreUnavailableError
@@ -30,5 +31,6 @@ __all__ = [
     "StoredLayer",
     "TopologyEdge",
     "TopologyNode",
+    "WmsBin",
     "WorkerInfo",
 ]

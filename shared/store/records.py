@@ -96,6 +96,27 @@ class TopologyEdge:
 
 
 @dataclass(frozen=True, slots=True)
+class WmsBin:
+    """A bin as the Warehouse Management System numbers it; position (map metres) and level when it knows them."""
+
+    wms_id: str
+    x_m: float | None = None
+    y_m: float | None = None
+    aisle: int | None = None
+    bay: int | None = None
+    level: int | None = None
+    properties: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.wms_id or len(self.wms_id) > 128:
+            raise StoreError(f"WMS bin id {self.wms_id!r} must be 1 to 128 characters")
+        if (self.x_m is None) != (self.y_m is None):
+            raise StoreError(f"WMS bin {self.wms_id!r}: give both x_m and y_m or neither")
+        if self.x_m is not None and self.y_m is not None and not (np.isfinite(self.x_m) and np.isfinite(self.y_m)):
+            raise StoreError(f"WMS bin {self.wms_id!r}: position must be finite")
+
+
+@dataclass(frozen=True, slots=True)
 class RevisionWrite:
     """Everything one stage writes at once; it lands whole or not at all.
 

@@ -104,6 +104,25 @@ topology_edges = sa.Table(
     sa.Index("ix_topology_edges_live", "map_id", "retired_revision_id"),
 )
 
+wms_bins = sa.Table(
+    "wms_bins",
+    metadata,
+    sa.Column("id", sa.Integer, primary_key=True),
+    sa.Column("map_id", sa.Integer, sa.ForeignKey("maps.id", ondelete="CASCADE"), nullable=False),
+    sa.Column("revision_id", sa.Integer, sa.ForeignKey("revisions.id", ondelete="CASCADE"), nullable=False),
+    sa.Column("retired_revision_id", sa.Integer, nullable=True),
+    sa.Column("wms_id", sa.String(128), nullable=False),
+    sa.Column("x_m", sa.Float, nullable=True),
+    sa.Column("y_m", sa.Float, nullable=True),
+    sa.Column("aisle", sa.Integer, nullable=True),
+    sa.Column("bay", sa.Integer, nullable=True),
+    sa.Column("level", sa.Integer, nullable=True),
+    sa.Column("properties", sa.JSON, nullable=False),
+    sa.Index("ix_wms_bins_live", "map_id", "retired_revision_id"),
+    sa.Index("ix_wms_bins_id", "map_id", "wms_id"),
+)
+"""The WMS's own bin list as last imported (versioned by revision like features); positions optional."""
+
 workers = sa.Table(
     "workers",
     metadata,

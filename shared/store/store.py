@@ -11,7 +11,7 @@ import datetime as dt
 import os
 import socket
 import zlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,7 @@ from shared.store.records import (
     StoreError,
     TopologyEdge,
     TopologyNode,
+    WmsBin,
     WorkerInfo,
     bounds,
 )
@@ -169,9 +170,16 @@ class MapStore:
         with self._read() as connection:
             return [self._revision(r) for r in connection.execute(query)]
 
-    def latest_revision(self, map_id: int) -> Revision | None:
+    def latest_revision(self, map_id: int, *, stage: str | None = None, at_or_before: int | None = None
+                        ) -> Revision | None:
+        """The map's newest revision (of ``stage``, not after revision ``at_or_before``, if given), or None."""
         table = schema.revisions
-        query = sa.select(table).where(table.c.map_id == map_id).order_by(table.c.id.desc()).limit(1)
+        query = sa.select(table).where(table.c.map_id == map_id)
+        if stage is not None:
+            query = query.where(table.c.stage == stage)
+        if at_or_before is not None:
+            query = query.where(table.c.id <= at_or_before)
+        query = query.order_by(table.c.id.desc()).limit(1)
         with self._read() as connection:
             row = connection.execute(query).first()
         return None if row is None else self._revision(row)
@@ -273,6 +281,17 @@ class MapStore:
                 sa.select(table.c.name).where(table.c.map_id == map_id).distinct().order_by(table.c.name)
             ).scalars())
 
+    def layer_revision(self, map_id: int, name: str, *, revision: int | None = None) -> int | None:
+        """The revision that wrote the newest version of layer ``name`` (at or before ``revision``), without
+        reading its data; None if there is none."""
+        table = schema.layers
+        query = sa.select(sa.func.max(table.c.revision_id)).where(table.c.map_id == map_id, table.c.name == name)
+        if revision is not None:
+            query = query.where(table.c.revision_id <= revision)
+        with self._read() as connection:
+            found = connection.execute(query).scalar_one_or_none()
+        return None if found is None else int(found)
+
     def layer(self, map_id: int, name: str, *, revision: int | None = None) -> StoredLayer | None:
         """The newest version of layer ``name`` (at or before ``revision`` if given)."""
         table = schema.layers
@@ -338,6 +357,45 @@ class MapStore:
                 sa.select(edges_t).where(edges_t.c.map_id == map_id, _live_at(edges_t, revision))
                 .order_by(edges_t.c.id))]
         return nodes, edges
+
+    # -- the WMS's bin list ---------------------------------------------------------------
+    def replace_wms_bins(self, map_id: int, items: Sequence[WmsBin], *, stage: str = "wms",
+                         summary: Mapping[str, Any] | None = None) -> Revision:
+        """Store ``items`` as the WMS's complete bin list, one new revision; the previous list is retired.
+
+        ``summary`` is added to the revision's summary (e.g. the matching tolerance the import asked for).
+        """
+        ids = [item.wms_id for item in items]
+        if len(set(ids)) != len(ids):
+            duplicates = sorted({i for i in ids if ids.count(i) > 1})[:10]
+            raise StoreError(f"WMS bin ids must be unique; repeated: {duplicates}")
+        table = schema.wms_bins
+        with self._begin() as connection:
+            created_at = _now()
+            previous = connection.execute(sa.select(sa.func.count()).select_from(table).where(
+                table.c.map_id == map_id, table.c.retired_revision_id.is_(None))).scalar_one()
+            summary = {**(summary or {}), "layers_updated": [], "features": {}, "topology_changed": False,
+                       "wms_bins": {"total": len(items), "previous": int(previous)}}
+            revision_id = connection.execute(
+                schema.revisions.insert().values(map_id=map_id, stage=stage, created_at=created_at, summary=summary)
+                .returning(schema.revisions.c.id)
+            ).scalar_one()
+            connection.execute(table.update().where(table.c.map_id == map_id, table.c.retired_revision_id.is_(None))
+                               .values(retired_revision_id=revision_id))
+            if items:
+                connection.execute(table.insert(), [
+                    {"map_id": map_id, "revision_id": revision_id, "wms_id": item.wms_id, "x_m": item.x_m,
+                     "y_m": item.y_m, "aisle": item.aisle, "bay": item.bay, "level": item.level,
+                     "properties": dict(item.properties)} for item in items])
+        return Revision(revision_id, map_id, stage, created_at, None, None, summary)
+
+    def wms_bins(self, map_id: int, *, revision: int | None = None) -> list[WmsBin]:
+        """The WMS bin list live at ``revision`` (default: now), in import order."""
+        table = schema.wms_bins
+        query = sa.select(table).where(table.c.map_id == map_id, _live_at(table, revision)).order_by(table.c.id)
+        with self._read() as connection:
+            return [WmsBin(r.wms_id, r.x_m, r.y_m, r.aisle, r.bay, r.level, r.properties)
+                    for r in connection.execute(query)]
 
     # -- workers --------------------------------------------------------------------------
     def heartbeat(self, name: str, counters: dict[str, int], *, started_at: dt.datetime) -> None:

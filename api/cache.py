@@ -1,0 +1,49 @@
+"""A small per-app cache of things derived from one revision of a map (decoded layers, bin indexes).
+
+Entries are keyed by what they were built from, including the revision, so a new revision makes new
+keys and old entries simply age out; nothing needs invalidating.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Hashable
+from typing import Any, TypeVar, cast
+
+from fastapi import Request
+
+T = TypeVar("T")
+
+
+class RevisionCache:
+    """A thread-safe LRU of at most ``size`` entries; ``get`` builds a missing entry outside the lock."""
+
+    def __init__(self, size: int = 16) -> None:
+        if size < 1:
+            raise ValueError(f"cache size must be at least 1, got {size}")
+        self.size = size
+        self._entries: OrderedDict[Hashable, Any] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, key: Hashable, build: Callable[[], T]) -> T:
+        with self._lock:
+            if key in self._entries:
+                self._entries.move_to_end(key)
+                return cast(T, self._entries[key])
+        value = build()
+        with self._lock:
+            self._entries[key] = value
+            self._entries.move_to_end(key)
+            while len(self._entries) > self.size:
+                self._entries.popitem(last=False)
+        return value
+
+
+def get_cache(request: Request) -> RevisionCache:
+    """The app's cache, made on first use."""
+    state = request.app.state
+    cache = getattr(state, "revision_cache", None)
+    if cache is None:
+        cache = state.revision_cache = RevisionCache()
+    return cast(RevisionCache, cache)

@@ -1,0 +1,115 @@
+"""The WMS's own bin numbering: import it, and see how it matches the bins Aisle detected."""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import Annotated
+
+from fastapi import APIRouter, Body, HTTPException, status
+from pydantic import BaseModel, Field, model_validator
+
+from api.binindex import WMS_STAGE, wms_matching
+from api.deps import MapDep, RevisionQuery, StoreDep
+from api.models import ErrorOut, Responses
+from api.routers.bins import BIN_ID_PATTERN
+from shared.store import WmsBin
+
+router = APIRouter(prefix="/v1/maps/{map_name}/wms-bins", tags=["bins"])
+
+MAX_WMS_BINS = 200_000
+_COORD = 100_000.0
+
+_ERRORS: Responses = {
+    status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map or revision, or no WMS list."},
+    status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut, "description": "Bad bin list or parameters."},
+}
+
+
+class WmsBinIn(BaseModel):
+    id: str = Field(pattern=BIN_ID_PATTERN, description="The WMS's id of the bin.", examples=["A-03-014"])
+    x_m: float | None = Field(None, ge=-_COORD, le=_COORD, description="Bin centre x in map metres, if known.")
+    y_m: float | None = Field(None, ge=-_COORD, le=_COORD, description="Bin centre y in map metres, if known.")
+    aisle: int | None = Field(None, ge=0, le=1_000_000)
+    bay: int | None = Field(None, ge=0, le=1_000_000)
+    level: int | None = Field(None, ge=0, le=1000, description="Shelf level, 0 = floor.")
+
+    @model_validator(mode="after")
+    def _both_or_neither(self) -> WmsBinIn:
+        if (self.x_m is None) != (self.y_m is None):
+            raise ValueError(f"bin {self.id!r}: give both x_m and y_m or neither")
+        return self
+
+
+class WmsImport(BaseModel):
+    bins: list[WmsBinIn] = Field(max_length=MAX_WMS_BINS, description="The WMS's complete bin list.")
+    tolerance_m: float = Field(0.5, gt=0.0, le=10.0, description="Largest distance between a WMS position and a "
+                               "detected bin centre that still matches, metres (about half a bay).")
+
+    model_config = {"json_schema_extra": {"examples": [{
+        "bins": [{"id": "A-03-014", "x_m": 41.2, "y_m": 17.6, "level": 0}, {"id": "03-015"}],
+        "tolerance_m": 0.5}]}}
+
+
+class MatchOut(BaseModel):
+    wms_id: str
+    detected_id: str = Field(description="Aisle's id of the matched bin.")
+    by: str = Field(description="`id` (same id on both sides) or `position`.")
+    distance_m: float | None = Field(description="WMS position to detected centre; null without a WMS position.")
+
+
+class ReconciliationOut(BaseModel):
+    wms_revision_id: int = Field(description="The revision that imported the WMS list.")
+    tolerance_m: float
+    matched: list[MatchOut]
+    missing_in_map: list[str] = Field(description="WMS bin ids with no detected bin (not yet mapped, or gone).")
+    unknown_to_wms: list[str] = Field(description="Detected bin ids the WMS list lacks.")
+    counts: dict[str, int] = Field(description="Sizes of the three lists.")
+
+
+def _reconciliation(store: StoreDep, map_id: int, map_name: str, revision: int | None) -> ReconciliationOut:
+    matching = wms_matching(store, map_id, revision)
+    if matching is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND,
+                            f"map {map_name!r} has no WMS bin list; import one with PUT /v1/maps/{map_name}/wms-bins")
+    result = matching.reconciliation
+    return ReconciliationOut(
+        wms_revision_id=matching.revision_id,
+        tolerance_m=matching.tolerance_m,
+        matched=[MatchOut(wms_id=m.wms_id, detected_id=m.detected_id, by=m.by, distance_m=m.distance_m)
+                 for m in result.matched],
+        missing_in_map=result.missing_in_map,
+        unknown_to_wms=result.unknown_to_wms,
+        counts={"matched": len(result.matched), "missing_in_map": len(result.missing_in_map),
+                "unknown_to_wms": len(result.unknown_to_wms)},
+    )
+
+
+@router.put("", summary="Import the WMS's bin list", responses=_ERRORS)
+def import_wms_bins(map_info: MapDep, store: StoreDep, body: Annotated[WmsImport, Body()]) -> ReconciliationOut:
+    """Replace the map's WMS bin list with ``bins`` (one new revision) and return how it matches the detected bins.
+
+    Bins are matched by equal id first, then by position (nearest detected bin within ``tolerance_m``, same
+    level when both know it). Matched bins are then served under the WMS's id, so a site keeps its numbering.
+    Needs a `write` key.
+    """
+    repeated = sorted(i for i, n in Counter(item.id for item in body.bins).items() if n > 1)
+    if repeated:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
+                            f"WMS bin ids must be unique; repeated: {repeated[:10]}")
+    items = [WmsBin(b.id, b.x_m, b.y_m, b.aisle, b.bay, b.level) for b in body.bins]
+    written = store.replace_wms_bins(map_info.id, items, stage=WMS_STAGE, summary={"tolerance_m": body.tolerance_m})
+    return _reconciliation(store, map_info.id, map_info.name, written.id)
+
+
+@router.get("/reconciliation", summary="WMS bins against detected bins", responses=_ERRORS)
+def get_reconciliation(map_info: MapDep, store: StoreDep, revision: RevisionQuery) -> ReconciliationOut:
+    """Which WMS bins are matched to detected bins, which are missing in the map and which detected bins the WMS
+    does not know, as of ``?revision=``."""
+    return _reconciliation(store, map_info.id, map_info.name, revision)
+
+
+@router.get("", summary="The imported WMS bin list", responses=_ERRORS)
+def list_wms_bins(map_info: MapDep, store: StoreDep, revision: RevisionQuery) -> list[WmsBinIn]:
+    """The WMS bin list as last imported (as of ``?revision=``); empty if none was."""
+    return [WmsBinIn(id=b.wms_id, x_m=b.x_m, y_m=b.y_m, aisle=b.aisle, bay=b.bay, level=b.level)
+            for b in store.wms_bins(map_info.id, revision=revision)]

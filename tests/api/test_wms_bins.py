@@ -1,0 +1,118 @@
+"""Importing the WMS's own bin ids and serving matched bins under them."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from api.reconcile import DetectedBin, reconcile
+from services.pillar_mapping import fit_layout
+from services.pillar_mapping.layout import layout_features
+from services.pillar_mapping.synthetic import noisy_landmarks, rack_region
+from shared.store import Feature, MapStore, RevisionWrite, WmsBin
+from shared.store.keys import Role, create_key
+
+URL = "/v1/maps/hall"
+
+
+@pytest.fixture(scope="module")
+def detected() -> list[Feature]:
+    """Bins of one fit of a hall (3 aisles x 10 bays), as the pillar stage writes them."""
+    hall = rack_region(aisles=3, bays=10)
+    return layout_features(fit_layout(noisy_landmarks(hall, np.random.default_rng(0))[0]))["bin"]
+
+
+@pytest.fixture
+def hall(store: MapStore, detected: list[Feature]) -> int:
+    map_id = store.ensure_map("hall").id
+    return store.write_revision(map_id, RevisionWrite("pillar_mapping", features={"bin": detected})).id
+
+
+@pytest.fixture
+def writer(store: MapStore) -> dict[str, str]:
+    return {"X-API-Key": create_key(store, role=Role.WRITE, name="operator")[1]}
+
+
+def _site_numbering(detected: list[Feature], rng: np.random.Generator) -> list[dict[str, Any]]:
+    """The WMS's list: its own ids ("A-<aisle>-<bay>") at surveyed positions 15 cm off, with the first three
+    detected bins missing from it and two bins the map has not got."""
+    out = []
+    for item in detected[3:]:
+        x, y = item.properties["centre"]
+        dx, dy = rng.normal(0.0, 0.1, 2)
+        out.append({"id": f"A-{item.key}", "x_m": x + dx, "y_m": y + dy})
+    out += [{"id": "A-99-001", "x_m": 500.0, "y_m": 500.0}, {"id": "A-99-002"}]
+    return out
+
+
+def test_import_matches_by_position_and_bins_keep_the_site_numbering(
+    client: TestClient, hall: int, detected: list[Feature], writer: dict[str, str]
+) -> None:
+    wms = _site_numbering(detected, np.random.default_rng(1))
+
+    result = client.put(f"{URL}/wms-bins", json={"bins": wms, "tolerance_m": 0.6}, headers=writer)
+
+    assert result.status_code == 200, result.text
+    body = result.json()
+    assert {(m["wms_id"], m["detected_id"]) for m in body["matched"]} == {(f"A-{f.key}", f.key) for f in detected[3:]}
+    assert body["missing_in_map"] == ["A-99-001", "A-99-002"]
+    assert body["unknown_to_wms"] == sorted(f.key for f in detected[:3])
+    one = detected[5]
+    by_wms = client.get(f"{URL}/bins/A-{one.key}").json()
+    assert by_wms["detected_id"] == one.key and by_wms["status"] == "matched" and by_wms["id"] == f"A-{one.key}"
+    assert client.get(f"{URL}/bins/{one.key}").json() == by_wms
+    listed = client.get(f"{URL}/bins", params={"status": "unknown_to_wms"}).json()
+    assert sorted(b["id"] for b in listed["bins"]) == sorted(f.key for f in detected[:3])
+    assert client.get(f"{URL}/bins", params={"id_prefix": "A-"}).json()["total"] == len(detected) - 3
+
+
+def test_reconciliation_follows_the_revisions(client: TestClient, store: MapStore, hall: int,
+                                              detected: list[Feature], writer: dict[str, str]) -> None:
+    first = client.put(f"{URL}/wms-bins", json={"bins": [{"id": detected[0].key}]}, headers=writer).json()
+    client.put(f"{URL}/wms-bins", json={"bins": [{"id": detected[1].key}]}, headers=writer)
+
+    then = client.get(f"{URL}/wms-bins/reconciliation", params={"revision": first["wms_revision_id"]}).json()
+    now = client.get(f"{URL}/wms-bins/reconciliation").json()
+
+    assert [m["detected_id"] for m in then["matched"]] == [detected[0].key]
+    assert [m["detected_id"] for m in now["matched"]] == [detected[1].key] and now["matched"][0]["by"] == "id"
+    assert [b["id"] for b in client.get(f"{URL}/wms-bins").json()] == [detected[1].key]
+
+
+@pytest.mark.parametrize("body", [
+    {"bins": [{"id": "A"}, {"id": "A"}]},
+    {"bins": [{"id": "A", "x_m": 1.0}]},
+    {"bins": [{"id": "A", "x_m": "nan", "y_m": 1.0}]},
+    {"bins": [{"id": "'; DROP TABLE wms_bins; --"}]},
+    {"bins": [], "tolerance_m": -1},
+    {"bins": "all"},
+])
+def test_bad_imports_are_refused_and_change_nothing(client: TestClient, store: MapStore, hall: int,
+                                                   writer: dict[str, str], body: dict[str, Any]) -> None:
+    client.put(f"{URL}/wms-bins", json={"bins": [{"id": "KEEP"}]}, headers=writer)
+
+    response = client.put(f"{URL}/wms-bins", json=body, headers=writer)
+
+    assert response.status_code == 422 and response.json()["detail"]
+    assert [b.wms_id for b in store.wms_bins(store.ensure_map("hall").id)] == ["KEEP"]
+
+
+def test_import_needs_a_write_key(client: TestClient, store: MapStore, hall: int) -> None:
+    reader = {"X-API-Key": create_key(store, role=Role.READ, name="wms")[1]}
+
+    assert client.put(f"{URL}/wms-bins", json={"bins": []}).status_code == 401
+    assert client.put(f"{URL}/wms-bins", json={"bins": []}, headers=reader).status_code == 403
+    assert client.get(f"{URL}/wms-bins/reconciliation").status_code == 404
+
+
+def test_matching_takes_closest_pairs_first_and_respects_levels() -> None:
+    detected = [DetectedBin("a", 0.0, 0.0, 0), DetectedBin("b", 1.0, 0.0, 0), DetectedBin("c", 1.0, 0.0, 1)]
+    wms = [WmsBin("W1", 0.45, 0.0, level=0), WmsBin("W2", 0.6, 0.0, level=0), WmsBin("W3", 1.1, 0.0, level=1)]
+
+    result = reconcile(wms, detected, tolerance_m=0.5)
+
+    assert {(m.wms_id, m.detected_id) for m in result.matched} == {("W1", "a"), ("W2", "b"), ("W3", "c")}
+    assert result.missing_in_map == [] and result.unknown_to_wms == []
