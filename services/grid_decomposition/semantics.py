@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from typing import NamedTuple
 
 from services.grid_decomposition.errors import DecompositionError
@@ -76,3 +77,30 @@ def link_connection(a: Label, b: Label, *, cogent: bool, door: bool) -> Connecti
     if Label.STORAGE in (a, b):
         return Connection.STORAGE_ACCESS
     return Connection.CONNECTED
+
+
+LABEL_TABLE_STAGE = "label_table"
+"""Stage name of the map-store revisions that record a person's label-table overrides; the grid
+decomposition worker re-labels the map from the newest one."""
+LABEL_OVERRIDES_KEY = "label_overrides"
+"""Summary key of those revisions: {category as a decimal string: label name}."""
+
+
+def parse_label_table(raw: Mapping[str, str]) -> dict[int, Label]:
+    """``{"0": "corridor", "3": "pallet cell"}`` (category -> label name, as stored) -> {0: CORRIDOR, 3: STORAGE}.
+
+    Raises
+    ------
+    DecompositionError
+        A category that is not a non-negative integer, or a label that is not a place label (``none`` is
+        not one a person can choose).
+    """
+    out: dict[int, Label] = {}
+    for key, value in raw.items():
+        if not (isinstance(key, str) and key.isdigit() and len(key) <= 6):
+            raise DecompositionError(f"category {key!r} must be a non-negative integer, e.g. '3'")
+        label = parse_label(str(value))
+        if label is Label.NONE:
+            raise DecompositionError(f"category {key}: 'none' marks occupied or unknown cells, not a place")
+        out[int(key)] = label
+    return out

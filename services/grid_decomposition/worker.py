@@ -18,6 +18,10 @@ junction, room, open_area, region (storage and unidentified, ``label`` property)
 the region graph (edges with ``connection``). Smaller changes accumulate against the last
 decomposed grid until they pass the threshold.
 
+A person's label table (category -> label, a revision of stage ``label_table`` that the API writes)
+is read on start and whenever a new one is committed; a new one re-decomposes the current grid at
+once with those overrides, whatever its change, so the map is re-labelled as a new revision.
+
 A grid the decomposition cannot use (no free cell, all unknown) is counted as
 ``decomposition_errors`` and logged; it becomes the reference all the same, so it is not retried
 until it changes enough. On start the source revision is read back from the stored label layer:
@@ -38,7 +42,8 @@ from services.grid_decomposition.records import (
     decomposition_layers,
     decomposition_topology,
 )
-from shared.store import GridLayer, RevisionWrite, StoredLayer, StoreUnavailableError
+from services.grid_decomposition.semantics import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE, Label, parse_label_table
+from shared.store import GridLayer, Revision, RevisionWrite, StoredLayer, StoreUnavailableError
 from shared.worker import StageContext
 
 log = logging.getLogger(__name__)
@@ -105,6 +110,8 @@ class DecompositionStage:
         self._checked_revision: int | None = None
         self._reference: GridLayer | None = None
         self._last_attempt = -float("inf")
+        self._overrides: dict[int, Label] = {}
+        self._relabel = False
 
     def run(self, stop: threading.Event) -> None:
         while True:
@@ -127,10 +134,11 @@ class DecompositionStage:
             return
         stored = self.context.store.layer(self.context.map.id, self.source_layer)
         self._pending = False
-        if stored is None or stored.revision_id == self._checked_revision:
+        relabel, self._relabel = self._relabel, False
+        if stored is None or (stored.revision_id == self._checked_revision and not relabel):
             return
         self._checked_revision = stored.revision_id
-        fraction = 1.0 if self._reference is None else changed_fraction(self._reference, stored.layer)
+        fraction = 1.0 if self._reference is None or relabel else changed_fraction(self._reference, stored.layer)
         if fraction < self.min_change_fraction:
             self.context.count("small_changes_skipped")
             log.debug("%s revision %d changed by %.4f, below %.4f: not decomposed", self.source_layer,
@@ -142,6 +150,9 @@ class DecompositionStage:
         """The newest revision id (watched after); the stored decomposition's source becomes the reference."""
         store, map_id = self.context.store, self.context.map.id
         latest = store.latest_revision(map_id)
+        table = store.latest_revision(map_id, stage=LABEL_TABLE_STAGE)
+        if table is not None:
+            self._take_label_table(table)
         labels = store.layer(map_id, self.layer_names[0])
         source = labels.layer.meta.get("source_revision") if labels is not None else None
         if isinstance(source, int):
@@ -161,8 +172,26 @@ class DecompositionStage:
                 return updated
             seen = self._seen_revision = page[-1].id
             updated |= any(self.source_layer in r.summary.get("layers_updated", ()) for r in page)
+            tables = [r for r in page if r.stage == LABEL_TABLE_STAGE]
+            if tables and self._take_label_table(tables[-1]):
+                self._relabel = updated = True
             if len(page) < _PAGE:
                 return updated
+
+    def _take_label_table(self, revision: Revision) -> bool:
+        """Adopt the overrides of a label-table revision; whether they differ from the current ones."""
+        raw = revision.summary.get(LABEL_OVERRIDES_KEY, {})
+        try:
+            overrides = parse_label_table(raw if isinstance(raw, dict) else {})
+        except DecompositionError as err:
+            self.context.count("bad_label_tables")
+            log.warning("label table of revision %d ignored: %s", revision.id, err)
+            return False
+        changed = overrides != self._overrides
+        self._overrides = overrides
+        log.info("label table of revision %d: %s", revision.id,
+                 {c: label.name.lower() for c, label in sorted(overrides.items())} or "automatic")
+        return changed
 
     # -- decomposing ------------------------------------------------------------------------------
 
@@ -173,7 +202,8 @@ class DecompositionStage:
         try:
             result = decompose(layer.data, resolution_m=layer.resolution_m,
                                origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
-                               neck_half_width_m=self.neck_half_width_m, door_max_width_m=self.door_max_width_m)
+                               neck_half_width_m=self.neck_half_width_m, door_max_width_m=self.door_max_width_m,
+                               label_overrides=self._overrides or None)
             source = {"source_layer": self.source_layer, "source_revision": stored.revision_id}
             layers = decomposition_layers(result, label_layer=self.layer_names[0],
                                           segment_layer=self.layer_names[1], meta=source)
@@ -190,7 +220,8 @@ class DecompositionStage:
             layers=layers,
             features=features,
             topology=decomposition_topology(result),
-            summary={**source, "regions": len(result.regions), "decomposition_s": round(seconds, 3)},
+            summary={**source, "regions": len(result.regions), "decomposition_s": round(seconds, 3),
+                     LABEL_OVERRIDES_KEY: {str(c): label.name.lower() for c, label in sorted(self._overrides.items())}},
         )
         self.context.counters.set(f"{self.context.name}.last_decomposition_ms", round(seconds * 1000))
         revision = self.context.commit(write)

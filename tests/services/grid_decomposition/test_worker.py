@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import DecompositionError
+from services.grid_decomposition.semantics import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from services.grid_decomposition.worker import DecompositionStage, decomposition_stage
 from shared.settings import Settings, ZenohSettings
 from shared.store import GridLayer, MapStore, Revision, RevisionWrite
@@ -173,3 +174,24 @@ def test_stage_rejects_nonsense_options(store: MapStore, settings: Settings, opt
     context = StageContext(STAGE, None, store, settings, store.ensure_map(settings.map_name), None)  # type: ignore[arg-type]
     with pytest.raises(DecompositionError):
         DecompositionStage(context, **options)  # type: ignore[arg-type]
+
+
+def test_a_label_table_revision_relabels_the_map_as_a_new_revision(store: MapStore, settings: Settings) -> None:
+    house = synthetic_warehouse(0, resolution_m=RES_M)
+    map_id = store.ensure_map(settings.map_name).id
+    with stages.running_stage(STAGE, _Stages(), settings, store):
+        _write_occupancy(store, settings, house.occupancy)
+        first = _wait_decompositions(store, settings, 1)
+        labels: dict[int, set[str]] = {}
+        for f in store.features(map_id, kinds=list(REGION_KINDS)):
+            labels.setdefault(f.feature.properties["category"], set()).add(f.feature.properties["label"])
+        chosen = min(c for c, names in labels.items() if "storage" in names and len(names) > 1)
+        store.write_revision(map_id, RevisionWrite(LABEL_TABLE_STAGE,
+                                                   summary={LABEL_OVERRIDES_KEY: {str(chosen): "pallet cell"}}))
+        second = _wait_decompositions(store, settings, 2)
+
+    assert second.summary["source_revision"] == first.summary["source_revision"]
+    assert second.summary[LABEL_OVERRIDES_KEY] == {str(chosen): "storage"}
+    relabelled = [f.feature for f in store.features(map_id, kinds=list(REGION_KINDS))
+                  if f.feature.properties["category"] == chosen]
+    assert relabelled and all(f.properties["label"] == "storage" for f in relabelled)
