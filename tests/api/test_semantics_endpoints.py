@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -76,7 +78,7 @@ def test_a_point_reads_the_map_as_it_was(client: TestClient, hall: dict[str, int
 
 
 @pytest.mark.parametrize("params", [{"x": "nan", "y": 1}, {"x": 1}, {"x": 1e12, "y": 0}, {"x": "1;DROP", "y": 2}])
-def test_bad_points_get_422(client: TestClient, hall: dict[str, int], params: dict[str, object]) -> None:
+def test_bad_points_get_422(client: TestClient, hall: dict[str, int], params: dict[str, Any]) -> None:
     response = client.get(f"{URL}/semantics", params=params)
 
     assert response.status_code == 422 and response.json()["detail"]
