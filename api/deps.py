@@ -11,11 +11,15 @@ from fastapi import Depends, HTTPException, Path, Query, Request, Security, stat
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
 from api.access import API_KEY_HEADER, AccessPolicy, Caller, check_role, required_role
+from api.announce import Announcer
 from api.streams import EventStreams
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore, Revision
 from shared.store.keys import Role
+
+MAX_ID = 2**31 - 1
+"""Largest row id the store holds (a 32-bit integer column); larger ids in a request are refused as 422."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -28,6 +32,7 @@ class ApiContext:
     expected_workers: Sequence[str]
     access: AccessPolicy
     events: EventStreams
+    announcer: Announcer
 
 
 def get_context(request: Request) -> ApiContext:
@@ -45,7 +50,13 @@ def get_settings(context: ContextDep) -> Settings:
     return context.settings
 
 
+def get_announcer(context: ContextDep) -> Announcer:
+    return context.announcer
+
+
 StoreDep = Annotated[MapStore, Depends(get_store)]
+AnnouncerDep = Annotated[Announcer, Depends(get_announcer)]
+"""Announce a revision the API wrote (on the bus, when there is one)."""
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 
 _api_key_header = APIKeyHeader(name=API_KEY_HEADER, auto_error=False, scheme_name="ApiKey",
@@ -85,7 +96,7 @@ AdminDep = Annotated[Caller, Depends(require_admin)]
 
 
 def get_map(
-    map_name: Annotated[str, Path(description="Name of the map, e.g. `site`.", max_length=64)],
+    map_name: Annotated[str, Path(description="Name of the map, e.g. `site`.", max_length=64, examples=["site"])],
     store: StoreDep,
 ) -> MapInfo:
     """The map named in the path, or 404 naming the maps that do exist."""
@@ -110,7 +121,8 @@ def get_revision(
     store: StoreDep,
     revision: Annotated[
         int | None,
-        Query(ge=1, description="Read the map as it was at this revision id (default: now)."),
+        Query(ge=1, le=MAX_ID, description="Read the map as it was at this revision id (default: now).",
+              examples=[1207]),
     ] = None,
 ) -> int | None:
     """The ``?revision=`` to read at, after checking it is a revision of the map (404 otherwise)."""

@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus, Publisher
@@ -62,21 +62,25 @@ class StageContext:
     def _announce(self, revision: Revision) -> None:
         if self._events is None:
             self._events = self.bus.publisher(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespace=WORKER_NAMESPACE)
-        features = revision.summary.get("features", {})
-        now = time.time_ns()
-        event = messages.message_class(messages.MAP_EVENT)(
-            stamp=messages.message_class("builtin_interfaces/msg/Time")(sec=now // 10**9, nanosec=now % 10**9),
-            map_name=self.map.name,
-            revision_id=revision.id,
-            stage=revision.stage,
-            layers_updated=list(revision.summary.get("layers_updated", [])),
-            feature_kinds=sorted(features),
-            features_added=sum(f["added"] for f in features.values()),
-            features_removed=sum(f["removed"] for f in features.values()),
-            features_moved=sum(f["moved"] for f in features.values()),
-            topology_changed=bool(revision.summary.get("topology_changed", False)),
-        )
-        self._events.publish(event)
+        self._events.publish(map_event(self.map.name, revision))
+
+
+def map_event(map_name: str, revision: Revision) -> Any:
+    """The ``aisle_msgs/msg/MapEvent`` announcing ``revision`` (from its stored summary), stamped now."""
+    features = revision.summary.get("features", {})
+    now = time.time_ns()
+    return messages.message_class(messages.MAP_EVENT)(
+        stamp=messages.message_class("builtin_interfaces/msg/Time")(sec=now // 10**9, nanosec=now % 10**9),
+        map_name=map_name,
+        revision_id=revision.id,
+        stage=revision.stage,
+        layers_updated=list(revision.summary.get("layers_updated", [])),
+        feature_kinds=sorted(features),
+        features_added=sum(f["added"] for f in features.values()),
+        features_removed=sum(f["removed"] for f in features.values()),
+        features_moved=sum(f["moved"] for f in features.values()),
+        topology_changed=bool(revision.summary.get("topology_changed", False)),
+    )
 
 
 class Stage(Protocol):

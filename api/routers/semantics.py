@@ -10,7 +10,7 @@ from fastapi import APIRouter, Body, Depends, HTTPException, Query, status
 from pydantic import BaseModel, Field
 
 from api.cache import RevisionCache, get_cache
-from api.deps import MapDep, RevisionQuery, SettingsDep, StoreDep
+from api.deps import AnnouncerDep, MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.gridlookup import cached_layer, class_name, value_at
 from api.models import ErrorOut, Responses
 from api.routers.features import MAX_BBOX_SIDE_M
@@ -216,7 +216,8 @@ class LabelTableAccepted(BaseModel):
 
 @router.put("/label-table", summary="Change the place label table", status_code=status.HTTP_202_ACCEPTED,
             responses=_ERRORS)
-def put_label_table(map_info: MapDep, store: StoreDep, body: Annotated[LabelTableIn, Body()]) -> LabelTableAccepted:
+def put_label_table(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
+                    body: Annotated[LabelTableIn, Body()]) -> LabelTableAccepted:
     """Set which label each place category means (e.g. category 3 is storage). The choice is recorded as a
     revision; the grid decomposition worker then re-labels the map as a new revision (watch the events).
     Needs a `write` key."""
@@ -227,4 +228,5 @@ def put_label_table(map_info: MapDep, store: StoreDep, body: Annotated[LabelTabl
     overrides = {str(c): label.name.lower() for c, label in sorted(parsed.items())}
     written = store.write_revision(map_info.id,
                                    RevisionWrite(LABEL_TABLE_STAGE, summary={LABEL_OVERRIDES_KEY: overrides}))
+    announcer.announce(map_info, written)
     return LabelTableAccepted(revision_id=written.id, overrides=overrides)

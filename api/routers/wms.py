@@ -9,7 +9,7 @@ from fastapi import APIRouter, Body, HTTPException, status
 from pydantic import BaseModel, Field, model_validator
 
 from api.binindex import WMS_STAGE, wms_matching
-from api.deps import MapDep, RevisionQuery, StoreDep
+from api.deps import AnnouncerDep, MapDep, RevisionQuery, StoreDep
 from api.models import ErrorOut, Responses
 from api.routers.bins import BIN_ID_PATTERN
 from shared.store import WmsBin
@@ -85,7 +85,8 @@ def _reconciliation(store: StoreDep, map_id: int, map_name: str, revision: int |
 
 
 @router.put("", summary="Import the WMS's bin list", responses=_ERRORS)
-def import_wms_bins(map_info: MapDep, store: StoreDep, body: Annotated[WmsImport, Body()]) -> ReconciliationOut:
+def import_wms_bins(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
+                    body: Annotated[WmsImport, Body()]) -> ReconciliationOut:
     """Replace the map's WMS bin list with ``bins`` (one new revision) and return how it matches the detected bins.
 
     Bins are matched by equal id first, then by position (nearest detected bin within ``tolerance_m``, same
@@ -98,6 +99,7 @@ def import_wms_bins(map_info: MapDep, store: StoreDep, body: Annotated[WmsImport
                             f"WMS bin ids must be unique; repeated: {repeated[:10]}")
     items = [WmsBin(b.id, b.x_m, b.y_m, b.aisle, b.bay, b.level) for b in body.bins]
     written = store.replace_wms_bins(map_info.id, items, stage=WMS_STAGE, summary={"tolerance_m": body.tolerance_m})
+    announcer.announce(map_info, written)
     return _reconciliation(store, map_info.id, map_info.name, written.id)
 
 

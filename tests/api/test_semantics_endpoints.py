@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from services.grid_decomposition.semantics import LABEL_TABLE_STAGE
+from shared import messages
+from shared.bus import WORKER_NAMESPACE, Bus
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
 from shared.store.keys import Role, create_key
+from shared.worker import MAP_EVENTS_TOPIC
+from tests.api.conftest import ClientFactory
 
 URL = "/v1/maps/hall"
 RES = 0.5
@@ -128,3 +134,19 @@ def test_diff_names_what_changed(client: TestClient, store: MapStore, hall: dict
     assert back["to_revision"] == latest and back["features"]["bin"]["moved"] == ["01-001"]
     assert back["features"]["bin"]["added"] == ["01-002"] and back["layers"] == []
     assert client.get(f"{URL}/revisions/99999/diff").status_code == 404
+
+
+def test_revisions_the_api_writes_are_announced_on_the_bus(store: MapStore, make_client: ClientFactory,
+                                                          bus_pair: tuple[Bus, Bus], hall: dict[str, int]) -> None:
+    api_bus, fleet_manager = bus_pair
+    events = fleet_manager.subscribe(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespaces=[WORKER_NAMESPACE])
+    client = make_client(store, bus=api_bus)
+    time.sleep(0.5)  # let the subscription reach the API's peer
+    writer = {"X-API-Key": create_key(store, role=Role.WRITE, name="operator")[1]}
+
+    accepted = client.put(f"{URL}/label-table", json={"overrides": {"0": "corridor"}}, headers=writer).json()
+    received = events.receive(timeout=10.0)
+
+    assert received is not None
+    assert received.message.map_name == "hall" and received.message.revision_id == accepted["revision_id"]
+    assert received.message.stage == LABEL_TABLE_STAGE
