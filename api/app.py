@@ -11,9 +11,10 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 
 from api.access import API_KEY_HEADER, AccessPolicy
+from api.announce import Announcer
 from api.deps import ApiContext, enforce_policy
 from api.errors import ApiConfigError
-from api.routers import bins, events, features, health, keys, layers, maps
+from api.routers import bins, events, features, health, history, keys, layers, maps, semantics, wms
 from api.routers.layers import REVISION_HEADER
 from api.streams import EventStreams
 from shared.bus import Bus
@@ -86,11 +87,12 @@ def create_app(
                           rate_limit_burst=rate_limit_burst)
     app.state.context = ApiContext(store=store, settings=settings, bus=bus,
                                    expected_workers=tuple(expected_workers), access=access,
-                                   events=EventStreams(poll_s=event_poll_s, heartbeat_s=event_heartbeat_s))
+                                   events=EventStreams(poll_s=event_poll_s, heartbeat_s=event_heartbeat_s),
+                                   announcer=Announcer(bus))
     app.add_exception_handler(StoreUnavailableError, _store_unavailable)
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
-    for module in (health, maps, layers, features, bins, events, keys):
+    for module in (health, maps, layers, features, bins, wms, semantics, history, events, keys):
         app.include_router(module.router)
     if cors_origins:
         app.add_middleware(
