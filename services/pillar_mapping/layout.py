@@ -33,8 +33,48 @@ def _point(xy: FloatArray) -> dict[str, Any]:
     return {"type": "Point", "coordinates": [float(xy[0]), float(xy[1])]}
 
 
+def aisle_key(aisle: int) -> str:
+    """Key of an aisle's ``corridor`` feature, e.g. ``aisle-03``."""
+    return f"aisle-{aisle:02d}"
+
+
+def aisle_corridors(bins: list[StorageBin]) -> list[Feature]:
+    """One ``corridor`` feature per aisle: the rectangle between the bin openings that face it.
+
+    Across the aisle it spans from the front edges of the bins on one side to those on the other; an
+    aisle with racks on one side only is mirrored about the access poses, which lie on its centre line.
+    Along it, it spans the bins' openings. Properties: ``label`` corridor, ``aisle``, ``width_m``,
+    ``length_m``, ``bins``.
+    """
+    out = []
+    for aisle in sorted({b.aisle for b in bins}):
+        members = [b for b in bins if b.aisle == aisle]
+        yaw = members[0].access_pose[2]
+        v = np.array([np.cos(yaw), np.sin(yaw)])  # across the aisle, towards the first bin
+        u = np.array([-v[1], v[0]])  # along the aisle
+        fronts = np.vstack([b.footprint[:2] for b in members])
+        access = np.array([b.access_pose[:2] for b in members])
+        centre_v = float(np.median(access @ v))
+        mirrored = 2.0 * centre_v - fronts @ v
+        across = np.concatenate([fronts @ v, mirrored])
+        along = fronts @ u
+        lo_v, hi_v, lo_u, hi_u = across.min(), across.max(), along.min(), along.max()
+        corners = [lo_u * u + lo_v * v, hi_u * u + lo_v * v, hi_u * u + hi_v * v, lo_u * u + hi_v * v]
+        ring = [[round(float(c[0]), 4), round(float(c[1]), 4)] for c in corners]
+        out.append(Feature("corridor", aisle_key(aisle), {"type": "Polygon", "coordinates": [[*ring, ring[0]]]}, {
+            "kind": "corridor",
+            "label": "corridor",
+            "aisle": aisle,
+            "width_m": round(float(hi_v - lo_v), 3),
+            "length_m": round(float(hi_u - lo_u), 3),
+            "bins": len(members),
+        }))
+    return out
+
+
 def layout_features(layout: RackLayout) -> dict[str, list[Feature]]:
-    """Map-store features of a layout, by kind (``pillar``, ``rack_row``, ``bin``), for one RevisionWrite.
+    """Map-store features of a layout, by kind (``pillar``, ``rack_row``, ``bin``, and ``corridor`` for the
+    aisles, :func:`aisle_corridors`), for one RevisionWrite.
 
     Keys are stable across rebuilds where the layout is: bins by id, rows by region and
     position in it, pillars by row and index (outliers by rounded position).
@@ -93,7 +133,7 @@ def layout_features(layout: RackLayout) -> dict[str, list[Feature]]:
         for b in layout.bins
     ]
     unique = {f.key: f for f in pillars}
-    return {"pillar": list(unique.values()), "rack_row": rows, "bin": bins}
+    return {"pillar": list(unique.values()), "rack_row": rows, "bin": bins, "corridor": aisle_corridors(layout.bins)}
 
 
 def layout_geojson(layout: RackLayout) -> dict[str, Any]:

@@ -1,6 +1,7 @@
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -35,8 +36,34 @@ def test_layout_features_fit_one_revision_write() -> None:
     table, _ = noisy_landmarks(rack_region(aisles=2, bays=5), np.random.default_rng(1))
     features = layout_features(fit_racks(table))
     write = RevisionWrite(stage="pillar_mapping", features=features)
-    assert set(write.features) == {"pillar", "rack_row", "bin"}
+    assert set(write.features) == {"pillar", "rack_row", "bin", "corridor"}
     assert all(len(v) > 0 for v in write.features.values())
+
+
+def test_each_aisle_is_a_corridor_on_its_true_centre_line_holding_its_access_poses() -> None:
+    hall = rack_region(aisles=3, bays=10, aisle_width_m=3.2)
+    table, _ = noisy_landmarks(hall, np.random.default_rng(2))
+    features = layout_features(fit_racks(table))
+
+    corridors = {f.properties["aisle"]: f for f in features["corridor"]}
+
+    assert len(corridors) == len(hall.aisles)
+    for aisle, corridor in corridors.items():
+        ring = np.asarray(corridor.geometry["coordinates"][0], dtype=np.float32)
+        for item in (b for b in features["bin"] if b.properties["aisle"] == aisle):
+            x, y, _ = item.properties["access_pose"]
+            assert cv2.pointPolygonTest(ring.reshape(-1, 1, 2), (x, y), False) > 0
+        centre = ring[:4].mean(axis=0)
+        line = min(hall.aisles, key=lambda ends: _distance_to_line(centre, ends))
+        assert _distance_to_line(centre, line) < 0.1
+        assert abs(corridor.properties["width_m"] - 3.2) < 0.15
+
+
+def _distance_to_line(point: np.ndarray, ends: np.ndarray) -> float:
+    a, b = ends
+    direction = (b - a) / np.linalg.norm(b - a)
+    offset = point - a
+    return float(abs(offset[0] * direction[1] - offset[1] * direction[0]))
 
 
 def test_landmark_csv_round_trips(tmp_path: Path) -> None:
