@@ -1,18 +1,82 @@
-"""Response models of the REST API, kept apart from the store's records."""
+"""Response models of the REST API, kept apart from the store's records.
+
+Every model carries an example (shown in ``/docs``), and :data:`COMMON_ERRORS`,
+:data:`UNPROCESSABLE` and :func:`not_found` document the errors routes share.
+"""
 
 from __future__ import annotations
 
 import datetime as dt
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field
+from fastapi import status
+from pydantic import BaseModel, ConfigDict, Field
 
 Responses = dict[int | str, dict[str, Any]]
 """The type of a route's ``responses=`` (extra OpenAPI responses)."""
 
 
+def example_config(**example: Any) -> ConfigDict:
+    """A model config whose JSON schema shows ``example`` (in ``/docs`` and to schema-driven tests)."""
+    return ConfigDict(json_schema_extra={"examples": [example]})
+
+
+class ValidationIssue(BaseModel):
+    """One invalid part of a request, as FastAPI reports it."""
+
+    loc: list[str | int] = Field(description="Where: `path`, `query`, `header` or `body`, then the name.")
+    msg: str = Field(description="What is wrong with it.")
+    type: str = Field(description="Error type, e.g. `string_too_long`.")
+    input: Any = Field(None, description="The value sent.")
+    ctx: dict[str, Any] | None = Field(None, description="Limits the value broke, e.g. `{\"max_length\": 64}`.")
+
+
 class ErrorOut(BaseModel):
-    detail: str = Field(description="What went wrong, and where possible what would work instead.")
+    detail: str | list[ValidationIssue] = Field(
+        description="What went wrong, and where possible what would work instead; for a request that breaks a "
+                    "parameter's or the body's declared limits (422), one entry per invalid part.")
+
+    model_config = example_config(detail="no map named 'hall'; known maps: ['site']")
+
+
+COMMON_ERRORS: Responses = {
+    status.HTTP_400_BAD_REQUEST: {"model": ErrorOut, "description": "The body is not valid JSON, or the store "
+                                                                    "refused the request as asked."},
+    status.HTTP_401_UNAUTHORIZED: {"model": ErrorOut, "description": "No API key where one is needed, or a bad one."},
+    status.HTTP_403_FORBIDDEN: {"model": ErrorOut, "description": "The API key's role is too low for this request."},
+    status.HTTP_429_TOO_MANY_REQUESTS: {"model": ErrorOut,
+                                        "description": "Rate limit spent; retry after `Retry-After` seconds."},
+    status.HTTP_503_SERVICE_UNAVAILABLE: {"model": ErrorOut,
+                                          "description": "Database unreachable; retry after `Retry-After` seconds."},
+}
+"""Errors any route can answer: the app-wide key check and rate limit, a malformed body, the store's refusal and
+an unreachable database."""
+
+UNPROCESSABLE: Responses = {
+    status.HTTP_422_UNPROCESSABLE_CONTENT: {
+        "model": ErrorOut, "description": "A parameter or the body is malformed or out of range."},
+}
+
+
+def not_found(description: str) -> Responses:
+    """A documented 404 saying what may be missing, e.g. ``"No such map or revision."``."""
+    return {status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": description}}
+
+
+def as_json(responses: Responses) -> Responses:
+    """``responses`` documented as ``application/json`` whatever the route's own media type (for streams).
+
+    FastAPI files a ``model`` under the route's response class's media type; a streaming route's errors
+    are still JSON, so this names the schema of each model under ``application/json`` instead.
+    """
+    out: Responses = {}
+    for code, response in responses.items():
+        entry = {name: value for name, value in response.items() if name != "model"}
+        if "model" in response:
+            schema = {"$ref": f"#/components/schemas/{response['model'].__name__}"}
+            entry["content"] = {"application/json": {"schema": schema}}
+        out[code] = entry
+    return out
 
 
 # -- health -------------------------------------------------------------------------------
@@ -43,8 +107,25 @@ class HealthOut(BaseModel):
     workers: list[WorkerHealth]
     missing_workers: list[str] = Field(description="Expected workers that are not alive.")
 
+    model_config = example_config(
+        status="ok",
+        database={"ok": True, "detail": "reachable", "url": "postgresql+psycopg://aisle:***@db/aisle"},
+        bus={"ok": True, "mode": "peer", "detail": "2 worker(s) seen", "counters": {"scan.dropped": 0}},
+        workers=[{"name": "occupancy_mapping", "alive": True, "heartbeat_at": "2025-03-04T10:15:02Z",
+                  "counters": {"scans": 18234}}],
+        missing_workers=[],
+    )
+
 
 # -- maps and revisions ---------------------------------------------------------------------
+_REVISION_EXAMPLE = {
+    "id": 1207, "stage": "pillar_mapping", "created_at": "2025-03-04T10:15:00Z",
+    "input_start_ns": 1741083240000000000, "input_end_ns": 1741083300000000000,
+    "summary": {"layers_updated": [], "topology_changed": False,
+                "features": {"bin": {"added": 2, "removed": 0, "moved": 1, "total": 8910}}},
+}
+
+
 class RevisionOut(BaseModel):
     id: int
     stage: str = Field(description="The stage worker that wrote this revision.")
@@ -53,10 +134,18 @@ class RevisionOut(BaseModel):
     input_end_ns: int | None = Field(description="Latest sensor stamp the stage used, ns since epoch.")
     summary: dict[str, Any]
 
+    model_config = example_config(**_REVISION_EXAMPLE)
+
 
 class RevisionPage(BaseModel):
     revisions: list[RevisionOut]
     next_after: int | None = Field(description="Pass as `?after=` for the next page; null on the last page.")
+
+    model_config = example_config(revisions=[_REVISION_EXAMPLE], next_after=None)
+
+
+_MAP_EXAMPLE = {"name": "site", "frame_id": "map", "created_at": "2025-03-01T08:00:00Z", "latest_revision_id": 1207,
+                "layers": ["occupancy", "place_labels", "semantic_label"]}
 
 
 class MapSummary(BaseModel):
@@ -66,15 +155,24 @@ class MapSummary(BaseModel):
     latest_revision_id: int | None
     layers: list[str]
 
+    model_config = example_config(**_MAP_EXAMPLE)
+
 
 class MapDetail(MapSummary):
     latest_revision: RevisionOut | None
+
+    model_config = example_config(**_MAP_EXAMPLE, latest_revision=_REVISION_EXAMPLE)
 
 
 # -- layers ---------------------------------------------------------------------------------
 class Origin(BaseModel):
     x_m: float
     y_m: float
+
+
+_LAYER_EXAMPLE = {"name": "occupancy", "revision_id": 1206, "dtype": "int8", "shape": [500, 800],
+                  "resolution_m": 0.05, "origin": {"x_m": -1.0, "y_m": -1.0}, "extent": [-1.0, -1.0, 39.0, 24.0],
+                  "meta": {"encoding": "occupancy"}}
 
 
 class LayerOut(BaseModel):
@@ -87,12 +185,26 @@ class LayerOut(BaseModel):
     extent: tuple[float, float, float, float] = Field(description="(min_x, min_y, max_x, max_y) in metres.")
     meta: dict[str, Any]
 
+    model_config = example_config(**_LAYER_EXAMPLE)
+
 
 class LayerValuesOut(LayerOut):
     data: list[list[Any]] = Field(description="data[row][col], row 0 the lowest y; non-finite as null.")
 
+    model_config = example_config(**{**_LAYER_EXAMPLE, "shape": [2, 3], "extent": [-1.0, -1.0, -0.85, -0.9]},
+                            data=[[0, 0, -1], [100, 0, -1]])
+
 
 # -- features -------------------------------------------------------------------------------
+_FEATURE_EXAMPLE = {
+    "type": "Feature", "id": "bin/03-014",
+    "geometry": {"type": "Polygon",
+                 "coordinates": [[[40.6, 17.1], [41.8, 17.1], [41.8, 18.1], [40.6, 18.1], [40.6, 17.1]]]},
+    "properties": {"aisle": 3, "bay": 14, "row": "r0-006", "access_pose": [41.2, 15.6, 1.5708], "kind": "bin",
+                   "key": "03-014", "stage": "pillar_mapping", "revision_id": 1207, "confidence": 0.92},
+}
+
+
 class GeoJSONFeature(BaseModel):
     type: Literal["Feature"] = "Feature"
     id: str = Field(description="`<kind>/<key>`.")
@@ -100,6 +212,8 @@ class GeoJSONFeature(BaseModel):
     properties: dict[str, Any] = Field(
         description="The feature's own properties plus kind, key, stage, revision_id and confidence."
     )
+
+    model_config = example_config(**_FEATURE_EXAMPLE)
 
 
 class FeatureCollection(BaseModel):
@@ -109,3 +223,6 @@ class FeatureCollection(BaseModel):
     limit: int
     offset: int
     next_offset: int | None = Field(description="Pass as `?offset=` for the next page; null on the last.")
+
+    model_config = example_config(type="FeatureCollection", features=[_FEATURE_EXAMPLE], revision=None, limit=1000,
+                            offset=0, next_offset=None)

@@ -13,8 +13,8 @@ from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, s
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 from pydantic import BaseModel, Field
 
-from api.deps import ContextDep, MapDep, StoreDep
-from api.models import ErrorOut
+from api.deps import MAX_ID, ContextDep, MapDep, StoreDep
+from api.models import COMMON_ERRORS, UNPROCESSABLE, as_json, not_found
 from shared.store import MapInfo, MapStore, Revision
 
 log = logging.getLogger(__name__)
@@ -65,16 +65,17 @@ def revision_event(map_info: MapInfo, revision: Revision) -> RevisionEvent:
 def get_cursor(
     map_info: MapDep,
     store: StoreDep,
-    after: Annotated[int | None, Query(ge=0, le=2**62, description=(
+    after: Annotated[int | None, Query(ge=0, le=MAX_ID, examples=[1200], description=(
         "Send revisions with a larger id (0: every revision). Default: only revisions from now on."))] = None,
-    last_event_id: Annotated[str | None, Header(alias="Last-Event-ID", max_length=20, description=(
+    last_event_id: Annotated[str | None, Header(alias="Last-Event-ID", max_length=20, examples=["1206"], description=(
         "The id of the last event received; a reconnecting EventSource sends it. Wins over `?after=`."))] = None,
 ) -> int:
     """The revision id after which the stream starts, or 422 for a Last-Event-ID that is not one."""
     if last_event_id is not None:
-        if not last_event_id.isdigit():
+        if not (last_event_id.isascii() and last_event_id.isdigit() and int(last_event_id) <= MAX_ID):
             raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
-                                f"Last-Event-ID must be a revision id (a non-negative integer), not {last_event_id!r}")
+                                f"Last-Event-ID must be a revision id (an integer from 0 to {MAX_ID}), "
+                                f"not {last_event_id!r}")
         return int(last_event_id)
     if after is not None:
         return after
@@ -88,8 +89,7 @@ def get_cursor(
     response_class=EventSourceResponse,
     responses={status.HTTP_200_OK: {"content": {"text/event-stream": {}},
                                     "description": "`event: revision`, `id: <revision id>`, `data: <JSON>`."},
-               status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map."},
-               status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut, "description": "Bad cursor."}},
+               **as_json({**COMMON_ERRORS, **not_found("No such map."), **UNPROCESSABLE})},
 )
 async def map_events(
     request: Request,

@@ -8,7 +8,7 @@ import sqlalchemy as sa
 from fastapi import APIRouter, Response, status
 
 from api.deps import ContextDep, SettingsDep
-from api.models import BusHealth, DatabaseHealth, HealthOut, WorkerHealth
+from api.models import COMMON_ERRORS, BusHealth, DatabaseHealth, HealthOut, WorkerHealth
 from shared.store import MapStore, StoreUnavailableError, WorkerInfo
 
 router = APIRouter(prefix="/v1/health", tags=["health"])
@@ -33,7 +33,10 @@ def _database(store: MapStore) -> tuple[DatabaseHealth, list[WorkerInfo]]:
 @router.get(
     "",
     summary="Service health",
-    responses={status.HTTP_503_SERVICE_UNAVAILABLE: {"model": HealthOut, "description": "Degraded."}},
+    responses={
+        **{code: COMMON_ERRORS[code] for code in (status.HTTP_401_UNAUTHORIZED, status.HTTP_429_TOO_MANY_REQUESTS)},
+        status.HTTP_503_SERVICE_UNAVAILABLE: {"model": HealthOut, "description": "Degraded (same body)."},
+    },
 )
 def health(context: ContextDep, settings: SettingsDep, response: Response) -> HealthOut:
     """Database, bus and worker health; HTTP 503 (same body) when anything is degraded.

@@ -10,7 +10,7 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Query, status
 from pydantic import BaseModel, Field
 
 from api.deps import AdminDep, StoreDep, require_admin
-from api.models import ErrorOut, Responses
+from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, example_config, not_found
 from shared.store.keys import KEY_ID_PATTERN, MAX_NAME_LENGTH, ApiKey, Role, create_key, get_key, list_keys, revoke_key
 
 log = logging.getLogger(__name__)
@@ -18,19 +18,24 @@ log = logging.getLogger(__name__)
 router = APIRouter(prefix="/v1/keys", tags=["keys"], dependencies=[Depends(require_admin)])
 
 _AUTH: Responses = {
-    status.HTTP_401_UNAUTHORIZED: {"model": ErrorOut, "description": "No key, or a bad one."},
+    **COMMON_ERRORS,
     status.HTTP_403_FORBIDDEN: {"model": ErrorOut, "description": "The key is not an admin key."},
-    status.HTTP_429_TOO_MANY_REQUESTS: {"model": ErrorOut, "description": "Rate limit spent; see Retry-After."},
+    **UNPROCESSABLE,
 }
 
 KeyIdPath = Annotated[str, Path(description="Public id of the key (12 hex characters).",
-                                pattern=f"^{KEY_ID_PATTERN.pattern}$")]
+                                pattern=f"^{KEY_ID_PATTERN.pattern}$", examples=["3f9c2a71b0de"])]
+
+_KEY_EXAMPLE = {"key_id": "3f9c2a71b0de", "name": "wms", "role": "read", "created_at": "2025-03-04T10:15:00Z",
+                "revoked_at": None}
 
 
 class KeyIn(BaseModel):
     name: str = Field(min_length=1, max_length=MAX_NAME_LENGTH, pattern=r"^[A-Za-z0-9 ._@:-]+$",
                       description="Who the key is for, e.g. `wms`.")
     role: Role = Field(description="read < write < admin.")
+
+    model_config = example_config(name="wms", role="read")
 
 
 class KeyOut(BaseModel):
@@ -40,9 +45,14 @@ class KeyOut(BaseModel):
     created_at: dt.datetime
     revoked_at: dt.datetime | None
 
+    model_config = example_config(**_KEY_EXAMPLE)
+
 
 class KeyCreated(KeyOut):
     secret: str = Field(description="The key itself; shown only in this response, store it now.")
+
+    model_config = example_config(**_KEY_EXAMPLE,
+                                  secret="aisle_3f9c2a71b0de_q3X9vJ0kz7WcN1bEw5Hf2uYtPaLr8sDgMiKo4nQe6Zx")
 
 
 def key_out(key: ApiKey) -> KeyOut:
@@ -53,7 +63,7 @@ def key_out(key: ApiKey) -> KeyOut:
 @router.get("", summary="List keys", responses=_AUTH)
 def get_keys(
     store: StoreDep,
-    include_revoked: Annotated[bool, Query(description="Also list revoked keys.")] = False,
+    include_revoked: Annotated[bool, Query(description="Also list revoked keys.", examples=[True])] = False,
 ) -> list[KeyOut]:
     """Every key's public id, name, role and dates (never a secret), oldest first."""
     return [key_out(key) for key in list_keys(store, include_revoked=include_revoked)]
@@ -73,8 +83,7 @@ def post_key(body: KeyIn, store: StoreDep, caller: AdminDep) -> KeyCreated:
 @router.delete(
     "/{key_id}",
     summary="Revoke a key",
-    responses={**_AUTH,
-               status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such key."},
+    responses={**_AUTH, **not_found("No such key."),
                status.HTTP_409_CONFLICT: {"model": ErrorOut, "description": "The last active admin key."}},
 )
 def delete_key(key_id: KeyIdPath, store: StoreDep, caller: AdminDep) -> KeyOut:

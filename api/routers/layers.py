@@ -10,11 +10,19 @@ import numpy.typing as npt
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
 
 from api.deps import MapDep, RevisionQuery, StoreDep
-from api.models import ErrorOut, LayerOut, LayerValuesOut, Origin, Responses
+from api.models import (
+    COMMON_ERRORS,
+    UNPROCESSABLE,
+    ErrorOut,
+    LayerOut,
+    LayerValuesOut,
+    Origin,
+    not_found,
+)
 from api.rendering import RenderError, encode_npy, encode_png, render_layer
 from shared.store import StoredLayer
 
-router = APIRouter(prefix="/v1/maps/{map_name}/layers", tags=["layers"])
+router = APIRouter(prefix="/v1/maps/{map_name}/layers", tags=["layers"], responses=COMMON_ERRORS)
 
 MAX_JSON_CELLS = 1_000_000
 """Larger layers are refused as JSON (413); fetch them as .npy."""
@@ -22,9 +30,7 @@ MAX_JSON_CELLS = 1_000_000
 REVISION_HEADER = "X-Aisle-Revision-Id"
 """Response header naming the revision that wrote the layer version returned."""
 
-_NOT_FOUND: Responses = {
-    status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map, revision or layer."},
-}
+_NOT_FOUND = not_found("No such map, revision or layer.")
 
 
 class ValuesFormat(enum.StrEnum):
@@ -36,7 +42,7 @@ def get_layer(
     map_info: MapDep,
     store: StoreDep,
     revision: RevisionQuery,
-    layer: Annotated[str, Path(description="Layer name, e.g. `occupancy`.", max_length=64)],
+    layer: Annotated[str, Path(description="Layer name, e.g. `occupancy`.", max_length=64, examples=["occupancy"])],
 ) -> StoredLayer:
     """The layer named in the path as of ``?revision=`` (default: newest), or 404 listing known layers."""
     found = store.layer(map_info.id, layer, revision=revision)
@@ -70,7 +76,7 @@ def layer_out(stored: StoredLayer) -> LayerOut:
     )
 
 
-@router.get("", summary="List layers", responses=_NOT_FOUND)
+@router.get("", summary="List layers", responses={**_NOT_FOUND, **UNPROCESSABLE})
 def list_layers(map_info: MapDep, store: StoreDep, revision: RevisionQuery) -> list[LayerOut]:
     """Every grid layer of the map (as of ``?revision=``) with its shape, resolution and origin."""
     found = (store.layer(map_info.id, name, revision=revision) for name in store.layer_names(map_info.id))
@@ -85,7 +91,8 @@ def list_layers(map_info: MapDep, store: StoreDep, revision: RevisionQuery) -> l
         status.HTTP_200_OK: {"content": {"image/png": {}},
                              "description": "PNG, top row = highest y: colour with a legend for semantic "
                                             "label layers, greyscale otherwise."},
-        status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut, "description": "Layer cannot be drawn."},
+        status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut,
+                                                "description": "Layer cannot be drawn, or a bad parameter."},
         **_NOT_FOUND,
     },
 )
@@ -112,14 +119,16 @@ def layer_png(stored: LayerDep) -> Response:
         status.HTTP_200_OK: {"content": {"application/x-npy": {}},
                              "description": "A .npy file (format=npy) or JSON (format=json)."},
         status.HTTP_413_CONTENT_TOO_LARGE: {"model": ErrorOut, "description": "Too many cells for JSON."},
-        status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut, "description": "No JSON form (complex)."},
+        status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut,
+                                                "description": "No JSON form (complex), or a bad parameter."},
         **_NOT_FOUND,
     },
 )
 def layer_values(
     map_info: MapDep,
     stored: LayerDep,
-    value_format: Annotated[ValuesFormat, Query(alias="format", description="npy (default) or json.")] = (
+    value_format: Annotated[ValuesFormat, Query(alias="format", description="npy (default) or json.",
+                                                examples=["json"])] = (
         ValuesFormat.NPY
     ),
 ) -> Response | LayerValuesOut:
@@ -157,7 +166,7 @@ def _json_values(data: npt.NDArray[Any]) -> list[list[Any]]:
     return list(data.tolist())
 
 
-@router.get("/{layer}", summary="Describe a layer", responses=_NOT_FOUND)
+@router.get("/{layer}", summary="Describe a layer", responses={**_NOT_FOUND, **UNPROCESSABLE})
 def get_layer_info(stored: LayerDep) -> LayerOut:
     """Shape, dtype, resolution, origin and metadata of one layer version."""
     return layer_out(stored)

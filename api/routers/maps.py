@@ -6,15 +6,13 @@ from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, status
 
-from api.deps import MapDep, StoreDep, find_revision
-from api.models import ErrorOut, MapDetail, MapSummary, Responses, RevisionOut, RevisionPage
+from api.deps import MAX_ID, MapDep, StoreDep, find_revision
+from api.models import COMMON_ERRORS, UNPROCESSABLE, MapDetail, MapSummary, RevisionOut, RevisionPage, not_found
 from shared.store import MapInfo, MapStore, Revision
 
-router = APIRouter(prefix="/v1/maps", tags=["maps"])
+router = APIRouter(prefix="/v1/maps", tags=["maps"], responses=COMMON_ERRORS)
 
-_NOT_FOUND: Responses = {
-    status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map or revision."},
-}
+_NOT_FOUND = {**not_found("No such map or revision."), **UNPROCESSABLE}
 
 
 def revision_out(revision: Revision) -> RevisionOut:
@@ -58,8 +56,9 @@ def get_map(map_info: MapDep, store: StoreDep) -> MapDetail:
 def list_revisions(
     map_info: MapDep,
     store: StoreDep,
-    after: Annotated[int, Query(ge=0, description="Only revisions with a larger id (a page cursor).")] = 0,
-    limit: Annotated[int, Query(ge=1, le=1000, description="Page size.")] = 100,
+    after: Annotated[int, Query(ge=0, le=MAX_ID, description="Only revisions with a larger id (a page cursor).",
+                                examples=[1200])] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000, description="Page size.", examples=[100])] = 100,
 ) -> RevisionPage:
     """Revisions of the map, oldest first, one page at a time."""
     revisions = store.revisions(map_info.id, after_id=after, limit=limit)
@@ -71,7 +70,7 @@ def list_revisions(
 def get_revision(
     map_info: MapDep,
     store: StoreDep,
-    revision_id: Annotated[int, Path(ge=1)],
+    revision_id: Annotated[int, Path(ge=1, le=MAX_ID, description="The revision's id.", examples=[1207])],
 ) -> RevisionOut:
     """One revision of the map: which stage wrote it, when, from which input, and what changed."""
     found = find_revision(store, map_info, revision_id)
