@@ -3,8 +3,12 @@ junctions, and the place layers that tell which corridor an access pose is in.""
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -39,12 +43,38 @@ class WmsMatching:
 
 
 @dataclass(frozen=True, slots=True)
+class CorridorShape:
+    key: str
+    aisle: int | None
+    rings: list[npt.NDArray[np.float32]]
+    """Outer rings (N, 1, 2) in map metres, as cv2.pointPolygonTest takes them; holes are ignored."""
+
+    def holds(self, x_m: float, y_m: float) -> bool:
+        return any(cv2.pointPolygonTest(ring, (x_m, y_m), False) >= 0 for ring in self.rings)
+
+
+def _outer_rings(geometry: Mapping[str, Any]) -> list[npt.NDArray[np.float32]]:
+    polygons = {"Polygon": [geometry.get("coordinates")], "MultiPolygon": geometry.get("coordinates")}.get(
+        str(geometry.get("type")), [])
+    return [np.asarray(polygon[0], dtype=np.float32).reshape(-1, 1, 2) for polygon in polygons or [] if polygon]
+
+
+@dataclass(frozen=True, slots=True)
 class BinIndex:
     matching: WmsMatching | None
     junction_keys: list[str]
     junction_xy: npt.NDArray[np.float64]
+    corridors: list[CorridorShape]
     labels: GridLayer | None
     segments: GridLayer | None
+
+    def corridor_at(self, x_m: float, y_m: float, *, aisle: int | None = None) -> str | None:
+        """Key of the corridor feature holding (x, y): the aisle's own (pillar mapping) when ``aisle`` is given
+        and one holds the point, else any."""
+        holding = [c for c in self.corridors if c.holds(x_m, y_m)]
+        own = [c for c in holding if aisle is not None and c.aisle == aisle]
+        chosen = own or holding
+        return chosen[0].key if chosen else None
 
     def nearest_junction(self, x_m: float, y_m: float) -> tuple[str, float] | None:
         if not self.junction_keys:
@@ -96,12 +126,40 @@ def bin_index(store: MapStore, cache: RevisionCache, map_id: int, revision: int 
         junctions = store.features(map_id, kinds=["junction"], revision=at or None)
         xy = np.array([[(b[0] + b[2]) / 2, (b[1] + b[3]) / 2] for b in (bounds(j.feature.geometry) for j in junctions)],
                       dtype=float).reshape(-1, 2)
+        corridors = [
+            CorridorShape(c.feature.key, aisle if isinstance(aisle := c.feature.properties.get("aisle"), int) else None,
+                          _outer_rings(c.feature.geometry))
+            for c in store.features(map_id, kinds=["corridor"], revision=at or None)
+        ]
         return BinIndex(
             matching=wms_matching(store, map_id, at or None),
             junction_keys=[j.feature.key for j in junctions],
             junction_xy=xy,
+            corridors=corridors,
             labels=cached_layer(store, cache, map_id, PLACE_LABELS_LAYER, at or None),
             segments=cached_layer(store, cache, map_id, PLACE_SEGMENTS_LAYER, at or None),
         )
 
     return cache.get(("bins", store.url, map_id, at), build)
+
+
+def corridors_along(corridors: list[CorridorShape], polyline: list[tuple[float, float]], *, step_m: float = 0.25
+                    ) -> list[str]:
+    """Keys of the corridors a polyline (map metres) runs through, in the order it enters them, each once.
+
+    Where corridors overlap (an aisle crossing a cross aisle) both are listed, the one entered first first.
+    """
+    if not corridors or len(polyline) < 2:
+        return []
+    points = np.asarray(polyline, dtype=np.float64)
+    samples = [points[0:1]]
+    for a, b in itertools.pairwise(points):
+        n = max(1, int(np.ceil(np.hypot(*(b - a)) / step_m)))
+        samples.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    path = np.vstack(samples)
+    order: list[tuple[int, str]] = []
+    for corridor in corridors:
+        inside = [k for k, (x, y) in enumerate(path) if corridor.holds(float(x), float(y))]
+        if inside:
+            order.append((inside[0], corridor.key))
+    return [key for _, key in sorted(order)]
