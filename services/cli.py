@@ -94,6 +94,14 @@ def _parser() -> argparse.ArgumentParser:
     fit.add_argument("pillars", type=Path)
     fit.add_argument("--out", type=Path, required=True)
 
+    export = commands.add_parser("export", help="write the stored map in a standard format, offline")
+    export.add_argument("format", help="export format: geojson, map_server, lif or rmf (as the API's /exports)")
+    export.add_argument("--out", type=Path, required=True,
+                        help="file to write; map_server writes OUT.yaml and OUT.pgm (OUT may end in .yaml)")
+    export.add_argument("--map", default=None, help="map name (default: the configured map_name)")
+    export.add_argument("--revision", type=int, default=None, help="revision id to export (default: the newest)")
+    export.add_argument("--layer", default=None, help="map_server: the grid layer to export (default: occupancy)")
+
     keys = commands.add_parser("keys", help="API keys").add_subparsers(
         dest="keys_command", required=True, metavar="KEYS_COMMAND")
     create = keys.add_parser("create", help="create a key; its secret is printed once")
@@ -220,6 +228,8 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             _classifier(args)
         case "keys":
             return _keys(args, settings)
+        case "export":
+            return _export(args, settings)
     return 0
 
 
@@ -242,6 +252,32 @@ def _keys(args: argparse.Namespace, settings: Settings) -> int:
             return 1
     finally:
         store.close()
+    return 0
+
+
+def _export(args: argparse.Namespace, settings: Settings) -> int:
+    """``aisle export``: exit code 2, with the reason on stderr, for an unknown map, format, revision or layer."""
+    from api.exports import ExportError, export_to_path
+    from services import runtime
+
+    store = runtime.open_store(settings)
+    try:
+        name = args.map or settings.map_name
+        map_info = store.get_map(name)
+        if map_info is None:
+            print(f"aisle export: no map named {name!r}; known maps: {[m.name for m in store.maps()]}",
+                  file=sys.stderr)
+            return 2
+        try:
+            written = export_to_path(store, map_info, args.format, args.out, revision=args.revision,
+                                     layer=args.layer)
+        except ExportError as err:
+            print(f"aisle export: {err}", file=sys.stderr)
+            return 2
+    finally:
+        store.close()
+    for path in written:
+        print(f"wrote {path} ({path.stat().st_size} bytes)")
     return 0
 
 
