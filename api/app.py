@@ -14,7 +14,22 @@ from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
 from api.deps import ApiContext, enforce_policy
 from api.errors import ApiConfigError
-from api.routers import bins, events, features, health, history, keys, layers, maps, semantics, wms
+from api.routers import (
+    bins,
+    events,
+    exports,
+    features,
+    health,
+    history,
+    keys,
+    layers,
+    layout,
+    maps,
+    places,
+    semantics,
+    topology,
+    wms,
+)
 from api.routers.layers import REVISION_HEADER
 from api.streams import EventStreams
 from shared.bus import Bus
@@ -26,10 +41,17 @@ log = logging.getLogger(__name__)
 DESCRIPTION = """\
 A live semantic map of the warehouse for a Warehouse Management System.
 
-* **maps**: the maps and their revisions (each stage write is one revision);
-* **layers**: grid layers (occupancy, ...) as metadata, PNG or raw values;
-* **features**: walls, rack rows, bins, docks, ... as GeoJSON in map-frame metres;
-* **bins**: storage bins by WMS id, with aisle, bay, level, footprint and access pose;
+* **maps**: the maps, their revisions and diffs between revisions (each write is one revision);
+* **layers**: grid layers (occupancy, place labels, semantic labels, ...) as metadata, PNG or raw values;
+* **features** and **layout**: walls, corridors and aisles, junctions, rack rows, bins, docks, ... as GeoJSON
+  in map-frame metres, and the whole layout as a PNG or SVG picture with a legend;
+* **bins**: storage bins by WMS id, with aisle, bay, level, footprint, opening, access pose, corridor and nearest
+  junction; the WMS's own bin list imported and reconciled;
+* **topology** and **routes**: the region graph, blocked regions and connections, drivable routes between bins,
+  places and points;
+* **places**: docks, gates and chargers set by operators;
+* **semantics**: what is at a point, and the human label table of the place categories;
+* **exports**: GeoJSON, ROS map_server, VDMA LIF 1.0, Open-RMF nav graph;
 * **events**: each new revision as a Server-Sent Event, resumable with `Last-Event-ID`;
 * **keys**: API keys (admin only);
 * **health**: database, bus and stage workers.
@@ -92,7 +114,8 @@ def create_app(
     app.add_exception_handler(StoreUnavailableError, _store_unavailable)
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
-    for module in (health, maps, layers, features, bins, wms, semantics, history, events, keys):
+    for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, places, history,
+                   events, keys):
         app.include_router(module.router)
     if cors_origins:
         app.add_middleware(

@@ -12,12 +12,12 @@ from pydantic import BaseModel, Field
 from api.binindex import BIN_KIND, BinIndex, bin_index
 from api.cache import RevisionCache, get_cache
 from api.deps import MapDep, RevisionQuery, StoreDep
-from api.models import ErrorOut, Responses
+from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.routers.features import BBox, parse_bbox
 from shared.store import StoredFeature
 from shared.store.records import bounds
 
-router = APIRouter(prefix="/v1/maps/{map_name}/bins", tags=["bins"])
+router = APIRouter(prefix="/v1/maps/{map_name}/bins", tags=["bins"], responses=COMMON_ERRORS)
 
 BIN_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._:-]{0,127}$"
 """What a bin id may look like (the pillar stage writes ``AA-BBB``: aisle, bay)."""
@@ -66,8 +66,11 @@ class BinOut(BaseModel):
     access_pose: AccessPose | None = Field(description="Where a vehicle stands in the aisle to reach the bin.")
     row: str | None = Field(description="Key of the aisle-facing rack row (a `rack_row` feature).")
     back_row: str | None = Field(description="Key of the rack row behind the bin, if any.")
-    corridor: PlaceRef | None = Field(description="The drivable place (grid decomposition) the access pose is "
-                                                  "in, usually the aisle's corridor; null without place layers.")
+    corridor: PlaceRef | None = Field(description="The corridor feature the access pose is in: the bin's aisle "
+                                                  "(`aisle-03`, from the rack rows) where there is one, else a "
+                                                  "decomposition corridor.")
+    region: PlaceRef | None = Field(description="The drivable region of the grid decomposition the access pose is "
+                                                "in (a topology node); null without place layers.")
     nearest_junction: PlaceRef | None = Field(description="The junction nearest the access pose, if any.")
     confidence: float | None
     stage: str = Field(description="The stage that wrote the bin.")
@@ -79,12 +82,15 @@ class BinOut(BaseModel):
         "footprint": [[40.6, 17.1], [41.8, 17.1], [41.8, 18.1], [40.6, 18.1], [40.6, 17.1]],
         "opening": {"left": [40.6, 17.1], "right": [41.8, 17.1], "width_m": 1.2},
         "access_pose": {"x_m": 41.2, "y_m": 15.6, "yaw_rad": 1.5708}, "row": "r0-006", "back_row": "r0-007",
-        "corridor": {"key": "r12", "label": "corridor", "distance_m": 0.0},
+        "corridor": {"key": "aisle-03", "label": "corridor", "distance_m": None},
+        "region": {"key": "r12", "label": "corridor", "distance_m": None},
         "nearest_junction": {"key": "r3", "label": "junction", "distance_m": 18.4},
         "confidence": 0.92, "stage": "pillar_mapping", "revision_id": 1207}]}}
 
 
 class BinPage(BaseModel):
+    model_config = example_config(bins=[], total=240, revision=None, limit=100, offset=200, next_offset=None)
+
     bins: list[BinOut]
     total: int = Field(description="Bins matching the filters, over all pages.")
     revision: int | None = Field(description="The revision read at, or null for the live map.")
@@ -153,11 +159,13 @@ def bin_out(stored: StoredFeature, index: BinIndex | None = None) -> BinOut:
     status: BinStatus = "unreconciled"
     if index is not None and index.matching is not None:
         status = "matched" if wms_id is not None else "unknown_to_wms"
-    corridor = junction = None
+    corridor = region = junction = None
     if index is not None:
         x, y = (access.x_m, access.y_m) if access is not None else centre
         place = index.place_at(x, y)
-        corridor = None if place is None else PlaceRef(key=place[0], label=place[1], distance_m=None)
+        region = None if place is None else PlaceRef(key=place[0], label=place[1], distance_m=None)
+        corridor_key = index.corridor_at(x, y, aisle=_int(properties.get("aisle")))
+        corridor = None if corridor_key is None else PlaceRef(key=corridor_key, label="corridor", distance_m=None)
         nearest = index.nearest_junction(x, y)
         junction = None if nearest is None else PlaceRef(key=nearest[0], label="junction", distance_m=nearest[1])
     detected_id = _str(properties.get("id")) or feature.key
@@ -176,6 +184,7 @@ def bin_out(stored: StoredFeature, index: BinIndex | None = None) -> BinOut:
         row=_str(properties.get("row")),
         back_row=_str(properties.get("back_row")),
         corridor=corridor,
+        region=region,
         nearest_junction=junction,
         confidence=feature.confidence,
         stage=stored.stage,

@@ -8,10 +8,10 @@ from fastapi import APIRouter, HTTPException, Path, Query, status
 from pydantic import BaseModel, Field
 
 from api.deps import MapDep, StoreDep, find_revision
-from api.models import ErrorOut, Responses
+from api.models import COMMON_ERRORS, ErrorOut, Responses
 from shared.store import MapInfo, MapStore
 
-router = APIRouter(prefix="/v1/maps/{map_name}/revisions", tags=["maps"])
+router = APIRouter(prefix="/v1/maps/{map_name}/revisions", tags=["maps"], responses=COMMON_ERRORS)
 
 MAX_KEYS = 1000
 """Keys listed per kind and change type; counts are always complete."""

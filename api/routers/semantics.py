@@ -12,7 +12,7 @@ from pydantic import BaseModel, Field
 from api.cache import RevisionCache, get_cache
 from api.deps import AnnouncerDep, MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.gridlookup import cached_layer, class_name, value_at
-from api.models import ErrorOut, Responses
+from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.routers.features import MAX_BBOX_SIDE_M
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.semantics import (
@@ -24,7 +24,7 @@ from services.grid_decomposition.semantics import (
 )
 from shared.store import RevisionWrite, StoredFeature
 
-router = APIRouter(prefix="/v1/maps/{map_name}", tags=["semantics"])
+router = APIRouter(prefix="/v1/maps/{map_name}", tags=["semantics"], responses=COMMON_ERRORS)
 
 REGION_KINDS = ("corridor", "junction", "room", "open_area", "region")
 
@@ -157,6 +157,12 @@ class CategoryRow(BaseModel):
 
 
 class LabelTableOut(BaseModel):
+    model_config = example_config(
+        labels=[{"label": "corridor", "functionality": "drivable & storage access",
+                 "connectable": ["corridor", "junction", "open_area", "room", "storage"]}],
+        categories=[{"category": 3, "label": "storage", "overridden": True, "regions": 102, "area_m2": 480.5}],
+        overrides={"3": "storage"}, overrides_revision_id=57)
+
     labels: list[LabelRow]
     categories: list[CategoryRow] = Field(description="Categories of the current decomposition.")
     overrides: dict[str, str] = Field(description="A person's choices, category -> label.")
@@ -164,6 +170,8 @@ class LabelTableOut(BaseModel):
 
 
 class LabelTableIn(BaseModel):
+    model_config = example_config(overrides={"0": "corridor", "3": "storage"})
+
     overrides: dict[str, str] = Field(
         max_length=256,
         description="Category -> label for every category a person decides; others are assigned automatically. "
@@ -209,6 +217,8 @@ def get_label_table(map_info: MapDep, store: StoreDep, revision: RevisionQuery) 
 
 
 class LabelTableAccepted(BaseModel):
+    model_config = example_config(revision_id=58, overrides={"0": "corridor", "3": "storage"})
+
     revision_id: int = Field(description="The revision that recorded the overrides; the grid decomposition "
                                          "worker re-labels the map from it in a later revision.")
     overrides: dict[str, str]

@@ -10,11 +10,11 @@ from pydantic import BaseModel, Field, model_validator
 
 from api.binindex import WMS_STAGE, wms_matching
 from api.deps import AnnouncerDep, MapDep, RevisionQuery, StoreDep
-from api.models import ErrorOut, Responses
+from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.routers.bins import BIN_ID_PATTERN
 from shared.store import WmsBin
 
-router = APIRouter(prefix="/v1/maps/{map_name}/wms-bins", tags=["bins"])
+router = APIRouter(prefix="/v1/maps/{map_name}/wms-bins", tags=["bins"], responses=COMMON_ERRORS)
 
 MAX_WMS_BINS = 200_000
 _COORD = 100_000.0
@@ -26,6 +26,8 @@ _ERRORS: Responses = {
 
 
 class WmsBinIn(BaseModel):
+    model_config = example_config(id="A-03-014", x_m=41.2, y_m=17.6, aisle=3, bay=14, level=0)
+
     id: str = Field(pattern=BIN_ID_PATTERN, description="The WMS's id of the bin.", examples=["A-03-014"])
     x_m: float | None = Field(None, ge=-_COORD, le=_COORD, description="Bin centre x in map metres, if known.")
     y_m: float | None = Field(None, ge=-_COORD, le=_COORD, description="Bin centre y in map metres, if known.")
@@ -58,6 +60,12 @@ class MatchOut(BaseModel):
 
 
 class ReconciliationOut(BaseModel):
+    model_config = example_config(
+        wms_revision_id=88, tolerance_m=0.5,
+        matched=[{"wms_id": "A-03-014", "detected_id": "03-014", "by": "position", "distance_m": 0.07}],
+        missing_in_map=["A-99-001"], unknown_to_wms=["03-015"],
+        counts={"matched": 1, "missing_in_map": 1, "unknown_to_wms": 1})
+
     wms_revision_id: int = Field(description="The revision that imported the WMS list.")
     tolerance_m: float
     matched: list[MatchOut]

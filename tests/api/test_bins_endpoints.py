@@ -57,6 +57,8 @@ def test_bins_come_in_wms_form(client: TestClient, hall: list[int], layouts: lis
     assert item["access_pose"] == pytest.approx({"x_m": x, "y_m": y, "yaw_rad": yaw})
     assert item["row"] == written.properties["row"] and item["back_row"] == written.properties["back_row"]
     assert item["revision_id"] == hall[1] and item["stage"] == "pillar_mapping"
+    assert item["corridor"]["key"] == "aisle-01"  # the aisle its access pose is in
+    assert item["opening"]["width_m"] == pytest.approx(np.hypot(*np.subtract(*item["footprint"][:2])))
 
 
 def test_pages_partition_the_bins_sorted_by_id(client: TestClient, hall: list[int],

@@ -116,3 +116,17 @@ def test_matching_takes_closest_pairs_first_and_respects_levels() -> None:
 
     assert {(m.wms_id, m.detected_id) for m in result.matched} == {("W1", "a"), ("W2", "b"), ("W3", "c")}
     assert result.missing_in_map == [] and result.unknown_to_wms == []
+
+
+def test_routes_take_the_wms_id_of_a_matched_bin(client: TestClient, store: MapStore, hall: int,
+                                                 detected: list[Feature], writer: dict[str, str]) -> None:
+    one = detected[4]
+    client.put(f"{URL}/wms-bins", json={"bins": [{"id": "SITE-7", "x_m": one.properties["centre"][0],
+                                                  "y_m": one.properties["centre"][1]}]}, headers=writer)
+    x, y, _ = one.properties["access_pose"]
+
+    by_wms = client.get(f"{URL}/routes", params={"from": "bin:SITE-7", "to": f"point:{x},{y}"})
+    by_aisle_id = client.get(f"{URL}/routes", params={"from": f"bin:{one.key}", "to": f"point:{x},{y}"})
+
+    assert by_wms.status_code == by_aisle_id.status_code  # no place layers here: both 409, never 404
+    assert by_wms.json()["detail"] == by_aisle_id.json()["detail"]
