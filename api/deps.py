@@ -4,14 +4,16 @@ revision a route reads."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated, cast
 
+import anyio
 from fastapi import Depends, HTTPException, Path, Query, Request, Security, status
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
 from api.access import API_KEY_HEADER, AccessPolicy, Caller, check_role, required_role
 from api.announce import Announcer
+from api.live_features import LiveFeatures
 from api.streams import EventStreams
 from shared.bus import Bus
 from shared.settings import Settings
@@ -33,24 +35,29 @@ class ApiContext:
     access: AccessPolicy
     events: EventStreams
     announcer: Announcer
+    live_features: LiveFeatures = field(default_factory=LiveFeatures)
+    maps: dict[str, MapInfo] = field(default_factory=dict)
+    """Maps found so far, by name."""
 
 
-def get_context(request: Request) -> ApiContext:
+# Dependencies that neither block nor wait are ``async def``: FastAPI runs a plain ``def`` dependency in a
+# worker thread, and that hop costs more than most of them do.
+async def get_context(request: Request) -> ApiContext:
     return cast(ApiContext, request.app.state.context)
 
 
 ContextDep = Annotated[ApiContext, Depends(get_context)]
 
 
-def get_store(context: ContextDep) -> MapStore:
+async def get_store(context: ContextDep) -> MapStore:
     return context.store
 
 
-def get_settings(context: ContextDep) -> Settings:
+async def get_settings(context: ContextDep) -> Settings:
     return context.settings
 
 
-def get_announcer(context: ContextDep) -> Announcer:
+async def get_announcer(context: ContextDep) -> Announcer:
     return context.announcer
 
 
@@ -79,14 +86,14 @@ def get_caller(
 CallerDep = Annotated[Caller, Depends(get_caller)]
 
 
-def enforce_policy(request: Request, caller: CallerDep, context: ContextDep) -> None:
+async def enforce_policy(request: Request, caller: CallerDep, context: ContextDep) -> None:
     """App-wide: writes need a ``write`` key, reads a ``read`` key when the app requires keys for reads."""
     route_path = str(getattr(request.scope.get("route"), "path", request.url.path))
     check_role(caller, required_role(request.method, route_path,
                                      require_keys_for_reads=context.access.require_keys_for_reads))
 
 
-def require_admin(caller: CallerDep) -> Caller:
+async def require_admin(caller: CallerDep) -> Caller:
     """The caller, if their key is an ``admin`` key (401/403 otherwise)."""
     check_role(caller, Role.ADMIN)
     return caller
@@ -95,15 +102,26 @@ def require_admin(caller: CallerDep) -> Caller:
 AdminDep = Annotated[Caller, Depends(require_admin)]
 
 
-def get_map(
+async def get_map(
     map_name: Annotated[str, Path(description="Name of the map, e.g. `site`.", max_length=64, examples=["site"])],
-    store: StoreDep,
+    context: ContextDep,
 ) -> MapInfo:
-    """The map named in the path, or 404 naming the maps that do exist."""
-    found = store.get_map(map_name)
+    """The map named in the path, or 404 naming the maps that do exist.
+
+    Maps are never renamed or removed (the store has no way to), so a map once found is remembered.
+    """
+    found = context.maps.get(map_name)
+    if found is None:
+        found = await anyio.to_thread.run_sync(_find_map, context.store, map_name)
+        context.maps[map_name] = found
+    return found
+
+
+def _find_map(store: MapStore, name: str) -> MapInfo:
+    found = store.get_map(name)
     if found is None:
         known = [info.name for info in store.maps()]
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no map named {map_name!r}; known maps: {known}")
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no map named {name!r}; known maps: {known}")
     return found
 
 
@@ -116,7 +134,7 @@ def find_revision(store: MapStore, map_info: MapInfo, revision_id: int) -> Revis
     return found[0] if found and found[0].id == revision_id else None
 
 
-def get_revision(
+async def get_revision(
     map_info: MapDep,
     store: StoreDep,
     revision: Annotated[
@@ -126,8 +144,12 @@ def get_revision(
     ] = None,
 ) -> int | None:
     """The ``?revision=`` to read at, after checking it is a revision of the map (404 otherwise)."""
-    if revision is None:
-        return None
+    if revision is not None:
+        await anyio.to_thread.run_sync(_check_revision, store, map_info, revision)
+    return revision
+
+
+def _check_revision(store: MapStore, map_info: MapInfo, revision: int) -> None:
     if find_revision(store, map_info, revision) is None:
         latest = store.latest_revision(map_info.id)
         newest = "it has no revisions yet" if latest is None else f"its newest is {latest.id}"
@@ -135,7 +157,6 @@ def get_revision(
             status.HTTP_404_NOT_FOUND,
             f"revision {revision} is not a revision of map {map_info.name!r}; {newest}",
         )
-    return revision
 
 
 RevisionQuery = Annotated[int | None, Depends(get_revision)]
