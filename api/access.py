@@ -11,10 +11,14 @@ import hashlib
 import hmac
 import math
 import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 from fastapi import HTTPException, status
 
+from api.errors import ApiConfigError
 from api.ratelimit import TokenBucketLimiter
 from shared.store import MapStore
 from shared.store.keys import ApiKey, Role, get_key, parse_key_id, verify_key
@@ -23,6 +27,8 @@ READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 OPEN_READ_PATHS = frozenset({"/v1/health"})
 """Route paths read without a key even when keys are required for reads (load balancer probes)."""
 API_KEY_HEADER = "X-API-Key"
+_LOCK_STRIPES = 64
+"""Locks that make one request per key verify it (keys share them by hash), bounded whatever ids callers send."""
 CHALLENGE = {"WWW-Authenticate": f'Bearer, ApiKey header="{API_KEY_HEADER}"'}
 
 
@@ -61,13 +67,26 @@ def check_role(caller: Caller, required: Role | None) -> None:
         )
 
 
+@dataclass(frozen=True, slots=True)
+class _Verified:
+    """A key whose secret was verified: the secret's SHA-256, the key's row and when that row was read."""
+
+    digest: bytes
+    key: ApiKey
+    read_at: float
+    """Clock time (s) just before the key's row was read."""
+
+
 class AccessPolicy:
     """The app's access rules and their state: the rate limiter and keys already verified.
 
-    Verifying a secret costs a scrypt hash (tens of milliseconds), so a verified secret's SHA-256
-    is remembered per key id; the key's row is still read on every request, so a revoked key
-    stops working at once. Hashing an unverified secret is charged to the caller's address, so
-    guessing keys is rate limited too.
+    Verifying a secret costs a scrypt hash (tens of milliseconds), so a verified secret's SHA-256 is remembered
+    per key id, and concurrent first requests with the same key wait for one verification. A remembered key is
+    trusted for reads for ``recheck_s`` after its row was read; then one request reads the row again, so a key
+    revoked elsewhere (``aisle keys revoke``, another API process) stops reading within ``recheck_s``.
+    Requests that change something always read the key's row, so a revoked key changes nothing from that
+    moment; a key revoked through this app stops at once. Hashing an unverified secret is charged to the
+    caller's address, so guessing keys is rate limited too.
 
     Parameters
     ----------
@@ -77,15 +96,29 @@ class AccessPolicy:
         Requests per second allowed per key (anonymous callers: per address); None: no limit.
     rate_limit_burst : int
         Requests allowed at once after a quiet spell.
+    recheck_s : float
+        Seconds a verified key is trusted for reads before its row is read again (>= 0).
+    clock : callable, optional
+        Monotonic seconds; tests pass a fake one.
     """
 
     def __init__(self, *, require_keys_for_reads: bool, rate_limit_per_s: float | None,
-                 rate_limit_burst: int) -> None:
+                 rate_limit_burst: int, recheck_s: float = 1.0, clock: Callable[[], float] = time.monotonic) -> None:
+        if not (math.isfinite(recheck_s) and recheck_s >= 0):
+            raise ApiConfigError(f"key recheck interval must be a number of seconds >= 0, not {recheck_s}")
         self.require_keys_for_reads = require_keys_for_reads
         self.limiter = (None if rate_limit_per_s is None
                         else TokenBucketLimiter(rate_per_s=rate_limit_per_s, burst=rate_limit_burst))
-        self._verified: dict[str, bytes] = {}
-        self._lock = threading.Lock()
+        self.recheck_s = recheck_s
+        self._clock = clock
+        self._verified: dict[str, _Verified] = {}
+        self._stripes = [threading.Lock() for _ in range(_LOCK_STRIPES)]
+        self._hashed = 0
+
+    @property
+    def secrets_hashed(self) -> int:
+        """Secrets verified with scrypt so far (each costs tens of milliseconds of CPU)."""
+        return self._hashed
 
     def charge(self, bucket: str) -> None:
         """Take one request from ``bucket``; 429 with Retry-After when it is empty."""
@@ -100,35 +133,67 @@ class AccessPolicy:
                 headers={"Retry-After": str(max(1, math.ceil(wait_s)))},
             )
 
-    def authenticate(self, store: MapStore, secret: str | None, *, address: str) -> Caller:
+    def forget(self, key_id: str) -> None:
+        """Stop trusting key ``key_id`` from memory (it was just revoked): its next request reads its row."""
+        self._verified.pop(key_id, None)
+
+    def remembered(self, secret: str) -> ApiKey | None:
+        """The key of ``secret`` if it was verified less than ``recheck_s`` ago, else None; reads no database.
+
+        Charges nothing: charge ``key:<key id>`` for a request it lets through (:meth:`charge`).
+        """
+        key_id = parse_key_id(secret)
+        known = None if key_id is None else self._verified.get(key_id)
+        if (known is None or self._clock() - known.read_at > self.recheck_s
+                or not hmac.compare_digest(known.digest, hashlib.sha256(secret.encode()).digest())):
+            return None
+        return known.key
+
+    def authenticate(self, store: MapStore, secret: str | None, *, address: str, fresh: bool = False) -> Caller:
         """The caller of a request carrying ``secret`` (None: no key), charged to its rate bucket.
 
-        Raises 401 for a malformed, unknown, revoked or wrong key and 429 over the rate limit.
+        Reads the key's row unless it was read less than ``recheck_s`` ago (always with ``fresh``), and verifies
+        the secret unless it was verified before; one request per key does so at a time, the others then use
+        its result. Raises 401 for a malformed, unknown, revoked or wrong key and 429 over the rate limit.
         The detail names the key id at most, never the secret.
         """
         if secret is None:
             self.charge(f"address:{address}")
             return Caller(None, address)
+        key_id = self._key_id(secret, address=address)
+        digest = hashlib.sha256(secret.encode()).digest()
+        with self._stripes[hash(key_id) % _LOCK_STRIPES]:
+            known = self._verified.get(key_id)
+            if (fresh or known is None or self._clock() - known.read_at > self.recheck_s
+                    or not hmac.compare_digest(known.digest, digest)):
+                known = self._read_key(store, key_id, secret, digest, address=address, known=known)
+        self.charge(f"key:{key_id}")
+        return Caller(known.key, address)
+
+    def _key_id(self, secret: str, *, address: str) -> str:
         key_id = parse_key_id(secret)
         if key_id is None:
             self.charge(f"address:{address}")
             raise HTTPException(status.HTTP_401_UNAUTHORIZED,
                                 "malformed API key; keys look like aisle_<12 hex>_<43 characters>",
                                 headers=CHALLENGE)
+        return key_id
+
+    def _read_key(self, store: MapStore, key_id: str, secret: str, digest: bytes, *, address: str,
+                  known: _Verified | None) -> _Verified:
+        """Read the key's row, verify ``secret`` unless ``known`` holds its digest, and remember the result."""
+        read_at = self._clock()
         key = get_key(store, key_id=key_id)
         if key is None or not key.active:
+            self.forget(key_id)
             self.charge(f"address:{address}")
             state = "unknown" if key is None else "revoked"
             raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"API key {key_id} is {state}", headers=CHALLENGE)
-        digest = hashlib.sha256(secret.encode()).digest()
-        with self._lock:
-            known = self._verified.get(key_id)
-        if known is None or not hmac.compare_digest(known, digest):
+        if known is None or not hmac.compare_digest(known.digest, digest):
             self.charge(f"address:{address}")
+            self._hashed += 1
             if verify_key(store, secret=secret) is None:
                 raise HTTPException(status.HTTP_401_UNAUTHORIZED, f"wrong secret for API key {key_id}",
                                     headers=CHALLENGE)
-            with self._lock:
-                self._verified[key_id] = digest
-        self.charge(f"key:{key_id}")
-        return Caller(key, address)
+        verified = self._verified[key_id] = _Verified(digest, key, read_at)
+        return verified

@@ -1,10 +1,12 @@
 """Revisions the API writes (human input: WMS bin lists, label tables, places, blocked connections) are announced
-on the bus like the stages' own, so the fleet manager misses none."""
+on the bus like the stages' own, so the fleet manager misses none, and to the API's own live state, so the
+writer's next read sees them."""
 
 from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus, Publisher
@@ -15,14 +17,18 @@ log = logging.getLogger(__name__)
 
 
 class Announcer:
-    """Publishes a MapEvent per revision on ``/aisle/map_events`` when the API has a bus; does nothing without."""
+    """Tells ``on_revision`` of each revision the API wrote, and publishes a MapEvent for it on
+    ``/aisle/map_events`` when the API has a bus."""
 
-    def __init__(self, bus: Bus | None) -> None:
+    def __init__(self, bus: Bus | None, on_revision: Callable[[MapInfo, Revision], None] | None = None) -> None:
         self.bus = bus
+        self.on_revision = on_revision
         self._publisher: Publisher | None = None
         self._lock = threading.Lock()
 
     def announce(self, map_info: MapInfo, revision: Revision) -> None:
+        if self.on_revision is not None:
+            self.on_revision(map_info, revision)
         if self.bus is None:
             return
         with self._lock:

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
 from importlib.metadata import version
 
 from fastapi import Depends, FastAPI, Request, status
@@ -12,8 +13,11 @@ from fastapi.responses import JSONResponse
 
 from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
+from api.cache import RevisionCache
 from api.deps import ApiContext, enforce_policy
 from api.errors import ApiConfigError
+from api.fastpath import LiveReads
+from api.live import STALENESS_S, LiveMaps
 from api.routers import (
     bins,
     events,
@@ -57,6 +61,9 @@ A live semantic map of the warehouse for a Warehouse Management System.
 * **health**: database, bus and stage workers.
 
 Every read accepts `?revision=<id>` to see the map as it was then. Errors are JSON with a `detail`.
+Live feature and bin reads (without `?revision=`) come from memory and may be up to 0.2 s (by default) behind
+the newest revision (the `X-Aisle-Revision-Id` header names the revision they cover); a client always reads
+the revisions it wrote itself.
 
 Send an API key as `X-API-Key: <secret>` or `Authorization: Bearer <secret>`. Anything that changes
 something needs a `write` key (keys: `admin`); reads need a `read` key when the server requires keys
@@ -76,6 +83,8 @@ def create_app(
     cors_origins: Sequence[str] = (),
     event_poll_s: float = 1.0,
     event_heartbeat_s: float = 15.0,
+    live_staleness_s: float = STALENESS_S,
+    key_recheck_s: float = 1.0,
 ) -> FastAPI:
     """The Aisle REST API over ``store``.
 
@@ -101,22 +110,40 @@ def create_app(
         Browser origins allowed to call the API (``https://wms.example.com``, or ``*``); none by default.
     event_poll_s, event_heartbeat_s : float
         How often event streams look for new revisions, and how long they stay silent before a heartbeat.
+    live_staleness_s : float
+        How far behind the store live feature and bin reads may be, seconds (0: each one looks at the store).
+    key_recheck_s : float
+        How long a verified API key is trusted for reads before its row is read again (a revoked key stops
+        reading within this time; writes always read it), seconds.
     """
     _check_origins(cors_origins)
+    cache = RevisionCache()
+    live = LiveMaps(store, cache, staleness_s=live_staleness_s)
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        if bus is not None:
+            live.follow(bus)
+        try:
+            yield
+        finally:
+            live.close()
+
     app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url="/docs",
-                  dependencies=[Depends(enforce_policy)])
+                  dependencies=[Depends(enforce_policy)], lifespan=lifespan)
     access = AccessPolicy(require_keys_for_reads=require_keys_for_reads, rate_limit_per_s=rate_limit_per_s,
-                          rate_limit_burst=rate_limit_burst)
-    app.state.context = ApiContext(store=store, settings=settings, bus=bus,
-                                   expected_workers=tuple(expected_workers), access=access,
-                                   events=EventStreams(poll_s=event_poll_s, heartbeat_s=event_heartbeat_s),
-                                   announcer=Announcer(bus))
+                          rate_limit_burst=rate_limit_burst, recheck_s=key_recheck_s)
+    context = app.state.context = ApiContext(
+        store=store, settings=settings, bus=bus, expected_workers=tuple(expected_workers), access=access,
+        events=EventStreams(poll_s=event_poll_s, heartbeat_s=event_heartbeat_s),
+        announcer=Announcer(bus, on_revision=live.written), cache=cache, live=live)
     app.add_exception_handler(StoreUnavailableError, _store_unavailable)
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
     for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, places, history,
                    events, keys):
         app.include_router(module.router)
+    app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too
     if cors_origins:
         app.add_middleware(
             CORSMiddleware,

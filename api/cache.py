@@ -11,39 +11,45 @@ from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from typing import Any, TypeVar, cast
 
-from fastapi import Request
-
 T = TypeVar("T")
 
 
 class RevisionCache:
-    """A thread-safe LRU of at most ``size`` entries; ``get`` builds a missing entry outside the lock."""
+    """A thread-safe LRU of at most ``size`` entries.
+
+    ``get`` builds a missing entry once: concurrent callers asking for the same key wait for that build
+    (single flight) instead of building it too; builds of different keys run at the same time.
+    """
 
     def __init__(self, size: int = 16) -> None:
         if size < 1:
             raise ValueError(f"cache size must be at least 1, got {size}")
         self.size = size
         self._entries: OrderedDict[Hashable, Any] = OrderedDict()
+        self._building: dict[Hashable, threading.Event] = {}
         self._lock = threading.Lock()
 
     def get(self, key: Hashable, build: Callable[[], T]) -> T:
-        with self._lock:
-            if key in self._entries:
+        while True:
+            with self._lock:
+                if key in self._entries:
+                    self._entries.move_to_end(key)
+                    return cast(T, self._entries[key])
+                running = self._building.get(key)
+                if running is None:
+                    done = self._building[key] = threading.Event()
+                    break
+            running.wait()  # then take its result, or build it ourselves if that build failed
+        try:
+            value = build()
+            with self._lock:
+                self._entries[key] = value
                 self._entries.move_to_end(key)
-                return cast(T, self._entries[key])
-        value = build()
-        with self._lock:
-            self._entries[key] = value
-            self._entries.move_to_end(key)
-            while len(self._entries) > self.size:
-                self._entries.popitem(last=False)
+                while len(self._entries) > self.size:
+                    self._entries.popitem(last=False)
+        finally:
+            with self._lock:
+                del self._building[key]
+            done.set()
         return value
 
-
-def get_cache(request: Request) -> RevisionCache:
-    """The app's cache, made on first use."""
-    state = request.app.state
-    cache = getattr(state, "revision_cache", None)
-    if cache is None:
-        cache = state.revision_cache = RevisionCache()
-    return cast(RevisionCache, cache)

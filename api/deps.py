@@ -5,15 +5,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Annotated, cast
 
 import anyio
 from fastapi import Depends, HTTPException, Path, Query, Request, Security, status
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
-from api.access import API_KEY_HEADER, AccessPolicy, Caller, check_role, required_role
+from api.access import API_KEY_HEADER, READ_METHODS, AccessPolicy, Caller, check_role, required_role
 from api.announce import Announcer
-from api.live_features import LiveFeatures
+from api.cache import RevisionCache
+from api.live import LiveMaps
 from api.streams import EventStreams
 from shared.bus import Bus
 from shared.settings import Settings
@@ -35,7 +37,10 @@ class ApiContext:
     access: AccessPolicy
     events: EventStreams
     announcer: Announcer
-    live_features: LiveFeatures = field(default_factory=LiveFeatures)
+    cache: RevisionCache
+    """Things derived from one revision of a map (decoded layers, bin indexes)."""
+    live: LiveMaps
+    """The live state of each map, for live reads."""
     maps: dict[str, MapInfo] = field(default_factory=dict)
     """Maps found so far, by name."""
 
@@ -61,6 +66,10 @@ async def get_announcer(context: ContextDep) -> Announcer:
     return context.announcer
 
 
+async def get_cache(context: ContextDep) -> RevisionCache:
+    return context.cache
+
+
 StoreDep = Annotated[MapStore, Depends(get_store)]
 AnnouncerDep = Annotated[Announcer, Depends(get_announcer)]
 """Announce a revision the API wrote (on the bus, when there is one)."""
@@ -71,16 +80,24 @@ _api_key_header = APIKeyHeader(name=API_KEY_HEADER, auto_error=False, scheme_nam
 _bearer = HTTPBearer(auto_error=False, scheme_name="Bearer", description="The same API key as a bearer token.")
 
 
-def get_caller(
+async def get_caller(
     request: Request,
     context: ContextDep,
     api_key: Annotated[str | None, Security(_api_key_header)],
     bearer: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)],
 ) -> Caller:
-    """The verified caller (401 for a bad key), charged to their rate limit (429 when spent)."""
+    """The verified caller (401 for a bad key), charged to their rate limit (429 when spent).
+
+    A read with a key verified recently is answered from memory; otherwise the key is read in a worker thread.
+    """
     secret = api_key if api_key is not None else (None if bearer is None else bearer.credentials)
     address = request.client.host if request.client is not None else "unknown"
-    return context.access.authenticate(context.store, secret, address=address)
+    read = request.method in READ_METHODS
+    if read and secret is not None and (key := context.access.remembered(secret)) is not None:
+        context.access.charge(f"key:{key.key_id}")
+        return Caller(key, address)
+    return await anyio.to_thread.run_sync(partial(context.access.authenticate, context.store, secret,
+                                                  address=address, fresh=not read))
 
 
 CallerDep = Annotated[Caller, Depends(get_caller)]

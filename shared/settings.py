@@ -194,6 +194,10 @@ class Settings(BaseSettings):
     api_cors_origins: list[str] = Field(default_factory=list, description="Browser origins allowed (CORS).")
     api_event_poll_s: float = Field(1.0, gt=0, le=60, description="How often event streams look for new revisions.")
     api_event_heartbeat_s: float = Field(15.0, gt=0)
+    api_live_staleness_s: float = Field(
+        0.2, ge=0, le=60, description="How far behind the store live feature and bin reads may be, seconds.")
+    api_key_recheck_s: float = Field(
+        1.0, ge=0, le=3600, description="How long a verified API key is trusted for reads before it is read again.")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     occupancy: OccupancySettings = Field(default_factory=OccupancySettings)

@@ -2,25 +2,30 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from typing import Annotated, Any, Literal
 
+import anyio
 import numpy as np
-from fastapi import APIRouter, Depends, HTTPException, Path, Query, status
+from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
 from api.binindex import BIN_KIND, BinIndex, bin_index
-from api.cache import RevisionCache, get_cache
-from api.deps import MapDep, RevisionQuery, StoreDep
+from api.cache import RevisionCache
+from api.deps import ContextDep, MapDep, RevisionQuery, StoreDep, get_cache
+from api.live import LiveMap
+from api.live_features import stored_feature
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
-from api.routers.features import BBox, parse_bbox
-from shared.store import StoredFeature
+from api.routers.features import REVISION_HEADER, BBox, parse_bbox
+from shared.store import MapInfo, MapStore, StoredFeature
 from shared.store.records import bounds
 
 router = APIRouter(prefix="/v1/maps/{map_name}/bins", tags=["bins"], responses=COMMON_ERRORS)
 
 BIN_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._:-]{0,127}$"
 """What a bin id may look like (the pillar stage writes ``AA-BBB``: aisle, bay)."""
+BIN_ID_REGEX = re.compile(BIN_ID_PATTERN)
 
 _ERRORS: Responses = {
     status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map, revision or bin."},
@@ -240,23 +245,57 @@ def list_bins(
                    next_offset=offset + limit if offset + limit < len(chosen) else None)
 
 
-@router.get("/{bin_id}", summary="One bin", responses=_ERRORS)
-def get_bin(
+@router.get("/{bin_id}", summary="One bin", responses=_ERRORS, response_model=BinOut)
+async def get_bin(
     map_info: MapDep,
     store: StoreDep,
     cache: IndexDep,
+    context: ContextDep,
     revision: RevisionQuery,
     bin_id: Annotated[str, Path(description="The bin's WMS id (when a WMS list was imported) or Aisle's id.",
                                 pattern=BIN_ID_PATTERN, examples=["03-014"])],
-) -> BinOut:
+) -> Response | BinOut:
     """One bin by its WMS id or Aisle's id (as of ``?revision=``), with where it is, its opening, where to stand,
-    the corridor that leads to it and the nearest junction; 404 if there is none."""
+    the corridor that leads to it and the nearest junction; 404 if there is none.
+
+    The live map (no ``?revision=``) is served from memory, and may be up to 0.2 s behind the newest
+    revision (revisions a client wrote through the API are always in); the header ``X-Aisle-Revision-Id``
+    names the newest revision the answer covers."""
+    if revision is not None:
+        return await anyio.to_thread.run_sync(_stored_bin, store, cache, map_info, revision, bin_id)
+    live = await context.live.get(map_info)
+    if live is None:
+        raise _no_bin(map_info, bin_id, revision)
+    return Response(live_bin(live, map_info, bin_id), media_type="application/json",
+                    headers={REVISION_HEADER: str(live.revision_id)})
+
+
+def _no_bin(map_info: MapInfo, bin_id: str, revision: int | None) -> HTTPException:
+    when = "now" if revision is None else f"at revision {revision}"
+    return HTTPException(status.HTTP_404_NOT_FOUND,
+                         f"map {map_info.name!r} has no bin {bin_id!r} {when}; list bins at "
+                         f"/v1/maps/{map_info.name}/bins?id_prefix=")
+
+
+def _stored_bin(store: MapStore, cache: RevisionCache, map_info: MapInfo, revision: int, bin_id: str) -> BinOut:
+    """Bin ``bin_id`` as of ``revision``, read from the store."""
     index = bin_index(store, cache, map_info.id, revision)
     detected = index.matching.detected_of(bin_id) if index.matching is not None else None
     found = store.feature(map_info.id, BIN_KIND, detected or bin_id, revision=revision)
     if found is None:
-        when = "now" if revision is None else f"at revision {revision}"
-        raise HTTPException(status.HTTP_404_NOT_FOUND,
-                            f"map {map_info.name!r} has no bin {bin_id!r} {when}; list bins at "
-                            f"/v1/maps/{map_info.name}/bins?id_prefix=")
+        raise _no_bin(map_info, bin_id, revision)
     return bin_out(found, index)
+
+
+def live_bin(live: LiveMap, map_info: MapInfo, bin_id: str) -> bytes:
+    """Bin ``bin_id`` of the live map as JSON (404 if there is none), made once per version of the bin and of
+    what it reads besides."""
+    matching = live.bins.matching
+    detected = matching.detected_of(bin_id) if matching is not None else None
+    row = live.features.feature(BIN_KIND, detected or bin_id)
+    if row is None:
+        raise _no_bin(map_info, bin_id, None)
+    body = live.bin_json.get(row.id)
+    if body is None:
+        body = live.bin_json[row.id] = bin_out(stored_feature(row), live.bins).model_dump_json().encode()
+    return body

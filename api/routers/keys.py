@@ -9,7 +9,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, status
 from pydantic import BaseModel, Field
 
-from api.deps import AdminDep, StoreDep, require_admin
+from api.deps import AdminDep, ContextDep, StoreDep, require_admin
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, example_config, not_found
 from shared.store.keys import KEY_ID_PATTERN, MAX_NAME_LENGTH, ApiKey, Role, create_key, get_key, list_keys, revoke_key
 
@@ -86,7 +86,7 @@ def post_key(body: KeyIn, store: StoreDep, caller: AdminDep) -> KeyCreated:
     responses={**_AUTH, **not_found("No such key."),
                status.HTTP_409_CONFLICT: {"model": ErrorOut, "description": "The last active admin key."}},
 )
-def delete_key(key_id: KeyIdPath, store: StoreDep, caller: AdminDep) -> KeyOut:
+def delete_key(key_id: KeyIdPath, store: StoreDep, caller: AdminDep, context: ContextDep) -> KeyOut:
     """Revoke a key at once; it stays listed with ``?include_revoked=true``. The last admin key cannot go."""
     active = list_keys(store)
     target = next((key for key in active if key.key_id == key_id), None)
@@ -97,5 +97,6 @@ def delete_key(key_id: KeyIdPath, store: StoreDep, caller: AdminDep) -> KeyOut:
     revoked = revoke_key(store, key_id=key_id)
     if revoked is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no API key {key_id}")
+    context.access.forget(key_id)
     log.info("API key %s revoked by %s", key_id, caller.key.key_id if caller.key else "?")
     return key_out(revoked)

@@ -9,8 +9,8 @@ import numpy as np
 from fastapi import APIRouter, Body, Depends, HTTPException, Query, status
 from pydantic import BaseModel, Field
 
-from api.cache import RevisionCache, get_cache
-from api.deps import AnnouncerDep, MapDep, RevisionQuery, SettingsDep, StoreDep
+from api.cache import RevisionCache
+from api.deps import AnnouncerDep, MapDep, RevisionQuery, SettingsDep, StoreDep, get_cache
 from api.gridlookup import cached_layer, class_name, value_at
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.routers.features import MAX_BBOX_SIDE_M

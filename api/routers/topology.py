@@ -11,8 +11,8 @@ from pydantic import BaseModel, Field
 from api.access import Caller
 from api.announce import Announcer
 from api.binindex import WmsMatching, bin_index, corridors_along
-from api.cache import RevisionCache, get_cache
-from api.deps import AnnouncerDep, CallerDep, MapDep, RevisionQuery, StoreDep
+from api.cache import RevisionCache
+from api.deps import AnnouncerDep, CallerDep, MapDep, RevisionQuery, StoreDep, get_cache
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, example_config, not_found
 from api.navigation import (
     REGION_KEY_PATTERN,

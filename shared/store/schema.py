@@ -72,6 +72,7 @@ features = sa.Table(
     sa.Index("ix_features_live", "map_id", "kind", "retired_revision_id"),
     sa.Index("ix_features_key", "map_id", "kind", "key"),
     sa.Index("ix_features_bbox", "map_id", "min_x", "min_y"),
+    sa.Index("ix_features_revision", "map_id", "revision_id"),
 )
 
 topology_nodes = sa.Table(

@@ -8,6 +8,7 @@ them, ``retired_revision_id`` superseded them), so any revision of the map can b
 from __future__ import annotations
 
 import datetime as dt
+import json
 import os
 import socket
 import zlib
@@ -40,13 +41,17 @@ from shared.store.records import (
 )
 
 MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+_IDS_PER_STATEMENT = 5000
+"""Row ids named in one ``IN (...)``, well below SQLite's and PostgreSQL's limits on bound parameters."""
 
 
-class LiveFeatureRow(NamedTuple):
-    """A live feature as stored: geometry and properties are the JSON text in the database."""
+class FeatureRow(NamedTuple):
+    """A feature row as stored: geometry and properties are the JSON text in the database."""
 
     id: int
     revision_id: int
+    retired_revision_id: int | None
+    """The revision that superseded the row; None while it is live."""
     stage: str
     kind: str
     key: str
@@ -77,6 +82,15 @@ def _decode(blob: bytes, dtype: str, height: int, width: int) -> np.ndarray[Any,
     return np.frombuffer(zlib.decompress(blob), dtype=np.dtype(dtype)).reshape(height, width).copy()
 
 
+def _same_json(stored: str, written: str) -> bool:
+    """Whether JSON text read back from the database is the text ``json.dumps`` made of a value.
+
+    SQLite and a PostgreSQL ``json`` column keep the text as written, so a plain comparison mostly decides; a
+    database that normalises the text is compared by value.
+    """
+    return stored == written or json.loads(stored) == json.loads(written)
+
+
 def _live_at(table: sa.Table, revision: int | None) -> sa.ColumnElement[bool]:
     if revision is None:
         return table.c.retired_revision_id.is_(None)
@@ -103,7 +117,8 @@ def create_store_engine(url: str) -> Engine:
             cursor.close()
 
         return engine
-    return sa.create_engine(url, pool_pre_ping=True, pool_size=5, max_overflow=10)
+    # An API process serves many requests at once, and each holds a connection only for its query.
+    return sa.create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=30)
 
 
 class MapStore:
@@ -208,9 +223,24 @@ class MapStore:
                         row.input_end_ns, row.summary)
 
     # -- writing --------------------------------------------------------------------------
+    @staticmethod
+    def _lock_map(connection: Connection, map_id: int) -> None:
+        """Hold the map's row until the transaction ends, so the map's revisions commit in id order.
+
+        Readers that follow a map by revision id (event streams resuming, the API's live index) then never see a
+        revision before an older one. PostgreSQL locks the row; SQLite has one writer at a time anyway.
+        """
+        connection.execute(sa.select(schema.maps.c.id).where(schema.maps.c.id == map_id).with_for_update())
+
     def write_revision(self, map_id: int, write: RevisionWrite) -> Revision:
-        """Store everything in ``write`` as one new revision, atomically."""
+        """Store everything in ``write`` as one new revision, atomically.
+
+        Features of a kind are replaced by ``write.features[kind]`` as a whole; a feature written exactly as it
+        is stored (same key, geometry, properties and confidence) stays the row it is, with the revision that
+        first wrote it, so a stage that rewrites all its features changes only the rows of those that changed.
+        """
         with self._begin() as connection:
+            self._lock_map(connection, map_id)
             created_at = _now()
             revision_id = connection.execute(
                 schema.revisions.insert().values(
@@ -255,23 +285,36 @@ class MapStore:
         table = schema.features
         live = sa.and_(table.c.map_id == map_id, table.c.stage == stage, table.c.kind == kind,
                        table.c.retired_revision_id.is_(None))
-        previous = {row.key: (row.geometry, row.properties)
-                    for row in connection.execute(sa.select(table.c.key, table.c.geometry, table.c.properties)
-                                                  .where(live))}
-        connection.execute(table.update().where(live).values(retired_revision_id=revision_id))
+        # key -> (row id, geometry text, properties text, confidence) of the live rows, as stored
+        previous = {row.key: (row.id, row.geometry, row.properties, row.confidence)
+                    for row in connection.execute(sa.select(table.c.id, table.c.key,
+                                                            sa.cast(table.c.geometry, sa.Text).label("geometry"),
+                                                            sa.cast(table.c.properties, sa.Text).label("properties"),
+                                                            table.c.confidence).where(live))}
+        kept: set[str] = set()
         rows = []
+        moved = 0
         for item in items:
+            geometry, properties = json.dumps(dict(item.geometry)), json.dumps(dict(item.properties))
+            stored = previous.get(item.key)
+            if (stored is not None and item.key not in kept and _same_json(stored[1], geometry)
+                    and _same_json(stored[2], properties) and stored[3] == item.confidence):
+                kept.add(item.key)
+                continue
+            moved += stored is not None and not _same_json(stored[1], geometry)
             min_x, min_y, max_x, max_y = bounds(item.geometry)
             rows.append({
                 "map_id": map_id, "revision_id": revision_id, "stage": stage, "kind": kind, "key": item.key,
                 "geometry": dict(item.geometry), "min_x": min_x, "min_y": min_y, "max_x": max_x, "max_y": max_y,
                 "confidence": item.confidence, "properties": dict(item.properties),
             })
+        retired = [row_id for key, (row_id, *_) in previous.items() if key not in kept]
+        for start in range(0, len(retired), _IDS_PER_STATEMENT):
+            connection.execute(table.update().where(table.c.id.in_(retired[start:start + _IDS_PER_STATEMENT]))
+                               .values(retired_revision_id=revision_id))
         if rows:
             connection.execute(table.insert(), rows)
         keys = {item.key for item in items}
-        moved = sum(1 for item in items if item.key in previous
-                    and previous[item.key][0] != dict(item.geometry))
         return {"added": len(keys - previous.keys()), "removed": len(previous.keys() - keys), "moved": moved,
                 "total": len(keys)}
 
@@ -351,23 +394,48 @@ class MapStore:
         return [StoredFeature(r.id, r.revision_id, r.stage,
                               Feature(r.kind, r.key, r.geometry, r.properties, r.confidence)) for r in rows]
 
-    def live_feature_rows(self, map_id: int) -> list[LiveFeatureRow]:
+    _FEATURE_ROW = (schema.features.c.id, schema.features.c.revision_id, schema.features.c.retired_revision_id,
+                    schema.features.c.stage, schema.features.c.kind, schema.features.c.key,
+                    schema.features.c.confidence, schema.features.c.min_x, schema.features.c.min_y,
+                    schema.features.c.max_x, schema.features.c.max_y, sa.cast(schema.features.c.geometry, sa.Text),
+                    sa.cast(schema.features.c.properties, sa.Text))
+
+    @staticmethod
+    def _feature_row(r: Any) -> FeatureRow:
+        return FeatureRow(r[0], r[1], r[2], r[3], r[4], r[5], r[6], (r[7], r[8], r[9], r[10]), r[11], r[12])
+
+    def live_feature_rows(self, map_id: int) -> list[FeatureRow]:
         """Every live feature of the map in id order, geometry and properties as the JSON text stored.
 
         For indexes that serve features as GeoJSON without decoding what they do not change.
         """
         table = schema.features
-        query = (sa.select(table.c.id, table.c.revision_id, table.c.stage, table.c.kind, table.c.key,
-                           table.c.confidence, table.c.min_x, table.c.min_y, table.c.max_x, table.c.max_y,
-                           sa.cast(table.c.geometry, sa.Text), sa.cast(table.c.properties, sa.Text))
+        query = (sa.select(*self._FEATURE_ROW)
                  # naming every kind lets the live index (map, kind, retired) find the live rows
                  .where(table.c.map_id == map_id, table.c.kind.in_(sorted(FEATURE_KINDS)),
                         table.c.retired_revision_id.is_(None))
                  .order_by(table.c.id))
         with self._read() as connection:
-            rows = connection.execute(query).all()
-        return [LiveFeatureRow(r[0], r[1], r[2], r[3], r[4], r[5], (r[6], r[7], r[8], r[9]), r[10], r[11])
-                for r in rows]
+            return [self._feature_row(r) for r in connection.execute(query)]
+
+    def feature_rows_changed(self, map_id: int, *, after: int, upto: int) -> list[FeatureRow]:
+        """Feature rows that revisions ``after`` < r <= ``upto`` of the map wrote or retired, in id order.
+
+        What turns the live features at revision ``after`` into those at ``upto``: drop the rows retired by
+        then, add those written and still live then (``retired_revision_id`` is as stored now, so compare it
+        with ``upto``). Revisions of a map commit in id order, so once ``upto`` is committed, so are they all.
+        """
+        table = schema.features
+        written = sa.select(*self._FEATURE_ROW).where(table.c.map_id == map_id, table.c.revision_id > after,
+                                                      table.c.revision_id <= upto)
+        # Naming every kind lets the live index (map, kind, retired) find the rows retired meanwhile; "+ 0" keeps
+        # SQLite (without statistics) from using the revision index for the written-before test instead.
+        retired = sa.select(*self._FEATURE_ROW).where(
+            table.c.map_id == map_id, table.c.kind.in_(sorted(FEATURE_KINDS)), table.c.retired_revision_id > after,
+            table.c.retired_revision_id <= upto, table.c.revision_id + 0 <= after)
+        with self._read() as connection:
+            rows = [self._feature_row(r) for r in connection.execute(sa.union_all(written, retired))]
+        return sorted(rows)
 
     def feature(self, map_id: int, kind: str, key: str, revision: int | None = None) -> StoredFeature | None:
         """The feature ``kind``/``key`` live at ``revision`` (default: now); the newest if several stages have it."""
@@ -410,6 +478,7 @@ class MapStore:
             raise StoreError(f"WMS bin ids must be unique; repeated: {duplicates}")
         table = schema.wms_bins
         with self._begin() as connection:
+            self._lock_map(connection, map_id)
             created_at = _now()
             previous = connection.execute(sa.select(sa.func.count()).select_from(table).where(
                 table.c.map_id == map_id, table.c.retired_revision_id.is_(None))).scalar_one()

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
 from api import create_app
@@ -28,7 +29,7 @@ def make_client(tmp_path: Path) -> Iterator[ClientFactory]:
 
     Other keyword arguments (``require_keys_for_reads``, ``rate_limit_per_s``, ...) go to :func:`create_app`.
     """
-    clients: list[TestClient] = []
+    clients: list[tuple[TestClient, FastAPI]] = []
 
     def build(map_store: MapStore, *, bus: Bus | None = None, expected_workers: Sequence[str] = (),
               raise_server_exceptions: bool = True, **options: Any) -> TestClient:
@@ -36,12 +37,13 @@ def make_client(tmp_path: Path) -> Iterator[ClientFactory]:
         app = create_app(store=map_store, settings=settings, bus=bus, expected_workers=expected_workers,
                          **options)
         client = TestClient(app, raise_server_exceptions=raise_server_exceptions)
-        clients.append(client)
+        clients.append((client, app))
         return client
 
     yield build
-    for client in clients:
+    for client, app in clients:
         client.close()
+        app.state.context.live.close()  # waits for live refreshes under way, before the store closes
 
 
 @pytest.fixture

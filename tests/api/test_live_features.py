@@ -1,7 +1,9 @@
-"""Live GeoJSON queries come from an in-memory index: the same answers as the store gives, never behind it."""
+"""Live GeoJSON queries come from an in-memory index: the same answers as the store gives at the revision the
+index covers, updated with just the rows each new revision changed."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 from typing import Any
 
@@ -9,8 +11,11 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.live_features import FeatureIndex, LiveFeatures, geojson_bytes
+from api.cache import RevisionCache
+from api.live import LiveMaps
+from api.live_features import FeatureIndex, geojson_bytes
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
+from tests.api.conftest import ClientFactory
 
 URL = "/v1/maps/site/features"
 QUERIES: list[dict[str, Any]] = [
@@ -43,7 +48,21 @@ def test_live_answer_is_the_store_answer_at_the_newest_revision(client: TestClie
     assert live["revision"] is None
 
 
-def test_live_answers_follow_every_new_revision(store: MapStore, client: TestClient, site: dict[str, int]) -> None:
+@pytest.mark.parametrize("query", QUERIES)
+def test_answers_from_memory_are_the_answers_of_the_route(client: TestClient, site: dict[str, int],
+                                                         query: dict[str, Any]) -> None:
+    first = client.get(URL, params=query)  # the route: it builds the live state
+    again = client.get(URL, params=query)  # answered from memory before FastAPI
+
+    assert first.status_code == again.status_code == 200
+    assert first.content == again.content
+    assert first.headers["X-Aisle-Revision-Id"] == again.headers["X-Aisle-Revision-Id"] == str(site["semantics_2"])
+    assert first.headers["content-type"] == again.headers["content-type"] == "application/json"
+
+
+def test_live_answers_follow_every_new_revision(store: MapStore, make_client: ClientFactory, site: dict[str, int]
+                                                ) -> None:
+    client = make_client(store, live_staleness_s=0)  # each read looks at the store: it sees writes made beside
     site_id = store.ensure_map("site").id
     assert [f["id"] for f in client.get(URL, params={"kind": "bin"}).json()["features"]] == ["bin/B1"]
 
@@ -73,10 +92,10 @@ def test_each_map_has_its_own_index(client: TestClient, site: dict[str, int]) ->
     assert other_ids == ["bin/X1"]
 
 
-def test_a_map_without_revisions_has_no_index(store: MapStore) -> None:
+def test_a_map_without_revisions_has_no_live_state(store: MapStore) -> None:
     empty = store.ensure_map("empty")
 
-    assert LiveFeatures().index(store, empty.id) is None
+    assert asyncio.run(LiveMaps(store, RevisionCache()).get(empty)) is None
 
 
 def test_stored_properties_named_like_the_added_ones_are_replaced(store: MapStore, client: TestClient) -> None:
@@ -93,17 +112,23 @@ def test_stored_properties_named_like_the_added_ones_are_replaced(store: MapStor
     assert geojson_bytes(row).count(b'"kind"') == 1
 
 
-def test_a_rebuilt_index_reuses_unchanged_features_and_encodes_them_as_new(store: MapStore, site: dict[str, int]
-                                                                           ) -> None:
+def test_an_updated_index_is_the_index_built_anew_and_keeps_unchanged_features(store: MapStore,
+                                                                               site: dict[str, int]) -> None:
     site_id = store.ensure_map("site").id
     before = FeatureIndex.build(site["semantics_2"], store.live_feature_rows(site_id))
-    store.write_revision(site_id, RevisionWrite("semantics", features={"bin": [
-        Feature("bin", "B1", {"type": "Point", "coordinates": [2.0, 1.0]}, {"level": 2}, 0.95),
-        Feature("bin", "B4", {"type": "Point", "coordinates": [4.0, 1.0]})]}))
-    rows = store.live_feature_rows(site_id)
+    newer = store.write_revision(site_id, RevisionWrite("semantics", features={"bin": [
+        Feature("bin", "B1", {"type": "Point", "coordinates": [2.0, 1.0]}, {"level": 2}, 0.95),  # as it was
+        Feature("bin", "B4", {"type": "Point", "coordinates": [4.0, 1.0]})]})).id
+    store.write_revision(site_id, RevisionWrite("occupancy_mapping", layers=[
+        GridLayer("occupancy", np.zeros((2, 2), dtype=np.int8), 0.5, 0.0, 0.0)]))
+    changed = store.feature_rows_changed(site_id, after=before.revision_id, upto=newer)
 
-    after = FeatureIndex.build(site["semantics_2"] + 1, rows, before)
+    after = before.updated(newer, changed)
+    anew = FeatureIndex.build(newer, store.live_feature_rows(site_id))
 
-    assert list(after.geojson) == [geojson_bytes(row) for row in rows]
-    assert [json.loads(item)["properties"]["revision_id"] for item in after.geojson] == [row.revision_id
-                                                                                       for row in rows]
+    assert [row.key for row in changed] == ["B4"]  # B1 was written as stored: its row stays
+    assert list(after.geojson) == list(anew.geojson)
+    assert after.rows == anew.rows and after.newest == anew.newest
+    assert after.geojson[0] is before.geojson[0]  # not encoded again
+    assert [json.loads(item)["properties"]["revision_id"] for item in after.geojson] == [
+        row.revision_id for row in anew.rows]

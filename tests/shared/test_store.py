@@ -62,6 +62,25 @@ def test_features_are_replaced_per_stage_and_kind_with_history(store: MapStore) 
     assert [f.feature.key for f in inside] == ["01-02"]
 
 
+def test_a_feature_written_as_stored_keeps_its_row_and_history_stays_exact(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    first = store.write_revision(site.id, RevisionWrite("pillars", features={
+        "bin": [_bin("01-01", 1, 1), _bin("01-02", 2, 1)]}))
+    second = store.write_revision(site.id, RevisionWrite("pillars", features={
+        "bin": [_bin("01-01", 1, 1), _bin("01-02", 2.5, 1), _bin("01-03", 3, 1)]}))
+
+    live = {f.feature.key: f for f in store.features(site.id, kinds=["bin"])}
+    changed = store.feature_rows_changed(site.id, after=first.id, upto=second.id)
+
+    assert live["01-01"].revision_id == first.id  # unchanged: the row first written
+    assert live["01-02"].revision_id == live["01-03"].revision_id == second.id
+    assert second.summary["features"]["bin"] == {"added": 1, "removed": 0, "moved": 1, "total": 3}
+    assert [(f.feature.key, f.feature.geometry["coordinates"]) for f in store.features(site.id, revision=first.id)
+            ] == [("01-01", [1, 1]), ("01-02", [2, 1])]
+    assert [(row.key, row.revision_id, row.retired_revision_id) for row in changed] == [
+        ("01-02", first.id, second.id), ("01-02", second.id, None), ("01-03", second.id, None)]
+
+
 def test_other_stages_features_are_untouched(store: MapStore) -> None:
     site = store.ensure_map("site")
     store.write_revision(site.id, RevisionWrite("pillars", features={"bin": [_bin("A", 0, 0)]}))
