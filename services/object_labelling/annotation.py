@@ -7,12 +7,12 @@ AnnotatedScan carries, so a consumer places cone ``i`` at ``pose * (r cos b, r s
 
 Cones of a classified object get its class; other obstacle cones get the whole-image class when
 exactly one is present (rack or gate), else ``unknown``. Cones that saw only floor or nothing are
-left out. Confidences are the logistic of the SVM margin (not calibrated).
+left out. Confidences are the calibrated (Platt) probabilities of the label given: the object's
+class, the whole-image class, or for ``unknown`` one minus the best class's probability.
 """
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
@@ -35,12 +35,7 @@ class ConeAnnotations(NamedTuple):
     confidences: npt.NDArray[np.float32]
 
 
-def _logistic(score: float) -> float:
-    return 1.0 / (1.0 + math.exp(-score))
-
-
-def annotate_cones(frame: FrameLabels, class_names: tuple[str, ...], *, scene_confidence: float = 0.5
-                   ) -> ConeAnnotations:
+def annotate_cones(frame: FrameLabels, class_names: tuple[str, ...]) -> ConeAnnotations:
     """Per-cone label and confidence of every cone with a finite obstacle range.
 
     Parameters
@@ -49,21 +44,22 @@ def annotate_cones(frame: FrameLabels, class_names: tuple[str, ...], *, scene_co
         The labeller's result for one frame.
     class_names
         Label names; must hold ``"unknown"`` and every class the labeller and the scene can give.
-    scene_confidence
-        Confidence given to obstacle cones labelled by the whole-image class.
     """
     index = {name: i for i, name in enumerate(class_names)}
     ranges = frame.scan.ranges_m
     n = ranges.shape[0]
-    present = [name for name, seen in frame.scene.items() if seen]
-    background = present[0] if len(present) == 1 else UNKNOWN
+    if len(frame.scene_present) == 1:
+        background = frame.scene_present[0]
+        background_confidence = frame.scene[background]
+    else:
+        background = UNKNOWN
+        background_confidence = 1.0 - max(frame.scene.values(), default=0.0) if not frame.scene_present else 0.0
     labels = np.full(n, index[background], dtype=np.uint8)
-    confidences = np.full(n, scene_confidence if background != UNKNOWN else 0.0, dtype=np.float32)
+    confidences = np.full(n, background_confidence, dtype=np.float32)
     for obj in frame.objects:
         segment = obj.proposal.segment
-        p = _logistic(obj.score)
         labels[segment.start : segment.stop] = index[obj.label]
-        confidences[segment.start : segment.stop] = 1.0 - p if obj.label == UNKNOWN else p
+        confidences[segment.start : segment.stop] = 1.0 - obj.probability if obj.label == UNKNOWN else obj.probability
     cones = np.flatnonzero(np.isfinite(ranges) & (ranges > 0))
     return ConeAnnotations(cones, labels[cones], confidences[cones])
 
@@ -108,6 +104,6 @@ def detections(
             continue
         local = np.array([np.median(forward[finite]), np.median(left[finite]), -plane.offset, 1.0])
         x, y = (to_map @ local)[:2]
-        out.append(Detection(obj.label, float(x), float(y), _logistic(obj.score), stamp_ns, namespace))
+        out.append(Detection(obj.label, float(x), float(y), obj.probability, stamp_ns, namespace, segment.width_m))
     return out
 

@@ -1,8 +1,13 @@
 """One-vs-all linear SVM banks over CNN features, and the versioned model file a worker loads.
 
+Each SVM's margin is turned into a probability by Platt scaling, ``p = 1 / (1 + exp(-(a s + b)))``,
+with ``a`` and ``b`` fitted on out-of-fold margins of the training split (see
+:mod:`~services.object_labelling.training`), so one threshold (``min_probability``) means the same
+for every class: a proposal is ``unknown`` unless some allowed class is at least that likely.
+
 The model file is a numpy ``.npz`` written and read without pickle: per bank the class names,
-weights, intercepts and feature standardisation, plus a JSON header (format version, CNN input
-size, sha256 of the CNN weights the features came from, score threshold).
+weights, intercepts, feature standardisation and Platt parameters, plus a JSON header (format
+version, CNN input size, sha256 of the CNN weights the features came from, probability threshold).
 """
 
 from __future__ import annotations
@@ -19,29 +24,42 @@ import numpy.typing as npt
 from services.object_labelling.errors import ObjectLabellingError
 
 MODEL_FORMAT = "aisle-object-labelling-svm"
-MODEL_VERSION = 1
+MODEL_VERSION = 2
 UNKNOWN = "unknown"
 
 
 @dataclass(frozen=True)
 class SvmBank:
-    """Linear one-vs-all SVMs ``score = ((x - mean) / scale) @ coef.T + intercept``, one row per class."""
+    """Linear one-vs-all SVMs ``score = ((x - mean) / scale) @ coef.T + intercept``, one row per class,
+    with Platt parameters ``platt_a``, ``platt_b`` (k,) turning scores into probabilities."""
 
     classes: tuple[str, ...]
     coef: npt.NDArray[np.float32]  # (k, d)
     intercept: npt.NDArray[np.float32]  # (k,)
     mean: npt.NDArray[np.float32]  # (d,)
     scale: npt.NDArray[np.float32]  # (d,)
+    platt_a: npt.NDArray[np.float32]  # (k,), > 0
+    platt_b: npt.NDArray[np.float32]  # (k,)
 
     def __post_init__(self) -> None:
         k, d = len(self.classes), self.mean.shape[0]
-        if self.coef.shape != (k, d) or self.intercept.shape != (k,) or self.scale.shape != (d,):
+        if (
+            self.coef.shape != (k, d)
+            or self.intercept.shape != (k,)
+            or self.scale.shape != (d,)
+            or self.platt_a.shape != (k,)
+            or self.platt_b.shape != (k,)
+        ):
             raise ObjectLabellingError(
                 f"SVM bank shapes disagree: {k} classes, coef {self.coef.shape}, intercept "
-                f"{self.intercept.shape}, mean {self.mean.shape}, scale {self.scale.shape}"
+                f"{self.intercept.shape}, mean {self.mean.shape}, scale {self.scale.shape}, "
+                f"Platt {self.platt_a.shape} {self.platt_b.shape}"
             )
-        if not (np.isfinite(self.coef).all() and np.isfinite(self.intercept).all() and (self.scale > 0).all()):
-            raise ObjectLabellingError("SVM bank holds non-finite weights or non-positive feature scales")
+        finite = all(np.isfinite(a).all() for a in (self.coef, self.intercept, self.platt_a, self.platt_b))
+        if not (finite and (self.scale > 0).all() and (self.platt_a > 0).all()):
+            raise ObjectLabellingError(
+                "SVM bank holds non-finite weights, non-positive feature scales or non-positive Platt slopes"
+            )
 
     def scores(self, features: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
         """Signed SVM margins (n, k) of (n, d) features; > 0 means "this class" for that SVM."""
@@ -49,12 +67,18 @@ class SvmBank:
             raise ObjectLabellingError(f"features must be (n, {self.mean.shape[0]}), got {features.shape}")
         return np.asarray(((features - self.mean) / self.scale) @ self.coef.T + self.intercept, dtype=np.float32)
 
+    def probabilities(self, scores: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+        """Calibrated one-vs-all probabilities (n, k) in (0, 1) of :meth:`scores` output."""
+        return np.asarray(1.0 / (1.0 + np.exp(-(scores * self.platt_a + self.platt_b))), dtype=np.float32)
 
-def best_class(scores: npt.NDArray[np.float32], classes: tuple[str, ...], *, min_score: float) -> list[str]:
-    """Per row, the class with the highest score, or ``"unknown"`` when that score is below ``min_score``."""
-    best = np.argmax(scores, axis=1)
-    top = scores[np.arange(scores.shape[0]), best]
-    return [classes[b] if s >= min_score else UNKNOWN for b, s in zip(best, top, strict=True)]
+
+def best_class(
+    probabilities: npt.NDArray[np.float32], classes: tuple[str, ...], *, min_probability: float
+) -> list[str]:
+    """Per row, the most probable class, or ``"unknown"`` when its probability is below ``min_probability``."""
+    best = np.argmax(probabilities, axis=1)
+    top = probabilities[np.arange(probabilities.shape[0]), best]
+    return [classes[b] if p >= min_probability else UNKNOWN for b, p in zip(best, top, strict=True)]
 
 
 @dataclass(frozen=True)
@@ -65,7 +89,8 @@ class LabelModel:
     scene: SvmBank
     input_size_px: int
     weights_sha256: str
-    min_score: float
+    min_probability: float = 0.5
+    """A ROI is ``unknown`` and a whole-image class absent below this calibrated probability."""
 
     def save(self, path: str | Path) -> None:
         """Write the model as an ``.npz`` (no pickle)."""
@@ -74,7 +99,7 @@ class LabelModel:
             "version": MODEL_VERSION,
             "input_size_px": self.input_size_px,
             "weights_sha256": self.weights_sha256,
-            "min_score": self.min_score,
+            "min_probability": self.min_probability,
             "roi_classes": list(self.roi.classes),
             "scene_classes": list(self.scene.classes),
         }
@@ -85,6 +110,8 @@ class LabelModel:
                 f"{name}_intercept": bank.intercept,
                 f"{name}_mean": bank.mean,
                 f"{name}_scale": bank.scale,
+                f"{name}_platt_a": bank.platt_a,
+                f"{name}_platt_b": bank.platt_b,
             }
         with Path(path).open("wb") as stream:
             np.savez(stream, allow_pickle=False, **arrays)
@@ -104,7 +131,7 @@ class LabelModel:
         if header.get("format") != MODEL_FORMAT or header.get("version") != MODEL_VERSION:
             raise ObjectLabellingError(
                 f"classifier model {path} is {header.get('format')} v{header.get('version')}, "
-                f"expected {MODEL_FORMAT} v{MODEL_VERSION}"
+                f"expected {MODEL_FORMAT} v{MODEL_VERSION} (retrain it)"
             )
         try:
             banks = {
@@ -114,6 +141,8 @@ class LabelModel:
                     arrays[f"{name}_intercept"].astype(np.float32),
                     arrays[f"{name}_mean"].astype(np.float32),
                     arrays[f"{name}_scale"].astype(np.float32),
+                    arrays[f"{name}_platt_a"].astype(np.float32),
+                    arrays[f"{name}_platt_b"].astype(np.float32),
                 )
                 for name in ("roi", "scene")
             }
@@ -122,7 +151,7 @@ class LabelModel:
                 banks["scene"],
                 int(header["input_size_px"]),
                 str(header["weights_sha256"]),
-                float(header["min_score"]),
+                float(header["min_probability"]),
             )
         except KeyError as err:
             raise ObjectLabellingError(f"classifier model {path} lacks {err.args[0]}") from err

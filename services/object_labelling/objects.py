@@ -3,6 +3,10 @@
 Detections of forklifts, people and loose pallets from every robot are associated with the
 objects already known by class and distance (greedy, closest first); an object not seen for
 ``forget_after_s`` is dropped. The set is what the worker commits every few seconds.
+
+A detection is placed on the face the camera sees, so the same 3 m forklift seen from its side
+and from its front gives points up to about half its length apart: the association gate is
+``merge_distance_m`` plus half the larger visible extent of the detection and the object.
 """
 
 from __future__ import annotations
@@ -17,7 +21,8 @@ from shared.store import Feature
 
 
 class Detection(NamedTuple):
-    """One labelled object of one frame: class, position on the floor in map metres, confidence in [0, 1]."""
+    """One labelled object of one frame: class, position on the floor in map metres, confidence in
+    [0, 1], and the width of its visible face in metres."""
 
     label: str
     x_m: float
@@ -25,6 +30,7 @@ class Detection(NamedTuple):
     confidence: float
     stamp_ns: int
     namespace: str
+    extent_m: float = 0.0
 
 
 @dataclass
@@ -40,6 +46,8 @@ class TrackedObject:
     last_seen_ns: int
     namespace: str
     detections: int = 1
+    extent_m: float = 0.0
+    """Largest visible extent seen, metres."""
 
     def feature(self) -> Feature:
         """The ``object`` feature: a GeoJSON Point in map metres with class, times and robot."""
@@ -66,7 +74,8 @@ class ObjectTracker:
     Parameters
     ----------
     merge_distance_m
-        A detection within this distance of a known object of the same class is that object.
+        A detection within this distance plus half the larger visible extent (its own and the
+        object's) of a known object of the same class is that object.
     forget_after_s
         Objects not detected for this long (detection stamps) are dropped.
     """
@@ -91,12 +100,11 @@ class ObjectTracker:
             for i, d in enumerate(detections)
             for o in self.objects.values()
             if o.label == d.label
+            and math.hypot(o.x_m - d.x_m, o.y_m - d.y_m) <= self.merge_distance_m + 0.5 * max(o.extent_m, d.extent_m)
         )
         taken_detections: set[int] = set()
         taken_objects: set[str] = set()
-        for distance, i, key in pairs:
-            if distance > self.merge_distance_m:
-                break
+        for _, i, key in pairs:
             if i in taken_detections or key in taken_objects:
                 continue
             taken_detections.add(i)
@@ -106,11 +114,12 @@ class ObjectTracker:
             o.confidence += (d.confidence - o.confidence) / (o.detections + 1)
             o.detections += 1
             o.last_seen_ns = max(o.last_seen_ns, d.stamp_ns)
+            o.extent_m = max(o.extent_m, d.extent_m)
         for i, d in enumerate(detections):
             if i not in taken_detections:
                 key = f"{d.label}-{next(self._ids)}"
                 self.objects[key] = TrackedObject(
-                    key, d.label, d.x_m, d.y_m, d.confidence, d.stamp_ns, d.stamp_ns, d.namespace
+                    key, d.label, d.x_m, d.y_m, d.confidence, d.stamp_ns, d.stamp_ns, d.namespace, extent_m=d.extent_m
                 )
         self.changed = self.changed or bool(detections)
 

@@ -21,6 +21,8 @@ from services.object_labelling.errors import ObjectLabellingError
 from services.object_labelling.ground_plane import GroundPlane
 
 FloatArray = npt.NDArray[np.float64]
+MAX_RANGE_M = 6.0
+"""Default horizontal range limit of the scan, metres (a 5 m depth camera sees 5.7 m at its image border)."""
 
 
 class MissingCones(enum.Enum):
@@ -85,7 +87,7 @@ def range_height_scan(
     plane: GroundPlane,
     *,
     n_cones: int = 160,
-    max_range_m: float = 5.0,
+    max_range_m: float = MAX_RANGE_M,
     ground_tolerance_m: float = 0.05,
     max_height_m: float = 3.0,
     depth_band_m: float = 0.3,

