@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from services.object_labelling import PriorDatabase
-from services.object_labelling.matching import box_iou, match_boxes, score_segmentation
+from services.object_labelling.datasets import box_iou
+from services.object_labelling.matching import match_boxes, score_segmentation
 from services.object_labelling.sim_views import SimView, sample_views, scatter_hall
 
 
