@@ -6,7 +6,9 @@ objects already known by class and distance (greedy, closest first); an object n
 
 A detection is placed on the face the camera sees, so the same 3 m forklift seen from its side
 and from its front gives points up to about half its length apart: the association gate is
-``merge_distance_m`` plus half the larger visible extent of the detection and the object.
+``merge_distance_m`` plus half the larger visible extent of the detection and the object. One
+object can also give several segments in one frame (a truck body and its mast); detections of a
+class within that gate of each other in one frame are first merged into one.
 """
 
 from __future__ import annotations
@@ -93,14 +95,36 @@ class ObjectTracker:
                 f"need merge_distance_m > 0 and forget_after_s > 0, got {self.merge_distance_m}, {self.forget_after_s}"
             )
 
+    def _gate(self, a_extent_m: float, b_extent_m: float) -> float:
+        return self.merge_distance_m + 0.5 * max(a_extent_m, b_extent_m)
+
+    def _merged(self, detections: list[Detection]) -> list[Detection]:
+        """One frame's detections with those of a class within the gate of each other merged (widest first)."""
+        merged: list[Detection] = []
+        for d in sorted(detections, key=lambda d: -d.extent_m):
+            for k, m in enumerate(merged):
+                distance = math.hypot(m.x_m - d.x_m, m.y_m - d.y_m)
+                if m.label == d.label and distance <= self._gate(m.extent_m, d.extent_m):
+                    w = m.extent_m / (m.extent_m + d.extent_m) if m.extent_m + d.extent_m > 0 else 0.5
+                    merged[k] = m._replace(
+                        x_m=w * m.x_m + (1 - w) * d.x_m,
+                        y_m=w * m.y_m + (1 - w) * d.y_m,
+                        confidence=max(m.confidence, d.confidence),
+                        extent_m=max(m.extent_m, distance + 0.5 * (m.extent_m + d.extent_m)),
+                    )
+                    break
+            else:
+                merged.append(d)
+        return merged
+
     def update(self, detections: list[Detection]) -> None:
         """Associate one frame's detections with the known objects (each object takes at most one)."""
+        detections = self._merged(detections)
         pairs = sorted(
             (math.hypot(o.x_m - d.x_m, o.y_m - d.y_m), i, o.key)
             for i, d in enumerate(detections)
             for o in self.objects.values()
-            if o.label == d.label
-            and math.hypot(o.x_m - d.x_m, o.y_m - d.y_m) <= self.merge_distance_m + 0.5 * max(o.extent_m, d.extent_m)
+            if o.label == d.label and math.hypot(o.x_m - d.x_m, o.y_m - d.y_m) <= self._gate(o.extent_m, d.extent_m)
         )
         taken_detections: set[int] = set()
         taken_objects: set[str] = set()

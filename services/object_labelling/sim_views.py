@@ -186,31 +186,43 @@ def render_view(world: World, base_xy: tuple[float, float], base_yaw_rad: float,
 
 def sample_views(world: World, rng: np.random.Generator, n_views: int, *, textures: Textures | None = None,
                  min_distance_m: float = 1.5, max_distance_m: float = 5.0, max_offset_rad: float = 0.4,
-                 aimed_fraction: float = 0.8) -> Iterator[SimView]:
+                 gate_share: float = 0.1, random_share: float = 0.1) -> Iterator[SimView]:
     """``n_views`` views of ``world`` from random robot poses on its open floor.
 
-    A share ``aimed_fraction`` of the views is aimed at an actor (picked in turn): the camera
-    stands ``min_distance_m``-``max_distance_m`` from it at a random bearing, the actor up to
-    ``max_offset_rad`` off the optical axis; the others look in a random direction. Robots never
-    stand within 0.5 m of a box or 0.8 m of a wall, and the camera (0.35 m to the robot's
-    left) never within 0.8 m of a box, beyond the depth camera's 0.4 m minimum range.
+    Most views are aimed at an actor (picked in turn): the camera stands
+    ``min_distance_m``-``max_distance_m`` from it at a random bearing, the actor up to
+    ``max_offset_rad`` off the optical axis. A share ``gate_share`` is aimed the same way at a
+    gate (2-8 m in front of it, from inside the hall), a share ``random_share`` looks in a random
+    direction from a random spot. Robots never stand within 0.5 m of a box or 0.8 m of a wall, and
+    the camera (0.35 m to the robot's left) never within 0.8 m of a box, beyond the depth camera's
+    0.4 m minimum range.
     """
     if not world.actors:
         raise ObjectLabellingError(f"world {world.name} has no actors to look at")
-    x_min, y_min, x_max, y_max = world.outline[:, 0].min(), world.outline[:, 1].min(), \
-        world.outline[:, 0].max(), world.outline[:, 1].max()
+    x_min, y_min = world.outline.min(axis=0)
+    x_max, y_max = world.outline.max(axis=0)
     scene = concat_boxes([world.boxes, *_actor_boxes(world)])
     made = 0
     while made < n_views:
-        if rng.random() < aimed_fraction:
-            ax, ay, _ = actor_pose(world.actors[made % len(world.actors)], 0.0)
-            direction = rng.uniform(-math.pi, math.pi)
-            distance = rng.uniform(min_distance_m, max_distance_m)
-            xy = np.array([ax - distance * math.cos(direction), ay - distance * math.sin(direction)])
-            look = direction + rng.uniform(-max_offset_rad, max_offset_rad)
-        else:
+        draw = rng.random()
+        if draw < random_share or (draw < random_share + gate_share and not world.gates):
             xy = rng.uniform([x_min, y_min], [x_max, y_max])
             look = rng.uniform(-math.pi, math.pi)
+        else:
+            if draw < random_share + gate_share:
+                gate = world.gates[made % len(world.gates)]
+                a, b = np.array(gate.a), np.array(gate.b)
+                target = 0.5 * (a + b)
+                inward = np.array([a[1] - b[1], b[0] - a[0]]) / np.hypot(*(b - a))  # left of a -> b: inside
+                direction = math.atan2(-inward[1], -inward[0]) + rng.uniform(-0.6, 0.6)
+                distance = rng.uniform(2.0, 8.0)
+            else:
+                ax, ay, _ = actor_pose(world.actors[made % len(world.actors)], 0.0)
+                target = np.array([ax, ay])
+                direction = rng.uniform(-math.pi, math.pi)
+                distance = rng.uniform(min_distance_m, max_distance_m)
+            xy = target - distance * np.array([math.cos(direction), math.sin(direction)])
+            look = direction + rng.uniform(-max_offset_rad, max_offset_rad)
         yaw = look - math.pi / 2
         camera_xy = xy + RGBD_MOUNT[1, 3] * np.array([-math.sin(yaw), math.cos(yaw)])
         inside = x_min + 0.8 < xy[0] < x_max - 0.8 and y_min + 0.8 < xy[1] < y_max - 0.8

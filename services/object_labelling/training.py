@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 from sklearn.linear_model import LogisticRegression
 from sklearn.metrics import confusion_matrix, roc_auc_score
-from sklearn.model_selection import GroupKFold
+from sklearn.model_selection import StratifiedGroupKFold
 from sklearn.svm import LinearSVC
 
 from services.object_labelling.classifier import UNKNOWN, LabelModel, SvmBank, best_class
@@ -170,8 +170,8 @@ def real_samples(roi_sets: list[YoloSet], scene_csv: Path | None, scene_image_di
     return Samples(crops, images, labels, [source_of(name) for name, _ in rows])
 
 
-def _out_of_fold(x: npt.NDArray[np.float32], y: npt.NDArray[np.bool_], folds: list[tuple[npt.NDArray[np.intp], ...]],
-                 c: float) -> npt.NDArray[np.float64]:
+def _out_of_fold(x: npt.NDArray[np.float32], y: npt.NDArray[np.bool_],
+                 folds: list[tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]], c: float) -> npt.NDArray[np.float64]:
     """SVM margins of every sample from the fold model that did not see it."""
     margins = np.zeros(y.size)
     for fit_idx, val_idx in folds:
@@ -180,6 +180,22 @@ def _out_of_fold(x: npt.NDArray[np.float32], y: npt.NDArray[np.bool_], folds: li
         svm = LinearSVC(C=c, class_weight="balanced", max_iter=20000).fit(x[fit_idx], y[fit_idx])
         margins[val_idx] = svm.decision_function(x[val_idx])
     return margins
+
+
+def _folds(targets: dict[str, npt.NDArray[np.bool_]], groups: npt.NDArray[np.str_], n_splits: int = 3
+           ) -> list[tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]]:
+    """Folds grouped by source and stratified by each sample's rarest positive class (or none).
+
+    Strata with fewer than ``n_splits`` samples join the largest one, so every stratum can be spread.
+    """
+    names = sorted(targets, key=lambda n: int(targets[n].sum()))
+    strata = np.full(groups.size, len(names))
+    for k, name in reversed(list(enumerate(names))):
+        strata[targets[name]] = k
+    counts = np.bincount(strata, minlength=len(names) + 1)
+    strata[counts[strata] < n_splits] = int(np.argmax(counts))
+    splitter = StratifiedGroupKFold(n_splits=n_splits, shuffle=True, random_state=0)
+    return list(splitter.split(np.zeros(groups.size), strata, groups))
 
 
 def fit_bank(
@@ -192,12 +208,16 @@ def fit_bank(
     for name, y in targets.items():
         if y.all() or not y.any():
             raise ObjectLabellingError(f"class {name} has no {'negatives' if y.all() else 'positives'} to train on")
-    if np.unique(groups).size < 3:
-        raise ObjectLabellingError(f"need samples from at least 3 sources, got {np.unique(groups).size}")
+        for side, members in (("positives", y), ("negatives", ~y)):
+            sources = np.unique(groups[members]).size
+            if sources < 3:
+                raise ObjectLabellingError(
+                    f"class {name} has {side} from {sources} sources; cross-validation needs at least 3"
+                )
     mean = features.mean(axis=0)
     scale = features.std(axis=0) + 1e-3
     x = ((features - mean) / scale).astype(np.float32)
-    folds = list(GroupKFold(n_splits=3).split(x, groups=groups))
+    folds = _folds(targets, groups)
     margins: dict[float, dict[str, npt.NDArray[np.float64]]] = {}
     best_c, best_auc = grid[0], -1.0
     for c in grid:

@@ -42,3 +42,14 @@ def test_two_people_a_few_metres_apart_stay_two_objects() -> None:
     tracker.update([Detection("human", 0.0, 0.0, 0.9, 1, "robot1", extent_m=0.5)])
     tracker.update([Detection("human", 2.0, 0.0, 0.9, 2, "robot1", extent_m=0.5)])
     assert len(tracker.features()) == 2
+
+
+def test_two_segments_of_one_truck_in_one_frame_are_one_object() -> None:
+    tracker = ObjectTracker(merge_distance_m=1.0)
+    body = Detection("forklift", 0.0, 0.0, 0.9, 1, "robot1", extent_m=1.7)
+    mast = Detection("forklift", 1.0, 0.3, 0.8, 1, "robot1", extent_m=0.2)
+    tracker.update([body, mast])
+    [only] = tracker.features()
+    assert only.properties["detections"] == 1
+    tracker.update([Detection("forklift", 0.5, 0.1, 0.9, 2, "robot1", extent_m=2.4)])
+    assert len(tracker.features()) == 1

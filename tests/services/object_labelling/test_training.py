@@ -36,5 +36,5 @@ def test_training_sets_without_negatives_or_with_too_few_sources_are_refused() -
     x = np.random.default_rng(1).normal(size=(30, 4)).astype(np.float32)
     with pytest.raises(ObjectLabellingError, match="no negatives"):
         fit_bank(x, {"a": np.ones(30, bool)}, np.arange(30).astype(str), (1e-2,))
-    with pytest.raises(ObjectLabellingError, match="at least 3 sources"):
+    with pytest.raises(ObjectLabellingError, match="from 1 sources; cross-validation needs at least 3"):
         fit_bank(x, {"a": np.arange(30) % 2 == 0}, np.array(["s1", "s2"] * 15), (1e-2,))

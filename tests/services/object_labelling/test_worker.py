@@ -134,14 +134,22 @@ def test_annotated_scans_of_simulated_traffic_label_the_objects_the_cones_hit(
     print(f"annotated_scans {len(scans)} of {frames} frames, object cones {labelled}, "
           f"label agreement {precision:.3f}, recall {recall:.3f}")
     assert scans[0].class_names[0] == "unknown" and set(ROI_CLASSES) <= set(scans[0].class_names)
-    assert labelled > 0 and precision > 0.5
-    objects = [s.feature for s in store.features(store.ensure_map(settings.map_name).id, kinds=["object"])]
-    truth = {{"person": "human"}.get(a.kind.value, a.kind.value): a.path[0] for a in labelling_hall().actors}
+    assert precision >= 0.85  # the object labels published are right
+    assert recall >= 0.6  # and most cones that see an object carry its class (objects cut by the image too)
+    site_id = store.ensure_map(settings.map_name).id
+    stored = {f.feature.key: f.feature for revision in store.revisions(site_id, limit=1000)
+              for f in store.features(site_id, kinds=["object"], revision=revision.id)}
+    objects = list(stored.values())  # every object the stage stored (each is dropped once unseen for 10 s)
     for feature in objects:
         assert feature.properties["robot"] == "robot1"
         assert feature.properties["first_seen_ns"] <= feature.properties["last_seen_ns"]
         print("object", feature.properties["class"], np.round(feature.geometry["coordinates"], 2), feature.confidence)
-    assert any(math.dist(f.geometry["coordinates"], truth[f.properties["class"]]) < 1.5 for f in objects)
+    for actor in labelling_hall().actors:  # each object stored once, near where it stands
+        label = {"person": "human"}.get(actor.kind.value, actor.kind.value)
+        near = [f for f in objects if f.properties["class"] == label
+                and math.dist(f.geometry["coordinates"], actor.path.mean(axis=0)) < 2.5]
+        assert len(near) == 1, (label, [f.geometry["coordinates"] for f in objects])
+    assert len(objects) == len(labelling_hall().actors)
 
 
 def test_missing_model_file_fails_at_start_with_how_to_train_one(tmp_path: Path, weights_path: Path) -> None:
