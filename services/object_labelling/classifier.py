@@ -83,7 +83,8 @@ def best_class(
 
 @dataclass(frozen=True)
 class LabelModel:
-    """Both SVM banks (ROI classes and whole-image classes) and how their features were made."""
+    """Both SVM banks (ROI classes and whole-image classes) and how their features were made
+    (``input_size_px``: CNN input size for ROIs)."""
 
     roi: SvmBank
     scene: SvmBank
@@ -91,6 +92,8 @@ class LabelModel:
     weights_sha256: str
     min_probability: float = 0.5
     """A ROI is ``unknown`` and a whole-image class absent below this calibrated probability."""
+    scene_input_size_px: int = 224
+    """CNN input size for whole images (computed only when the image changed, so it can be larger)."""
 
     def save(self, path: str | Path) -> None:
         """Write the model as an ``.npz`` (no pickle)."""
@@ -98,6 +101,7 @@ class LabelModel:
             "format": MODEL_FORMAT,
             "version": MODEL_VERSION,
             "input_size_px": self.input_size_px,
+            "scene_input_size_px": self.scene_input_size_px,
             "weights_sha256": self.weights_sha256,
             "min_probability": self.min_probability,
             "roi_classes": list(self.roi.classes),
@@ -122,6 +126,8 @@ class LabelModel:
         path = Path(path)
         if not path.is_file():
             raise ObjectLabellingError(f"classifier model {path} does not exist")
+        if not zipfile.is_zipfile(path):
+            raise ObjectLabellingError(f"classifier model {path} is corrupt or not a model file (not an .npz archive)")
         try:
             with path.open("rb") as stream, np.load(stream, allow_pickle=False) as data:
                 arrays = {key: data[key] for key in data.files}
@@ -152,6 +158,7 @@ class LabelModel:
                 int(header["input_size_px"]),
                 str(header["weights_sha256"]),
                 float(header["min_probability"]),
+                int(header["scene_input_size_px"]),
             )
         except KeyError as err:
             raise ObjectLabellingError(f"classifier model {path} lacks {err.args[0]}") from err

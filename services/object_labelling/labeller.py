@@ -111,7 +111,7 @@ class ObjectLabeller:
             or np.abs(thumbnail - self._scene_thumbnail).mean() > self.change_threshold
         ):
             bank = self.model.scene
-            features = self.net.features(resize_for_cnn(rgb, size_px=self.model.input_size_px)[None])
+            features = self.net.features(resize_for_cnn(rgb, size_px=self.model.scene_input_size_px)[None])
             probabilities = bank.probabilities(bank.scores(features))[0]
             self._scene = {name: float(p) for name, p in zip(bank.classes, probabilities, strict=True)}
             self._scene_thumbnail = thumbnail

@@ -255,6 +255,7 @@ def train_classifier(
     net: EfficientNetLite0,
     weights_sha256: str,
     input_size_px: int = 128,
+    scene_input_size_px: int = 224,
     svm_c_grid: tuple[float, ...] = DEFAULT_C_GRID,
     min_probability: float = 0.5,
     cache: FeatureCache | None = None,
@@ -269,8 +270,8 @@ def train_classifier(
         Where the ``.npz`` model goes.
     net, weights_sha256
         The CNN and the sha256 of its weights file (stored, checked by the worker).
-    input_size_px
-        Square CNN input size for crops and whole images.
+    input_size_px, scene_input_size_px
+        Square CNN input size for ROI crops and for whole images.
     svm_c_grid
         Linear SVM regularisation values to choose from by grouped cross-validation.
     min_probability
@@ -285,10 +286,10 @@ def train_classifier(
     roi_features = cache.features((c.image for c in samples.crops), input_size_px)
     roi = fit_bank(roi_features, {name: labels == name for name in ROI_CLASSES},
                     np.array([c.source for c in samples.crops]), svm_c_grid)
-    scene_features = cache.features(samples.scene_images, input_size_px)
+    scene_features = cache.features(samples.scene_images, scene_input_size_px)
     scene = fit_bank(scene_features, {name: samples.scene_labels[name] == 1 for name in SCENE_CLASSES},
                       np.array(samples.scene_sources), svm_c_grid)
-    model = LabelModel(roi, scene, input_size_px, weights_sha256, min_probability)
+    model = LabelModel(roi, scene, input_size_px, weights_sha256, min_probability, scene_input_size_px)
     out_model_path.parent.mkdir(parents=True, exist_ok=True)
     model.save(out_model_path)
     log.info("wrote classifier model %s", out_model_path)
@@ -316,7 +317,7 @@ def evaluate_classifier(model: LabelModel, samples: Samples, *, cache: FeatureCa
     scene: dict[str, tuple[int, float, float, float]] = {}
     if samples.scene_images:
         bank = model.scene
-        scene_scores = bank.scores(cache.features(samples.scene_images, model.input_size_px))
+        scene_scores = bank.scores(cache.features(samples.scene_images, model.scene_input_size_px))
         present = bank.probabilities(scene_scores) >= model.min_probability
         for i, name in enumerate(bank.classes):
             truth = samples.scene_labels[name] == 1

@@ -9,14 +9,11 @@ classifier is trained on renders of *other* halls (the scatter halls of
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from services.object_labelling import LabelModel
-from services.object_labelling.commands import train_from_sources
 from services.simulator import World, world_from_layout
 from services.simulator.actors import dynamic_boxes
 from services.simulator.lidar import Segments, cast_rays
@@ -26,7 +23,6 @@ ROI_OF_KIND = {ObjectClass.PALLET: "pallet", ObjectClass.LOAD: "pallet", ObjectC
                ObjectClass.PERSON: "human"}
 """Labeller ROI class of each simulated object class; anything else is background."""
 ROBOT_Y_M = 2.0
-INPUT_SIZE_PX = 96
 
 
 def _layout(name: str, actors: list[dict[str, Any]], *, seed: int) -> dict[str, Any]:
@@ -56,11 +52,6 @@ def labelling_hall() -> World:
 def robot_waypoints() -> list[list[float]]:
     """The robot's straight route past the objects."""
     return [[2.0, ROBOT_Y_M], [19.0, ROBOT_Y_M]]
-
-
-def train_sim_model(out: Path, *, views: int = 40) -> LabelModel:
-    """A model trained on ``views`` renders of scatter halls (not the test hall), textured like the traffic."""
-    return train_from_sources(out, data_dir=None, sim_views=views, input_size_px=INPUT_SIZE_PX)
 
 
 def cone_truth(world: World, time_s: float, origin_xy: npt.NDArray[np.float64],
