@@ -141,14 +141,15 @@ def range_height_scan(
     cones = np.clip(((left_edge - bearings) / cone_width).astype(np.intp), 0, n_cones - 1)
     seen = np.bincount(cones, minlength=n_cones) > 0
 
-    obstacle = (heights > ground_tolerance_m) & (heights < max_height_m) & (ranges < max_range_m)
+    obstacle = np.flatnonzero((heights > ground_tolerance_m) & (heights < max_height_m) & (ranges < max_range_m))
     o_cone, o_range = cones[obstacle], ranges[obstacle]
     closest = np.full(n_cones, np.inf)
     np.minimum.at(closest, o_cone, o_range)
-    band = o_range <= closest[o_cone] + depth_band_m
-    b_cone, b_pix = o_cone[band], pixels[obstacle][band]
+    in_band = o_range <= closest[o_cone] + depth_band_m
+    band, b_cone = obstacle[in_band], o_cone[in_band]
+    b_pix = pixels[band]
     height = np.zeros(n_cones)
-    np.maximum.at(height, b_cone, heights[obstacle][band])
+    np.maximum.at(height, b_cone, heights[band])
     big = np.iinfo(np.intp).max
     row_min, col_min = np.full(n_cones, big), np.full(n_cones, big)
     row_max, col_max = np.full(n_cones, -1), np.full(n_cones, -1)
@@ -158,11 +159,12 @@ def range_height_scan(
     np.maximum.at(col_max, b_cone, b_pix[:, 1])
     row_min[row_min == big], col_min[col_min == big] = -1, -1
 
-    # the closest point itself, for widths measured on the floor plane
-    order = np.lexsort((o_range, o_cone))
-    first = order[np.r_[True, np.diff(o_cone[order]) > 0]] if order.size else order
+    # the closest point itself (the first one of a cone reaching its minimum), for widths on the floor plane
+    at_min = np.flatnonzero(o_range == closest[o_cone])
+    hit_cones, first = np.unique(o_cone[at_min], return_index=True)
+    nearest = obstacle[at_min[first]]
     fwd, lft = np.full(n_cones, np.nan), np.full(n_cones, np.nan)
-    fwd[o_cone[first]], lft[o_cone[first]] = forward[obstacle][first], left[obstacle][first]
+    fwd[hit_cones], lft[hit_cones] = forward[nearest], left[nearest]
 
     closest[~seen], height[~seen] = np.nan, np.nan
     if missing is MissingCones.GAUSSIAN and (~seen).any() and seen.any():
