@@ -5,7 +5,8 @@ CNN features on up to ``max_rois`` ROIs (one batch) -> ROI SVMs, restricted to t
 size prior allows.
 
 Nothing is recomputed that has not changed: the whole image goes through the CNN and the scene
-SVMs only when it differs noticeably from the last time (a small thumbnail difference); a ROI
+SVMs only when it differs noticeably from the last time (a small thumbnail difference), and at
+most every ``scene_period_frames`` frames (racks and gates come and go slowly); a ROI
 keeps the class probabilities of the previous frame's ROI it continues (box IoU >= 0.5, range
 within 0.5 m, a small thumbnail difference of the crop) for up to ``roi_reuse_frames`` frames, so
 at 30 frames/s an object is still re-classified several times a second.
@@ -76,8 +77,9 @@ class ObjectLabeller:
     """Stateful per-camera labeller (it caches the whole-image result and the last ROIs); not thread-safe.
 
     ``change_threshold`` is the mean absolute thumbnail difference (grey levels) above which the
-    whole image or a ROI counts as changed; ``roi_reuse_frames`` how many frames in a row a ROI
-    may reuse earlier probabilities (0: every ROI goes through the CNN every frame).
+    whole image or a ROI counts as changed; ``scene_period_frames`` the fewest frames between two
+    whole-image classifications; ``roi_reuse_frames`` how many frames in a row a ROI may reuse
+    earlier probabilities (0: every ROI goes through the CNN every frame).
     """
 
     net: EfficientNetLite0
@@ -89,7 +91,9 @@ class ObjectLabeller:
     min_ground_inliers: int = 300
     ground_check_step: int = 4
     change_threshold: float = 12.0
+    scene_period_frames: int = 5
     roi_reuse_frames: int = 10
+    _scene_age: int = field(default=0, repr=False)
     _scene_thumbnail: npt.NDArray[np.float32] | None = field(default=None, repr=False)
     _scene: dict[str, float] = field(default_factory=dict, repr=False)
     _rois: list[_Roi] = field(default_factory=list, repr=False)
@@ -105,11 +109,15 @@ class ObjectLabeller:
             )
 
     def _scene_labels(self, rgb: npt.NDArray[np.uint8]) -> dict[str, float]:
+        self._scene_age += 1
+        if self._scene_thumbnail is not None and self._scene_age < self.scene_period_frames:
+            return self._scene
         thumbnail = cv2.resize(rgb, (32, 24), interpolation=cv2.INTER_AREA).astype(np.float32)
         if (
             self._scene_thumbnail is None
             or np.abs(thumbnail - self._scene_thumbnail).mean() > self.change_threshold
         ):
+            self._scene_age = 0
             bank = self.model.scene
             features = self.net.features(resize_for_cnn(rgb, size_px=self.model.scene_input_size_px)[None])
             probabilities = bank.probabilities(bank.scores(features))[0]

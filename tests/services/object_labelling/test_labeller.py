@@ -27,7 +27,9 @@ def empty_depth() -> np.ndarray:
     return render_depth(vga_intrinsics(), [])
 
 
-def _labeller(net: EfficientNetLite0, *, max_rois: int = 3, roi_reuse_frames: int = 10) -> ObjectLabeller:
+def _labeller(
+    net: EfficientNetLite0, *, max_rois: int = 3, roi_reuse_frames: int = 10, scene_period_frames: int = 1
+) -> ObjectLabeller:
     return ObjectLabeller(
         net,
         random_model(input_size_px=64),
@@ -36,6 +38,7 @@ def _labeller(net: EfficientNetLite0, *, max_rois: int = 3, roi_reuse_frames: in
         true_plane(1.0, 0.25),
         max_rois=max_rois,
         roi_reuse_frames=roi_reuse_frames,
+        scene_period_frames=scene_period_frames,
     )
 
 
@@ -63,9 +66,9 @@ def test_label_keeps_only_the_closest_rois(net: EfficientNetLite0, scene_depth: 
     assert only.proposal.segment.range_m == min(p.segment.range_m for p in result.proposals if p.label)
 
 
-def test_label_reuses_the_scene_class_while_the_image_is_unchanged(
-    net: EfficientNetLite0, empty_depth: np.ndarray, monkeypatch: pytest.MonkeyPatch
-) -> None:
+@pytest.fixture
+def cnn_calls(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Batch sizes of every CNN call from now on."""
     calls: list[int] = []
     features = EfficientNetLite0.features
 
@@ -74,12 +77,28 @@ def test_label_reuses_the_scene_class_while_the_image_is_unchanged(
         return features(self, images)
 
     monkeypatch.setattr(EfficientNetLite0, "features", counting)
+    return calls
+
+
+def test_label_reuses_the_scene_class_while_the_image_is_unchanged(
+    net: EfficientNetLite0, empty_depth: np.ndarray, cnn_calls: list[int]
+) -> None:
     labeller = _labeller(net)  # an empty floor has no ROIs: every CNN call is for the whole image
     labeller.label(_rgb(0), empty_depth)
     labeller.label(_rgb(0), empty_depth)
-    assert len(calls) == 1
+    assert len(cnn_calls) == 1
     labeller.label(np.zeros((480, 640, 3), np.uint8), empty_depth)
-    assert len(calls) == 2
+    assert len(cnn_calls) == 2
+
+
+def test_label_classifies_the_whole_image_at_most_every_few_frames(
+    net: EfficientNetLite0, empty_depth: np.ndarray, cnn_calls: list[int]
+) -> None:
+    labeller = _labeller(net, scene_period_frames=3)
+    black, grey = np.zeros((480, 640, 3), np.uint8), np.full((480, 640, 3), 128, np.uint8)
+    for image in (black, grey, grey, grey, black):
+        labeller.label(image, empty_depth)
+    assert len(cnn_calls) == 2  # black; grey only from the third frame on; black again too soon
 
 
 def test_label_reuses_roi_classes_only_while_the_rois_look_the_same(
