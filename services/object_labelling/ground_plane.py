@@ -1,8 +1,10 @@
 """Ground plane: RANSAC fit at teach-in, then a cheap per-frame validity check.
 
 The camera is fixed on the vehicle, so the floor plane in the camera frame is constant. It is
-estimated once (teach-in) and kept; each frame then only counts the points that still lie on it.
-Too few means the camera was moved or knocked and the plane must be taught in again.
+estimated once (teach-in) and kept; each frame then counts the points that still lie on it. Too
+few is not proof of a moved camera by itself (a camera facing a rack close by sees no floor), so
+the plane is only *contradicted* when something is seen through the floor or another floor-like
+plane is in view; then the camera was moved or knocked and the plane must be taught in again.
 """
 
 from __future__ import annotations
@@ -33,10 +35,15 @@ class GroundPlane(NamedTuple):
 
 
 class GroundCheck(NamedTuple):
-    """Result of :func:`check_ground_plane`: inlier count and whether it reaches the minimum."""
+    """Result of :func:`check_ground_plane`.
+
+    ``inliers``: points on the taught-in plane; ``verified``: enough of them to confirm it;
+    ``valid``: the frame does not contradict the plane (verified, or no floor in view at all).
+    """
 
     inliers: int
     valid: bool
+    verified: bool
 
 
 def _plane_through(p: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
@@ -104,14 +111,48 @@ def fit_ground_plane(
 
 
 def check_ground_plane(
-    points: npt.NDArray[np.float64], plane: GroundPlane, *, inlier_tolerance_m: float = 0.03, min_inliers: int = 500
+    points: npt.NDArray[np.float64],
+    plane: GroundPlane,
+    *,
+    inlier_tolerance_m: float = 0.03,
+    min_inliers: int = 500,
+    below_m: float = 0.15,
+    search_height_m: float = 0.5,
+    min_spread_m: float = 0.25,
 ) -> GroundCheck:
-    """Count the points within ``inlier_tolerance_m`` of the taught-in ``plane``.
+    """Check a frame's points against the taught-in ``plane``.
 
-    ``valid`` is False when fewer than ``min_inliers`` lie on it: the floor is not where the
-    teach-in put it, so the camera has probably moved (or the view is blocked).
+    The plane is *contradicted* (``valid`` False) when at least ``min_inliers`` points lie more
+    than ``below_m`` below it (nothing is seen through a floor: the camera was raised or tilted
+    up). Otherwise it is *verified* when at least ``min_inliers`` points lie within
+    ``inlier_tolerance_m`` of it. If not, it is contradicted when the points lower than
+    ``search_height_m`` hold another floor-like plane (within 0.5 rad of the plane's up direction)
+    with three times ``min_inliers`` points spread at least ``min_spread_m`` (standard deviation)
+    in its second direction too: the floor is in view, elsewhere (camera lowered or tilted down).
+    With neither, the view simply shows no floor, and the frame stays valid.
+
+    ``min_inliers`` is an absolute count: scale it with the number of points checked (the
+    labeller checks every 4th pixel of a 640 x 480 frame, 19,200 points, with 300).
     """
     if points.ndim != 2 or points.shape[1] != 3:
         raise ObjectLabellingError(f"points must be (n, 3), got shape {points.shape}")
-    inliers = int(np.count_nonzero(np.abs(plane.height_m(points)) <= inlier_tolerance_m))
-    return GroundCheck(inliers, inliers >= min_inliers)
+    heights = plane.height_m(points)
+    inliers = int(np.count_nonzero(np.abs(heights) <= inlier_tolerance_m))
+    if np.count_nonzero(heights < -below_m) >= min_inliers:
+        return GroundCheck(inliers, False, False)
+    if inliers >= min_inliers:
+        return GroundCheck(inliers, True, True)
+    low = points[heights < search_height_m]
+    if low.shape[0] >= 3 * min_inliers:
+        try:
+            other = fit_ground_plane(low, inlier_tolerance_m=inlier_tolerance_m, up=plane.normal,
+                                     min_inliers=3 * min_inliers)
+        except ObjectLabellingError:
+            other = None  # no floor in view
+        if other is not None:
+            on = low[np.abs(other.height_m(low)) <= inlier_tolerance_m]
+            # a floor spreads in two directions; a level plane cutting a wall leaves only a thin strip
+            spread = np.linalg.svd(on - on.mean(axis=0), compute_uv=False)[1] / np.sqrt(on.shape[0])
+            if spread >= min_spread_m:
+                return GroundCheck(inliers, False, False)
+    return GroundCheck(inliers, True, False)

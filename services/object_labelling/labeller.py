@@ -134,7 +134,7 @@ class ObjectLabeller:
         points = depth_to_points(sub, sub_intrinsics)[0] if sub.any() else np.zeros((0, 3))
         ground = check_ground_plane(points, self.plane, min_inliers=self.min_ground_inliers)
         if not ground.valid:
-            log.warning("ground plane check failed (%d inliers): has the camera moved?", ground.inliers)
+            log.warning("frame contradicts the ground plane (%d points on it): has the camera moved?", ground.inliers)
         times["ground_check"] = time.perf_counter() - start
         start = time.perf_counter()
         scan = range_height_scan(depth_mm, self.intrinsics, self.plane)

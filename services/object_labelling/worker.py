@@ -336,6 +336,8 @@ class LabellingStage:
     def _ground_ok(self, robot: _Robot, frame: FrameLabels) -> bool:
         if frame.ground.valid:
             robot.invalid_streak = 0
+            if not frame.ground.verified:
+                self.context.count("ground_unverified")  # no floor in view: nothing to check against
             return True
         robot.invalid_streak += 1
         self.context.count("ground_invalid")
