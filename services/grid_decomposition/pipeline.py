@@ -315,8 +315,11 @@ def decompose(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )
     face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
+    automatic = assign_labels(evidence, face_cat, cog.face_free_px)
     face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
-    region_of_face = face_regions(sub, cog, component, cog.face_free_px, face_labels.label)
+    # regions come from the automatic labels: a person's overrides rename places, they do not
+    # merge a warehouse's pallet cells and aisles into one region
+    region_of_face = face_regions(sub, cog, component, cog.face_free_px, automatic.label)
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )

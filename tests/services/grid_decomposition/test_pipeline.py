@@ -76,6 +76,24 @@ def test_label_overrides_relabel_a_category() -> None:
     assert forced.face_labels.category_labels[category] is Label.STORAGE
 
 
+@pytest.mark.parametrize("label", [Label.ROOM, Label.UNIDENTIFIED])
+def test_overriding_a_storage_category_renames_its_places_and_keeps_every_region(label: Label) -> None:
+    wh = synthetic_warehouse(4, n_double_rows=2, n_sections=2, bays_per_section=4)
+    auto = decompose(wh.occupancy, resolution_m=wh.resolution_m)
+    storage = [c for c, lab in auto.face_labels.category_labels.items() if lab is Label.STORAGE]
+    assert storage
+    forced = decompose(wh.occupancy, resolution_m=wh.resolution_m, label_overrides=dict.fromkeys(storage, label))
+    assert len(forced.regions) == len(auto.regions)
+    assert (forced.segments == auto.segments).all()
+    in_face = (auto.subdivision.face_image > 0) & (auto.labels > 0)
+    renamed = np.isin(auto.face_labels.category[auto.subdivision.face_image], storage) & in_face
+    assert renamed.any() and (forced.labels[renamed] == label.value).all()
+    assert (forced.labels[in_face & ~renamed] == auto.labels[in_face & ~renamed]).all()
+    assert sum(info.label is label for info in forced.regions.values()) >= sum(
+        info.label is Label.STORAGE for info in auto.regions.values()
+    ) // 2
+
+
 @pytest.mark.parametrize(
     ("occupancy", "message"),
     [
