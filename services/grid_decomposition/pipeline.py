@@ -31,6 +31,7 @@ logger = logging.getLogger(__name__)
 
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
+_REGION_CORE_M = 1.0
 
 
 class Resolution(enum.Enum):
@@ -128,15 +129,25 @@ def _lines(
     mask: npt.NDArray[np.bool_] | None,
     resolution_m: float,
 ) -> dict[float, list[Line]]:
-    """Lines per dominant orientation inside ``mask``: directions from ``structure``, radiograms from all."""
+    """Lines per dominant orientation inside ``mask``: directions from ``structure``, radiograms from all.
+
+    A texture region's directions come from its structure at least ``_REGION_CORE_M`` inside it, so
+    a sliver of a neighbouring region's wall along its border adds no direction of its own.
+    """
     grads = gradients if mask is None else _masked(gradients, mask)
-    struct = structure if mask is None else _masked(structure, mask)
+    struct = structure if mask is None else _masked(structure, _core(mask, round(_REGION_CORE_M / resolution_m)))
     if struct.magnitude.size < 0.05 * max(grads.magnitude.size, 1):
         struct = grads
     return {
         float(a): line_offsets(radiogram(grads, float(a)), resolution_m=resolution_m)
         for a in dominant_orientations(struct)
     }
+
+
+def _core(mask: npt.NDArray[np.bool_], depth_px: int) -> npt.NDArray[np.bool_]:
+    """Pixels of ``mask`` at least ``depth_px`` from its outside (all of it if nothing is that deep)."""
+    inner = cv2.distanceTransform(np.pad(mask, 1).astype(np.uint8), cv2.DIST_L2, 3)[1:-1, 1:-1] >= depth_px
+    return inner if inner.any() else mask
 
 
 def _structure(obstacle: npt.NDArray[np.bool_], min_area_px: int) -> npt.NDArray[np.bool_]:
