@@ -8,10 +8,10 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy.signal import find_peaks_cwt
 from sklearn.mixture import GaussianMixture
 
 from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.wavelets import find_peaks_ricker
 
 _BINS = 180
 
@@ -142,7 +142,7 @@ def dominant_orientations(
     smooth = _gmm_smooth(hist, max_orientations)
     tripled = np.r_[smooth, smooth, smooth]
     with np.errstate(divide="ignore", invalid="ignore"):
-        found = find_peaks_cwt(tripled, np.arange(1, 8))
+        found = find_peaks_ricker(tripled, np.arange(1, 8))
     # each ridge maximum snapped to the highest smoothed bin within +-3 (the ridge can sit a bin
     # off a sharp peak, and its height decides whether the orientation is kept)
     ridges = [int(p) for p in found if _BINS <= p < 2 * _BINS]
