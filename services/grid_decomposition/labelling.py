@@ -75,8 +75,8 @@ def evidence_labels(
     Storage: a small rectangle (short side <= ``storage_max_depth_m``, long side <=
     ``storage_max_width_m`` and >= ``storage_min_width_m``: a bay) with at least three corners
     on obstacles (uprights) and an outline mostly open (at most ``storage_max_walled`` of it
-    touching obstacles); a bay with only two corners on obstacles (missing uprights) is storage
-    when at least two storage faces neighbour it (it lies in a rack row). Faces of a compact
+    touching obstacles); a bay with missing uprights is storage when at least two storage faces
+    neighbour it (three if fewer than two of its corners are on obstacles): it lies in a rack row. Faces of a compact
     connected component (elongation below ``corridor_min_elongation`` and no storage) are one
     room (or open area above ``open_area_min_m2``). In the other components (networks of
     aisles or corridors) the templates run on the graph of non-storage faces: T/X junctions, and
@@ -100,13 +100,15 @@ def evidence_labels(
         & (geometry.walled_fraction <= storage_max_walled)
     )
     storage = bay & (geometry.corners_on_obstacle >= 3)
-    # a bay with missing uprights (two corners on obstacles) in a rack row: storage next to storage
-    weak = bay & (geometry.corners_on_obstacle == 2)
+    # a bay with missing uprights in a rack row: storage next to two storage faces (three when
+    # fewer than two of its corners stand on uprights)
+    weak = bay & (geometry.corners_on_obstacle < 3)
+    need = np.where(geometry.corners_on_obstacle == 2, 2, 3)
     e_all = np.asarray(links, dtype=np.int64).reshape(-1, 2)
     for _ in range(3):
         nb = np.bincount(e_all[:, 0], weights=storage[e_all[:, 1]], minlength=n)
         nb += np.bincount(e_all[:, 1], weights=storage[e_all[:, 0]], minlength=n)
-        grown = weak & ~storage & (nb >= 2)
+        grown = weak & ~storage & (nb >= need)
         if not grown.any():
             break
         storage |= grown

@@ -7,6 +7,7 @@ are missing. An optional second building holds a rotated block of racks, and the
 turned. Ground truth codes follow ``Label``: corridor (aisles and cross aisles), junction (aisle
 x cross-aisle crossings, not the L bends of the perimeter aisle), storage (rack footprints), 0
 off free space; and every pallet cell (one bay, one side of the flue) has an id.
+Also the ground truth of the tuw grid warehouses (``../shared/data/maps/tuw_warehouse``).
 """
 
 from __future__ import annotations
@@ -209,3 +210,39 @@ def synthetic_warehouse(
         shape = (max(h1, diag) + 2 * margin, w1 + diag + 3 * margin)
     out = _place(parts, shape)
     return _rotate(out, rotation_rad) if rotation_rad else out
+
+
+def cell_labels(labels: npt.NDArray[np.uint8], wh: Warehouse) -> npt.NDArray[np.int64]:
+    """The majority label of each pallet cell's free pixels, (N,) for cells 1..N; -1 for a cell without any."""
+    ok = (wh.cells > 0) & (wh.occupancy == 0)
+    n = int(wh.cells.max()) + 1
+    votes = np.zeros((n, len(Label)), dtype=np.int64)
+    np.add.at(votes, (wh.cells[ok], labels[ok]), 1)
+    out: npt.NDArray[np.int64] = np.where(votes.sum(axis=1) > 0, votes.argmax(axis=1), -1)
+    return out[1:]
+
+
+def _runs(free: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
+    """Length of the horizontal free run through every pixel."""
+    out = np.zeros(free.shape, dtype=np.int64)
+    for r in range(free.shape[0]):
+        d = np.diff(np.r_[0, free[r].astype(np.int8), 0])
+        for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+            out[r, a:b] = b - a
+    return out
+
+
+def tuw_truth(occupancy: npt.NDArray[np.int8]) -> npt.NDArray[np.uint8]:
+    """Corridor / junction ground truth of a tuw grid warehouse (roads between solid blocks).
+
+    A free pixel whose free runs along both axes are longer than 1.5 road widths (the most common
+    shorter run) is a junction, every other free pixel corridor. A crossing widened into a square
+    is one junction; an L bend would count as one too, but every crossing of these maps is a T or
+    an X.
+    """
+    free = occupancy == 0
+    h_run, v_run = _runs(free), _runs(free.T).T
+    road = int(np.bincount(np.minimum(h_run, v_run)[free]).argmax())
+    truth = np.where(free, Label.CORRIDOR.value, 0).astype(np.uint8)
+    truth[free & (h_run > 1.5 * road) & (v_run > 1.5 * road)] = Label.JUNCTION.value
+    return truth
