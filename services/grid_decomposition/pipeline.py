@@ -382,14 +382,12 @@ def _pairs(segments: npt.NDArray[np.int32], sub: Subdivision) -> _Pairs:
     n_seg = np.int64(int(s.max()) + 1)
     keys, counts = np.unique(f[other].astype(np.int64) * n_seg + s[other], return_counts=True)
     has = agree_count > 0
+    # the two sets are disjoint: the rest never holds a face's representative segment
     face = np.r_[np.flatnonzero(has), keys // n_seg]
     seg = np.r_[rep[has].astype(np.int64), keys % n_seg]
-    count = np.r_[agree_count[has], counts.astype(np.float64)]
+    pixels = np.r_[agree_count[has], counts.astype(np.float64)]
     order = np.lexsort((seg, face))
-    key = face[order] * n_seg + seg[order]
-    first = np.r_[True, key[1:] != key[:-1]]
-    total = np.add.reduceat(count[order], np.flatnonzero(first)) if key.size else count
-    return _Pairs(face[order][first], seg[order][first], total)
+    return _Pairs(face[order], seg[order], pixels[order])
 
 
 def _final_face_regions(pairs: _Pairs, n_faces: int) -> npt.NDArray[np.int64]:
