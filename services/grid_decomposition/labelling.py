@@ -36,6 +36,22 @@ class FaceLabels(NamedTuple):
     category_labels: dict[int, Label]
 
 
+class Evidence(NamedTuple):
+    """What geometry and the templates say of each face, index 0 unused.
+
+    Attributes
+    ----------
+    label : (F + 1,) int64
+        :class:`Label` value.
+    off_pitch : (F + 1,) bool
+        Bay-shaped faces between uprights left out of storage because they are longer than the
+        bays around them (a cross aisle one bay wide); they are drivable in ``label``.
+    """
+
+    label: npt.NDArray[np.int64]
+    off_pitch: npt.NDArray[np.bool_]
+
+
 def face_categories(
     face_image: npt.NDArray[np.int32],
     n_faces: int,
@@ -66,16 +82,19 @@ def evidence_labels(
     storage_max_width_m: float = 3.0,
     storage_min_width_m: float = 1.8,
     storage_max_walled: float = 0.3,
+    max_pitch_ratio: float = 1.08,
     corridor_max_width_m: float = 4.0,
     corridor_min_elongation: float = 4.0,
     open_area_min_m2: float = 150.0,
-) -> npt.NDArray[np.int64]:
+) -> Evidence:
     """Label evidence per face from its geometry and the paper-B templates.
 
     Storage: a small rectangle (short side <= ``storage_max_depth_m``, long side <=
     ``storage_max_width_m`` and >= ``storage_min_width_m``: a bay) with at least three corners
     on obstacles (uprights) and an outline mostly open (at most ``storage_max_walled`` of it
-    touching obstacles); a bay with missing uprights is storage when at least two storage faces
+    touching obstacles) and at most ``max_pitch_ratio`` times as long as the median bay of its
+    connected component (bays of a rack share a pitch: a cross aisle one bay wide, 3.0 m in 2.7 m
+    racks, is no bay); a bay with missing uprights is storage when at least two storage faces
     neighbour it (three if fewer than two of its corners are on obstacles): it lies in a rack row. Faces of a compact
     connected component (elongation below ``corridor_min_elongation`` and no storage) are one
     room (or open area above ``open_area_min_m2``). In the other components (networks of
@@ -99,6 +118,9 @@ def evidence_labels(
         & (geometry.long_m >= storage_min_width_m)
         & (geometry.walled_fraction <= storage_max_walled)
     )
+    pitch = _pitch(geometry.long_m, component, bay & (geometry.corners_on_obstacle >= 3))
+    off_pitch = bay & (geometry.corners_on_obstacle >= 3) & (geometry.long_m > max_pitch_ratio * pitch)
+    bay &= ~off_pitch
     storage = bay & (geometry.corners_on_obstacle >= 3)
     # a bay with missing uprights in a rack row: storage next to two storage faces (three when
     # fewer than two of its corners stand on uprights)
@@ -134,7 +156,18 @@ def evidence_labels(
     ev[drivable] = Label.OPEN_AREA.value
     ev[junction] = Label.JUNCTION.value
     ev[corridor] = Label.CORRIDOR.value
-    return ev
+    return Evidence(ev, off_pitch)
+
+
+def _pitch(
+    long_m: npt.NDArray[np.float64], component: npt.NDArray[np.int64], bay: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.float64]:
+    """Per face, the median long side of the bays in its connected component (inf where there are none)."""
+    median = np.full(int(component.max()) + 1, np.inf)
+    for c in np.unique(component[bay]):
+        median[c] = float(np.median(long_m[bay & (component == c)]))
+    out: npt.NDArray[np.float64] = median[component]
+    return out
 
 
 def _cluster_junctions(

@@ -91,7 +91,11 @@ def _refine(
         scores = np.empty(steps.size)
         for i, a in enumerate(centre + steps):
             s = -math.sin(a) * cols + math.cos(a) * rows
-            hist = np.bincount(np.rint(s - s.min()).astype(np.int64))
+            s -= s.min()
+            whole = np.floor(s).astype(np.int64)
+            part = s - whole
+            # each point split linearly between its two bins: no rounding luck at tiny angles
+            hist = np.bincount(whole, 1.0 - part, whole.max() + 2) + np.bincount(whole + 1, part, whole.max() + 2)
             scores[i] = float(np.dot(hist, hist))
         best = int(np.argmax(scores))
         return float(centre + steps[best]), 0 < best < steps.size - 1

@@ -322,15 +322,18 @@ def decompose(
         sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m, face_angle_rad=_face_angles(sub, used)
     )
     elongation = _elongation(component, sub.face_image, free, resolution_m)
-    evidence = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
+    found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
+    evidence = found.label
     rows, cols, cats = categorize_places(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )
     face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
-    automatic = assign_labels(evidence, face_cat, cog.face_free_px)
     face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
     # regions come from the automatic labels: a person's overrides rename places, they do not
-    # merge a warehouse's pallet cells and aisles into one region
+    # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
+    # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
+    cut_like_cells = np.where(found.off_pitch, Label.STORAGE.value, evidence)
+    automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
     region_of_face = face_regions(sub, cog, component, cog.face_free_px, automatic.label)
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import Connection, Decomposition, DecompositionError, Label, Resolution, decompose
+from tests.api.warehouse_map import warehouse
 from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse
 
 
@@ -140,3 +141,15 @@ def test_rack_uprights_do_not_split_an_axis_aligned_warehouse_into_texture_regio
     wh = synthetic_warehouse(0)
     d = decompose(wh.occupancy, resolution_m=wh.resolution_m)
     assert d.texture_regions.max() == 0
+
+
+def test_a_cross_aisle_one_bay_wide_is_corridor_not_storage() -> None:
+    """The simulator's hall: 2.7 m bays, 3.0 m cross and end aisles (a bay-sized rectangle between uprights)."""
+    wh = warehouse()
+    free = wh.grids.occupancy == 0
+    aisle = free & np.isin(wh.grids.labels, [Label.CORRIDOR.value, Label.JUNCTION.value])
+    storage = free & (wh.grids.labels == Label.STORAGE.value)
+    assert (wh.decomposition.labels[aisle] == Label.STORAGE.value).mean() < 0.01
+    assert (wh.decomposition.labels[storage] == Label.STORAGE.value).mean() > 0.9
+    kinds = {info.label for info in wh.decomposition.regions.values()}
+    assert {Label.CORRIDOR, Label.JUNCTION, Label.STORAGE} <= kinds
