@@ -1,94 +1,153 @@
-"""Grid decomposition: speed, peak memory and label accuracy on synthetic and real warehouses.
+"""Grid decomposition on warehouses: label accuracy, junctions, pallet cells, speed and peak memory.
 
-Prints ``name value unit`` lines. Synthetic warehouses come from the seeded generator of the
-tests (``tests/services/grid_decomposition/warehouse.py``); the tuw grid warehouses get a
-ground truth derived from their grid (a free pixel whose free runs along both axes are longer
-than 1.5 road widths is a junction, else corridor). Run from the repository root with
-``PYTHONPATH=. .venv/bin/python bench/bench_grid_decomposition.py`` (one BLAS thread).
+Prints ``name value unit`` lines, one BLAS thread, seconds as wall time and CPU time
+(``time.process_time``) with the load average, since the machine may be shared.
+
+* Synthetic warehouses from the seeded generator of the tests
+  (``tests/services/grid_decomposition/warehouse.py``), seeds 0-2 of: ``plain`` (aisles
+  2.8-3.5 m), ``narrow`` (1.8-2.2 m), ``wide`` (3.5-4.5 m), ``turned`` (the whole map rotated by
+  0.3 + 0.4 * seed rad) and ``two_region`` (a second walled building whose racks are rotated by
+  0.5 rad); 10 % of the uprights missing everywhere. Per map: label accuracy over free space,
+  cross-aisle junctions found (the label at each junction's centre), pallet cells labelled
+  corridor (a cell's majority label; also as a share of storage pixels).
+* The tuw grid warehouses (``../shared/data/maps/tuw_warehouse``) with a ground truth derived from
+  their grid (``tuw_truth`` of the same test helper): accuracy, junctions found (a true junction is found when most of
+  its pixels are labelled junction) and junction pixels found.
+* A 5000 x 1440 px warehouse (250 m x 72 m at 5 cm): median of three runs.
+* The ipa maps (every variant), one run each: median seconds (``--no-ipa`` skips them).
+
+Run from the repository root: ``PYTHONPATH=. .venv/bin/python bench/bench_grid_decomposition.py``.
 """
 
 from __future__ import annotations
 
+import argparse
+import os
 import resource
+import statistics
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits
 
-from services.grid_decomposition import Label, decompose, read_map_file
-from tests.services.grid_decomposition.warehouse import synthetic_warehouse
+from services.grid_decomposition import Decomposition, Label, decompose, read_map_file
+from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse, tuw_truth
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
-
-
-def _runs(free: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
-    """Length of the horizontal free run through every pixel."""
-    out = np.zeros(free.shape, dtype=np.int64)
-    for r in range(free.shape[0]):
-        row = free[r].astype(np.int8)
-        d = np.diff(np.r_[0, row, 0])
-        starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-        for a, b in zip(starts, ends, strict=True):
-            out[r, a:b] = b - a
-    return out
-
-
-def tuw_truth(occupancy: npt.NDArray[np.int8]) -> npt.NDArray[np.uint8]:
-    """Corridor / junction ground truth of a tuw grid warehouse (roads between solid blocks)."""
-    free = occupancy == 0
-    h_run, v_run = _runs(free), _runs(free.T).T
-    road = int(np.bincount(np.minimum(h_run, v_run)[free]).argmax())
-    truth = np.where(free, Label.CORRIDOR.value, 0).astype(np.uint8)
-    truth[free & (h_run > 1.5 * road) & (v_run > 1.5 * road)] = Label.JUNCTION.value
-    return truth
+LARGE_SHAPE = (1440, 5000)
 
 
 def _accuracy(labels: npt.NDArray[np.uint8], truth: npt.NDArray[np.uint8], free: npt.NDArray[np.bool_]) -> float:
     return float((labels[free] == truth[free]).mean())
 
 
-def _synthetic(tag: str, seed: int, rotated: float | None) -> None:
-    wh = synthetic_warehouse(seed, rotated_block_rad=rotated)
-    start = time.perf_counter()
-    d = decompose(wh.occupancy, resolution_m=wh.resolution_m)
-    seconds = time.perf_counter() - start
+def _timed(occupancy: npt.NDArray[np.int8], resolution_m: float) -> tuple[Decomposition, float, float]:
+    wall, cpu = time.perf_counter(), time.process_time()
+    d = decompose(occupancy, resolution_m=resolution_m)
+    return d, time.perf_counter() - wall, time.process_time() - cpu
+
+
+def _report_warehouse(tag: str, wh: Warehouse, d: Decomposition) -> None:
     free = wh.occupancy == 0
     found = sum(d.labels[round(y), round(x)] == Label.JUNCTION.value for x, y in wh.junctions_px)
     storage = free & (wh.truth == Label.STORAGE.value)
-    print(f"synthetic_{tag}_seed{seed}_accuracy {100 * _accuracy(d.labels, wh.truth, free):.2f} %")
-    print(f"synthetic_{tag}_seed{seed}_junctions_found {found}/{len(wh.junctions_px)} count")
-    print(f"synthetic_{tag}_seed{seed}_storage_as_corridor {100 * (d.labels[storage] == 1).mean():.2f} %")
-    print(f"synthetic_{tag}_seed{seed}_seconds {seconds:.2f} s")
+    cells = cell_labels(d.labels, wh)
+    print(f"{tag}_accuracy {100 * _accuracy(d.labels, wh.truth, free):.2f} %")
+    print(f"{tag}_junctions_found {found}/{len(wh.junctions_px)} count")
+    print(f"{tag}_cells_as_corridor {(cells == Label.CORRIDOR.value).sum()}/{(cells >= 0).sum()} count")
+    print(f"{tag}_storage_px_as_corridor {100 * (d.labels[storage] == Label.CORRIDOR.value).mean():.2f} %")
+
+
+def _synthetic() -> None:
+    for seed in (0, 1, 2):
+        maps = {
+            "plain": synthetic_warehouse(seed),
+            "narrow": synthetic_warehouse(seed, aisle_width_m=(1.8, 2.2)),
+            "wide": synthetic_warehouse(seed, aisle_width_m=(3.5, 4.5)),
+            "turned": synthetic_warehouse(seed, rotation_rad=0.3 + 0.4 * seed),
+            "two_region": synthetic_warehouse(seed, rotated_block_rad=0.5),
+        }
+        for name, wh in maps.items():
+            d, wall, cpu = _timed(wh.occupancy, wh.resolution_m)
+            tag = f"synthetic_{name}_seed{seed}"
+            _report_warehouse(tag, wh, d)
+            print(f"{tag}_seconds {wall:.2f} s")
+            print(f"{tag}_cpu_seconds {cpu:.2f} s")
+
+
+def _tuw() -> None:
+    for name in ("warehouse008", "warehouse032", "warehouse200"):
+        path = DATA / "tuw_warehouse" / name / "map.yaml"
+        if not path.exists():
+            print(f"# {path} is absent: tuw maps skipped")
+            return
+        occ, res, _ = read_map_file(path)
+        d, wall, cpu = _timed(occ, res)
+        truth = tuw_truth(occ)
+        free = occ == 0
+        junction = free & (truth == Label.JUNCTION.value)
+        n, parts = cv2.connectedComponents(junction.astype(np.uint8), connectivity=4)
+        hit = np.bincount(parts[junction], weights=d.labels[junction] == Label.JUNCTION.value, minlength=n)
+        size = np.bincount(parts[junction], minlength=n)
+        found = int((hit[1:] > 0.5 * size[1:]).sum())
+        print(f"tuw_{name}_accuracy {100 * _accuracy(d.labels, truth, free):.2f} %")
+        print(f"tuw_{name}_junctions_found {found}/{n - 1} count")
+        print(f"tuw_{name}_junction_px_found {100 * (d.labels[junction] == Label.JUNCTION.value).mean():.2f} %")
+        print(f"tuw_{name}_seconds {wall:.2f} s")
+        print(f"tuw_{name}_cpu_seconds {cpu:.2f} s")
+
+
+def large_warehouse() -> Warehouse:
+    """A 5000 x 1440 px warehouse at 5 cm (250 m x 72 m): 11 double rows, 4 x 21 bays, unknown border."""
+    wh = synthetic_warehouse(7, n_double_rows=11, n_sections=4, bays_per_section=21, aisle_width_m=(3.2, 3.8))
+    pad = [(0, t - s) for s, t in zip(wh.occupancy.shape, LARGE_SHAPE, strict=True)]
+    assert min(p[1] for p in pad) >= 0, wh.occupancy.shape
+    return Warehouse(
+        np.pad(wh.occupancy, pad, constant_values=-1),
+        np.pad(wh.truth, pad),
+        np.pad(wh.cells, pad),
+        wh.junctions_px,
+        wh.resolution_m,
+    )
+
+
+def _large() -> None:
+    wh = large_warehouse()
+    print(f"large_warehouse_shape {wh.occupancy.shape[1]}x{wh.occupancy.shape[0]} px")
+    runs = [_timed(wh.occupancy, wh.resolution_m) for _ in range(3)]
+    print(f"large_warehouse_seconds {statistics.median(r[1] for r in runs):.2f} s")
+    print(f"large_warehouse_cpu_seconds {statistics.median(r[2] for r in runs):.2f} s")
+    _report_warehouse("large_warehouse", wh, runs[0][0])
+
+
+def _ipa() -> None:
+    folder = DATA / "ipa_room_segmentation"
+    paths = sorted(p for p in folder.glob("*.png") if not p.name.endswith("_gt_segmentation.png"))
+    if not paths:
+        print(f"# {folder} is absent: ipa maps skipped")
+        return
+    times = [_timed(read_map_file(p, resolution_m=0.05)[0], 0.05)[1:] for p in paths]
+    print(f"ipa_maps {len(paths)} count")
+    print(f"ipa_median_seconds {statistics.median(t[0] for t in times):.3f} s")
+    print(f"ipa_median_cpu_seconds {statistics.median(t[1] for t in times):.3f} s")
+    print(f"ipa_max_seconds {max(t[0] for t in times):.2f} s")
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--no-ipa", action="store_true", help="skip the ipa timings")
+    args = parser.parse_args()
+    print(f"load_average_start {os.getloadavg()[0]:.2f} ratio")
     with threadpool_limits(1):
-        for seed in (0, 1, 2):
-            _synthetic("plain", seed, None)
-            _synthetic("rotated", seed, 0.5)
-        for name in ("warehouse008", "warehouse032", "warehouse200"):
-            path = DATA / "tuw_warehouse" / name / "map.yaml"
-            if not path.exists():
-                continue
-            occ, res, origin = read_map_file(path)
-            start = time.perf_counter()
-            d = decompose(occ, resolution_m=res, origin_xy_m=origin)
-            seconds = time.perf_counter() - start
-            truth = tuw_truth(occ)
-            free = occ == 0
-            print(f"tuw_{name}_accuracy {100 * _accuracy(d.labels, truth, free):.2f} %")
-            junction = free & (truth == Label.JUNCTION.value)
-            print(f"tuw_{name}_junction_recall {100 * (d.labels[junction] == 2).mean():.2f} %")
-            print(f"tuw_{name}_seconds {seconds:.2f} s")
-        big = synthetic_warehouse(7, n_double_rows=11, n_sections=5, bays_per_section=16)
-        print(f"large_warehouse_shape {big.occupancy.shape[1]}x{big.occupancy.shape[0]} px")
-        start = time.perf_counter()
-        d = decompose(big.occupancy, resolution_m=big.resolution_m)
-        print(f"large_warehouse_seconds {time.perf_counter() - start:.2f} s")
-        free = big.occupancy == 0
-        print(f"large_warehouse_accuracy {100 * _accuracy(d.labels, big.truth, free):.2f} %")
+        _synthetic()
+        _tuw()
+        _large()
+        if not args.no_ipa:
+            _ipa()
+    print(f"load_average_end {os.getloadavg()[0]:.2f} ratio")
     print(f"peak_rss {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
 
 

@@ -5,7 +5,7 @@ from services.grid_decomposition.cogency import EdgeCogency, close_doorways, edg
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.evaluation import IpaScores, ground_truth_rooms, ipa_scores
 from services.grid_decomposition.faces import FaceGeometry, face_geometry
-from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
+from services.grid_decomposition.labelling import Evidence, FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.mapfile import (
     decompose_map_file,
     layout_features,
@@ -50,6 +50,7 @@ __all__ = [
     "Decomposition",
     "DecompositionError",
     "EdgeCogency",
+    "Evidence",
     "FaceGeometry",
     "FaceLabels",
     "Gradients",

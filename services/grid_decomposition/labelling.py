@@ -7,6 +7,8 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from services.grid_decomposition.faces import FaceGeometry
 from services.grid_decomposition.semantics import Label
@@ -32,6 +34,22 @@ class FaceLabels(NamedTuple):
     category: npt.NDArray[np.int64]
     label: npt.NDArray[np.int64]
     category_labels: dict[int, Label]
+
+
+class Evidence(NamedTuple):
+    """What geometry and the templates say of each face, index 0 unused.
+
+    Attributes
+    ----------
+    label : (F + 1,) int64
+        :class:`Label` value.
+    off_pitch : (F + 1,) bool
+        Bay-shaped faces between uprights left out of storage because they are longer than the
+        bays around them (a cross aisle one bay wide); they are drivable in ``label``.
+    """
+
+    label: npt.NDArray[np.int64]
+    off_pitch: npt.NDArray[np.bool_]
 
 
 def face_categories(
@@ -64,21 +82,26 @@ def evidence_labels(
     storage_max_width_m: float = 3.0,
     storage_min_width_m: float = 1.8,
     storage_max_walled: float = 0.3,
+    max_pitch_ratio: float = 1.08,
     corridor_max_width_m: float = 4.0,
     corridor_min_elongation: float = 4.0,
     open_area_min_m2: float = 150.0,
-) -> npt.NDArray[np.int64]:
+) -> Evidence:
     """Label evidence per face from its geometry and the paper-B templates.
 
     Storage: a small rectangle (short side <= ``storage_max_depth_m``, long side <=
     ``storage_max_width_m`` and >= ``storage_min_width_m``: a bay) with at least three corners
     on obstacles (uprights) and an outline mostly open (at most ``storage_max_walled`` of it
-    touching obstacles). Faces of a compact connected component (elongation below
-    ``corridor_min_elongation`` and no storage) are one room (or open area above
-    ``open_area_min_m2``). In the other components (networks of
+    touching obstacles) and at most ``max_pitch_ratio`` times as long as the median bay of its
+    connected component (bays of a rack share a pitch: a cross aisle one bay wide, 3.0 m in 2.7 m
+    racks, is no bay); a bay with missing uprights is storage when at least two storage faces
+    neighbour it (three if fewer than two of its corners are on obstacles): it lies in a rack row. Faces of a compact
+    connected component (elongation below ``corridor_min_elongation`` and no storage) are one
+    room (or open area above ``open_area_min_m2``). In the other components (networks of
     aisles or corridors) the templates run on the graph of non-storage faces: T/X junctions, and
-    corridor pieces (two branches or a dead end, short side <= ``corridor_max_width_m``); the
-    rest is open area.
+    corridor pieces (two branches or a dead end, short side <= ``corridor_max_width_m``); a small
+    cluster of faces matching no template that matches the T or X template as one node (a widened
+    crossing) is a junction; the rest is open area.
 
     Parameters
     ----------
@@ -88,14 +111,29 @@ def evidence_labels(
     n = geometry.short_m.size
     ev = np.full(n, Label.NONE.value, dtype=np.int64)
     is_free = face_free_px > 0
-    storage = (
+    bay = (
         is_free
-        & (geometry.corners_on_obstacle >= 3)
         & (geometry.short_m <= storage_max_depth_m)
         & (geometry.long_m <= storage_max_width_m)
         & (geometry.long_m >= storage_min_width_m)
         & (geometry.walled_fraction <= storage_max_walled)
     )
+    pitch = _pitch(geometry.long_m, component, bay & (geometry.corners_on_obstacle >= 3))
+    off_pitch = bay & (geometry.corners_on_obstacle >= 3) & (geometry.long_m > max_pitch_ratio * pitch)
+    bay &= ~off_pitch
+    storage = bay & (geometry.corners_on_obstacle >= 3)
+    # a bay with missing uprights in a rack row: storage next to two storage faces (three when
+    # fewer than two of its corners stand on uprights)
+    weak = bay & (geometry.corners_on_obstacle < 3)
+    need = np.where(geometry.corners_on_obstacle == 2, 2, 3)
+    e_all = np.asarray(links, dtype=np.int64).reshape(-1, 2)
+    for _ in range(3):
+        nb = np.bincount(e_all[:, 0], weights=storage[e_all[:, 1]], minlength=n)
+        nb += np.bincount(e_all[:, 1], weights=storage[e_all[:, 0]], minlength=n)
+        grown = weak & ~storage & (nb >= need)
+        if not grown.any():
+            break
+        storage |= grown
     ev[storage] = Label.STORAGE.value
     has_storage = np.zeros(component_elongation.size, dtype=bool)
     has_storage[component[storage]] = True
@@ -109,10 +147,48 @@ def evidence_labels(
     branches = template_branches(n, e)
     junction = drivable & (branches >= 3) & (branches <= 4)
     corridor = drivable & (branches >= 1) & (branches <= 2) & (geometry.short_m <= corridor_max_width_m)
+    junction |= _cluster_junctions(
+        e,
+        drivable & ~junction & ~corridor,
+        face_free_px.astype(np.float64) * resolution_m**2,
+        max_area_m2=corridor_max_width_m**2,
+    )
     ev[drivable] = Label.OPEN_AREA.value
     ev[junction] = Label.JUNCTION.value
     ev[corridor] = Label.CORRIDOR.value
-    return ev
+    return Evidence(ev, off_pitch)
+
+
+def _pitch(
+    long_m: npt.NDArray[np.float64], component: npt.NDArray[np.int64], bay: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.float64]:
+    """Per face, the median long side of the bays in its connected component (inf where there are none)."""
+    median = np.full(int(component.max()) + 1, np.inf)
+    for c in np.unique(component[bay]):
+        median[c] = float(np.median(long_m[bay & (component == c)]))
+    out: npt.NDArray[np.float64] = median[component]
+    return out
+
+
+def _cluster_junctions(
+    links: npt.NDArray[np.int64], rest: npt.NDArray[np.bool_], area_m2: npt.NDArray[np.float64], *, max_area_m2: float
+) -> npt.NDArray[np.bool_]:
+    """Faces of small clusters of unmatched drivable faces that, taken as one node, match the T or X template.
+
+    A crossing widened into a small square is cut by its own edges into several faces, none of
+    which matches a template alone; contracted into one node of at most ``max_area_m2`` it does.
+    """
+    n = rest.size
+    inner = links[rest[links[:, 0]] & rest[links[:, 1]]]
+    graph = coo_matrix((np.ones(len(inner)), (inner[:, 0], inner[:, 1])), shape=(n, n))
+    _, cluster = connected_components(graph, directed=False)
+    node = np.where(rest, n + cluster, np.arange(n))
+    branches = template_branches(2 * n, node[links])
+    cluster_area = np.bincount(cluster[rest], weights=area_m2[rest], minlength=n)
+    small = cluster_area <= max_area_m2
+    matches = (branches[n:] >= 3) & (branches[n:] <= 4) & small
+    out: npt.NDArray[np.bool_] = rest & matches[cluster]
+    return out
 
 
 def assign_labels(
@@ -127,9 +203,11 @@ def assign_labels(
 
     Each category gets the label most of its faces' free area has as evidence (its purity is
     that share); ``overrides`` (category -> label, a person's choice) replace the automatic
-    assignment. A face takes its category's label when the category was overridden or is at
-    least ``min_purity`` pure; otherwise (mixed categories, or no category) it keeps its own
-    evidence, since the ray-cast shape of an aisle piece and of a pallet cell can coincide.
+    assignment. A face takes its category's label when the category was overridden, or when the
+    category is at least ``min_purity`` pure and the face has no decisive evidence of its own (a
+    pallet-cell rectangle or a corridor or junction template; the ray-cast shape of a cross-aisle
+    piece between two rack ends and that of a pallet cell can coincide). Otherwise (mixed
+    categories, no category, decisive evidence) it keeps its own evidence.
     """
     n_cat = int(category.max()) + 1 if category.size else 0
     votes = np.zeros((max(n_cat, 1), len(Label)), dtype=np.float64)
@@ -144,10 +222,12 @@ def assign_labels(
     trusted = purity >= min_purity
     for c, label in (overrides or {}).items():
         mapping[c] = label
-        if 0 <= c < trusted.size:
-            trusted[c] = True
     lut = np.array([mapping.get(c, Label.UNIDENTIFIED).value for c in range(max(n_cat, 1))], dtype=np.int64)
-    use = has & trusted[np.maximum(category, 0)]
+    decisive = np.isin(evidence, [Label.STORAGE.value, Label.CORRIDOR.value, Label.JUNCTION.value])
+    overridden = np.zeros(trusted.size, dtype=bool)
+    overridden[[c for c in (overrides or {}) if 0 <= c < trusted.size]] = True
+    cat = np.maximum(category, 0)
+    use = has & (overridden[cat] | (trusted[cat] & ~decisive))
     final = np.where(use, lut[np.maximum(category, 0)], evidence).astype(np.int64)
     final[(final == Label.NONE.value) & (face_free_px > 0)] = Label.UNIDENTIFIED.value
     final[face_free_px == 0] = Label.NONE.value

@@ -45,7 +45,7 @@ def read_map_file(
         try:
             image = read_map_yaml(path)
         except OccupancyMappingError as err:
-            raise DecompositionError(str(err)) from err
+            raise DecompositionError(f"{err}{_missing_image_hint(path, err)}") from err
         if resolution_m is not None and not math.isclose(resolution_m, image.resolution_m, rel_tol=1e-6):
             raise DecompositionError(
                 f"--resolution {resolution_m} m disagrees with {path}'s resolution {image.resolution_m} m"
@@ -67,6 +67,20 @@ def read_map_file(
     occ[p > 0.65] = 100
     occ[p < 0.196] = 0
     return occ[::-1].copy(), float(resolution_m), (0.0, 0.0)
+
+
+def _missing_image_hint(yaml_path: Path, err: OccupancyMappingError) -> str:
+    """For a YAML whose image is missing: the images beside it and how to decompose one of them."""
+    if not isinstance(err.__cause__, FileNotFoundError) or not yaml_path.exists():
+        return ""
+    beside = sorted(p.name for p in yaml_path.parent.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
+    if not beside:
+        return ""
+    return (
+        f"; {yaml_path.parent} holds {', '.join(beside)}: fix the YAML's 'image:' if one of them is this map, "
+        f"or decompose it as a bare image, e.g. aisle decompose {yaml_path.parent / beside[0]} --resolution R "
+        "--out DIR (origin (0, 0); the YAML's origin belongs to its own image)"
+    )
 
 
 def parse_label_overrides(text: str) -> dict[int, Label]:

@@ -1,6 +1,8 @@
-"""A picture of a decomposition a person can check at a glance."""
+"""A picture of a decomposition a person can check at a glance: places in colour, walls, doors, a legend."""
 
 from __future__ import annotations
+
+import math
 
 import cv2
 import numpy as np
@@ -18,15 +20,25 @@ LABEL_COLOURS: dict[Label, tuple[int, int, int]] = {
     Label.OPEN_AREA: (150, 220, 230),
     Label.UNIDENTIFIED: (200, 200, 200),
 }
+WALL_COLOUR = (230, 30, 30)
+DOOR_COLOUR = (230, 0, 230)
+BORDER_COLOUR = (20, 20, 20)
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+_ROW_PX = 26
 
 
-def overview_image(decomposition: Decomposition, *, max_side_px: int = 2000) -> npt.NDArray[np.uint8]:
-    """RGB image (top row = highest y): label colours, region borders, walls in red, lines faint.
+def overview_image(
+    decomposition: Decomposition, *, max_side_px: int = 2000, min_side_px: int = 1000
+) -> npt.NDArray[np.uint8]:
+    """RGB image (top row = highest y): label colours, region borders, walls red, doors magenta, lines faint, legend.
+
+    The map is scaled to at most ``max_side_px`` on its longer side (small maps are enlarged by an
+    integer factor, nearest neighbour, to about ``min_side_px``); the legend to its right names every
+    colour with its share of the free space, the line styles, the region count and a scale bar.
 
     Returns
     -------
     (H', W', 3) uint8
-        At most ``max_side_px`` on its longer side.
     """
     lut = np.zeros((256, 3), dtype=np.uint8)
     for label, colour in LABEL_COLOURS.items():
@@ -38,16 +50,67 @@ def overview_image(decomposition: Decomposition, *, max_side_px: int = 2000) -> 
     border[1:, :] |= seg[1:, :] != seg[:-1, :]
     border &= seg > 0
     rgb[decomposition.subdivision.line_image & (decomposition.labels > 0)] //= 2
-    rgb[border] = (20, 20, 20)
+    rgb[border] = BORDER_COLOUR
     sub, cog = decomposition.subdivision, decomposition.cogency
-    wall_px = np.zeros(seg.size, dtype=bool)
-    for e in np.flatnonzero(cog.cogent):
-        wall_px[sub.edge_pixels[sub.edge_starts[e] : sub.edge_starts[e + 1]]] = True
-    rgb.reshape(-1, 3)[wall_px] = (230, 30, 30)
+    edge_of_pixel = np.repeat(np.arange(sub.n_edges), np.diff(sub.edge_starts))
+    flat = rgb.reshape(-1, 3)
+    flat[sub.edge_pixels[cog.cogent[edge_of_pixel]]] = WALL_COLOUR
+    flat[sub.edge_pixels[cog.door[edge_of_pixel]]] = DOOR_COLOUR
     image = np.ascontiguousarray(rgb[::-1])
     h, w = image.shape[:2]
     scale = min(1.0, max_side_px / max(h, w))
     if scale < 1.0:
         size = (max(1, round(w * scale)), max(1, round(h * scale)))
         image = np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA), dtype=np.uint8)
-    return image
+    elif max(h, w) < min_side_px:
+        scale = float(math.ceil(min_side_px / max(h, w)))
+        image = np.repeat(np.repeat(image, int(scale), axis=0), int(scale), axis=1)
+    return _with_legend(image, decomposition, metres_per_px=decomposition.resolution_m / scale)
+
+
+def _with_legend(
+    image: npt.NDArray[np.uint8], decomposition: Decomposition, *, metres_per_px: float
+) -> npt.NDArray[np.uint8]:
+    """``image`` with a white legend panel on its right."""
+    labels = decomposition.labels
+    free = labels > 0
+    share = np.bincount(labels[free], minlength=len(Label)) / max(int(free.sum()), 1)
+    rows: list[tuple[str, tuple[int, int, int], str]] = []
+    for label in Label:
+        if label is not Label.NONE and share[label.value] > 0:
+            name = label.name.lower().replace("_", " ")
+            rows.append(("box", LABEL_COLOURS[label], f"{name} {100 * share[label]:.1f} % of free space"))
+    rows.append(("box", LABEL_COLOURS[Label.NONE], "occupied / unknown"))
+    rows.append(("line", WALL_COLOUR, "wall (cogent edge)"))
+    rows.append(("line", DOOR_COLOUR, "door (closed doorway)"))
+    rows.append(("line", BORDER_COLOUR, "region border"))
+    title = f"{len(decomposition.regions)} regions, {decomposition.subdivision.n_faces} cells"
+    width = 20 + max(cv2.getTextSize(t, _FONT, 0.5, 1)[0][0] for t in [title] + [r[2] for r in rows]) + 40
+    height = max(image.shape[0], _ROW_PX * (len(rows) + 4))
+    panel = np.full((height, width, 3), 255, dtype=np.uint8)
+    y = _ROW_PX
+    cv2.putText(panel, title, (10, y), _FONT, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    for kind, colour, text in rows:
+        y += _ROW_PX
+        if kind == "box":
+            cv2.rectangle(panel, (10, y - 13), (34, y + 3), colour, -1)
+            cv2.rectangle(panel, (10, y - 13), (34, y + 3), (0, 0, 0), 1)
+        else:
+            cv2.line(panel, (10, y - 5), (34, y - 5), colour, 3)
+        cv2.putText(panel, text, (42, y), _FONT, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    bar_m = _round_length((width - 80) * metres_per_px)
+    bar_px = max(1, round(bar_m / metres_per_px))
+    y += 2 * _ROW_PX
+    cv2.line(panel, (10, y), (10 + bar_px, y), (0, 0, 0), 2)
+    cv2.putText(panel, f"{bar_m:g} m", (16 + bar_px, y + 5), _FONT, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    canvas = np.full((height, image.shape[1], 3), 255, dtype=np.uint8)
+    canvas[: image.shape[0]] = image
+    return np.ascontiguousarray(np.concatenate([canvas, panel], axis=1))
+
+
+def _round_length(metres: float) -> float:
+    """The largest 1, 2 or 5 x 10^k not above ``metres`` (at least 0.1 m)."""
+    if metres < 0.1:
+        return 0.1
+    power = 10.0 ** math.floor(math.log10(metres))
+    return max(step * power for step in (1.0, 2.0, 5.0) if step * power <= metres)

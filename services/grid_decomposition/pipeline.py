@@ -7,6 +7,7 @@ import logging
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import networkx as nx
@@ -31,6 +32,7 @@ logger = logging.getLogger(__name__)
 
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
+_REGION_CORE_M = 1.0
 
 
 class Resolution(enum.Enum):
@@ -128,15 +130,25 @@ def _lines(
     mask: npt.NDArray[np.bool_] | None,
     resolution_m: float,
 ) -> dict[float, list[Line]]:
-    """Lines per dominant orientation inside ``mask``: directions from ``structure``, radiograms from all."""
+    """Lines per dominant orientation inside ``mask``: directions from ``structure``, radiograms from all.
+
+    A texture region's directions come from its structure at least ``_REGION_CORE_M`` inside it, so
+    a sliver of a neighbouring region's wall along its border adds no direction of its own.
+    """
     grads = gradients if mask is None else _masked(gradients, mask)
-    struct = structure if mask is None else _masked(structure, mask)
+    struct = structure if mask is None else _masked(structure, _core(mask, round(_REGION_CORE_M / resolution_m)))
     if struct.magnitude.size < 0.05 * max(grads.magnitude.size, 1):
         struct = grads
     return {
         float(a): line_offsets(radiogram(grads, float(a)), resolution_m=resolution_m)
         for a in dominant_orientations(struct)
     }
+
+
+def _core(mask: npt.NDArray[np.bool_], depth_px: int) -> npt.NDArray[np.bool_]:
+    """Pixels of ``mask`` at least ``depth_px`` from its outside (all of it if nothing is that deep)."""
+    inner = cv2.distanceTransform(np.pad(mask, 1).astype(np.uint8), cv2.DIST_L2, 3)[1:-1, 1:-1] >= depth_px
+    return inner if inner.any() else mask
 
 
 def _structure(obstacle: npt.NDArray[np.bool_], min_area_px: int) -> npt.NDArray[np.bool_]:
@@ -310,20 +322,27 @@ def decompose(
         sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m, face_angle_rad=_face_angles(sub, used)
     )
     elongation = _elongation(component, sub.face_image, free, resolution_m)
-    evidence = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
+    found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
+    evidence = found.label
     rows, cols, cats = categorize_places(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )
     face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
     face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
-    region_of_face = face_regions(sub, cog, component, cog.face_free_px, face_labels.label)
+    # regions come from the automatic labels: a person's overrides rename places, they do not
+    # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
+    # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
+    cut_like_cells = np.where(found.off_pitch, Label.STORAGE.value, evidence)
+    automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
+    region_of_face = face_regions(sub, cog, component, cog.face_free_px, automatic.label)
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
     if neck_half_width_m > 0:
         segments = split_at_necks(segments, free, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
-    regions, labels = _region_records(segments, sub, region_of_face, face_labels, resolution_m, origin_xy_m)
-    face_region_final = _final_face_regions(segments, sub)
+    pairs = _pairs(segments, sub)
+    regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(sub, cog, face_region_final, regions)
     return Decomposition(
         labels=labels,
@@ -341,20 +360,46 @@ def decompose(
     )
 
 
-def _final_face_regions(segments: npt.NDArray[np.int32], sub: Subdivision) -> npt.NDArray[np.int64]:
-    """Region of each face after segment cleaning (majority of its pixels)."""
-    n = sub.n_faces + 1
-    f = sub.face_image.ravel().astype(np.int64)
-    s = segments.ravel().astype(np.int64)
-    ok = (f > 0) & (s > 0)
-    out = np.zeros(n, dtype=np.int64)
-    if not ok.any():
-        return out
-    n_seg = int(s.max()) + 1
-    upair, counts = np.unique(f[ok] * n_seg + s[ok], return_counts=True)
-    face, seg = upair // n_seg, upair % n_seg
-    order = np.lexsort((-counts, face))
-    first = np.r_[True, face[order][1:] != face[order][:-1]]
+class _Pairs(NamedTuple):
+    """Pixel counts of every (face, segment) pair present (face 0 = line pixels), sorted by (face, segment)."""
+
+    face: npt.NDArray[np.int64]
+    segment: npt.NDArray[np.int64]
+    pixels: npt.NDArray[np.float64]
+
+
+def _pairs(segments: npt.NDArray[np.int32], sub: Subdivision) -> _Pairs:
+    """(face, segment) pixel counts in a few linear passes.
+
+    Nearly every face lies in one segment: each face's pixels are compared with one representative
+    pixel's segment and counted by face; only the rest (line pixels, faces a segment boundary cuts)
+    go through a sort.
+    """
+    f = sub.face_image.ravel()
+    s = segments.ravel()
+    rep = np.zeros(sub.n_faces + 1, dtype=np.int32)
+    rep[f] = s
+    agree = (s == rep[f]) & (s > 0)
+    agree_count = np.bincount(f, weights=agree, minlength=rep.size)
+    other = np.flatnonzero(~agree & (s > 0))
+    n_seg = np.int64(int(s.max()) + 1)
+    keys, counts = np.unique(f[other].astype(np.int64) * n_seg + s[other], return_counts=True)
+    has = agree_count > 0
+    # the two sets are disjoint: the rest never holds a face's representative segment
+    face = np.r_[np.flatnonzero(has), keys // n_seg]
+    seg = np.r_[rep[has].astype(np.int64), keys % n_seg]
+    pixels = np.r_[agree_count[has], counts.astype(np.float64)]
+    order = np.lexsort((seg, face))
+    return _Pairs(face[order], seg[order], pixels[order])
+
+
+def _final_face_regions(pairs: _Pairs, n_faces: int) -> npt.NDArray[np.int64]:
+    """Region of each face after segment cleaning (majority of its pixels; ties to the lower id)."""
+    out = np.zeros(n_faces + 1, dtype=np.int64)
+    ok = pairs.face > 0
+    face, seg, pixels = pairs.face[ok], pairs.segment[ok], pairs.pixels[ok]
+    order = np.lexsort((-pixels, face))
+    first = np.r_[True, face[order][1:] != face[order][:-1]] if face.size else np.zeros(0, dtype=bool)
     out[face[order][first]] = seg[order][first]
     return out
 
@@ -362,40 +407,40 @@ def _final_face_regions(segments: npt.NDArray[np.int32], sub: Subdivision) -> np
 def _region_records(
     segments: npt.NDArray[np.int32],
     sub: Subdivision,
-    region_of_face: npt.NDArray[np.int64],
+    pairs: _Pairs,
     face_labels: FaceLabels,
     resolution_m: float,
     origin_xy_m: tuple[float, float],
 ) -> tuple[dict[int, RegionInfo], npt.NDArray[np.uint8]]:
     """Region records (label: its faces' majority) and the label image (each face's own label)."""
     n_seg = int(segments.max()) + 1
-    flat_seg = segments.ravel()
-    face_px = sub.face_image.ravel()
-    ok = flat_seg > 0
-    lab_px = face_labels.label[face_px[ok]]
-    cat_px = face_labels.category[face_px[ok]]
     n_lab = len(Label)
-    lab_votes = np.bincount(flat_seg[ok] * n_lab + lab_px, minlength=n_seg * n_lab).reshape(n_seg, n_lab)
+    lab_votes = np.bincount(
+        pairs.segment * n_lab + face_labels.label[pairs.face], weights=pairs.pixels, minlength=n_seg * n_lab
+    ).reshape(n_seg, n_lab)
     lab_votes[:, 0] = 0
     seg_label = np.argmax(lab_votes, axis=1)
     seg_label[lab_votes.sum(axis=1) == 0] = Label.UNIDENTIFIED.value
     n_cat = int(max(face_labels.category.max(), 0)) + 2
-    cat_votes = np.bincount(flat_seg[ok] * n_cat + cat_px + 1, minlength=n_seg * n_cat).reshape(n_seg, n_cat)
+    cat_votes = np.bincount(
+        pairs.segment * n_cat + face_labels.category[pairs.face] + 1, weights=pairs.pixels, minlength=n_seg * n_cat
+    ).reshape(n_seg, n_cat)
     seg_cat = np.argmax(cat_votes, axis=1) - 1
-    area = np.bincount(flat_seg, minlength=n_seg).astype(np.float64)
-    ys, xs = np.divmod(np.flatnonzero(ok), segments.shape[1])
-    sx = np.bincount(flat_seg[ok], xs, n_seg)
-    sy = np.bincount(flat_seg[ok], ys, n_seg)
+    area = np.bincount(pairs.segment, weights=pairs.pixels, minlength=n_seg)
+    h, w = segments.shape
+    flat = segments.ravel()
+    sx = np.bincount(flat, np.tile(np.arange(w, dtype=np.float64), h), n_seg)
+    sy = np.bincount(flat, np.repeat(np.arange(h, dtype=np.float64), w), n_seg)
     regions: dict[int, RegionInfo] = {}
-    for sid in range(1, n_seg):
-        if area[sid] == 0:
-            continue
+    for sid in np.flatnonzero(area[1:] > 0) + 1:
         cx = origin_xy_m[0] + (sx[sid] / area[sid] + 0.5) * resolution_m
         cy = origin_xy_m[1] + (sy[sid] / area[sid] + 0.5) * resolution_m
-        regions[sid] = RegionInfo(
-            sid, Label(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
+        regions[int(sid)] = RegionInfo(
+            int(sid), Label(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
         )
-    labels = np.where(segments > 0, face_labels.label[sub.face_image], 0).astype(np.int32)
-    labels = fill_from_neighbours(labels, segments > 0)
-    labels = np.where(labels > 0, labels, np.where(segments > 0, seg_label[segments], 0))
+    inside = segments > 0
+    labels = np.where(inside, face_labels.label.astype(np.int32)[sub.face_image], 0).astype(np.int32)
+    labels = fill_from_neighbours(labels, inside)
+    hole = inside & (labels == 0)
+    labels[hole] = seg_label[segments[hole]]
     return regions, labels.astype(np.uint8)

@@ -9,9 +9,10 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
-from scipy.signal import find_peaks, find_peaks_cwt, peak_widths
+from scipy.signal import find_peaks, peak_widths
 
 from services.grid_decomposition.orientations import Gradients
+from services.grid_decomposition.wavelets import find_peaks_ricker
 
 
 class Radiogram(NamedTuple):
@@ -107,7 +108,7 @@ def line_offsets(
     # a tiny floor keeps the SNR test of find_peaks_cwt defined where the radiogram is flat zero
     floor = 1e-3 * float(smooth.max())
     with np.errstate(divide="ignore", invalid="ignore"):
-        cwt_peaks = np.asarray(find_peaks_cwt(smooth + floor, np.arange(lo, hi + 1)), dtype=np.int64)
+        cwt_peaks = find_peaks_ricker(smooth + floor, np.arange(lo, hi + 1))
     # find_peaks_cwt loses ridges of strictly periodic patterns (evenly spaced walls or uprights);
     # local maxima whose width lies in the wavelet range are added
     plain, _ = find_peaks(smooth, width=(lo, 2 * hi), prominence=floor * 10)

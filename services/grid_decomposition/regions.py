@@ -32,7 +32,7 @@ def face_regions(
     face_free_px: npt.NDArray[np.int64],
     face_label: npt.NDArray[np.int64],
     *,
-    min_storage_share: float = 0.2,
+    min_storage_share: float = 0.15,
 ) -> npt.NDArray[np.int64]:
     """Region id per face (0 = none).
 

@@ -10,8 +10,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from services.grid_decomposition import DecompositionError, Label, decompose_map_file, parse_label_overrides
+from services.grid_decomposition import (
+    DecompositionError,
+    Label,
+    decompose_map_file,
+    parse_label_overrides,
+    read_map_file,
+)
 from tests.helpers import data_path
+from tests.services.grid_decomposition.warehouse import tuw_truth
 
 
 def _office_png(path: Path) -> Path:
@@ -74,6 +81,20 @@ def test_bad_map_files_raise_decomposition_error(tmp_path: Path, name: str, cont
         decompose_map_file(tmp_path / name, tmp_path / "out", resolution_m=0.05)
 
 
+def test_a_yaml_naming_a_missing_image_points_at_the_images_beside_it(tmp_path: Path) -> None:
+    _office_png(tmp_path / "map.png")
+    (tmp_path / "map.yaml").write_text("image: map_rotated.png\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    with pytest.raises(DecompositionError, match=r"map_rotated.png does not exist; .* holds map.png: .*--resolution"):
+        decompose_map_file(tmp_path / "map.yaml", tmp_path / "out")
+
+
+def test_an_empty_file_raises_decomposition_error(tmp_path: Path) -> None:
+    for name in ("empty.png", "empty.yaml"):
+        (tmp_path / name).write_bytes(b"")
+        with pytest.raises(DecompositionError):
+            decompose_map_file(tmp_path / name, tmp_path / "out", resolution_m=0.05)
+
+
 def test_all_unknown_and_one_pixel_images_raise_decomposition_error(tmp_path: Path) -> None:
     Image.fromarray(np.full((30, 30), 205, np.uint8)).save(tmp_path / "unknown.png")
     with pytest.raises(DecompositionError, match="no free cell"):
@@ -94,10 +115,15 @@ def test_parse_label_overrides() -> None:
         parse_label_overrides("corridor")
 
 
-@pytest.mark.slow
-def test_tuw_warehouse_roads_are_corridors_and_crossings_junctions(tmp_path: Path) -> None:
-    yaml_path = data_path("maps", "tuw_warehouse", "warehouse032", "map.yaml")
+@pytest.mark.parametrize("name", ["warehouse008", "warehouse032", "warehouse200"])
+def test_tuw_warehouse_roads_are_corridors_and_every_crossing_a_junction(tmp_path: Path, name: str) -> None:
+    yaml_path = data_path("maps", "tuw_warehouse", name, "map.yaml")
     d = decompose_map_file(yaml_path, tmp_path)
-    free = d.labels > 0
-    share = np.bincount(d.labels[free], minlength=7) / free.sum()
-    assert share[Label.CORRIDOR] + share[Label.JUNCTION] > 0.8
+    occupancy, _, _ = read_map_file(yaml_path)
+    truth = tuw_truth(occupancy)
+    free = occupancy == 0
+    assert (d.labels[free] == truth[free]).mean() >= 0.95
+    junction = free & (truth == Label.JUNCTION.value)
+    n, parts = cv2.connectedComponents(junction.astype(np.uint8), connectivity=4)
+    found = np.bincount(parts[junction], weights=d.labels[junction] == Label.JUNCTION.value, minlength=n)
+    assert (found[1:] > 0.5 * np.bincount(parts[junction], minlength=n)[1:]).all()

@@ -176,22 +176,26 @@ def test_stage_rejects_nonsense_options(store: MapStore, settings: Settings, opt
         DecompositionStage(context, **options)  # type: ignore[arg-type]
 
 
-def test_a_label_table_revision_relabels_the_map_as_a_new_revision(store: MapStore, settings: Settings) -> None:
+@pytest.mark.parametrize(("chosen_label", "stored_as"), [("pallet cell", "storage"), ("room", "room")])
+def test_a_label_table_revision_relabels_the_map_as_a_new_revision(
+        store: MapStore, settings: Settings, chosen_label: str, stored_as: str) -> None:
     house = synthetic_warehouse(0, resolution_m=RES_M)
     map_id = store.ensure_map(settings.map_name).id
     with stages.running_stage(STAGE, _Stages(), settings, store):
         _write_occupancy(store, settings, house.occupancy)
         first = _wait_decompositions(store, settings, 1)
+        before = store.features(map_id, kinds=list(REGION_KINDS))
         labels: dict[int, set[str]] = {}
-        for f in store.features(map_id, kinds=list(REGION_KINDS)):
+        for f in before:
             labels.setdefault(f.feature.properties["category"], set()).add(f.feature.properties["label"])
-        chosen = min(c for c, names in labels.items() if "storage" in names and len(names) > 1)
+        chosen = min(c for c, names in labels.items() if "storage" in names)
         store.write_revision(map_id, RevisionWrite(LABEL_TABLE_STAGE,
-                                                   summary={LABEL_OVERRIDES_KEY: {str(chosen): "pallet cell"}}))
+                                                   summary={LABEL_OVERRIDES_KEY: {str(chosen): chosen_label}}))
         second = _wait_decompositions(store, settings, 2)
 
     assert second.summary["source_revision"] == first.summary["source_revision"]
-    assert second.summary[LABEL_OVERRIDES_KEY] == {str(chosen): "storage"}
-    relabelled = [f.feature for f in store.features(map_id, kinds=list(REGION_KINDS))
-                  if f.feature.properties["category"] == chosen]
-    assert relabelled and all(f.properties["label"] == "storage" for f in relabelled)
+    assert second.summary[LABEL_OVERRIDES_KEY] == {str(chosen): stored_as}
+    after = store.features(map_id, kinds=list(REGION_KINDS))
+    assert len(after) == len(before)  # the override renames places, it keeps the warehouse's regions
+    relabelled = [f.feature for f in after if f.feature.properties["category"] == chosen]
+    assert relabelled and all(f.properties["label"] == stored_as for f in relabelled)
