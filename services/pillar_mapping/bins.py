@@ -74,26 +74,51 @@ def _gap(w: dict[int, float], span: dict[int, tuple[float, float]], i: int, side
     return min(gaps) if gaps else float("inf")
 
 
+def _candidates(
+    w: dict[int, float], span: dict[int, tuple[float, float]], depth_m: tuple[float, float]
+) -> list[tuple[int, int]]:
+    """Neighbouring rows (by offset ``w``) overlapping along and ``depth_m`` (least, most) apart."""
+    return [
+        (a, b)
+        for a, b in itertools.pairwise(sorted(w, key=lambda i: w[i]))
+        if depth_m[0] <= w[b] - w[a] <= depth_m[1] and _overlap(span, a, b) > 0
+    ]
+
+
+def _typical_depth(depths: list[float], tolerance_m: float) -> float:
+    """The depth most others agree with (within ``tolerance_m``); of equals the smallest (a pair over a flue
+    is a rack depth plus the flue)."""
+    values = np.sort(np.asarray(depths))
+    votes = (np.abs(values[:, None] - values[None, :]) <= tolerance_m).sum(axis=1)
+    return float(values[int(np.argmax(votes))])
+
+
 def _racks(
     w: dict[int, float],
     span: dict[int, tuple[float, float]],
     *,
+    typical_depth_m: float,
     min_rack_depth_m: float,
     max_rack_depth_m: float,
+    rack_depth_tolerance_m: float,
     min_aisle_width_m: float,
     default_aisle_width_m: float,
 ) -> list[_Rack]:
     """Pairs of parallel rows of one block ``min..max_rack_depth_m`` apart, each facing its aisle.
 
-    Of a rack's two rows, the one with an open gap of at least ``min_aisle_width_m`` to the
-    next row beyond it faces an aisle (if both or neither do, the one with the narrower such
-    gap, else the first).
+    Candidate pairs (:func:`_candidates`) nearest ``typical_depth_m`` are taken first, each row in
+    one rack, none further than ``rack_depth_tolerance_m`` from it (so while a rack's back row is
+    unmapped, its front row is not paired with the back row of the rack behind, over the flue). Of
+    a rack's two rows, the one with an open gap of at least ``min_aisle_width_m`` to the next row
+    beyond it faces an aisle (if both or neither do, the one with the narrower such gap, else the
+    first).
     """
+    candidates = _candidates(w, span, (min_rack_depth_m, max_rack_depth_m))
+    typical = typical_depth_m
     racks = []
     used: set[int] = set()
-    for a, b in itertools.pairwise(sorted(w, key=lambda i: w[i])):
-        depth = w[b] - w[a]
-        if a in used or b in used or not min_rack_depth_m <= depth <= max_rack_depth_m or _overlap(span, a, b) <= 0:
+    for a, b in sorted(candidates, key=lambda pair: abs(w[pair[1]] - w[pair[0]] - typical)):
+        if a in used or b in used or abs(w[b] - w[a] - typical) > rack_depth_tolerance_m:
             continue
         used |= {a, b}
         gap_a, gap_b = _gap(w, span, a, -1.0), _gap(w, span, b, 1.0)
@@ -122,13 +147,17 @@ def storage_bins(
     *,
     min_rack_depth_m: float = 0.6,
     max_rack_depth_m: float = 1.6,
+    rack_depth_tolerance_m: float = 0.1,
     min_aisle_width_m: float = 2.0,
     default_aisle_width_m: float = 3.0,
     access_standoff_m: float = 1.2,
 ) -> list[StorageBin]:
     """Floor-level pallet cells of every rack: a pair of parallel rows ``min_rack_depth_m``..``max_rack_depth_m`` apart.
 
-    Racks are paired within each block (:class:`~services.pillar_mapping.rows.RackRow`); each pair of
+    Racks are paired within each block (:class:`~services.pillar_mapping.rows.RackRow`), from rows whose
+    distance is within ``rack_depth_tolerance_m`` of the depth most neighbouring rows of the region
+    agree on (racks of one region are one depth: a region of mixed depths gets bins for the
+    common one only); each pair of
     consecutive uprights of the aisle-facing row, with the back row behind, bounds a cell, made
     only where it lies between seen uprights of its row or a landmark supports one of its four
     corner uprights (a cell beyond a row's seen end whose uprights were all restored from the
@@ -147,15 +176,22 @@ def storage_bins(
         w = {i: float(rows[i].uprights.mean(axis=0) @ v) for i in index}
         span = {i: (float((rows[i].uprights @ u).min()), float((rows[i].uprights @ u).max())) for i in index}
         blocks: list[tuple[float, float, float, list[_Rack]]] = []  # (start, bays, spacing, racks) along u
-        for b in {rows[i].block for i in index}:
-            members = [i for i in index if rows[i].block == b]
+        groups = [[i for i in index if rows[i].block == b] for b in sorted({rows[i].block for i in index})]
+        depths = [
+            w[b] - w[a]
+            for members in groups
+            for a, b in _candidates({i: w[i] for i in members}, span, (min_rack_depth_m, max_rack_depth_m))
+        ]
+        for members in groups:
             start, end = min(span[i][0] for i in members), max(span[i][1] for i in members)
             d = float(np.median([rows[i].d_m for i in members]))
             racks = _racks(
                 {i: w[i] for i in members},
                 {i: span[i] for i in members},
+                typical_depth_m=_typical_depth(depths, 0.5 * rack_depth_tolerance_m) if depths else 0.0,
                 min_rack_depth_m=min_rack_depth_m,
                 max_rack_depth_m=max_rack_depth_m,
+                rack_depth_tolerance_m=rack_depth_tolerance_m,
                 min_aisle_width_m=min_aisle_width_m,
                 default_aisle_width_m=default_aisle_width_m,
             )

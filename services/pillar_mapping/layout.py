@@ -15,6 +15,7 @@ from services.pillar_mapping.bins import StorageBin, storage_bins
 from services.pillar_mapping.errors import PillarMappingError
 from services.pillar_mapping.landmark_io import read_landmarks_csv
 from services.pillar_mapping.levels import RackProfile, bins_on_levels
+from services.pillar_mapping.mapper import LandmarkMap
 from services.pillar_mapping.rows import RackRow, fit_rack_rows
 from shared.store import Feature
 
@@ -161,6 +162,31 @@ def fit_layout(
         claimed[row.members] = True
     outliers = table[~claimed, :2] if table.ndim == 2 and len(table) else np.zeros((0, 2))
     return RackLayout(rows, bins_on_levels(storage_bins(rows), profiles), outliers)
+
+
+def fit_landmark_map(
+    landmarks: LandmarkMap,
+    *,
+    max_sigma_m: float = 0.05,
+    profiles: Sequence[RackProfile] = (),
+    **row_options: Any,
+) -> RackLayout:
+    """The layout of a live landmark map (as the worker fits it while the survey goes on).
+
+    Landmarks whose largest standard deviation exceeds ``max_sigma_m`` are left out until more
+    views pin them down: bins must come out within 10 cm, which a landmark twice as uncertain as
+    that cannot give. The rest are fitted with :func:`fit_layout`, whose bins already need a seen
+    upright at a corner or on both sides and racks of the region's common depth, so a partly
+    surveyed hall gets fewer bins, not bins where there are none.
+    """
+    if max_sigma_m <= 0:
+        raise PillarMappingError(f"max_sigma_m must be positive, got {max_sigma_m}")
+    means = np.asarray(landmarks.means, dtype=np.float64).reshape(-1, 2)
+    covs = np.asarray(landmarks.covs, dtype=np.float64).reshape(-1, 2, 2)
+    sigma = np.sqrt(np.maximum(np.linalg.eigvalsh(covs)[:, 1], 0.0)) if len(covs) else np.zeros(0)
+    keep = sigma <= max_sigma_m
+    table = np.column_stack([means[keep], covs[keep].reshape(-1, 4)[:, [0, 1, 3]]])
+    return fit_layout(table, profiles=profiles, **row_options)
 
 
 def fit_racks(

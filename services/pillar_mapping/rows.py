@@ -30,7 +30,14 @@ from services.pillar_mapping.hough import (
     wrap_half,
 )
 from services.pillar_mapping.join import complete_block, join_rows
-from services.pillar_mapping.rowmodel import RowModel, along_line, fit_model, lattice_phase, validated_landmarks
+from services.pillar_mapping.rowmodel import (
+    RowModel,
+    along_line,
+    fit_model,
+    lattice_inliers,
+    lattice_phase,
+    validated_landmarks,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -224,13 +231,21 @@ def _direction(rows: list[RowModel]) -> FloatArray:
 
 
 def _lattice(
-    table: FloatArray, rows: list[RowModel], *, spacing_tolerance: float, angle_tolerance_rad: float
+    table: FloatArray,
+    rows: list[RowModel],
+    free: npt.NDArray[np.bool_],
+    *,
+    spacing_tolerance: float,
+    angle_tolerance_rad: float,
 ) -> tuple[list[RowModel], FloatArray, float]:
     """Rows on their block's dominant orientation and spacing, with their phase and count on that lattice.
 
     The spacing is the mode of the rows' spacings, refined by least squares over the landmarks of
     every row that takes it (each row its own offset, one spacing for all); rows whose spacing or
-    angle is off by more than the tolerances keep their own.
+    angle is off by more than the tolerances keep their own. Landmarks off their row's line or
+    lattice (:func:`~services.pillar_mapping.rowmodel.lattice_inliers`) leave it and are marked
+    ``free``; rows left with fewer than two landmarks are dropped. Returns the rows, the block's
+    direction (2,) and spacing, metres.
     """
     thetas = np.array([np.arctan2(r.direction[1], r.direction[0]) for r in rows])
     u0 = _direction(rows)
@@ -241,22 +256,28 @@ def _lattice(
     d0 = float(np.median(ds[np.abs(ds - mode) <= spacing_tolerance * mode]))
     aligned = [abs(float(wrap_half(t - theta0))) <= angle_tolerance_rad for t in thetas]
     regular = [bool(abs(r.d - d0) <= spacing_tolerance * d0) for r in rows]
-    num = den = 0.0
+    placed = []
     for r, ok_angle, ok_d in zip(rows, aligned, regular, strict=True):
-        if ok_angle and ok_d:
-            s, _ = along_line(table, r.members, r.centre, u0)
+        row = r._replace(direction=u0 if ok_angle else r.direction, d=d0 if ok_d else r.d)
+        inliers = lattice_inliers(table, row)
+        free[row.members[~inliers]] = True
+        if inliers.sum() >= 2:
+            placed.append((row._replace(members=row.members[inliers]), ok_angle and ok_d))
+    num = den = 0.0
+    for row, on in placed:
+        if on:
+            s, _ = along_line(table, row.members, row.centre, u0)
             _, slots = lattice_phase(s, d0)
             k = slots - slots.mean()
             num, den = num + float(k @ (s - s.mean())), den + float(k @ k)
-    d0 = num / den if den > 0 else d0
+    d_fit = num / den if den > 0 else d0
     out = []
-    for r, ok_angle, ok_d in zip(rows, aligned, regular, strict=True):
-        u = u0 if ok_angle else r.direction
-        d = d0 if ok_d else r.d
-        s, _ = along_line(table, r.members, r.centre, u)
+    for row, on in placed:
+        d = d_fit if on or row.d == d0 else row.d
+        s, _ = along_line(table, row.members, row.centre, row.direction)
         first, slots = lattice_phase(s, d)
-        out.append(r._replace(direction=u, d=d, first=first, n=int(slots.max()) + 1))
-    return out, u0, d0
+        out.append(row._replace(d=d, first=first, n=int(slots.max()) + 1))
+    return out, u0, d_fit
 
 
 def _restore_ends(rows: list[RowModel], u0: FloatArray, d0: float, *, max_restored: int) -> list[RowModel]:
@@ -264,7 +285,9 @@ def _restore_ends(rows: list[RowModel], u0: FloatArray, d0: float, *, max_restor
 
     The lines are robust (Theil-Sen) fits of the rows' first (last) upright positions against their
     offsets across; a row short of a line by a whole number of spacings, at most ``max_restored``,
-    is extended to it. Needs three rows on the block's lattice (direction ``u0``, spacing ``d0``).
+    is extended to it, but never beyond the block's seen extent (the first and last seen upright of
+    any of its rows): in a partly surveyed block the lines' slopes come from ends not seen yet.
+    Needs three rows on the block's lattice (direction ``u0``, spacing ``d0``).
     """
     on = [i for i, r in enumerate(rows) if r.d == d0 and np.array_equal(r.direction, u0)]
     if len(on) < 3:
@@ -274,6 +297,7 @@ def _restore_ends(rows: list[RowModel], u0: FloatArray, d0: float, *, max_restor
     w = np.array([rows[i].centre @ v0 for i in on])
     starts = np.array([rows[i].centre @ u0 + rows[i].first for i in on])
     ends = starts + np.array([(rows[i].n - 1) * d0 for i in on])
+    seen = (starts.min() - 0.25 * d0, ends.max() + 0.25 * d0)
     for line, sign in ((starts, -1), (ends, 1)):
         slope, intercept, _, _ = theilslopes(line, w)
         predicted = intercept + slope * w
@@ -281,7 +305,8 @@ def _restore_ends(rows: list[RowModel], u0: FloatArray, d0: float, *, max_restor
             r = out[i]
             missing = sign * (predicted[k] - line[k]) / d0
             m = int(np.rint(missing))
-            if 1 <= m <= max_restored and abs(missing - m) <= 0.25:
+            inside = seen[0] <= line[k] + sign * m * d0 <= seen[1]
+            if 1 <= m <= max_restored and abs(missing - m) <= 0.25 and inside:
                 out[i] = r._replace(first=r.first - m * d0 if sign < 0 else r.first, n=r.n + m)
     return out
 
@@ -298,8 +323,12 @@ def _fit_block(
     """A block's rows on its lattice, completed (:func:`~services.pillar_mapping.join.complete_block`), their
     ends restored, sorted by offset across."""
     options = {"spacing_tolerance": spacing_tolerance, "angle_tolerance_rad": angle_tolerance_rad}
-    first, _, _ = _lattice(table, rows, **options)
-    completed, u0, d0 = _lattice(table, complete_block(table, first, free), **options)
+    first, _, _ = _lattice(table, rows, free, **options)
+    if not first:
+        return []
+    completed, u0, d0 = _lattice(table, complete_block(table, first, free), free, **options)
+    if not completed:
+        return []
     restored = _restore_ends(completed, u0, d0, max_restored=max_restored)
     v = np.array([-u0[1], u0[0]])
     return sorted(restored, key=lambda r: float(r.centre @ v))

@@ -23,7 +23,8 @@ from services.pillar_mapping.bag import image_bgr
 from services.pillar_mapping.camera import FisheyeCamera, camera_from_info
 from services.pillar_mapping.detection import detect_pillars
 from services.pillar_mapping.errors import PillarMappingError
-from services.pillar_mapping.layout import fit_layout, layout_features
+from services.pillar_mapping.layout import fit_landmark_map, layout_features
+from services.pillar_mapping.levels import rack_profile
 from services.pillar_mapping.mapper import BearingOnlyMapper, LandmarkMap
 from services.pillar_mapping.mount import mount_from_transform, sensor_pose, vehicle_bearings
 from shared import messages
@@ -84,6 +85,7 @@ class PillarStage:
         self.tf_static = subscribe("tf_static", messages.TF_MESSAGE, DropPolicy.BLOCK, 100)
         self._subscriptions = (self.images, self.infos, self.tf, self.tf_static)
         self.mapper = BearingOnlyMapper(max_range_m=self.settings.max_range_m)
+        self.profiles = [rack_profile(p.levels_m, p.area) for p in self.settings.rack_profiles]
         self.robots: dict[str, _Robot] = {}
         self.first_stamp_ns: int | None = None
         self.last_stamp_ns: int | None = None
@@ -223,21 +225,21 @@ class PillarStage:
         if self._frames_since_store == 0:
             return
         reliable = self.mapper.reliable_landmarks()
-        table = np.column_stack([reliable.means, reliable.covs.reshape(-1, 4)[:, [0, 1, 3]]])
         try:
-            layout = fit_layout(table, min_bay_pitch_m=self.settings.min_bay_pitch_m,
-                                max_bay_pitch_m=self.settings.max_bay_pitch_m)
+            layout = fit_landmark_map(reliable, max_sigma_m=self.settings.max_landmark_sigma_m,
+                                      profiles=self.profiles, min_bay_pitch_m=self.settings.min_bay_pitch_m,
+                                      max_bay_pitch_m=self.settings.max_bay_pitch_m)
         except (PillarMappingError, ValueError, np.linalg.LinAlgError) as err:
             self.context.count("fit_failures")
-            log.warning("layout of %d landmarks not fitted: %s", len(table), err)
+            log.warning("layout of %d landmarks not fitted: %s", len(reliable.means), err)
             return
         features = layout_features(layout)
         write = RevisionWrite(self.context.name, features=features, input_start_ns=self.first_stamp_ns,
                               input_end_ns=self.last_stamp_ns,
-                              summary={"frames": self._frames_since_store, "landmarks": len(table)})
+                              summary={"frames": self._frames_since_store, "landmarks": len(reliable.means)})
         revision = self.context.commit(write)
         if revision is not None:
             log.info("revision %d: %d pillars, %d rack rows, %d bins from %d landmarks (%d new frames)", revision.id,
-                     len(features["pillar"]), len(features["rack_row"]), len(features["bin"]), len(table),
+                     len(features["pillar"]), len(features["rack_row"]), len(features["bin"]), len(reliable.means),
                      self._frames_since_store)
             self._frames_since_store = 0
