@@ -15,7 +15,7 @@ import logging
 import numpy as np
 import numpy.typing as npt
 
-from services.pillar_mapping.rowmodel import RowModel, along_line, fit_model, lattice_phase
+from services.pillar_mapping.rowmodel import RowModel, along_line, fit_model, lattice_inliers, lattice_phase
 
 logger = logging.getLogger(__name__)
 
@@ -271,6 +271,8 @@ def complete_block(
     *,
     max_offset_m: float = 0.1,
     phase_tolerance_m: float = 0.1,
+    min_landmarks: int = 3,
+    max_rack_depth_m: float = 1.6,
 ) -> list[RowModel]:
     """A block's rows with pieces of one line merged and free landmarks on their lattices pulled in.
 
@@ -278,7 +280,9 @@ def complete_block(
     far more precise than one piece's own: pieces that segmentation or the first join pass could
     not join (few landmarks, a noisy spacing) are joined when they lie on one line at one phase,
     and every free landmark on a row's line, at an empty slot of its lattice and within the
-    block's extent along the rows (never across a cross aisle), is pulled into it.
+    block's extent along the rows (never across a cross aisle), is pulled into it. At least
+    ``min_landmarks`` free landmarks on one line parallel to the rows, within ``max_rack_depth_m``
+    of the block across and on one lattice of its spacing, make a new row.
 
     Parameters
     ----------
@@ -313,7 +317,43 @@ def complete_block(
     starts = np.array([r.centre @ u + r.first * (r.direction @ u) for r in rows])
     ends = starts + np.array([(r.n - 1) * r.d * (r.direction @ u) for r in rows])
     lo, hi = float(np.minimum(starts, ends).min()), float(np.maximum(starts, ends).max())
+    rows = rows + _new_rows(table, rows, free, (lo, hi), max_offset_m, min_landmarks, max_rack_depth_m)
     return [_pull_on_lattice(table, row, free, (lo, hi), max_offset_m, phase_tolerance_m) for row in rows]
+
+
+def _new_rows(
+    table: FloatArray,
+    rows: list[RowModel],
+    free: BoolArray,
+    extent: tuple[float, float],
+    max_offset_m: float,
+    min_landmarks: int,
+    max_rack_depth_m: float,
+) -> list[RowModel]:
+    """Rows of free landmarks on a line parallel to the block's (but on none of its rows' lines), at most a
+    rack depth beyond its rows and within ``extent`` along, on one lattice of the block's spacing (a row
+    segmentation could not see: too few landmarks close enough together to form an aligned set)."""
+    model = max(rows, key=lambda r: r.members.size)
+    u, v = model.direction, _normal(model.direction)
+    offsets = np.array([r.centre @ v for r in rows])
+    index = np.flatnonzero(free)
+    along, across = table[index, :2] @ u, table[index, :2] @ v
+    inside = (along >= extent[0] - 0.25 * model.d) & (along <= extent[1] + 0.25 * model.d)
+    inside &= (across >= offsets.min() - max_rack_depth_m) & (across <= offsets.max() + max_rack_depth_m)
+    inside &= np.min(np.abs(across[:, None] - offsets[None, :]), axis=1) > max_offset_m  # those are pulled
+    index, across = index[inside], across[inside]
+    order = np.argsort(across)
+    out = []
+    for group in np.split(index[order], np.flatnonzero(np.diff(across[order]) > max_offset_m) + 1):
+        if group.size < min_landmarks:
+            continue
+        centre = table[group, :2].mean(axis=0)
+        candidate = _on_lattice(table, group, model._replace(centre=centre, members=group))
+        members = candidate.members[lattice_inliers(table, candidate)]
+        if members.size >= min_landmarks:
+            free[members] = False
+            out.append(_on_lattice(table, members, candidate))
+    return out
 
 
 def _pull_on_lattice(

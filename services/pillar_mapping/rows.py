@@ -18,13 +18,12 @@ import numpy as np
 import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.stats import theilslopes
 
 from services.pillar_mapping.blocks import block_cuts, lattice_breaks, split_rows, step_spacing
 from services.pillar_mapping.errors import PillarMappingError
 from services.pillar_mapping.hough import (
-    dominant_orientations,
     hough_pairs,
+    local_orientations,
     refine_orientation,
     segment_aligned,
     wrap_half,
@@ -129,7 +128,7 @@ def _segment(
     pts = table[:, :2]
     pairs = hough_pairs(pts, min_length_m=0.9 * pitch[0], max_length_m=2.2 * pitch[1])
     candidates: list[RowModel] = []
-    for k, peak in enumerate(dominant_orientations(pairs.alpha)):
+    for k, peak in enumerate(local_orientations(pts, pairs)):
         alpha = refine_orientation(pts, pairs, float(peak))
         u0 = np.array([np.cos(alpha), np.sin(alpha)])
         labels = _merge_collinear(pts, segment_aligned(pts, pairs, float(alpha)), u0)
@@ -280,11 +279,34 @@ def _lattice(
     return out, u0, d_fit
 
 
+def _end_line(w: FloatArray, line: FloatArray, tolerance_m: float) -> FloatArray:
+    """Where the line most rows' ends ``line`` (R,) lie on (within ``tolerance_m``, metres along) puts each
+    row's end, given the rows' offsets across ``w`` (R,).
+
+    Candidates are the lines through every two rows' ends and the lines square to the rows through
+    each one; the one with most ends on it wins (of equals the squarest), refined by least squares
+    over those ends. A few rows short of the line cannot tilt it, as they tilt a regression.
+    """
+    i, j = np.triu_indices(w.size, k=1)
+    apart = np.abs(w[j] - w[i]) > 0.1
+    i, j = i[apart], j[apart]
+    slope = np.concatenate([np.zeros(w.size), (line[j] - line[i]) / (w[j] - w[i])])
+    intercept = np.concatenate([line, line[i] - slope[w.size :] * w[i]])
+    inliers = np.abs(intercept[:, None] + slope[:, None] * w[None, :] - line[None, :]) <= tolerance_m
+    best = int(np.lexsort((np.abs(slope), -inliers.sum(axis=1)))[0])
+    on = inliers[best]
+    if np.ptp(w[on]) > 0.1:
+        fitted_slope, fitted_intercept = np.polyfit(w[on], line[on], 1)
+    else:
+        fitted_slope, fitted_intercept = 0.0, float(line[on].mean())
+    return np.asarray(fitted_intercept + fitted_slope * w)
+
+
 def _restore_ends(rows: list[RowModel], u0: FloatArray, d0: float, *, max_restored: int) -> list[RowModel]:
     """Unseen uprights restored at rows' ends from the block's initialisation (and end) line.
 
-    The lines are robust (Theil-Sen) fits of the rows' first (last) upright positions against their
-    offsets across; a row short of a line by a whole number of spacings, at most ``max_restored``,
+    The lines are robust fits (:func:`_end_line`) of the rows' first (last) upright positions against
+    their offsets across; a row short of a line by a whole number of spacings, at most ``max_restored``,
     is extended to it, but never beyond the block's seen extent (the first and last seen upright of
     any of its rows): in a partly surveyed block the lines' slopes come from ends not seen yet.
     Needs three rows on the block's lattice (direction ``u0``, spacing ``d0``).
@@ -299,8 +321,7 @@ def _restore_ends(rows: list[RowModel], u0: FloatArray, d0: float, *, max_restor
     ends = starts + np.array([(rows[i].n - 1) * d0 for i in on])
     seen = (starts.min() - 0.25 * d0, ends.max() + 0.25 * d0)
     for line, sign in ((starts, -1), (ends, 1)):
-        slope, intercept, _, _ = theilslopes(line, w)
-        predicted = intercept + slope * w
+        predicted = _end_line(w, line, min(0.15, 0.25 * d0))
         for k, i in enumerate(on):
             r = out[i]
             missing = sign * (predicted[k] - line[k]) / d0

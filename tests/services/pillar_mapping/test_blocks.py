@@ -79,3 +79,17 @@ def test_a_region_at_another_angle_and_pitch_is_fitted_row_for_row(seed: int) ->
     found, total = _exact_rows(layout, landmarks)
 
     assert found == total
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_a_small_region_at_another_angle_beside_a_big_one_is_fitted_row_for_row(seed: int) -> None:
+    # the big region's lattice diagonals outnumber the small one's rows in the whole map's orientations
+    layout = merge_layouts(
+        rack_region(aisles=10, bays=24),
+        rack_region(origin_xy_m=(80.0, 5.0), theta_rad=np.deg2rad(30), aisles=1, bays=8, bay_pitch_m=3.6),
+    )
+    landmarks, _ = noisy_landmarks(layout, np.random.default_rng(seed), sigma_m=0.03, missing_fraction=0.1)
+
+    found, total = _exact_rows(layout, landmarks)
+
+    assert found == total
