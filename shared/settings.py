@@ -107,6 +107,11 @@ class PillarSettings(BaseModel):
         default_factory=list, description="Beam levels of the site's racks; bins get a level and an id AA-BBB-LL "
         "where a profile covers them (first whose area holds the bin, else the first without an area)."
     )
+    localisation_sigma_m: float = Field(
+        0.0, ge=0.0, le=1.0, description="Std of the localisation's position error (tf map -> base); with the "
+        "heading's it widens the mapper's gates. 0: poses are taken as exact, as paper A does."
+    )
+    localisation_sigma_rad: float = Field(0.0, ge=0.0, le=0.2, description="Std of the localisation's heading error.")
     max_landmark_sigma_m: float = Field(
         0.05, gt=0.0, description="Uprights mapped less precisely than this (largest std) are not fitted yet."
     )
