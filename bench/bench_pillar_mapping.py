@@ -54,7 +54,7 @@ from services.simulator.world import World
 
 FloatArray = npt.NDArray[np.float64]
 
-POSE_NOISE = {"pose_1cm_0.2deg": (0.01, 0.2), "pose_3cm_0.5deg": (0.03, 0.5)}
+POSE_NOISE = {"pose_1cm_0.2deg": (0.01, 0.2), "pose_2cm_0.3deg": (0.02, 0.3), "pose_3cm_0.5deg": (0.03, 0.5)}
 """Localisation error levels (position std, heading std in degrees), applied as a slowly varying error."""
 POSE_CORRELATION_FRAMES = 10.0
 """Frames over which the localisation error decorrelates (5 s at the 2 Hz fisheye rate)."""

@@ -1,12 +1,16 @@
 """Rack-row models fitted to a landmark map (paper A, sections 2 and 3.1).
 
 Each row is the model ``M(n, d, x, y, theta)``: ``n`` uprights ``d`` apart from ``(x, y)``
-along ``theta``. Rows are segmented by the closed-form Hough transform with DBSCAN, their
-spacing found by Fourier analysis, pieces of one row joined and leftover landmarks on a row's
-lattice pulled in (:mod:`services.pillar_mapping.join`), then global constraints are applied per region (rows of
-one orientation close together): the modal spacing, the dominant orientation and the
-initialisation (and end) lines through the rows' first (and last) uprights, which restore
-end uprights that were never seen. A last optimisation places each model on its landmarks.
+along ``theta``. Rows are segmented by the closed-form Hough transform with DBSCAN around the
+dominant orientations of every neighbourhood, their spacing found by Fourier analysis, pieces
+of one row joined and leftover landmarks on a row's lattice pulled in
+(:mod:`services.pillar_mapping.join`). Regions (rows of one orientation close together) are cut
+into blocks where a cross aisle runs through them (:mod:`services.pillar_mapping.blocks`), and
+the global constraints are applied per block: the dominant orientation, the modal spacing
+(refined by least squares over all its rows), landmarks off their row's lattice dropped, pieces
+on one line joined and free landmarks on the lattice pulled in or made into rows, and the
+initialisation (and end) lines through the rows' first (and last) uprights, which restore end
+uprights that were never seen. A last optimisation places each model on its landmarks.
 """
 
 from __future__ import annotations
@@ -414,7 +418,7 @@ def fit_rack_rows(
     Returns
     -------
     list of RackRow
-        Sorted by region, then offset across the rows. Empty when there are no rows.
+        Sorted by region, block, then offset across the rows. Empty when there are no rows.
 
     Raises
     ------
