@@ -1,19 +1,38 @@
-"""Pillar-mapping bench: detection on rendered fisheye frames, bearing-only mapping, rack-row fitting.
+"""Pillar-mapping bench: detection on rendered fisheye frames, bearing-only mapping (with and without
+localisation noise), rack-row and bin fitting on simulated halls, and fits of a partly surveyed hall.
 
-Prints ``name value unit`` lines. Run: ``.venv/bin/python bench/bench_pillar_mapping.py [--quick]``.
+Prints ``name value unit`` lines. Run:
+``PYTHONPATH=. .venv/bin/python bench/bench_pillar_mapping.py [--quick] [--rows-only] [--seeds N] [--sim-survey]``.
+``--sim-survey`` also records the simulator's demo survey (photo-textured fisheye, about 3 minutes) and maps it.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
+import math
+import tempfile
 import time
-from collections.abc import Callable
+import tracemalloc
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
-from services.pillar_mapping import BearingOnlyMapper, default_mount, detect_pillars, fit_layout, vehicle_bearings
+from services.pillar_mapping import (
+    BearingOnlyMapper,
+    RackRow,
+    default_mount,
+    detect_pillars,
+    fit_landmark_map,
+    fit_layout,
+    hough_pairs,
+    vehicle_bearings,
+)
 from services.pillar_mapping.evaluation import (
     DetectionScore,
     aisle_poses,
@@ -26,15 +45,39 @@ from services.pillar_mapping.synthetic import (
     HallLayout,
     default_camera,
     merge_layouts,
-    noisy_landmarks,
     rack_region,
     rack_scene,
     render_fisheye,
 )
+from services.simulator import hall_layout, load_world, world_from_layout
+from services.simulator.world import World
+
+FloatArray = npt.NDArray[np.float64]
+
+POSE_NOISE = {"pose_1cm_0.2deg": (0.01, 0.2), "pose_2cm_0.3deg": (0.02, 0.3), "pose_3cm_0.5deg": (0.03, 0.5)}
+"""Localisation error levels (position std, heading std in degrees), applied as a slowly varying error."""
+POSE_CORRELATION_FRAMES = 10.0
+"""Frames over which the localisation error decorrelates (5 s at the 2 Hz fisheye rate)."""
 
 
 def report(name: str, value: float, unit: str) -> None:
     print(f"{name} {value:.6g} {unit}", flush=True)
+
+
+def pose_errors(count: int, rng: np.random.Generator, sigma_m: float, sigma_deg: float) -> FloatArray:
+    """(count, 3) localisation errors: a first-order Gauss-Markov process with the given stds."""
+    a = math.exp(-1.0 / POSE_CORRELATION_FRAMES)
+    scale = np.array([sigma_m, sigma_m, math.radians(sigma_deg)])
+    out = np.zeros((count, 3))
+    x = rng.normal(0.0, 1.0, 3) * scale
+    for k in range(count):
+        x = a * x + math.sqrt(1 - a * a) * rng.normal(0.0, 1.0, 3) * scale
+        out[k] = x
+    return out
+
+
+def pose_cov(sigma_m: float, sigma_deg: float) -> FloatArray | None:
+    return np.diag([sigma_m**2, sigma_m**2, math.radians(sigma_deg) ** 2]) if sigma_m > 0 else None
 
 
 def bench_detection(frames: int, size_px: int) -> float:
@@ -46,9 +89,9 @@ def bench_detection(frames: int, size_px: int) -> float:
     spent = 0.0
     for pose in aisle_poses(layout, rng, frames):
         image, ids = render_fisheye(camera, scene, pose, rng)
-        start = time.perf_counter()
+        start = time.process_time()
         found = detect_pillars(image, camera)
-        spent += time.perf_counter() - start
+        spent += time.process_time() - start
         s = score_frame(found, ids, layout.uprights, pose, radius_m=scene.upright_radius_m)
         total = DetectionScore(
             total.true_positives + s.true_positives,
@@ -62,96 +105,248 @@ def bench_detection(frames: int, size_px: int) -> float:
     report(f"{tag}_precision", 100 * total.precision, "%")
     report(f"{tag}_median_bearing_error", float(np.rad2deg(np.median(total.errors_rad))), "deg")
     report(f"{tag}_p95_bearing_error", float(np.rad2deg(np.percentile(total.errors_rad, 95))), "deg")
-    report(f"{tag}_time_per_frame", 1000 * spent / frames, "ms")
+    report(f"{tag}_cpu_per_frame", 1000 * spent / frames, "ms")
     return float(np.percentile(total.errors_rad, 95))
 
 
-def bench_mapping_rendered(size_px: int, step_m: float) -> None:
+def _map(frames: list[tuple[tuple[float, float, float], FloatArray, FloatArray]], truth: FloatArray, tag: str,
+         *, seeds: int) -> None:
+    """Map the (true pose, bearings, sigmas) frames with exact poses, then with each localisation noise level."""
+    cases = {"known_pose": (0.0, 0.0), **POSE_NOISE}
+    for case, (sigma_m, sigma_deg) in cases.items():
+        rmses, matched, extra = [], [], []
+        for seed in range(seeds if sigma_m > 0 else 1):
+            errors = pose_errors(len(frames), np.random.default_rng(100 + seed), sigma_m, sigma_deg)
+            mapper = BearingOnlyMapper()
+            cov = pose_cov(sigma_m, sigma_deg)
+            for (pose, bearings, sigmas), error in zip(frames, errors, strict=True):
+                mapper.observe(tuple(np.asarray(pose) + error), bearings, sigmas, pose_cov=cov)
+            r, m, e = map_rmse(mapper.reliable_landmarks().means, truth)
+            rmses.append(r)
+            matched.append(m)
+            extra.append(e)
+        report(f"{tag}_{case}_rmse", 100 * float(np.mean(rmses)), "cm")
+        report(f"{tag}_{case}_rmse_max", 100 * float(np.max(rmses)), "cm")
+        report(f"{tag}_{case}_uprights_matched", float(np.mean(matched)), "count")
+        report(f"{tag}_{case}_landmarks_spurious", float(np.mean(extra)), "count")
+
+
+def bench_mapping_simulated(sigma_rad: float, seeds: int) -> None:
+    rng = np.random.default_rng(21)
+    layout = rack_region(aisles=4, bays=20)
+    frames = []
+    for pose in drive_aisles(layout, 0.25):
+        b = simulated_bearings(layout.uprights, pose, rng, sigma_rad=sigma_rad)
+        frames.append((pose, b, np.full(b.size, sigma_rad)))
+    report("map_sim_bearing_sigma", float(np.rad2deg(sigma_rad)), "deg")
+    report("map_sim_uprights_true", len(layout.uprights), "count")
+    report("map_sim_frames", len(frames), "count")
+    start = time.process_time()
+    mapper = BearingOnlyMapper()
+    for pose, b, s in frames:
+        mapper.observe(pose, b, s)
+    report("map_sim_cpu_per_frame", 1000 * (time.process_time() - start) / len(frames), "ms")
+    _map(frames, layout.uprights, "map_sim", seeds=seeds)
+
+
+def bench_mapping_rendered(size_px: int, step_m: float, seeds: int) -> None:
     rng = np.random.default_rng(20)
     layout = rack_region(aisles=2, bays=8)
     scene = rack_scene(layout, rng)
     camera = default_camera(size_px=size_px)
-    mapper = BearingOnlyMapper()
     mount = default_mount()
+    frames = []
     spent = 0.0
-    poses = drive_aisles(layout, step_m)
-    for pose in poses:
+    for pose in drive_aisles(layout, step_m):
         image, _ = render_fisheye(camera, scene, pose, rng)
         start = time.process_time()
         found = detect_pillars(image, camera)
-        mapper.observe(pose, vehicle_bearings(mount, found.bearings_rad), found.sigmas_rad)
         spent += time.process_time() - start
-    rmse, matched, extra = map_rmse(mapper.reliable_landmarks().means, layout.uprights)
-    report("map_rendered_frames", len(poses), "count")
+        frames.append((pose, vehicle_bearings(mount, found.bearings_rad), found.sigmas_rad))
+    report("map_rendered_frames", len(frames), "count")
     report("map_rendered_uprights_true", len(layout.uprights), "count")
-    report("map_rendered_uprights_matched", matched, "count")
-    report("map_rendered_landmarks_spurious", extra, "count")
-    report("map_rendered_rmse", 100 * rmse, "cm")
-    report("map_rendered_cpu_per_frame", 1000 * spent / len(poses), "ms")
+    report("map_rendered_detect_cpu_per_frame", 1000 * spent / len(frames), "ms")
+    _map(frames, layout.uprights, "map_rendered", seeds=seeds)
 
 
-def bench_mapping_simulated(sigma_rad: float) -> None:
-    rng = np.random.default_rng(21)
-    layout = rack_region(aisles=4, bays=20)
-    mapper = BearingOnlyMapper()
-    poses = drive_aisles(layout, 0.25)
-    start = time.perf_counter()
-    for pose in poses:
-        b = simulated_bearings(layout.uprights, pose, rng, sigma_rad=sigma_rad)
-        mapper.observe(pose, b, np.full(b.size, sigma_rad))
-    spent = time.perf_counter() - start
-    rmse, matched, extra = map_rmse(mapper.reliable_landmarks().means, layout.uprights)
-    report("map_sim_bearing_sigma", float(np.rad2deg(sigma_rad)), "deg")
-    report("map_sim_uprights_true", len(layout.uprights), "count")
-    report("map_sim_uprights_matched", matched, "count")
-    report("map_sim_landmarks_spurious", extra, "count")
-    report("map_sim_rmse", 100 * rmse, "cm")
-    report("map_sim_time_per_frame", 1000 * spent / len(poses), "ms")
+class Truth(NamedTuple):
+    """A hall's upright lines (each (n, 2), in order along), floor bin centres (B, 2) and their ids (or None)."""
+
+    lines: list[FloatArray]
+    spacings: list[float]
+    bins: FloatArray
+    bin_ids: list[str] | None
 
 
-def bench_rows(name: str, layout_fn: Callable[[], HallLayout], seeds: int) -> None:
-    rows_ok = bins_found = bins_truth = invented = 0
-    rows_truth = 0
-    times = []
-    cpu = []
+def truth_of_layout(layout: HallLayout) -> Truth:
+    lines = [layout.uprights[layout.row_of == r] for r in range(len(layout.row_n))]
+    return Truth(lines, [float(d) for d in layout.row_d], layout.bin_centres, None)
+
+
+def truth_of_world(world: World) -> Truth:
+    """Upright lines of a simulated world: each row's front or back uprights between two cross aisles."""
+    lines, spacings = [], []
+    for r, row in enumerate(world.rows):
+        for tag in ("F", "B"):
+            index = [k for k, i in enumerate(world.uprights.ids) if world.uprights.row[k] == r and i.endswith(tag)]
+            xy = world.uprights.xy[index]
+            u = row.polygon[1] - row.polygon[0]
+            xy = xy[np.argsort(xy @ u)]
+            steps = np.hypot(*np.diff(xy, axis=0).T)
+            pitch = float(np.median(steps))
+            for piece in np.split(xy, np.flatnonzero(steps > 1.1 * pitch) + 1):
+                lines.append(piece)
+                spacings.append(pitch)
+    floor = [b for b in world.bins if b.level == 1]
+    return Truth(lines, spacings, np.array([b.polygon.mean(axis=0) for b in floor]), [b.id[:-3] for b in floor])
+
+
+def _rows_exact(rows: list[RackRow], truth: Truth) -> tuple[int, float]:
+    """(true lines fitted upright for upright within 10 cm, largest spacing error of those, metres)."""
+    starts = cKDTree(np.vstack([np.vstack([r.uprights[0], r.uprights[-1]]) for r in rows]))
+    found, worst = 0, 0.0
+    for line, d in zip(truth.lines, truth.spacings, strict=True):
+        for k in starts.query_ball_point(line[0], 0.3):
+            row = rows[k // 2]
+            ordered = row.uprights if k % 2 == 0 else row.uprights[::-1]
+            if row.n == len(line) and np.all(np.hypot(*(ordered - line).T) <= 0.1):
+                found += 1
+                worst = max(worst, abs(row.d_m - d))
+                break
+    return found, worst
+
+
+def bench_rows(name: str, truth: Truth, uprights: FloatArray, seeds: int) -> None:
+    rows_ok, worst_d, found, invented, errors, same_id, cpu, wall = 0, 0.0, 0, 0, [], 0, [], []
     for seed in range(seeds):
-        layout = layout_fn()
-        landmarks, _ = noisy_landmarks(layout, np.random.default_rng(seed), sigma_m=0.03, missing_fraction=0.1)
+        rng = np.random.default_rng(seed)
+        kept = rng.random(len(uprights)) >= 0.1
+        xy = uprights[kept] + rng.normal(0.0, 0.03, (int(kept.sum()), 2))
+        landmarks = np.column_stack([xy, np.tile([0.03**2, 0.0, 0.03**2], (len(xy), 1))])
         with threadpool_limits(1):
             start, start_cpu = time.perf_counter(), time.process_time()
             result = fit_layout(landmarks)
-            times.append(time.perf_counter() - start)
+            wall.append(time.perf_counter() - start)
             cpu.append(time.process_time() - start_cpu)
-        for r in range(len(layout.row_n)):
-            pts = layout.uprights[layout.row_of == r]
-            match = [
-                row
-                for row in result.rows
-                if min(np.hypot(*(row.uprights[0] - pts[0])), np.hypot(*(row.uprights[0] - pts[-1]))) < 0.15
-                and row.n == layout.row_n[r]
-                and abs(row.d_m - layout.row_d[r]) < 0.01
-            ]
-            rows_ok += bool(match)
-        rows_truth += len(layout.row_n)
+        ok, worst = _rows_exact(result.rows, truth)
+        rows_ok += ok
+        worst_d = max(worst_d, worst)
         centres = np.array([b.centre for b in result.bins]).reshape(-1, 2)
-        if len(centres):
-            d_found, _ = cKDTree(centres).query(layout.bin_centres)
-            d_truth, _ = cKDTree(layout.bin_centres).query(centres)
-            bins_found += int((d_found <= 0.1).sum())
-            invented += int((d_truth > 0.1).sum())
-        bins_truth += len(layout.bin_centres)
-    layout = layout_fn()
-    ext = layout.uprights.max(axis=0) - layout.uprights.min(axis=0)
-    report(f"{name}_uprights", len(layout.uprights), "count")
+        to_found, nearest = cKDTree(centres).query(truth.bins)
+        to_truth, _ = cKDTree(truth.bins).query(centres)
+        found += int((to_found <= 0.1).sum())
+        invented += int((to_truth > 0.1).sum())
+        errors += to_found[to_found <= 0.1].tolist()
+        if truth.bin_ids is not None:
+            same_id += sum(
+                result.bins[j].id == truth.bin_ids[i] for i, j in enumerate(nearest) if to_found[i] <= 0.1
+            )
+    tracemalloc.start()
+    fit_layout(landmarks)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    ext = uprights.max(axis=0) - uprights.min(axis=0)
+    pairs = hough_pairs(uprights, min_length_m=0.9 * 1.5, max_length_m=2.2 * 4.5)
+    report(f"{name}_uprights", len(uprights), "count")
     report(f"{name}_extent_x", float(ext[0]), "m")
     report(f"{name}_extent_y", float(ext[1]), "m")
-    report(f"{name}_rows_exact", 100 * rows_ok / rows_truth, "%")
-    report(f"{name}_bins_found", 100 * bins_found / bins_truth, "%")
+    report(f"{name}_rows", len(truth.lines), "count")
+    report(f"{name}_seeds", seeds, "count")
+    report(f"{name}_hough_pairs", len(pairs.i), "count")
+    report(f"{name}_rows_exact", 100 * rows_ok / (seeds * len(truth.lines)), "%")
+    report(f"{name}_rows_wrong", seeds * len(truth.lines) - rows_ok, "count")
+    report(f"{name}_spacing_error_max", 1000 * worst_d, "mm")
+    report(f"{name}_bins_found", 100 * found / (seeds * len(truth.bins)), "%")
     report(f"{name}_bins_invented", invented, "count")
-    report(f"{name}_fit_time_median", float(np.median(times)), "s")
-    report(f"{name}_fit_time_max", float(np.max(times)), "s")
+    report(f"{name}_bin_centre_error_median", 100 * float(np.median(errors)), "cm")
+    report(f"{name}_bin_centre_error_max", 100 * float(np.max(errors)), "cm")
+    if truth.bin_ids is not None:
+        report(f"{name}_bin_ids_as_simulator", 100 * same_id / max(found, 1), "%")
     report(f"{name}_fit_cpu_median", float(np.median(cpu)), "s")
     report(f"{name}_fit_cpu_max", float(np.max(cpu)), "s")
+    report(f"{name}_fit_wall_median", float(np.median(wall)), "s")
+    report(f"{name}_fit_peak_memory", peak / 2**20, "MiB")
+
+
+def two_region_hall() -> World:
+    """The 250 m x 72 m hall with a second region at 30 degrees and a 3.6 m bay pitch beside the first."""
+    layout = copy.deepcopy(hall_layout())
+    layout["name"] = "hall-two-regions"
+    layout["blocks"] = [
+        {"id": "A", "origin_m": [8.0, 8.0], "aisles": 11, "bays": 50, "aisle_width_m": 3.0, "bay_pitch_m": 2.7,
+         "rack_depth_m": 1.1, "levels": 5, "level_pitch_m": 1.6, "fill": 0.75, "cross_aisle_every": 25,
+         "cross_aisle_width_m": 3.0, "end_corridor_m": 4.0},
+        {"id": "B", "origin_m": [180.0, 12.0], "yaw_rad": math.radians(30), "aisles": 4, "bays": 14,
+         "aisle_width_m": 3.0, "bay_pitch_m": 3.6, "rack_depth_m": 1.1, "levels": 4, "level_pitch_m": 1.8,
+         "fill": 0.6, "end_corridor_m": 0.0},
+    ]
+    return world_from_layout(layout)
+
+
+def bench_live(seeds: int) -> None:
+    """Fits every 10 frames while a hall with a cross aisle is surveyed: bins made outside the racks."""
+    published = invented = 0
+    final = []
+    hall = rack_region(aisles=3, bays=10, cross_aisle_every=5, cross_aisle_width_m=3.0)
+    sigma = math.radians(0.1)
+    for seed in range(seeds):
+        rng = np.random.default_rng(seed)
+        mapper = BearingOnlyMapper()
+        poses = drive_aisles(hall, 0.5)
+        for k, pose in enumerate(poses, start=1):
+            b = simulated_bearings(hall.uprights, pose, rng, sigma_rad=sigma, clutter_rate=0.2, miss_rate=0.2)
+            mapper.observe(pose, b, np.full(b.size, sigma))
+            if k % 10 and k != len(poses):
+                continue
+            centres = np.array([x.centre for x in fit_landmark_map(mapper.reliable_landmarks()).bins]).reshape(-1, 2)
+            published += len(centres)
+            if len(centres):
+                invented += int((cKDTree(hall.bin_centres).query(centres)[0] > 0.1).sum())
+            if k == len(poses):
+                final.append(float(np.mean(cKDTree(centres).query(hall.bin_centres)[0] <= 0.1)))
+    report("live_fits_bins_published", published, "count")
+    report("live_fits_bins_invented", invented, "count")
+    report("live_final_bins_found", 100 * float(np.mean(final)), "%")
+
+
+def _survey_frames(bag: Path) -> Iterator[tuple[tuple[float, float, float], FloatArray, FloatArray]]:
+    from rosbags.highlevel import AnyReader
+
+    from services.pillar_mapping import camera_from_info, image_bgr
+    from services.pillar_mapping.bag import _mount, _pose_at, _read_poses, _stamp_ns
+    from services.pillar_mapping.mount import sensor_pose
+    from shared.messages import CAMERA_INFO, POSE_STAMPED, TYPESTORE
+
+    with AnyReader([bag], default_typestore=TYPESTORE) as reader:
+        conns = reader.connections
+        images = [c for c in conns if c.topic.endswith("/fisheye/image_raw")]
+        info: Any = next(reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(
+            connections=[c for c in conns if c.msgtype == CAMERA_INFO]))
+        camera = camera_from_info(info)
+        mount = _mount(reader, [c for c in conns if c.topic.endswith("tf_static")], str(info.header.frame_id),
+                       images[0].topic.split("/")[1] + "/base_link")
+        stamps, table = _read_poses(reader, [c for c in conns if c.msgtype == POSE_STAMPED])
+        for connection, _, raw in reader.messages(connections=images):
+            message = reader.deserialize(raw, connection.msgtype)
+            pose = _pose_at(stamps, table, _stamp_ns(message))
+            if pose is not None:
+                seen = detect_pillars(image_bgr(message), camera)
+                x, y, yaw = sensor_pose(mount, pose)
+                yield (float(x), float(y), float(yaw)), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad
+
+
+def bench_sim_survey(seeds: int) -> None:
+    """The simulator's demo survey: photo-textured 185 deg fisheye frames at 2 Hz, one pass along each aisle."""
+    from services.simulator import sim_run
+
+    world = load_world("demo")
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = Path(tmp) / "bag"
+        sim_run(world, bag, robots=1, cameras=["fisheye"], fisheye_rate_hz=2.0)
+        frames = list(_survey_frames(bag))
+    report("survey_frames", len(frames), "count")
+    report("survey_uprights_true", len(world.uprights.xy), "count")
+    _map(frames, world.uprights.xy, "survey", seeds=seeds)
 
 
 def main() -> None:
@@ -159,22 +354,33 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer frames and seeds")
     parser.add_argument("--rows-only", action="store_true", help="only the row and bin fitting")
     parser.add_argument("--seeds", type=int, default=None, help="landmark draws per hall (default 5, quick 2)")
+    parser.add_argument("--sim-survey", action="store_true", help="also map the simulator's demo fisheye survey")
     args = parser.parse_args()
     frames = 8 if args.quick else 30
     seeds = args.seeds or (2 if args.quick else 5)
     if not args.rows_only:
         p95 = bench_detection(frames, 640)
         bench_detection(frames, 480)
-        bench_mapping_simulated(max(p95, float(np.deg2rad(0.1))))
-        bench_mapping_rendered(480, 0.5 if args.quick else 0.25)
-    bench_rows("hall_one_region", lambda: rack_region(aisles=19, bays=26), seeds)
-    bench_rows(
-        "hall_two_regions",
-        lambda: merge_layouts(
-            rack_region(aisles=19, bays=26),
-            rack_region(origin_xy_m=(150.0, 0.0), theta_rad=np.deg2rad(30), aisles=5, bays=12, bay_pitch_m=3.6),
-        ),
-        seeds,
+        bench_mapping_simulated(max(p95, math.radians(0.1)), seeds)
+        bench_mapping_rendered(480, 0.5 if args.quick else 0.25, seeds)
+        bench_live(2 if args.quick else 4)
+        if args.sim_survey:
+            bench_sim_survey(seeds)
+    halls: dict[str, Callable[[], tuple[Truth, FloatArray]]] = {
+        "hall_250x72": lambda: (truth_of_world(w := load_world("hall")), w.uprights.xy),
+        "hall_two_regions": lambda: (truth_of_world(w := two_region_hall()), w.uprights.xy),
+        "synthetic_two_regions": lambda: (truth_of_layout(lay := _synthetic_two_regions()), lay.uprights),
+    }
+    for name, build in halls.items():
+        truth, uprights = build()
+        bench_rows(name, truth, uprights, seeds)
+
+
+def _synthetic_two_regions() -> HallLayout:
+    """The earlier bench hall: 19 aisles of 26 bays and a 30 degree region of 3.6 m bays (187 m x 108 m)."""
+    return merge_layouts(
+        rack_region(aisles=19, bays=26),
+        rack_region(origin_xy_m=(150.0, 0.0), theta_rad=np.deg2rad(30), aisles=5, bays=12, bay_pitch_m=3.6),
     )
 
 

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
-from shared.settings import STAGES, Settings, get_settings
+from shared.settings import STAGES, RackProfileSettings, Settings, get_settings
 
 if TYPE_CHECKING:
     from shared.bus import Bus
@@ -92,6 +92,8 @@ def _parser() -> argparse.ArgumentParser:
     fit = racks.add_parser("fit", help="fit rack rows and bins to upright landmarks (CSV x,y,sxx,sxy,syy)")
     fit.add_argument("pillars", type=Path)
     fit.add_argument("--out", type=Path, required=True)
+    fit.add_argument("--levels", default="", help="the racks' level heights in metres, e.g. 0,1.5,3 (bins per "
+                     "level, ids AA-BBB-LL); default: the settings' rack profiles")
 
     export = commands.add_parser("export", help="write the stored map in a standard format, offline")
     export.add_argument("format", help="export format: geojson, map_server, lif or rmf (as the API's /exports)")
@@ -186,6 +188,7 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             stages = list(settings.stages)
             if args.demo:
                 extra.append(_demo_job(args.demo_cameras, rate=args.demo_rate))
+                settings = _demo_settings(settings)
                 if "rgbd" in args.demo_cameras.split(","):
                     stages += [] if "object_labelling" in stages else ["object_labelling"]
                     _demo_labelling_model(settings)
@@ -231,7 +234,7 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             decompose_map_file(args.map, args.out, resolution_m=args.resolution, label_overrides=overrides)
             log.info("wrote the decomposition of %s to %s", args.map, args.out)
         case "pillars" | "racks":
-            _pillars(args)
+            _pillars(args, settings)
         case "train-classifier" | "eval-classifier":
             _classifier(args, settings)
         case "keys":
@@ -305,13 +308,15 @@ def _classifier(args: argparse.Namespace, settings: Settings) -> None:
             print(f"## {title}\n\n{evaluation.markdown()}\n")
 
 
-def _pillars(args: argparse.Namespace) -> None:
+def _pillars(args: argparse.Namespace, settings: Settings) -> None:
     import math
 
     from services import pillar_mapping
 
     if args.command == "racks":
-        layout = pillar_mapping.fit_racks(args.pillars, args.out)
+        profiles = ([pillar_mapping.rack_profile([float(z) for z in args.levels.split(",")])] if args.levels else
+                    [pillar_mapping.rack_profile(p.levels_m, p.area) for p in settings.pillars.rack_profiles])
+        layout = pillar_mapping.fit_racks(args.pillars, args.out, profiles=profiles)
         log.info("%d rack rows, %d bins -> %s", len(layout.rows), len(layout.bins), args.out / "racks.geojson")
     elif args.pillars_command == "detect":
         found = pillar_mapping.detect_pillars_file(args.image, args.camera_info)
@@ -358,6 +363,18 @@ def _demo_labelling_model(settings: Settings) -> None:
     from services.object_labelling.worker import model_path_of
 
     ensure_demo_model(model_path_of(settings))
+
+
+def _demo_settings(settings: Settings) -> Settings:
+    """The demo warehouse's rack levels as the site's rack profile, unless the settings give one."""
+    from services.simulator import demo_layout
+
+    if settings.pillars.rack_profiles:
+        return settings
+    block = demo_layout()["blocks"][0]
+    levels = [k * float(block["level_pitch_m"]) for k in range(int(block["levels"]))]
+    pillars = settings.pillars.model_copy(update={"rack_profiles": [RackProfileSettings(levels_m=levels)]})
+    return settings.model_copy(update={"pillars": pillars})
 
 
 def _demo_job(cameras: str, *, rate: float) -> Callable[[Bus, threading.Event], None]:

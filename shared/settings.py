@@ -6,6 +6,7 @@ The TOML file is named by ``AISLE_CONFIG_FILE``; environment variables win over 
 
 from __future__ import annotations
 
+import itertools
 import os
 from functools import lru_cache
 from pathlib import Path
@@ -71,6 +72,23 @@ class OccupancySettings(BaseModel):
     )
 
 
+class RackProfileSettings(BaseModel):
+    """A site's rack profile: the height of each storage level's floor, for the racks in ``area`` (map metres)
+    or, without an area, everywhere no other profile's area covers."""
+
+    levels_m: list[float] = Field(min_length=1, description="Level floor heights from 0.0 (the floor) up, metres.")
+    area: list[tuple[float, float]] | None = Field(None, description="Polygon [[x, y], ...] in map metres.")
+
+    @model_validator(mode="after")
+    def _valid(self) -> RackProfileSettings:
+        levels = self.levels_m
+        if levels[0] < 0 or any(b <= a for a, b in itertools.pairwise(levels)):
+            raise ValueError(f"rack levels must be >= 0 and increasing, got {levels}")
+        if self.area is not None and len(self.area) < 3:
+            raise ValueError(f"a rack profile's area needs at least 3 points, got {self.area}")
+        return self
+
+
 class PillarSettings(BaseModel):
     """The pillar-mapping stage: uprights from the downward fisheye, rack rows and bins."""
 
@@ -85,6 +103,18 @@ class PillarSettings(BaseModel):
     max_range_m: float = Field(8.0, gt=0.0, description="Uprights farther than this are not expected in view.")
     min_bay_pitch_m: float = Field(1.5, gt=0.0)
     max_bay_pitch_m: float = Field(4.5, gt=0.0)
+    rack_profiles: list[RackProfileSettings] = Field(
+        default_factory=list, description="Beam levels of the site's racks; bins get a level and an id AA-BBB-LL "
+        "where a profile covers them (first whose area holds the bin, else the first without an area)."
+    )
+    localisation_sigma_m: float = Field(
+        0.0, ge=0.0, le=1.0, description="Std of the localisation's position error (tf map -> base); with the "
+        "heading's it widens the mapper's gates. 0: poses are taken as exact, as paper A does."
+    )
+    localisation_sigma_rad: float = Field(0.0, ge=0.0, le=0.2, description="Std of the localisation's heading error.")
+    max_landmark_sigma_m: float = Field(
+        0.05, gt=0.0, description="Uprights mapped less precisely than this (largest std) are not fitted yet."
+    )
 
     @model_validator(mode="after")
     def _pitch_range(self) -> PillarSettings:

@@ -21,7 +21,15 @@ from services.pillar_mapping.errors import PillarMappingError
 from services.pillar_mapping.frequency import Periodicity, dominant_spacing, projection_spectrum
 from services.pillar_mapping.hough import HoughPairs, dominant_orientations, hough_pairs, segment_aligned
 from services.pillar_mapping.landmark_io import read_landmarks_csv, write_landmarks_csv
-from services.pillar_mapping.layout import RackLayout, fit_layout, fit_racks, layout_features, layout_geojson
+from services.pillar_mapping.layout import (
+    RackLayout,
+    fit_landmark_map,
+    fit_layout,
+    fit_racks,
+    layout_features,
+    layout_geojson,
+)
+from services.pillar_mapping.levels import RackProfile, bins_on_levels, profile_at, rack_profile
 from services.pillar_mapping.mapper import BearingOnlyMapper, FrameReport, LandmarkMap
 from services.pillar_mapping.mount import CameraMount, default_mount, mount_from_transform, vehicle_bearings
 from services.pillar_mapping.paint import PaintModel, paint_likelihood
@@ -42,16 +50,19 @@ __all__ = [
     "PillarMapResult",
     "PillarMappingError",
     "RackLayout",
+    "RackProfile",
     "RackRow",
     "StorageBin",
     "Triangulation",
     "bearing_signal",
+    "bins_on_levels",
     "camera_from_info",
     "default_mount",
     "detect_pillars",
     "detect_pillars_file",
     "dominant_orientations",
     "dominant_spacing",
+    "fit_landmark_map",
     "fit_layout",
     "fit_rack_rows",
     "fit_racks",
@@ -64,8 +75,10 @@ __all__ = [
     "paint_likelihood",
     "pixel_angles",
     "pixel_rays",
+    "profile_at",
     "project_angles",
     "projection_spectrum",
+    "rack_profile",
     "read_camera_info_yaml",
     "read_landmarks_csv",
     "segment_aligned",

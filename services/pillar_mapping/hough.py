@@ -78,6 +78,46 @@ def dominant_orientations(
     return np.asarray(-0.5 * np.pi + (peaks + 0.5) * np.pi / bins, dtype=np.float64)
 
 
+def local_orientations(
+    points: FloatArray,
+    pairs: HoughPairs,
+    *,
+    tile_m: float = 40.0,
+    per_tile: int = 4,
+    min_pairs: int = 50,
+    min_separation_rad: float = float(np.deg2rad(1.5)),
+) -> FloatArray:
+    """Dominant orientations of every neighbourhood (``tile_m`` square tiles of the pairs' midpoints), merged.
+
+    One histogram over a whole hall is ruled by its biggest region, whose lattice diagonals can
+    outnumber a small region's rows at another angle; each tile's own ``per_tile`` strongest
+    peaks (tiles with at least ``min_pairs`` pairs), and the whole map's, are kept instead, and
+    merged where closer than ``min_separation_rad``, the one with more pairs in the whole map first.
+
+    Returns
+    -------
+    ndarray of float64, shape (K,)
+        Radians in [-pi/2, pi/2), the most supported in the whole map first.
+    """
+    if pairs.alpha.size == 0:
+        return np.zeros(0)
+    mid = 0.5 * (points[pairs.i] + points[pairs.j])
+    _, tile = np.unique(np.floor(mid / tile_m).astype(np.int64), axis=0, return_inverse=True)
+    tile = tile.ravel()
+    found = dominant_orientations(pairs.alpha, max_orientations=per_tile).tolist() + [
+        peak
+        for t in range(int(tile.max()) + 1)
+        if np.count_nonzero(tile == t) >= min_pairs
+        for peak in dominant_orientations(pairs.alpha[tile == t], max_orientations=per_tile)
+    ]
+    support = [int(np.sum(np.abs(wrap_half(pairs.alpha - peak)) <= min_separation_rad)) for peak in found]
+    kept: list[float] = []
+    for k in np.argsort(support)[::-1]:
+        if all(abs(float(wrap_half(found[k] - other))) >= min_separation_rad for other in kept):
+            kept.append(float(found[k]))
+    return np.asarray(kept, dtype=np.float64)
+
+
 def refine_orientation(
     points: FloatArray,
     pairs: HoughPairs,

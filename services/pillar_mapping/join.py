@@ -15,7 +15,7 @@ import logging
 import numpy as np
 import numpy.typing as npt
 
-from services.pillar_mapping.rowmodel import RowModel, along_line, fit_model
+from services.pillar_mapping.rowmodel import RowModel, along_line, fit_model, lattice_inliers, lattice_phase
 
 logger = logging.getLogger(__name__)
 
@@ -240,3 +240,147 @@ def join_rows(
     rows = _pull_leftovers(table, rows, pitch, **options)
     rows = _merge_pieces(table, rows, pitch, **options)
     return _pull_leftovers(table, rows, pitch, **options)
+
+
+def _on_lattice(table: FloatArray, members: IntArray, row: RowModel) -> RowModel:
+    """``row`` with ``members`` as its landmarks, its line through their mean, phase and count on its lattice."""
+    centre = table[members, :2].mean(axis=0)
+    centre = row.centre + ((centre - row.centre) @ _normal(row.direction)) * _normal(row.direction)
+    s, _ = along_line(table, members, centre, row.direction)
+    first, slots = lattice_phase(s, row.d)
+    return row._replace(members=members, centre=centre, first=first, n=int(slots.max()) + 1)
+
+
+def _same_line(table: FloatArray, a: RowModel, b: RowModel, max_offset_m: float, phase_tolerance_m: float) -> bool:
+    """Whether ``b`` continues ``a``: same lattice, on ``a``'s line and phase, in slots ``a`` leaves empty."""
+    if a.d != b.d or not np.array_equal(a.direction, b.direction):
+        return False
+    if abs(float((b.centre - a.centre) @ _normal(a.direction))) > max_offset_m:
+        return False
+    slots_b, residual = _lattice(table, b.members, a)
+    if np.abs(np.median(residual)) > phase_tolerance_m:
+        return False
+    slots_a, _ = _lattice(table, a.members, a)
+    return not np.isin(slots_b, slots_a).any()
+
+
+def complete_block(
+    table: FloatArray,
+    rows: list[RowModel],
+    free: BoolArray,
+    *,
+    max_offset_m: float = 0.1,
+    phase_tolerance_m: float = 0.1,
+    min_landmarks: int = 3,
+    max_rack_depth_m: float = 1.6,
+) -> list[RowModel]:
+    """A block's rows with pieces of one line merged and free landmarks on their lattices pulled in.
+
+    Run once the block's spacing and orientation are known (every row on one lattice), which is
+    far more precise than one piece's own: pieces that segmentation or the first join pass could
+    not join (few landmarks, a noisy spacing) are joined when they lie on one line at one phase,
+    and every free landmark on a row's line, at an empty slot of its lattice and within the
+    block's extent along the rows (never across a cross aisle), is pulled into it. At least
+    ``min_landmarks`` free landmarks on one line parallel to the rows, within ``max_rack_depth_m``
+    of the block across and on one lattice of its spacing, make a new row.
+
+    Parameters
+    ----------
+    table : ndarray of float64, shape (N, 5)
+        Landmarks ``x, y, sxx, sxy, syy``, metres and m^2.
+    rows : list of RowModel
+        The rows of one block, on its lattice.
+    free : ndarray of bool, shape (N,)
+        Landmarks in no row; those pulled in are cleared.
+    max_offset_m, phase_tolerance_m : float
+        Largest distance of a landmark (or a piece's line) across a row's line and along it from
+        its lattice slot (a piece's median), metres.
+
+    Returns
+    -------
+    list of RowModel
+        The block's rows, fewer when pieces were joined.
+    """
+    rows = sorted(rows, key=lambda r: -r.members.size)
+    merged = True
+    while merged:
+        merged = False
+        for i, j in ((i, j) for i in range(len(rows)) for j in range(len(rows)) if i != j):
+            if _same_line(table, rows[i], rows[j], max_offset_m, phase_tolerance_m):
+                joined = _on_lattice(table, np.concatenate([rows[i].members, rows[j].members]), rows[i])
+                rows = [r for k, r in enumerate(rows) if k not in (i, j)] + [joined]
+                merged = True
+                break
+    if not rows:
+        return rows
+    u = rows[0].direction
+    starts = np.array([r.centre @ u + r.first * (r.direction @ u) for r in rows])
+    ends = starts + np.array([(r.n - 1) * r.d * (r.direction @ u) for r in rows])
+    lo, hi = float(np.minimum(starts, ends).min()), float(np.maximum(starts, ends).max())
+    rows = rows + _new_rows(table, rows, free, (lo, hi), max_offset_m, min_landmarks, max_rack_depth_m)
+    return [_pull_on_lattice(table, row, free, (lo, hi), max_offset_m, phase_tolerance_m) for row in rows]
+
+
+def _new_rows(
+    table: FloatArray,
+    rows: list[RowModel],
+    free: BoolArray,
+    extent: tuple[float, float],
+    max_offset_m: float,
+    min_landmarks: int,
+    max_rack_depth_m: float,
+) -> list[RowModel]:
+    """Rows of free landmarks on a line parallel to the block's (but on none of its rows' lines), at most a
+    rack depth beyond its rows and within ``extent`` along, on one lattice of the block's spacing (a row
+    segmentation could not see: too few landmarks close enough together to form an aligned set)."""
+    model = max(rows, key=lambda r: r.members.size)
+    u, v = model.direction, _normal(model.direction)
+    offsets = np.array([r.centre @ v for r in rows])
+    index = np.flatnonzero(free)
+    along, across = table[index, :2] @ u, table[index, :2] @ v
+    inside = (along >= extent[0] - 0.25 * model.d) & (along <= extent[1] + 0.25 * model.d)
+    inside &= (across >= offsets.min() - max_rack_depth_m) & (across <= offsets.max() + max_rack_depth_m)
+    inside &= np.min(np.abs(across[:, None] - offsets[None, :]), axis=1) > max_offset_m  # those are pulled
+    index, across = index[inside], across[inside]
+    order = np.argsort(across)
+    out = []
+    for group in np.split(index[order], np.flatnonzero(np.diff(across[order]) > max_offset_m) + 1):
+        if group.size < min_landmarks:
+            continue
+        centre = table[group, :2].mean(axis=0)
+        candidate = _on_lattice(table, group, model._replace(centre=centre, members=group))
+        members = candidate.members[lattice_inliers(table, candidate)]
+        if members.size >= min_landmarks:
+            free[members] = False
+            out.append(_on_lattice(table, members, candidate))
+    return out
+
+
+def _pull_on_lattice(
+    table: FloatArray,
+    row: RowModel,
+    free: BoolArray,
+    extent: tuple[float, float],
+    max_offset_m: float,
+    phase_tolerance_m: float,
+) -> RowModel:
+    """``row`` with the free landmarks on its line at empty slots within ``extent`` (along its block) pulled in."""
+    lo, hi = extent
+    u = row.direction
+    index = np.flatnonzero(free)
+    along = table[index, :2] @ u
+    near = (np.abs((table[index, :2] - row.centre) @ _normal(u)) <= max_offset_m) & (
+        along >= lo - 0.25 * row.d
+    ) & (along <= hi + 0.25 * row.d)
+    index = index[near]
+    slots, residual = _lattice(table, index, row)
+    taken, _ = _lattice(table, row.members, row)
+    fits = (np.abs(residual) <= phase_tolerance_m) & ~np.isin(slots, taken)
+    index, slots, residual = index[fits], slots[fits], residual[fits]
+    order = np.lexsort((np.abs(residual), slots))
+    _, first = np.unique(slots[order], return_index=True)  # the closest landmark per slot
+    found = index[order][first]
+    if found.size == 0:
+        return row
+    free[found] = False
+    return _on_lattice(table, np.concatenate([row.members, found]), row)

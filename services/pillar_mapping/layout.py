@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -13,6 +14,8 @@ import numpy.typing as npt
 from services.pillar_mapping.bins import StorageBin, storage_bins
 from services.pillar_mapping.errors import PillarMappingError
 from services.pillar_mapping.landmark_io import read_landmarks_csv
+from services.pillar_mapping.levels import RackProfile, bins_on_levels
+from services.pillar_mapping.mapper import LandmarkMap
 from services.pillar_mapping.rows import RackRow, fit_rack_rows
 from shared.store import Feature
 
@@ -123,7 +126,8 @@ def layout_features(layout: RackLayout) -> dict[str, list[Feature]]:
                 "id": b.id,
                 "aisle": b.aisle,
                 "bay": b.bay,
-                "level": None,
+                "level": b.level,
+                "z_m": b.z_m,
                 "access_pose": list(b.access_pose),
                 "row": row_keys[b.row],
                 "back_row": row_keys[b.back_row],
@@ -146,24 +150,58 @@ def layout_geojson(layout: RackLayout) -> dict[str, Any]:
     return {"type": "FeatureCollection", "features": features}
 
 
-def fit_layout(landmarks: npt.ArrayLike, **row_options: Any) -> RackLayout:
-    """Rows (:func:`~services.pillar_mapping.rows.fit_rack_rows`) and bins of a landmark table (N, 5)."""
+def fit_layout(
+    landmarks: npt.ArrayLike, *, profiles: Sequence[RackProfile] = (), **row_options: Any
+) -> RackLayout:
+    """Rows (:func:`~services.pillar_mapping.rows.fit_rack_rows`) and bins of a landmark table (N, 5), the bins
+    on the levels of the site's rack ``profiles`` (:func:`~services.pillar_mapping.levels.bins_on_levels`)."""
     table = np.asarray(landmarks, dtype=np.float64)
     rows = fit_rack_rows(table, **row_options)
     claimed = np.zeros(len(table), dtype=bool)
     for row in rows:
         claimed[row.members] = True
     outliers = table[~claimed, :2] if table.ndim == 2 and len(table) else np.zeros((0, 2))
-    return RackLayout(rows, storage_bins(rows), outliers)
+    return RackLayout(rows, bins_on_levels(storage_bins(rows), profiles), outliers)
 
 
-def fit_racks(landmarks: Path | npt.ArrayLike, out_dir: Path | None = None, **row_options: Any) -> RackLayout:
-    """``aisle racks fit PILLARS.csv --out DIR``: fit a layout and write ``DIR/racks.geojson``.
+def fit_landmark_map(
+    landmarks: LandmarkMap,
+    *,
+    max_sigma_m: float = 0.05,
+    profiles: Sequence[RackProfile] = (),
+    **row_options: Any,
+) -> RackLayout:
+    """The layout of a live landmark map (as the worker fits it while the survey goes on).
+
+    Landmarks whose largest standard deviation exceeds ``max_sigma_m`` are left out until more
+    views pin them down: bins must come out within 10 cm, which a landmark twice as uncertain as
+    that cannot give. The rest are fitted with :func:`fit_layout`, whose bins already need a seen
+    upright at a corner or on both sides and racks of the region's common depth, so a partly
+    surveyed hall gets fewer bins, not bins where there are none.
+    """
+    if max_sigma_m <= 0:
+        raise PillarMappingError(f"max_sigma_m must be positive, got {max_sigma_m}")
+    means = np.asarray(landmarks.means, dtype=np.float64).reshape(-1, 2)
+    covs = np.asarray(landmarks.covs, dtype=np.float64).reshape(-1, 2, 2)
+    sigma = np.sqrt(np.maximum(np.linalg.eigvalsh(covs)[:, 1], 0.0)) if len(covs) else np.zeros(0)
+    keep = sigma <= max_sigma_m
+    table = np.column_stack([means[keep], covs[keep].reshape(-1, 4)[:, [0, 1, 3]]])
+    return fit_layout(table, profiles=profiles, **row_options)
+
+
+def fit_racks(
+    landmarks: Path | npt.ArrayLike,
+    out_dir: Path | None = None,
+    *,
+    profiles: Sequence[RackProfile] = (),
+    **row_options: Any,
+) -> RackLayout:
+    """``aisle racks fit PILLARS.csv --out DIR [--levels 0,1.5,3]``: fit a layout and write ``DIR/racks.geojson``.
 
     ``landmarks`` is a CSV path (``x,y,sxx,sxy,syy``) or an (N, 5) array.
     """
     table = read_landmarks_csv(Path(landmarks)) if isinstance(landmarks, str | Path) else landmarks
-    layout = fit_layout(table, **row_options)
+    layout = fit_layout(table, profiles=profiles, **row_options)
     logger.info(
         "fitted %d rows and %d bins; %d landmarks in no row", len(layout.rows), len(layout.bins), len(layout.outliers)
     )

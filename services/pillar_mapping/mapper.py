@@ -4,12 +4,17 @@ The state is the vehicle pose plus every landmark's position, as in Bailey's bea
 SLAM; but the vehicle is neither predicted nor updated: its pose (and covariance, if given)
 comes from the localisation topic each frame. With the vehicle known, landmarks stay
 uncorrelated, so the joint covariance is kept as its 2x2 landmark blocks, and the vehicle
-covariance enters each update as a considered (not estimated) uncertainty. Estimating the
-vehicle as well (SLAM) would add the vehicle block and the vehicle-landmark cross terms.
+covariance enters each update as a considered (not estimated) uncertainty. The measurement
+model (:func:`bearing_model`) gives the Jacobians with respect to both the vehicle and the
+landmark, so estimating the vehicle as well (SLAM) adds the vehicle block and the
+vehicle-landmark cross terms to the covariance and a prediction step, not a new model.
 
 New landmarks are initialised in a delayed way: bearings that match no landmark wait in a
 pool until rays from at least ``min_views`` frames, spanning at least ``min_parallax_rad``,
-cross at one point; it is then triangulated and enters the filter with its covariance.
+cross at one point; it is then triangulated and enters the filter with its covariance. A
+pooled ray keeps its frame's pose uncertainty (heading variance added to the bearing's,
+position variance turned into a bearing variance at the candidate's range), so rays from a
+localisation a few centimetres and half a degree off still meet within their gates.
 """
 
 from __future__ import annotations
@@ -45,22 +50,57 @@ class FrameReport(NamedTuple):
     initialised: int
 
 
+def bearing_model(pose: FloatArray, landmarks: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Bearings of landmarks from a sensor pose and their Jacobians.
+
+    Parameters
+    ----------
+    pose : ndarray of float64, shape (3,)
+        Sensor ``x, y`` (metres) and heading (radians) in the map.
+    landmarks : ndarray of float64, shape (M, 2)
+        Landmark positions, metres.
+
+    Returns
+    -------
+    predicted : ndarray of float64, shape (M,)
+        Bearings relative to the heading, radians in [-pi, pi).
+    h_vehicle : ndarray of float64, shape (M, 3)
+        d bearing / d (x, y, heading) of the sensor.
+    h_landmark : ndarray of float64, shape (M, 2)
+        d bearing / d (x, y) of the landmark.
+    """
+    delta = landmarks - pose[:2]
+    q = np.maximum(np.sum(delta**2, axis=1), 1e-9)
+    h_landmark = np.stack([-delta[:, 1] / q, delta[:, 0] / q], axis=1)
+    h_vehicle = np.column_stack([-h_landmark, -np.ones(len(landmarks))])
+    return wrap(np.arctan2(delta[:, 1], delta[:, 0]) - pose[2]), h_vehicle, h_landmark
+
+
 @dataclass
 class _RayPool:
+    """Unmatched bearings waiting to start landmarks: ray ``origins`` (K, 2) and map ``angles`` (K,), their
+    std ``sigmas`` (K,) with the heading's, the origin's position variance ``origin_vars`` (K,) m^2, ``frames``."""
+
     origins: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     angles: FloatArray = field(default_factory=lambda: np.zeros(0))
     sigmas: FloatArray = field(default_factory=lambda: np.zeros(0))
+    origin_vars: FloatArray = field(default_factory=lambda: np.zeros(0))
     frames: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
-    def add(self, origin: FloatArray, angles: FloatArray, sigmas: FloatArray, frame: int) -> None:
+    def add(self, origin: FloatArray, angles: FloatArray, sigmas: FloatArray, origin_var: float, frame: int) -> None:
         self.origins = np.vstack([self.origins, np.tile(origin, (angles.size, 1))])
         self.angles = np.concatenate([self.angles, angles])
         self.sigmas = np.concatenate([self.sigmas, sigmas])
+        self.origin_vars = np.concatenate([self.origin_vars, np.full(angles.size, origin_var)])
         self.frames = np.concatenate([self.frames, np.full(angles.size, frame, dtype=np.int64)])
 
     def keep(self, mask: npt.NDArray[np.bool_]) -> None:
         self.origins, self.angles = self.origins[mask], self.angles[mask]
-        self.sigmas, self.frames = self.sigmas[mask], self.frames[mask]
+        self.sigmas, self.origin_vars, self.frames = self.sigmas[mask], self.origin_vars[mask], self.frames[mask]
+
+    def sigmas_at(self, rays: IntArray, distance_m: FloatArray) -> FloatArray:
+        """Std (radians) of ``rays`` as seen at ``distance_m`` from their origins (shapes broadcast)."""
+        return np.asarray(np.sqrt(self.sigmas[rays] ** 2 + self.origin_vars[rays] / np.maximum(distance_m, 0.05) ** 2))
 
 
 class BearingOnlyMapper:
@@ -167,7 +207,9 @@ class BearingOnlyMapper:
         bearings_rad, sigmas_rad : array_like, shape (K,)
             Bearings relative to the sensor heading and their standard deviations, radians.
         pose_cov : ndarray, shape (3, 3), optional
-            Localisation covariance of the sensor pose.
+            Localisation covariance of the sensor pose (m^2, rad^2); it widens the gates of
+            association and initialisation and enters each update as considered uncertainty.
+            Without it the pose is taken as exact.
         """
         pose = np.asarray(sensor_pose, dtype=np.float64)
         bearings = np.asarray(bearings_rad, dtype=np.float64).ravel()
@@ -176,18 +218,27 @@ class BearingOnlyMapper:
             raise PillarMappingError(f"sensor pose must be 3 finite numbers, got {pose.tolist()}")
         if bearings.shape != sigmas.shape or not (np.all(np.isfinite(bearings)) and np.all(sigmas > 0)):
             raise PillarMappingError("bearings and sigmas must be finite, of equal length, sigmas positive")
+        cov = np.zeros((3, 3)) if pose_cov is None else np.asarray(pose_cov, dtype=np.float64)
+        if cov.shape != (3, 3) or not np.all(np.isfinite(cov)) or np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) < 0):
+            raise PillarMappingError("pose_cov must be a finite positive semi-definite 3x3 matrix")
         self.vehicle_pose = pose
-        self.vehicle_cov = np.zeros((3, 3)) if pose_cov is None else np.asarray(pose_cov, dtype=np.float64)
+        self.vehicle_cov = cov
+        sigmas = np.maximum(sigmas, self.sigma_floor_rad)
         self._frame += 1
         self._frame_origins = {f: o for f, o in self._frame_origins.items() if f > self._frame - self.window_frames}
         self._frame_origins[self._frame] = pose[:2].copy()
         self._expected[self._visible()] += 1
-        sigmas = np.maximum(sigmas, self.sigma_floor_rad)
         matches, ambiguous, gated_any = self._associate(bearings, sigmas)
         self._update(bearings, sigmas, matches)
         fresh = (matches < 0) & ~gated_any
         self._pool.keep(self._pool.frames > self._frame - self.window_frames)
-        self._pool.add(pose[:2], wrap(pose[2] + bearings[fresh]), sigmas[fresh], self._frame)
+        self._pool.add(
+            pose[:2],
+            wrap(pose[2] + bearings[fresh]),
+            np.sqrt(sigmas[fresh] ** 2 + cov[2, 2]),
+            float(np.linalg.eigvalsh(cov[:2, :2])[1]),
+            self._frame,
+        )
         born = self._initialise()
         return FrameReport(int((matches >= 0).sum()), int(ambiguous.sum()), int(fresh.sum()), born)
 
@@ -195,12 +246,7 @@ class BearingOnlyMapper:
         self, bearings: FloatArray, sigmas: FloatArray, index: IntArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Innovations (K, M), their variances (K, M) and landmark Jacobians (M, 2) for landmarks ``index``."""
-        x, y, yaw = self.vehicle_pose
-        delta = self._means[index] - np.array([x, y])
-        q = np.maximum(np.sum(delta**2, axis=1), 1e-9)
-        h_l = np.stack([-delta[:, 1] / q, delta[:, 0] / q], axis=1)
-        h_v = np.stack([delta[:, 1] / q, -delta[:, 0] / q, -np.ones(index.size)], axis=1)
-        predicted = wrap(np.arctan2(delta[:, 1], delta[:, 0]) - yaw)
+        predicted, h_v, h_l = bearing_model(self.vehicle_pose, self._means[index])
         var_l = np.einsum("mi,mij,mj->m", h_l, self._covs[index], h_l)
         var_v = np.einsum("mi,ij,mj->m", h_v, self.vehicle_cov, h_v)
         innovation = wrap(bearings[:, None] - predicted[None, :])
@@ -246,7 +292,7 @@ class BearingOnlyMapper:
         dist = np.hypot(delta[..., 0], delta[..., 1])
         seen = np.arctan2(delta[..., 1], delta[..., 0])
         residual = np.abs(wrap(seen - pool.angles[None, :]))
-        limit = np.sqrt(self.gate_sq) * pool.sigmas[None, :]
+        limit = np.sqrt(self.gate_sq) * pool.sigmas_at(np.arange(pool.angles.size)[None, :], dist)
         ok: npt.NDArray[np.bool_] = (residual <= limit) & (dist <= self.max_range_m) & (dist > 0.05)
         return ok
 
@@ -305,12 +351,13 @@ class BearingOnlyMapper:
             rays = self._one_per_frame(np.flatnonzero(support[best]), points[best])
             used = np.zeros(self._pool.angles.size, dtype=bool)
             used[rays] = True
+            sigmas = self._pool.sigmas_at(rays, np.hypot(*(points[best] - self._pool.origins[rays]).T))
             points = np.delete(points, best, axis=0)
             try:
-                tri = triangulate_bearings(self._pool.origins[rays], self._pool.angles[rays], self._pool.sigmas[rays])
+                tri = triangulate_bearings(self._pool.origins[rays], self._pool.angles[rays], sigmas)
             except PillarMappingError:
                 continue
-            limit = np.sqrt(self.gate_sq) * self._pool.sigmas[rays]
+            limit = np.sqrt(self.gate_sq) * sigmas
             if tri.parallax_rad < self.min_parallax_rad or np.any(np.abs(tri.residuals_rad) > limit):
                 continue
             self._pool.keep(~used)

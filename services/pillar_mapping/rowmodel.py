@@ -78,3 +78,27 @@ def fit_model(
     period = dominant_spacing(s, sigma, min_spacing_m=pitch[0], max_spacing_m=pitch[1])
     first, slots = lattice_phase(s, period.d_m)
     return RowModel(members, centre, u, period.d_m, first, int(slots.max()) + 1, period.coherence, orientation)
+
+
+def lattice_inliers(
+    table: FloatArray, row: RowModel, *, max_residual_m: float = 0.15, z: float = 4.0
+) -> npt.NDArray[np.bool_]:
+    """Which of ``row``'s landmarks sit on its line and lattice: within ``max_residual_m`` (or ``z`` of their
+    standard deviations, if more) of it across and of a lattice slot along.
+
+    The phase is the one most landmarks agree with (each landmark's phase tried in turn), so one
+    landmark far off its slot (a ghost where rays of different uprights crossed) cannot shift the
+    row, as it would the mean phase.
+    """
+    u = row.direction
+    s, sigma = along_line(table, row.members, row.centre, u)
+    across = (table[row.members, :2] - row.centre) @ np.array([-u[1], u[0]])
+    _, sigma_across = along_line(table, row.members, row.centre, np.array([-u[1], u[0]]))
+    limit = np.maximum(max_residual_m, z * sigma)
+    offsets = (s[:, None] - s[None, :] + 0.5 * row.d) % row.d - 0.5 * row.d  # phase of j relative to i
+    votes = (np.abs(offsets) <= limit[None, :]).sum(axis=1)
+    phase = s[int(np.argmax(votes))]
+    residual = (s - phase + 0.5 * row.d) % row.d - 0.5 * row.d
+    on_line = np.abs(across) <= np.maximum(max_residual_m, z * sigma_across)
+    ok: npt.NDArray[np.bool_] = (np.abs(residual) <= limit) & on_line
+    return ok

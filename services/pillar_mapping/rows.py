@@ -1,12 +1,16 @@
 """Rack-row models fitted to a landmark map (paper A, sections 2 and 3.1).
 
 Each row is the model ``M(n, d, x, y, theta)``: ``n`` uprights ``d`` apart from ``(x, y)``
-along ``theta``. Rows are segmented by the closed-form Hough transform with DBSCAN, their
-spacing found by Fourier analysis, pieces of one row joined and leftover landmarks on a row's
-lattice pulled in (:mod:`services.pillar_mapping.join`), then global constraints are applied per region (rows of
-one orientation close together): the modal spacing, the dominant orientation and the
-initialisation (and end) lines through the rows' first (and last) uprights, which restore
-end uprights that were never seen. A last optimisation places each model on its landmarks.
+along ``theta``. Rows are segmented by the closed-form Hough transform with DBSCAN around the
+dominant orientations of every neighbourhood, their spacing found by Fourier analysis, pieces
+of one row joined and leftover landmarks on a row's lattice pulled in
+(:mod:`services.pillar_mapping.join`). Regions (rows of one orientation close together) are cut
+into blocks where a cross aisle runs through them (:mod:`services.pillar_mapping.blocks`), and
+the global constraints are applied per block: the dominant orientation, the modal spacing
+(refined by least squares over all its rows), landmarks off their row's lattice dropped, pieces
+on one line joined and free landmarks on the lattice pulled in or made into rows, and the
+initialisation (and end) lines through the rows' first (and last) uprights, which restore end
+uprights that were never seen. A last optimisation places each model on its landmarks.
 """
 
 from __future__ import annotations
@@ -18,18 +22,25 @@ import numpy as np
 import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.stats import theilslopes
 
+from services.pillar_mapping.blocks import block_cuts, lattice_breaks, split_rows, step_spacing
 from services.pillar_mapping.errors import PillarMappingError
 from services.pillar_mapping.hough import (
-    dominant_orientations,
     hough_pairs,
+    local_orientations,
     refine_orientation,
     segment_aligned,
     wrap_half,
 )
-from services.pillar_mapping.join import join_rows
-from services.pillar_mapping.rowmodel import RowModel, along_line, fit_model, lattice_phase, validated_landmarks
+from services.pillar_mapping.join import complete_block, join_rows
+from services.pillar_mapping.rowmodel import (
+    RowModel,
+    along_line,
+    fit_model,
+    lattice_inliers,
+    lattice_phase,
+    validated_landmarks,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -42,7 +53,9 @@ class RackRow(NamedTuple):
 
     ``n`` uprights ``d_m`` apart from ``(x_m, y_m)`` along ``theta_rad`` in [-pi/2, pi/2);
     ``uprights`` (n, 2) metres; ``observed`` (n,) whether a landmark supports each;
-    ``members`` indices of the input landmarks in the row; ``region`` its region number.
+    ``members`` indices of the input landmarks in the row; ``region`` its region number (rows of
+    one orientation close together) and ``block`` the block of the region it lies in (0, 1, ...
+    along the rows, between cross aisles).
     """
 
     n: int
@@ -51,6 +64,7 @@ class RackRow(NamedTuple):
     x_m: float
     y_m: float
     region: int
+    block: int
     uprights: FloatArray
     observed: npt.NDArray[np.bool_]
     members: IntArray
@@ -118,17 +132,23 @@ def _segment(
     pts = table[:, :2]
     pairs = hough_pairs(pts, min_length_m=0.9 * pitch[0], max_length_m=2.2 * pitch[1])
     candidates: list[RowModel] = []
-    for k, peak in enumerate(dominant_orientations(pairs.alpha)):
+    for k, peak in enumerate(local_orientations(pts, pairs)):
         alpha = refine_orientation(pts, pairs, float(peak))
         u0 = np.array([np.cos(alpha), np.sin(alpha)])
         labels = _merge_collinear(pts, segment_aligned(pts, pairs, float(alpha)), u0)
         found: list[RowModel] = []
         for label in np.unique(labels[labels >= 0]):
             for piece in _split(table, np.flatnonzero(labels == label), u0, (max_missing_run + 1.5) * pitch[1]):
-                if piece.size >= min_uprights:
-                    row = fit_model(table, piece, u0, k, pitch)
-                    if row.coherence >= min_coherence and piece.size >= min_fill * row.n:
-                        found.append(row)
+                if piece.size < min_uprights:
+                    continue
+                row = fit_model(table, piece, u0, k, pitch)
+                # a set broken by a cross aisle half a bay off its lattice is irregular as a whole, regular in parts
+                parts = [row] if row.coherence >= min_coherence else [
+                    fit_model(table, part, u0, k, pitch)
+                    for part in lattice_breaks(table, piece, u0, pitch)
+                    if part.size >= min_uprights
+                ]
+                found += [r for r in parts if r.coherence >= min_coherence and r.members.size >= min_fill * r.n]
         inside = sum(r.members.size for r in found)
         if inside < 0.5 * int((labels >= 0).sum()):
             logger.debug(
@@ -207,45 +227,136 @@ def _regions(rows: list[RowModel], gap_m: float) -> IntArray:
     return out
 
 
-def _constrain(
-    table: FloatArray, rows: list[RowModel], *, spacing_tolerance: float, angle_tolerance_rad: float, max_restored: int
-) -> list[RowModel]:
-    """Apply the region's modal spacing, dominant orientation and initialisation/end lines."""
+def _direction(rows: list[RowModel]) -> FloatArray:
+    """Unit vector (2,) of the median direction of ``rows`` (all found along one orientation)."""
+    theta = float(np.median([np.arctan2(r.direction[1], r.direction[0]) for r in rows]))
+    return np.array([np.cos(theta), np.sin(theta)])
+
+
+def _lattice(
+    table: FloatArray,
+    rows: list[RowModel],
+    free: npt.NDArray[np.bool_],
+    *,
+    spacing_tolerance: float,
+    angle_tolerance_rad: float,
+) -> tuple[list[RowModel], FloatArray, float]:
+    """Rows on their block's dominant orientation and spacing, with their phase and count on that lattice.
+
+    The spacing is the mode of the rows' spacings, refined by least squares over the landmarks of
+    every row that takes it (each row its own offset, one spacing for all); rows whose spacing or
+    angle is off by more than the tolerances keep their own. Landmarks off their row's line or
+    lattice (:func:`~services.pillar_mapping.rowmodel.lattice_inliers`) leave it and are marked
+    ``free``; rows left with fewer than two landmarks are dropped. Returns the rows, the block's
+    direction (2,) and spacing, metres.
+    """
     thetas = np.array([np.arctan2(r.direction[1], r.direction[0]) for r in rows])
-    theta0 = float(np.median(thetas))
-    u0 = np.array([np.cos(theta0), np.sin(theta0)])
+    u0 = _direction(rows)
+    theta0 = float(np.arctan2(u0[1], u0[0]))
     ds = np.array([r.d for r in rows])
     hist, edges = np.histogram(ds, bins=np.arange(ds.min() - 0.005, ds.max() + 0.015, 0.01))
     mode = 0.5 * (edges[np.argmax(hist)] + edges[np.argmax(hist) + 1])
     d0 = float(np.median(ds[np.abs(ds - mode) <= spacing_tolerance * mode]))
+    aligned = [abs(float(wrap_half(t - theta0))) <= angle_tolerance_rad for t in thetas]
+    regular = [bool(abs(r.d - d0) <= spacing_tolerance * d0) for r in rows]
+    placed = []
+    for r, ok_angle, ok_d in zip(rows, aligned, regular, strict=True):
+        row = r._replace(direction=u0 if ok_angle else r.direction, d=d0 if ok_d else r.d)
+        inliers = lattice_inliers(table, row)
+        free[row.members[~inliers]] = True
+        if inliers.sum() >= 2:
+            placed.append((row._replace(members=row.members[inliers]), ok_angle and ok_d))
+    num = den = 0.0
+    for row, on in placed:
+        if on:
+            s, _ = along_line(table, row.members, row.centre, u0)
+            _, slots = lattice_phase(s, d0)
+            k = slots - slots.mean()
+            num, den = num + float(k @ (s - s.mean())), den + float(k @ k)
+    d_fit = num / den if den > 0 else d0
     out = []
-    for r in rows:
-        u = (
-            u0
-            if abs(wrap_half(np.arctan2(r.direction[1], r.direction[0]) - theta0)) <= angle_tolerance_rad
-            else r.direction
-        )
-        d = d0 if abs(r.d - d0) <= spacing_tolerance * d0 else r.d
-        s, _ = along_line(table, r.members, r.centre, u)
+    for row, on in placed:
+        d = d_fit if on or row.d == d0 else row.d
+        s, _ = along_line(table, row.members, row.centre, row.direction)
         first, slots = lattice_phase(s, d)
-        out.append(r._replace(direction=u, d=d, first=first, n=int(slots.max()) + 1))
-    if len(out) < 3:
-        return out
+        out.append(row._replace(d=d, first=first, n=int(slots.max()) + 1))
+    return out, u0, d_fit
+
+
+def _end_line(w: FloatArray, line: FloatArray, tolerance_m: float) -> FloatArray:
+    """Where the line most rows' ends ``line`` (R,) lie on (within ``tolerance_m``, metres along) puts each
+    row's end, given the rows' offsets across ``w`` (R,).
+
+    Candidates are the lines through every two rows' ends and the lines square to the rows through
+    each one; the one with most ends on it wins (of equals the squarest), refined by least squares
+    over those ends. A few rows short of the line cannot tilt it, as they tilt a regression.
+    """
+    i, j = np.triu_indices(w.size, k=1)
+    apart = np.abs(w[j] - w[i]) > 0.1
+    i, j = i[apart], j[apart]
+    slope = np.concatenate([np.zeros(w.size), (line[j] - line[i]) / (w[j] - w[i])])
+    intercept = np.concatenate([line, line[i] - slope[w.size :] * w[i]])
+    inliers = np.abs(intercept[:, None] + slope[:, None] * w[None, :] - line[None, :]) <= tolerance_m
+    best = int(np.lexsort((np.abs(slope), -inliers.sum(axis=1)))[0])
+    on = inliers[best]
+    if np.ptp(w[on]) > 0.1:
+        fitted_slope, fitted_intercept = np.polyfit(w[on], line[on], 1)
+    else:
+        fitted_slope, fitted_intercept = 0.0, float(line[on].mean())
+    return np.asarray(fitted_intercept + fitted_slope * w)
+
+
+def _restore_ends(rows: list[RowModel], u0: FloatArray, d0: float, *, max_restored: int) -> list[RowModel]:
+    """Unseen uprights restored at rows' ends from the block's initialisation (and end) line.
+
+    The lines are robust fits (:func:`_end_line`) of the rows' first (last) upright positions against
+    their offsets across; a row short of a line by a whole number of spacings, at most ``max_restored``,
+    is extended to it, but never beyond the block's seen extent (the first and last seen upright of
+    any of its rows): in a partly surveyed block the lines' slopes come from ends not seen yet.
+    Needs three rows on the block's lattice (direction ``u0``, spacing ``d0``).
+    """
+    on = [i for i, r in enumerate(rows) if r.d == d0 and np.array_equal(r.direction, u0)]
+    if len(on) < 3:
+        return rows
+    out = list(rows)
     v0 = np.array([-u0[1], u0[0]])
-    w = np.array([r.centre @ v0 for r in out])
-    starts = np.array([r.centre @ u0 + r.first for r in out])
-    ends = starts + np.array([(r.n - 1) * r.d for r in out])
+    w = np.array([rows[i].centre @ v0 for i in on])
+    starts = np.array([rows[i].centre @ u0 + rows[i].first for i in on])
+    ends = starts + np.array([(rows[i].n - 1) * d0 for i in on])
+    seen = (starts.min() - 0.25 * d0, ends.max() + 0.25 * d0)
     for line, sign in ((starts, -1), (ends, 1)):
-        slope, intercept, _, _ = theilslopes(line, w)
-        predicted = intercept + slope * w
-        for i, r in enumerate(out):
-            if r.d != d0:
-                continue
-            missing = sign * (predicted[i] - line[i]) / r.d
+        predicted = _end_line(w, line, min(0.15, 0.25 * d0))
+        for k, i in enumerate(on):
+            r = out[i]
+            missing = sign * (predicted[k] - line[k]) / d0
             m = int(np.rint(missing))
-            if 1 <= m <= max_restored and abs(missing - m) <= 0.25:
-                out[i] = r._replace(first=r.first - m * r.d if sign < 0 else r.first, n=r.n + m)
+            inside = seen[0] <= line[k] + sign * m * d0 <= seen[1]
+            if 1 <= m <= max_restored and abs(missing - m) <= 0.25 and inside:
+                out[i] = r._replace(first=r.first - m * d0 if sign < 0 else r.first, n=r.n + m)
     return out
+
+
+def _fit_block(
+    table: FloatArray,
+    rows: list[RowModel],
+    free: npt.NDArray[np.bool_],
+    *,
+    spacing_tolerance: float,
+    angle_tolerance_rad: float,
+    max_restored: int,
+) -> list[RowModel]:
+    """A block's rows on its lattice, completed (:func:`~services.pillar_mapping.join.complete_block`), their
+    ends restored, sorted by offset across."""
+    options = {"spacing_tolerance": spacing_tolerance, "angle_tolerance_rad": angle_tolerance_rad}
+    first, _, _ = _lattice(table, rows, free, **options)
+    if not first:
+        return []
+    completed, u0, d0 = _lattice(table, complete_block(table, first, free), free, **options)
+    if not completed:
+        return []
+    restored = _restore_ends(completed, u0, d0, max_restored=max_restored)
+    v = np.array([-u0[1], u0[0]])
+    return sorted(restored, key=lambda r: float(r.centre @ v))
 
 
 def _place(table: FloatArray, row: RowModel, sigma_floor_m: float) -> FloatArray:
@@ -307,7 +418,7 @@ def fit_rack_rows(
     Returns
     -------
     list of RackRow
-        Sorted by region, then offset across the rows. Empty when there are no rows.
+        Sorted by region, block, then offset across the rows. Empty when there are no rows.
 
     Raises
     ------
@@ -339,21 +450,36 @@ def fit_rack_rows(
         min_coherence=min_coherence,
     )
     regions = _regions(rows, region_gap_m)
-    out: list[RackRow] = []
     order = sorted(
         range(int(regions.max()) + 1),
         key=lambda g: tuple(np.mean([rows[i].centre for i in np.flatnonzero(regions == g)], axis=0).round(1)),
     )
+    blocks: list[tuple[int, int, list[RowModel]]] = []  # (region, block, rows)
     for number, g in enumerate(order):
-        group = _constrain(
+        group = [rows[i] for i in np.flatnonzero(regions == g)]
+        u0 = _direction(group)
+        d_step = step_spacing(table, group, u0, pitch)
+        cuts = block_cuts(table, group, u0, d_step)
+        if cuts.size:
+            logger.debug("region %d cut at %s m along", number, np.round(cuts, 2).tolist())
+        cut = split_rows(table, group, cuts, u0, d_step) if cuts.size else [(0, r) for r in group]
+        for b, k in enumerate(sorted({k for k, _ in cut})):
+            blocks.append((number, b, [r for j, r in cut if j == k]))
+    free = np.ones(len(table), dtype=bool)
+    for _, _, block_rows in blocks:
+        for row in block_rows:
+            free[row.members] = False
+    out: list[RackRow] = []
+    for number, b, block_rows in blocks:
+        group = _fit_block(
             table,
-            [rows[i] for i in np.flatnonzero(regions == g)],
+            block_rows,
+            free,
             spacing_tolerance=spacing_tolerance,
             angle_tolerance_rad=angle_tolerance_rad,
             max_restored=max_restored_uprights,
         )
-        v = np.array([-group[0].direction[1], group[0].direction[0]])
-        for row in sorted(group, key=lambda r: float(r.centre @ v)):
+        for row in group:
             uprights = _place(table, row, sigma_floor_m)
             mu = table[row.members, :2]
             gap = np.min(np.hypot(*(uprights[:, None, :] - mu[None]).transpose(2, 0, 1)), axis=1)
@@ -366,6 +492,7 @@ def fit_rack_rows(
                     float(uprights[0, 0]),
                     float(uprights[0, 1]),
                     number,
+                    b,
                     uprights,
                     gap <= min(0.25 * row.d, 0.3),
                     row.members,

@@ -49,8 +49,14 @@ def rack_region(
     rack_depth_m: float = 1.1,
     flue_m: float = 0.3,
     aisle_width_m: float = 3.2,
+    cross_aisle_every: int = 0,
+    cross_aisle_width_m: float = 3.0,
 ) -> HallLayout:
-    """One block of racks whose rows run along ``theta_rad`` from ``origin_xy_m``, stacked to its left."""
+    """One block of racks whose rows run along ``theta_rad`` from ``origin_xy_m``, stacked to its left.
+
+    With ``cross_aisle_every`` > 0 a cross aisle ``cross_aisle_width_m`` wide (between the uprights either
+    side) cuts every row after each ``cross_aisle_every`` bays; each piece of a row is a row of its own.
+    """
     u = np.array([np.cos(theta_rad), np.sin(theta_rad)])
     v = np.array([-np.sin(theta_rad), np.cos(theta_rad)])
     offsets: list[tuple[float, bool, int]] = []  # (offset along v, is front, direction to back)
@@ -66,33 +72,39 @@ def rack_region(
     w += aisle_width_m
     offsets += [(w, True, 1), (w + rack_depth_m, False, 0)]
     origin = np.asarray(origin_xy_m, dtype=np.float64)
-    along = np.arange(bays + 1) * bay_pitch_m
-    uprights, row_of, starts, bins = [], [], [], []
-    for r, (off, _, back) in enumerate(offsets):
-        start = origin + off * v
-        starts.append(start)
-        uprights.append(start + along[:, None] * u)
-        row_of.append(np.full(bays + 1, r))
-        if back:
-            mids = start + (along[:-1, None] + 0.5 * bay_pitch_m) * u
-            bins.append(mids + back * 0.5 * rack_depth_m * v)
+    every = cross_aisle_every or bays
+    block_m = every * bay_pitch_m + cross_aisle_width_m
+    pieces = [(k * block_m, min(every, bays - k * every)) for k in range(-(-bays // every))]
+    length = pieces[-1][0] + pieces[-1][1] * bay_pitch_m
+    uprights, row_of, starts, bins, fronts = [], [], [], [], []
+    for off, front, back in offsets:
+        for start_m, piece_bays in pieces:
+            along = start_m + np.arange(piece_bays + 1) * bay_pitch_m
+            start = origin + off * v + start_m * u
+            starts.append(start)
+            fronts.append(front)
+            uprights.append(origin + off * v + along[:, None] * u)
+            row_of.append(np.full(piece_bays + 1, len(starts) - 1))
+            if back:
+                mids = origin + off * v + (along[:-1, None] + 0.5 * bay_pitch_m) * u
+                bins.append(mids + back * 0.5 * rack_depth_m * v)
     first_aisle = origin + (rack_depth_m + 0.5 * aisle_width_m) * v
     aisle_lines = [
         [
             first_aisle + k * (aisle_width_m + 2 * rack_depth_m + flue_m) * v,
-            first_aisle + k * (aisle_width_m + 2 * rack_depth_m + flue_m) * v + bays * bay_pitch_m * u,
+            first_aisle + k * (aisle_width_m + 2 * rack_depth_m + flue_m) * v + length * u,
         ]
         for k in range(aisles)
     ]
-    rows = len(offsets)
+    rows = len(starts)
     return HallLayout(
         uprights=np.concatenate(uprights),
         row_of=np.concatenate(row_of).astype(np.int64),
         row_start=np.asarray(starts),
         row_theta=np.full(rows, theta_rad),
-        row_n=np.full(rows, bays + 1, dtype=np.int64),
+        row_n=np.array([len(r) for r in row_of], dtype=np.int64),
         row_d=np.full(rows, bay_pitch_m),
-        row_front=np.array([f for _, f, _ in offsets]),
+        row_front=np.array(fronts),
         bin_centres=np.concatenate(bins),
         aisles=np.asarray(aisle_lines, dtype=np.float64),
     )

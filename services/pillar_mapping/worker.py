@@ -2,9 +2,12 @@
 
 Every robot's downward fisheye frames are searched for uprights; each frame's bearings go into
 one bearing-only map (the robots share the ``map`` frame), posed by the robot's tf at the
-image stamp (an image waits up to ``tf_wait_s`` for tf to reach it). Every ``store_period_s``
-the reliable landmarks are fitted with rack rows and bins and stored as one revision of the
-``pillar``, ``rack_row`` and ``bin`` features. On start the stored observed pillars seed the
+image stamp (an image waits up to ``tf_wait_s`` for tf to reach it), with the localisation's
+stated uncertainty (``localisation_sigma_m``/``_rad``). Every ``store_period_s`` the reliable
+landmarks precise to ``max_landmark_sigma_m`` are fitted with rack rows and bins
+(:func:`~services.pillar_mapping.layout.fit_landmark_map`, bins on the levels of the site's
+``rack_profiles``) and stored as one revision of the ``pillar``, ``rack_row``, ``bin`` and
+``corridor`` features. On start the stored observed pillars seed the
 map, so a restart keeps what was committed.
 """
 
@@ -23,7 +26,8 @@ from services.pillar_mapping.bag import image_bgr
 from services.pillar_mapping.camera import FisheyeCamera, camera_from_info
 from services.pillar_mapping.detection import detect_pillars
 from services.pillar_mapping.errors import PillarMappingError
-from services.pillar_mapping.layout import fit_layout, layout_features
+from services.pillar_mapping.layout import fit_landmark_map, layout_features
+from services.pillar_mapping.levels import rack_profile
 from services.pillar_mapping.mapper import BearingOnlyMapper, LandmarkMap
 from services.pillar_mapping.mount import mount_from_transform, sensor_pose, vehicle_bearings
 from shared import messages
@@ -34,7 +38,6 @@ from shared.worker import StageContext
 
 log = logging.getLogger(__name__)
 
-FEATURE_KINDS = ("pillar", "rack_row", "bin")
 _RESUMED_SIGMA_M = 0.03
 _RESUMED_OBSERVATIONS = 10
 
@@ -84,6 +87,9 @@ class PillarStage:
         self.tf_static = subscribe("tf_static", messages.TF_MESSAGE, DropPolicy.BLOCK, 100)
         self._subscriptions = (self.images, self.infos, self.tf, self.tf_static)
         self.mapper = BearingOnlyMapper(max_range_m=self.settings.max_range_m)
+        self.profiles = [rack_profile(p.levels_m, p.area) for p in self.settings.rack_profiles]
+        sigma_m, sigma_rad = self.settings.localisation_sigma_m, self.settings.localisation_sigma_rad
+        self.pose_cov = np.diag([sigma_m**2, sigma_m**2, sigma_rad**2]) if sigma_m > 0 or sigma_rad > 0 else None
         self.robots: dict[str, _Robot] = {}
         self.first_stamp_ns: int | None = None
         self.last_stamp_ns: int | None = None
@@ -207,7 +213,8 @@ class PillarStage:
         try:
             seen = detect_pillars(frame.pixels, robot.camera)
             pose = sensor_pose(mount, np.array(vehicle, dtype=np.float64))
-            self.mapper.observe(tuple(pose), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad)
+            self.mapper.observe(tuple(pose), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad,
+                                pose_cov=self.pose_cov)
         except (PillarMappingError, ValueError) as err:
             self.context.count("bad_frames")
             log.warning("frame of %r at %d ns skipped: %s", namespace or "/", frame.stamp_ns, err)
@@ -223,21 +230,21 @@ class PillarStage:
         if self._frames_since_store == 0:
             return
         reliable = self.mapper.reliable_landmarks()
-        table = np.column_stack([reliable.means, reliable.covs.reshape(-1, 4)[:, [0, 1, 3]]])
         try:
-            layout = fit_layout(table, min_bay_pitch_m=self.settings.min_bay_pitch_m,
-                                max_bay_pitch_m=self.settings.max_bay_pitch_m)
+            layout = fit_landmark_map(reliable, max_sigma_m=self.settings.max_landmark_sigma_m,
+                                      profiles=self.profiles, min_bay_pitch_m=self.settings.min_bay_pitch_m,
+                                      max_bay_pitch_m=self.settings.max_bay_pitch_m)
         except (PillarMappingError, ValueError, np.linalg.LinAlgError) as err:
             self.context.count("fit_failures")
-            log.warning("layout of %d landmarks not fitted: %s", len(table), err)
+            log.warning("layout of %d landmarks not fitted: %s", len(reliable.means), err)
             return
         features = layout_features(layout)
         write = RevisionWrite(self.context.name, features=features, input_start_ns=self.first_stamp_ns,
                               input_end_ns=self.last_stamp_ns,
-                              summary={"frames": self._frames_since_store, "landmarks": len(table)})
+                              summary={"frames": self._frames_since_store, "landmarks": len(reliable.means)})
         revision = self.context.commit(write)
         if revision is not None:
             log.info("revision %d: %d pillars, %d rack rows, %d bins from %d landmarks (%d new frames)", revision.id,
-                     len(features["pillar"]), len(features["rack_row"]), len(features["bin"]), len(table),
+                     len(features["pillar"]), len(features["rack_row"]), len(features["bin"]), len(reliable.means),
                      self._frames_since_store)
             self._frames_since_store = 0

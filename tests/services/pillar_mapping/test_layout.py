@@ -5,6 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
+from services.cli import main
 from services.pillar_mapping import (
     PillarMappingError,
     fit_racks,
@@ -79,3 +80,15 @@ def test_read_landmarks_csv_names_the_bad_line(tmp_path: Path) -> None:
     path.write_text("x,y,sxx,sxy,syy\n1,2,3\n")
     with pytest.raises(PillarMappingError, match=r"p.csv:2"):
         read_landmarks_csv(path)
+
+
+def test_racks_fit_puts_bins_on_the_levels_given(tmp_path: Path) -> None:
+    table, _ = noisy_landmarks(rack_region(aisles=1, bays=4), np.random.default_rng(3), missing_fraction=0.0)
+    csv = tmp_path / "pillars.csv"
+    write_landmarks_csv(csv, table[:, :2], table[:, [2, 3, 3, 4]].reshape(-1, 2, 2))
+
+    assert main(["racks", "fit", str(csv), "--out", str(tmp_path / "out"), "--levels", "0,1.6,3.2"]) == 0
+    bins = [f["properties"] for f in json.loads((tmp_path / "out" / "racks.geojson").read_text())["features"]
+            if f["properties"]["kind"] == "bin"]
+    assert {(b["level"], b["z_m"], b["id"][-3:]) for b in bins} == {(0, 0.0, "-01"), (1, 1.6, "-02"), (2, 3.2, "-03")}
+    assert main(["racks", "fit", str(csv), "--out", str(tmp_path / "out"), "--levels", "0,3.2,1.6"]) == 1

@@ -3,6 +3,7 @@ import pytest
 
 from services.pillar_mapping import BearingOnlyMapper, PillarMappingError, triangulate_bearings
 from services.pillar_mapping.evaluation import drive_aisles, map_rmse, simulated_bearings
+from services.pillar_mapping.mapper import bearing_model
 from services.pillar_mapping.synthetic import rack_region
 
 
@@ -49,3 +50,40 @@ def test_mapper_stays_empty_when_bearings_never_agree() -> None:
 def test_mapper_rejects_a_non_finite_pose() -> None:
     with pytest.raises(PillarMappingError, match="sensor pose"):
         BearingOnlyMapper().observe((np.nan, 0.0, 0.0), [0.1], [0.01])
+
+
+def test_bearing_model_jacobians_match_finite_differences() -> None:
+    # the vehicle Jacobian is what estimating the vehicle as well (SLAM) needs; the landmark one the EKF uses
+    pose = np.array([1.0, -2.0, 0.3])
+    landmarks = np.array([[4.0, 1.0], [-3.0, 0.5], [1.5, -6.0]])
+    predicted, h_vehicle, h_landmark = bearing_model(pose, landmarks)
+    step = 1e-6
+    for k in range(3):
+        moved = pose + step * np.eye(3)[k]
+        assert np.allclose((bearing_model(moved, landmarks)[0] - predicted) / step, h_vehicle[:, k], atol=1e-5)
+    for k in range(2):
+        moved = landmarks + step * np.eye(2)[k]
+        assert np.allclose((bearing_model(pose, moved)[0] - predicted) / step, h_landmark[:, k], atol=1e-5)
+
+
+def test_mapping_with_a_slightly_wrong_localisation_stays_within_five_centimetres() -> None:
+    rng = np.random.default_rng(12)
+    layout = rack_region(aisles=2, bays=8)
+    sigma = np.deg2rad(0.05)
+    pose_sigma = np.array([0.01, 0.01, np.deg2rad(0.2)])
+    mapper = BearingOnlyMapper()
+    error = rng.normal(0.0, 1.0, 3) * pose_sigma
+    for pose in drive_aisles(layout, 0.25):
+        error = 0.9 * error + np.sqrt(1 - 0.9**2) * rng.normal(0.0, 1.0, 3) * pose_sigma  # slowly varying
+        bearings = simulated_bearings(layout.uprights, pose, rng, sigma_rad=sigma)
+        mapper.observe(tuple(np.asarray(pose) + error), bearings, np.full(bearings.size, sigma),
+                       pose_cov=np.diag(pose_sigma**2))
+    rmse, matched, extra = map_rmse(mapper.reliable_landmarks().means, layout.uprights)
+    assert matched >= 0.95 * len(layout.uprights)
+    assert extra == 0
+    assert rmse <= 0.05
+
+
+def test_mapper_rejects_a_malformed_pose_covariance() -> None:
+    with pytest.raises(PillarMappingError, match="pose_cov"):
+        BearingOnlyMapper().observe((0.0, 0.0, 0.0), [0.1], [0.01], pose_cov=-np.eye(3))

@@ -47,7 +47,9 @@ running_stage = partial(stages.running_stage, "pillar_mapping", PillarStage)
 
 
 def _settings(zenoh_listen: ZenohSettings, url: str) -> Settings:
-    return Settings(database_url=url, zenoh=zenoh_listen, pillars={"store_period_s": 0.5})
+    # the site's rack profile: SMALL_HALL's two levels, 1.5 m apart
+    return Settings(database_url=url, zenoh=zenoh_listen,
+                    pillars={"store_period_s": 0.5, "rack_profiles": [{"levels_m": [0.0, 1.5]}]})
 
 
 def _publish_survey(zenoh_listen: ZenohSettings, world: World) -> None:
@@ -60,11 +62,11 @@ def _publish_survey(zenoh_listen: ZenohSettings, world: World) -> None:
                      rate=1000.0)
 
 
-def _truth_bin_centres(world: World) -> np.ndarray:
-    truth = ground_truth_features(world)
-    rings = [np.asarray(f["geometry"]["coordinates"][0][:-1], dtype=np.float64)
-             for f in truth["features"] if f["properties"]["kind"] == "bin"]
-    return np.unique(np.round([ring.mean(axis=0) for ring in rings], 3), axis=0)  # one per level
+def _truth_bins(world: World) -> tuple[np.ndarray, list[str]]:
+    """Centres (B, 2) and ids of the simulator's bins, every level."""
+    truth = [f for f in ground_truth_features(world)["features"] if f["properties"]["kind"] == "bin"]
+    centres = [np.asarray(f["geometry"]["coordinates"][0][:-1], dtype=np.float64).mean(axis=0) for f in truth]
+    return np.array(centres), [f["properties"]["id"] for f in truth]
 
 
 def _bin_centres(collection: dict[str, Any]) -> np.ndarray:
@@ -85,11 +87,16 @@ def test_simulated_fisheye_survey_yields_the_true_bins_through_the_api(zenoh_lis
     response = client.get(f"/v1/maps/{settings.map_name}/features", params={"kind": "bin"})
     assert response.status_code == 200
     found = _bin_centres(response.json())
-    truth = _truth_bin_centres(world)
-    to_truth, _ = cKDTree(truth).query(found)
+    truth, truth_ids = _truth_bins(world)
+    to_truth, nearest = cKDTree(truth).query(found)
     assert np.all(to_truth <= 0.1), f"bins off the true ones by {to_truth.round(3).tolist()} m"
     to_found, _ = cKDTree(found).query(truth)
     assert np.mean(to_found <= 0.1) >= 0.75
+    properties = [f["properties"] for f in response.json()["features"]]
+    assert {p["level"] for p in properties} == {0, 1}
+    assert all(p["id"] == f"{p['id'][:-3]}-{p['level'] + 1:02d}" for p in properties)
+    same_cell = [truth_ids[k][:-3] == p["id"][:-3] for k, p in zip(nearest, properties, strict=True)]
+    assert all(same_cell), "a bin's aisle-bay differs from the simulator's numbering at its place"
     worker = {w.name: w for w in store.workers()}["pillar_mapping"]
     assert worker.counters["pillar_mapping.frames"] > 20
     assert worker.counters.get("pillar_mapping.bad_frames", 0) == 0
