@@ -21,8 +21,14 @@ from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
-from services.grid_decomposition.regions import RegionInfo, face_regions, link_components, region_topology
-from services.grid_decomposition.segments import fill_from_neighbours, segment_image
+from services.grid_decomposition.regions import (
+    RegionInfo,
+    face_regions,
+    link_components,
+    region_topology,
+    warehouse_floors,
+)
+from services.grid_decomposition.segments import fill_from_neighbours, merge_small_segments, segment_image
 from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
@@ -212,6 +218,7 @@ def decompose(
     min_region_area_m2: float = 0.3,
     structure_min_area_m2: float = 0.5,
     neck_half_width_m: float = 0.5,
+    room_min_area_m2: float = 1.5,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -245,6 +252,9 @@ def decompose(
     neck_half_width_m : float
         A region whose free space falls apart when shrunk by this half-width is split into the
         rooms its necks join (:func:`split_at_necks`); 0 turns it off.
+    room_min_area_m2 : float
+        Regions off warehouse floors smaller than this (door slivers, strips between close lines)
+        join the neighbour they share the longest border with.
     structure_min_area_m2 : float
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
@@ -322,6 +332,12 @@ def decompose(
     )
     if neck_half_width_m > 0:
         segments = split_at_necks(segments, free, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
+    floor_px = warehouse_floors(component, cog.face_free_px, face_labels.label)[component[sub.face_image]]
+    segments = merge_small_segments(
+        segments,
+        min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),
+        fixed=_segment_share(segments, floor_px) > 0.5,
+    )
     regions, labels = _region_records(segments, sub, region_of_face, face_labels, resolution_m, origin_xy_m)
     face_region_final = _final_face_regions(segments, sub)
     topology = region_topology(sub, cog, face_region_final, regions)
@@ -339,6 +355,15 @@ def decompose(
         resolution_m=resolution_m,
         origin_xy_m=origin_xy_m,
     )
+
+
+def _segment_share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
+    """(N + 1,) share of each segment's pixels inside ``mask``."""
+    n = int(segments.max()) + 1
+    area = np.bincount(segments.ravel(), minlength=n)
+    inside = np.bincount(segments.ravel(), weights=mask.ravel(), minlength=n)
+    share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
+    return share
 
 
 def _final_face_regions(segments: npt.NDArray[np.int32], sub: Subdivision) -> npt.NDArray[np.int64]:

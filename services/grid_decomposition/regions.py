@@ -25,6 +25,36 @@ def link_components(n_nodes: int, links: npt.NDArray[np.int64], keep: npt.NDArra
     return np.where(keep, dense + 1, 0).astype(np.int64)
 
 
+def warehouse_floors(
+    component: npt.NDArray[np.int64],
+    face_free_px: npt.NDArray[np.int64],
+    face_label: npt.NDArray[np.int64],
+    *,
+    min_storage_share: float = 0.2,
+) -> npt.NDArray[np.bool_]:
+    """Per component id: storage faces make up at least ``min_storage_share`` of its free area.
+
+    Parameters
+    ----------
+    component : (F + 1,) int64
+        Component id per face (0 = none), from :func:`link_components`.
+    face_free_px : (F + 1,) int64
+    face_label : (F + 1,) int64
+        :class:`Label` value per face.
+
+    Returns
+    -------
+    (C,) bool
+        Indexed by component id; False for 0.
+    """
+    n_comp = int(component.max()) + 1
+    area = np.bincount(component, weights=face_free_px, minlength=n_comp)
+    stored = np.bincount(component, weights=face_free_px * (face_label == Label.STORAGE.value), minlength=n_comp)
+    floor: npt.NDArray[np.bool_] = stored >= min_storage_share * np.maximum(area, 1)
+    floor[0] = False
+    return floor
+
+
 def face_regions(
     sub: Subdivision,
     cogency: EdgeCogency,
@@ -42,12 +72,7 @@ def face_regions(
     aisles (adjacent faces of one drivable label together).
     """
     n = sub.n_faces + 1
-    n_comp = int(component.max()) + 1
-    area = np.bincount(component, weights=face_free_px, minlength=n_comp)
-    stored = np.bincount(component, weights=face_free_px * (face_label == Label.STORAGE.value), minlength=n_comp)
-    has_storage = stored >= min_storage_share * np.maximum(area, 1)
-    has_storage[0] = False
-    split = has_storage[component]
+    split = warehouse_floors(component, face_free_px, face_label, min_storage_share=min_storage_share)[component]
     a, b = sub.edge_faces[:, 0], sub.edge_faces[:, 1]
     same = (component[a] == component[b]) & ~cogency.cogent & (component[a] > 0)
     join = same & (~split[a] | ((face_label[a] == face_label[b]) & (face_label[a] != Label.STORAGE.value)))

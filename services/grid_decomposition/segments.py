@@ -78,3 +78,95 @@ def segment_image(
     if small.any():
         out = fill_from_neighbours(out, small)
     return out
+
+
+def segment_adjacency(segments: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Touching pairs of segments and the length of their shared border.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment id per pixel, 0 = none.
+
+    Returns
+    -------
+    pairs : (K, 2) int64
+        Segment ids ``a < b`` that are 4-neighbours somewhere.
+    border_px : (K,) int64
+        Number of 4-neighbour pixel pairs across their border.
+    """
+    seg = np.asarray(segments, dtype=np.int64)
+    a = np.concatenate([seg[:, :-1].ravel(), seg[:-1, :].ravel()])
+    b = np.concatenate([seg[:, 1:].ravel(), seg[1:, :].ravel()])
+    ok = (a > 0) & (b > 0) & (a != b)
+    lo, hi = np.minimum(a[ok], b[ok]), np.maximum(a[ok], b[ok])
+    n = int(seg.max()) + 1
+    codes, counts = np.unique(lo * n + hi, return_counts=True)
+    return np.stack([codes // n, codes % n], axis=1), counts.astype(np.int64)
+
+
+def merge_small_segments(
+    segments: npt.NDArray[np.int32],
+    *,
+    min_area_px: int,
+    fixed: npt.NDArray[np.bool_] | None = None,
+) -> npt.NDArray[np.int32]:
+    """Merge every segment smaller than ``min_area_px`` into the neighbour it shares the longest border with.
+
+    Smallest first; a merged segment's borders add up, so a chain of slivers ends in the room
+    they line. Segments without a neighbour (an enclosed closet) stay.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment id per pixel, 0 = none.
+    min_area_px : int
+    fixed : (N + 1,) bool, optional
+        Per segment id: never merged away (it may still absorb small neighbours).
+
+    Returns
+    -------
+    (H, W) int32
+        Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max()) + 1
+    area = np.bincount(seg.ravel(), minlength=n).astype(np.int64)
+    small = (area < min_area_px) & (area > 0)
+    small[0] = False
+    if fixed is not None:
+        small &= ~fixed[:n]
+    if not small.any():
+        return _renumber(seg)
+    pairs, border = segment_adjacency(seg)
+    neighbours: list[dict[int, int]] = [{} for _ in range(n)]
+    for (p, q), c in zip(pairs.tolist(), border.tolist(), strict=True):
+        neighbours[p][q] = c
+        neighbours[q][p] = c
+    parent = np.arange(n)
+    for s in sorted(np.flatnonzero(small).tolist(), key=lambda i: area[i]):
+        if area[s] >= min_area_px or not neighbours[s]:
+            continue
+        t = max(neighbours[s], key=lambda k: neighbours[s][k])
+        parent[s] = t
+        area[t] += area[s]
+        for k, c in neighbours[s].items():
+            del neighbours[k][s]
+            if k != t:
+                neighbours[t][k] = neighbours[t].get(k, 0) + c
+                neighbours[k][t] = neighbours[k].get(t, 0) + c
+        neighbours[s] = {}
+    root = parent.copy()
+    while True:
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            break
+        root = nxt
+    return _renumber(root[seg].astype(np.int32))
+
+
+def _renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """Ids 1..N in order of first id, 0 kept."""
+    _, inverse = np.unique(seg, return_inverse=True)
+    dense = inverse.reshape(seg.shape).astype(np.int32)
+    return np.where(seg > 0, dense + (0 if seg.min() == 0 else 1), 0).astype(np.int32)
