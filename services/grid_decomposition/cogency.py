@@ -80,25 +80,59 @@ def close_doorways(
     return wall, ends[:-1][small].astype(np.int64), starts[1:][small].astype(np.int64)
 
 
-def _is_doorway(
-    near: npt.NDArray[np.bool_],
-    jambs: npt.NDArray[np.float64],
-    normal: tuple[float, float],
-    depth_px: float,
-) -> npt.NDArray[np.bool_]:
-    """Gaps whose jambs do not continue along the normal on one side (a mouth of a passage).
+def _centre_runs(
+    blocked: npt.NDArray[np.bool_],
+    points: npt.NDArray[np.float64],
+    direction: npt.NDArray[np.float64],
+    reach_px: int,
+) -> npt.NDArray[np.int64]:
+    """Length of the unblocked run through each point along ``direction`` (0 where the point is blocked).
 
-    ``jambs`` is (G, 2, 2): the two jamb points (x, y) of each gap. A doorway is a hole in a wall:
-    a step ``depth_px`` away from the wall, on either side, at least one jamb is in free space.
-    Between two solid blocks both jambs stay on obstacles along the passage, so it is no door.
+    ``points`` is (..., 2) (x, y); runs are counted up to ``reach_px`` each way.
     """
-    h, w = near.shape
-    door = np.ones(jambs.shape[0], dtype=bool)
+    h, w = blocked.shape
+    t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
+    pts = points[..., None, :] + t[:, None] * direction
+    x = np.rint(pts[..., 0]).astype(np.int64)
+    y = np.rint(pts[..., 1]).astype(np.int64)
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+    stop = ~inside
+    stop[inside] = blocked[y[inside], x[inside]]
+    ahead = np.concatenate([stop[..., reach_px:], np.ones(stop.shape[:-1] + (1,), dtype=bool)], axis=-1)
+    behind = np.concatenate([stop[..., reach_px::-1], np.ones(stop.shape[:-1] + (1,), dtype=bool)], axis=-1)
+    run = np.argmax(ahead, axis=-1) + np.argmax(behind, axis=-1) - 1
+    return np.maximum(run, 0).astype(np.int64)
+
+
+def _widens(
+    blocked: npt.NDArray[np.bool_],
+    gaps: npt.NDArray[np.float64],
+    direction: tuple[float, float],
+    *,
+    widening_px: float,
+    max_depth_px: int,
+    depth_step_px: int,
+) -> npt.NDArray[np.bool_]:
+    """Gaps behind which the free space widens on both sides: doorways, not passages.
+
+    ``gaps`` is (G, 2, 2): the two ends (x, y) of each gap on its line. On each side of the line,
+    at depths ``depth_step_px, 2 * depth_step_px, ... <= max_depth_px`` (past the wall's
+    thickness), the free run through the gap's middle parallel to the line is measured; a
+    doorway opens into space at least ``widening_px`` wider than itself on both sides. A
+    corridor crossing a line, or a passage between blocks, stays as narrow as the gap on at
+    least one side.
+    """
+    u = np.asarray(direction, dtype=np.float64)
+    normal = np.array([-u[1], u[0]])
+    mid = gaps.mean(axis=1)
+    need = np.linalg.norm(gaps[:, 1] - gaps[:, 0], axis=1) + widening_px
+    depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
+    reach = int(math.ceil(float(need.max(initial=0.0)))) + 1
+    door = np.ones(len(gaps), dtype=bool)
     for sign in (1.0, -1.0):
-        pts = jambs + sign * depth_px * np.asarray(normal)[None, None, :]
-        x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
-        y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
-        door &= ~(near[y, x].all(axis=1))
+        points = mid[:, None, :] + sign * depths[None, :, None] * normal
+        runs = _centre_runs(blocked, points, u, reach)
+        door &= runs.max(axis=1) >= need
     return door
 
 
@@ -109,14 +143,24 @@ def wall_evidence(
     tolerance_px: int,
     min_wall_px: int,
     max_door_px: int,
-    door_depth_px: int,
+    widening_px: int,
+    max_depth_px: int,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
 
-    Along each line the occupied mask (dilated by ``tolerance_px``, so slightly crooked walls
-    still sit on their line) is read as a 1-D profile; doorway-sized gaps between wall runs
-    (:func:`close_doorways`) are closed unless both jambs continue ``door_depth_px`` along the
-    normal on the same side (then the gap is the mouth of a passage between blocks, not a door).
+    Along each line the wall mask (dilated by ``tolerance_px``, so slightly crooked walls still
+    sit on their line) is read as a 1-D profile; doorway-sized gaps between wall runs
+    (:func:`close_doorways`) are closed when the free space behind them widens by at least
+    ``widening_px`` on both sides within ``max_depth_px`` of the line (a doorway between rooms);
+    a gap that stays as narrow on one side is a corridor or a passage between blocks, left open.
+
+    Parameters
+    ----------
+    occupied : (H, W) bool
+        Walls: occupied and unknown cells without furniture.
+    groups : sequence of LineGroup
+    tolerance_px, min_wall_px, max_door_px, widening_px, max_depth_px : int
+        Pixels.
 
     Returns
     -------
@@ -145,14 +189,19 @@ def wall_evidence(
             wall[ys[on_wall], xs[on_wall]] = True
             if g0.size == 0:
                 continue
-            jambs = np.stack(
-                [np.stack([xs[g0 - 1], ys[g0 - 1]], axis=1), np.stack([xs[g1], ys[g1]], axis=1)], axis=1
+            ends = np.stack(
+                [np.stack([xs[g0], ys[g0]], axis=1), np.stack([xs[g1 - 1], ys[g1 - 1]], axis=1)], axis=1
             ).astype(np.float64)
-            normal = (-math.sin(line.angle_rad), math.cos(line.angle_rad))
-            depth = float(door_depth_px + tolerance_px)
-            for a, b in zip(
-                g0[_is_doorway(near, jambs, normal, depth)], g1[_is_doorway(near, jambs, normal, depth)], strict=True
-            ):
+            direction = (math.cos(line.angle_rad), math.sin(line.angle_rad))
+            doorway = _widens(
+                near,
+                ends,
+                direction,
+                widening_px=widening_px,
+                max_depth_px=max_depth_px + tolerance_px,
+                depth_step_px=max(1, max_depth_px // 4),
+            )
+            for a, b in zip(g0[doorway], g1[doorway], strict=True):
                 wall[ys[a:b], xs[a:b]] = True
                 door[ys[a:b], xs[a:b]] = True
     kernel = np.ones((3, 3), np.uint8)

@@ -29,6 +29,7 @@ from services.grid_decomposition.regions import (
     warehouse_floors,
 )
 from services.grid_decomposition.segments import fill_from_neighbours, merge_small_segments, segment_image
+from services.grid_decomposition.rooms import furniture
 from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
@@ -209,9 +210,10 @@ def decompose(
     n_texture_regions: int | None = None,
     n_categories: int = 8,
     label_overrides: Mapping[int, Label] | None = None,
-    door_max_width_m: float = 1.3,
+    door_max_width_m: float = 2.0,
     wall_min_length_m: float = 0.5,
-    door_depth_m: float = 0.5,
+    door_widening_m: float = 0.3,
+    door_max_depth_m: float = 1.0,
     wall_tolerance_m: float = 0.1,
     face_disparity_threshold: float = 0.5,
     edge_occupancy_threshold: float = 0.5,
@@ -241,10 +243,11 @@ def decompose(
         k of the k-means place categorisation.
     label_overrides : mapping, optional
         Place category -> :class:`Label`, replacing the automatic assignment.
-    door_max_width_m, wall_min_length_m, wall_tolerance_m : float
+    door_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
         Doorway closing along lines: gaps up to ``door_max_width_m`` between wall runs of at least
-        ``wall_min_length_m`` are closed, unless both jambs go on ``door_depth_m`` along the
-        normal (a passage between blocks); walls within ``wall_tolerance_m`` of a line are on it.
+        ``wall_min_length_m`` are closed when the free space behind them widens by
+        ``door_widening_m`` on both sides within ``door_max_depth_m`` of the line (a corridor or a
+        passage between blocks does not); walls within ``wall_tolerance_m`` of a line are on it.
     face_disparity_threshold, edge_occupancy_threshold : float
         t1, t2 of the cogency test.
     min_region_area_m2 : float
@@ -296,13 +299,16 @@ def decompose(
     ]
     logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
     sub = subdivide(used, occ.shape, domain=free)
+    clutter = furniture(obstacle, resolution_m=resolution_m)
+    walls = (occupied | ~known) & ~clutter
     wall, door = wall_evidence(
-        occupied | (~known & ~free),
+        walls,
         used,
         tolerance_px=max(1, round(wall_tolerance_m / resolution_m)),
         min_wall_px=max(1, round(wall_min_length_m / resolution_m)),
         max_door_px=max(1, round(door_max_width_m / resolution_m)),
-        door_depth_px=max(1, round(door_depth_m / resolution_m)),
+        widening_px=max(1, round(door_widening_m / resolution_m)),
+        max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
     )
     cog = edge_cogency(
         sub,
@@ -331,7 +337,10 @@ def decompose(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
     if neck_half_width_m > 0:
-        segments = split_at_necks(segments, free, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
+        room_space = free | clutter
+        spread = fill_from_neighbours(segments, room_space)
+        spread = split_at_necks(spread, room_space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
+        segments = np.where(free, spread, 0).astype(np.int32)
     floor_px = warehouse_floors(component, cog.face_free_px, face_labels.label)[component[sub.face_image]]
     segments = merge_small_segments(
         segments,
