@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
+from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
@@ -28,7 +29,7 @@ from services.grid_decomposition.regions import (
     region_topology,
     warehouse_floors,
 )
-from services.grid_decomposition.segments import fill_from_neighbours, merge_small_segments, segment_image
+from services.grid_decomposition.segments import fill_from_neighbours, merge_small_segments, segment_image, split_along
 from services.grid_decomposition.rooms import furniture
 from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -210,7 +211,7 @@ def decompose(
     n_texture_regions: int | None = None,
     n_categories: int = 8,
     label_overrides: Mapping[int, Label] | None = None,
-    door_max_width_m: float = 2.0,
+    door_max_width_m: float = 2.5,
     wall_min_length_m: float = 0.5,
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
@@ -336,12 +337,16 @@ def decompose(
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
+    room_space = free | clutter
     if neck_half_width_m > 0:
-        room_space = free | clutter
         spread = fill_from_neighbours(segments, room_space)
         spread = split_at_necks(spread, room_space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
         segments = np.where(free, spread, 0).astype(np.int32)
     floor_px = warehouse_floors(component, cog.face_free_px, face_labels.label)[component[sub.face_image]]
+    if door_max_width_m > 0 and not floor_px[free].all():
+        cuts = find_doorways(room_space & ~floor_px, resolution_m=resolution_m, max_width_m=door_max_width_m,
+                             widening_m=door_widening_m, max_depth_m=door_max_depth_m)
+        segments = split_along(segments, draw_cuts(cuts, free.shape) & ~floor_px)
     segments = merge_small_segments(
         segments,
         min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),

@@ -170,3 +170,36 @@ def _renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     _, inverse = np.unique(seg, return_inverse=True)
     dense = inverse.reshape(seg.shape).astype(np.int32)
     return np.where(seg > 0, dense + (0 if seg.min() == 0 else 1), 0).astype(np.int32)
+
+
+def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
+    """Split every segment into the 4-connected pieces it falls into once ``barrier`` pixels are taken out.
+
+    Barrier pixels then rejoin a neighbouring piece of their segment.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment id per pixel, 0 = none.
+    barrier : (H, W) bool
+        Cuts (8-connected lines separate 4-connected pieces).
+
+    Returns
+    -------
+    (H, W) int32
+        Segment ids 1..N (consecutive), 0 where ``segments`` is 0.
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    cut = np.where(barrier, 0, seg)
+    out = np.zeros_like(seg)
+    next_id = 1
+    for sid, box in enumerate(ndimage.find_objects(cut), start=1):
+        if box is None:
+            continue
+        n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=4)
+        view = out[box]
+        inside = pieces > 0
+        view[inside] = pieces[inside] + next_id - 1
+        next_id += n - 1
+    out = fill_from_neighbours(out, barrier & (seg > 0))
+    return _renumber(np.where(seg > 0, out, 0).astype(np.int32))

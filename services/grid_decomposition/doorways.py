@@ -1,0 +1,209 @@
+"""Doorways found from the free space itself, whatever the decomposition lines: narrow passages between walls."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+
+def _centre_runs(
+    blocked: npt.NDArray[np.bool_],
+    points: npt.NDArray[np.float64],
+    direction: npt.NDArray[np.float64],
+    reach_px: int,
+) -> npt.NDArray[np.int64]:
+    """Length of the unblocked run through each point along its direction (0 where the point is blocked).
+
+    Parameters
+    ----------
+    blocked : (H, W) bool
+    points : (..., 2) float64
+        (x, y) pixels.
+    direction : (..., 2) float64
+        Unit (x, y) direction per point (broadcast against ``points``).
+    reach_px : int
+        Runs are counted up to this many pixels each way.
+    """
+    h, w = blocked.shape
+    t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
+    pts = points[..., None, :] + t[:, None] * direction[..., None, :]
+    x = np.rint(pts[..., 0]).astype(np.int64)
+    y = np.rint(pts[..., 1]).astype(np.int64)
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+    stop = ~inside
+    stop[inside] = blocked[y[inside], x[inside]]
+    end = np.ones(stop.shape[:-1] + (1,), dtype=bool)
+    ahead = np.concatenate([stop[..., reach_px:], end], axis=-1)
+    behind = np.concatenate([stop[..., reach_px::-1], end], axis=-1)
+    run = np.argmax(ahead, axis=-1) + np.argmax(behind, axis=-1) - 1
+    return np.maximum(run, 0).astype(np.int64)
+
+
+def widens(
+    blocked: npt.NDArray[np.bool_],
+    ends: npt.NDArray[np.float64],
+    *,
+    widening_px: float,
+    max_depth_px: int,
+    depth_step_px: int,
+) -> npt.NDArray[np.bool_]:
+    """Gaps behind which the free space widens on both sides: doorways, not corridors or passages.
+
+    On each side of a gap, at depths ``depth_step_px, 2 * depth_step_px, ... <= max_depth_px``
+    along its normal (past the thickness of the wall it pierces), the free run through the gap's
+    middle parallel to the gap is measured. A doorway opens on both sides into space at least
+    ``widening_px`` wider than itself; a corridor crossing the gap, or a passage between blocks,
+    stays as narrow on one side.
+
+    Parameters
+    ----------
+    blocked : (H, W) bool
+        Walls.
+    ends : (G, 2, 2) float64
+        The two ends (x, y) of each gap, pixels.
+
+    Returns
+    -------
+    (G,) bool
+    """
+    if len(ends) == 0:
+        return np.zeros(0, dtype=bool)
+    span = ends[:, 1] - ends[:, 0]
+    width = np.linalg.norm(span, axis=1)
+    u = span / np.maximum(width, 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    mid = ends.mean(axis=1)
+    need = width + widening_px
+    depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
+    reach = int(math.ceil(float(need.max()))) + 1
+    door = np.ones(len(ends), dtype=bool)
+    for sign in (1.0, -1.0):
+        reachable = _free_depth(blocked, mid, sign * normal, max_depth_px)
+        points = mid[:, None, :] + sign * depths[None, :, None] * normal[:, None, :]
+        runs = _centre_runs(blocked, points, np.broadcast_to(u[:, None, :], points.shape), reach)
+        runs[depths[None, :] > reachable[:, None]] = 0
+        door &= runs.max(axis=1) >= need
+    return door
+
+
+def _free_depth(
+    blocked: npt.NDArray[np.bool_], points: npt.NDArray[np.float64], direction: npt.NDArray[np.float64], max_px: int
+) -> npt.NDArray[np.float64]:
+    """(N,) how far, in pixels, each point sees free space along its direction (up to ``max_px``)."""
+    h, w = blocked.shape
+    t = np.arange(0, max_px + 1, dtype=np.float64)
+    pts = points[:, None, :] + t[None, :, None] * direction[:, None, :]
+    x = np.rint(pts[..., 0]).astype(np.int64)
+    y = np.rint(pts[..., 1]).astype(np.int64)
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+    stop = ~inside
+    stop[inside] = blocked[y[inside], x[inside]]
+    stop = np.concatenate([stop, np.ones((len(points), 1), dtype=bool)], axis=1)
+    return np.argmax(stop, axis=1).astype(np.float64) - 1.0
+
+
+def find_doorways(
+    space: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    min_width_m: float = 0.5,
+    max_width_m: float = 2.5,
+    widening_m: float = 0.3,
+    max_depth_m: float = 1.0,
+    straightness: float = 0.9,
+    wall_run_m: float = 0.5,
+    wall_share: float = 0.9,
+) -> npt.NDArray[np.float64]:
+    """Doorways of a floor: cuts across the narrow passages between walls, independent of any line.
+
+    Every pair of neighbouring pixels whose nearest walls lie on opposite sides (their feature
+    points are about as far apart as the two clearances add up to: the medial axis between two
+    facing walls or wall ends) proposes the cut between those two wall points. A cut
+    ``min_width_m``..``max_width_m`` long is a doorway when the free space widens behind it on
+    both sides (:func:`widens`); along a corridor or between a room's parallel walls it does not.
+
+    Parameters
+    ----------
+    space : (H, W) bool
+        Free space with furniture counted free; everything else is wall.
+    resolution_m : float
+        Metres per pixel.
+    wall_run_m, wall_share : float
+        A doorway continues a wall: beyond at least one of its ends, ``wall_share`` of the next
+        ``wall_run_m`` along the cut is wall (the door's own wall; a cut from a wall end across
+        a room to the facing wall leaves that wall at an angle).
+    straightness : float
+        Minimum ratio of the feature points' distance to the sum of the two clearances (1 for
+        walls facing each other straight across; a room corner's bisector is about 0.7).
+
+    Returns
+    -------
+    (K, 2, 2) float64
+        The two wall points (x, y) pixels of each doorway cut.
+    """
+    if space.all() or not space.any():
+        return np.zeros((0, 2, 2))
+    dist, (fy, fx) = ndimage.distance_transform_edt(space, return_indices=True)
+    lo, hi = min_width_m / resolution_m, max_width_m / resolution_m
+    cuts: list[npt.NDArray[np.float64]] = []
+    for dy, dx in ((0, 1), (1, 0)):
+        h, w = space.shape
+        a = (slice(0, h - dy), slice(0, w - dx))
+        b = (slice(dy, h), slice(dx, w))
+        both = space[a] & space[b]
+        sep = np.hypot(fx[a] - fx[b], fy[a] - fy[b])
+        ok = both & (sep >= lo) & (sep <= hi) & (sep >= straightness * (dist[a] + dist[b]))
+        rows, cols = np.nonzero(ok)
+        if rows.size == 0:
+            continue
+        p = np.stack([fx[a][rows, cols], fy[a][rows, cols]], axis=1)
+        q = np.stack([fx[b][rows, cols], fy[b][rows, cols]], axis=1)
+        cuts.append(np.stack([p, q], axis=1).astype(np.float64))
+    if not cuts:
+        return np.zeros((0, 2, 2))
+    pairs = np.concatenate(cuts)
+    swap = (pairs[:, 0, 0] > pairs[:, 1, 0]) | ((pairs[:, 0, 0] == pairs[:, 1, 0]) & (pairs[:, 0, 1] > pairs[:, 1, 1]))
+    pairs[swap] = pairs[swap, ::-1]
+    pairs = np.unique(pairs.reshape(-1, 4), axis=0).reshape(-1, 2, 2)
+    walls = ~space
+    keep = _extends_a_wall(walls, pairs, round(wall_run_m / resolution_m), wall_share)
+    pairs = pairs[keep]
+    keep = widens(
+        walls,
+        pairs,
+        widening_px=widening_m / resolution_m,
+        max_depth_px=max(1, round(max_depth_m / resolution_m)),
+        depth_step_px=max(1, round(max_depth_m / resolution_m / 4)),
+    )
+    return pairs[keep]
+
+
+def _extends_a_wall(
+    walls: npt.NDArray[np.bool_], cuts: npt.NDArray[np.float64], run_px: int, share: float
+) -> npt.NDArray[np.bool_]:
+    """(K,) bool: beyond one end of the cut, along the cut, the wall goes on for ``share`` of ``run_px``."""
+    if len(cuts) == 0 or run_px < 1:
+        return np.ones(len(cuts), dtype=bool)
+    h, w = walls.shape
+    span = cuts[:, 1] - cuts[:, 0]
+    u = span / np.maximum(np.linalg.norm(span, axis=1), 1e-9)[:, None]
+    k = np.arange(1, run_px + 1, dtype=np.float64)
+    out = np.zeros(len(cuts), dtype=bool)
+    for end, sign in ((0, -1.0), (1, 1.0)):
+        pts = cuts[:, end, None, :] + sign * k[None, :, None] * u[:, None, :]
+        x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+        y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+        out |= walls[y, x].mean(axis=1) >= share
+    return out
+
+
+def draw_cuts(cuts: npt.NDArray[np.float64], shape: tuple[int, int]) -> npt.NDArray[np.bool_]:
+    """Raster of the cuts (1 px, 8-connected, so they separate 4-connected free space)."""
+    canvas = np.zeros(shape, dtype=np.uint8)
+    for (x0, y0), (x1, y1) in cuts:
+        cv2.line(canvas, (round(x0), round(y0)), (round(x1), round(y1)), 1, 1, cv2.LINE_8)
+    return canvas.astype(bool)
