@@ -29,7 +29,13 @@ from services.grid_decomposition.regions import (
     region_topology,
     warehouse_floors,
 )
-from services.grid_decomposition.segments import fill_from_neighbours, merge_small_segments, segment_image, split_along
+from services.grid_decomposition.segments import (
+    fill_from_neighbours,
+    merge_open_segments,
+    merge_small_segments,
+    segment_image,
+    split_along,
+)
 from services.grid_decomposition.rooms import furniture
 from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -338,14 +344,20 @@ def decompose(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
     room_space = free | clutter
+    floor_px = warehouse_floors(component, cog.face_free_px, face_labels.label)[component[sub.face_image]]
+    segments = merge_open_segments(segments, wall | door, fixed=_segment_share(segments, floor_px) > 0.5)
     if neck_half_width_m > 0:
         spread = fill_from_neighbours(segments, room_space)
         spread = split_at_necks(spread, room_space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
         segments = np.where(free, spread, 0).astype(np.int32)
-    floor_px = warehouse_floors(component, cog.face_free_px, face_labels.label)[component[sub.face_image]]
     if door_max_width_m > 0 and not floor_px[free].all():
-        cuts = find_doorways(room_space & ~floor_px, resolution_m=resolution_m, max_width_m=door_max_width_m,
-                             widening_m=door_widening_m, max_depth_m=door_max_depth_m)
+        cuts = find_doorways(
+            room_space & ~floor_px,
+            resolution_m=resolution_m,
+            max_width_m=door_max_width_m,
+            widening_m=door_widening_m,
+            max_depth_m=door_max_depth_m,
+        )
         segments = split_along(segments, draw_cuts(cuts, free.shape) & ~floor_px)
     segments = merge_small_segments(
         segments,

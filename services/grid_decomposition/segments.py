@@ -6,6 +6,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 
 def fill_from_neighbours(
@@ -203,3 +205,49 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
         next_id += n - 1
     out = fill_from_neighbours(out, barrier & (seg > 0))
     return _renumber(np.where(seg > 0, out, 0).astype(np.int32))
+
+
+def merge_open_segments(
+    segments: npt.NDArray[np.int32],
+    closed: npt.NDArray[np.bool_],
+    *,
+    max_closed_share: float = 0.5,
+    fixed: npt.NDArray[np.bool_] | None = None,
+) -> npt.NDArray[np.int32]:
+    """Join touching segments whose shared border is mostly open (cogency between segments).
+
+    A border pixel pair is closed when either pixel is on ``closed`` (wall evidence, a closed
+    doorway, a cut). Two segments touching along a border of which at most
+    ``max_closed_share`` is closed are one region, as faces joined by a connected link are;
+    this also joins faces that no line edge links (across texture-region borders).
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment id per pixel, 0 = none.
+    closed : (H, W) bool
+    fixed : (N + 1,) bool, optional
+        Per segment id: never joined.
+
+    Returns
+    -------
+    (H, W) int32
+        Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
+    """
+    seg = np.asarray(segments, dtype=np.int64)
+    n = int(seg.max()) + 1
+    a = np.concatenate([seg[:, :-1].ravel(), seg[:-1, :].ravel()])
+    b = np.concatenate([seg[:, 1:].ravel(), seg[1:, :].ravel()])
+    shut = np.concatenate([(closed[:, :-1] | closed[:, 1:]).ravel(), (closed[:-1, :] | closed[1:, :]).ravel()])
+    ok = (a > 0) & (b > 0) & (a != b)
+    if fixed is not None:
+        ok &= ~fixed[a] & ~fixed[b]
+    lo, hi = np.minimum(a[ok], b[ok]), np.maximum(a[ok], b[ok])
+    codes, inverse = np.unique(lo * n + hi, return_inverse=True)
+    total = np.bincount(inverse, minlength=len(codes))
+    shut_count = np.bincount(inverse, weights=shut[ok], minlength=len(codes))
+    join = shut_count <= max_closed_share * total
+    pairs = np.stack([codes[join] // n, codes[join] % n], axis=1)
+    m = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, comp = connected_components(m, directed=False)
+    return _renumber(np.where(seg > 0, comp[seg] + 1, 0).astype(np.int32))
