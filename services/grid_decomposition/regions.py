@@ -31,8 +31,11 @@ def warehouse_floors(
     face_label: npt.NDArray[np.int64],
     *,
     min_storage_share: float = 0.2,
+    min_storage_faces: int = 6,
 ) -> npt.NDArray[np.bool_]:
-    """Per component id: storage faces make up at least ``min_storage_share`` of its free area.
+    """Per component id: a warehouse floor, with at least ``min_storage_faces`` storage faces making up
+    at least ``min_storage_share`` of its free area (a few storage-like faces between furniture in a
+    room do not make it one).
 
     Parameters
     ----------
@@ -50,7 +53,8 @@ def warehouse_floors(
     n_comp = int(component.max()) + 1
     area = np.bincount(component, weights=face_free_px, minlength=n_comp)
     stored = np.bincount(component, weights=face_free_px * (face_label == Label.STORAGE.value), minlength=n_comp)
-    floor: npt.NDArray[np.bool_] = stored >= min_storage_share * np.maximum(area, 1)
+    cells = np.bincount(component, weights=face_label == Label.STORAGE.value, minlength=n_comp)
+    floor: npt.NDArray[np.bool_] = (stored >= min_storage_share * np.maximum(area, 1)) & (cells >= min_storage_faces)
     floor[0] = False
     return floor
 
