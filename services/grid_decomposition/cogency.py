@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.doorways import widens
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, line_endpoints
 
 DOOR_MIN_PX = 5
@@ -80,62 +81,6 @@ def close_doorways(
     return wall, ends[:-1][small].astype(np.int64), starts[1:][small].astype(np.int64)
 
 
-def _centre_runs(
-    blocked: npt.NDArray[np.bool_],
-    points: npt.NDArray[np.float64],
-    direction: npt.NDArray[np.float64],
-    reach_px: int,
-) -> npt.NDArray[np.int64]:
-    """Length of the unblocked run through each point along ``direction`` (0 where the point is blocked).
-
-    ``points`` is (..., 2) (x, y); runs are counted up to ``reach_px`` each way.
-    """
-    h, w = blocked.shape
-    t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
-    pts = points[..., None, :] + t[:, None] * direction
-    x = np.rint(pts[..., 0]).astype(np.int64)
-    y = np.rint(pts[..., 1]).astype(np.int64)
-    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-    stop = ~inside
-    stop[inside] = blocked[y[inside], x[inside]]
-    ahead = np.concatenate([stop[..., reach_px:], np.ones(stop.shape[:-1] + (1,), dtype=bool)], axis=-1)
-    behind = np.concatenate([stop[..., reach_px::-1], np.ones(stop.shape[:-1] + (1,), dtype=bool)], axis=-1)
-    run = np.argmax(ahead, axis=-1) + np.argmax(behind, axis=-1) - 1
-    return np.maximum(run, 0).astype(np.int64)
-
-
-def _widens(
-    blocked: npt.NDArray[np.bool_],
-    gaps: npt.NDArray[np.float64],
-    direction: tuple[float, float],
-    *,
-    widening_px: float,
-    max_depth_px: int,
-    depth_step_px: int,
-) -> npt.NDArray[np.bool_]:
-    """Gaps behind which the free space widens on both sides: doorways, not passages.
-
-    ``gaps`` is (G, 2, 2): the two ends (x, y) of each gap on its line. On each side of the line,
-    at depths ``depth_step_px, 2 * depth_step_px, ... <= max_depth_px`` (past the wall's
-    thickness), the free run through the gap's middle parallel to the line is measured; a
-    doorway opens into space at least ``widening_px`` wider than itself on both sides. A
-    corridor crossing a line, or a passage between blocks, stays as narrow as the gap on at
-    least one side.
-    """
-    u = np.asarray(direction, dtype=np.float64)
-    normal = np.array([-u[1], u[0]])
-    mid = gaps.mean(axis=1)
-    need = np.linalg.norm(gaps[:, 1] - gaps[:, 0], axis=1) + widening_px
-    depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
-    reach = int(math.ceil(float(need.max(initial=0.0)))) + 1
-    door = np.ones(len(gaps), dtype=bool)
-    for sign in (1.0, -1.0):
-        points = mid[:, None, :] + sign * depths[None, :, None] * normal
-        runs = _centre_runs(blocked, points, u, reach)
-        door &= runs.max(axis=1) >= need
-    return door
-
-
 def wall_evidence(
     occupied: npt.NDArray[np.bool_],
     groups: Sequence[LineGroup],
@@ -192,11 +137,9 @@ def wall_evidence(
             ends = np.stack(
                 [np.stack([xs[g0], ys[g0]], axis=1), np.stack([xs[g1 - 1], ys[g1 - 1]], axis=1)], axis=1
             ).astype(np.float64)
-            direction = (math.cos(line.angle_rad), math.sin(line.angle_rad))
-            doorway = _widens(
+            doorway = widens(
                 near,
                 ends,
-                direction,
                 widening_px=widening_px,
                 max_depth_px=max_depth_px + tolerance_px,
                 depth_step_px=max(1, max_depth_px // 4),
