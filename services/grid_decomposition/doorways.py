@@ -117,6 +117,9 @@ def find_doorways(
     straightness: float = 0.9,
     wall_run_m: float = 0.5,
     wall_share: float = 0.9,
+    max_wall_thickness_m: float = 0.6,
+    neck_reach_m: float = 0.5,
+    neck_tolerance_m: float = 0.05,
 ) -> npt.NDArray[np.float64]:
     """Doorways of a floor: cuts across the narrow passages between walls, independent of any line.
 
@@ -136,6 +139,13 @@ def find_doorways(
         A doorway continues a wall: beyond at least one of its ends, ``wall_share`` of the next
         ``wall_run_m`` along the cut is wall (the door's own wall; a cut from a wall end across
         a room to the facing wall leaves that wall at an angle).
+    max_wall_thickness_m : float
+        ... and that wall is at most this thick across the cut (a cut from the corner of a
+        cabinet or block across a corridor continues no wall).
+    neck_reach_m, neck_tolerance_m : float
+        A doorway is a neck: up to ``neck_reach_m`` ahead and behind it (along its normal) the
+        clearance does not drop more than ``neck_tolerance_m`` below its own (a cut across a
+        corridor that narrows on one side, or across a bend, is no neck).
     straightness : float
         Minimum ratio of the feature points' distance to the sum of the two clearances (1 for
         walls facing each other straight across; a room corner's bisector is about 0.7).
@@ -170,7 +180,10 @@ def find_doorways(
     pairs[swap] = pairs[swap, ::-1]
     pairs = np.unique(pairs.reshape(-1, 4), axis=0).reshape(-1, 2, 2)
     walls = ~space
-    keep = _extends_a_wall(walls, pairs, round(wall_run_m / resolution_m), wall_share)
+    pairs = pairs[_is_neck(dist, pairs, round(neck_reach_m / resolution_m), neck_tolerance_m / resolution_m)]
+    keep = _extends_a_wall(
+        walls, pairs, round(wall_run_m / resolution_m), wall_share, round(max_wall_thickness_m / resolution_m)
+    )
     pairs = pairs[keep]
     keep = widens(
         walls,
@@ -182,22 +195,49 @@ def find_doorways(
     return pairs[keep]
 
 
-def _extends_a_wall(
-    walls: npt.NDArray[np.bool_], cuts: npt.NDArray[np.float64], run_px: int, share: float
+def _is_neck(
+    dist: npt.NDArray[np.float64], cuts: npt.NDArray[np.float64], reach_px: int, tolerance_px: float
 ) -> npt.NDArray[np.bool_]:
-    """(K,) bool: beyond one end of the cut, along the cut, the wall goes on for ``share`` of ``run_px``."""
+    """(K,) bool: the clearance at each cut's middle is the least along its normal, within ``reach_px``."""
+    h, w = dist.shape
+    span = cuts[:, 1] - cuts[:, 0]
+    u = span / np.maximum(np.linalg.norm(span, axis=1), 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    steps = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
+    pts = cuts.mean(axis=1)[:, None, :] + steps[None, :, None] * normal[:, None, :]
+    x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+    y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+    clearance = dist[y, x]
+    out: npt.NDArray[np.bool_] = clearance.min(axis=1) >= clearance[:, reach_px] - tolerance_px
+    return out
+
+
+def _extends_a_wall(
+    walls: npt.NDArray[np.bool_], cuts: npt.NDArray[np.float64], run_px: int, share: float, max_thickness_px: int
+) -> npt.NDArray[np.bool_]:
+    """(K,) bool: beyond one end of the cut, along it, a thin wall goes on.
+
+    ``share`` of the next ``run_px`` pixels along the cut are wall, and across the cut that wall
+    is at most ``max_thickness_px`` thick somewhere (a wall, not a cabinet or a block; a wall
+    meeting another one is thick only where they meet).
+    """
     if len(cuts) == 0 or run_px < 1:
         return np.ones(len(cuts), dtype=bool)
     h, w = walls.shape
     span = cuts[:, 1] - cuts[:, 0]
     u = span / np.maximum(np.linalg.norm(span, axis=1), 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
     k = np.arange(1, run_px + 1, dtype=np.float64)
     out = np.zeros(len(cuts), dtype=bool)
     for end, sign in ((0, -1.0), (1, 1.0)):
         pts = cuts[:, end, None, :] + sign * k[None, :, None] * u[:, None, :]
         x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
         y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
-        out |= walls[y, x].mean(axis=1) >= share
+        on_wall = walls[y, x].mean(axis=1) >= share
+        along = cuts[:, end, None, :] + sign * np.array([0.2, 0.35, 0.5])[None, :, None] * run_px * u[:, None, :]
+        across = np.broadcast_to(normal[:, None, :], along.shape)
+        thickness = _centre_runs(~walls, along, across, max_thickness_px + 1).min(axis=1)
+        out |= on_wall & (thickness <= max_thickness_px)
     return out
 
 
