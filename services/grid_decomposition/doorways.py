@@ -157,6 +157,41 @@ def find_doorways(
     """
     if space.all() or not space.any():
         return np.zeros((0, 2, 2))
+    rows, cols = np.nonzero(space)
+    r0, c0 = max(int(rows.min()) - 1, 0), max(int(cols.min()) - 1, 0)
+    box = space[r0 : int(rows.max()) + 2, c0 : int(cols.max()) + 2]
+    return _find_doorways(
+        box,
+        resolution_m=resolution_m,
+        min_width_m=min_width_m,
+        max_width_m=max_width_m,
+        widening_m=widening_m,
+        max_depth_m=max_depth_m,
+        straightness=straightness,
+        wall_run_m=wall_run_m,
+        wall_share=wall_share,
+        max_wall_thickness_m=max_wall_thickness_m,
+        neck_reach_m=neck_reach_m,
+        neck_tolerance_m=neck_tolerance_m,
+    ) + np.array([c0, r0], dtype=np.float64)
+
+
+def _find_doorways(
+    space: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    min_width_m: float,
+    max_width_m: float,
+    widening_m: float,
+    max_depth_m: float,
+    straightness: float,
+    wall_run_m: float,
+    wall_share: float,
+    max_wall_thickness_m: float,
+    neck_reach_m: float,
+    neck_tolerance_m: float,
+) -> npt.NDArray[np.float64]:
+    """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
     dist, (fy, fx) = ndimage.distance_transform_edt(space, return_indices=True)
     lo, hi = min_width_m / resolution_m, max_width_m / resolution_m
     cuts: list[npt.NDArray[np.float64]] = []

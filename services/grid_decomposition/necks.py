@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.segments import fill_from_neighbours
+from services.grid_decomposition.segments import renumber, fill_from_neighbours
 
 
 def split_at_necks(
@@ -55,7 +55,7 @@ def split_at_necks(
     split = cores_per_seg >= 2
     split[0] = False
     if not split.any():
-        return _renumber(seg)
+        return renumber(seg)
     in_split = split[seg]
     marker = np.where(in_split & big[parts], parts + n_seg, 0).astype(np.int32)
     grown = marker
@@ -64,10 +64,4 @@ def split_at_necks(
         if not np.any(in_split & (grown == 0)):
             break
     out = np.where(in_split & (grown > 0), grown, seg)
-    return _renumber(out)
-
-
-def _renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
-    _, inverse = np.unique(seg, return_inverse=True)
-    dense = inverse.reshape(seg.shape).astype(np.int32)
-    return np.where(seg > 0, dense + (0 if seg.min() == 0 else 1), 0).astype(np.int32)
+    return renumber(out)

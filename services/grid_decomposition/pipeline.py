@@ -14,11 +14,9 @@ import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
-from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
@@ -29,14 +27,8 @@ from services.grid_decomposition.regions import (
     region_topology,
     warehouse_floors,
 )
-from services.grid_decomposition.segments import (
-    fill_from_neighbours,
-    merge_open_segments,
-    merge_small_segments,
-    segment_image,
-    split_along,
-)
-from services.grid_decomposition.rooms import furniture
+from services.grid_decomposition.segments import fill_from_neighbours, segment_image
+from services.grid_decomposition.rooms import furniture, segment_rooms
 from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
@@ -343,28 +335,22 @@ def decompose(
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
-    room_space = free | clutter
     floor_px = warehouse_floors(component, cog.face_free_px, face_labels.label)[component[sub.face_image]]
-    segments = merge_open_segments(segments, wall | door, fixed=_segment_share(segments, floor_px) > 0.5)
-    if neck_half_width_m > 0:
-        spread = fill_from_neighbours(segments, room_space)
-        spread = split_at_necks(spread, room_space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
-        segments = np.where(free, spread, 0).astype(np.int32)
-    if door_max_width_m > 0 and not floor_px[free].all():
-        cuts = find_doorways(
-            room_space & ~floor_px,
-            resolution_m=resolution_m,
-            max_width_m=door_max_width_m,
-            widening_m=door_widening_m,
-            max_depth_m=door_max_depth_m,
-        )
-        segments = split_along(segments, draw_cuts(cuts, free.shape) & ~floor_px)
-    segments = merge_small_segments(
+    segments = segment_rooms(
         segments,
-        min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),
-        fixed=_segment_share(segments, floor_px) > 0.5,
+        free,
+        clutter,
+        floor_px,
+        wall | door,
+        resolution_m=resolution_m,
+        door_max_width_m=door_max_width_m,
+        door_widening_m=door_widening_m,
+        door_max_depth_m=door_max_depth_m,
+        room_min_area_m2=room_min_area_m2,
+        neck_half_width_m=neck_half_width_m,
     )
     regions, labels = _region_records(segments, sub, region_of_face, face_labels, resolution_m, origin_xy_m)
+    labels = np.where(free, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(segments, sub)
     topology = region_topology(sub, cog, face_region_final, regions)
     return Decomposition(
@@ -381,15 +367,6 @@ def decompose(
         resolution_m=resolution_m,
         origin_xy_m=origin_xy_m,
     )
-
-
-def _segment_share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
-    """(N + 1,) share of each segment's pixels inside ``mask``."""
-    n = int(segments.max()) + 1
-    area = np.bincount(segments.ravel(), minlength=n)
-    inside = np.bincount(segments.ravel(), weights=mask.ravel(), minlength=n)
-    share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
-    return share
 
 
 def _final_face_regions(segments: npt.NDArray[np.int32], sub: Subdivision) -> npt.NDArray[np.int64]:

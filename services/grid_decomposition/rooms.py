@@ -1,10 +1,19 @@
-"""Room structure: walls without furniture, for doorways and necks."""
+"""Rooms: furniture told from walls, face regions joined, cut at doorways and cleaned."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import numpy.typing as npt
+
+from services.grid_decomposition.doorways import draw_cuts, find_doorways
+from services.grid_decomposition.necks import split_at_necks
+from services.grid_decomposition.segments import (
+    fill_from_neighbours,
+    merge_open_segments,
+    merge_small_segments,
+    split_along,
+)
 
 
 def furniture(
@@ -44,3 +53,74 @@ def furniture(
     keep = inner & small
     keep[0] = False
     return np.asarray(keep[parts], dtype=bool)
+
+
+def segment_rooms(
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    clutter: npt.NDArray[np.bool_],
+    floor: npt.NDArray[np.bool_],
+    closed: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    door_max_width_m: float = 2.5,
+    door_widening_m: float = 0.3,
+    door_max_depth_m: float = 1.0,
+    room_min_area_m2: float = 1.5,
+    neck_half_width_m: float = 0.0,
+) -> npt.NDArray[np.int32]:
+    """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
+
+    Segments on warehouse floors (``floor``) are left as they are.
+
+    1. Touching segments whose shared border is mostly open (not on ``closed``: wall evidence
+       and doorways closed along lines) are one room (:func:`merge_open_segments`).
+    2. Furniture (``clutter``) takes the room around it: a room's area is its floor plan.
+    3. Doorways found from the free space itself (:func:`find_doorways`) cut rooms apart, and
+       optionally rooms joined through a neck are split (:func:`split_at_necks`).
+    4. Pieces smaller than ``room_min_area_m2`` join the neighbour they share the longest border
+       with (:func:`merge_small_segments`).
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per free pixel from the faces, 0 elsewhere.
+    free, clutter, floor, closed : (H, W) bool
+        Free space; furniture (:func:`furniture`); pixels of warehouse floors; closed line pixels.
+    resolution_m : float
+        Metres per pixel.
+
+    Returns
+    -------
+    (H, W) int32
+        Region ids 1..N, 0 off free space and furniture.
+    """
+    seg = merge_open_segments(segments, closed, fixed=_share(segments, floor) > 0.5)
+    fixed = _share(seg, floor) > 0.5
+    spread = fill_from_neighbours(seg, clutter)
+    seg = np.where(clutter & fixed[spread], 0, spread).astype(np.int32)
+    space = (free | clutter) & ~floor
+    if neck_half_width_m > 0:
+        split = split_at_necks(seg, space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
+        seg = np.where(space, split, seg).astype(np.int32)
+    if door_max_width_m > 0 and space.any():
+        cuts = find_doorways(
+            space,
+            resolution_m=resolution_m,
+            max_width_m=door_max_width_m,
+            widening_m=door_widening_m,
+            max_depth_m=door_max_depth_m,
+        )
+        seg = split_along(seg, draw_cuts(cuts, seg.shape) & space)
+    return merge_small_segments(
+        seg, min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)), fixed=_share(seg, floor) > 0.5
+    )
+
+
+def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
+    """(N + 1,) share of each segment's pixels inside ``mask``."""
+    n = int(segments.max()) + 1
+    area = np.bincount(segments.ravel(), minlength=n)
+    inside = np.bincount(segments.ravel(), weights=mask.ravel(), minlength=n)
+    share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
+    return share

@@ -15,21 +15,25 @@ def fill_from_neighbours(
 ) -> npt.NDArray[np.int32]:
     """Give unlabelled (0) ``target`` pixels the id of a labelled 8-neighbour, growing outwards."""
     out = segments.copy()
+    hole = target & (out == 0)
+    rows = np.flatnonzero(hole.any(axis=1))
+    if rows.size == 0:
+        return out
+    cols = np.flatnonzero(hole.any(axis=0))
+    r0, r1 = max(int(rows[0]) - 1, 0), int(rows[-1]) + 2
+    c0, c1 = max(int(cols[0]) - 1, 0), int(cols[-1]) + 2
+    crop = out[r0:r1, c0:c1]
+    inside = target[r0:r1, c0:c1]
     kernel = np.ones((3, 3), np.uint8)
     for _ in range(max_iterations):
-        hole = target & (out == 0)
-        if not hole.any():
+        h = inside & (crop == 0)
+        if not h.any():
             break
-        rows, cols = np.nonzero(hole)
-        r0, r1 = max(rows.min() - 1, 0), rows.max() + 2
-        c0, c1 = max(cols.min() - 1, 0), cols.max() + 2
-        crop = out[r0:r1, c0:c1]
-        grown = cv2.dilate(crop.astype(np.float32), kernel).astype(np.int32)
-        h = hole[r0:r1, c0:c1]
+        grown = cv2.dilate(crop.astype(np.float32), kernel)
         fill = h & (grown > 0)
         if not fill.any():
             break
-        crop[fill] = grown[fill]
+        crop[fill] = grown[fill].astype(np.int32)
     return out
 
 
@@ -139,7 +143,7 @@ def merge_small_segments(
     if fixed is not None:
         small &= ~fixed[:n]
     if not small.any():
-        return _renumber(seg)
+        return renumber(seg)
     pairs, border = segment_adjacency(seg)
     neighbours: list[dict[int, int]] = [{} for _ in range(n)]
     for (p, q), c in zip(pairs.tolist(), border.tolist(), strict=True):
@@ -164,14 +168,16 @@ def merge_small_segments(
         if np.array_equal(nxt, root):
             break
         root = nxt
-    return _renumber(root[seg].astype(np.int32))
+    return renumber(root[seg].astype(np.int32))
 
 
-def _renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
-    """Ids 1..N in order of first id, 0 kept."""
-    _, inverse = np.unique(seg, return_inverse=True)
-    dense = inverse.reshape(seg.shape).astype(np.int32)
-    return np.where(seg > 0, dense + (0 if seg.min() == 0 else 1), 0).astype(np.int32)
+def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """Ids 1..N in the order of the old ids, 0 kept."""
+    present = np.bincount(seg.ravel(), minlength=1) > 0
+    present[0] = False
+    lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
+    out: npt.NDArray[np.int32] = lut[seg]
+    return out
 
 
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
@@ -204,7 +210,7 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
         view[inside] = pieces[inside] + next_id - 1
         next_id += n - 1
     out = fill_from_neighbours(out, barrier & (seg > 0))
-    return _renumber(np.where(seg > 0, out, 0).astype(np.int32))
+    return renumber(np.where(seg > 0, out, 0).astype(np.int32))
 
 
 def merge_open_segments(
@@ -250,4 +256,4 @@ def merge_open_segments(
     pairs = np.stack([codes[join] // n, codes[join] % n], axis=1)
     m = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = connected_components(m, directed=False)
-    return _renumber(np.where(seg > 0, comp[seg] + 1, 0).astype(np.int32))
+    return renumber(np.where(seg > 0, comp[seg] + 1, 0).astype(np.int32))
