@@ -50,6 +50,8 @@ def widens(
     widening_px: float,
     max_depth_px: int,
     depth_step_px: int,
+    clearance: npt.NDArray[np.floating] | None = None,
+    room_margin_px: float = 0.0,
 ) -> npt.NDArray[np.bool_]:
     """Gaps behind which the free space widens on both sides: doorways, not corridors or passages.
 
@@ -57,7 +59,9 @@ def widens(
     along its normal (past the thickness of the wall it pierces), the free run through the gap's
     middle parallel to the gap is measured. A doorway opens on both sides into space at least
     ``widening_px`` wider than itself; a corridor crossing the gap, or a passage between blocks,
-    stays as narrow on one side.
+    stays as narrow on one side. With ``clearance``, the space on each side must also hold a
+    disc wider than the gap by ``room_margin_px`` on its radius, reached straight along the
+    normal (a parallel run can leak through another doorway of a corridor; a disc cannot).
 
     Parameters
     ----------
@@ -65,6 +69,8 @@ def widens(
         Walls.
     ends : (G, 2, 2) float64
         The two ends (x, y) of each gap, pixels.
+    clearance : (H, W) float, optional
+        Distance to the nearest wall, pixels.
 
     Returns
     -------
@@ -87,7 +93,35 @@ def widens(
         runs = _centre_runs(blocked, points, np.broadcast_to(u[:, None, :], points.shape), reach)
         runs[depths[None, :] > reachable[:, None]] = 0
         door &= runs.max(axis=1) >= need
+    if clearance is not None:
+        door &= _room_on_both_sides(blocked, clearance, mid, normal, width / 2.0 + room_margin_px, max_depth_px)
     return door
+
+
+def _room_on_both_sides(
+    blocked: npt.NDArray[np.bool_],
+    clearance: npt.NDArray[np.floating],
+    mid: npt.NDArray[np.float64],
+    normal: npt.NDArray[np.float64],
+    radius_px: npt.NDArray[np.float64],
+    max_depth_px: int,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: straight ahead and behind each gap, within its radius plus ``max_depth_px``, the clearance
+    reaches ``radius_px``."""
+    h, w = blocked.shape
+    reach = int(math.ceil(float(radius_px.max()))) + max_depth_px
+    t = np.arange(1, reach + 1, dtype=np.float64)
+    ok = np.ones(len(mid), dtype=bool)
+    for sign in (1.0, -1.0):
+        seen = _free_depth(blocked, mid, sign * normal, reach)
+        pts = mid[:, None, :] + sign * t[None, :, None] * normal[:, None, :]
+        x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+        y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+        room = np.where(
+            (t[None, :] <= seen[:, None]) & (t[None, :] <= radius_px[:, None] + max_depth_px), clearance[y, x], 0.0
+        )
+        ok &= room.max(axis=1) >= radius_px
+    return ok
 
 
 def _free_depth(
@@ -120,6 +154,7 @@ def find_doorways(
     max_wall_thickness_m: float = 0.6,
     neck_reach_m: float = 0.5,
     neck_tolerance_m: float = 0.05,
+    room_margin_m: float = 0.0,
 ) -> npt.NDArray[np.float64]:
     """Doorways of a floor: cuts across the narrow passages between walls, independent of any line.
 
@@ -142,6 +177,9 @@ def find_doorways(
     max_wall_thickness_m : float
         ... and that wall is at most this thick across the cut (a cut from the corner of a
         cabinet or block across a corridor continues no wall).
+    room_margin_m : float
+        On both sides the doorway opens into a room holding a disc of radius half its width
+        plus this (:func:`widens`).
     neck_reach_m, neck_tolerance_m : float
         A doorway is a neck: up to ``neck_reach_m`` ahead and behind it (along its normal) the
         clearance does not drop more than ``neck_tolerance_m`` below its own (a cut across a
@@ -173,6 +211,7 @@ def find_doorways(
         max_wall_thickness_m=max_wall_thickness_m,
         neck_reach_m=neck_reach_m,
         neck_tolerance_m=neck_tolerance_m,
+        room_margin_m=room_margin_m,
     ) + np.array([c0, r0], dtype=np.float64)
 
 
@@ -190,6 +229,7 @@ def _find_doorways(
     max_wall_thickness_m: float,
     neck_reach_m: float,
     neck_tolerance_m: float,
+    room_margin_m: float,
 ) -> npt.NDArray[np.float64]:
     """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
     dist, (fy, fx) = ndimage.distance_transform_edt(space, return_indices=True)
@@ -226,6 +266,8 @@ def _find_doorways(
         widening_px=widening_m / resolution_m,
         max_depth_px=max(1, round(max_depth_m / resolution_m)),
         depth_step_px=max(1, round(max_depth_m / resolution_m / 4)),
+        clearance=dist,
+        room_margin_px=room_margin_m / resolution_m,
     )
     return pairs[keep]
 
