@@ -47,7 +47,8 @@ def segment_image(
     """Per-pixel segments of free space from a segment id per face.
 
     Line pixels take a neighbouring face's segment; every segment is split into its 4-connected
-    pieces; pieces smaller than ``min_area_px`` are absorbed by their neighbours.
+    pieces; pieces smaller than ``min_area_px`` are absorbed by their neighbours (an enclosed one
+    stays a segment of its own).
 
     Parameters
     ----------
@@ -83,6 +84,10 @@ def segment_image(
             next_id += 1
     if small.any():
         out = fill_from_neighbours(out, small)
+        alone = small & (out == 0)
+        if alone.any():
+            n, pieces = cv2.connectedComponents(alone.astype(np.uint8), connectivity=4)
+            out = np.where(alone, pieces + next_id - 1, out).astype(np.int32)
     return out
 
 
