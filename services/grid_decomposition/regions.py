@@ -31,11 +31,15 @@ def warehouse_floors(
     face_label: npt.NDArray[np.int64],
     *,
     min_storage_share: float = 0.2,
-    min_storage_faces: int = 6,
+    min_storage_faces: int = 12,
+    min_storage_face_share: float = 0.3,
 ) -> npt.NDArray[np.bool_]:
     """Per component id: a warehouse floor, with at least ``min_storage_faces`` storage faces making up
-    at least ``min_storage_share`` of its free area (a few storage-like faces between furniture in a
-    room do not make it one).
+    at least ``min_storage_share`` of its free area and ``min_storage_face_share`` of its faces.
+
+    Pallet cells come in long rows, about every other face of a warehouse floor (half of them in
+    the synthetic warehouses); storage-like faces between furniture are a few, or a small share
+    of a room's many faces, and do not make a room a floor.
 
     Parameters
     ----------
@@ -54,7 +58,12 @@ def warehouse_floors(
     area = np.bincount(component, weights=face_free_px, minlength=n_comp)
     stored = np.bincount(component, weights=face_free_px * (face_label == Label.STORAGE.value), minlength=n_comp)
     cells = np.bincount(component, weights=face_label == Label.STORAGE.value, minlength=n_comp)
-    floor: npt.NDArray[np.bool_] = (stored >= min_storage_share * np.maximum(area, 1)) & (cells >= min_storage_faces)
+    faces = np.bincount(component, weights=face_free_px > 0, minlength=n_comp)
+    floor: npt.NDArray[np.bool_] = (
+        (stored >= min_storage_share * np.maximum(area, 1))
+        & (cells >= min_storage_faces)
+        & (cells >= min_storage_face_share * faces)
+    )
     floor[0] = False
     return floor
 

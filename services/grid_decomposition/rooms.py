@@ -67,6 +67,7 @@ def segment_rooms(
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
     room_min_area_m2: float = 1.5,
+    room_min_half_width_m: float = 0.4,
     neck_half_width_m: float = 0.0,
 ) -> npt.NDArray[np.int32]:
     """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
@@ -78,8 +79,9 @@ def segment_rooms(
     2. Furniture (``clutter``) takes the room around it: a room's area is its floor plan.
     3. Doorways found from the free space itself (:func:`find_doorways`) cut rooms apart, and
        optionally rooms joined through a neck are split (:func:`split_at_necks`).
-    4. Pieces smaller than ``room_min_area_m2`` join the neighbour they share the longest border
-       with (:func:`merge_small_segments`).
+    4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
+       everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
+       longest border with (:func:`merge_small_segments`).
 
     Parameters
     ----------
@@ -112,8 +114,14 @@ def segment_rooms(
             max_depth_m=door_max_depth_m,
         )
         seg = split_along(seg, draw_cuts(cuts, seg.shape) & space)
+    clearance = cv2.distanceTransform((free | clutter).astype(np.uint8), cv2.DIST_L2, 5)
+    widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)
+    np.maximum.at(widest, seg.ravel(), clearance.ravel())
     return merge_small_segments(
-        seg, min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)), fixed=_share(seg, floor) > 0.5
+        seg,
+        min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),
+        fixed=_share(seg, floor) > 0.5,
+        absorb=widest * resolution_m < room_min_half_width_m,
     )
 
 

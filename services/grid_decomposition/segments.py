@@ -121,6 +121,7 @@ def merge_small_segments(
     *,
     min_area_px: int,
     fixed: npt.NDArray[np.bool_] | None = None,
+    absorb: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.int32]:
     """Merge every segment smaller than ``min_area_px`` into the neighbour it shares the longest border with.
 
@@ -134,6 +135,8 @@ def merge_small_segments(
     min_area_px : int
     fixed : (N + 1,) bool, optional
         Per segment id: never merged away (it may still absorb small neighbours).
+    absorb : (N + 1,) bool, optional
+        Per segment id: merged like a small one whatever its area.
 
     Returns
     -------
@@ -143,7 +146,8 @@ def merge_small_segments(
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
     area = np.bincount(seg.ravel(), minlength=n).astype(np.int64)
-    small = (area < min_area_px) & (area > 0)
+    must = np.zeros(n, dtype=bool) if absorb is None else absorb[:n].copy()
+    small = ((area < min_area_px) | must) & (area > 0)
     small[0] = False
     if fixed is not None:
         small &= ~fixed[:n]
@@ -156,7 +160,7 @@ def merge_small_segments(
         neighbours[q][p] = c
     parent = np.arange(n)
     for s in sorted(np.flatnonzero(small).tolist(), key=lambda i: area[i]):
-        if area[s] >= min_area_px or not neighbours[s]:
+        if (area[s] >= min_area_px and not must[s]) or not neighbours[s]:
             continue
         t = max(neighbours[s], key=lambda k: neighbours[s][k])
         parent[s] = t
