@@ -36,11 +36,11 @@ def _centre_runs(
     inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
     stop = ~inside
     stop[inside] = blocked[y[inside], x[inside]]
-    end = np.ones(stop.shape[:-1] + (1,), dtype=bool)
+    end = np.ones((*stop.shape[:-1], 1), dtype=bool)
     ahead = np.concatenate([stop[..., reach_px:], end], axis=-1)
     behind = np.concatenate([stop[..., reach_px::-1], end], axis=-1)
-    run = np.argmax(ahead, axis=-1) + np.argmax(behind, axis=-1) - 1
-    return np.maximum(run, 0).astype(np.int64)
+    run: npt.NDArray[np.int64] = np.argmax(ahead, axis=-1) + np.argmax(behind, axis=-1) - 1
+    return np.maximum(run, 0)
 
 
 def widens(
@@ -85,7 +85,7 @@ def widens(
     mid = ends.mean(axis=1)
     need = width + widening_px
     depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
-    reach = int(math.ceil(float(need.max()))) + 1
+    reach = math.ceil(float(need.max())) + 1
     door = np.ones(len(ends), dtype=bool)
     for sign in (1.0, -1.0):
         reachable = _free_depth(blocked, mid, sign * normal, max_depth_px)
@@ -109,7 +109,7 @@ def _room_on_both_sides(
     """(G,) bool: straight ahead and behind each gap, within its radius plus ``max_depth_px``, the clearance
     reaches ``radius_px``."""
     h, w = blocked.shape
-    reach = int(math.ceil(float(radius_px.max()))) + max_depth_px
+    reach = math.ceil(float(radius_px.max())) + max_depth_px
     t = np.arange(1, reach + 1, dtype=np.float64)
     ok = np.ones(len(mid), dtype=bool)
     for sign in (1.0, -1.0):
@@ -137,7 +137,8 @@ def _free_depth(
     stop = ~inside
     stop[inside] = blocked[y[inside], x[inside]]
     stop = np.concatenate([stop, np.ones((len(points), 1), dtype=bool)], axis=1)
-    return np.argmax(stop, axis=1).astype(np.float64) - 1.0
+    depth: npt.NDArray[np.float64] = np.argmax(stop, axis=1).astype(np.float64) - 1.0
+    return depth
 
 
 def find_doorways(

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.segments import renumber, fill_from_neighbours
+from services.grid_decomposition.segments import fill_from_neighbours, renumber
 
 
 def split_at_necks(

@@ -27,8 +27,8 @@ from services.grid_decomposition.regions import (
     region_topology,
     warehouse_floors,
 )
-from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.rooms import furniture, segment_rooms
+from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
@@ -336,7 +336,7 @@ def decompose(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
     floor_px = warehouse_floors(component, cog.face_free_px, face_labels.label)[component[sub.face_image]]
-    segments = segment_rooms(
+    segments, cuts = segment_rooms(
         segments,
         free,
         clutter,
@@ -352,7 +352,7 @@ def decompose(
     regions, labels = _region_records(segments, sub, region_of_face, face_labels, resolution_m, origin_xy_m)
     labels = np.where(free, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(segments, sub)
-    topology = region_topology(sub, cog, face_region_final, regions)
+    topology = region_topology(sub, cog, face_region_final, regions, segments=segments, doorways=door | cuts)
     return Decomposition(
         labels=labels,
         segments=segments,

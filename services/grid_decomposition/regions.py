@@ -11,6 +11,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from services.grid_decomposition.cogency import EdgeCogency
+from services.grid_decomposition.segments import border_closure
 from services.grid_decomposition.semantics import Label, link_connection
 from services.grid_decomposition.subdivision import Subdivision
 
@@ -111,12 +112,17 @@ def region_topology(
     cogency: EdgeCogency,
     face_region: npt.NDArray[np.int64],
     regions: dict[int, RegionInfo],
+    *,
+    segments: npt.NDArray[np.int32] | None = None,
+    doorways: npt.NDArray[np.bool_] | None = None,
 ) -> nx.Graph:
     """Graph of regions; an edge per touching pair with attribute ``connection`` (a Connection value).
 
     Regions touching across at least one non-cogent edge are linked by their labels
     (:func:`link_connection`); touching only across cogent edges, by a door when a doorway was
-    closed on one of them, else they are disconnected.
+    closed on one of them, else they are disconnected. With ``segments`` and ``doorways`` (the
+    closed doorway pixels, also those found off the lines), regions whose pixels touch are linked
+    by a door when at least half of their shared border is on a doorway, else by their labels.
     """
     graph = nx.Graph()
     for info in regions.values():
@@ -141,4 +147,11 @@ def region_topology(
         door = bool(cogency.door[edges].any())
         conn = link_connection(regions[p].label, regions[q].label, cogent=not open_edges, door=door)
         graph.add_edge(p, q, connection=conn.value)
+    if segments is not None and doorways is not None:
+        touching, total, shut = border_closure(segments, doorways)
+        for (p, q), t, c in zip(touching.tolist(), total.tolist(), shut.tolist(), strict=True):
+            if p in regions and q in regions:
+                door = 2 * c >= t
+                conn = link_connection(regions[p].label, regions[q].label, cogent=door, door=door)
+                graph.add_edge(p, q, connection=conn.value)
     return graph

@@ -42,7 +42,7 @@ def furniture(
     (H, W) bool
         The furniture cells (a subset of ``obstacle``).
     """
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(obstacle.astype(np.uint8), connectivity=8)
+    _n, parts, stats, _ = cv2.connectedComponentsWithStats(obstacle.astype(np.uint8), connectivity=8)
     h, w = obstacle.shape
     x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
     bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
@@ -69,7 +69,7 @@ def segment_rooms(
     room_min_area_m2: float = 1.5,
     room_min_half_width_m: float = 0.4,
     neck_half_width_m: float = 0.0,
-) -> npt.NDArray[np.int32]:
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
     """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
 
     Segments on warehouse floors (``floor``) are left as they are.
@@ -94,10 +94,13 @@ def segment_rooms(
 
     Returns
     -------
-    (H, W) int32
+    segments : (H, W) int32
         Region ids 1..N, 0 off free space and furniture.
+    cuts : (H, W) bool
+        The doorways found off the lines (cut pixels).
     """
     seg = merge_open_segments(segments, closed, fixed=_share(segments, floor) > 0.5)
+    cut = np.zeros(seg.shape, dtype=bool)
     fixed = _share(seg, floor) > 0.5
     spread = fill_from_neighbours(seg, clutter)
     seg = np.where(clutter & fixed[spread], 0, spread).astype(np.int32)
@@ -113,16 +116,18 @@ def segment_rooms(
             widening_m=door_widening_m,
             max_depth_m=door_max_depth_m,
         )
-        seg = split_along(seg, draw_cuts(cuts, seg.shape) & space)
+        cut = draw_cuts(cuts, seg.shape) & space
+        seg = split_along(seg, cut)
     clearance = cv2.distanceTransform((free | clutter).astype(np.uint8), cv2.DIST_L2, 5)
     widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)
     np.maximum.at(widest, seg.ravel(), clearance.ravel())
-    return merge_small_segments(
+    rooms = merge_small_segments(
         seg,
         min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),
         fixed=_share(seg, floor) > 0.5,
         absorb=widest * resolution_m < room_min_half_width_m,
     )
+    return rooms, cut
 
 
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:

@@ -91,31 +91,6 @@ def segment_image(
     return out
 
 
-def segment_adjacency(segments: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Touching pairs of segments and the length of their shared border.
-
-    Parameters
-    ----------
-    segments : (H, W) int32
-        Segment id per pixel, 0 = none.
-
-    Returns
-    -------
-    pairs : (K, 2) int64
-        Segment ids ``a < b`` that are 4-neighbours somewhere.
-    border_px : (K,) int64
-        Number of 4-neighbour pixel pairs across their border.
-    """
-    seg = np.asarray(segments, dtype=np.int64)
-    a = np.concatenate([seg[:, :-1].ravel(), seg[:-1, :].ravel()])
-    b = np.concatenate([seg[:, 1:].ravel(), seg[1:, :].ravel()])
-    ok = (a > 0) & (b > 0) & (a != b)
-    lo, hi = np.minimum(a[ok], b[ok]), np.maximum(a[ok], b[ok])
-    n = int(seg.max()) + 1
-    codes, counts = np.unique(lo * n + hi, return_counts=True)
-    return np.stack([codes // n, codes % n], axis=1), counts.astype(np.int64)
-
-
 def merge_small_segments(
     segments: npt.NDArray[np.int32],
     *,
@@ -153,7 +128,7 @@ def merge_small_segments(
         small &= ~fixed[:n]
     if not small.any():
         return renumber(seg)
-    pairs, border = segment_adjacency(seg)
+    pairs, border, _ = border_closure(seg, None)
     neighbours: list[dict[int, int]] = [{} for _ in range(n)]
     for (p, q), c in zip(pairs.tolist(), border.tolist(), strict=True):
         neighbours[p][q] = c
@@ -222,6 +197,39 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
     return renumber(np.where(seg > 0, out, 0).astype(np.int32))
 
 
+def border_closure(
+    segments: npt.NDArray[np.int32], closed: npt.NDArray[np.bool_] | None
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Touching segment pairs, the length of their border and how much of it is closed.
+
+    A border pixel pair (4-neighbours of two segments) is closed when either pixel is on ``closed``
+    (``None``: nothing is).
+
+    Returns
+    -------
+    pairs : (K, 2) int64
+        Segment ids ``a < b``.
+    total, shut : (K,) int64
+        Border pixel pairs, and those closed.
+    """
+    seg = np.asarray(segments, dtype=np.int64)
+    n = int(seg.max()) + 1
+    a = np.concatenate([seg[:, :-1].ravel(), seg[:-1, :].ravel()])
+    b = np.concatenate([seg[:, 1:].ravel(), seg[1:, :].ravel()])
+    ok = (a > 0) & (b > 0) & (a != b)
+    a, b = a[ok], b[ok]
+    if closed is None:
+        shut_px = np.zeros(a.size, dtype=bool)
+    else:
+        horizontal = closed[:, :-1] | closed[:, 1:]
+        vertical = closed[:-1, :] | closed[1:, :]
+        shut_px = np.concatenate([horizontal.ravel(), vertical.ravel()])[ok]
+    codes, inverse = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True)
+    total = np.bincount(inverse, minlength=len(codes)).astype(np.int64)
+    shut = np.bincount(inverse, weights=shut_px, minlength=len(codes)).astype(np.int64)
+    return np.stack([codes // n, codes % n], axis=1), total, shut
+
+
 def merge_open_segments(
     segments: npt.NDArray[np.int32],
     closed: npt.NDArray[np.bool_],
@@ -249,20 +257,13 @@ def merge_open_segments(
     (H, W) int32
         Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
     """
-    seg = np.asarray(segments, dtype=np.int64)
+    seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
-    a = np.concatenate([seg[:, :-1].ravel(), seg[:-1, :].ravel()])
-    b = np.concatenate([seg[:, 1:].ravel(), seg[1:, :].ravel()])
-    shut = np.concatenate([(closed[:, :-1] | closed[:, 1:]).ravel(), (closed[:-1, :] | closed[1:, :]).ravel()])
-    ok = (a > 0) & (b > 0) & (a != b)
+    pairs, total, shut = border_closure(seg, closed)
+    join = shut <= max_closed_share * total
     if fixed is not None:
-        ok &= ~fixed[a] & ~fixed[b]
-    lo, hi = np.minimum(a[ok], b[ok]), np.maximum(a[ok], b[ok])
-    codes, inverse = np.unique(lo * n + hi, return_inverse=True)
-    total = np.bincount(inverse, minlength=len(codes))
-    shut_count = np.bincount(inverse, weights=shut[ok], minlength=len(codes))
-    join = shut_count <= max_closed_share * total
-    pairs = np.stack([codes[join] // n, codes[join] % n], axis=1)
+        join &= ~fixed[pairs[:, 0]] & ~fixed[pairs[:, 1]]
+    pairs = pairs[join]
     m = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = connected_components(m, directed=False)
     return renumber(np.where(seg > 0, comp[seg] + 1, 0).astype(np.int32))
