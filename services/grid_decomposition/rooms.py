@@ -22,13 +22,17 @@ def furniture(
     resolution_m: float,
     max_area_m2: float = 1.0,
     max_extent_m: float = 1.2,
+    wall_min_length_m: float = 0.5,
+    wall_max_thickness_m: float = 0.35,
 ) -> npt.NDArray[np.bool_]:
     """Free-standing small obstacles: furniture, bins, pillars, table legs, clutter.
 
     An 8-connected obstacle component is furniture when it does not touch the map border, covers
-    at most ``max_area_m2`` and its bounding box is at most ``max_extent_m`` on its longer side.
-    Walls, even short free-standing pieces, are longer; furniture pushed against a wall is part
-    of the wall's component and stays.
+    at most ``max_area_m2`` and its bounding box is at most ``max_extent_m`` on its longer side,
+    unless it is a piece of wall: at least ``wall_min_length_m`` long and at most
+    ``wall_max_thickness_m`` thick (its minimum-area rectangle), as the dashes of a wall with many
+    doors. Longer walls are kept anyway; furniture pushed against a wall is part of the wall's
+    component and stays.
 
     Parameters
     ----------
@@ -52,6 +56,13 @@ def furniture(
     )
     keep = inner & small
     keep[0] = False
+    for k in np.flatnonzero(keep & (np.hypot(bw, bh) * resolution_m >= wall_min_length_m)):
+        box = parts[y[k] : y[k] + bh[k], x[k] : x[k] + bw[k]] == k
+        rows, cols = np.nonzero(box)
+        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+        length, thickness = (max(side_a, side_b) + 1) * resolution_m, (min(side_a, side_b) + 1) * resolution_m
+        if length >= wall_min_length_m and thickness <= wall_max_thickness_m:
+            keep[k] = False
     return np.asarray(keep[parts], dtype=bool)
 
 
