@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -233,25 +234,22 @@ def _find_doorways(
     room_margin_m: float,
 ) -> npt.NDArray[np.float64]:
     """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
-    dist, (fy, fx) = ndimage.distance_transform_edt(space, return_indices=True)
+    dist, nearest = _nearest_walls(space, reach_px=math.ceil(max_width_m / resolution_m) + 2)
     lo, hi = min_width_m / resolution_m, max_width_m / resolution_m
+    h, w = space.shape
+    band = space & (dist >= lo / 2 - 1) & (dist <= hi / 2 + 1)
     cuts: list[npt.NDArray[np.float64]] = []
     for dy, dx in ((0, 1), (1, 0)):
-        h, w = space.shape
-        a = (slice(0, h - dy), slice(0, w - dx))
-        b = (slice(dy, h), slice(dx, w))
-        both = space[a] & space[b]
-        sep = np.hypot(fx[a] - fx[b], fy[a] - fy[b])
-        ok = both & (sep >= lo) & (sep <= hi) & (sep >= straightness * (dist[a] + dist[b]))
-        rows, cols = np.nonzero(ok)
-        if rows.size == 0:
-            continue
-        p = np.stack([fx[a][rows, cols], fy[a][rows, cols]], axis=1)
-        q = np.stack([fx[b][rows, cols], fy[b][rows, cols]], axis=1)
-        cuts.append(np.stack([p, q], axis=1).astype(np.float64))
-    if not cuts:
-        return np.zeros((0, 2, 2))
+        rows, cols = np.nonzero(band[: h - dy, : w - dx] & space[dy:, dx:])
+        p = nearest(rows * w + cols)
+        q = nearest((rows + dy) * w + cols + dx)
+        sep = np.hypot(*(p - q).T)
+        clear = dist[rows, cols] + dist[rows + dy, cols + dx]
+        ok = (sep >= lo) & (sep <= hi) & (sep >= straightness * clear)
+        cuts.append(np.stack([p[ok], q[ok]], axis=1))
     pairs = np.concatenate(cuts)
+    if len(pairs) == 0:
+        return np.zeros((0, 2, 2))
     swap = (pairs[:, 0, 0] > pairs[:, 1, 0]) | ((pairs[:, 0, 0] == pairs[:, 1, 0]) & (pairs[:, 0, 1] > pairs[:, 1, 1]))
     pairs[swap] = pairs[swap, ::-1]
     pairs = np.unique(pairs.reshape(-1, 4), axis=0).reshape(-1, 2, 2)
@@ -273,8 +271,47 @@ def _find_doorways(
     return pairs[keep]
 
 
+def _nearest_walls(
+    space: npt.NDArray[np.bool_], *, reach_px: int, tile_px: int = 256, max_share: float = 0.25
+) -> tuple[npt.NDArray[np.float32], Callable[[npt.NDArray[np.int64]], npt.NDArray[np.float64]]]:
+    """Distance to the nearest wall pixel, (H, W) float32 pixels, and a lookup from flat pixel indices
+    to the (x, y) of their nearest wall pixel, (K, 2) float64 (exact Euclidean feature transform).
+
+    Exact wherever the distance is at most ``reach_px`` (and at least ``reach_px`` elsewhere).
+    When free space is a small share of the image (a warehouse floor with a perimeter aisle), the
+    transform runs only on tiles of ``tile_px`` holding free space, each widened by ``reach_px``.
+    """
+    h, w = space.shape
+    if space.mean() > max_share:
+        tiles = [(0, h, 0, w)]
+    else:
+        tiles = [
+            (r, min(r + tile_px, h), c, min(c + tile_px, w))
+            for r in range(0, h, tile_px)
+            for c in range(0, w, tile_px)
+            if space[r : r + tile_px, c : c + tile_px].any()
+        ]
+    dist = np.zeros((h, w), dtype=np.float32)
+    fx = np.zeros((h, w), dtype=np.int32)
+    fy = np.zeros((h, w), dtype=np.int32)
+    for r0, r1, c0, c1 in tiles:
+        a0, a1 = max(r0 - reach_px, 0), min(r1 + reach_px, h)
+        b0, b1 = max(c0 - reach_px, 0), min(c1 + reach_px, w)
+        d, (iy, ix) = ndimage.distance_transform_edt(space[a0:a1, b0:b1], return_indices=True)
+        core = (slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0))
+        dist[r0:r1, c0:c1] = d[core]
+        fy[r0:r1, c0:c1] = iy[core] + a0
+        fx[r0:r1, c0:c1] = ix[core] + b0
+    flat_x, flat_y = fx.ravel(), fy.ravel()
+
+    def wall_xy(index: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+        return np.stack([flat_x[index], flat_y[index]], axis=1).astype(np.float64)
+
+    return dist, wall_xy
+
+
 def _is_neck(
-    dist: npt.NDArray[np.float64], cuts: npt.NDArray[np.float64], reach_px: int, tolerance_px: float
+    dist: npt.NDArray[np.floating], cuts: npt.NDArray[np.float64], reach_px: int, tolerance_px: float
 ) -> npt.NDArray[np.bool_]:
     """(K,) bool: the clearance at each cut's middle is the least along its normal, within ``reach_px``."""
     h, w = dist.shape

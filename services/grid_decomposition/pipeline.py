@@ -338,7 +338,6 @@ def decompose(
     floor_px = warehouse_floors(component, cog.face_free_px, face_labels.label)[component[sub.face_image]]
     segments, cuts = segment_rooms(
         segments,
-        free,
         clutter,
         floor_px,
         wall | door,

@@ -68,7 +68,6 @@ def furniture(
 
 def segment_rooms(
     segments: npt.NDArray[np.int32],
-    free: npt.NDArray[np.bool_],
     clutter: npt.NDArray[np.bool_],
     floor: npt.NDArray[np.bool_],
     closed: npt.NDArray[np.bool_],
@@ -98,8 +97,8 @@ def segment_rooms(
     ----------
     segments : (H, W) int32
         Region id per free pixel from the faces, 0 elsewhere.
-    free, clutter, floor, closed : (H, W) bool
-        Free space; furniture (:func:`furniture`); pixels of warehouse floors; closed line pixels.
+    clutter, floor, closed : (H, W) bool
+        Furniture (:func:`furniture`); pixels of warehouse floors; closed line pixels.
     resolution_m : float
         Metres per pixel.
 
@@ -115,10 +114,9 @@ def segment_rooms(
     fixed = _share(seg, floor) > 0.5
     spread = fill_from_neighbours(seg, clutter)
     seg = np.where(clutter & fixed[spread], 0, spread).astype(np.int32)
-    space = (free | clutter) & ~floor
+    space = (seg > 0) & ~fixed[seg]
     if neck_half_width_m > 0:
-        split = split_at_necks(seg, space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
-        seg = np.where(space, split, seg).astype(np.int32)
+        seg = split_at_necks(seg, space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
     if door_max_width_m > 0 and space.any():
         cuts = find_doorways(
             space,
@@ -129,7 +127,7 @@ def segment_rooms(
         )
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
-    clearance = cv2.distanceTransform((free | clutter).astype(np.uint8), cv2.DIST_L2, 5)
+    clearance = cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5)
     widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)
     np.maximum.at(widest, seg.ravel(), clearance.ravel())
     rooms = merge_small_segments(
@@ -145,6 +143,6 @@ def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.
     """(N + 1,) share of each segment's pixels inside ``mask``."""
     n = int(segments.max()) + 1
     area = np.bincount(segments.ravel(), minlength=n)
-    inside = np.bincount(segments.ravel(), weights=mask.ravel(), minlength=n)
+    inside = np.bincount(segments[mask], minlength=n)
     share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
     return share

@@ -106,7 +106,7 @@ def merge_small_segments(
     Parameters
     ----------
     segments : (H, W) int32
-        Segment id per pixel, 0 = none.
+        Segment ids 1..N (consecutive) per pixel, 0 = none.
     min_area_px : int
     fixed : (N + 1,) bool, optional
         Per segment id: never merged away (it may still absorb small neighbours).
@@ -127,7 +127,7 @@ def merge_small_segments(
     if fixed is not None:
         small &= ~fixed[:n]
     if not small.any():
-        return renumber(seg)
+        return seg
     pairs, border, _ = border_closure(seg, None)
     neighbours: list[dict[int, int]] = [{} for _ in range(n)]
     for (p, q), c in zip(pairs.tolist(), border.tolist(), strict=True):
@@ -152,7 +152,16 @@ def merge_small_segments(
         if np.array_equal(nxt, root):
             break
         root = nxt
-    return renumber(root[seg].astype(np.int32))
+    return _relabel(seg, root)
+
+
+def _relabel(seg: npt.NDArray[np.int32], group: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
+    """Segments ``1..N`` (all present) relabelled by ``group`` (per id), the groups numbered 1..M in order."""
+    n = int(seg.max()) + 1
+    _, dense = np.unique(group[1:n], return_inverse=True)
+    lut = np.concatenate([[0], dense + 1]).astype(np.int32)
+    out: npt.NDArray[np.int32] = lut[seg]
+    return out
 
 
 def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
@@ -172,7 +181,7 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
     Parameters
     ----------
     segments : (H, W) int32
-        Segment id per pixel, 0 = none.
+        Segment ids 1..N (consecutive) per pixel, 0 = none.
     barrier : (H, W) bool
         Cuts (8-connected lines separate 4-connected pieces).
 
@@ -183,18 +192,21 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
     """
     seg = np.asarray(segments, dtype=np.int32)
     cut = np.where(barrier, 0, seg)
-    out = np.zeros_like(seg)
-    next_id = 1
-    for sid, box in enumerate(ndimage.find_objects(cut), start=1):
+    out = seg.copy()
+    next_id = int(seg.max()) + 1
+    touched = np.zeros(next_id, dtype=bool)
+    touched[seg[barrier]] = True
+    touched[0] = False
+    for sid, box in enumerate(ndimage.find_objects(np.where(touched[seg], seg, 0)), start=1):
         if box is None:
             continue
         n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=4)
         view = out[box]
-        inside = pieces > 0
-        view[inside] = pieces[inside] + next_id - 1
-        next_id += n - 1
-    out = fill_from_neighbours(out, barrier & (seg > 0))
-    return renumber(np.where(seg > 0, out, 0).astype(np.int32))
+        view[(seg[box] == sid) & barrier[box]] = 0
+        for k in range(2, n):
+            view[pieces == k] = next_id
+            next_id += 1
+    return fill_from_neighbours(out, barrier & (seg > 0))
 
 
 def border_closure(
@@ -212,18 +224,23 @@ def border_closure(
     total, shut : (K,) int64
         Border pixel pairs, and those closed.
     """
-    seg = np.asarray(segments, dtype=np.int64)
+    seg = np.asarray(segments)
     n = int(seg.max()) + 1
-    a = np.concatenate([seg[:, :-1].ravel(), seg[:-1, :].ravel()])
-    b = np.concatenate([seg[:, 1:].ravel(), seg[1:, :].ravel()])
-    ok = (a > 0) & (b > 0) & (a != b)
-    a, b = a[ok], b[ok]
-    if closed is None:
-        shut_px = np.zeros(a.size, dtype=bool)
-    else:
-        horizontal = closed[:, :-1] | closed[:, 1:]
-        vertical = closed[:-1, :] | closed[1:, :]
-        shut_px = np.concatenate([horizontal.ravel(), vertical.ravel()])[ok]
+    firsts: list[npt.NDArray[np.int64]] = []
+    seconds: list[npt.NDArray[np.int64]] = []
+    shuts: list[npt.NDArray[np.bool_]] = []
+    for dy, dx in ((0, 1), (1, 0)):
+        h, w = seg.shape
+        rows, cols = np.nonzero(seg[: h - dy, : w - dx] != seg[dy:, dx:])
+        firsts.append(seg[rows, cols].astype(np.int64))
+        seconds.append(seg[rows + dy, cols + dx].astype(np.int64))
+        if closed is None:
+            shuts.append(np.zeros(rows.size, dtype=bool))
+        else:
+            shuts.append(closed[rows, cols] | closed[rows + dy, cols + dx])
+    a, b, shut_px = np.concatenate(firsts), np.concatenate(seconds), np.concatenate(shuts)
+    ok = (a > 0) & (b > 0)
+    a, b, shut_px = a[ok], b[ok], shut_px[ok]
     codes, inverse = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True)
     total = np.bincount(inverse, minlength=len(codes)).astype(np.int64)
     shut = np.bincount(inverse, weights=shut_px, minlength=len(codes)).astype(np.int64)
@@ -247,7 +264,7 @@ def merge_open_segments(
     Parameters
     ----------
     segments : (H, W) int32
-        Segment id per pixel, 0 = none.
+        Segment ids 1..N (consecutive) per pixel, 0 = none.
     closed : (H, W) bool
     fixed : (N + 1,) bool, optional
         Per segment id: never joined.
@@ -266,4 +283,4 @@ def merge_open_segments(
     pairs = pairs[join]
     m = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = connected_components(m, directed=False)
-    return renumber(np.where(seg > 0, comp[seg] + 1, 0).astype(np.int32))
+    return _relabel(seg, comp)
