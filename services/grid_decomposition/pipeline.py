@@ -243,20 +243,24 @@ def decompose(
     label_overrides : mapping, optional
         Place category -> :class:`Label`, replacing the automatic assignment.
     door_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
-        Doorway closing along lines: gaps up to ``door_max_width_m`` between wall runs of at least
+        Doorways up to ``door_max_width_m`` wide. Along lines: gaps between wall runs of at least
         ``wall_min_length_m`` are closed when the free space behind them widens by
         ``door_widening_m`` on both sides within ``door_max_depth_m`` of the line (a corridor or a
         passage between blocks does not); walls within ``wall_tolerance_m`` of a line are on it.
+        Off the lines, doorways are found from the free space itself
+        (:func:`~services.grid_decomposition.doorways.find_doorways`, same width and widening).
     face_disparity_threshold, edge_occupancy_threshold : float
         t1, t2 of the cogency test.
     min_region_area_m2 : float
         Smaller pieces of free space join a neighbouring region.
     neck_half_width_m : float
-        A region whose free space falls apart when shrunk by this half-width is split into the
+        A room whose free space falls apart when shrunk by this half-width is split into the
         rooms its necks join (:func:`split_at_necks`); 0 turns it off.
     room_min_area_m2 : float
         Regions off warehouse floors smaller than this (door slivers, strips between close lines)
-        join the neighbour they share the longest border with.
+        join the neighbour they share the longest border with
+        (:func:`~services.grid_decomposition.rooms.segment_rooms`: rooms off warehouse floors
+        are face regions joined across open borders, with their furniture, cut at doorways).
     structure_min_area_m2 : float
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every

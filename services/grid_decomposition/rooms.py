@@ -87,8 +87,9 @@ def segment_rooms(
     1. Touching segments whose shared border is mostly open (not on ``closed``: wall evidence
        and doorways closed along lines) are one room (:func:`merge_open_segments`).
     2. Furniture (``clutter``) takes the room around it: a room's area is its floor plan.
-    3. Doorways found from the free space itself (:func:`find_doorways`) cut rooms apart, and
-       optionally rooms joined through a neck are split (:func:`split_at_necks`).
+    3. Rooms joined through a neck are split (:func:`split_at_necks`, when
+       ``neck_half_width_m`` > 0), and doorways found from the free space itself
+       (:func:`find_doorways`) cut rooms apart.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`).
