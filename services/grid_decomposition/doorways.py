@@ -163,8 +163,10 @@ def find_doorways(
     Every pair of neighbouring pixels whose nearest walls lie on opposite sides (their feature
     points are about as far apart as the two clearances add up to: the medial axis between two
     facing walls or wall ends) proposes the cut between those two wall points. A cut
-    ``min_width_m``..``max_width_m`` long is a doorway when the free space widens behind it on
-    both sides (:func:`widens`); along a corridor or between a room's parallel walls it does not.
+    ``min_width_m``..``max_width_m`` long is a doorway when it is a neck, it continues a thin
+    wall, and behind it on both sides the free space widens and holds a room at least as wide as
+    the cut (:func:`widens`); along a corridor, across a bend, or from a wall end across a room it
+    is not.
 
     Parameters
     ----------

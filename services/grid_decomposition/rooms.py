@@ -5,6 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -106,7 +107,7 @@ def segment_rooms(
     Returns
     -------
     segments : (H, W) int32
-        Region ids 1..N, 0 off free space and furniture.
+        Region ids 1..N; 0 on walls, unknown space and furniture on warehouse floors.
     cuts : (H, W) bool
         The doorways found off the lines (cut pixels).
     """
@@ -129,8 +130,7 @@ def segment_rooms(
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
     clearance = cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5)
-    widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)
-    np.maximum.at(widest, seg.ravel(), clearance.ravel())
+    widest = np.asarray(ndimage.maximum(clearance, labels=seg, index=np.arange(int(seg.max()) + 1)))
     rooms = merge_small_segments(
         seg,
         min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),
