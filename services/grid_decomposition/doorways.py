@@ -359,8 +359,8 @@ def _extends_a_wall(
 
 
 def draw_cuts(cuts: npt.NDArray[np.float64], shape: tuple[int, int]) -> npt.NDArray[np.bool_]:
-    """Raster of the cuts (1 px, 8-connected, so they separate 4-connected free space)."""
+    """Raster of the cuts (1 px, 4-connected, so they separate 8-connected free space)."""
     canvas = np.zeros(shape, dtype=np.uint8)
     for (x0, y0), (x1, y1) in cuts:
-        cv2.line(canvas, (round(x0), round(y0)), (round(x1), round(y1)), 1, 1, cv2.LINE_8)
+        cv2.line(canvas, (round(x0), round(y0)), (round(x1), round(y1)), 1, 1, cv2.LINE_4)
     return canvas.astype(bool)

@@ -48,7 +48,7 @@ def segment_image(
 
     Line pixels take a neighbouring face's segment; every segment is split into its 4-connected
     pieces; pieces smaller than ``min_area_px`` are absorbed by their neighbours (an enclosed one
-    stays a segment of its own).
+    stays a segment of its own, unless under half of ``min_area_px``: specks of mapping noise).
 
     Parameters
     ----------
@@ -86,8 +86,11 @@ def segment_image(
         out = fill_from_neighbours(out, small)
         alone = small & (out == 0)
         if alone.any():
-            n, pieces = cv2.connectedComponents(alone.astype(np.uint8), connectivity=4)
-            out = np.where(alone, pieces + next_id - 1, out).astype(np.int32)
+            n, pieces, stats, _ = cv2.connectedComponentsWithStats(alone.astype(np.uint8), connectivity=4)
+            keep = stats[:, cv2.CC_STAT_AREA] >= min_area_px // 2
+            keep[0] = False
+            ids = np.where(keep, np.cumsum(keep) + next_id - 1, 0)
+            out = np.where(alone, ids[pieces], out).astype(np.int32)
     return out
 
 
@@ -127,7 +130,7 @@ def merge_small_segments(
     if fixed is not None:
         small &= ~fixed[:n]
     if not small.any():
-        return seg
+        return _relabel(seg, np.arange(n), area > 0)
     pairs, border, _ = border_closure(seg, None)
     neighbours: list[dict[int, int]] = [{} for _ in range(n)]
     for (p, q), c in zip(pairs.tolist(), border.tolist(), strict=True):
@@ -152,14 +155,19 @@ def merge_small_segments(
         if np.array_equal(nxt, root):
             break
         root = nxt
-    return _relabel(seg, root)
+    return _relabel(seg, root, area > 0)
 
 
-def _relabel(seg: npt.NDArray[np.int32], group: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
-    """Segments ``1..N`` (all present) relabelled by ``group`` (per id), the groups numbered 1..M in order."""
+def _relabel(
+    seg: npt.NDArray[np.int32], group: npt.NDArray[np.int64], present: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.int32]:
+    """Segments relabelled by ``group`` (per id), the groups of the ``present`` ids numbered 1..M in order."""
     n = int(seg.max()) + 1
-    _, dense = np.unique(group[1:n], return_inverse=True)
-    lut = np.concatenate([[0], dense + 1]).astype(np.int32)
+    ids = np.flatnonzero(present[:n])
+    ids = ids[ids > 0]
+    _, dense = np.unique(group[ids], return_inverse=True)
+    lut = np.zeros(n, dtype=np.int32)
+    lut[ids] = dense + 1
     out: npt.NDArray[np.int32] = lut[seg]
     return out
 
@@ -174,7 +182,7 @@ def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
 
 
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
-    """Split every segment into the 4-connected pieces it falls into once ``barrier`` pixels are taken out.
+    """Split every segment into the 8-connected pieces it falls into once ``barrier`` pixels are taken out.
 
     Barrier pixels then rejoin a neighbouring piece of their segment.
 
@@ -183,7 +191,7 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
     segments : (H, W) int32
         Segment ids 1..N (consecutive) per pixel, 0 = none.
     barrier : (H, W) bool
-        Cuts (8-connected lines separate 4-connected pieces).
+        Cuts (4-connected lines separate 8-connected pieces).
 
     Returns
     -------
@@ -200,7 +208,7 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
     for sid, box in enumerate(ndimage.find_objects(np.where(touched[seg], seg, 0)), start=1):
         if box is None:
             continue
-        n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=4)
+        n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=8)
         view = out[box]
         view[(seg[box] == sid) & barrier[box]] = 0
         for k in range(2, n):
@@ -283,4 +291,4 @@ def merge_open_segments(
     pairs = pairs[join]
     m = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = connected_components(m, directed=False)
-    return _relabel(seg, comp)
+    return _relabel(seg, comp, np.bincount(seg.ravel(), minlength=n) > 0)
