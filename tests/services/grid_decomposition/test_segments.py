@@ -73,14 +73,17 @@ def test_split_along_cuts_a_segment_and_gives_the_cut_to_a_side() -> None:
     assert len(np.unique(split_along(seg, barrier))) == 1
 
 
-def test_segment_image_keeps_a_small_enclosed_piece_as_its_own_segment() -> None:
-    free = np.zeros((30, 30), dtype=bool)
-    free[2:20, 2:28] = True
-    free[24:28, 24:28] = True  # a 16 px pocket, walled off
+def test_segment_image_keeps_a_small_enclosed_piece_but_not_a_speck() -> None:
+    free = np.zeros((30, 40), dtype=bool)
+    free[2:20, 2:38] = True
+    free[23:28, 22:28] = True  # a 30 px pocket, walled off
+    free[25:27, 32:34] = True  # a 4 px speck, walled off
     face = np.where(free, 1, 0).astype(np.int32)
-    face[24:28, 24:28] = 2
-    out = segment_image(face, np.array([0, 1, 2]), free, min_area_px=50)
+    face[23:28, 22:28] = 2
+    face[25:27, 32:34] = 3
+    out = segment_image(face, np.array([0, 1, 2, 3]), free, min_area_px=50)
     assert out[25, 25] > 0 and out[25, 25] != out[10, 10]
+    assert out[25, 32] == 0
 
 
 def test_warehouse_floor_needs_many_storage_faces() -> None:
