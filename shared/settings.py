@@ -184,7 +184,7 @@ class DecompositionSettings(BaseModel):
     neck_half_width_m: float = Field(
         0.5, ge=0.0, description="Regions that fall apart when shrunk by this half-width are split; 0: off."
     )
-    door_max_width_m: float = Field(1.3, ge=0.0, description="Widest gap between wall runs closed as a doorway.")
+    door_max_width_m: float = Field(2.5, ge=0.0, description="Widest doorway closed between rooms.")
 
     @model_validator(mode="after")
     def _distinct_layers(self) -> DecompositionSettings:

@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.doorways import widens
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, line_endpoints
 
 DOOR_MIN_PX = 5
@@ -80,28 +81,6 @@ def close_doorways(
     return wall, ends[:-1][small].astype(np.int64), starts[1:][small].astype(np.int64)
 
 
-def _is_doorway(
-    near: npt.NDArray[np.bool_],
-    jambs: npt.NDArray[np.float64],
-    normal: tuple[float, float],
-    depth_px: float,
-) -> npt.NDArray[np.bool_]:
-    """Gaps whose jambs do not continue along the normal on one side (a mouth of a passage).
-
-    ``jambs`` is (G, 2, 2): the two jamb points (x, y) of each gap. A doorway is a hole in a wall:
-    a step ``depth_px`` away from the wall, on either side, at least one jamb is in free space.
-    Between two solid blocks both jambs stay on obstacles along the passage, so it is no door.
-    """
-    h, w = near.shape
-    door = np.ones(jambs.shape[0], dtype=bool)
-    for sign in (1.0, -1.0):
-        pts = jambs + sign * depth_px * np.asarray(normal)[None, None, :]
-        x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
-        y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
-        door &= ~(near[y, x].all(axis=1))
-    return door
-
-
 def wall_evidence(
     occupied: npt.NDArray[np.bool_],
     groups: Sequence[LineGroup],
@@ -109,14 +88,24 @@ def wall_evidence(
     tolerance_px: int,
     min_wall_px: int,
     max_door_px: int,
-    door_depth_px: int,
+    widening_px: int,
+    max_depth_px: int,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
 
-    Along each line the occupied mask (dilated by ``tolerance_px``, so slightly crooked walls
-    still sit on their line) is read as a 1-D profile; doorway-sized gaps between wall runs
-    (:func:`close_doorways`) are closed unless both jambs continue ``door_depth_px`` along the
-    normal on the same side (then the gap is the mouth of a passage between blocks, not a door).
+    Along each line the wall mask (dilated by ``tolerance_px``, so slightly crooked walls still
+    sit on their line) is read as a 1-D profile; doorway-sized gaps between wall runs
+    (:func:`close_doorways`) are closed when the free space behind them widens by at least
+    ``widening_px`` on both sides within ``max_depth_px`` of the line (a doorway between rooms);
+    a gap that stays as narrow on one side is a corridor or a passage between blocks, left open.
+
+    Parameters
+    ----------
+    occupied : (H, W) bool
+        Walls: occupied and unknown cells without furniture.
+    groups : sequence of LineGroup
+    tolerance_px, min_wall_px, max_door_px, widening_px, max_depth_px : int
+        Pixels.
 
     Returns
     -------
@@ -145,14 +134,17 @@ def wall_evidence(
             wall[ys[on_wall], xs[on_wall]] = True
             if g0.size == 0:
                 continue
-            jambs = np.stack(
-                [np.stack([xs[g0 - 1], ys[g0 - 1]], axis=1), np.stack([xs[g1], ys[g1]], axis=1)], axis=1
+            ends = np.stack(
+                [np.stack([xs[g0], ys[g0]], axis=1), np.stack([xs[g1 - 1], ys[g1 - 1]], axis=1)], axis=1
             ).astype(np.float64)
-            normal = (-math.sin(line.angle_rad), math.cos(line.angle_rad))
-            depth = float(door_depth_px + tolerance_px)
-            for a, b in zip(
-                g0[_is_doorway(near, jambs, normal, depth)], g1[_is_doorway(near, jambs, normal, depth)], strict=True
-            ):
+            doorway = widens(
+                near,
+                ends,
+                widening_px=widening_px,
+                max_depth_px=max_depth_px + tolerance_px,
+                depth_step_px=max(1, max_depth_px // 4),
+            )
+            for a, b in zip(g0[doorway], g1[doorway], strict=True):
                 wall[ys[a:b], xs[a:b]] = True
                 door[ys[a:b], xs[a:b]] = True
     kernel = np.ones((3, 3), np.uint8)

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.segments import fill_from_neighbours
+from services.grid_decomposition.segments import fill_from_neighbours, renumber
 
 
 def split_at_necks(
@@ -55,7 +55,7 @@ def split_at_necks(
     split = cores_per_seg >= 2
     split[0] = False
     if not split.any():
-        return _renumber(seg)
+        return renumber(seg)
     in_split = split[seg]
     marker = np.where(in_split & big[parts], parts + n_seg, 0).astype(np.int32)
     grown = marker
@@ -64,12 +64,4 @@ def split_at_necks(
         if not np.any(in_split & (grown == 0)):
             break
     out = np.where(in_split & (grown > 0), grown, seg)
-    return _renumber(out)
-
-
-def _renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
-    """Ids 1..N in the order of the ids used (0 stays 0); a lookup table, linear in the pixels."""
-    present = np.bincount(seg.ravel()) > 0
-    present[0] = False
-    lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
-    return lut[seg]
+    return renumber(out)

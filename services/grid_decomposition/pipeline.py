@@ -18,11 +18,17 @@ from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
-from services.grid_decomposition.regions import RegionInfo, face_regions, link_components, region_topology
+from services.grid_decomposition.regions import (
+    RegionInfo,
+    face_regions,
+    link_components,
+    region_topology,
+    warehouse_floors,
+)
+from services.grid_decomposition.rooms import furniture, segment_rooms
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -215,15 +221,17 @@ def decompose(
     n_texture_regions: int | None = None,
     n_categories: int = 8,
     label_overrides: Mapping[int, Label] | None = None,
-    door_max_width_m: float = 1.3,
+    door_max_width_m: float = 2.5,
     wall_min_length_m: float = 0.5,
-    door_depth_m: float = 0.5,
+    door_widening_m: float = 0.3,
+    door_max_depth_m: float = 1.0,
     wall_tolerance_m: float = 0.1,
     face_disparity_threshold: float = 0.5,
     edge_occupancy_threshold: float = 0.5,
     min_region_area_m2: float = 0.3,
     structure_min_area_m2: float = 0.5,
     neck_half_width_m: float = 0.5,
+    room_min_area_m2: float = 1.5,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -246,17 +254,25 @@ def decompose(
         k of the k-means place categorisation.
     label_overrides : mapping, optional
         Place category -> :class:`Label`, replacing the automatic assignment.
-    door_max_width_m, wall_min_length_m, wall_tolerance_m : float
-        Doorway closing along lines: gaps up to ``door_max_width_m`` between wall runs of at least
-        ``wall_min_length_m`` are closed, unless both jambs go on ``door_depth_m`` along the
-        normal (a passage between blocks); walls within ``wall_tolerance_m`` of a line are on it.
+    door_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
+        Doorways up to ``door_max_width_m`` wide. Along lines: gaps between wall runs of at least
+        ``wall_min_length_m`` are closed when the free space behind them widens by
+        ``door_widening_m`` on both sides within ``door_max_depth_m`` of the line (a corridor or a
+        passage between blocks does not); walls within ``wall_tolerance_m`` of a line are on it.
+        Off the lines, doorways are found from the free space itself
+        (:func:`~services.grid_decomposition.doorways.find_doorways`, same width and widening).
     face_disparity_threshold, edge_occupancy_threshold : float
         t1, t2 of the cogency test.
     min_region_area_m2 : float
         Smaller pieces of free space join a neighbouring region.
     neck_half_width_m : float
-        A region whose free space falls apart when shrunk by this half-width is split into the
+        A room whose free space falls apart when shrunk by this half-width is split into the
         rooms its necks join (:func:`split_at_necks`); 0 turns it off.
+    room_min_area_m2 : float
+        Regions off warehouse floors smaller than this (door slivers, strips between close lines)
+        join the neighbour they share the longest border with
+        (:func:`~services.grid_decomposition.rooms.segment_rooms`: rooms off warehouse floors
+        are face regions joined across open borders, with their furniture, cut at doorways).
     structure_min_area_m2 : float
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
@@ -298,13 +314,16 @@ def decompose(
     ]
     logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
     sub = subdivide(used, occ.shape, domain=free)
+    clutter = furniture(obstacle, resolution_m=resolution_m)
+    walls = (occupied | ~known) & ~clutter
     wall, door = wall_evidence(
-        occupied | (~known & ~free),
+        walls,
         used,
         tolerance_px=max(1, round(wall_tolerance_m / resolution_m)),
         min_wall_px=max(1, round(wall_min_length_m / resolution_m)),
         max_door_px=max(1, round(door_max_width_m / resolution_m)),
-        door_depth_px=max(1, round(door_depth_m / resolution_m)),
+        widening_px=max(1, round(door_widening_m / resolution_m)),
+        max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
     )
     cog = edge_cogency(
         sub,
@@ -338,12 +357,24 @@ def decompose(
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
-    if neck_half_width_m > 0:
-        segments = split_at_necks(segments, free, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
+    floor_px = warehouse_floors(component, cog.face_free_px, automatic.label)[component[sub.face_image]]
+    segments, cuts = segment_rooms(
+        segments,
+        clutter,
+        floor_px,
+        wall | door,
+        resolution_m=resolution_m,
+        door_max_width_m=door_max_width_m,
+        door_widening_m=door_widening_m,
+        door_max_depth_m=door_max_depth_m,
+        room_min_area_m2=room_min_area_m2,
+        neck_half_width_m=neck_half_width_m,
+    )
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    labels = np.where(free, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
-    topology = region_topology(sub, cog, face_region_final, regions)
+    topology = region_topology(sub, cog, face_region_final, regions, segments=segments, doorways=door | cuts)
     return Decomposition(
         labels=labels,
         segments=segments,

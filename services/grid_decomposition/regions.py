@@ -11,6 +11,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from services.grid_decomposition.cogency import EdgeCogency
+from services.grid_decomposition.segments import border_closure
 from services.grid_decomposition.semantics import Label, link_connection
 from services.grid_decomposition.subdivision import Subdivision
 
@@ -23,6 +24,49 @@ def link_components(n_nodes: int, links: npt.NDArray[np.int64], keep: npt.NDArra
     _, comp = connected_components(m, directed=False)
     _, dense = np.unique(comp, return_inverse=True)
     return np.where(keep, dense + 1, 0).astype(np.int64)
+
+
+def warehouse_floors(
+    component: npt.NDArray[np.int64],
+    face_free_px: npt.NDArray[np.int64],
+    face_label: npt.NDArray[np.int64],
+    *,
+    min_storage_share: float = 0.15,
+    min_storage_faces: int = 12,
+    min_storage_face_share: float = 0.3,
+) -> npt.NDArray[np.bool_]:
+    """Per component id: a warehouse floor, with at least ``min_storage_faces`` storage faces making up
+    at least ``min_storage_share`` of its free area and ``min_storage_face_share`` of its faces.
+
+    Pallet cells come in long rows, about every other face of a warehouse floor (half of them in
+    the synthetic warehouses); storage-like faces between furniture are a few, or a small share
+    of a room's many faces, and do not make a room a floor.
+
+    Parameters
+    ----------
+    component : (F + 1,) int64
+        Component id per face (0 = none), from :func:`link_components`.
+    face_free_px : (F + 1,) int64
+    face_label : (F + 1,) int64
+        :class:`Label` value per face.
+
+    Returns
+    -------
+    (C,) bool
+        Indexed by component id; False for 0.
+    """
+    n_comp = int(component.max()) + 1
+    area = np.bincount(component, weights=face_free_px, minlength=n_comp)
+    stored = np.bincount(component, weights=face_free_px * (face_label == Label.STORAGE.value), minlength=n_comp)
+    cells = np.bincount(component, weights=face_label == Label.STORAGE.value, minlength=n_comp)
+    faces = np.bincount(component, weights=face_free_px > 0, minlength=n_comp)
+    floor: npt.NDArray[np.bool_] = (
+        (stored >= min_storage_share * np.maximum(area, 1))
+        & (cells >= min_storage_faces)
+        & (cells >= min_storage_face_share * faces)
+    )
+    floor[0] = False
+    return floor
 
 
 def face_regions(
@@ -42,12 +86,7 @@ def face_regions(
     aisles (adjacent faces of one drivable label together).
     """
     n = sub.n_faces + 1
-    n_comp = int(component.max()) + 1
-    area = np.bincount(component, weights=face_free_px, minlength=n_comp)
-    stored = np.bincount(component, weights=face_free_px * (face_label == Label.STORAGE.value), minlength=n_comp)
-    has_storage = stored >= min_storage_share * np.maximum(area, 1)
-    has_storage[0] = False
-    split = has_storage[component]
+    split = warehouse_floors(component, face_free_px, face_label, min_storage_share=min_storage_share)[component]
     a, b = sub.edge_faces[:, 0], sub.edge_faces[:, 1]
     same = (component[a] == component[b]) & ~cogency.cogent & (component[a] > 0)
     join = same & (~split[a] | ((face_label[a] == face_label[b]) & (face_label[a] != Label.STORAGE.value)))
@@ -73,12 +112,17 @@ def region_topology(
     cogency: EdgeCogency,
     face_region: npt.NDArray[np.int64],
     regions: dict[int, RegionInfo],
+    *,
+    segments: npt.NDArray[np.int32] | None = None,
+    doorways: npt.NDArray[np.bool_] | None = None,
 ) -> nx.Graph:
     """Graph of regions; an edge per touching pair with attribute ``connection`` (a Connection value).
 
     Regions touching across at least one non-cogent edge are linked by their labels
     (:func:`link_connection`); touching only across cogent edges, by a door when a doorway was
-    closed on one of them, else they are disconnected.
+    closed on one of them, else they are disconnected. With ``segments`` and ``doorways`` (the
+    closed doorway pixels, also those found off the lines), regions whose pixels touch are linked
+    by a door when at least half of their shared border is on a doorway, else by their labels.
     """
     graph = nx.Graph()
     for info in regions.values():
@@ -103,4 +147,11 @@ def region_topology(
         door = bool(cogency.door[edges].any())
         conn = link_connection(regions[p].label, regions[q].label, cogent=not open_edges, door=door)
         graph.add_edge(p, q, connection=conn.value)
+    if segments is not None and doorways is not None:
+        touching, total, shut = border_closure(segments, doorways)
+        for (p, q), t, c in zip(touching.tolist(), total.tolist(), shut.tolist(), strict=True):
+            if p in regions and q in regions:
+                door = 2 * c >= t
+                conn = link_connection(regions[p].label, regions[q].label, cogent=door, door=door)
+                graph.add_edge(p, q, connection=conn.value)
     return graph

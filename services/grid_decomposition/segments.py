@@ -6,6 +6,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 
 def fill_from_neighbours(
@@ -13,21 +15,25 @@ def fill_from_neighbours(
 ) -> npt.NDArray[np.int32]:
     """Give unlabelled (0) ``target`` pixels the id of a labelled 8-neighbour, growing outwards."""
     out = segments.copy()
+    hole = target & (out == 0)
+    rows = np.flatnonzero(hole.any(axis=1))
+    if rows.size == 0:
+        return out
+    cols = np.flatnonzero(hole.any(axis=0))
+    r0, r1 = max(int(rows[0]) - 1, 0), int(rows[-1]) + 2
+    c0, c1 = max(int(cols[0]) - 1, 0), int(cols[-1]) + 2
+    crop = out[r0:r1, c0:c1]
+    inside = target[r0:r1, c0:c1]
     kernel = np.ones((3, 3), np.uint8)
     for _ in range(max_iterations):
-        hole = target & (out == 0)
-        if not hole.any():
+        h = inside & (crop == 0)
+        if not h.any():
             break
-        rows, cols = np.nonzero(hole)
-        r0, r1 = max(rows.min() - 1, 0), rows.max() + 2
-        c0, c1 = max(cols.min() - 1, 0), cols.max() + 2
-        crop = out[r0:r1, c0:c1]
-        grown = cv2.dilate(crop.astype(np.float32), kernel).astype(np.int32)
-        h = hole[r0:r1, c0:c1]
+        grown = cv2.dilate(crop.astype(np.float32), kernel)
         fill = h & (grown > 0)
         if not fill.any():
             break
-        crop[fill] = grown[fill]
+        crop[fill] = grown[fill].astype(np.int32)
     return out
 
 
@@ -41,7 +47,8 @@ def segment_image(
     """Per-pixel segments of free space from a segment id per face.
 
     Line pixels take a neighbouring face's segment; every segment is split into its 4-connected
-    pieces; pieces smaller than ``min_area_px`` are absorbed by their neighbours.
+    pieces; pieces smaller than ``min_area_px`` are absorbed by their neighbours (an enclosed one
+    stays a segment of its own, unless under half of ``min_area_px``: specks of mapping noise).
 
     Parameters
     ----------
@@ -77,4 +84,211 @@ def segment_image(
             next_id += 1
     if small.any():
         out = fill_from_neighbours(out, small)
+        alone = small & (out == 0)
+        if alone.any():
+            n, pieces, stats, _ = cv2.connectedComponentsWithStats(alone.astype(np.uint8), connectivity=4)
+            keep = stats[:, cv2.CC_STAT_AREA] >= min_area_px // 2
+            keep[0] = False
+            ids = np.where(keep, np.cumsum(keep) + next_id - 1, 0)
+            out = np.where(alone, ids[pieces], out).astype(np.int32)
     return out
+
+
+def merge_small_segments(
+    segments: npt.NDArray[np.int32],
+    *,
+    min_area_px: int,
+    fixed: npt.NDArray[np.bool_] | None = None,
+    absorb: npt.NDArray[np.bool_] | None = None,
+) -> npt.NDArray[np.int32]:
+    """Merge every segment smaller than ``min_area_px`` into the neighbour it shares the longest border with.
+
+    Smallest first; a merged segment's borders add up, so a chain of slivers ends in the room
+    they line. Segments without a neighbour (an enclosed closet) stay.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment ids 1..N (consecutive) per pixel, 0 = none.
+    min_area_px : int
+    fixed : (N + 1,) bool, optional
+        Per segment id: never merged away (it may still absorb small neighbours).
+    absorb : (N + 1,) bool, optional
+        Per segment id: merged like a small one whatever its area.
+
+    Returns
+    -------
+    (H, W) int32
+        Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max()) + 1
+    area = np.bincount(seg.ravel(), minlength=n).astype(np.int64)
+    must = np.zeros(n, dtype=bool) if absorb is None else absorb[:n].copy()
+    small = ((area < min_area_px) | must) & (area > 0)
+    small[0] = False
+    if fixed is not None:
+        small &= ~fixed[:n]
+    if not small.any():
+        return _relabel(seg, np.arange(n), area > 0)
+    pairs, border, _ = border_closure(seg, None)
+    neighbours: list[dict[int, int]] = [{} for _ in range(n)]
+    for (p, q), c in zip(pairs.tolist(), border.tolist(), strict=True):
+        neighbours[p][q] = c
+        neighbours[q][p] = c
+    parent = np.arange(n)
+    for s in sorted(np.flatnonzero(small).tolist(), key=lambda i: area[i]):
+        if (area[s] >= min_area_px and not must[s]) or not neighbours[s]:
+            continue
+        t = max(neighbours[s], key=lambda k: neighbours[s][k])
+        parent[s] = t
+        area[t] += area[s]
+        for k, c in neighbours[s].items():
+            del neighbours[k][s]
+            if k != t:
+                neighbours[t][k] = neighbours[t].get(k, 0) + c
+                neighbours[k][t] = neighbours[k].get(t, 0) + c
+        neighbours[s] = {}
+    root = parent.copy()
+    while True:
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            break
+        root = nxt
+    return _relabel(seg, root, area > 0)
+
+
+def _relabel(
+    seg: npt.NDArray[np.int32], group: npt.NDArray[np.int64], present: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.int32]:
+    """Segments relabelled by ``group`` (per id), the groups of the ``present`` ids numbered 1..M in order."""
+    n = int(seg.max()) + 1
+    ids = np.flatnonzero(present[:n])
+    ids = ids[ids > 0]
+    _, dense = np.unique(group[ids], return_inverse=True)
+    lut = np.zeros(n, dtype=np.int32)
+    lut[ids] = dense + 1
+    out: npt.NDArray[np.int32] = lut[seg]
+    return out
+
+
+def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """Ids 1..N in the order of the old ids, 0 kept."""
+    present = np.bincount(seg.ravel(), minlength=1) > 0
+    present[0] = False
+    lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
+    out: npt.NDArray[np.int32] = lut[seg]
+    return out
+
+
+def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
+    """Split every segment into the 8-connected pieces it falls into once ``barrier`` pixels are taken out.
+
+    Barrier pixels then rejoin a neighbouring piece of their segment.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment ids 1..N (consecutive) per pixel, 0 = none.
+    barrier : (H, W) bool
+        Cuts (4-connected lines separate 8-connected pieces).
+
+    Returns
+    -------
+    (H, W) int32
+        Segment ids 1..N (consecutive), 0 where ``segments`` is 0.
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    cut = np.where(barrier, 0, seg)
+    out = seg.copy()
+    next_id = int(seg.max()) + 1
+    touched = np.zeros(next_id, dtype=bool)
+    touched[seg[barrier]] = True
+    touched[0] = False
+    for sid, box in enumerate(ndimage.find_objects(np.where(touched[seg], seg, 0)), start=1):
+        if box is None:
+            continue
+        n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=8)
+        view = out[box]
+        view[(seg[box] == sid) & barrier[box]] = 0
+        for k in range(2, n):
+            view[pieces == k] = next_id
+            next_id += 1
+    return fill_from_neighbours(out, barrier & (seg > 0))
+
+
+def border_closure(
+    segments: npt.NDArray[np.int32], closed: npt.NDArray[np.bool_] | None
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Touching segment pairs, the length of their border and how much of it is closed.
+
+    A border pixel pair (4-neighbours of two segments) is closed when either pixel is on ``closed``
+    (``None``: nothing is).
+
+    Returns
+    -------
+    pairs : (K, 2) int64
+        Segment ids ``a < b``.
+    total, shut : (K,) int64
+        Border pixel pairs, and those closed.
+    """
+    seg = np.asarray(segments)
+    n = int(seg.max()) + 1
+    firsts: list[npt.NDArray[np.int64]] = []
+    seconds: list[npt.NDArray[np.int64]] = []
+    shuts: list[npt.NDArray[np.bool_]] = []
+    for dy, dx in ((0, 1), (1, 0)):
+        h, w = seg.shape
+        rows, cols = np.nonzero(seg[: h - dy, : w - dx] != seg[dy:, dx:])
+        firsts.append(seg[rows, cols].astype(np.int64))
+        seconds.append(seg[rows + dy, cols + dx].astype(np.int64))
+        if closed is None:
+            shuts.append(np.zeros(rows.size, dtype=bool))
+        else:
+            shuts.append(closed[rows, cols] | closed[rows + dy, cols + dx])
+    a, b, shut_px = np.concatenate(firsts), np.concatenate(seconds), np.concatenate(shuts)
+    ok = (a > 0) & (b > 0)
+    a, b, shut_px = a[ok], b[ok], shut_px[ok]
+    codes, inverse = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True)
+    total = np.bincount(inverse, minlength=len(codes)).astype(np.int64)
+    shut = np.bincount(inverse, weights=shut_px, minlength=len(codes)).astype(np.int64)
+    return np.stack([codes // n, codes % n], axis=1), total, shut
+
+
+def merge_open_segments(
+    segments: npt.NDArray[np.int32],
+    closed: npt.NDArray[np.bool_],
+    *,
+    max_closed_share: float = 0.5,
+    fixed: npt.NDArray[np.bool_] | None = None,
+) -> npt.NDArray[np.int32]:
+    """Join touching segments whose shared border is mostly open (cogency between segments).
+
+    A border pixel pair is closed when either pixel is on ``closed`` (wall evidence, a closed
+    doorway, a cut). Two segments touching along a border of which at most
+    ``max_closed_share`` is closed are one region, as faces joined by a connected link are;
+    this also joins faces that no line edge links (across texture-region borders).
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment ids 1..N (consecutive) per pixel, 0 = none.
+    closed : (H, W) bool
+    fixed : (N + 1,) bool, optional
+        Per segment id: never joined.
+
+    Returns
+    -------
+    (H, W) int32
+        Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max()) + 1
+    pairs, total, shut = border_closure(seg, closed)
+    join = shut <= max_closed_share * total
+    if fixed is not None:
+        join &= ~fixed[pairs[:, 0]] & ~fixed[pairs[:, 1]]
+    pairs = pairs[join]
+    m = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, comp = connected_components(m, directed=False)
+    return _relabel(seg, comp, np.bincount(seg.ravel(), minlength=n) > 0)

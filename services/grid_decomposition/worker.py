@@ -84,7 +84,7 @@ class DecompositionStage:
         min_period_s: float = 10.0,
         poll_period_s: float = 2.0,
         neck_half_width_m: float = 0.5,
-        door_max_width_m: float = 1.3,
+        door_max_width_m: float = 2.5,
     ) -> None:
         if not 0.0 <= min_change_fraction <= 1.0:
             raise DecompositionError(f"min_change_fraction must be in [0, 1], got {min_change_fraction}")

@@ -40,7 +40,9 @@ def test_wall_with_a_door_is_cogent_and_an_open_line_is_not() -> None:
     lines = (Line(math.pi / 2, -50.0, 5.0, 0.1, True), Line(0.0, 20.0, 5.0, 0.1, True))
     groups = [LineGroup(lines, None)]
     sub = subdivide(groups, occ.shape, domain=free)
-    wall, door = wall_evidence(occ, groups, tolerance_px=1, min_wall_px=5, max_door_px=25, door_depth_px=10)
+    wall, door = wall_evidence(
+        occ, groups, tolerance_px=1, min_wall_px=5, max_door_px=25, widening_px=6, max_depth_px=20
+    )
     cog = edge_cogency(sub, occ.astype(float), free, wall, door)
     assert sub.n_edges >= 3
     crosses_wall = np.array(

@@ -1,0 +1,366 @@
+"""Doorways found from the free space itself, whatever the decomposition lines: narrow passages between walls."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+
+def _centre_runs(
+    blocked: npt.NDArray[np.bool_],
+    points: npt.NDArray[np.float64],
+    direction: npt.NDArray[np.float64],
+    reach_px: int,
+) -> npt.NDArray[np.int64]:
+    """Length of the unblocked run through each point along its direction (0 where the point is blocked).
+
+    Parameters
+    ----------
+    blocked : (H, W) bool
+    points : (..., 2) float64
+        (x, y) pixels.
+    direction : (..., 2) float64
+        Unit (x, y) direction per point (broadcast against ``points``).
+    reach_px : int
+        Runs are counted up to this many pixels each way.
+    """
+    h, w = blocked.shape
+    t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
+    pts = points[..., None, :] + t[:, None] * direction[..., None, :]
+    x = np.rint(pts[..., 0]).astype(np.int64)
+    y = np.rint(pts[..., 1]).astype(np.int64)
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+    stop = ~inside
+    stop[inside] = blocked[y[inside], x[inside]]
+    end = np.ones((*stop.shape[:-1], 1), dtype=bool)
+    ahead = np.concatenate([stop[..., reach_px:], end], axis=-1)
+    behind = np.concatenate([stop[..., reach_px::-1], end], axis=-1)
+    run: npt.NDArray[np.int64] = np.argmax(ahead, axis=-1) + np.argmax(behind, axis=-1) - 1
+    return np.maximum(run, 0)
+
+
+def widens(
+    blocked: npt.NDArray[np.bool_],
+    ends: npt.NDArray[np.float64],
+    *,
+    widening_px: float,
+    max_depth_px: int,
+    depth_step_px: int,
+    clearance: npt.NDArray[np.floating] | None = None,
+    room_margin_px: float = 0.0,
+) -> npt.NDArray[np.bool_]:
+    """Gaps behind which the free space widens on both sides: doorways, not corridors or passages.
+
+    On each side of a gap, at depths ``depth_step_px, 2 * depth_step_px, ... <= max_depth_px``
+    along its normal (past the thickness of the wall it pierces), the free run through the gap's
+    middle parallel to the gap is measured. A doorway opens on both sides into space at least
+    ``widening_px`` wider than itself; a corridor crossing the gap, or a passage between blocks,
+    stays as narrow on one side. With ``clearance``, the space on each side must also hold a
+    disc wider than the gap by ``room_margin_px`` on its radius, reached straight along the
+    normal (a parallel run can leak through another doorway of a corridor; a disc cannot).
+
+    Parameters
+    ----------
+    blocked : (H, W) bool
+        Walls.
+    ends : (G, 2, 2) float64
+        The two ends (x, y) of each gap, pixels.
+    clearance : (H, W) float, optional
+        Distance to the nearest wall, pixels.
+
+    Returns
+    -------
+    (G,) bool
+    """
+    if len(ends) == 0:
+        return np.zeros(0, dtype=bool)
+    span = ends[:, 1] - ends[:, 0]
+    width = np.linalg.norm(span, axis=1)
+    u = span / np.maximum(width, 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    mid = ends.mean(axis=1)
+    need = width + widening_px
+    depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
+    reach = math.ceil(float(need.max())) + 1
+    door = np.ones(len(ends), dtype=bool)
+    for sign in (1.0, -1.0):
+        reachable = _free_depth(blocked, mid, sign * normal, max_depth_px)
+        points = mid[:, None, :] + sign * depths[None, :, None] * normal[:, None, :]
+        runs = _centre_runs(blocked, points, np.broadcast_to(u[:, None, :], points.shape), reach)
+        runs[depths[None, :] > reachable[:, None]] = 0
+        door &= runs.max(axis=1) >= need
+    if clearance is not None:
+        door &= _room_on_both_sides(blocked, clearance, mid, normal, width / 2.0 + room_margin_px, max_depth_px)
+    return door
+
+
+def _room_on_both_sides(
+    blocked: npt.NDArray[np.bool_],
+    clearance: npt.NDArray[np.floating],
+    mid: npt.NDArray[np.float64],
+    normal: npt.NDArray[np.float64],
+    radius_px: npt.NDArray[np.float64],
+    max_depth_px: int,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: straight ahead and behind each gap, within its radius plus ``max_depth_px``, the clearance
+    reaches ``radius_px``."""
+    h, w = blocked.shape
+    reach = math.ceil(float(radius_px.max())) + max_depth_px
+    t = np.arange(1, reach + 1, dtype=np.float64)
+    ok = np.ones(len(mid), dtype=bool)
+    for sign in (1.0, -1.0):
+        seen = _free_depth(blocked, mid, sign * normal, reach)
+        pts = mid[:, None, :] + sign * t[None, :, None] * normal[:, None, :]
+        x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+        y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+        room = np.where(
+            (t[None, :] <= seen[:, None]) & (t[None, :] <= radius_px[:, None] + max_depth_px), clearance[y, x], 0.0
+        )
+        ok &= room.max(axis=1) >= radius_px
+    return ok
+
+
+def _free_depth(
+    blocked: npt.NDArray[np.bool_], points: npt.NDArray[np.float64], direction: npt.NDArray[np.float64], max_px: int
+) -> npt.NDArray[np.float64]:
+    """(N,) how far, in pixels, each point sees free space along its direction (up to ``max_px``)."""
+    h, w = blocked.shape
+    t = np.arange(0, max_px + 1, dtype=np.float64)
+    pts = points[:, None, :] + t[None, :, None] * direction[:, None, :]
+    x = np.rint(pts[..., 0]).astype(np.int64)
+    y = np.rint(pts[..., 1]).astype(np.int64)
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+    stop = ~inside
+    stop[inside] = blocked[y[inside], x[inside]]
+    stop = np.concatenate([stop, np.ones((len(points), 1), dtype=bool)], axis=1)
+    depth: npt.NDArray[np.float64] = np.argmax(stop, axis=1).astype(np.float64) - 1.0
+    return depth
+
+
+def find_doorways(
+    space: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    min_width_m: float = 0.5,
+    max_width_m: float = 2.5,
+    widening_m: float = 0.3,
+    max_depth_m: float = 1.0,
+    straightness: float = 0.9,
+    wall_run_m: float = 0.5,
+    wall_share: float = 0.9,
+    max_wall_thickness_m: float = 0.6,
+    neck_reach_m: float = 0.5,
+    neck_tolerance_m: float = 0.05,
+    room_margin_m: float = 0.0,
+) -> npt.NDArray[np.float64]:
+    """Doorways of a floor: cuts across the narrow passages between walls, independent of any line.
+
+    Every pair of neighbouring pixels whose nearest walls lie on opposite sides (their feature
+    points are about as far apart as the two clearances add up to: the medial axis between two
+    facing walls or wall ends) proposes the cut between those two wall points. A cut
+    ``min_width_m``..``max_width_m`` long is a doorway when it is a neck, it continues a thin
+    wall, and behind it on both sides the free space widens and holds a room at least as wide as
+    the cut (:func:`widens`); along a corridor, across a bend, or from a wall end across a room it
+    is not.
+
+    Parameters
+    ----------
+    space : (H, W) bool
+        Free space with furniture counted free; everything else is wall.
+    resolution_m : float
+        Metres per pixel.
+    wall_run_m, wall_share : float
+        A doorway continues a wall: beyond at least one of its ends, ``wall_share`` of the next
+        ``wall_run_m`` along the cut is wall (the door's own wall; a cut from a wall end across
+        a room to the facing wall leaves that wall at an angle).
+    max_wall_thickness_m : float
+        ... and that wall is at most this thick across the cut (a cut from the corner of a
+        cabinet or block across a corridor continues no wall).
+    room_margin_m : float
+        On both sides the doorway opens into a room holding a disc of radius half its width
+        plus this (:func:`widens`).
+    neck_reach_m, neck_tolerance_m : float
+        A doorway is a neck: up to ``neck_reach_m`` ahead and behind it (along its normal) the
+        clearance does not drop more than ``neck_tolerance_m`` below its own (a cut across a
+        corridor that narrows on one side, or across a bend, is no neck).
+    straightness : float
+        Minimum ratio of the feature points' distance to the sum of the two clearances (1 for
+        walls facing each other straight across; a room corner's bisector is about 0.7).
+
+    Returns
+    -------
+    (K, 2, 2) float64
+        The two wall points (x, y) pixels of each doorway cut.
+    """
+    if space.all() or not space.any():
+        return np.zeros((0, 2, 2))
+    rows, cols = np.nonzero(space)
+    r0, c0 = max(int(rows.min()) - 1, 0), max(int(cols.min()) - 1, 0)
+    box = space[r0 : int(rows.max()) + 2, c0 : int(cols.max()) + 2]
+    return _find_doorways(
+        box,
+        resolution_m=resolution_m,
+        min_width_m=min_width_m,
+        max_width_m=max_width_m,
+        widening_m=widening_m,
+        max_depth_m=max_depth_m,
+        straightness=straightness,
+        wall_run_m=wall_run_m,
+        wall_share=wall_share,
+        max_wall_thickness_m=max_wall_thickness_m,
+        neck_reach_m=neck_reach_m,
+        neck_tolerance_m=neck_tolerance_m,
+        room_margin_m=room_margin_m,
+    ) + np.array([c0, r0], dtype=np.float64)
+
+
+def _find_doorways(
+    space: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    min_width_m: float,
+    max_width_m: float,
+    widening_m: float,
+    max_depth_m: float,
+    straightness: float,
+    wall_run_m: float,
+    wall_share: float,
+    max_wall_thickness_m: float,
+    neck_reach_m: float,
+    neck_tolerance_m: float,
+    room_margin_m: float,
+) -> npt.NDArray[np.float64]:
+    """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
+    dist, nearest = _nearest_walls(space, reach_px=math.ceil(max_width_m / resolution_m) + 2)
+    lo, hi = min_width_m / resolution_m, max_width_m / resolution_m
+    h, w = space.shape
+    band = space & (dist >= lo / 2 - 1) & (dist <= hi / 2 + 1)
+    cuts: list[npt.NDArray[np.float64]] = []
+    for dy, dx in ((0, 1), (1, 0)):
+        rows, cols = np.nonzero(band[: h - dy, : w - dx] & space[dy:, dx:])
+        p = nearest(rows * w + cols)
+        q = nearest((rows + dy) * w + cols + dx)
+        sep = np.hypot(*(p - q).T)
+        clear = dist[rows, cols] + dist[rows + dy, cols + dx]
+        ok = (sep >= lo) & (sep <= hi) & (sep >= straightness * clear)
+        cuts.append(np.stack([p[ok], q[ok]], axis=1))
+    pairs = np.concatenate(cuts)
+    if len(pairs) == 0:
+        return np.zeros((0, 2, 2))
+    swap = (pairs[:, 0, 0] > pairs[:, 1, 0]) | ((pairs[:, 0, 0] == pairs[:, 1, 0]) & (pairs[:, 0, 1] > pairs[:, 1, 1]))
+    pairs[swap] = pairs[swap, ::-1]
+    pairs = np.unique(pairs.reshape(-1, 4), axis=0).reshape(-1, 2, 2)
+    walls = ~space
+    pairs = pairs[_is_neck(dist, pairs, round(neck_reach_m / resolution_m), neck_tolerance_m / resolution_m)]
+    keep = _extends_a_wall(
+        walls, pairs, round(wall_run_m / resolution_m), wall_share, round(max_wall_thickness_m / resolution_m)
+    )
+    pairs = pairs[keep]
+    keep = widens(
+        walls,
+        pairs,
+        widening_px=widening_m / resolution_m,
+        max_depth_px=max(1, round(max_depth_m / resolution_m)),
+        depth_step_px=max(1, round(max_depth_m / resolution_m / 4)),
+        clearance=dist,
+        room_margin_px=room_margin_m / resolution_m,
+    )
+    return pairs[keep]
+
+
+def _nearest_walls(
+    space: npt.NDArray[np.bool_], *, reach_px: int, tile_px: int = 256, max_share: float = 0.25
+) -> tuple[npt.NDArray[np.float32], Callable[[npt.NDArray[np.int64]], npt.NDArray[np.float64]]]:
+    """Distance to the nearest wall pixel, (H, W) float32 pixels, and a lookup from flat pixel indices
+    to the (x, y) of their nearest wall pixel, (K, 2) float64 (exact Euclidean feature transform).
+
+    Exact wherever the distance is at most ``reach_px`` (and at least ``reach_px`` elsewhere).
+    When free space is a small share of the image (a warehouse floor with a perimeter aisle), the
+    transform runs only on tiles of ``tile_px`` holding free space, each widened by ``reach_px``.
+    """
+    h, w = space.shape
+    if space.mean() > max_share:
+        tiles = [(0, h, 0, w)]
+    else:
+        tiles = [
+            (r, min(r + tile_px, h), c, min(c + tile_px, w))
+            for r in range(0, h, tile_px)
+            for c in range(0, w, tile_px)
+            if space[r : r + tile_px, c : c + tile_px].any()
+        ]
+    dist = np.zeros((h, w), dtype=np.float32)
+    fx = np.zeros((h, w), dtype=np.int32)
+    fy = np.zeros((h, w), dtype=np.int32)
+    for r0, r1, c0, c1 in tiles:
+        a0, a1 = max(r0 - reach_px, 0), min(r1 + reach_px, h)
+        b0, b1 = max(c0 - reach_px, 0), min(c1 + reach_px, w)
+        d, (iy, ix) = ndimage.distance_transform_edt(space[a0:a1, b0:b1], return_indices=True)
+        core = (slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0))
+        dist[r0:r1, c0:c1] = d[core]
+        fy[r0:r1, c0:c1] = iy[core] + a0
+        fx[r0:r1, c0:c1] = ix[core] + b0
+    flat_x, flat_y = fx.ravel(), fy.ravel()
+
+    def wall_xy(index: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+        return np.stack([flat_x[index], flat_y[index]], axis=1).astype(np.float64)
+
+    return dist, wall_xy
+
+
+def _is_neck(
+    dist: npt.NDArray[np.floating], cuts: npt.NDArray[np.float64], reach_px: int, tolerance_px: float
+) -> npt.NDArray[np.bool_]:
+    """(K,) bool: the clearance at each cut's middle is the least along its normal, within ``reach_px``."""
+    h, w = dist.shape
+    span = cuts[:, 1] - cuts[:, 0]
+    u = span / np.maximum(np.linalg.norm(span, axis=1), 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    steps = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
+    pts = cuts.mean(axis=1)[:, None, :] + steps[None, :, None] * normal[:, None, :]
+    x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+    y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+    clearance = dist[y, x]
+    out: npt.NDArray[np.bool_] = clearance.min(axis=1) >= clearance[:, reach_px] - tolerance_px
+    return out
+
+
+def _extends_a_wall(
+    walls: npt.NDArray[np.bool_], cuts: npt.NDArray[np.float64], run_px: int, share: float, max_thickness_px: int
+) -> npt.NDArray[np.bool_]:
+    """(K,) bool: beyond one end of the cut, along it, a thin wall goes on.
+
+    ``share`` of the next ``run_px`` pixels along the cut are wall, and across the cut that wall
+    is at most ``max_thickness_px`` thick somewhere (a wall, not a cabinet or a block; a wall
+    meeting another one is thick only where they meet).
+    """
+    if len(cuts) == 0 or run_px < 1:
+        return np.ones(len(cuts), dtype=bool)
+    h, w = walls.shape
+    span = cuts[:, 1] - cuts[:, 0]
+    u = span / np.maximum(np.linalg.norm(span, axis=1), 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    k = np.arange(1, run_px + 1, dtype=np.float64)
+    out = np.zeros(len(cuts), dtype=bool)
+    for end, sign in ((0, -1.0), (1, 1.0)):
+        pts = cuts[:, end, None, :] + sign * k[None, :, None] * u[:, None, :]
+        x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+        y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+        on_wall = walls[y, x].mean(axis=1) >= share
+        along = cuts[:, end, None, :] + sign * np.array([0.2, 0.35, 0.5])[None, :, None] * run_px * u[:, None, :]
+        across = np.broadcast_to(normal[:, None, :], along.shape)
+        thickness = _centre_runs(~walls, along, across, max_thickness_px + 1).min(axis=1)
+        out |= on_wall & (thickness <= max_thickness_px)
+    return out
+
+
+def draw_cuts(cuts: npt.NDArray[np.float64], shape: tuple[int, int]) -> npt.NDArray[np.bool_]:
+    """Raster of the cuts (1 px, 4-connected, so they separate 8-connected free space)."""
+    canvas = np.zeros(shape, dtype=np.uint8)
+    for (x0, y0), (x1, y1) in cuts:
+        cv2.line(canvas, (round(x0), round(y0)), (round(x1), round(y1)), 1, 1, cv2.LINE_4)
+    return canvas.astype(bool)

@@ -1,0 +1,149 @@
+"""Rooms: furniture told from walls, face regions joined, cut at doorways and cleaned."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+from services.grid_decomposition.doorways import draw_cuts, find_doorways
+from services.grid_decomposition.necks import split_at_necks
+from services.grid_decomposition.segments import (
+    fill_from_neighbours,
+    merge_open_segments,
+    merge_small_segments,
+    split_along,
+)
+
+
+def furniture(
+    obstacle: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    max_area_m2: float = 1.0,
+    max_extent_m: float = 1.2,
+    wall_min_length_m: float = 0.5,
+    wall_max_thickness_m: float = 0.35,
+) -> npt.NDArray[np.bool_]:
+    """Free-standing small obstacles: furniture, bins, pillars, table legs, clutter.
+
+    An 8-connected obstacle component is furniture when it does not touch the map border, covers
+    at most ``max_area_m2`` and its bounding box is at most ``max_extent_m`` on its longer side,
+    unless it is a piece of wall: at least ``wall_min_length_m`` long and at most
+    ``wall_max_thickness_m`` thick (its minimum-area rectangle), as the dashes of a wall with many
+    doors. Longer walls are kept anyway; furniture pushed against a wall is part of the wall's
+    component and stays.
+
+    Parameters
+    ----------
+    obstacle : (H, W) bool
+        Occupied or unknown cells.
+    resolution_m : float
+        Metres per cell.
+
+    Returns
+    -------
+    (H, W) bool
+        The furniture cells (a subset of ``obstacle``).
+    """
+    _n, parts, stats, _ = cv2.connectedComponentsWithStats(obstacle.astype(np.uint8), connectivity=8)
+    h, w = obstacle.shape
+    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
+    inner = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h)
+    small = (stats[:, cv2.CC_STAT_AREA] * resolution_m**2 <= max_area_m2) & (
+        np.maximum(bw, bh) * resolution_m <= max_extent_m
+    )
+    keep = inner & small
+    keep[0] = False
+    for k in np.flatnonzero(keep & (np.hypot(bw, bh) * resolution_m >= wall_min_length_m)):
+        box = parts[y[k] : y[k] + bh[k], x[k] : x[k] + bw[k]] == k
+        rows, cols = np.nonzero(box)
+        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+        length, thickness = (max(side_a, side_b) + 1) * resolution_m, (min(side_a, side_b) + 1) * resolution_m
+        if length >= wall_min_length_m and thickness <= wall_max_thickness_m:
+            keep[k] = False
+    return np.asarray(keep[parts], dtype=bool)
+
+
+def segment_rooms(
+    segments: npt.NDArray[np.int32],
+    clutter: npt.NDArray[np.bool_],
+    floor: npt.NDArray[np.bool_],
+    closed: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    door_max_width_m: float = 2.5,
+    door_widening_m: float = 0.3,
+    door_max_depth_m: float = 1.0,
+    room_min_area_m2: float = 1.5,
+    room_min_half_width_m: float = 0.4,
+    neck_half_width_m: float = 0.0,
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
+    """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
+
+    Segments on warehouse floors (``floor``) are left as they are.
+
+    1. Touching segments whose shared border is mostly open (not on ``closed``: wall evidence
+       and doorways closed along lines) are one room (:func:`merge_open_segments`).
+    2. Furniture (``clutter``) takes the room around it: a room's area is its floor plan.
+    3. Rooms joined through a neck are split (:func:`split_at_necks`, when
+       ``neck_half_width_m`` > 0), and doorways found from the free space itself
+       (:func:`find_doorways`) cut rooms apart.
+    4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
+       everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
+       longest border with (:func:`merge_small_segments`).
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per free pixel from the faces, 0 elsewhere.
+    clutter, floor, closed : (H, W) bool
+        Furniture (:func:`furniture`); pixels of warehouse floors; closed line pixels.
+    resolution_m : float
+        Metres per pixel.
+
+    Returns
+    -------
+    segments : (H, W) int32
+        Region ids 1..N; 0 on walls, unknown space and furniture on warehouse floors.
+    cuts : (H, W) bool
+        The doorways found off the lines (cut pixels).
+    """
+    seg = merge_open_segments(segments, closed, fixed=_share(segments, floor) > 0.5)
+    cut = np.zeros(seg.shape, dtype=bool)
+    fixed = _share(seg, floor) > 0.5
+    spread = fill_from_neighbours(seg, clutter)
+    seg = np.where(clutter & fixed[spread], 0, spread).astype(np.int32)
+    space = (seg > 0) & ~fixed[seg]
+    if neck_half_width_m > 0:
+        seg = split_at_necks(seg, space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
+    if door_max_width_m > 0 and space.any():
+        cuts = find_doorways(
+            space,
+            resolution_m=resolution_m,
+            max_width_m=door_max_width_m,
+            widening_m=door_widening_m,
+            max_depth_m=door_max_depth_m,
+        )
+        cut = draw_cuts(cuts, seg.shape) & space
+        seg = split_along(seg, cut)
+    clearance = cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5)
+    widest = np.asarray(ndimage.maximum(clearance, labels=seg, index=np.arange(int(seg.max()) + 1)))
+    rooms = merge_small_segments(
+        seg,
+        min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),
+        fixed=_share(seg, floor) > 0.5,
+        absorb=widest * resolution_m < room_min_half_width_m,
+    )
+    return rooms, cut
+
+
+def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
+    """(N + 1,) share of each segment's pixels inside ``mask``."""
+    n = int(segments.max()) + 1
+    area = np.bincount(segments.ravel(), minlength=n)
+    inside = np.bincount(segments[mask], minlength=n)
+    share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
+    return share

@@ -1,0 +1,81 @@
+"""Doorways found from the free space: cuts across narrow passages between walls, not along corridors."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from services.grid_decomposition.doorways import draw_cuts, find_doorways, widens
+
+RES = 0.05
+
+
+def _two_rooms(door_m: float, *, angle_deg: float = 0.0) -> np.ndarray:
+    """Free space of two 4 x 4 m rooms side by side, split by a 0.15 m wall with a door in its middle.
+
+    With ``angle_deg`` the dividing wall is slanted by that much from vertical (no axis-aligned
+    line follows it).
+    """
+    free = np.zeros((100, 200), dtype=np.uint8)
+    free[10:90, 10:190] = 1
+    half = 40 * math.tan(math.radians(angle_deg))
+    top, bottom = (100 + half, 10), (100 - half, 89)
+    cv2.line(free, (round(top[0]), top[1]), (round(bottom[0]), bottom[1]), 0, 3)
+    door_px = door_m / RES
+    mid = ((top[0] + bottom[0]) / 2, 50.0)
+    dx, dy = (bottom[0] - top[0]) / 79, 1.0
+    norm = math.hypot(dx, dy)
+    a = (round(mid[0] - dx / norm * door_px / 2), round(mid[1] - dy / norm * door_px / 2))
+    b = (round(mid[0] + dx / norm * door_px / 2), round(mid[1] + dy / norm * door_px / 2))
+    cv2.line(free, a, b, 1, 5)
+    return free.astype(bool)
+
+
+def test_find_doorways_cuts_across_the_door_between_two_rooms() -> None:
+    free = _two_rooms(0.9)
+    cuts = find_doorways(free, resolution_m=RES)
+    assert len(cuts) >= 1
+    cut_px = draw_cuts(cuts, free.shape) & free
+    left, right = cut_px[:, :95], cut_px[:, 106:]
+    assert not left.any() and not right.any()
+    pieces, _ = cv2.connectedComponents((free & ~draw_cuts(cuts, free.shape)).astype(np.uint8), connectivity=4)
+    assert pieces - 1 >= 2
+
+
+def test_find_doorways_finds_a_door_in_a_slanted_wall() -> None:
+    free = _two_rooms(1.0, angle_deg=25.0)
+    cuts = find_doorways(free, resolution_m=RES)
+    blocked = free & ~draw_cuts(cuts, free.shape)
+    _, pieces = cv2.connectedComponents(blocked.astype(np.uint8), connectivity=4)
+    assert pieces[50, 30] != pieces[50, 170]
+
+
+def test_find_doorways_leaves_a_corridor_whole() -> None:
+    free = np.zeros((60, 300), dtype=bool)
+    free[15:45, 10:290] = True  # 1.5 m wide, 14 m long
+    assert len(find_doorways(free, resolution_m=RES)) == 0
+
+
+def test_find_doorways_leaves_a_room_with_furniture_space_whole() -> None:
+    free = np.zeros((100, 140), dtype=bool)
+    free[10:90, 10:130] = True
+    assert len(find_doorways(free, resolution_m=RES)) == 0
+
+
+def test_find_doorways_ignores_openings_wider_than_a_door() -> None:
+    free = _two_rooms(3.0)
+    assert len(find_doorways(free, resolution_m=RES, max_width_m=2.5)) == 0
+
+
+def test_widens_tells_a_doorway_from_the_mouth_of_a_passage() -> None:
+    walls = np.ones((120, 120), dtype=bool)
+    walls[10:50, 10:110] = False  # a room above
+    walls[50:53, 50:68] = False  # an 18 px doorway in a 3 px wall
+    walls[53:110, 10:110] = False  # a room below
+    doorway = np.array([[[50.0, 51.0], [67.0, 51.0]]])
+    assert widens(walls, doorway, widening_px=6, max_depth_px=20, depth_step_px=5).all()
+    walls[53:110, 10:110] = True
+    walls[53:110, 50:68] = False  # below the gap a passage as narrow as the gap
+    assert not widens(walls, doorway, widening_px=6, max_depth_px=20, depth_step_px=5).any()

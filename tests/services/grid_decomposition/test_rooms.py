@@ -1,0 +1,95 @@
+"""Rooms: furniture is not a wall, doors split rooms, a corridor and its offices, warehouse floors untouched."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from services.grid_decomposition import Connection, decompose
+from services.grid_decomposition.rooms import furniture, segment_rooms
+
+RES = 0.05
+
+
+def _office_row() -> np.ndarray:
+    """12 x 7 m at 5 cm: a 2 m corridor along the bottom, three 4 x 4.5 m offices above it, each
+    with a 0.9 m door from the corridor; 0.15 m walls, unknown outside."""
+    occ = np.full((150, 250), -1, dtype=np.int8)
+    occ[2:148, 2:248] = 100
+    occ[5:145, 5:245] = 0
+    occ[45:48, 5:245] = 100  # wall between the corridor (rows 5..44) and the offices
+    for x in (85, 165):
+        occ[48:145, x : x + 3] = 100
+    for x0 in (30, 110, 190):
+        occ[45:48, x0 : x0 + 18] = 0  # doors
+    return occ
+
+
+def _furnish(occ: np.ndarray) -> np.ndarray:
+    """The offices of :func:`_office_row` with a table on four legs, chairs and a bin against a wall."""
+    out = occ.copy()
+    for x0 in (15, 95, 175):
+        for dx, dy in ((0, 0), (30, 0), (0, 14), (30, 14)):  # table legs, 1.5 x 0.7 m table
+            out[90 + dy : 92 + dy, x0 + 20 + dx : x0 + 22 + dx] = 100
+        for dx in (18, 28, 38):  # chair legs in a row
+            out[80:82, x0 + dx : x0 + dx + 2] = 100
+            out[118:120, x0 + dx : x0 + dx + 2] = 100
+        cv2.circle(out, (x0 + 55, 140), 5, 100, -1)  # a bin touching the back wall
+    return out
+
+
+def test_furniture_is_small_free_standing_obstacles_not_walls() -> None:
+    occ = _furnish(_office_row())
+    obstacle = occ != 0
+    found = furniture(obstacle, resolution_m=RES)
+    assert found[90, 35] and found[80, 33]  # a table leg, a chair leg
+    assert not found[46, 60] and not found[100, 86]  # walls
+    assert not found[140, 70]  # the bin touches a wall: part of it
+    piece = np.zeros_like(obstacle)
+    piece[60:62, 20:60] = True  # a 2 m free-standing piece of wall
+    assert not furniture(piece, resolution_m=RES)[61, 40]
+    dash = np.zeros_like(obstacle)
+    dash[60:63, 20:34] = True  # a 0.7 m long, 0.15 m thick dash of a wall with many doors
+    assert not furniture(dash, resolution_m=RES)[61, 25]
+
+
+def test_a_corridor_and_its_offices_are_one_region_each_linked_by_doors() -> None:
+    d = decompose(_office_row(), resolution_m=RES)
+    corridor = d.segments[25, 120]
+    offices = [d.segments[100, 45], d.segments[100, 125], d.segments[100, 205]]
+    assert corridor > 0 and len({corridor, *offices}) == 4
+    assert set(np.unique(d.segments[5:45, 5:245]).tolist()) == {corridor}
+    for office in offices:
+        assert d.topology.edges[corridor, office]["connection"] == Connection.DOOR.value
+
+
+def test_furniture_inside_rooms_does_not_split_them() -> None:
+    plain = decompose(_office_row(), resolution_m=RES)
+    furnished = _furnish(_office_row())
+    d = decompose(furnished, resolution_m=RES)
+    assert len(d.regions) == len(plain.regions) == 4
+    for x in (45, 125, 205):
+        office = d.segments[100, x]
+        room = d.segments[48:145, x - 35 : x + 35]
+        assert (room[furnished[48:145, x - 35 : x + 35] == 0] == office).all()
+    legs = furniture(furnished != 0, resolution_m=RES)
+    assert (d.segments[legs] > 0).all()  # a room's area is its floor plan, furniture included
+    assert (d.labels[furnished != 0] == 0).all()  # labels stay on free space
+
+
+def test_segment_rooms_leaves_warehouse_floors_alone() -> None:
+    seg = np.zeros((40, 80), dtype=np.int32)
+    seg[5:35, 5:40] = 1
+    seg[5:35, 40:45] = 2  # a narrow sliver of a floor: a room piece would be merged
+    seg[5:35, 45:75] = 3
+    floor = np.zeros(seg.shape, dtype=bool)
+    floor[5:35, 40:75] = True
+    out, _ = segment_rooms(
+        seg,
+        np.zeros(seg.shape, dtype=bool),
+        floor,
+        np.zeros(seg.shape, dtype=bool),
+        resolution_m=RES,
+    )
+    assert len(np.unique(out[5:35, 40:75])) == 2
+    assert out[10, 42] != out[10, 60]

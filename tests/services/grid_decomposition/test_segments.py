@@ -1,0 +1,96 @@
+"""Segment clean-up: slivers join rooms, open borders join, cuts split, enclosed pieces keep their id."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.grid_decomposition.regions import warehouse_floors
+from services.grid_decomposition.segments import (
+    border_closure,
+    merge_open_segments,
+    merge_small_segments,
+    segment_image,
+    split_along,
+)
+
+
+def _room_sliver_room() -> np.ndarray:
+    """Two rooms with a 3 px sliver (a door strip) between them that touches the left room longer."""
+    seg = np.zeros((40, 60), dtype=np.int32)
+    seg[0:40, 0:28] = 1
+    seg[5:35, 28:31] = 2
+    seg[0:40, 31:60] = 3
+    seg[0:5, 28:31] = 1
+    seg[35:40, 28:31] = 1
+    return seg
+
+
+def test_merge_small_segments_joins_a_sliver_to_the_room_it_shares_most_border_with() -> None:
+    out = merge_small_segments(_room_sliver_room(), min_area_px=200)
+    assert out[20, 29] == out[20, 10] != out[20, 50]
+    assert sorted(np.unique(out).tolist()) == [1, 2]
+
+
+def test_merge_small_segments_keeps_an_enclosed_piece_and_fixed_segments() -> None:
+    seg = _room_sliver_room()
+    seg[20, 45] = 0
+    seg[15:18, 40:43] = 0
+    closet = np.zeros_like(seg)
+    closet[15:18, 40:43] = 4
+    seg = np.where(closet > 0, 4, seg)
+    seg[14, 39:44] = 0
+    seg[18, 39:44] = 0
+    seg[14:19, 39] = 0
+    seg[14:19, 43] = 0  # the closet is walled in
+    out = merge_small_segments(seg, min_area_px=200)
+    assert out[16, 41] > 0 and out[16, 41] not in (out[20, 10], out[20, 50])
+    fixed = np.zeros(5, dtype=bool)
+    fixed[2] = True
+    kept = merge_small_segments(_room_sliver_room(), min_area_px=200, fixed=fixed)
+    assert sorted(np.unique(kept).tolist()) == [1, 2, 3]
+
+
+def test_merge_open_segments_joins_open_borders_only() -> None:
+    seg = np.zeros((20, 40), dtype=np.int32)
+    seg[:, :20] = 1
+    seg[:, 20:] = 2
+    closed = np.zeros(seg.shape, dtype=bool)
+    assert len(np.unique(merge_open_segments(seg, closed))) == 1
+    closed[:, 19] = True  # a closed doorway along their whole border
+    assert len(np.unique(merge_open_segments(seg, closed))) == 2
+    pairs, total, shut = border_closure(seg, closed)
+    assert pairs.tolist() == [[1, 2]] and total.tolist() == [20] and shut.tolist() == [20]
+
+
+def test_split_along_cuts_a_segment_and_gives_the_cut_to_a_side() -> None:
+    seg = np.ones((20, 40), dtype=np.int32)
+    barrier = np.zeros(seg.shape, dtype=bool)
+    barrier[:, 20] = True
+    out = split_along(seg, barrier)
+    assert out[5, 5] != out[5, 35]
+    assert (out > 0).all()
+    barrier[:10, 20] = False  # a cut that does not close: nothing to split
+    assert len(np.unique(split_along(seg, barrier))) == 1
+
+
+def test_segment_image_keeps_a_small_enclosed_piece_but_not_a_speck() -> None:
+    free = np.zeros((30, 40), dtype=bool)
+    free[2:20, 2:38] = True
+    free[23:28, 22:28] = True  # a 30 px pocket, walled off
+    free[25:27, 32:34] = True  # a 4 px speck, walled off
+    face = np.where(free, 1, 0).astype(np.int32)
+    face[23:28, 22:28] = 2
+    face[25:27, 32:34] = 3
+    out = segment_image(face, np.array([0, 1, 2, 3]), free, min_area_px=50)
+    assert out[25, 25] > 0 and out[25, 25] != out[10, 10]
+    assert out[25, 32] == 0
+
+
+def test_warehouse_floor_needs_many_storage_faces() -> None:
+    component = np.array([0] + [1] * 40 + [2] * 40)
+    free_px = np.full(81, 100)
+    label = np.full(81, 4)  # rooms
+    label[1:21] = 3  # half the faces of component 1 are pallet cells
+    label[41:45] = 3  # a few storage-like faces between furniture in component 2
+    floors = warehouse_floors(component, free_px, label)
+    assert floors.tolist() == [False, True, False]
