@@ -153,3 +153,4 @@ def test_a_cross_aisle_one_bay_wide_is_corridor_not_storage() -> None:
     assert (wh.decomposition.labels[storage] == Label.STORAGE.value).mean() > 0.9
     kinds = {info.label for info in wh.decomposition.regions.values()}
     assert {Label.CORRIDOR, Label.JUNCTION, Label.STORAGE} <= kinds
+
