@@ -26,6 +26,7 @@ from services.grid_decomposition.regions import (
     face_regions,
     link_components,
     region_topology,
+    road_networks,
     warehouse_floors,
 )
 from services.grid_decomposition.rooms import furniture, segment_rooms
@@ -353,11 +354,14 @@ def decompose(
     # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
     cut_like_cells = np.where(found.off_pitch, Label.STORAGE.value, evidence)
     automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
-    region_of_face = face_regions(sub, cog, component, cog.face_free_px, automatic.label)
+    # warehouse floors and road networks are split by their labels and left alone by the room stage
+    roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
+    structured = warehouse_floors(component, cog.face_free_px, automatic.label) | roads
+    region_of_face = face_regions(sub, cog, component, automatic.label, structured)
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
-    floor_px = warehouse_floors(component, cog.face_free_px, automatic.label)[component[sub.face_image]]
+    floor_px = structured[component[sub.face_image]]
     segments, cuts = segment_rooms(
         segments,
         clutter,
