@@ -40,6 +40,7 @@ logger = logging.getLogger(__name__)
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
 _REGION_CORE_M = 1.0
+_MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by their pixels
 
 
 class Resolution(enum.Enum):
@@ -378,7 +379,15 @@ def decompose(
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
     labels = np.where(free, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
-    topology = region_topology(sub, cog, face_region_final, regions, segments=segments, doorways=door | cuts)
+    topology = region_topology(
+        sub,
+        cog,
+        face_region_final,
+        regions,
+        segments=segments,
+        doorways=door | cuts,
+        min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
+    )
     return Decomposition(
         labels=labels,
         segments=segments,

@@ -148,14 +148,17 @@ def region_topology(
     *,
     segments: npt.NDArray[np.int32] | None = None,
     doorways: npt.NDArray[np.bool_] | None = None,
+    min_border_px: int = 1,
 ) -> nx.Graph:
     """Graph of regions; an edge per touching pair with attribute ``connection`` (a Connection value).
 
     Regions touching across at least one non-cogent edge are linked by their labels
     (:func:`link_connection`); touching only across cogent edges, by a door when a doorway was
     closed on one of them, else they are disconnected. With ``segments`` and ``doorways`` (the
-    closed doorway pixels, also those found off the lines), regions whose pixels touch are linked
-    by a door when at least half of their shared border is on a doorway, else by their labels.
+    closed doorway pixels, also those found off the lines), regions whose pixels touch along at
+    least ``min_border_px`` border pixel pairs are linked by a door when at least half of their
+    shared border is on a doorway, else by their labels (two road pieces touching at the corner of
+    a crossing are no passage).
     """
     graph = nx.Graph()
     for info in regions.values():
@@ -183,7 +186,7 @@ def region_topology(
     if segments is not None and doorways is not None:
         touching, total, shut = border_closure(segments, doorways)
         for (p, q), t, c in zip(touching.tolist(), total.tolist(), shut.tolist(), strict=True):
-            if p in regions and q in regions:
+            if p in regions and q in regions and t >= min_border_px:
                 door = 2 * c >= t
                 conn = link_connection(regions[p].label, regions[q].label, cogent=door, door=door)
                 graph.add_edge(p, q, connection=conn.value)

@@ -177,3 +177,5 @@ def test_a_grid_of_roads_is_split_into_corridors_and_junctions_linked_in_the_top
         corridors = [n for n in d.topology.neighbors(r) if d.regions[n].label is Label.CORRIDOR]
         assert len(corridors) >= 2
         assert all(d.topology.edges[r, n]["connection"] == Connection.CONNECTED.value for n in corridors)
+    # road pieces are linked through the crossings, not to each other
+    assert not [(a, b) for a, b in d.topology.edges if d.regions[a].label is d.regions[b].label is Label.CORRIDOR]
