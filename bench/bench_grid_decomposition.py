@@ -12,7 +12,8 @@ Prints ``name value unit`` lines, one BLAS thread, seconds as wall time and CPU 
   corridor (a cell's majority label; also as a share of storage pixels).
 * The tuw grid warehouses (``../shared/data/maps/tuw_warehouse``) with a ground truth derived from
   their grid (``tuw_truth`` of the same test helper): accuracy, junctions found (a true junction is found when most of
-  its pixels are labelled junction) and junction pixels found.
+  its pixels are labelled junction), junction pixels found, and the regions (junction and corridor
+  regions, topology links).
 * A 5000 x 1440 px warehouse (250 m x 72 m at 5 cm): median of three runs.
 * The ipa maps (every variant), one run each: median seconds (``--no-ipa`` skips them).
 
@@ -96,6 +97,11 @@ def _tuw() -> None:
         print(f"tuw_{name}_accuracy {100 * _accuracy(d.labels, truth, free):.2f} %")
         print(f"tuw_{name}_junctions_found {found}/{n - 1} count")
         print(f"tuw_{name}_junction_px_found {100 * (d.labels[junction] == Label.JUNCTION.value).mean():.2f} %")
+        kinds = [info.label for info in d.regions.values()]
+        print(f"tuw_{name}_regions {len(kinds)} count")
+        print(f"tuw_{name}_junction_regions {kinds.count(Label.JUNCTION)} count")
+        print(f"tuw_{name}_corridor_regions {kinds.count(Label.CORRIDOR)} count")
+        print(f"tuw_{name}_topology_links {d.topology.number_of_edges()} count")
         print(f"tuw_{name}_seconds {wall:.2f} s")
         print(f"tuw_{name}_cpu_seconds {cpu:.2f} s")
 

@@ -20,6 +20,11 @@ class FaceGeometry(NamedTuple):
         Sides of the face's bounding rectangle along its orientation, metres.
     corners_on_obstacle : (F + 1,) int64
         How many of that rectangle's four corners lie within the tolerance of an obstacle.
+    ends_on_obstacle : (F + 1,) int64
+        How many of the midpoints of its two short sides lie within the tolerance of an obstacle
+        (a bay's short sides run between uprights and are open in the middle; a slice of a
+        corridor between two cutting lines ends on the corridor's walls); -1 where the short
+        sides are too short to tell (at most twice the tolerance: a flue between two racks).
     walled_fraction : (F + 1,) float64
         Fraction of the face's outline within 0.1 m (at least 2 px) of an obstacle (a pallet cell between uprights
         is open on all sides, a passage between solid blocks is walled along its length).
@@ -30,6 +35,7 @@ class FaceGeometry(NamedTuple):
     short_m: npt.NDArray[np.float64]
     long_m: npt.NDArray[np.float64]
     corners_on_obstacle: npt.NDArray[np.int64]
+    ends_on_obstacle: npt.NDArray[np.int64]
     walled_fraction: npt.NDArray[np.float64]
     centroid_px: npt.NDArray[np.float64]
 
@@ -94,6 +100,7 @@ def face_geometry(
     has = np.isfinite(lo_u)
     ext_u = np.where(has, hi_u - lo_u + 1.0, 0.0)
     ext_v = np.where(has, hi_v - lo_v + 1.0, 0.0)
+    lo_u, hi_u, lo_v, hi_v = (np.where(has, e, 0.0) for e in (lo_u, hi_u, lo_v, hi_v))
     short = np.minimum(ext_u, ext_v) * resolution_m
     long = np.maximum(ext_u, ext_v) * resolution_m
     t = max(2, round(0.1 / resolution_m))
@@ -102,10 +109,24 @@ def face_geometry(
     walled = np.bincount(of, touch[oy, ox].astype(np.float64), n) / np.maximum(n_out, 1.0)
     r = max(1, round(corner_tolerance_m / resolution_m))
     near = cv2.dilate(obstacle.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1,) * 2)) > 0
-    corners = np.zeros(n, dtype=np.int64)
     ids = np.flatnonzero(has)
+
+    def on_obstacle(pu: npt.NDArray[np.float64], pv: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+        x = np.rint(pu[ids] * c[ids] - pv[ids] * s[ids]).astype(np.int64).clip(0, w - 1)
+        y = np.rint(pu[ids] * s[ids] + pv[ids] * c[ids]).astype(np.int64).clip(0, h - 1)
+        hit: npt.NDArray[np.bool_] = near[y, x]
+        return hit
+
+    corners = np.zeros(n, dtype=np.int64)
     for cu, cv in ((lo_u, lo_v), (lo_u, hi_v), (hi_u, lo_v), (hi_u, hi_v)):
-        x = np.rint(cu[ids] * c[ids] - cv[ids] * s[ids]).astype(np.int64).clip(0, w - 1)
-        y = np.rint(cu[ids] * s[ids] + cv[ids] * c[ids]).astype(np.int64).clip(0, h - 1)
-        corners[ids] += near[y, x]
-    return FaceGeometry(short, long, corners, walled, centroid)
+        corners[ids] += on_obstacle(cu, cv)
+    # short sides: at the ends of the long axis (v when u is the short extent)
+    mid_u, mid_v = (lo_u + hi_u) / 2, (lo_v + hi_v) / 2
+    u_short = ext_u <= ext_v
+    ends = np.zeros(n, dtype=np.int64)
+    for lo_end in (True, False):
+        pu = np.where(u_short, mid_u, lo_u if lo_end else hi_u)
+        pv = np.where(u_short, lo_v if lo_end else hi_v, mid_v)
+        ends[ids] += on_obstacle(pu, pv)
+    ends[np.minimum(ext_u, ext_v) <= 2 * r + 1] = -1
+    return FaceGeometry(short, long, corners, ends, walled, centroid)

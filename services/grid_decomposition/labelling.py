@@ -91,11 +91,14 @@ def evidence_labels(
 
     Storage: a small rectangle (short side <= ``storage_max_depth_m``, long side <=
     ``storage_max_width_m`` and >= ``storage_min_width_m``: a bay) with at least three corners
-    on obstacles (uprights) and an outline mostly open (at most ``storage_max_walled`` of it
-    touching obstacles) and at most ``max_pitch_ratio`` times as long as the median bay of its
+    on obstacles (uprights), an outline mostly open (at most ``storage_max_walled`` of it
+    touching obstacles), not both short sides ending on obstacles in their middle (a slice of a
+    corridor between two lines ends on its walls; a bay's short sides run between uprights) and
+    at most ``max_pitch_ratio`` times as long as the median bay of its
     connected component (bays of a rack share a pitch: a cross aisle one bay wide, 3.0 m in 2.7 m
     racks, is no bay); a bay with missing uprights is storage when at least two storage faces
-    neighbour it (three if fewer than two of its corners are on obstacles): it lies in a rack row. Faces of a compact
+    neighbour it (three if fewer than two of its corners are on obstacles): it lies in a rack row;
+    a strip too thin for the short-side test (a flue) is storage next to one storage face. Faces of a compact
     connected component (elongation below ``corridor_min_elongation`` and no storage) are one
     room (or open area above ``open_area_min_m2``). In the other components (networks of
     aisles or corridors) the templates run on the graph of non-storage faces: T/X junctions, and
@@ -117,15 +120,19 @@ def evidence_labels(
         & (geometry.long_m <= storage_max_width_m)
         & (geometry.long_m >= storage_min_width_m)
         & (geometry.walled_fraction <= storage_max_walled)
+        & (geometry.ends_on_obstacle < 2)
     )
     pitch = _pitch(geometry.long_m, component, bay & (geometry.corners_on_obstacle >= 3))
     off_pitch = bay & (geometry.corners_on_obstacle >= 3) & (geometry.long_m > max_pitch_ratio * pitch)
     bay &= ~off_pitch
-    storage = bay & (geometry.corners_on_obstacle >= 3)
-    # a bay with missing uprights in a rack row: storage next to two storage faces (three when
-    # fewer than two of its corners stand on uprights)
-    weak = bay & (geometry.corners_on_obstacle < 3)
-    need = np.where(geometry.corners_on_obstacle == 2, 2, 3)
+    storage = bay & (geometry.corners_on_obstacle >= 3) & (geometry.ends_on_obstacle >= 0)
+    # a strip too thin to tell a bay from a slice of a corridor (a flue between back-to-back racks)
+    # is storage next to one storage face, a bay with missing uprights in a rack row next to two
+    # (three when fewer than two of its corners stand on uprights)
+    weak = bay & ~storage
+    need = np.select(
+        [geometry.corners_on_obstacle >= 3, geometry.corners_on_obstacle == 2], [1, 2], default=3
+    )
     e_all = np.asarray(links, dtype=np.int64).reshape(-1, 2)
     for _ in range(3):
         nb = np.bincount(e_all[:, 0], weights=storage[e_all[:, 1]], minlength=n)

@@ -26,6 +26,7 @@ from services.grid_decomposition.regions import (
     face_regions,
     link_components,
     region_topology,
+    road_networks,
     warehouse_floors,
 )
 from services.grid_decomposition.rooms import furniture, segment_rooms
@@ -39,6 +40,7 @@ logger = logging.getLogger(__name__)
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
 _REGION_CORE_M = 1.0
+_MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by their pixels
 
 
 class Resolution(enum.Enum):
@@ -353,11 +355,14 @@ def decompose(
     # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
     cut_like_cells = np.where(found.off_pitch, Label.STORAGE.value, evidence)
     automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
-    region_of_face = face_regions(sub, cog, component, cog.face_free_px, automatic.label)
+    # warehouse floors and road networks are split by their labels and left alone by the room stage
+    roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
+    structured = warehouse_floors(component, cog.face_free_px, automatic.label) | roads
+    region_of_face = face_regions(sub, cog, component, automatic.label, structured)
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
-    floor_px = warehouse_floors(component, cog.face_free_px, automatic.label)[component[sub.face_image]]
+    floor_px = structured[component[sub.face_image]]
     segments, cuts = segment_rooms(
         segments,
         clutter,
@@ -374,7 +379,15 @@ def decompose(
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
     labels = np.where(free, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
-    topology = region_topology(sub, cog, face_region_final, regions, segments=segments, doorways=door | cuts)
+    topology = region_topology(
+        sub,
+        cog,
+        face_region_final,
+        regions,
+        segments=segments,
+        doorways=door | cuts,
+        min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
+    )
     return Decomposition(
         labels=labels,
         segments=segments,

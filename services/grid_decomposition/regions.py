@@ -69,27 +69,60 @@ def warehouse_floors(
     return floor
 
 
-def face_regions(
+def road_networks(
     sub: Subdivision,
     cogency: EdgeCogency,
     component: npt.NDArray[np.int64],
     face_free_px: npt.NDArray[np.int64],
     face_label: npt.NDArray[np.int64],
     *,
-    min_storage_share: float = 0.15,
+    min_road_share: float = 0.95,
+) -> npt.NDArray[np.bool_]:
+    """Per component id: a network of roads, at least ``min_road_share`` of its free area corridor
+    and junction faces, with at least one junction and no closed doorway on its edges.
+
+    A grid of passages between solid blocks (the tuw warehouses) is one such component; split into
+    corridors and junctions it gets a topology. An office corridor network has doors to its rooms
+    (and rooms joined to corridors are not roads), so it stays one region for the room stage.
+
+    Returns
+    -------
+    (C,) bool
+        Indexed by component id; False for 0.
+    """
+    n_comp = int(component.max()) + 1
+    area = np.bincount(component, weights=face_free_px, minlength=n_comp)
+    road = np.isin(face_label, [Label.CORRIDOR.value, Label.JUNCTION.value])
+    road_area = np.bincount(component, weights=face_free_px * road, minlength=n_comp)
+    is_junction = (face_label == Label.JUNCTION.value) & (face_free_px > 0)
+    junctions = np.bincount(component, weights=is_junction, minlength=n_comp)
+    door_faces = sub.edge_faces[cogency.door].ravel()
+    has_door = np.bincount(component[door_faces], minlength=n_comp) > 0
+    out: npt.NDArray[np.bool_] = (road_area >= min_road_share * np.maximum(area, 1)) & (junctions > 0) & ~has_door
+    out[0] = False
+    return out
+
+
+def face_regions(
+    sub: Subdivision,
+    cogency: EdgeCogency,
+    component: npt.NDArray[np.int64],
+    face_label: npt.NDArray[np.int64],
+    split: npt.NDArray[np.bool_],
 ) -> npt.NDArray[np.int64]:
     """Region id per face (0 = none).
 
-    A connected component (faces joined by connected links) is one region, unless storage faces
-    make up at least ``min_storage_share`` of its free area (a warehouse floor): then it is split
-    into pallet cells (each storage face alone), junctions (adjacent junction faces together) and
-    aisles (adjacent faces of one drivable label together).
+    A connected component (faces joined by connected links) is one region, unless ``split`` (per
+    component id: a warehouse floor, :func:`warehouse_floors`, or a road network,
+    :func:`road_networks`): then it is split into pallet cells (each storage face alone),
+    junctions (adjacent junction faces together) and aisles or roads (adjacent faces of one
+    drivable label together).
     """
     n = sub.n_faces + 1
-    split = warehouse_floors(component, face_free_px, face_label, min_storage_share=min_storage_share)[component]
+    apart = split[component]
     a, b = sub.edge_faces[:, 0], sub.edge_faces[:, 1]
     same = (component[a] == component[b]) & ~cogency.cogent & (component[a] > 0)
-    join = same & (~split[a] | ((face_label[a] == face_label[b]) & (face_label[a] != Label.STORAGE.value)))
+    join = same & (~apart[a] | ((face_label[a] == face_label[b]) & (face_label[a] != Label.STORAGE.value)))
     return link_components(n, sub.edge_faces[join], component > 0)
 
 
@@ -115,14 +148,17 @@ def region_topology(
     *,
     segments: npt.NDArray[np.int32] | None = None,
     doorways: npt.NDArray[np.bool_] | None = None,
+    min_border_px: int = 1,
 ) -> nx.Graph:
     """Graph of regions; an edge per touching pair with attribute ``connection`` (a Connection value).
 
     Regions touching across at least one non-cogent edge are linked by their labels
     (:func:`link_connection`); touching only across cogent edges, by a door when a doorway was
     closed on one of them, else they are disconnected. With ``segments`` and ``doorways`` (the
-    closed doorway pixels, also those found off the lines), regions whose pixels touch are linked
-    by a door when at least half of their shared border is on a doorway, else by their labels.
+    closed doorway pixels, also those found off the lines), regions whose pixels touch along at
+    least ``min_border_px`` border pixel pairs are linked by a door when at least half of their
+    shared border is on a doorway, else by their labels (two road pieces touching at the corner of
+    a crossing are no passage).
     """
     graph = nx.Graph()
     for info in regions.values():
@@ -150,7 +186,7 @@ def region_topology(
     if segments is not None and doorways is not None:
         touching, total, shut = border_closure(segments, doorways)
         for (p, q), t, c in zip(touching.tolist(), total.tolist(), shut.tolist(), strict=True):
-            if p in regions and q in regions:
+            if p in regions and q in regions and t >= min_border_px:
                 door = 2 * c >= t
                 conn = link_connection(regions[p].label, regions[q].label, cogent=door, door=door)
                 graph.add_edge(p, q, connection=conn.value)

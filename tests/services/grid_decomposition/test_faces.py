@@ -41,3 +41,20 @@ def test_face_geometry_rejects_angles_of_the_wrong_length() -> None:
     faces = np.ones((4, 4), dtype=np.int32)
     with pytest.raises(DecompositionError, match="face_angle_rad must have shape"):
         face_geometry(faces, 1, faces == 0, resolution_m=0.05, face_angle_rad=np.zeros(3))
+
+
+def test_a_bay_is_open_at_the_middle_of_its_short_sides_a_corridor_slice_is_not() -> None:
+    """A bay between four uprights vs. a bay-sized slice of a corridor between its two walls."""
+    faces = np.zeros((80, 80), dtype=np.int32)
+    faces[10:32, 20:74] = 1  # bay: 1.1 x 2.7 m, uprights at the corners
+    faces[40:76, 30:52] = 2  # slice of a 1.8 m corridor, 1.1 m long, walls above and below
+    faces[4:8, 20:74] = 3  # flue: 0.2 m strip
+    obstacle = np.zeros_like(faces, dtype=bool)
+    for r, c in ((8, 18), (8, 75), (33, 18), (33, 75)):
+        obstacle[r : r + 2, c : c + 2] = True
+    obstacle[38:40, 26:56] = True
+    obstacle[76:78, 26:56] = True
+    g = face_geometry(faces, 3, obstacle, resolution_m=0.05)
+    assert g.corners_on_obstacle[1] == 4 and g.ends_on_obstacle[1] == 0
+    assert g.corners_on_obstacle[2] == 4 and g.ends_on_obstacle[2] == 2
+    assert g.ends_on_obstacle[3] == -1

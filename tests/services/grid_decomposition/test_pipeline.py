@@ -153,3 +153,29 @@ def test_a_cross_aisle_one_bay_wide_is_corridor_not_storage() -> None:
     assert (wh.decomposition.labels[storage] == Label.STORAGE.value).mean() > 0.9
     kinds = {info.label for info in wh.decomposition.regions.values()}
     assert {Label.CORRIDOR, Label.JUNCTION, Label.STORAGE} <= kinds
+
+
+
+def _road_grid() -> np.ndarray:
+    """Roads 0.75 m wide between 2.25 m square solid blocks, 3 x 3 blocks (5 cm, unknown outside)."""
+    occ = np.full((200, 200), -1, dtype=np.int8)
+    occ[10:190, 10:190] = 100
+    occ[15:185, 15:185] = 0
+    for r in range(30, 170, 60):
+        for c in range(30, 170, 60):
+            occ[r : r + 45, c : c + 45] = 100
+    return occ
+
+
+def test_a_grid_of_roads_is_split_into_corridors_and_junctions_linked_in_the_topology() -> None:
+    d = decompose(_road_grid(), resolution_m=0.05)
+    kinds = {info.label for info in d.regions.values()}
+    assert kinds == {Label.CORRIDOR, Label.JUNCTION}
+    junctions = [r for r, info in d.regions.items() if info.label is Label.JUNCTION]
+    assert len(junctions) >= 4  # the four crossings inside the grid
+    for r in junctions:
+        corridors = [n for n in d.topology.neighbors(r) if d.regions[n].label is Label.CORRIDOR]
+        assert len(corridors) >= 2
+        assert all(d.topology.edges[r, n]["connection"] == Connection.CONNECTED.value for n in corridors)
+    # road pieces are linked through the crossings, not to each other
+    assert not [(a, b) for a, b in d.topology.edges if d.regions[a].label is d.regions[b].label is Label.CORRIDOR]
