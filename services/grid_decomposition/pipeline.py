@@ -32,6 +32,7 @@ from services.grid_decomposition.regions import (
 from services.grid_decomposition.rooms import furniture, segment_rooms
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.semantics import Label
+from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
 
@@ -315,7 +316,8 @@ def decompose(
         LineGroup(tuple(ln for ln in g.lines if resolution is Resolution.FINE or ln.coarse), g.mask) for g in groups
     ]
     logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
-    sub = subdivide(used, occ.shape, domain=free)
+    banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
+    sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline)
     clutter = furniture(obstacle, resolution_m=resolution_m)
     walls = (occupied | ~known) & ~clutter
     wall, door = wall_evidence(
@@ -344,7 +346,10 @@ def decompose(
     )
     elongation = _elongation(component, sub.face_image, free, resolution_m)
     found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
-    evidence = found.label
+    evidence = found.label.copy()
+    # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)
+    evidence[majority_faces(sub.face_image, sub.n_faces, banks.storage, free)] = Label.STORAGE.value
+    evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = Label.CORRIDOR.value
     rows, cols, cats = categorize_places(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )

@@ -112,7 +112,11 @@ def _vertices(groups: Sequence[LineGroup], shape: tuple[int, int]) -> npt.NDArra
 
 
 def subdivide(
-    groups: Sequence[LineGroup], shape: tuple[int, int], *, domain: npt.NDArray[np.bool_] | None = None
+    groups: Sequence[LineGroup],
+    shape: tuple[int, int],
+    *,
+    domain: npt.NDArray[np.bool_] | None = None,
+    cuts: npt.NDArray[np.bool_] | None = None,
 ) -> Subdivision:
     """Decompose an image of ``shape`` (rows, cols) into polygonal faces by the lines of ``groups``.
 
@@ -126,6 +130,8 @@ def subdivide(
         Pixels that may belong to a face. With the free space as domain, each polygonal cell is
         split into its connected free parts, so a cell cut by a curved or oblique wall yields one
         face per side and walls separate faces even where no line follows them.
+    cuts : (H, W) bool, optional
+        Further line pixels (the outlines of racks found from their dashes).
 
     Returns
     -------
@@ -134,6 +140,8 @@ def subdivide(
     """
     w = shape[1]
     line_image = draw_lines(groups, shape)
+    if cuts is not None:
+        line_image |= cuts
     inside = ~line_image if domain is None else ~line_image & domain
     n_labels, labels = cv2.connectedComponents(inside.astype(np.uint8), connectivity=4, ltype=cv2.CV_32S)
     face_image = labels.astype(np.int32)
