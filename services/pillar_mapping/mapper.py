@@ -123,6 +123,13 @@ class BearingOnlyMapper:
     min_support_ratio : float
         Least fraction of the pooled frames within range of a candidate that must have seen
         it: ghosts where rays of different uprights happen to cross get few.
+    min_hit_ratio, min_observations : float, int
+        A landmark is reliable while, in its current pass (a run of frames that had it in range,
+        broken by ``window_frames`` without), it was matched in at least ``min_hit_ratio`` of
+        those frames and in at least ``min_observations``, and for good once a whole pass did.
+        Judged per pass, an upright seen well once stays reliable when a later pass has it in
+        range but hidden (behind a rack, from the next aisle); a ghost where rays of different
+        uprights crossed is matched in few frames of its pass and never becomes reliable for good.
     """
 
     _CELL_M = 0.25
@@ -137,6 +144,8 @@ class BearingOnlyMapper:
         min_parallax_rad: float = float(np.deg2rad(10.0)),
         window_frames: int = 40,
         min_support_ratio: float = 0.6,
+        min_hit_ratio: float = 0.3,
+        min_observations: int = 6,
     ) -> None:
         if max_range_m <= 0 or gate_sq <= 0 or sigma_floor_rad <= 0:
             raise PillarMappingError("max_range_m, gate_sq and sigma_floor_rad must be positive")
@@ -151,8 +160,13 @@ class BearingOnlyMapper:
         self.min_parallax_rad = min_parallax_rad
         self.window_frames = window_frames
         self.min_support_ratio = min_support_ratio
+        self.min_hit_ratio = min_hit_ratio
+        self.min_observations = min_observations
         self._frame_origins: dict[int, FloatArray] = {}
-        self._expected = np.zeros(0, dtype=np.int64)
+        self._run_hits = np.zeros(0, dtype=np.int64)
+        self._run_expected = np.zeros(0, dtype=np.int64)
+        self._last_in_range = np.zeros(0, dtype=np.int64)
+        self._confirmed = np.zeros(0, dtype=bool)
         self._means = np.zeros((0, 2))
         self._covs = np.zeros((0, 2, 2))
         self._counts = np.zeros(0, dtype=np.int64)
@@ -169,7 +183,7 @@ class BearingOnlyMapper:
     def seed(self, landmarks: LandmarkMap) -> None:
         """Start from known landmarks (e.g. from the map store after a restart).
 
-        Each counts as seen in every frame that had it in range so far, so it stays reliable.
+        Each with at least ``min_observations`` counts as confirmed, so it stays reliable.
         """
         means = np.asarray(landmarks.means, dtype=np.float64).reshape(-1, 2)
         covs = np.asarray(landmarks.covs, dtype=np.float64).reshape(-1, 2, 2)
@@ -178,15 +192,22 @@ class BearingOnlyMapper:
             raise PillarMappingError("seed landmarks need finite means, one covariance and a count >= 0 each")
         if len(means) and np.any(np.linalg.eigvalsh(covs)[:, 0] <= 0):
             raise PillarMappingError("seed landmark covariances must be positive definite")
+        self._append(means, covs, counts, counts, counts >= self.min_observations)
+
+    def _append(self, means: FloatArray, covs: FloatArray, counts: IntArray, expected: IntArray,
+                confirmed: npt.NDArray[np.bool_]) -> None:
+        """New landmarks, matched in ``counts`` of the ``expected`` frames of their first pass so far."""
         self._means = np.vstack([self._means, means])
         self._covs = np.concatenate([self._covs, covs])
         self._counts = np.concatenate([self._counts, counts])
-        self._expected = np.concatenate([self._expected, counts])
+        self._run_hits = np.concatenate([self._run_hits, counts])
+        self._run_expected = np.concatenate([self._run_expected, expected])
+        self._last_in_range = np.concatenate([self._last_in_range, np.full(len(means), self._frame, dtype=np.int64)])
+        self._confirmed = np.concatenate([self._confirmed, confirmed])
 
-    def reliable_landmarks(self, *, min_hit_ratio: float = 0.3, min_observations: int = 6) -> LandmarkMap:
-        """The landmarks matched in at least ``min_hit_ratio`` of the frames that had them in range."""
-        ratio = self._counts / np.maximum(self._expected, 1)
-        keep = (ratio >= min_hit_ratio) & (self._counts >= min_observations)
+    def reliable_landmarks(self) -> LandmarkMap:
+        """The landmarks confirmed by a whole pass or by their current one (see ``min_hit_ratio``)."""
+        keep = self._confirmed | self._pass_ok(slice(None))
         return LandmarkMap(self._means[keep].copy(), self._covs[keep].copy(), self._counts[keep].copy())
 
     def observe(
@@ -227,7 +248,7 @@ class BearingOnlyMapper:
         self._frame += 1
         self._frame_origins = {f: o for f, o in self._frame_origins.items() if f > self._frame - self.window_frames}
         self._frame_origins[self._frame] = pose[:2].copy()
-        self._expected[self._visible()] += 1
+        self._count_in_range(self._visible())
         matches, ambiguous, gated_any = self._associate(bearings, sigmas)
         self._update(bearings, sigmas, matches)
         fresh = (matches < 0) & ~gated_any
@@ -284,6 +305,21 @@ class BearingOnlyMapper:
         r = (s - np.einsum("mi,mi->m", h_l, ph))[:, None, None]
         self._covs[index] = ikh @ p @ np.transpose(ikh, (0, 2, 1)) + r * gain[:, :, None] * gain[:, None, :]
         self._counts[index] += 1
+        self._run_hits[index] += 1
+
+    def _pass_ok(self, index: IntArray | slice) -> npt.NDArray[np.bool_]:
+        hits, expected = self._run_hits[index], self._run_expected[index]
+        ok: npt.NDArray[np.bool_] = (hits >= self.min_observations) & (hits >= self.min_hit_ratio * expected)
+        return ok
+
+    def _count_in_range(self, index: IntArray) -> None:
+        """Count this frame for the landmarks in range; one out of range ``window_frames`` starts a new pass."""
+        new_pass = self._last_in_range[index] < self._frame - self.window_frames
+        self._confirmed[index[new_pass]] |= self._pass_ok(index[new_pass])
+        self._run_hits[index[new_pass]] = 0
+        self._run_expected[index[new_pass]] = 0
+        self._run_expected[index] += 1
+        self._last_in_range[index] = self._frame
 
     def _support(self, points: FloatArray) -> npt.NDArray[np.bool_]:
         """(C, P) whether pool ray p passes through candidate point c within its gate."""
@@ -352,6 +388,7 @@ class BearingOnlyMapper:
             used = np.zeros(self._pool.angles.size, dtype=bool)
             used[rays] = True
             sigmas = self._pool.sigmas_at(rays, np.hypot(*(points[best] - self._pool.origins[rays]).T))
+            expected = max(int(in_range[best]), rays.size)
             points = np.delete(points, best, axis=0)
             try:
                 tri = triangulate_bearings(self._pool.origins[rays], self._pool.angles[rays], sigmas)
@@ -362,10 +399,8 @@ class BearingOnlyMapper:
                 continue
             self._pool.keep(~used)
             if not self._duplicate(tri.mean, tri.cov):
-                self._means = np.vstack([self._means, tri.mean])
-                self._covs = np.concatenate([self._covs, tri.cov[None]])
-                self._counts = np.append(self._counts, rays.size)
-                self._expected = np.append(self._expected, rays.size)
+                self._append(tri.mean[None], tri.cov[None], np.array([rays.size]), np.array([expected]),
+                             np.zeros(1, dtype=bool))
                 born += 1
         return born
 
