@@ -58,6 +58,13 @@ POSE_NOISE = {"pose_1cm_0.2deg": (0.01, 0.2), "pose_2cm_0.3deg": (0.02, 0.3), "p
 """Localisation error levels (position std, heading std in degrees), applied as a slowly varying error."""
 POSE_CORRELATION_FRAMES = 10.0
 """Frames over which the localisation error decorrelates (5 s at the 2 Hz fisheye rate)."""
+ODOMETRY_SCALE_STD, ODOMETRY_YAW_BIAS_STD_RAD_PER_M = 0.01, 0.002
+"""Wheel odometry as the simulator drifts it: a constant scale error and a gyro bias (per metre at 1 m/s)."""
+ODOMETRY_WHITE = (0.001, 0.0005)
+"""White noise per step, metres and radians."""
+
+Frame = tuple[tuple[float, float, float], FloatArray, FloatArray, tuple[float, float, float] | None]
+"""(true sensor pose, vehicle-frame bearings, their stds, odometry sensor pose or None to drift one)."""
 
 
 def report(name: str, value: float, unit: str) -> None:
@@ -73,6 +80,30 @@ def pose_errors(count: int, rng: np.random.Generator, sigma_m: float, sigma_deg:
     for k in range(count):
         x = a * x + math.sqrt(1 - a * a) * rng.normal(0.0, 1.0, 3) * scale
         out[k] = x
+    return out
+
+
+def _relative(a: FloatArray, b: FloatArray) -> FloatArray:
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    d = b[:, :2] - a[:, :2]
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1],
+                            np.angle(np.exp(1j * (b[:, 2] - a[:, 2])))])
+
+
+def drifting_odometry(poses: FloatArray, rng: np.random.Generator) -> FloatArray:
+    """(n, 3) odometry poses: the true steps between ``poses`` with a constant scale error, a heading
+    bias per metre and white noise, integrated from the first pose (drift grows without bound)."""
+    steps = _relative(poses[:-1], poses[1:])
+    distance = np.hypot(steps[:, 0], steps[:, 1])
+    scale = 1.0 + rng.normal(0.0, ODOMETRY_SCALE_STD)
+    bias = rng.normal(0.0, ODOMETRY_YAW_BIAS_STD_RAD_PER_M)
+    noisy = np.column_stack([steps[:, :2] * scale + rng.normal(0.0, ODOMETRY_WHITE[0], (len(steps), 2)),
+                             steps[:, 2] + bias * distance + rng.normal(0.0, ODOMETRY_WHITE[1], len(steps))])
+    out = np.zeros_like(poses)
+    out[0] = poses[0]
+    for k, (dx, dy, dyaw) in enumerate(noisy):
+        c, s = math.cos(out[k, 2]), math.sin(out[k, 2])
+        out[k + 1] = (out[k, 0] + c * dx - s * dy, out[k, 1] + s * dx + c * dy, out[k, 2] + dyaw)
     return out
 
 
@@ -109,41 +140,51 @@ def bench_detection(frames: int, size_px: int) -> float:
     return float(np.percentile(total.errors_rad, 95))
 
 
-def _map(frames: list[tuple[tuple[float, float, float], FloatArray, FloatArray]], truth: FloatArray, tag: str,
-         *, seeds: int) -> None:
-    """Map the (true pose, bearings, sigmas) frames with exact poses, then with each localisation noise level."""
+def _map(frames: list[Frame], truth: FloatArray, tag: str, *, seeds: int) -> None:
+    """Map the frames with exact poses, then with each localisation noise level: the EKF alone
+    (``_rmse``) and after smoothing poses and landmarks with odometry (``_smoothed_rmse``)."""
     cases = {"known_pose": (0.0, 0.0), **POSE_NOISE}
+    true_poses = np.array([f[0] for f in frames])
     for case, (sigma_m, sigma_deg) in cases.items():
-        rmses, matched, extra = [], [], []
+        stats: dict[str, list[float]] = {}
         for seed in range(seeds if sigma_m > 0 else 1):
-            errors = pose_errors(len(frames), np.random.default_rng(100 + seed), sigma_m, sigma_deg)
-            mapper = BearingOnlyMapper()
+            rng = np.random.default_rng(100 + seed)
+            errors = pose_errors(len(frames), rng, sigma_m, sigma_deg)
+            drifted = drifting_odometry(true_poses, rng)
+            mapper = BearingOnlyMapper(smooth_window_frames=len(frames))
             cov = pose_cov(sigma_m, sigma_deg)
-            for (pose, bearings, sigmas), error in zip(frames, errors, strict=True):
-                mapper.observe(tuple(np.asarray(pose) + error), bearings, sigmas, pose_cov=cov)
-            r, m, e = map_rmse(mapper.reliable_landmarks().means, truth)
-            rmses.append(r)
-            matched.append(m)
-            extra.append(e)
-        report(f"{tag}_{case}_rmse", 100 * float(np.mean(rmses)), "cm")
-        report(f"{tag}_{case}_rmse_max", 100 * float(np.max(rmses)), "cm")
-        report(f"{tag}_{case}_uprights_matched", float(np.mean(matched)), "count")
-        report(f"{tag}_{case}_landmarks_spurious", float(np.mean(extra)), "count")
+            for (pose, bearings, sigmas, odometry), error, odo in zip(frames, errors, drifted, strict=True):
+                mapper.observe(tuple(np.asarray(pose) + error), bearings, sigmas, pose_cov=cov,
+                               odometry_pose=odometry if odometry is not None else tuple(odo))
+            for name, value in zip(("rmse", "uprights_matched", "landmarks_spurious"),
+                                   map_rmse(mapper.reliable_landmarks().means, truth), strict=True):
+                stats.setdefault(name, []).append(value)
+            start = time.process_time()
+            mapper.smooth()
+            stats.setdefault("smooth_cpu", []).append(time.process_time() - start)
+            for name, value in zip(("smoothed_rmse", "smoothed_uprights_matched", "smoothed_landmarks_spurious"),
+                                   map_rmse(mapper.reliable_landmarks().means, truth), strict=True):
+                stats.setdefault(name, []).append(value)
+        for name, values in stats.items():
+            scale, unit = (100.0, "cm") if name.endswith("rmse") else (1.0, "s" if name.endswith("cpu") else "count")
+            report(f"{tag}_{case}_{name}", scale * float(np.mean(values)), unit)
+            if name.endswith("rmse"):
+                report(f"{tag}_{case}_{name}_max", scale * float(np.max(values)), unit)
 
 
 def bench_mapping_simulated(sigma_rad: float, seeds: int) -> None:
     rng = np.random.default_rng(21)
     layout = rack_region(aisles=4, bays=20)
-    frames = []
+    frames: list[Frame] = []
     for pose in drive_aisles(layout, 0.25):
         b = simulated_bearings(layout.uprights, pose, rng, sigma_rad=sigma_rad)
-        frames.append((pose, b, np.full(b.size, sigma_rad)))
+        frames.append((pose, b, np.full(b.size, sigma_rad), None))
     report("map_sim_bearing_sigma", float(np.rad2deg(sigma_rad)), "deg")
     report("map_sim_uprights_true", len(layout.uprights), "count")
     report("map_sim_frames", len(frames), "count")
     start = time.process_time()
     mapper = BearingOnlyMapper()
-    for pose, b, s in frames:
+    for pose, b, s, _ in frames:
         mapper.observe(pose, b, s)
     report("map_sim_cpu_per_frame", 1000 * (time.process_time() - start) / len(frames), "ms")
     _map(frames, layout.uprights, "map_sim", seeds=seeds)
@@ -155,14 +196,14 @@ def bench_mapping_rendered(size_px: int, step_m: float, seeds: int) -> None:
     scene = rack_scene(layout, rng)
     camera = default_camera(size_px=size_px)
     mount = default_mount()
-    frames = []
+    frames: list[Frame] = []
     spent = 0.0
     for pose in drive_aisles(layout, step_m):
         image, _ = render_fisheye(camera, scene, pose, rng)
         start = time.process_time()
         found = detect_pillars(image, camera)
         spent += time.process_time() - start
-        frames.append((pose, vehicle_bearings(mount, found.bearings_rad), found.sigmas_rad))
+        frames.append((pose, vehicle_bearings(mount, found.bearings_rad), found.sigmas_rad, None))
     report("map_rendered_frames", len(frames), "count")
     report("map_rendered_uprights_true", len(layout.uprights), "count")
     report("map_rendered_detect_cpu_per_frame", 1000 * spent / len(frames), "ms")
@@ -309,13 +350,29 @@ def bench_live(seeds: int) -> None:
     report("live_final_bins_found", 100 * float(np.mean(final)), "%")
 
 
-def _survey_frames(bag: Path) -> Iterator[tuple[tuple[float, float, float], FloatArray, FloatArray]]:
+def _read_odometry(reader: Any, connections: list[Any]) -> tuple[FloatArray, FloatArray]:
+    """Stamps (n,) and base poses (n, 3) in the odometry frame of nav_msgs/Odometry messages."""
+    from shared.transforms import yaw_from_quaternion
+
+    rows = []
+    for connection, _, raw in reader.messages(connections=connections):
+        msg = reader.deserialize(raw, connection.msgtype)
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        rows.append((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, p.x, p.y,
+                     yaw_from_quaternion([q.x, q.y, q.z, q.w])))
+    table = np.array(sorted(rows), dtype=np.float64).reshape(-1, 4)
+    table[:, 3] = np.unwrap(table[:, 3])
+    return table[:, 0], table[:, 1:]
+
+
+def _survey_frames(bag: Path) -> Iterator[Frame]:
+    """The survey's frames: true sensor pose, detections, and the sensor pose in the simulator's drifting odometry."""
     from rosbags.highlevel import AnyReader
 
     from services.pillar_mapping import camera_from_info, image_bgr
     from services.pillar_mapping.bag import _mount, _pose_at, _read_poses, _stamp_ns
     from services.pillar_mapping.mount import sensor_pose
-    from shared.messages import CAMERA_INFO, POSE_STAMPED, TYPESTORE
+    from shared.messages import CAMERA_INFO, ODOMETRY, POSE_STAMPED, TYPESTORE
 
     with AnyReader([bag], default_typestore=TYPESTORE) as reader:
         conns = reader.connections
@@ -326,13 +383,17 @@ def _survey_frames(bag: Path) -> Iterator[tuple[tuple[float, float, float], Floa
         mount = _mount(reader, [c for c in conns if c.topic.endswith("tf_static")], str(info.header.frame_id),
                        images[0].topic.split("/")[1] + "/base_link")
         stamps, table = _read_poses(reader, [c for c in conns if c.msgtype == POSE_STAMPED])
+        odom_stamps, odom_table = _read_odometry(reader, [c for c in conns if c.msgtype == ODOMETRY])
         for connection, _, raw in reader.messages(connections=images):
             message = reader.deserialize(raw, connection.msgtype)
             pose = _pose_at(stamps, table, _stamp_ns(message))
-            if pose is not None:
+            odometry = _pose_at(odom_stamps, odom_table, _stamp_ns(message))
+            if pose is not None and odometry is not None:
                 seen = detect_pillars(image_bgr(message), camera)
                 x, y, yaw = sensor_pose(mount, pose)
-                yield (float(x), float(y), float(yaw)), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad
+                ox, oy, oyaw = sensor_pose(mount, odometry)
+                yield ((float(x), float(y), float(yaw)), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad,
+                       (float(ox), float(oy), float(oyaw)))
 
 
 def bench_sim_survey(seeds: int) -> None:
