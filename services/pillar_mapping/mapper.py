@@ -119,19 +119,22 @@ class _RayPool:
 
 @dataclass
 class _WindowLog:
-    """The latest frames (number, pose, covariance, odometry pose, track) and the bearings associated in them."""
+    """The latest frames (number, pose, covariance, odometry pose, track) and the bearings associated in them;
+    ``partial`` lists the landmarks some of whose bearings have left the window."""
 
     frames: list[tuple[int, FloatArray, FloatArray, FloatArray, int]] = field(default_factory=list)
     frame: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     landmark: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     bearing: FloatArray = field(default_factory=lambda: np.zeros(0))
     sigma: FloatArray = field(default_factory=lambda: np.zeros(0))
+    partial: set[int] = field(default_factory=set)
 
     def add_frame(self, number: int, pose: FloatArray, cov: FloatArray, odometry: FloatArray, track: int, *,
                   keep_after: int) -> None:
         self.frames = [f for f in self.frames if f[0] > keep_after]
         self.frames.append((number, pose.copy(), cov.copy(), odometry.copy(), track))
         keep = self.frame > keep_after
+        self.partial.update(self.landmark[~keep].tolist())
         self.frame, self.landmark = self.frame[keep], self.landmark[keep]
         self.bearing, self.sigma = self.bearing[keep], self.sigma[keep]
 
@@ -273,6 +276,9 @@ class BearingOnlyMapper:
         """Re-estimate the landmarks seen in the window jointly with the window's poses
         (:func:`~services.pillar_mapping.smoother.smooth_map`); None when there is nothing to smooth.
 
+        A landmark some of whose bearings have left the window enters with its estimate and
+        covariance as a prior and is left unchanged (its older views are no longer in the graph).
+
         Raises
         ------
         PillarMappingError
@@ -281,7 +287,8 @@ class BearingOnlyMapper:
         frames, bearings = self._log.logs()
         if len(frames.poses) == 0 or bearings.frame.size == 0:
             return None
-        result = smooth_map(frames, bearings, self._means, odometry=self.odometry_noise)
+        result = smooth_map(frames, bearings, self._means, odometry=self.odometry_noise,
+                            fixed=np.array(sorted(self._log.partial), dtype=np.int64), fixed_covs=self._covs)
         self._means[result.landmarks] = result.means
         self._covs[result.landmarks] = result.covs
         return result

@@ -109,7 +109,8 @@ def odometry_steps(frames: FrameLog, noise: OdometryNoise) -> tuple[IntArray, Fl
 
 
 def smooth_map(frames: FrameLog, bearings: BearingLog, initial: FloatArray, *,
-               odometry: OdometryNoise | None = None, iterations: int = 30) -> SmoothedMap:
+               odometry: OdometryNoise | None = None, fixed: IntArray | None = None,
+               fixed_covs: FloatArray | None = None, iterations: int = 30) -> SmoothedMap:
     """Jointly estimate the frames' poses and the landmarks they saw (see the module docstring).
 
     Parameters
@@ -121,6 +122,9 @@ def smooth_map(frames: FrameLog, bearings: BearingLog, initial: FloatArray, *,
         The bearings associated with landmarks in those frames.
     initial : ndarray of float64, shape (N, 2)
         Every landmark's current estimate; those with at least two bearings are re-estimated.
+    fixed, fixed_covs : ndarray of int64, shape (P,), and of float64, shape (N, 2, 2)
+        Landmarks that enter with their estimate and covariance (``fixed_covs[n]``) as a prior,
+        constraining the poses, and are not returned (their older views left the window).
 
     Raises
     ------
@@ -133,8 +137,14 @@ def smooth_map(frames: FrameLog, bearings: BearingLog, initial: FloatArray, *,
             and frames.tracks.shape == (count,)):
         raise PillarMappingError("frame log arrays must have one entry per frame")
     seen = np.bincount(bearings.landmark, minlength=len(initial)) if bearings.landmark.size else np.zeros(0, int)
+    held = np.zeros(0, dtype=np.int64) if fixed is None else fixed
+    held_covs = np.zeros((0, 2, 2)) if fixed_covs is None else fixed_covs
+    if held.size and len(held_covs) != len(initial):
+        raise PillarMappingError("fixed landmarks need one covariance per landmark")
     index = np.flatnonzero(seen >= 2).astype(np.int64)
-    use = np.isin(bearings.landmark, index)
+    pinned = np.intersect1d(index, held)
+    index = np.setdiff1d(index, held)
+    use = np.isin(bearings.landmark, np.concatenate([index, pinned]))
     graph = gtsam.NonlinearFactorGraph()
     values = gtsam.Values()
     for k in range(count):
@@ -152,6 +162,11 @@ def smooth_map(frames: FrameLog, bearings: BearingLog, initial: FloatArray, *,
     for n in index.tolist():
         point = np.asarray(initial[n], dtype=np.float64)
         graph.add(gtsam.PriorFactorPoint2(gtsam.symbol("l", n), point, weak))
+        values.insert(gtsam.symbol("l", n), point)
+    for n in pinned.tolist():
+        point = np.asarray(initial[n], dtype=np.float64)
+        cov = 0.5 * (held_covs[n] + held_covs[n].T) + np.eye(2) * 1e-8
+        graph.add(gtsam.PriorFactorPoint2(gtsam.symbol("l", n), point, gtsam.noiseModel.Gaussian.Covariance(cov)))
         values.insert(gtsam.symbol("l", n), point)
     huber = gtsam.noiseModel.mEstimator.Huber.Create(_HUBER_K)
     for f, n, b, s in zip(bearings.frame[use].tolist(), bearings.landmark[use].tolist(),
