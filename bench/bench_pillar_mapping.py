@@ -172,7 +172,7 @@ def _map(frames: list[Frame], truth: FloatArray, tag: str, *, seeds: int, smooth
                     stats.setdefault("smooth_cpu_per_call", []).append(spent / calls)
                     stats.setdefault("smooth_cpu_total", []).append(spent)
         for name, values in stats.items():
-            scale, unit = (100.0, "cm") if name.endswith("rmse") else (1.0, "s" if name.endswith("cpu") else "count")
+            scale, unit = (100.0, "cm") if name.endswith("rmse") else (1.0, "s" if "cpu" in name else "count")
             report(f"{tag}_{case}_{name}", scale * float(np.mean(values)), unit)
             if name.endswith("rmse"):
                 report(f"{tag}_{case}_{name}_max", scale * float(np.max(values)), unit)
