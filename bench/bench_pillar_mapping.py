@@ -416,12 +416,110 @@ def bench_sim_survey(seeds: int) -> None:
     _map(frames, world.uprights.xy, "survey", seeds=seeds, smooth_every=20)
 
 
+class DemoFrame(NamedTuple):
+    """A fisheye frame of the live demo: round, true / tf (map) / odom base poses, camera mount, bearings, stds."""
+
+    round: int
+    truth: FloatArray
+    tf: FloatArray
+    odom: FloatArray
+    mount: Any
+    bearings: FloatArray
+    sigmas: FloatArray
+
+
+def demo_round_frames(rounds: int) -> tuple[World, list[DemoFrame]]:
+    """The live demo (``aisle run --demo``) driven offline: the same world, loop and per-round seeds, each
+    frame posed as the worker poses it (tf ``map -> base_link`` at the image stamp) and by the truth."""
+    from services.pillar_mapping import camera_from_info, image_bgr
+    from services.pillar_mapping.mount import mount_from_transform
+    from services.simulator import demo_layout, fisheye_sensor
+    from services.simulator.lidar import LidarModel
+    from services.simulator.route import survey_route, waypoint_route
+    from services.simulator.stream import RobotSpec, simulate
+    from shared.transforms import TransformBuffer, add_tf_message, sensor_pose_2d, yaw_from_quaternion
+
+    layout = demo_layout()
+    layout["seed"] = 0
+    world = world_from_layout(layout)
+    survey = survey_route(world)
+    loop = np.vstack([survey, waypoint_route(world, [survey[-1], survey[0]])[1:]])
+    frames: list[DemoFrame] = []
+    start_ns = 1_700_000_000_000_000_000
+    for r in range(rounds):
+        robot = RobotSpec("robot1", loop, seed=r, cameras=(fisheye_sensor(rate_hz=2.0),),
+                          lidar=LidarModel(rate_hz=0.05))  # scans are not used here
+        buffer = TransformBuffer(cache_s=10.0)
+        truth: dict[int, tuple[float, float, float]] = {}
+        image: Any = None
+        for output in simulate(world, [robot], start_ns=start_ns):
+            message: Any = output.message
+            if output.topic in ("tf", "tf_static"):
+                add_tf_message(buffer, message, static=output.topic == "tf_static")
+            elif output.topic == "ground_truth/pose":
+                q = message.pose.orientation
+                truth[output.stamp_ns] = (message.pose.position.x, message.pose.position.y,
+                                          yaw_from_quaternion([q.x, q.y, q.z, q.w]))
+            elif output.topic == "fisheye/image_raw":
+                image = message
+            elif output.topic == "fisheye/camera_info":
+                seen = detect_pillars(image_bgr(image), camera_from_info(message))
+                mount = mount_from_transform(buffer.lookup("robot1/base_link", image.header.frame_id, output.stamp_ns))
+                frames.append(DemoFrame(
+                    r, np.array(truth[output.stamp_ns]),
+                    np.array(sensor_pose_2d(buffer.lookup("map", "robot1/base_link", output.stamp_ns))),
+                    np.array(sensor_pose_2d(buffer.lookup("robot1/odom", "robot1/base_link", output.stamp_ns))),
+                    mount, vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad))
+            start_ns = max(start_ns, output.stamp_ns)
+        start_ns += 1_000_000_000
+    return world, frames
+
+
+def bench_demo_rounds(rounds: int) -> None:
+    """Cells of the live demo's floor found at the end of each round, the map fitted every 20 frames (10 s)
+    as the worker does: poses from tf as the worker has them (the simulator's localisation error, 1 cm and
+    0.002 rad, white) taken as exact, or with that error stated and the map smoothed, or the true poses."""
+    from services.pillar_mapping.mount import sensor_pose
+
+    world, frames = demo_round_frames(rounds)
+    true_cells = np.array([b.polygon.mean(axis=0) for b in world.bins if b.level == 1])
+    stated = np.diag([0.01**2, 0.01**2, 0.002**2])
+    cases = {"tf": ("tf", None), "tf_smoothed": ("tf", stated), "truth": ("truth", None)}
+    report("demo_cells_true", len(true_cells), "count")
+    for case, (which, cov) in cases.items():
+        mapper = BearingOnlyMapper()
+        fewest = len(true_cells)
+        for k, f in enumerate(frames, start=1):
+            base = f.truth if which == "truth" else f.tf
+            mapper.observe(tuple(sensor_pose(f.mount, base)), f.bearings, f.sigmas, pose_cov=cov,
+                           odometry_pose=tuple(sensor_pose(f.mount, f.odom)))
+            last = k == len(frames) or frames[k].round != f.round
+            if k % 20 and not last:
+                continue
+            if cov is not None:
+                mapper.smooth()
+            reliable = mapper.reliable_landmarks()
+            centres = np.array([b.centre for b in fit_landmark_map(reliable).bins]).reshape(-1, 2)
+            found = int((cKDTree(centres).query(true_cells)[0] <= 0.1).sum()) if len(centres) else 0
+            if f.round > 0 or last:  # from the end of the first round on
+                fewest = min(fewest, found)
+            if last:
+                invented = int((cKDTree(true_cells).query(centres)[0] > 0.1).sum()) if len(centres) else 0
+                report(f"demo_{case}_round{f.round + 1}_cells_found", found, "count")
+                report(f"demo_{case}_round{f.round + 1}_cells_invented", invented, "count")
+                report(f"demo_{case}_round{f.round + 1}_rmse", 100 * map_rmse(reliable.means, world.uprights.xy)[0],
+                       "cm")
+        report(f"demo_{case}_fewest_cells_after_round1", fewest, "count")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer frames and seeds")
     parser.add_argument("--rows-only", action="store_true", help="only the row and bin fitting")
     parser.add_argument("--seeds", type=int, default=None, help="landmark draws per hall (default 5, quick 2)")
     parser.add_argument("--sim-survey", action="store_true", help="also map the simulator's demo fisheye survey")
+    parser.add_argument("--demo-rounds", type=int, default=0,
+                        help="also drive this many rounds of the live demo offline and count its cells per round")
     args = parser.parse_args()
     frames = 8 if args.quick else 30
     seeds = args.seeds or (2 if args.quick else 5)
@@ -433,6 +531,8 @@ def main() -> None:
         bench_live(2 if args.quick else 4)
         if args.sim_survey:
             bench_sim_survey(seeds)
+        if args.demo_rounds:
+            bench_demo_rounds(args.demo_rounds)
     halls: dict[str, Callable[[], tuple[Truth, FloatArray]]] = {
         "hall_250x72": lambda: (truth_of_world(w := load_world("hall")), w.uprights.xy),
         "hall_two_regions": lambda: (truth_of_world(w := two_region_hall()), w.uprights.xy),

@@ -176,12 +176,15 @@ class BearingOnlyMapper:
         Least fraction of the pooled frames within range of a candidate that must have seen
         it: ghosts where rays of different uprights happen to cross get few.
     min_hit_ratio, min_observations : float, int
-        A landmark is reliable while, in its current pass (a run of frames that had it in range,
-        broken by ``window_frames`` without), it was matched in at least ``min_hit_ratio`` of
-        those frames and in at least ``min_observations``, and for good once a whole pass did.
-        Judged per pass, an upright seen well once stays reliable when a later pass has it in
-        range but hidden (behind a rack, from the next aisle); a ghost where rays of different
-        uprights crossed is matched in few frames of its pass and never becomes reliable for good.
+        A landmark is reliable while it was matched in at least ``min_hit_ratio`` of the frames
+        that had it in range and in at least ``min_observations`` frames;
+    min_pass_ratio : float
+        and for good once one whole pass by it (a run of frames that had it in range, broken by
+        ``window_frames`` without) matched it in at least this fraction of the pass's frames (and
+        in ``min_observations``). An upright seen well on one pass then stays reliable when later
+        passes have it in range but hidden (behind a rack, from the next aisle), where its overall
+        ratio falls; a ghost where rays of different uprights crossed is matched in few frames of
+        its pass and is not kept.
     smooth_window_frames : int
         How many of the latest frames (poses, odometry, associated bearings) :meth:`smooth`
         re-estimates.
@@ -203,6 +206,7 @@ class BearingOnlyMapper:
         min_support_ratio: float = 0.6,
         min_hit_ratio: float = 0.3,
         min_observations: int = 6,
+        min_pass_ratio: float = 0.4,
         smooth_window_frames: int = 1200,
         odometry_noise: OdometryNoise | None = None,
     ) -> None:
@@ -221,10 +225,12 @@ class BearingOnlyMapper:
         self.min_support_ratio = min_support_ratio
         self.min_hit_ratio = min_hit_ratio
         self.min_observations = min_observations
+        self.min_pass_ratio = min_pass_ratio
         self.smooth_window_frames = smooth_window_frames
         self.odometry_noise = odometry_noise or OdometryNoise()
         self._log = _WindowLog()
         self._frame_origins: dict[int, FloatArray] = {}
+        self._expected = np.zeros(0, dtype=np.int64)
         self._run_hits = np.zeros(0, dtype=np.int64)
         self._run_expected = np.zeros(0, dtype=np.int64)
         self._last_in_range = np.zeros(0, dtype=np.int64)
@@ -264,12 +270,14 @@ class BearingOnlyMapper:
         self._counts = np.concatenate([self._counts, counts])
         self._run_hits = np.concatenate([self._run_hits, counts])
         self._run_expected = np.concatenate([self._run_expected, expected])
+        self._expected = np.concatenate([self._expected, expected])
         self._last_in_range = np.concatenate([self._last_in_range, np.full(len(means), self._frame, dtype=np.int64)])
         self._confirmed = np.concatenate([self._confirmed, confirmed])
 
     def reliable_landmarks(self) -> LandmarkMap:
-        """The landmarks confirmed by a whole pass or by their current one (see ``min_hit_ratio``)."""
-        keep = self._confirmed | self._pass_ok(slice(None))
+        """The landmarks matched often enough overall, or confirmed by a whole pass (see ``min_pass_ratio``)."""
+        ratio_ok = self._counts >= self.min_hit_ratio * self._expected
+        keep = self._confirmed | ((self._counts >= self.min_observations) & ratio_ok)
         return LandmarkMap(self._means[keep].copy(), self._covs[keep].copy(), self._counts[keep].copy())
 
     def smooth(self) -> SmoothedMap | None:
@@ -394,18 +402,21 @@ class BearingOnlyMapper:
         self._run_hits[index] += 1
         self._log.add_bearings(np.full(obs.size, self._frame), index, bearings[obs], sigmas[obs])
 
-    def _pass_ok(self, index: IntArray | slice) -> npt.NDArray[np.bool_]:
+    def _pass_ok(self, index: IntArray) -> npt.NDArray[np.bool_]:
+        """Whether the current pass of landmarks ``index`` confirms them for good."""
         hits, expected = self._run_hits[index], self._run_expected[index]
-        ok: npt.NDArray[np.bool_] = (hits >= self.min_observations) & (hits >= self.min_hit_ratio * expected)
+        ok: npt.NDArray[np.bool_] = (hits >= self.min_observations) & (hits >= self.min_pass_ratio * expected)
         return ok
 
     def _count_in_range(self, index: IntArray) -> None:
-        """Count this frame for the landmarks in range; one out of range ``window_frames`` starts a new pass."""
+        """Count this frame for the landmarks in range; one out of range ``window_frames`` starts a new pass
+        (the pass before confirms it for good if it matched it often enough)."""
         new_pass = self._last_in_range[index] < self._frame - self.window_frames
         self._confirmed[index[new_pass]] |= self._pass_ok(index[new_pass])
         self._run_hits[index[new_pass]] = 0
         self._run_expected[index[new_pass]] = 0
         self._run_expected[index] += 1
+        self._expected[index] += 1
         self._last_in_range[index] = self._frame
 
     def _support(self, points: FloatArray) -> npt.NDArray[np.bool_]:
