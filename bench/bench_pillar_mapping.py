@@ -516,6 +516,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer frames and seeds")
     parser.add_argument("--rows-only", action="store_true", help="only the row and bin fitting")
+    parser.add_argument("--mapping-only", action="store_true", help="only the mapping (and the options below)")
     parser.add_argument("--seeds", type=int, default=None, help="landmark draws per hall (default 5, quick 2)")
     parser.add_argument("--sim-survey", action="store_true", help="also map the simulator's demo fisheye survey")
     parser.add_argument("--demo-rounds", type=int, default=0,
@@ -524,8 +525,10 @@ def main() -> None:
     frames = 8 if args.quick else 30
     seeds = args.seeds or (2 if args.quick else 5)
     if not args.rows_only:
-        p95 = bench_detection(frames, 640)
-        bench_detection(frames, 480)
+        p95 = math.radians(0.1)
+        if not args.mapping_only:
+            p95 = bench_detection(frames, 640)
+            bench_detection(frames, 480)
         bench_mapping_simulated(max(p95, math.radians(0.1)), seeds)
         bench_mapping_rendered(480, 0.5 if args.quick else 0.25, seeds)
         bench_live(2 if args.quick else 4)
@@ -533,6 +536,8 @@ def main() -> None:
             bench_sim_survey(seeds)
         if args.demo_rounds:
             bench_demo_rounds(args.demo_rounds)
+    if args.mapping_only:
+        return
     halls: dict[str, Callable[[], tuple[Truth, FloatArray]]] = {
         "hall_250x72": lambda: (truth_of_world(w := load_world("hall")), w.uprights.xy),
         "hall_two_regions": lambda: (truth_of_world(w := two_region_hall()), w.uprights.xy),
