@@ -58,6 +58,13 @@ POSE_NOISE = {"pose_1cm_0.2deg": (0.01, 0.2), "pose_2cm_0.3deg": (0.02, 0.3), "p
 """Localisation error levels (position std, heading std in degrees), applied as a slowly varying error."""
 POSE_CORRELATION_FRAMES = 10.0
 """Frames over which the localisation error decorrelates (5 s at the 2 Hz fisheye rate)."""
+ODOMETRY_SCALE_STD, ODOMETRY_YAW_BIAS_STD_RAD_PER_M = 0.01, 0.002
+"""Wheel odometry as the simulator drifts it: a constant scale error and a gyro bias (per metre at 1 m/s)."""
+ODOMETRY_WHITE = (0.001, 0.0005)
+"""White noise per step, metres and radians."""
+
+Frame = tuple[tuple[float, float, float], FloatArray, FloatArray, tuple[float, float, float] | None]
+"""(true sensor pose, vehicle-frame bearings, their stds, odometry sensor pose or None to drift one)."""
 
 
 def report(name: str, value: float, unit: str) -> None:
@@ -73,6 +80,30 @@ def pose_errors(count: int, rng: np.random.Generator, sigma_m: float, sigma_deg:
     for k in range(count):
         x = a * x + math.sqrt(1 - a * a) * rng.normal(0.0, 1.0, 3) * scale
         out[k] = x
+    return out
+
+
+def _relative(a: FloatArray, b: FloatArray) -> FloatArray:
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    d = b[:, :2] - a[:, :2]
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1],
+                            np.angle(np.exp(1j * (b[:, 2] - a[:, 2])))])
+
+
+def drifting_odometry(poses: FloatArray, rng: np.random.Generator) -> FloatArray:
+    """(n, 3) odometry poses: the true steps between ``poses`` with a constant scale error, a heading
+    bias per metre and white noise, integrated from the first pose (drift grows without bound)."""
+    steps = _relative(poses[:-1], poses[1:])
+    distance = np.hypot(steps[:, 0], steps[:, 1])
+    scale = 1.0 + rng.normal(0.0, ODOMETRY_SCALE_STD)
+    bias = rng.normal(0.0, ODOMETRY_YAW_BIAS_STD_RAD_PER_M)
+    noisy = np.column_stack([steps[:, :2] * scale + rng.normal(0.0, ODOMETRY_WHITE[0], (len(steps), 2)),
+                             steps[:, 2] + bias * distance + rng.normal(0.0, ODOMETRY_WHITE[1], len(steps))])
+    out = np.zeros_like(poses)
+    out[0] = poses[0]
+    for k, (dx, dy, dyaw) in enumerate(noisy):
+        c, s = math.cos(out[k, 2]), math.sin(out[k, 2])
+        out[k + 1] = (out[k, 0] + c * dx - s * dy, out[k, 1] + s * dx + c * dy, out[k, 2] + dyaw)
     return out
 
 
@@ -109,44 +140,63 @@ def bench_detection(frames: int, size_px: int) -> float:
     return float(np.percentile(total.errors_rad, 95))
 
 
-def _map(frames: list[tuple[tuple[float, float, float], FloatArray, FloatArray]], truth: FloatArray, tag: str,
-         *, seeds: int) -> None:
-    """Map the (true pose, bearings, sigmas) frames with exact poses, then with each localisation noise level."""
+def _map(frames: list[Frame], truth: FloatArray, tag: str, *, seeds: int, smooth_every: int) -> None:
+    """Map the frames with exact poses, then with each localisation noise level: the EKF alone
+    (``_rmse``; ``_rmse_within_20cm`` over the matches within 20 cm only), and with poses and landmarks
+    smoothed with odometry every ``smooth_every`` frames (10 s of driving, as the worker does every
+    ``store_period_s``) and at the end (``_smoothed_rmse``)."""
     cases = {"known_pose": (0.0, 0.0), **POSE_NOISE}
+    true_poses = np.array([f[0] for f in frames])
     for case, (sigma_m, sigma_deg) in cases.items():
-        rmses, matched, extra = [], [], []
+        stats: dict[str, list[float]] = {}
         for seed in range(seeds if sigma_m > 0 else 1):
-            errors = pose_errors(len(frames), np.random.default_rng(100 + seed), sigma_m, sigma_deg)
-            mapper = BearingOnlyMapper()
+            rng = np.random.default_rng(100 + seed)
+            errors = pose_errors(len(frames), rng, sigma_m, sigma_deg)
+            drifted = drifting_odometry(true_poses, rng)
             cov = pose_cov(sigma_m, sigma_deg)
-            for (pose, bearings, sigmas), error in zip(frames, errors, strict=True):
-                mapper.observe(tuple(np.asarray(pose) + error), bearings, sigmas, pose_cov=cov)
-            r, m, e = map_rmse(mapper.reliable_landmarks().means, truth)
-            rmses.append(r)
-            matched.append(m)
-            extra.append(e)
-        report(f"{tag}_{case}_rmse", 100 * float(np.mean(rmses)), "cm")
-        report(f"{tag}_{case}_rmse_max", 100 * float(np.max(rmses)), "cm")
-        report(f"{tag}_{case}_uprights_matched", float(np.mean(matched)), "count")
-        report(f"{tag}_{case}_landmarks_spurious", float(np.mean(extra)), "count")
+            for smoothed in (False, True):
+                mapper = BearingOnlyMapper()
+                spent, calls = 0.0, 0
+                for k, ((pose, bearings, sigmas, odometry), error, odo) in enumerate(
+                        zip(frames, errors, drifted, strict=True), start=1):
+                    mapper.observe(tuple(np.asarray(pose) + error), bearings, sigmas, pose_cov=cov,
+                                   odometry_pose=odometry if odometry is not None else tuple(odo))
+                    if smoothed and (k % smooth_every == 0 or k == len(frames)):
+                        start = time.process_time()
+                        mapper.smooth()
+                        spent, calls = spent + time.process_time() - start, calls + 1
+                prefix = "smoothed_" if smoothed else ""
+                means = mapper.reliable_landmarks().means
+                for name, value in zip(("rmse", "uprights_matched", "landmarks_spurious"), map_rmse(means, truth),
+                                       strict=True):
+                    stats.setdefault(prefix + name, []).append(value)
+                stats.setdefault(prefix + "rmse_within_20cm", []).append(map_rmse(means, truth, gate_m=0.2)[0])
+                if smoothed:
+                    stats.setdefault("smooth_cpu_per_call", []).append(spent / calls)
+                    stats.setdefault("smooth_cpu_total", []).append(spent)
+        for name, values in stats.items():
+            scale, unit = (100.0, "cm") if "rmse" in name else (1.0, "s" if "cpu" in name else "count")
+            report(f"{tag}_{case}_{name}", scale * float(np.mean(values)), unit)
+            if "rmse" in name:
+                report(f"{tag}_{case}_{name}_max", scale * float(np.max(values)), unit)
 
 
 def bench_mapping_simulated(sigma_rad: float, seeds: int) -> None:
     rng = np.random.default_rng(21)
     layout = rack_region(aisles=4, bays=20)
-    frames = []
+    frames: list[Frame] = []
     for pose in drive_aisles(layout, 0.25):
         b = simulated_bearings(layout.uprights, pose, rng, sigma_rad=sigma_rad)
-        frames.append((pose, b, np.full(b.size, sigma_rad)))
+        frames.append((pose, b, np.full(b.size, sigma_rad), None))
     report("map_sim_bearing_sigma", float(np.rad2deg(sigma_rad)), "deg")
     report("map_sim_uprights_true", len(layout.uprights), "count")
     report("map_sim_frames", len(frames), "count")
     start = time.process_time()
     mapper = BearingOnlyMapper()
-    for pose, b, s in frames:
+    for pose, b, s, _ in frames:
         mapper.observe(pose, b, s)
     report("map_sim_cpu_per_frame", 1000 * (time.process_time() - start) / len(frames), "ms")
-    _map(frames, layout.uprights, "map_sim", seeds=seeds)
+    _map(frames, layout.uprights, "map_sim", seeds=seeds, smooth_every=48)  # 12 m of 0.25 m steps: 10 s at 1.2 m/s
 
 
 def bench_mapping_rendered(size_px: int, step_m: float, seeds: int) -> None:
@@ -155,18 +205,18 @@ def bench_mapping_rendered(size_px: int, step_m: float, seeds: int) -> None:
     scene = rack_scene(layout, rng)
     camera = default_camera(size_px=size_px)
     mount = default_mount()
-    frames = []
+    frames: list[Frame] = []
     spent = 0.0
     for pose in drive_aisles(layout, step_m):
         image, _ = render_fisheye(camera, scene, pose, rng)
         start = time.process_time()
         found = detect_pillars(image, camera)
         spent += time.process_time() - start
-        frames.append((pose, vehicle_bearings(mount, found.bearings_rad), found.sigmas_rad))
+        frames.append((pose, vehicle_bearings(mount, found.bearings_rad), found.sigmas_rad, None))
     report("map_rendered_frames", len(frames), "count")
     report("map_rendered_uprights_true", len(layout.uprights), "count")
     report("map_rendered_detect_cpu_per_frame", 1000 * spent / len(frames), "ms")
-    _map(frames, layout.uprights, "map_rendered", seeds=seeds)
+    _map(frames, layout.uprights, "map_rendered", seeds=seeds, smooth_every=max(1, round(12.0 / step_m)))
 
 
 class Truth(NamedTuple):
@@ -309,13 +359,29 @@ def bench_live(seeds: int) -> None:
     report("live_final_bins_found", 100 * float(np.mean(final)), "%")
 
 
-def _survey_frames(bag: Path) -> Iterator[tuple[tuple[float, float, float], FloatArray, FloatArray]]:
+def _read_odometry(reader: Any, connections: list[Any]) -> tuple[FloatArray, FloatArray]:
+    """Stamps (n,) and base poses (n, 3) in the odometry frame of nav_msgs/Odometry messages."""
+    from shared.transforms import yaw_from_quaternion
+
+    rows = []
+    for connection, _, raw in reader.messages(connections=connections):
+        msg = reader.deserialize(raw, connection.msgtype)
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        rows.append((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, p.x, p.y,
+                     yaw_from_quaternion([q.x, q.y, q.z, q.w])))
+    table = np.array(sorted(rows), dtype=np.float64).reshape(-1, 4)
+    table[:, 3] = np.unwrap(table[:, 3])
+    return table[:, 0], table[:, 1:]
+
+
+def _survey_frames(bag: Path) -> Iterator[Frame]:
+    """The survey's frames: true sensor pose, detections, and the sensor pose in the simulator's drifting odometry."""
     from rosbags.highlevel import AnyReader
 
     from services.pillar_mapping import camera_from_info, image_bgr
     from services.pillar_mapping.bag import _mount, _pose_at, _read_poses, _stamp_ns
     from services.pillar_mapping.mount import sensor_pose
-    from shared.messages import CAMERA_INFO, POSE_STAMPED, TYPESTORE
+    from shared.messages import CAMERA_INFO, ODOMETRY, POSE_STAMPED, TYPESTORE
 
     with AnyReader([bag], default_typestore=TYPESTORE) as reader:
         conns = reader.connections
@@ -326,13 +392,17 @@ def _survey_frames(bag: Path) -> Iterator[tuple[tuple[float, float, float], Floa
         mount = _mount(reader, [c for c in conns if c.topic.endswith("tf_static")], str(info.header.frame_id),
                        images[0].topic.split("/")[1] + "/base_link")
         stamps, table = _read_poses(reader, [c for c in conns if c.msgtype == POSE_STAMPED])
+        odom_stamps, odom_table = _read_odometry(reader, [c for c in conns if c.msgtype == ODOMETRY])
         for connection, _, raw in reader.messages(connections=images):
             message = reader.deserialize(raw, connection.msgtype)
             pose = _pose_at(stamps, table, _stamp_ns(message))
-            if pose is not None:
+            odometry = _pose_at(odom_stamps, odom_table, _stamp_ns(message))
+            if pose is not None and odometry is not None:
                 seen = detect_pillars(image_bgr(message), camera)
                 x, y, yaw = sensor_pose(mount, pose)
-                yield (float(x), float(y), float(yaw)), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad
+                ox, oy, oyaw = sensor_pose(mount, odometry)
+                yield ((float(x), float(y), float(yaw)), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad,
+                       (float(ox), float(oy), float(oyaw)))
 
 
 def bench_sim_survey(seeds: int) -> None:
@@ -346,26 +416,131 @@ def bench_sim_survey(seeds: int) -> None:
         frames = list(_survey_frames(bag))
     report("survey_frames", len(frames), "count")
     report("survey_uprights_true", len(world.uprights.xy), "count")
-    _map(frames, world.uprights.xy, "survey", seeds=seeds)
+    _map(frames, world.uprights.xy, "survey", seeds=seeds, smooth_every=20)
+
+
+class DemoFrame(NamedTuple):
+    """A fisheye frame of the live demo: round, true / tf (map) / odom base poses, camera mount, bearings, stds."""
+
+    round: int
+    truth: FloatArray
+    tf: FloatArray
+    odom: FloatArray
+    mount: Any
+    bearings: FloatArray
+    sigmas: FloatArray
+
+
+def demo_round_frames(rounds: int) -> tuple[World, list[DemoFrame]]:
+    """The live demo (``aisle run --demo``) driven offline: the same world, loop and per-round seeds, each
+    frame posed as the worker poses it (tf ``map -> base_link`` at the image stamp) and by the truth."""
+    from services.pillar_mapping import camera_from_info, image_bgr
+    from services.pillar_mapping.mount import mount_from_transform
+    from services.simulator import demo_layout, fisheye_sensor
+    from services.simulator.lidar import LidarModel
+    from services.simulator.route import survey_route, waypoint_route
+    from services.simulator.stream import RobotSpec, simulate
+    from shared.transforms import TransformBuffer, add_tf_message, sensor_pose_2d, yaw_from_quaternion
+
+    layout = demo_layout()
+    layout["seed"] = 0
+    world = world_from_layout(layout)
+    survey = survey_route(world)
+    loop = np.vstack([survey, waypoint_route(world, [survey[-1], survey[0]])[1:]])
+    frames: list[DemoFrame] = []
+    start_ns = 1_700_000_000_000_000_000
+    for r in range(rounds):
+        robot = RobotSpec("robot1", loop, seed=r, cameras=(fisheye_sensor(rate_hz=2.0),),
+                          lidar=LidarModel(rate_hz=0.05))  # scans are not used here
+        buffer = TransformBuffer(cache_s=10.0)
+        truth: dict[int, tuple[float, float, float]] = {}
+        image: Any = None
+        for output in simulate(world, [robot], start_ns=start_ns):
+            message: Any = output.message
+            if output.topic in ("tf", "tf_static"):
+                add_tf_message(buffer, message, static=output.topic == "tf_static")
+            elif output.topic == "ground_truth/pose":
+                q = message.pose.orientation
+                truth[output.stamp_ns] = (message.pose.position.x, message.pose.position.y,
+                                          yaw_from_quaternion([q.x, q.y, q.z, q.w]))
+            elif output.topic == "fisheye/image_raw":
+                image = message
+            elif output.topic == "fisheye/camera_info":
+                seen = detect_pillars(image_bgr(image), camera_from_info(message))
+                mount = mount_from_transform(buffer.lookup("robot1/base_link", image.header.frame_id, output.stamp_ns))
+                frames.append(DemoFrame(
+                    r, np.array(truth[output.stamp_ns]),
+                    np.array(sensor_pose_2d(buffer.lookup("map", "robot1/base_link", output.stamp_ns))),
+                    np.array(sensor_pose_2d(buffer.lookup("robot1/odom", "robot1/base_link", output.stamp_ns))),
+                    mount, vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad))
+            start_ns = max(start_ns, output.stamp_ns)
+        start_ns += 1_000_000_000
+    return world, frames
+
+
+def bench_demo_rounds(rounds: int) -> None:
+    """Cells of the live demo's floor found at the end of each round, the map fitted every 20 frames (10 s)
+    as the worker does: poses from tf as the worker has them (the simulator's localisation error, 1 cm and
+    0.002 rad, white) taken as exact, or with that error stated and the map smoothed, or the true poses."""
+    from services.pillar_mapping.mount import sensor_pose
+
+    world, frames = demo_round_frames(rounds)
+    true_cells = np.array([b.polygon.mean(axis=0) for b in world.bins if b.level == 1])
+    stated = np.diag([0.01**2, 0.01**2, 0.002**2])
+    cases = {"tf": ("tf", None), "tf_smoothed": ("tf", stated), "truth": ("truth", None)}
+    report("demo_cells_true", len(true_cells), "count")
+    for case, (which, cov) in cases.items():
+        mapper = BearingOnlyMapper()
+        fewest = len(true_cells)
+        for k, f in enumerate(frames, start=1):
+            base = f.truth if which == "truth" else f.tf
+            mapper.observe(tuple(sensor_pose(f.mount, base)), f.bearings, f.sigmas, pose_cov=cov,
+                           odometry_pose=tuple(sensor_pose(f.mount, f.odom)))
+            last = k == len(frames) or frames[k].round != f.round
+            if k % 20 and not last:
+                continue
+            if cov is not None:
+                mapper.smooth()
+            reliable = mapper.reliable_landmarks()
+            centres = np.array([b.centre for b in fit_landmark_map(reliable).bins]).reshape(-1, 2)
+            found = int((cKDTree(centres).query(true_cells)[0] <= 0.1).sum()) if len(centres) else 0
+            if f.round > 0 or last:  # from the end of the first round on
+                fewest = min(fewest, found)
+            if last:
+                invented = int((cKDTree(true_cells).query(centres)[0] > 0.1).sum()) if len(centres) else 0
+                report(f"demo_{case}_round{f.round + 1}_cells_found", found, "count")
+                report(f"demo_{case}_round{f.round + 1}_cells_invented", invented, "count")
+                report(f"demo_{case}_round{f.round + 1}_rmse", 100 * map_rmse(reliable.means, world.uprights.xy)[0],
+                       "cm")
+        report(f"demo_{case}_fewest_cells_after_round1", fewest, "count")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer frames and seeds")
     parser.add_argument("--rows-only", action="store_true", help="only the row and bin fitting")
+    parser.add_argument("--mapping-only", action="store_true", help="only the mapping (and the options below)")
     parser.add_argument("--seeds", type=int, default=None, help="landmark draws per hall (default 5, quick 2)")
     parser.add_argument("--sim-survey", action="store_true", help="also map the simulator's demo fisheye survey")
+    parser.add_argument("--demo-rounds", type=int, default=0,
+                        help="also drive this many rounds of the live demo offline and count its cells per round")
     args = parser.parse_args()
     frames = 8 if args.quick else 30
     seeds = args.seeds or (2 if args.quick else 5)
     if not args.rows_only:
-        p95 = bench_detection(frames, 640)
-        bench_detection(frames, 480)
+        p95 = math.radians(0.1)
+        if not args.mapping_only:
+            p95 = bench_detection(frames, 640)
+            bench_detection(frames, 480)
         bench_mapping_simulated(max(p95, math.radians(0.1)), seeds)
         bench_mapping_rendered(480, 0.5 if args.quick else 0.25, seeds)
         bench_live(2 if args.quick else 4)
         if args.sim_survey:
             bench_sim_survey(seeds)
+        if args.demo_rounds:
+            bench_demo_rounds(args.demo_rounds)
+    if args.mapping_only:
+        return
     halls: dict[str, Callable[[], tuple[Truth, FloatArray]]] = {
         "hall_250x72": lambda: (truth_of_world(w := load_world("hall")), w.uprights.xy),
         "hall_two_regions": lambda: (truth_of_world(w := two_region_hall()), w.uprights.xy),

@@ -366,15 +366,18 @@ def _demo_labelling_model(settings: Settings) -> None:
 
 
 def _demo_settings(settings: Settings) -> Settings:
-    """The demo warehouse's rack levels as the site's rack profile, unless the settings give one."""
+    """The demo warehouse's rack levels as the site's rack profile and the simulator's localisation error
+    (1 cm, 0.002 rad: the pillar map is then smoothed with odometry), unless the settings give them."""
     from services.simulator import demo_layout
 
-    if settings.pillars.rack_profiles:
-        return settings
-    block = demo_layout()["blocks"][0]
-    levels = [k * float(block["level_pitch_m"]) for k in range(int(block["levels"]))]
-    pillars = settings.pillars.model_copy(update={"rack_profiles": [RackProfileSettings(levels_m=levels)]})
-    return settings.model_copy(update={"pillars": pillars})
+    update: dict[str, object] = {}
+    if not settings.pillars.rack_profiles:
+        block = demo_layout()["blocks"][0]
+        levels = [k * float(block["level_pitch_m"]) for k in range(int(block["levels"]))]
+        update["rack_profiles"] = [RackProfileSettings(levels_m=levels)]
+    if settings.pillars.localisation_sigma_m == 0 and settings.pillars.localisation_sigma_rad == 0:
+        update.update(localisation_sigma_m=0.01, localisation_sigma_rad=0.002)
+    return settings.model_copy(update={"pillars": settings.pillars.model_copy(update=update)})
 
 
 def _demo_job(cameras: str, *, rate: float) -> Callable[[Bus, threading.Event], None]:

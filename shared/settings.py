@@ -97,6 +97,8 @@ class PillarSettings(BaseModel):
     info_topic: str = "fisheye/camera_info"
     map_frame: str = "map"
     base_frame: str = Field("base_link", description="The vehicle frame (prefixed with the robot namespace in tf).")
+    odom_frame: str = Field("odom", description="The odometry frame (prefixed like base_frame); its relative motion "
+                            "links frames when the map is smoothed.")
     tf_wait_s: float = Field(
         0.5, ge=0.0, le=10.0, description="How long an image waits for tf to reach its stamp before it is dropped."
     )

@@ -1,8 +1,11 @@
 """Bearing-only EKF mapping of uprights with the vehicle pose from localisation (paper A, section 3).
 
 The state is the vehicle pose plus every landmark's position, as in Bailey's bearing-only
-SLAM; but the vehicle is neither predicted nor updated: its pose (and covariance, if given)
-comes from the localisation topic each frame. With the vehicle known, landmarks stay
+SLAM; but the vehicle is neither predicted nor updated here: its pose (and covariance, if given)
+comes from the localisation topic each frame. The frames of a window are logged with their
+odometry and the bearings associated in them, and :meth:`BearingOnlyMapper.smooth` re-estimates
+poses and landmarks jointly (:mod:`~services.pillar_mapping.smoother`), so a slowly varying
+localisation error is averaged out instead of copied into the map. With the vehicle known, landmarks stay
 uncorrelated, so the joint covariance is kept as its 2x2 landmark blocks, and the vehicle
 covariance enters each update as a considered (not estimated) uncertainty. The measurement
 model (:func:`bearing_model`) gives the Jacobians with respect to both the vehicle and the
@@ -27,6 +30,7 @@ import numpy.typing as npt
 
 from services.pillar_mapping.association import associate
 from services.pillar_mapping.errors import PillarMappingError
+from services.pillar_mapping.smoother import BearingLog, FrameLog, OdometryNoise, SmoothedMap, smooth_map
 from services.pillar_mapping.triangulation import triangulate_bearings, wrap
 
 FloatArray = npt.NDArray[np.float64]
@@ -79,15 +83,24 @@ def bearing_model(pose: FloatArray, landmarks: FloatArray) -> tuple[FloatArray, 
 @dataclass
 class _RayPool:
     """Unmatched bearings waiting to start landmarks: ray ``origins`` (K, 2) and map ``angles`` (K,), their
-    std ``sigmas`` (K,) with the heading's, the origin's position variance ``origin_vars`` (K,) m^2, ``frames``."""
+    std ``sigmas`` (K,) with the heading's, the origin's position variance ``origin_vars`` (K,) m^2, ``frames``,
+    and the vehicle-frame ``bearings`` (K,) with their own std ``bearing_sigmas`` (K,)."""
 
     origins: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     angles: FloatArray = field(default_factory=lambda: np.zeros(0))
     sigmas: FloatArray = field(default_factory=lambda: np.zeros(0))
     origin_vars: FloatArray = field(default_factory=lambda: np.zeros(0))
     frames: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    bearings: FloatArray = field(default_factory=lambda: np.zeros(0))
+    bearing_sigmas: FloatArray = field(default_factory=lambda: np.zeros(0))
 
-    def add(self, origin: FloatArray, angles: FloatArray, sigmas: FloatArray, origin_var: float, frame: int) -> None:
+    def add(self, pose: FloatArray, bearings: FloatArray, bearing_sigmas: FloatArray, cov: FloatArray,
+            frame: int) -> None:
+        """Rays of ``bearings`` from ``pose`` with localisation covariance ``cov``."""
+        origin, angles = pose[:2], wrap(pose[2] + bearings)
+        sigmas, origin_var = np.sqrt(bearing_sigmas**2 + cov[2, 2]), float(np.linalg.eigvalsh(cov[:2, :2])[1])
+        self.bearings = np.concatenate([self.bearings, bearings])
+        self.bearing_sigmas = np.concatenate([self.bearing_sigmas, bearing_sigmas])
         self.origins = np.vstack([self.origins, np.tile(origin, (angles.size, 1))])
         self.angles = np.concatenate([self.angles, angles])
         self.sigmas = np.concatenate([self.sigmas, sigmas])
@@ -97,10 +110,49 @@ class _RayPool:
     def keep(self, mask: npt.NDArray[np.bool_]) -> None:
         self.origins, self.angles = self.origins[mask], self.angles[mask]
         self.sigmas, self.origin_vars, self.frames = self.sigmas[mask], self.origin_vars[mask], self.frames[mask]
+        self.bearings, self.bearing_sigmas = self.bearings[mask], self.bearing_sigmas[mask]
 
     def sigmas_at(self, rays: IntArray, distance_m: FloatArray) -> FloatArray:
         """Std (radians) of ``rays`` as seen at ``distance_m`` from their origins (shapes broadcast)."""
         return np.asarray(np.sqrt(self.sigmas[rays] ** 2 + self.origin_vars[rays] / np.maximum(distance_m, 0.05) ** 2))
+
+
+@dataclass
+class _WindowLog:
+    """The latest frames (number, pose, covariance, odometry pose, track) and the bearings associated in them;
+    ``partial`` lists the landmarks some of whose bearings have left the window."""
+
+    frames: list[tuple[int, FloatArray, FloatArray, FloatArray, int]] = field(default_factory=list)
+    frame: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    landmark: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    bearing: FloatArray = field(default_factory=lambda: np.zeros(0))
+    sigma: FloatArray = field(default_factory=lambda: np.zeros(0))
+    partial: set[int] = field(default_factory=set)
+
+    def add_frame(self, number: int, pose: FloatArray, cov: FloatArray, odometry: FloatArray, track: int, *,
+                  keep_after: int) -> None:
+        self.frames = [f for f in self.frames if f[0] > keep_after]
+        self.frames.append((number, pose.copy(), cov.copy(), odometry.copy(), track))
+        keep = self.frame > keep_after
+        self.partial.update(self.landmark[~keep].tolist())
+        self.frame, self.landmark = self.frame[keep], self.landmark[keep]
+        self.bearing, self.sigma = self.bearing[keep], self.sigma[keep]
+
+    def add_bearings(self, frame: IntArray, landmark: IntArray, bearing: FloatArray, sigma: FloatArray) -> None:
+        self.frame = np.concatenate([self.frame, frame.astype(np.int64)])
+        self.landmark = np.concatenate([self.landmark, landmark.astype(np.int64)])
+        self.bearing = np.concatenate([self.bearing, bearing])
+        self.sigma = np.concatenate([self.sigma, sigma])
+
+    def logs(self) -> tuple[FrameLog, BearingLog]:
+        numbers = np.array([f[0] for f in self.frames], dtype=np.int64)
+        keep = np.isin(self.frame, numbers)
+        frames = FrameLog(np.array([f[1] for f in self.frames]).reshape(-1, 3),
+                          np.array([f[2] for f in self.frames]).reshape(-1, 3, 3),
+                          np.array([f[3] for f in self.frames]).reshape(-1, 3),
+                          np.array([f[4] for f in self.frames], dtype=np.int64))
+        index = np.searchsorted(numbers, self.frame[keep])
+        return frames, BearingLog(index.astype(np.int64), self.landmark[keep], self.bearing[keep], self.sigma[keep])
 
 
 class BearingOnlyMapper:
@@ -123,6 +175,21 @@ class BearingOnlyMapper:
     min_support_ratio : float
         Least fraction of the pooled frames within range of a candidate that must have seen
         it: ghosts where rays of different uprights happen to cross get few.
+    min_hit_ratio, min_observations : float, int
+        A landmark is reliable while it was matched in at least ``min_hit_ratio`` of the frames
+        that had it in range and in at least ``min_observations`` frames;
+    min_pass_ratio : float
+        and for good once one whole pass by it (a run of frames that had it in range, broken by
+        ``window_frames`` without) matched it in at least this fraction of the pass's frames (and
+        in ``min_observations``). An upright seen well on one pass then stays reliable when later
+        passes have it in range but hidden (behind a rack, from the next aisle), where its overall
+        ratio falls; a ghost where rays of different uprights crossed is matched in few frames of
+        its pass and is not kept.
+    smooth_window_frames : int
+        How many of the latest frames (poses, odometry, associated bearings) :meth:`smooth`
+        re-estimates.
+    odometry_noise : OdometryNoise, optional
+        Noise of the odometry steps between frames of one robot when smoothing.
     """
 
     _CELL_M = 0.25
@@ -137,6 +204,11 @@ class BearingOnlyMapper:
         min_parallax_rad: float = float(np.deg2rad(10.0)),
         window_frames: int = 40,
         min_support_ratio: float = 0.6,
+        min_hit_ratio: float = 0.3,
+        min_observations: int = 6,
+        min_pass_ratio: float = 0.4,
+        smooth_window_frames: int = 1200,
+        odometry_noise: OdometryNoise | None = None,
     ) -> None:
         if max_range_m <= 0 or gate_sq <= 0 or sigma_floor_rad <= 0:
             raise PillarMappingError("max_range_m, gate_sq and sigma_floor_rad must be positive")
@@ -151,8 +223,18 @@ class BearingOnlyMapper:
         self.min_parallax_rad = min_parallax_rad
         self.window_frames = window_frames
         self.min_support_ratio = min_support_ratio
+        self.min_hit_ratio = min_hit_ratio
+        self.min_observations = min_observations
+        self.min_pass_ratio = min_pass_ratio
+        self.smooth_window_frames = smooth_window_frames
+        self.odometry_noise = odometry_noise or OdometryNoise()
+        self._log = _WindowLog()
         self._frame_origins: dict[int, FloatArray] = {}
         self._expected = np.zeros(0, dtype=np.int64)
+        self._run_hits = np.zeros(0, dtype=np.int64)
+        self._run_expected = np.zeros(0, dtype=np.int64)
+        self._last_in_range = np.zeros(0, dtype=np.int64)
+        self._confirmed = np.zeros(0, dtype=bool)
         self._means = np.zeros((0, 2))
         self._covs = np.zeros((0, 2, 2))
         self._counts = np.zeros(0, dtype=np.int64)
@@ -169,7 +251,7 @@ class BearingOnlyMapper:
     def seed(self, landmarks: LandmarkMap) -> None:
         """Start from known landmarks (e.g. from the map store after a restart).
 
-        Each counts as seen in every frame that had it in range so far, so it stays reliable.
+        Each with at least ``min_observations`` counts as confirmed, so it stays reliable.
         """
         means = np.asarray(landmarks.means, dtype=np.float64).reshape(-1, 2)
         covs = np.asarray(landmarks.covs, dtype=np.float64).reshape(-1, 2, 2)
@@ -178,16 +260,46 @@ class BearingOnlyMapper:
             raise PillarMappingError("seed landmarks need finite means, one covariance and a count >= 0 each")
         if len(means) and np.any(np.linalg.eigvalsh(covs)[:, 0] <= 0):
             raise PillarMappingError("seed landmark covariances must be positive definite")
+        self._append(means, covs, counts, counts, counts >= self.min_observations)
+
+    def _append(self, means: FloatArray, covs: FloatArray, counts: IntArray, expected: IntArray,
+                confirmed: npt.NDArray[np.bool_]) -> None:
+        """New landmarks, matched in ``counts`` of the ``expected`` frames of their first pass so far."""
         self._means = np.vstack([self._means, means])
         self._covs = np.concatenate([self._covs, covs])
         self._counts = np.concatenate([self._counts, counts])
-        self._expected = np.concatenate([self._expected, counts])
+        self._run_hits = np.concatenate([self._run_hits, counts])
+        self._run_expected = np.concatenate([self._run_expected, expected])
+        self._expected = np.concatenate([self._expected, expected])
+        self._last_in_range = np.concatenate([self._last_in_range, np.full(len(means), self._frame, dtype=np.int64)])
+        self._confirmed = np.concatenate([self._confirmed, confirmed])
 
-    def reliable_landmarks(self, *, min_hit_ratio: float = 0.3, min_observations: int = 6) -> LandmarkMap:
-        """The landmarks matched in at least ``min_hit_ratio`` of the frames that had them in range."""
-        ratio = self._counts / np.maximum(self._expected, 1)
-        keep = (ratio >= min_hit_ratio) & (self._counts >= min_observations)
+    def reliable_landmarks(self) -> LandmarkMap:
+        """The landmarks matched often enough overall, or confirmed by a whole pass (see ``min_pass_ratio``)."""
+        ratio_ok = self._counts >= self.min_hit_ratio * self._expected
+        keep = self._confirmed | ((self._counts >= self.min_observations) & ratio_ok)
         return LandmarkMap(self._means[keep].copy(), self._covs[keep].copy(), self._counts[keep].copy())
+
+    def smooth(self) -> SmoothedMap | None:
+        """Re-estimate the landmarks seen in the window jointly with the window's poses
+        (:func:`~services.pillar_mapping.smoother.smooth_map`); None when there is nothing to smooth.
+
+        A landmark some of whose bearings have left the window enters with its estimate and
+        covariance as a prior and is left unchanged (its older views are no longer in the graph).
+
+        Raises
+        ------
+        PillarMappingError
+            When the optimisation fails (the map is left as it was).
+        """
+        frames, bearings = self._log.logs()
+        if len(frames.poses) == 0 or bearings.frame.size == 0:
+            return None
+        result = smooth_map(frames, bearings, self._means, odometry=self.odometry_noise,
+                            fixed=np.array(sorted(self._log.partial), dtype=np.int64), fixed_covs=self._covs)
+        self._means[result.landmarks] = result.means
+        self._covs[result.landmarks] = result.covs
+        return result
 
     def observe(
         self,
@@ -196,6 +308,8 @@ class BearingOnlyMapper:
         sigmas_rad: npt.ArrayLike,
         *,
         pose_cov: FloatArray | None = None,
+        odometry_pose: tuple[float, float, float] | None = None,
+        track: int = 0,
     ) -> FrameReport:
         """Fold one frame's bearings into the map.
 
@@ -210,8 +324,12 @@ class BearingOnlyMapper:
             Localisation covariance of the sensor pose (m^2, rad^2); it widens the gates of
             association and initialisation and enters each update as considered uncertainty.
             Without it the pose is taken as exact.
+        odometry_pose : (x, y, yaw), optional
+            The sensor pose in the robot's odometry frame: consecutive frames of one ``track``
+            (robot) are linked by its relative motion when the map is smoothed (:meth:`smooth`).
         """
         pose = np.asarray(sensor_pose, dtype=np.float64)
+        odometry = np.full(3, np.nan) if odometry_pose is None else np.asarray(odometry_pose, dtype=np.float64)
         bearings = np.asarray(bearings_rad, dtype=np.float64).ravel()
         sigmas = np.asarray(sigmas_rad, dtype=np.float64).ravel()
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
@@ -221,24 +339,21 @@ class BearingOnlyMapper:
         cov = np.zeros((3, 3)) if pose_cov is None else np.asarray(pose_cov, dtype=np.float64)
         if cov.shape != (3, 3) or not np.all(np.isfinite(cov)) or np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) < 0):
             raise PillarMappingError("pose_cov must be a finite positive semi-definite 3x3 matrix")
+        if odometry.shape != (3,) or not np.all(np.isfinite(odometry) | (odometry_pose is None)):
+            raise PillarMappingError(f"odometry pose must be 3 finite numbers, got {odometry.tolist()}")
         self.vehicle_pose = pose
         self.vehicle_cov = cov
         sigmas = np.maximum(sigmas, self.sigma_floor_rad)
         self._frame += 1
         self._frame_origins = {f: o for f, o in self._frame_origins.items() if f > self._frame - self.window_frames}
         self._frame_origins[self._frame] = pose[:2].copy()
-        self._expected[self._visible()] += 1
+        self._log.add_frame(self._frame, pose, cov, odometry, track, keep_after=self._frame - self.smooth_window_frames)
+        self._count_in_range(self._visible())
         matches, ambiguous, gated_any = self._associate(bearings, sigmas)
         self._update(bearings, sigmas, matches)
         fresh = (matches < 0) & ~gated_any
         self._pool.keep(self._pool.frames > self._frame - self.window_frames)
-        self._pool.add(
-            pose[:2],
-            wrap(pose[2] + bearings[fresh]),
-            np.sqrt(sigmas[fresh] ** 2 + cov[2, 2]),
-            float(np.linalg.eigvalsh(cov[:2, :2])[1]),
-            self._frame,
-        )
+        self._pool.add(pose, bearings[fresh], sigmas[fresh], cov, self._frame)
         born = self._initialise()
         return FrameReport(int((matches >= 0).sum()), int(ambiguous.sum()), int(fresh.sum()), born)
 
@@ -284,6 +399,25 @@ class BearingOnlyMapper:
         r = (s - np.einsum("mi,mi->m", h_l, ph))[:, None, None]
         self._covs[index] = ikh @ p @ np.transpose(ikh, (0, 2, 1)) + r * gain[:, :, None] * gain[:, None, :]
         self._counts[index] += 1
+        self._run_hits[index] += 1
+        self._log.add_bearings(np.full(obs.size, self._frame), index, bearings[obs], sigmas[obs])
+
+    def _pass_ok(self, index: IntArray) -> npt.NDArray[np.bool_]:
+        """Whether the current pass of landmarks ``index`` confirms them for good."""
+        hits, expected = self._run_hits[index], self._run_expected[index]
+        ok: npt.NDArray[np.bool_] = (hits >= self.min_observations) & (hits >= self.min_pass_ratio * expected)
+        return ok
+
+    def _count_in_range(self, index: IntArray) -> None:
+        """Count this frame for the landmarks in range; one out of range ``window_frames`` starts a new pass
+        (the pass before confirms it for good if it matched it often enough)."""
+        new_pass = self._last_in_range[index] < self._frame - self.window_frames
+        self._confirmed[index[new_pass]] |= self._pass_ok(index[new_pass])
+        self._run_hits[index[new_pass]] = 0
+        self._run_expected[index[new_pass]] = 0
+        self._run_expected[index] += 1
+        self._expected[index] += 1
+        self._last_in_range[index] = self._frame
 
     def _support(self, points: FloatArray) -> npt.NDArray[np.bool_]:
         """(C, P) whether pool ray p passes through candidate point c within its gate."""
@@ -352,6 +486,7 @@ class BearingOnlyMapper:
             used = np.zeros(self._pool.angles.size, dtype=bool)
             used[rays] = True
             sigmas = self._pool.sigmas_at(rays, np.hypot(*(points[best] - self._pool.origins[rays]).T))
+            expected = max(int(in_range[best]), rays.size)
             points = np.delete(points, best, axis=0)
             try:
                 tri = triangulate_bearings(self._pool.origins[rays], self._pool.angles[rays], sigmas)
@@ -360,12 +495,13 @@ class BearingOnlyMapper:
             limit = np.sqrt(self.gate_sq) * sigmas
             if tri.parallax_rad < self.min_parallax_rad or np.any(np.abs(tri.residuals_rad) > limit):
                 continue
+            ray_frames, ray_bearings, ray_sigmas = (self._pool.frames[rays], self._pool.bearings[rays],
+                                                    self._pool.bearing_sigmas[rays])
             self._pool.keep(~used)
             if not self._duplicate(tri.mean, tri.cov):
-                self._means = np.vstack([self._means, tri.mean])
-                self._covs = np.concatenate([self._covs, tri.cov[None]])
-                self._counts = np.append(self._counts, rays.size)
-                self._expected = np.append(self._expected, rays.size)
+                self._log.add_bearings(ray_frames, np.full(rays.size, len(self._means)), ray_bearings, ray_sigmas)
+                self._append(tri.mean[None], tri.cov[None], np.array([rays.size]), np.array([expected]),
+                             np.zeros(1, dtype=bool))
                 born += 1
         return born
 

@@ -3,7 +3,10 @@
 Every robot's downward fisheye frames are searched for uprights; each frame's bearings go into
 one bearing-only map (the robots share the ``map`` frame), posed by the robot's tf at the
 image stamp (an image waits up to ``tf_wait_s`` for tf to reach it), with the localisation's
-stated uncertainty (``localisation_sigma_m``/``_rad``). Every ``store_period_s`` the reliable
+stated uncertainty (``localisation_sigma_m``/``_rad``) and, where tf has it, its pose in the
+robot's ``odom_frame``. Every ``store_period_s``, when the localisation is uncertain, the window's
+poses and landmarks are smoothed with the odometry's relative motion
+(:meth:`~services.pillar_mapping.mapper.BearingOnlyMapper.smooth`); then the reliable
 landmarks precise to ``max_landmark_sigma_m`` are fitted with rack rows and bins
 (:func:`~services.pillar_mapping.layout.fit_landmark_map`, bins on the levels of the site's
 ``rack_profiles``) and stored as one revision of the ``pillar``, ``rack_row``, ``bin`` and
@@ -209,12 +212,19 @@ class PillarStage:
             self.context.count("frames_without_pose")
             log.debug("frame of %r at %d ns has no pose: %s", namespace or "/", frame.stamp_ns, err)
             return
+        try:
+            odometry = sensor_pose(mount, np.array(sensor_pose_2d(robot.tf.lookup(
+                _frame(namespace, self.settings.odom_frame), base, frame.stamp_ns)), dtype=np.float64))
+        except (LookupError, ValueError):
+            self.context.count("frames_without_odometry")
+            odometry = None
         start = time.perf_counter()
         try:
             seen = detect_pillars(frame.pixels, robot.camera)
             pose = sensor_pose(mount, np.array(vehicle, dtype=np.float64))
             self.mapper.observe(tuple(pose), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad,
-                                pose_cov=self.pose_cov)
+                                pose_cov=self.pose_cov, odometry_pose=None if odometry is None else tuple(odometry),
+                                track=list(self.robots).index(namespace))
         except (PillarMappingError, ValueError) as err:
             self.context.count("bad_frames")
             log.warning("frame of %r at %d ns skipped: %s", namespace or "/", frame.stamp_ns, err)
@@ -229,6 +239,14 @@ class PillarStage:
     def _store(self) -> None:
         if self._frames_since_store == 0:
             return
+        if self.pose_cov is not None:
+            start = time.process_time()
+            try:
+                self.mapper.smooth()
+            except PillarMappingError as err:
+                self.context.count("smoothing_failures")
+                log.warning("landmarks not smoothed: %s", err)
+            self.context.count("smooth_cpu_us", round(1e6 * (time.process_time() - start)))
         reliable = self.mapper.reliable_landmarks()
         try:
             layout = fit_landmark_map(reliable, max_sigma_m=self.settings.max_landmark_sigma_m,

@@ -87,3 +87,41 @@ def test_mapping_with_a_slightly_wrong_localisation_stays_within_five_centimetre
 def test_mapper_rejects_a_malformed_pose_covariance() -> None:
     with pytest.raises(PillarMappingError, match="pose_cov"):
         BearingOnlyMapper().observe((0.0, 0.0, 0.0), [0.1], [0.01], pose_cov=-np.eye(3))
+
+
+def test_uprights_hidden_on_later_passes_stay_mapped() -> None:
+    # the live demo lost cells on its second round: uprights seen well on the first pass, then in
+    # range but hidden behind the racks on every later pass, fell below the hit ratio and out of the map
+    rng = np.random.default_rng(5)
+    layout = rack_region(aisles=2, bays=8)
+    sigma = np.deg2rad(0.1)
+    mapper = BearingOnlyMapper()
+    poses = drive_aisles(layout, 0.25)
+    for pose in poses:
+        bearings = simulated_bearings(layout.uprights, pose, rng, sigma_rad=sigma)
+        mapper.observe(pose, bearings, np.full(bearings.size, sigma))
+    first = mapper.reliable_landmarks().means
+    hidden = layout.row_of == 0
+    assert map_rmse(first, layout.uprights[hidden])[1] == hidden.sum()
+    for _ in range(4):
+        for pose in poses:
+            bearings = simulated_bearings(layout.uprights[~hidden], pose, rng, sigma_rad=sigma)
+            mapper.observe(pose, bearings, np.full(bearings.size, sigma))
+    rmse, matched, _ = map_rmse(mapper.reliable_landmarks().means, layout.uprights)
+    assert matched == len(layout.uprights)
+    assert rmse <= 0.05
+
+
+def test_a_ghost_matched_in_few_frames_of_its_pass_does_not_stay_in_the_map() -> None:
+    mapper = BearingOnlyMapper()
+    rng = np.random.default_rng(8)
+    ghost = np.array([[3.0, 2.0]])
+    sigma = np.deg2rad(0.1)
+    for k in range(80):
+        pose = (0.25 * k - 5.0, 0.0, 0.0)
+        seen = ghost if k < 12 else np.zeros((0, 2))  # seen at first, then no longer from where rays crossed
+        bearings = simulated_bearings(seen, pose, rng, sigma_rad=sigma, miss_rate=0.0, clutter_rate=0.0)
+        mapper.observe(pose, bearings, np.full(bearings.size, sigma))
+    for k in range(60):  # far away: the pass ends
+        mapper.observe((100.0 + k, 0.0, 0.0), np.zeros(0), np.zeros(0))
+    assert len(mapper.reliable_landmarks().means) == 0

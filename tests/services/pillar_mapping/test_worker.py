@@ -47,9 +47,11 @@ running_stage = partial(stages.running_stage, "pillar_mapping", PillarStage)
 
 
 def _settings(zenoh_listen: ZenohSettings, url: str) -> Settings:
-    # the site's rack profile: SMALL_HALL's two levels, 1.5 m apart
+    # the site's rack profile: SMALL_HALL's two levels, 1.5 m apart; the simulator's localisation error,
+    # so the worker smooths the map with the robots' odometry
     return Settings(database_url=url, zenoh=zenoh_listen,
-                    pillars={"store_period_s": 0.5, "rack_profiles": [{"levels_m": [0.0, 1.5]}]})
+                    pillars={"store_period_s": 0.5, "rack_profiles": [{"levels_m": [0.0, 1.5]}],
+                             "localisation_sigma_m": 0.01, "localisation_sigma_rad": 0.002})
 
 
 def _publish_survey(zenoh_listen: ZenohSettings, world: World) -> None:
@@ -100,6 +102,9 @@ def test_simulated_fisheye_survey_yields_the_true_bins_through_the_api(zenoh_lis
     worker = {w.name: w for w in store.workers()}["pillar_mapping"]
     assert worker.counters["pillar_mapping.frames"] > 20
     assert worker.counters.get("pillar_mapping.bad_frames", 0) == 0
+    assert worker.counters.get("pillar_mapping.frames_without_odometry", 0) == 0
+    assert worker.counters.get("pillar_mapping.smoothing_failures", 0) == 0
+    assert worker.counters["pillar_mapping.smooth_cpu_us"] > 0
 
 
 def _image(stamp_ns: int, *, width: int, height: int, encoding: str, data: np.ndarray) -> Any:
