@@ -25,8 +25,8 @@ from services.semantic_fusion.grid import SemanticGrid, evidence_weights
 from services.semantic_fusion.inference import SemanticLayers, infer_labels, rasterise
 from services.semantic_fusion.observations import ObservationStore
 from services.semantic_fusion.pose_graph import PoseGraph
-from services.semantic_fusion.scan import ScanObservation
-from services.semantic_fusion.scan_matching import match_scans
+from services.semantic_fusion.scan import RangeScan, ScanObservation
+from services.semantic_fusion.scan_matching import align_scans, match_scans
 
 log = logging.getLogger(__name__)
 
@@ -52,13 +52,23 @@ class FusionSettings:
     loop_max_ambiguity: float = 0.95
     loop_every_keyframes: int = 3
     loop_cooldown_keyframes: int = 10
+    range_voxel_m: float = 0.05
+    sequential_submap_keyframes: int = 10
+    sequential_min_points: int = 100
+    sequential_min_inlier_fraction: float = 0.8
+    sequential_max_rmse_m: float = 0.03
+    sequential_max_correspondence_m: float = 0.08
+    sequential_information_scale: float = 0.1
+    sequential_min_sigma_m: float = 1.0
     reproject_min_shift_m: float = 0.01
     max_point_range_m: float = 8.0
 
     def __post_init__(self) -> None:
         positive = {name: getattr(self, name) for name in (
             "resolution_m", "dynamic_half_life_s", "keyframe_distance_m", "keyframe_angle_rad",
-            "loop_candidate_radius_m", "loop_max_rmse_m", "reproject_min_shift_m", "max_point_range_m")}
+            "loop_candidate_radius_m", "loop_max_rmse_m", "reproject_min_shift_m", "max_point_range_m",
+            "range_voxel_m", "sequential_max_rmse_m", "sequential_max_correspondence_m",
+            "sequential_information_scale", "sequential_min_sigma_m")}
         bad = {name: value for name, value in positive.items() if not (math.isfinite(value) and value > 0)}
         if bad:
             raise SemanticFusionError(f"settings must be positive and finite: {bad}")
@@ -99,6 +109,7 @@ class SemanticFusion:
         self.store = ObservationStore()
         self.detect_loops = detect_loops
         self._keyframe_stamps_ns: list[int] = []
+        self._range_points: dict[int, npt.NDArray[np.float32]] = {}
         self._last_stamp_ns: int | None = None
         self._dynamic = np.zeros(N_CLASSES, dtype=bool)
         self._dynamic[dynamic_columns()] = True
@@ -122,6 +133,7 @@ class SemanticFusion:
         n = self.graph.n_keyframes
         if not n or self._moved(self.graph.odometry_pose(n - 1), scan.camera_pose):
             if n and self.detect_loops:
+                self._match_previous(n - 1)
                 closures = self._close_loops(n - 1)
             self.graph.add_keyframe(scan.camera_pose)
             self.store.start_keyframe()
@@ -136,6 +148,23 @@ class SemanticFusion:
         self.store.append(local, scan.columns, weights, scan.heights, stamp_s, rows)
         self._last_stamp_ns = scan.stamp_ns
         return closures
+
+    def add_range_scan(self, scan: RangeScan) -> bool:
+        """Attach a lidar scan to the newest keyframe, for scan matching; return whether it was kept.
+
+        Each keyframe keeps the first range scan that arrives while it is the newest, its points
+        moved into the keyframe's frame by odometry and thinned to one per ``range_voxel_m`` cell.
+        Keyframes with a range scan are matched on those points (which see all around, further and
+        whatever the labeller calls them) instead of the static-class annotated points.
+        """
+        key = self.graph.n_keyframes - 1
+        if key < 0 or key in self._range_points or not scan.points_xy.shape[0]:
+            return False
+        local = se2.transform_points(se2.between(self.graph.odometry_pose(key), scan.pose), scan.points_xy)
+        cells = np.floor(local / self.settings.range_voxel_m).astype(np.int64)
+        _, first = np.unique(cells, axis=0, return_index=True)
+        self._range_points[key] = local[np.sort(first)].astype(np.float32)
+        return True
 
     def _moved(self, keyframe_pose: npt.NDArray[np.float64], pose: npt.NDArray[np.float64]) -> bool:
         step = se2.between(keyframe_pose, pose)
@@ -153,6 +182,52 @@ class SemanticFusion:
         c, s = np.cos(relative[:, 2]), np.sin(relative[:, 2])
         out = np.stack([relative[:, 0] + c * xy[:, 0] - s * xy[:, 1], relative[:, 1] + s * xy[:, 0] + c * xy[:, 1]], 1)
         return np.asarray(out[static])
+
+    def _match_previous(self, key: int) -> None:
+        """Align keyframe ``key``'s static points with the submap of the keyframes before it.
+
+        An accepted alignment enters the graph as a between-factor with the alignment's information
+        (scaled by ``sequential_information_scale`` for the correlation between neighbouring points),
+        ``key``'s estimate moves to it and its points are re-projected. Directions the points leave
+        open stay at odometry, through an odometry prior inside the alignment.
+        """
+        cfg = self.settings
+        if key < 1 or cfg.sequential_submap_keyframes < 1:
+            return
+        if key in self._range_points:
+            source = self._range_points[key].astype(np.float64)
+            target = self._range_submap(key - 1, key - cfg.sequential_submap_keyframes, key - 1)
+        else:
+            source = self._submap(key, key, key)
+            target = self._submap(key - 1, key - cfg.sequential_submap_keyframes, key - 1)
+        if min(source.shape[0], target.shape[0]) < cfg.sequential_min_points:
+            return
+        odometry = se2.between(self.graph.odometry_pose(key - 1), self.graph.odometry_pose(key))
+        sigma = self.graph.odometry_sigmas(key)
+        try:
+            alignment = align_scans(source, target, initial_pose=odometry,
+                                    prior_information=np.diag(1.0 / np.square(sigma)),
+                                    max_correspondence_m=cfg.sequential_max_correspondence_m)
+        except SemanticFusionError as exc:
+            log.debug("keyframe %d not aligned: %s", key, exc)
+            return
+        if (alignment.inlier_fraction < cfg.sequential_min_inlier_fraction
+                or alignment.rmse_m > cfg.sequential_max_rmse_m):
+            return
+        floor = 1.0 / cfg.sequential_min_sigma_m**2
+        values, vectors = np.linalg.eigh(alignment.information * cfg.sequential_information_scale)
+        information = (vectors * np.maximum(values, floor)) @ vectors.T
+        self.graph.add_scan_match(key - 1, key, alignment.pose, (information + information.T) / 2)
+        self.reproject([key])
+
+    def _range_submap(self, centre: int, lo: int, hi: int) -> npt.NDArray[np.float64]:
+        """Range-scan points of keyframes ``lo..hi`` (those that have one) in keyframe ``centre``'s frame."""
+        keys = [k for k in range(max(lo, 0), hi + 1) if k in self._range_points]
+        if not keys:
+            return np.zeros((0, 2))
+        poses = self.graph.poses
+        relative = se2.between(poses[centre], poses[keys])
+        return np.vstack([se2.transform_points(r, self._range_points[k]) for r, k in zip(relative, keys, strict=True)])
 
     def _close_loops(self, key: int) -> int:
         cfg = self.settings
