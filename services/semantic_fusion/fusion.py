@@ -52,6 +52,8 @@ class FusionSettings:
     loop_max_ambiguity: float = 0.95
     loop_every_keyframes: int = 3
     loop_cooldown_keyframes: int = 10
+    loop_max_residual_m: float = 0.15
+    loop_max_residual_rad: float = 0.03
     range_voxel_m: float = 0.05
     sequential_submap_keyframes: int = 10
     sequential_min_points: int = 100
@@ -67,7 +69,8 @@ class FusionSettings:
         positive = {name: getattr(self, name) for name in (
             "resolution_m", "dynamic_half_life_s", "keyframe_distance_m", "keyframe_angle_rad",
             "loop_candidate_radius_m", "loop_max_rmse_m", "reproject_min_shift_m", "max_point_range_m",
-            "range_voxel_m", "sequential_max_rmse_m", "sequential_max_correspondence_m",
+            "range_voxel_m", "loop_max_residual_m", "loop_max_residual_rad", "sequential_max_rmse_m",
+            "sequential_max_correspondence_m",
             "sequential_information_scale", "sequential_min_sigma_m")}
         bad = {name: value for name, value in positive.items() if not (math.isfinite(value) and value > 0)}
         if bad:
@@ -124,6 +127,11 @@ class SemanticFusion:
         """Stamp of the newest scan taken, for the out-of-order check."""
         return self._last_stamp_ns
 
+    @property
+    def range_nbytes(self) -> int:
+        """Memory held by the keyframes' range-scan points, bytes."""
+        return sum(points.nbytes for points in self._range_points.values())
+
     def add_scan(self, scan: ScanObservation) -> int:
         """Take one scan; return the number of loop closures it led to (0 almost always)."""
         if self._last_stamp_ns is not None and scan.stamp_ns <= self._last_stamp_ns:
@@ -152,13 +160,15 @@ class SemanticFusion:
     def add_range_scan(self, scan: RangeScan) -> bool:
         """Attach a lidar scan to the newest keyframe, for scan matching; return whether it was kept.
 
-        Each keyframe keeps the first range scan that arrives while it is the newest, its points
-        moved into the keyframe's frame by odometry and thinned to one per ``range_voxel_m`` cell.
-        Keyframes with a range scan are matched on those points (which see all around, further and
-        whatever the labeller calls them) instead of the static-class annotated points.
+        Each keyframe keeps the first range scan taken while it is the newest (not before its first
+        annotated scan), its points moved into the keyframe's frame by odometry and thinned to one
+        per ``range_voxel_m`` cell. Keyframes with a range scan are matched on those points (which
+        see all around, further and whatever the labeller calls them) instead of the static-class
+        annotated points. Feed a range scan before the first annotated scan stamped after it.
         """
         key = self.graph.n_keyframes - 1
-        if key < 0 or key in self._range_points or not scan.points_xy.shape[0]:
+        if (key < 0 or key in self._range_points or not scan.points_xy.shape[0]
+                or scan.stamp_ns < self._keyframe_stamps_ns[key]):
             return False
         local = se2.transform_points(se2.between(self.graph.odometry_pose(key), scan.pose), scan.points_xy)
         cells = np.floor(local / self.settings.range_voxel_m).astype(np.int64)
@@ -259,9 +269,27 @@ class SemanticFusion:
                 accepted += 1
                 log.debug("loop closure %d -> %d: inliers %.2f rmse %.3f m ambiguity %.2f", j, key,
                           match.inlier_fraction, match.rmse_m, match.ambiguity)
-        if accepted:
-            self._optimise_and_reproject()
-        return accepted
+        if not accepted:
+            return 0
+        before = self.graph.poses
+        self.graph.optimise()
+        new = range(len(self.graph.loop_closures) - accepted, len(self.graph.loop_closures))
+        disagree = [i for i in new if self._disagrees(self.graph.constraint_error(self.graph.loop_closures[i]))]
+        for i in reversed(disagree):
+            dropped = self.graph.remove_loop_closure(i)
+            log.debug("loop closure %d -> %d dropped: the optimised graph disagrees with it", dropped.from_key,
+                      dropped.to_key)
+        if disagree:
+            self.graph.set_poses(before)
+            if len(disagree) < accepted:
+                self.graph.optimise()
+        self._reproject_moved(before)
+        return accepted - len(disagree)
+
+    def _disagrees(self, error: npt.NDArray[np.float64]) -> bool:
+        cfg = self.settings
+        return bool(math.hypot(error[0], error[1]) > cfg.loop_max_residual_m
+                    or abs(error[2]) > cfg.loop_max_residual_rad)
 
     def add_pose_correction(self, stamp_ns: int, pose: npt.ArrayLike, *,
                             sigmas: tuple[float, float, float] = (0.05, 0.05, 0.02)) -> int:
@@ -279,8 +307,12 @@ class SemanticFusion:
 
     def _optimise_and_reproject(self) -> int:
         before = self.graph.poses
-        after = self.graph.optimise()
-        step = se2.between(before, after)
+        self.graph.optimise()
+        return self._reproject_moved(before)
+
+    def _reproject_moved(self, before: npt.NDArray[np.float64]) -> int:
+        """Re-project the keyframes whose estimates moved since ``before``; return how many."""
+        step = se2.between(before, self.graph.poses)
         shift = np.hypot(step[:, 0], step[:, 1]) + np.abs(step[:, 2]) * self.settings.max_point_range_m
         moved = np.flatnonzero(shift >= self.settings.reproject_min_shift_m)
         self.reproject(moved)

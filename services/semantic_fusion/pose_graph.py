@@ -82,6 +82,7 @@ class PoseGraph:
         self._estimate = np.zeros((64, 3))
         self._n = 0
         self.loop_closures: list[Constraint] = []
+        self._loop_factors: list[int] = []
         self.n_scan_matches = 0
 
     @property
@@ -161,8 +162,32 @@ class PoseGraph:
         noise: gtsam.noiseModel.Base = _sigmas(chosen, "loop closure")
         if self._kernel is not None:
             noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(self._kernel), noise)
+        self._loop_factors.append(self._graph.size())
         self._graph.add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel), noise))
         self.loop_closures.append(Constraint(from_key, to_key, (rel[0], rel[1], rel[2]), chosen))
+
+    def remove_loop_closure(self, index: int) -> Constraint:
+        """Take loop closure ``index`` (position in :attr:`loop_closures`) out of the graph; return it.
+
+        For a closure the optimised graph disagrees with. Estimates stay as they are: restore or
+        re-optimise them.
+        """
+        if not 0 <= index < len(self.loop_closures):
+            raise SemanticFusionError(f"loop closure {index} does not exist (have {len(self.loop_closures)})")
+        self._graph.remove(self._loop_factors.pop(index))
+        return self.loop_closures.pop(index)
+
+    def constraint_error(self, constraint: Constraint) -> npt.NDArray[np.float64]:
+        """How far the current estimates are from ``constraint``: (x m, y m, yaw rad) in ``to_key``'s frame."""
+        estimated = se2.between(self._estimate[constraint.from_key], self._estimate[constraint.to_key])
+        return se2.between(estimated, np.asarray(constraint.relative))
+
+    def set_poses(self, poses: npt.ArrayLike) -> None:
+        """Replace every estimate, (n, 3) (e.g. to restore the ones before a rejected optimisation)."""
+        p = np.asarray(poses, dtype=np.float64)
+        if p.shape != (self._n, 3) or not np.all(np.isfinite(p)):
+            raise SemanticFusionError(f"need ({self._n}, 3) finite poses, got {p.shape}")
+        self._estimate[: self._n] = p
 
     def add_scan_match(self, from_key: int, to_key: int, relative_pose: npt.ArrayLike,
                        information: npt.ArrayLike) -> None:
