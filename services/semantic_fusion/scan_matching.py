@@ -197,6 +197,7 @@ def align_scans(
     robust_m: float = 0.03,
     noise_m: float = 0.01,
     neighbours: int = 6,
+    radius_m: float = 0.3,
     max_flatness: float = 0.05,
     max_iterations: int = 20,
 ) -> Alignment:
@@ -226,12 +227,12 @@ def align_scans(
     if not (np.all(np.isfinite(source)) and np.all(np.isfinite(target)) and np.all(np.isfinite(initial))
             and prior.shape == (3, 3) and np.all(np.isfinite(prior))):
         raise SemanticFusionError("scan alignment input must be finite (prior information (3, 3))")
-    if min(max_correspondence_m, inlier_m, robust_m, noise_m, max_flatness) <= 0 or min(neighbours - 2,
-                                                                                         max_iterations) < 1:
+    distances = (max_correspondence_m, inlier_m, robust_m, noise_m, radius_m, max_flatness)
+    if min(distances) <= 0 or min(neighbours - 2, max_iterations) < 1:
         raise SemanticFusionError("alignment distances must be positive, neighbours >= 3, max_iterations >= 1")
     tree = cKDTree(target)
-    anchors, surface = _surface_weights(target, tree, neighbours=neighbours, radius_m=4 * max_correspondence_m,
-                               max_flatness=max_flatness)
+    anchors, surface = _surface_weights(target, tree, neighbours=neighbours, radius_m=radius_m,
+                                        max_flatness=max_flatness)
     pose = initial.copy()
     hessian = np.zeros((3, 3))
     for _ in range(max_iterations + 1):

@@ -45,16 +45,16 @@ def test_align_scans_recovers_a_small_offset_and_says_how_sure_it_is(seed: int) 
 
 def test_align_scans_leaves_the_direction_along_a_lone_wall_to_the_prior() -> None:
     rng = np.random.default_rng(0)
-    wall = np.column_stack([np.linspace(0, 8, 400), np.zeros(400)])
+    wall = np.column_stack([np.linspace(0, 8, 80), np.zeros(80)])  # a point every 10 cm, as a scan sees it
     target = wall + rng.normal(0, 0.01, wall.shape)
     truth = np.array([0.3, 0.05, 0.0])  # 0.3 m along the wall: nothing in the points shows it
     source = se2.transform_points(se2.inverse(truth), wall) + rng.normal(0, 0.01, wall.shape)
     prior = np.diag([1 / 0.1**2, 1 / 0.1**2, 1 / 0.01**2])
     alignment = align_scans(source, target, initial_pose=np.zeros(3), prior_information=prior)
     assert abs(alignment.pose[0]) < 0.05  # stays at the prior along the wall
-    assert abs(alignment.pose[1] - truth[1]) < 0.005  # across the wall the points decide
+    assert abs(alignment.pose[1] - truth[1]) < 0.01  # across the wall the points decide
     sigma_along, sigma_across = np.sqrt(np.diag(np.linalg.inv(alignment.information)))[:2]
-    assert sigma_along > 100 * sigma_across
+    assert sigma_along > 10 * sigma_across
 
 
 def test_align_scans_rejects_bad_input() -> None:
