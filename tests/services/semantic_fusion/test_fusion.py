@@ -125,8 +125,8 @@ def _keyframe_truth(fusion: SemanticFusion, run: syn.SimulatedRun) -> np.ndarray
     return run.true_poses[np.searchsorted(stamps, fusion.keyframe_stamps_ns)]
 
 
-def _fused(run: syn.SimulatedRun, *, lidar: bool, **settings: float) -> SemanticFusion:
-    fusion = SemanticFusion(FusionSettings(**settings))
+def _fused(run: syn.SimulatedRun, *, lidar: bool) -> SemanticFusion:
+    fusion = SemanticFusion()
     ranges = {r.stamp_ns: r for r in run.range_scans} if lidar else {}
     for scan in run.scans:
         fusion.add_scan(scan)
