@@ -54,6 +54,7 @@ class FusionSettings:
     loop_cooldown_keyframes: int = 10
     loop_max_residual_m: float = 0.15
     loop_max_residual_rad: float = 0.03
+    loop_max_dropped: int = 3
     range_voxel_m: float = 0.05
     sequential_submap_keyframes: int = 10
     sequential_min_points: int = 100
@@ -273,23 +274,27 @@ class SemanticFusion:
             return 0
         before = self.graph.poses
         self.graph.optimise()
-        new = range(len(self.graph.loop_closures) - accepted, len(self.graph.loop_closures))
-        disagree = [i for i in new if self._disagrees(self.graph.constraint_error(self.graph.loop_closures[i]))]
-        for i in reversed(disagree):
-            dropped = self.graph.remove_loop_closure(i)
-            log.debug("loop closure %d -> %d dropped: the optimised graph disagrees with it", dropped.from_key,
-                      dropped.to_key)
-        if disagree:
+        dropped = 0
+        while dropped < cfg.loop_max_dropped and (worst := self._worst_closure()) is not None:
+            closure = self.graph.remove_loop_closure(worst)
+            dropped += 1
+            log.debug("loop closure %d -> %d dropped: the optimised graph disagrees with it", closure.from_key,
+                      closure.to_key)
             self.graph.set_poses(before)
-            if len(disagree) < accepted:
-                self.graph.optimise()
+            self.graph.optimise()
         self._reproject_moved(before)
-        return accepted - len(disagree)
+        return accepted
 
-    def _disagrees(self, error: npt.NDArray[np.float64]) -> bool:
+    def _worst_closure(self) -> int | None:
+        """The loop closure the optimised graph disagrees with most, if any is beyond the residual limits."""
         cfg = self.settings
-        return bool(math.hypot(error[0], error[1]) > cfg.loop_max_residual_m
-                    or abs(error[2]) > cfg.loop_max_residual_rad)
+        if not self.graph.loop_closures:
+            return None
+        errors = np.array([self.graph.constraint_error(c) for c in self.graph.loop_closures])
+        excess = np.maximum(np.hypot(errors[:, 0], errors[:, 1]) / cfg.loop_max_residual_m,
+                            np.abs(errors[:, 2]) / cfg.loop_max_residual_rad)
+        worst = int(np.argmax(excess))
+        return worst if excess[worst] > 1.0 else None
 
     def add_pose_correction(self, stamp_ns: int, pose: npt.ArrayLike, *,
                             sigmas: tuple[float, float, float] = (0.05, 0.05, 0.02)) -> int:

@@ -23,9 +23,11 @@ evidence stays in the grid.
 When ``range_scan_topic`` is set, the robot's lidar (sensor_msgs/LaserScan under the same
 namespace, mounted at ``lidar_*_in_base``) feeds the scan matching behind loop closures and the
 sequential keyframe alignment: each range scan waits until an annotated scan is stamped at or after
-it, takes the robot's pose interpolated between that scan and the one before, and attaches to the
-current keyframe. Range scans that cannot be placed (older than the robot's last annotated scan)
-are counted as ``range_scans_unplaced``, unusable ones as ``bad_range_scans``.
+it, takes the robot's pose interpolated between the annotated scans around it, and attaches to the
+current keyframe if none has yet (range scans of keyframes already closed are not used). Range
+scans older than the robot's kept poses are counted as ``range_scans_unplaced``, unusable ones as
+``bad_range_scans``, and the oldest waiting ones dropped when more than a minute's worth wait as
+``range_scans_dropped``.
 
 A corrected pose at stamp ``t`` becomes a camera pose through the fixed mount
 (``camera_*_in_base``), is carried to the keyframe nearest ``t`` by the robot's own motion between
@@ -70,7 +72,8 @@ _BATCH = 50
 _POSE_HISTORY = 1200
 """Recent scan poses kept per robot to place corrections (two minutes at 10 Hz)."""
 _PENDING_CORRECTIONS = 200
-_PENDING_RANGE_SCANS = 100
+_PENDING_RANGE_SCANS = 600
+"""Range scans kept per robot while the annotated scans catch up (a minute of a 10 Hz lidar)."""
 
 
 def _stamp_ns(header: Any) -> int:
@@ -272,6 +275,7 @@ class FusionStage:
             log.warning("scan from %r skipped: %s", namespace or "/", err)
             return
         robot.out_of_order = 0
+        self._take_range_scans()
         self._place_range_scans(robot, observation.stamp_ns, observation.camera_pose)
         closures = robot.fusion.add_scan(observation)
         robot.stamps_ns.append(observation.stamp_ns)
@@ -294,7 +298,10 @@ class FusionStage:
                 self.context.count("bad_range_scans")
                 log.warning("range scan from %r skipped: %s", item.namespace or "/", err)
                 continue
-            self._robot(item.namespace).range_scans.append(scan)
+            waiting = self._robot(item.namespace).range_scans
+            if len(waiting) == waiting.maxlen:
+                self.context.count("range_scans_dropped")
+            waiting.append(scan)
 
     def _place_range_scans(self, robot: _Robot, stamp_ns: int, camera: npt.NDArray[np.float64]) -> None:
         """Attach waiting range scans stamped up to ``stamp_ns`` (the annotated scan about to be added).
@@ -304,13 +311,15 @@ class FusionStage:
         """
         while robot.range_scans and robot.range_scans[0].stamp_ns <= stamp_ns:
             scan = robot.range_scans.popleft()
-            if not robot.stamps_ns or scan.stamp_ns < robot.stamps_ns[-1]:
+            if robot.stamps_ns and scan.stamp_ns >= robot.stamps_ns[-1]:
+                before, t0 = robot.poses[-1], robot.stamps_ns[-1]
+                fraction = (scan.stamp_ns - t0) / (stamp_ns - t0) if stamp_ns > t0 else 1.0
+                at: npt.NDArray[np.float64] | None = se2.compose(before, fraction * se2.between(before, camera))
+            else:  # arrived after later annotated scans: placed from the pose history
+                at = robot.pose_at(scan.stamp_ns)
+            if at is None:
                 self.context.count("range_scans_unplaced")
-                continue
-            before, t0 = robot.poses[-1], robot.stamps_ns[-1]
-            fraction = (scan.stamp_ns - t0) / (stamp_ns - t0) if stamp_ns > t0 else 1.0
-            at = se2.compose(before, fraction * se2.between(before, camera))
-            if robot.fusion.add_range_scan(scan._replace(pose=se2.compose(at, scan.pose))):
+            elif robot.fusion.add_range_scan(scan._replace(pose=se2.compose(at, scan.pose))):
                 self.context.count("range_scans_attached")
 
     def _take_poses(self) -> None:
