@@ -57,6 +57,8 @@ class FusionSettings:
     loop_max_dropped: int = 3
     range_voxel_m: float = 0.05
     sequential_submap_keyframes: int = 10
+    sequential_long_baseline_keyframes: int = 20
+    sequential_long_baseline_min_inlier_fraction: float = 0.5
     sequential_min_points: int = 100
     sequential_min_inlier_fraction: float = 0.8
     sequential_max_rmse_m: float = 0.03
@@ -72,13 +74,15 @@ class FusionSettings:
             "loop_candidate_radius_m", "loop_max_rmse_m", "reproject_min_shift_m", "max_point_range_m",
             "range_voxel_m", "loop_max_residual_m", "loop_max_residual_rad", "sequential_max_rmse_m",
             "sequential_max_correspondence_m",
-            "sequential_information_scale", "sequential_min_sigma_m")}
+            "sequential_information_scale", "sequential_min_sigma_m", "sequential_long_baseline_min_inlier_fraction")}
         bad = {name: value for name, value in positive.items() if not (math.isfinite(value) and value > 0)}
         if bad:
             raise SemanticFusionError(f"settings must be positive and finite: {bad}")
         if self.loop_min_separation_keyframes < 1 or self.loop_submap_keyframes < 0 or min(
-                self.loop_every_keyframes, self.loop_max_candidates) < 1 or self.loop_cooldown_keyframes < 0:
-            raise SemanticFusionError("loop keyframe counts must be >= 1 (submap and cooldown >= 0)")
+                self.loop_every_keyframes, self.loop_max_candidates) < 1 or min(
+                self.loop_cooldown_keyframes, self.sequential_submap_keyframes,
+                self.sequential_long_baseline_keyframes, self.loop_max_dropped) < 0:
+            raise SemanticFusionError("loop keyframe counts must be >= 1 (submaps, cooldown and drops >= 0)")
 
 
 class SemanticFusion:
@@ -195,41 +199,59 @@ class SemanticFusion:
         return np.asarray(out[static])
 
     def _match_previous(self, key: int) -> None:
-        """Align keyframe ``key``'s static points with the submap of the keyframes before it.
+        """Align keyframe ``key``'s points with the submap of the keyframes before it (and further back).
 
         An accepted alignment enters the graph as a between-factor with the alignment's information
         (scaled by ``sequential_information_scale`` for the correlation between neighbouring points),
         ``key``'s estimate moves to it and its points are re-projected. Directions the points leave
-        open stay at odometry, through an odometry prior inside the alignment.
+        open stay at odometry, through an odometry prior inside the alignment. With
+        ``sequential_long_baseline_keyframes`` > 0 and a range scan on ``key``, a second alignment,
+        against the range scans around that many keyframes back (accepted with
+        ``sequential_long_baseline_min_inlier_fraction``, since part of what the lidar sees now was
+        out of its range then), ties ``key`` to them directly, so the chain's random error does not
+        add up keyframe by keyframe. The camera cone does not see that far back.
         """
         cfg = self.settings
         if key < 1 or cfg.sequential_submap_keyframes < 1:
             return
+        if self._align(key, key - 1, key - cfg.sequential_submap_keyframes, key - 1, reseed=True,
+                       min_inliers=cfg.sequential_min_inlier_fraction):
+            self.reproject([key])
+        back = cfg.sequential_long_baseline_keyframes
+        if (key in self._range_points and back > cfg.sequential_submap_keyframes
+                and key - back - cfg.sequential_submap_keyframes // 2 >= 0):
+            half = cfg.sequential_submap_keyframes // 2
+            self._align(key, key - back, key - back - half, key - back + half, reseed=False,
+                        min_inliers=cfg.sequential_long_baseline_min_inlier_fraction)
+
+    def _align(self, key: int, anchor: int, lo: int, hi: int, *, reseed: bool, min_inliers: float) -> bool:
+        """Align ``key`` with keyframes ``lo..hi`` in ``anchor``'s frame; add the factor if accepted."""
+        cfg = self.settings
         if key in self._range_points:
             source = self._range_points[key].astype(np.float64)
-            target = self._range_submap(key - 1, key - cfg.sequential_submap_keyframes, key - 1)
+            target = self._range_submap(anchor, lo, hi)
         else:
             source = self._submap(key, key, key)
-            target = self._submap(key - 1, key - cfg.sequential_submap_keyframes, key - 1)
+            target = self._submap(anchor, lo, hi)
         if min(source.shape[0], target.shape[0]) < cfg.sequential_min_points:
-            return
+            return False
         odometry = se2.between(self.graph.odometry_pose(key - 1), self.graph.odometry_pose(key))
+        guess = se2.compose(se2.between(self.graph.pose(anchor), self.graph.pose(key - 1)), odometry)
         sigma = self.graph.odometry_sigmas(key)
         try:
-            alignment = align_scans(source, target, initial_pose=odometry,
+            alignment = align_scans(source, target, initial_pose=guess,
                                     prior_information=np.diag(1.0 / np.square(sigma)),
                                     max_correspondence_m=cfg.sequential_max_correspondence_m)
         except SemanticFusionError as exc:
-            log.debug("keyframe %d not aligned: %s", key, exc)
-            return
-        if (alignment.inlier_fraction < cfg.sequential_min_inlier_fraction
-                or alignment.rmse_m > cfg.sequential_max_rmse_m):
-            return
+            log.debug("keyframe %d not aligned with %d: %s", key, anchor, exc)
+            return False
+        if alignment.inlier_fraction < min_inliers or alignment.rmse_m > cfg.sequential_max_rmse_m:
+            return False
         floor = 1.0 / cfg.sequential_min_sigma_m**2
         values, vectors = np.linalg.eigh(alignment.information * cfg.sequential_information_scale)
         information = (vectors * np.maximum(values, floor)) @ vectors.T
-        self.graph.add_scan_match(key - 1, key, alignment.pose, (information + information.T) / 2)
-        self.reproject([key])
+        self.graph.add_scan_match(anchor, key, alignment.pose, (information + information.T) / 2, reseed=reseed)
+        return True
 
     def _range_submap(self, centre: int, lo: int, hi: int) -> npt.NDArray[np.float64]:
         """Range-scan points of keyframes ``lo..hi`` (those that have one) in keyframe ``centre``'s frame."""

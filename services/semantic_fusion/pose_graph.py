@@ -190,13 +190,14 @@ class PoseGraph:
         self._estimate[: self._n] = p
 
     def add_scan_match(self, from_key: int, to_key: int, relative_pose: npt.ArrayLike,
-                       information: npt.ArrayLike) -> None:
+                       information: npt.ArrayLike, *, reseed: bool = True) -> None:
         """Constrain ``to_key``'s pose in ``from_key``'s frame with a full (3, 3) ``information`` matrix.
 
         For matches between consecutive keyframes: the information (inverse covariance in ``to_key``'s
         tangent space, x, y, yaw) is what makes a match along a featureless aisle strong across it and
-        in yaw but weak along it. When ``to_key`` is the newest keyframe its estimate is re-seeded from
-        ``from_key``'s through the match, so the keyframes that follow continue from the matched pose.
+        in yaw but weak along it. When ``to_key`` is the newest keyframe and ``reseed`` is set, its
+        estimate is re-seeded from ``from_key``'s through the match, so the keyframes that follow
+        continue from the matched pose.
         """
         self._check_key(from_key)
         self._check_key(to_key)
@@ -210,7 +211,7 @@ class PoseGraph:
         self._graph.add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel),
                                                  gtsam.noiseModel.Gaussian.Information(info)))
         self.n_scan_matches += 1
-        if to_key == self._n - 1:
+        if reseed and to_key == self._n - 1:
             self._estimate[to_key] = se2.compose(self._estimate[from_key], rel)
 
     def add_pose_prior(self, key: int, pose: npt.ArrayLike, *, sigmas: tuple[float, float, float]) -> None:
