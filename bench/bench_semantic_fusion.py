@@ -206,15 +206,16 @@ def hall_slam(n_scans: int) -> None:
     warehouse = syn.make_warehouse(length_m=250.0, width_m=72.0, n_forklifts=6, n_humans=10, seed=7)
     run = syn.simulate_run(warehouse, seed=8, n_cones=160, lidar_beams=541, max_scans=n_scans)
     print(f"hall_slam_scans {len(run.scans)} count")
-    for tag, lidar in (("slam", False), ("slam_lidar", True)):
-        fusion = SemanticFusion(FusionSettings(resolution_m=RESOLUTION_M))
+    for tag, lidar, long_baseline in (("slam", False, 0), ("slam_lidar", True, 0), ("slam_lidar_long", True, 20)):
+        fusion = SemanticFusion(FusionSettings(resolution_m=RESOLUTION_M,
+                                               sequential_long_baseline_keyframes=long_baseline))
         cpu = _feed(fusion, run, lidar=lidar)
         truth_kf = _keyframe_truth(fusion, run)
         print(f"hall_{tag}_rate {len(run.scans) / cpu:.0f} scans/s (CPU, {fusion.graph.n_keyframes} keyframes, "
               f"{len(fusion.graph.loop_closures)} loop closures)")
         print(f"hall_{tag}_ate {absolute_trajectory_error(fusion.graph.poses, truth_kf):.3f} m (odometry "
               f"{absolute_trajectory_error(fusion.graph.odometry_poses, truth_kf):.3f} m)")
-        if lidar:
+        if tag == "slam_lidar":
             per_keyframe = fusion.range_nbytes / fusion.graph.n_keyframes
             print(f"hall_range_points_memory {fusion.range_nbytes / 2**20:.1f} MB "
                   f"({per_keyframe / 1024:.1f} KB a keyframe)")

@@ -57,7 +57,7 @@ class FusionSettings:
     loop_max_dropped: int = 3
     range_voxel_m: float = 0.05
     sequential_submap_keyframes: int = 10
-    sequential_long_baseline_keyframes: int = 20
+    sequential_long_baseline_keyframes: int = 0
     sequential_long_baseline_min_inlier_fraction: float = 0.5
     sequential_min_points: int = 100
     sequential_min_inlier_fraction: float = 0.8

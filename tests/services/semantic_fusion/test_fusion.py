@@ -125,8 +125,8 @@ def _keyframe_truth(fusion: SemanticFusion, run: syn.SimulatedRun) -> np.ndarray
     return run.true_poses[np.searchsorted(stamps, fusion.keyframe_stamps_ns)]
 
 
-def _fused(run: syn.SimulatedRun, *, lidar: bool) -> SemanticFusion:
-    fusion = SemanticFusion()
+def _fused(run: syn.SimulatedRun, *, lidar: bool, long_baseline: int = 0) -> SemanticFusion:
+    fusion = SemanticFusion(FusionSettings(sequential_long_baseline_keyframes=long_baseline))
     ranges = {r.stamp_ns: r for r in run.range_scans} if lidar else {}
     for scan in run.scans:
         fusion.add_scan(scan)
@@ -142,12 +142,16 @@ def drifting_run() -> syn.SimulatedRun:
     return syn.simulate_run(warehouse, seed=100, odometry_yaw_bias_per_m=0.002, lidar_beams=541)
 
 
-def test_lidar_slam_brings_the_trajectory_error_down_to_a_grid_cell(drifting_run: syn.SimulatedRun) -> None:
-    fusion = _fused(drifting_run, lidar=True)
+@pytest.mark.parametrize("long_baseline", [0, 20])
+def test_lidar_slam_brings_the_trajectory_error_down_to_a_grid_cell(drifting_run: syn.SimulatedRun,
+                                                                    long_baseline: int) -> None:
+    fusion = _fused(drifting_run, lidar=True, long_baseline=long_baseline)
     truth = _keyframe_truth(fusion, drifting_run)
     odometry = absolute_trajectory_error(fusion.graph.odometry_poses, truth)
     slam = absolute_trajectory_error(fusion.graph.poses, truth)
     assert fusion.graph.loop_closures and fusion.graph.n_scan_matches > 0.9 * fusion.graph.n_keyframes
+    if long_baseline:  # keyframes also tied to the ones 10 m back
+        assert fusion.graph.n_scan_matches > 1.2 * fusion.graph.n_keyframes
     assert odometry > 0.5
     assert slam < 0.05  # one 5 cm cell: the map's own resolution
     assert np.max(np.hypot(*(fusion.graph.poses[:, :2] - truth[:, :2]).T)) < 0.1
