@@ -28,6 +28,7 @@ from services.semantic_fusion import (
     label_accuracy,
     rasterise,
     render_labels,
+    se2,
 )
 from services.semantic_fusion import synthetic as syn
 from services.semantic_fusion.scan import ScanObservation, observation_from_message
@@ -52,11 +53,37 @@ def _accuracy(fusion: SemanticFusion, truth: np.ndarray) -> tuple[float, float, 
     return inferred.fraction, raw.fraction, inferred.spurious / max(inferred.cells, 1)
 
 
+def _feed(fusion: SemanticFusion, run: syn.SimulatedRun, *, lidar: bool) -> float:
+    """Feed a run (annotated scans, and range scans when ``lidar``); return CPU seconds."""
+    ranges = {r.stamp_ns: r for r in run.range_scans} if lidar else {}
+    start = time.process_time()
+    for scan in run.scans:
+        fusion.add_scan(scan)
+        if scan.stamp_ns in ranges:
+            fusion.add_range_scan(ranges[scan.stamp_ns])
+    return time.process_time() - start
+
+
+def _closure_errors(fusion: SemanticFusion, truth_kf: np.ndarray) -> np.ndarray:
+    """Position error (m) of each accepted loop closure's relative pose against the true relative pose."""
+    closures = fusion.graph.loop_closures
+    if not closures:
+        return np.zeros(0)
+    frm = np.array([c.from_key for c in closures])
+    to = np.array([c.to_key for c in closures])
+    error = se2.between(se2.between(truth_kf[frm], truth_kf[to]), np.array([c.relative for c in closures]))
+    return np.hypot(error[:, 0], error[:, 1])
+
+
 def accuracy(png_dir: Path | None) -> None:
-    """Small halls over seeds: label accuracy with true and with SLAM poses; ATE before/after."""
+    """Small halls over seeds: label accuracy with true, odometry and SLAM poses; ATE before/after.
+
+    SLAM runs twice: on the annotated scans alone (static-class points for matching) and with the
+    robot's lidar (541 beams over 270 degrees, 20 m, 1 cm noise, every other frame) for matching.
+    """
     for seed in range(3):
         warehouse = syn.make_warehouse(length_m=60.0, width_m=30.0, seed=seed)
-        run = syn.simulate_run(warehouse, seed=100 + seed)
+        run = syn.simulate_run(warehouse, seed=100 + seed, lidar_beams=541)
         truth = syn.truth_labels(warehouse, resolution_m=RESOLUTION_M)
         exact = SemanticFusion(FusionSettings(resolution_m=RESOLUTION_M), detect_loops=False)
         for scan, pose in zip(run.scans, run.true_poses, strict=True):
@@ -64,29 +91,37 @@ def accuracy(png_dir: Path | None) -> None:
         inferred, raw, spurious = _accuracy(exact, truth)
         print(f"accuracy_true_poses_seed{seed}_inferred {100 * inferred:.2f} %")
         print(f"accuracy_true_poses_seed{seed}_raw_argmax {100 * raw:.2f} %")
-        for loops in (False, True):
+        print(f"scans_seed{seed} {len(run.scans)} count")
+        for tag, loops, lidar in (("odometry", False, False), ("slam", True, False), ("slam_lidar", True, True)):
             fusion = SemanticFusion(FusionSettings(resolution_m=RESOLUTION_M), detect_loops=loops)
-            for scan in run.scans:
-                fusion.add_scan(scan)
-            tag = "slam" if loops else "odometry"
+            cpu = _feed(fusion, run, lidar=lidar)
             inferred, raw, spurious = _accuracy(fusion, truth)
-            ate = absolute_trajectory_error(fusion.graph.poses, _keyframe_truth(fusion, run))
+            truth_kf = _keyframe_truth(fusion, run)
+            ate = absolute_trajectory_error(fusion.graph.poses, truth_kf)
             print(f"accuracy_{tag}_seed{seed}_inferred {100 * inferred:.2f} %")
             print(f"accuracy_{tag}_seed{seed}_raw_argmax {100 * raw:.2f} %")
             print(f"spurious_cells_{tag}_seed{seed} {100 * spurious:.1f} %")
             print(f"ate_{tag}_seed{seed} {ate:.3f} m")
+            print(f"rate_{tag}_seed{seed} {len(run.scans) / cpu:.0f} scans/s (CPU)")
             if loops:
-                print(f"loop_closures_seed{seed} {len(fusion.graph.loop_closures)} count")
+                errors = _closure_errors(fusion, truth_kf)
+                print(f"loop_closures_{tag}_seed{seed} {len(fusion.graph.loop_closures)} count")
+                print(f"loop_closure_error_rms_{tag}_seed{seed} {np.sqrt(np.mean(errors**2)):.3f} m")
+                print(f"sequential_matches_{tag}_seed{seed} {fusion.graph.n_scan_matches} of "
+                      f"{fusion.graph.n_keyframes - 1} keyframes")
                 tail = slice(-len(fusion.graph.poses) // 5, None)  # the revisited stretch at the end
-                truth_kf = _keyframe_truth(fusion, run)
                 print(f"ate_revisited_odometry_seed{seed} "
                       f"{absolute_trajectory_error(fusion.graph.odometry_poses[tail], truth_kf[tail]):.3f} m")
-                print(f"ate_revisited_slam_seed{seed} "
+                print(f"ate_revisited_{tag}_seed{seed} "
                       f"{absolute_trajectory_error(fusion.graph.poses[tail], truth_kf[tail]):.3f} m")
+                print(f"max_position_error_{tag}_seed{seed} "
+                      f"{np.max(np.hypot(*(fusion.graph.poses[:, :2] - truth_kf[:, :2]).T)):.3f} m")
             if png_dir is not None and seed == 0:
                 layers = fusion.layers(confident_entropy=CONFIDENT_ENTROPY, unconfident_entropy=UNCONFIDENT_ENTROPY)
                 image = render_labels(layers.labels, scale=1)
-                name = "semantic_fusion_after_loop_closure.png" if loops else "semantic_fusion_before_loop_closure.png"
+                name = {"odometry": "semantic_fusion_before_loop_closure.png",
+                        "slam": "semantic_fusion_after_loop_closure.png",
+                        "slam_lidar": "semantic_fusion_after_loop_closure_lidar.png"}[tag]
                 Image.fromarray(image).save(png_dir / name, optimize=True)
         if png_dir is not None and seed == 0:
             truth_image = render_labels(np.where(truth > 0, truth, 0).astype(np.uint8), scale=1)
@@ -166,17 +201,43 @@ def hall() -> None:
     print(f"hall_inference {time.perf_counter() - start:.3f} s ({cols} x {rows} cells)")
 
 
+def hall_slam(n_scans: int) -> None:
+    """The 250 x 72 m hall's first ``n_scans`` scans with drifting odometry: SLAM cost and ATE, one core."""
+    warehouse = syn.make_warehouse(length_m=250.0, width_m=72.0, n_forklifts=6, n_humans=10, seed=7)
+    run = syn.simulate_run(warehouse, seed=8, n_cones=160, lidar_beams=541, max_scans=n_scans)
+    print(f"hall_slam_scans {len(run.scans)} count")
+    for tag, lidar, long_baseline in (("slam", False, 0), ("slam_lidar", True, 0), ("slam_lidar_long", True, 20)):
+        fusion = SemanticFusion(FusionSettings(resolution_m=RESOLUTION_M,
+                                               sequential_long_baseline_keyframes=long_baseline))
+        cpu = _feed(fusion, run, lidar=lidar)
+        truth_kf = _keyframe_truth(fusion, run)
+        print(f"hall_{tag}_rate {len(run.scans) / cpu:.0f} scans/s (CPU, {fusion.graph.n_keyframes} keyframes, "
+              f"{len(fusion.graph.loop_closures)} loop closures)")
+        print(f"hall_{tag}_ate {absolute_trajectory_error(fusion.graph.poses, truth_kf):.3f} m (odometry "
+              f"{absolute_trajectory_error(fusion.graph.odometry_poses, truth_kf):.3f} m)")
+        if tag == "slam_lidar":
+            per_keyframe = fusion.range_nbytes / fusion.graph.n_keyframes
+            print(f"hall_range_points_memory {fusion.range_nbytes / 2**20:.1f} MB "
+                  f"({per_keyframe / 1024:.1f} KB a keyframe)")
+        start = time.process_time()
+        fusion.graph.optimise()
+        print(f"hall_{tag}_optimise {time.process_time() - start:.3f} s CPU (LM over {fusion.graph.n_keyframes} "
+              f"keyframes, {fusion.graph.n_scan_matches} sequential matches)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--png-dir", type=Path, default=None)
     parser.add_argument("--skip-hall", action="store_true")
     parser.add_argument("--only-hall", action="store_true")
+    parser.add_argument("--hall-slam-scans", type=int, default=8000)
     args = parser.parse_args()
     with threadpool_limits(1):
         if not args.only_hall:
             accuracy(args.png_dir)
         if not args.skip_hall:
             hall()
+            hall_slam(args.hall_slam_scans)
 
 
 if __name__ == "__main__":

@@ -136,6 +136,11 @@ class SemanticFusionSettings(BaseModel):
     camera_yaw_in_base_rad: float = Field(
         0.0, ge=-3.1416, le=3.1416, description="Camera floor frame (AnnotatedScan camera_pose) in the base frame."
     )
+    range_scan_topic: str = Field("", description="sensor_msgs/LaserScan of the robot's lidar for scan matching "
+                                  "(e.g. scan); empty: match on the annotated scans' points.")
+    lidar_x_in_base_m: float = 0.0
+    lidar_y_in_base_m: float = 0.0
+    lidar_yaw_in_base_rad: float = Field(0.0, ge=-3.1416, le=3.1416, description="Lidar frame in the base frame.")
     pose_correction_sigma_m: float = Field(0.05, gt=0.0)
     pose_correction_sigma_rad: float = Field(0.02, gt=0.0)
     pose_correction_period_s: float = Field(5.0, ge=0.0, description="Least time between corrections of one robot.")

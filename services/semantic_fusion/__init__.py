@@ -25,8 +25,14 @@ from services.semantic_fusion.inference import (
 from services.semantic_fusion.pose_graph import Constraint, PoseGraph
 from services.semantic_fusion.render import render_labels
 from services.semantic_fusion.resume import evidence_for_entropy, seed_grid
-from services.semantic_fusion.scan import ScanObservation, observation_from_arrays, observation_from_message
-from services.semantic_fusion.scan_matching import ScanMatch, match_scans
+from services.semantic_fusion.scan import (
+    RangeScan,
+    ScanObservation,
+    observation_from_arrays,
+    observation_from_message,
+    range_scan_from_arrays,
+)
+from services.semantic_fusion.scan_matching import Alignment, ScanMatch, align_scans, match_scans
 
 __all__ = [
     "CLASS_COLOURS",
@@ -36,12 +42,14 @@ __all__ = [
     "LABEL_ENCODING",
     "NO_ENTROPY",
     "N_CLASSES",
+    "Alignment",
     "CellLabels",
     "Constraint",
     "FusionSettings",
     "GridCells",
     "LabelAccuracy",
     "PoseGraph",
+    "RangeScan",
     "ScanMatch",
     "ScanObservation",
     "SemanticClass",
@@ -50,6 +58,7 @@ __all__ = [
     "SemanticGrid",
     "SemanticLayers",
     "absolute_trajectory_error",
+    "align_scans",
     "cell_indices",
     "class_columns",
     "evidence_for_entropy",
@@ -60,6 +69,7 @@ __all__ = [
     "normalised_entropy",
     "observation_from_arrays",
     "observation_from_message",
+    "range_scan_from_arrays",
     "rasterise",
     "render_labels",
     "seed_grid",

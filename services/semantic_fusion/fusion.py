@@ -25,8 +25,8 @@ from services.semantic_fusion.grid import SemanticGrid, evidence_weights
 from services.semantic_fusion.inference import SemanticLayers, infer_labels, rasterise
 from services.semantic_fusion.observations import ObservationStore
 from services.semantic_fusion.pose_graph import PoseGraph
-from services.semantic_fusion.scan import ScanObservation
-from services.semantic_fusion.scan_matching import match_scans
+from services.semantic_fusion.scan import RangeScan, ScanObservation
+from services.semantic_fusion.scan_matching import align_scans, match_scans
 
 log = logging.getLogger(__name__)
 
@@ -52,19 +52,37 @@ class FusionSettings:
     loop_max_ambiguity: float = 0.95
     loop_every_keyframes: int = 3
     loop_cooldown_keyframes: int = 10
+    loop_max_residual_m: float = 0.15
+    loop_max_residual_rad: float = 0.03
+    loop_max_dropped: int = 3
+    range_voxel_m: float = 0.05
+    sequential_submap_keyframes: int = 10
+    sequential_long_baseline_keyframes: int = 0
+    sequential_long_baseline_min_inlier_fraction: float = 0.5
+    sequential_min_points: int = 100
+    sequential_min_inlier_fraction: float = 0.8
+    sequential_max_rmse_m: float = 0.03
+    sequential_max_correspondence_m: float = 0.08
+    sequential_information_scale: float = 0.1
+    sequential_min_sigma_m: float = 1.0
     reproject_min_shift_m: float = 0.01
     max_point_range_m: float = 8.0
 
     def __post_init__(self) -> None:
         positive = {name: getattr(self, name) for name in (
             "resolution_m", "dynamic_half_life_s", "keyframe_distance_m", "keyframe_angle_rad",
-            "loop_candidate_radius_m", "loop_max_rmse_m", "reproject_min_shift_m", "max_point_range_m")}
+            "loop_candidate_radius_m", "loop_max_rmse_m", "reproject_min_shift_m", "max_point_range_m",
+            "range_voxel_m", "loop_max_residual_m", "loop_max_residual_rad", "sequential_max_rmse_m",
+            "sequential_max_correspondence_m",
+            "sequential_information_scale", "sequential_min_sigma_m", "sequential_long_baseline_min_inlier_fraction")}
         bad = {name: value for name, value in positive.items() if not (math.isfinite(value) and value > 0)}
         if bad:
             raise SemanticFusionError(f"settings must be positive and finite: {bad}")
         if self.loop_min_separation_keyframes < 1 or self.loop_submap_keyframes < 0 or min(
-                self.loop_every_keyframes, self.loop_max_candidates) < 1 or self.loop_cooldown_keyframes < 0:
-            raise SemanticFusionError("loop keyframe counts must be >= 1 (submap and cooldown >= 0)")
+                self.loop_every_keyframes, self.loop_max_candidates) < 1 or min(
+                self.loop_cooldown_keyframes, self.sequential_submap_keyframes,
+                self.sequential_long_baseline_keyframes, self.loop_max_dropped) < 0:
+            raise SemanticFusionError("loop keyframe counts must be >= 1 (submaps, cooldown and drops >= 0)")
 
 
 class SemanticFusion:
@@ -99,6 +117,7 @@ class SemanticFusion:
         self.store = ObservationStore()
         self.detect_loops = detect_loops
         self._keyframe_stamps_ns: list[int] = []
+        self._range_points: dict[int, npt.NDArray[np.float32]] = {}
         self._last_stamp_ns: int | None = None
         self._dynamic = np.zeros(N_CLASSES, dtype=bool)
         self._dynamic[dynamic_columns()] = True
@@ -113,6 +132,11 @@ class SemanticFusion:
         """Stamp of the newest scan taken, for the out-of-order check."""
         return self._last_stamp_ns
 
+    @property
+    def range_nbytes(self) -> int:
+        """Memory held by the keyframes' range-scan points, bytes."""
+        return sum(points.nbytes for points in self._range_points.values())
+
     def add_scan(self, scan: ScanObservation) -> int:
         """Take one scan; return the number of loop closures it led to (0 almost always)."""
         if self._last_stamp_ns is not None and scan.stamp_ns <= self._last_stamp_ns:
@@ -122,6 +146,7 @@ class SemanticFusion:
         n = self.graph.n_keyframes
         if not n or self._moved(self.graph.odometry_pose(n - 1), scan.camera_pose):
             if n and self.detect_loops:
+                self._match_previous(n - 1)
                 closures = self._close_loops(n - 1)
             self.graph.add_keyframe(scan.camera_pose)
             self.store.start_keyframe()
@@ -136,6 +161,25 @@ class SemanticFusion:
         self.store.append(local, scan.columns, weights, scan.heights, stamp_s, rows)
         self._last_stamp_ns = scan.stamp_ns
         return closures
+
+    def add_range_scan(self, scan: RangeScan) -> bool:
+        """Attach a lidar scan to the newest keyframe, for scan matching; return whether it was kept.
+
+        Each keyframe keeps the first range scan taken while it is the newest (not before its first
+        annotated scan), its points moved into the keyframe's frame by odometry and thinned to one
+        per ``range_voxel_m`` cell. Keyframes with a range scan are matched on those points (which
+        see all around, further and whatever the labeller calls them) instead of the static-class
+        annotated points. Feed a range scan before the first annotated scan stamped after it.
+        """
+        key = self.graph.n_keyframes - 1
+        if (key < 0 or key in self._range_points or not scan.points_xy.shape[0]
+                or scan.stamp_ns < self._keyframe_stamps_ns[key]):
+            return False
+        local = se2.transform_points(se2.between(self.graph.odometry_pose(key), scan.pose), scan.points_xy)
+        cells = np.floor(local / self.settings.range_voxel_m).astype(np.int64)
+        _, first = np.unique(cells, axis=0, return_index=True)
+        self._range_points[key] = local[np.sort(first)].astype(np.float32)
+        return True
 
     def _moved(self, keyframe_pose: npt.NDArray[np.float64], pose: npt.NDArray[np.float64]) -> bool:
         step = se2.between(keyframe_pose, pose)
@@ -153,6 +197,70 @@ class SemanticFusion:
         c, s = np.cos(relative[:, 2]), np.sin(relative[:, 2])
         out = np.stack([relative[:, 0] + c * xy[:, 0] - s * xy[:, 1], relative[:, 1] + s * xy[:, 0] + c * xy[:, 1]], 1)
         return np.asarray(out[static])
+
+    def _match_previous(self, key: int) -> None:
+        """Align keyframe ``key``'s points with the submap of the keyframes before it (and further back).
+
+        An accepted alignment enters the graph as a between-factor with the alignment's information
+        (scaled by ``sequential_information_scale`` for the correlation between neighbouring points),
+        ``key``'s estimate moves to it and its points are re-projected. Directions the points leave
+        open stay at odometry, through an odometry prior inside the alignment. With
+        ``sequential_long_baseline_keyframes`` > 0 and a range scan on ``key``, a second alignment,
+        against the range scans around that many keyframes back (accepted with
+        ``sequential_long_baseline_min_inlier_fraction``, since part of what the lidar sees now was
+        out of its range then), ties ``key`` to them directly, so the chain's random error does not
+        add up keyframe by keyframe. The camera cone does not see that far back.
+        """
+        cfg = self.settings
+        if key < 1 or cfg.sequential_submap_keyframes < 1:
+            return
+        if self._align(key, key - 1, key - cfg.sequential_submap_keyframes, key - 1, reseed=True,
+                       min_inliers=cfg.sequential_min_inlier_fraction):
+            self.reproject([key])
+        back = cfg.sequential_long_baseline_keyframes
+        if (key in self._range_points and back > cfg.sequential_submap_keyframes
+                and key - back - cfg.sequential_submap_keyframes // 2 >= 0):
+            half = cfg.sequential_submap_keyframes // 2
+            self._align(key, key - back, key - back - half, key - back + half, reseed=False,
+                        min_inliers=cfg.sequential_long_baseline_min_inlier_fraction)
+
+    def _align(self, key: int, anchor: int, lo: int, hi: int, *, reseed: bool, min_inliers: float) -> bool:
+        """Align ``key`` with keyframes ``lo..hi`` in ``anchor``'s frame; add the factor if accepted."""
+        cfg = self.settings
+        if key in self._range_points:
+            source = self._range_points[key].astype(np.float64)
+            target = self._range_submap(anchor, lo, hi)
+        else:
+            source = self._submap(key, key, key)
+            target = self._submap(anchor, lo, hi)
+        if min(source.shape[0], target.shape[0]) < cfg.sequential_min_points:
+            return False
+        odometry = se2.between(self.graph.odometry_pose(key - 1), self.graph.odometry_pose(key))
+        guess = se2.compose(se2.between(self.graph.pose(anchor), self.graph.pose(key - 1)), odometry)
+        sigma = self.graph.odometry_sigmas(key)
+        try:
+            alignment = align_scans(source, target, initial_pose=guess,
+                                    prior_information=np.diag(1.0 / np.square(sigma)),
+                                    max_correspondence_m=cfg.sequential_max_correspondence_m)
+        except SemanticFusionError as exc:
+            log.debug("keyframe %d not aligned with %d: %s", key, anchor, exc)
+            return False
+        if alignment.inlier_fraction < min_inliers or alignment.rmse_m > cfg.sequential_max_rmse_m:
+            return False
+        floor = 1.0 / cfg.sequential_min_sigma_m**2
+        values, vectors = np.linalg.eigh(alignment.information * cfg.sequential_information_scale)
+        information = (vectors * np.maximum(values, floor)) @ vectors.T
+        self.graph.add_scan_match(anchor, key, alignment.pose, (information + information.T) / 2, reseed=reseed)
+        return True
+
+    def _range_submap(self, centre: int, lo: int, hi: int) -> npt.NDArray[np.float64]:
+        """Range-scan points of keyframes ``lo..hi`` (those that have one) in keyframe ``centre``'s frame."""
+        keys = [k for k in range(max(lo, 0), hi + 1) if k in self._range_points]
+        if not keys:
+            return np.zeros((0, 2))
+        poses = self.graph.poses
+        relative = se2.between(poses[centre], poses[keys])
+        return np.vstack([se2.transform_points(r, self._range_points[k]) for r, k in zip(relative, keys, strict=True)])
 
     def _close_loops(self, key: int) -> int:
         cfg = self.settings
@@ -184,9 +292,31 @@ class SemanticFusion:
                 accepted += 1
                 log.debug("loop closure %d -> %d: inliers %.2f rmse %.3f m ambiguity %.2f", j, key,
                           match.inlier_fraction, match.rmse_m, match.ambiguity)
-        if accepted:
-            self._optimise_and_reproject()
+        if not accepted:
+            return 0
+        before = self.graph.poses
+        self.graph.optimise()
+        dropped = 0
+        while dropped < cfg.loop_max_dropped and (worst := self._worst_closure()) is not None:
+            closure = self.graph.remove_loop_closure(worst)
+            dropped += 1
+            log.debug("loop closure %d -> %d dropped: the optimised graph disagrees with it", closure.from_key,
+                      closure.to_key)
+            self.graph.set_poses(before)
+            self.graph.optimise()
+        self._reproject_moved(before)
         return accepted
+
+    def _worst_closure(self) -> int | None:
+        """The loop closure the optimised graph disagrees with most, if any is beyond the residual limits."""
+        cfg = self.settings
+        if not self.graph.loop_closures:
+            return None
+        errors = np.array([self.graph.constraint_error(c) for c in self.graph.loop_closures])
+        excess = np.maximum(np.hypot(errors[:, 0], errors[:, 1]) / cfg.loop_max_residual_m,
+                            np.abs(errors[:, 2]) / cfg.loop_max_residual_rad)
+        worst = int(np.argmax(excess))
+        return worst if excess[worst] > 1.0 else None
 
     def add_pose_correction(self, stamp_ns: int, pose: npt.ArrayLike, *,
                             sigmas: tuple[float, float, float] = (0.05, 0.05, 0.02)) -> int:
@@ -204,8 +334,12 @@ class SemanticFusion:
 
     def _optimise_and_reproject(self) -> int:
         before = self.graph.poses
-        after = self.graph.optimise()
-        step = se2.between(before, after)
+        self.graph.optimise()
+        return self._reproject_moved(before)
+
+    def _reproject_moved(self, before: npt.NDArray[np.float64]) -> int:
+        """Re-project the keyframes whose estimates moved since ``before``; return how many."""
+        step = se2.between(before, self.graph.poses)
         shift = np.hypot(step[:, 0], step[:, 1]) + np.abs(step[:, 2]) * self.settings.max_point_range_m
         moved = np.flatnonzero(shift >= self.settings.reproject_min_shift_m)
         self.reproject(moved)

@@ -82,6 +82,8 @@ class PoseGraph:
         self._estimate = np.zeros((64, 3))
         self._n = 0
         self.loop_closures: list[Constraint] = []
+        self._loop_factors: list[int] = []
+        self.n_scan_matches = 0
 
     @property
     def n_keyframes(self) -> int:
@@ -122,11 +124,8 @@ class PoseGraph:
             estimate = pose
         else:
             step = se2.between(self._odometry[key - 1], pose)
-            dist = math.hypot(step[0], step[1]) + 0.5 * abs(step[2])
-            sig = max(self._per_m[0] * dist, self._min[0])
-            yaw_sig = max(self._per_m[1] * dist, self._min[1])
             self._graph.add(gtsam.BetweenFactorPose2(key - 1, key, gtsam.Pose2(*step),
-                                                     _sigmas((sig, sig, yaw_sig), "odometry")))
+                                                     _sigmas(self._step_sigmas(step), "odometry")))
             estimate = se2.compose(self._estimate[key - 1], step)
         if key == self._odometry.shape[0]:
             self._odometry = np.vstack([self._odometry, np.zeros_like(self._odometry)])
@@ -134,6 +133,18 @@ class PoseGraph:
         self._odometry[key], self._estimate[key] = pose, estimate
         self._n = key + 1
         return key
+
+    def _step_sigmas(self, step: npt.NDArray[np.float64]) -> tuple[float, float, float]:
+        dist = math.hypot(step[0], step[1]) + 0.5 * abs(step[2])
+        sig = max(self._per_m[0] * dist, self._min[0])
+        return sig, sig, max(self._per_m[1] * dist, self._min[1])
+
+    def odometry_sigmas(self, key: int) -> tuple[float, float, float]:
+        """Noise (x m, y m, yaw rad) of the odometry step from keyframe ``key - 1`` to ``key``."""
+        self._check_key(key)
+        if key == 0:
+            raise SemanticFusionError("keyframe 0 has no odometry step")
+        return self._step_sigmas(se2.between(self._odometry[key - 1], self._odometry[key]))
 
     def _check_key(self, key: int) -> None:
         if not 0 <= key < self.n_keyframes:
@@ -151,8 +162,57 @@ class PoseGraph:
         noise: gtsam.noiseModel.Base = _sigmas(chosen, "loop closure")
         if self._kernel is not None:
             noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(self._kernel), noise)
+        self._loop_factors.append(self._graph.size())
         self._graph.add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel), noise))
         self.loop_closures.append(Constraint(from_key, to_key, (rel[0], rel[1], rel[2]), chosen))
+
+    def remove_loop_closure(self, index: int) -> Constraint:
+        """Take loop closure ``index`` (position in :attr:`loop_closures`) out of the graph; return it.
+
+        For a closure the optimised graph disagrees with. Estimates stay as they are: restore or
+        re-optimise them.
+        """
+        if not 0 <= index < len(self.loop_closures):
+            raise SemanticFusionError(f"loop closure {index} does not exist (have {len(self.loop_closures)})")
+        self._graph.remove(self._loop_factors.pop(index))
+        return self.loop_closures.pop(index)
+
+    def constraint_error(self, constraint: Constraint) -> npt.NDArray[np.float64]:
+        """How far the current estimates are from ``constraint``: (x m, y m, yaw rad) in ``to_key``'s frame."""
+        estimated = se2.between(self._estimate[constraint.from_key], self._estimate[constraint.to_key])
+        return se2.between(estimated, np.asarray(constraint.relative))
+
+    def set_poses(self, poses: npt.ArrayLike) -> None:
+        """Replace every estimate, (n, 3) (e.g. to restore the ones before a rejected optimisation)."""
+        p = np.asarray(poses, dtype=np.float64)
+        if p.shape != (self._n, 3) or not np.all(np.isfinite(p)):
+            raise SemanticFusionError(f"need ({self._n}, 3) finite poses, got {p.shape}")
+        self._estimate[: self._n] = p
+
+    def add_scan_match(self, from_key: int, to_key: int, relative_pose: npt.ArrayLike,
+                       information: npt.ArrayLike, *, reseed: bool = True) -> None:
+        """Constrain ``to_key``'s pose in ``from_key``'s frame with a full (3, 3) ``information`` matrix.
+
+        For matches between consecutive keyframes: the information (inverse covariance in ``to_key``'s
+        tangent space, x, y, yaw) is what makes a match along a featureless aisle strong across it and
+        in yaw but weak along it. When ``to_key`` is the newest keyframe and ``reseed`` is set, its
+        estimate is re-seeded from ``from_key``'s through the match, so the keyframes that follow
+        continue from the matched pose.
+        """
+        self._check_key(from_key)
+        self._check_key(to_key)
+        if from_key == to_key:
+            raise SemanticFusionError(f"a scan match needs two keyframes, got {from_key} twice")
+        rel = _pose3(relative_pose, "relative pose")
+        info = np.asarray(information, dtype=np.float64)
+        if info.shape != (3, 3) or not np.all(np.isfinite(info)) or not np.allclose(info, info.T) or np.min(
+                np.linalg.eigvalsh(info)) <= 0:
+            raise SemanticFusionError("scan match information must be a symmetric positive definite (3, 3) matrix")
+        self._graph.add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel),
+                                                 gtsam.noiseModel.Gaussian.Information(info)))
+        self.n_scan_matches += 1
+        if reseed and to_key == self._n - 1:
+            self._estimate[to_key] = se2.compose(self._estimate[from_key], rel)
 
     def add_pose_prior(self, key: int, pose: npt.ArrayLike, *, sigmas: tuple[float, float, float]) -> None:
         """Constrain keyframe ``key`` to a corrected map-frame ``pose`` (as a robot's localiser publishes)."""

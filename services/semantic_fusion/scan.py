@@ -147,3 +147,42 @@ def observation_from_message(message: Any, *, previous_stamp_ns: int | None = No
         stamp_ns, (p.x, p.y, yaw), message.bearings, message.ranges, message.heights, message.labels,
         message.confidences, list(message.class_names), previous_stamp_ns=previous_stamp_ns,
     )
+
+
+class RangeScan(NamedTuple):
+    """One planar range scan (a lidar's), for scan matching only: it adds nothing to the grid.
+
+    ``pose`` (3,) float64 is the scanner's (x, y, yaw) in the map frame as the robot estimated it
+    (the same odometry as the annotated scans' camera poses); ``points_xy`` (n, 2) float64 are the
+    returns in the scanner's frame, metres.
+    """
+
+    stamp_ns: int
+    pose: npt.NDArray[np.float64]
+    points_xy: npt.NDArray[np.float64]
+
+
+def range_scan_from_arrays(stamp_ns: int, pose: npt.ArrayLike, angle_min_rad: float, angle_increment_rad: float,
+                           ranges_m: npt.ArrayLike, *, range_min_m: float = 0.0,
+                           range_max_m: float = math.inf) -> RangeScan:
+    """Validate a planar range scan (sensor_msgs/LaserScan fields) and return its returns as points.
+
+    Beams without a return (inf, NaN, outside ``[range_min_m, range_max_m]``, as REP 117 allows)
+    are dropped, not errors.
+
+    Raises
+    ------
+    SemanticFusionError
+        A non-finite pose or angles, or a non-positive angle increment.
+    """
+    p = np.asarray(pose, dtype=np.float64).reshape(-1)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise SemanticFusionError(f"scanner pose must be 3 finite numbers (x, y, yaw), got {p.tolist()}")
+    if not (math.isfinite(angle_min_rad) and math.isfinite(angle_increment_rad) and angle_increment_rad > 0):
+        raise SemanticFusionError(f"unusable scan angles: min {angle_min_rad}, increment {angle_increment_rad}")
+    ranges = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
+    bearings = angle_min_rad + angle_increment_rad * np.arange(ranges.size)
+    with np.errstate(invalid="ignore"):
+        keep = np.isfinite(ranges) & (ranges >= max(range_min_m, 1e-3)) & (ranges <= range_max_m)
+    r, b = ranges[keep], bearings[keep]
+    return RangeScan(int(stamp_ns), p, np.stack([r * np.cos(b), r * np.sin(b)], axis=1))

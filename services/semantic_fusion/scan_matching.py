@@ -145,3 +145,121 @@ def match_scans(
     inliers = distance <= inlier_m
     rmse = float(np.sqrt(np.mean(distance[inliers] ** 2))) if inliers.any() else math.inf
     return ScanMatch(pose, rmse, float(inliers.mean()), ambiguity)
+
+
+class Alignment(NamedTuple):
+    """Result of :func:`align_scans`.
+
+    ``pose`` (3,) maps source points into the target frame. ``information`` (3, 3) is the inverse
+    covariance of that pose in the source frame's tangent space (x, y metres, yaw radians; GTSAM's
+    ``Pose2`` convention), from the point-to-line residuals alone: large across a surface and in yaw,
+    near zero along a featureless wall. ``rmse_m`` is the RMS residual of the inlier pairs and
+    ``inlier_fraction`` the share of source points within ``inlier_m`` of a target point.
+    """
+
+    pose: npt.NDArray[np.float64]
+    information: npt.NDArray[np.float64]
+    rmse_m: float
+    inlier_fraction: float
+
+
+def _surface_weights(target: npt.NDArray[np.float64], tree: cKDTree, *, neighbours: int, radius_m: float,
+                     max_flatness: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Per target point an anchor (2,) and a (2, 2) residual weight.
+
+    On a locally straight surface the anchor is the neighbours' centroid and the weight ``n n^T``
+    (distance to the fitted line); elsewhere (an upright's corner, a lone point) the point itself and
+    the identity.
+    """
+    distance, index = tree.query(target, k=neighbours, distance_upper_bound=radius_m)
+    found = np.isfinite(distance)
+    near = target[np.minimum(index, target.shape[0] - 1)]
+    count = found.sum(axis=1)
+    mean = np.sum(np.where(found[..., None], near, 0.0), axis=1) / count[:, None]
+    d = np.where(found[..., None], near - mean[:, None, :], 0.0)
+    cov = np.einsum("nki,nkj->nij", d, d) / count[:, None, None]
+    values, vectors = np.linalg.eigh(cov)
+    normal = vectors[:, :, 0]
+    straight = (count >= 3) & (values[:, 0] <= max_flatness * values[:, 1])
+    weights = np.broadcast_to(np.eye(2), (target.shape[0], 2, 2)).copy()
+    weights[straight] = np.einsum("ni,nj->nij", normal[straight], normal[straight])
+    return np.where(straight[:, None], mean, target), weights
+
+
+def align_scans(
+    source_xy: npt.ArrayLike,
+    target_xy: npt.ArrayLike,
+    *,
+    initial_pose: npt.ArrayLike,
+    prior_information: npt.ArrayLike | None = None,
+    max_correspondence_m: float = 0.2,
+    inlier_m: float = 0.1,
+    robust_m: float = 0.03,
+    noise_m: float = 0.01,
+    neighbours: int = 6,
+    radius_m: float = 0.3,
+    max_flatness: float = 0.05,
+    max_iterations: int = 20,
+) -> Alignment:
+    """Refine ``initial_pose`` of ``source`` in ``target`` by point-to-line ICP, with its information matrix.
+
+    For use when the initial pose is already close (odometry between consecutive keyframes, or a
+    :func:`match_scans` result): no search, only Gauss-Newton on the distances of source points to
+    the straight surface through their nearest target point (to the point itself where the target is
+    not locally straight, e.g. at an upright's corner), with Cauchy weights of width ``robust_m``
+    against outliers. ``prior_information`` (3, 3), optional, pulls the pose towards
+    ``initial_pose`` (in its tangent space), so a direction the points leave open (along a wall)
+    stays where odometry put it; it is not part of the returned ``information``. The residual
+    variance behind ``information`` is the inliers' mean squared residual, at least ``noise_m``
+    squared.
+
+    Raises
+    ------
+    SemanticFusionError
+        Fewer than 3 points on either side, non-finite input, or non-positive distances.
+    """
+    source = np.asarray(source_xy, dtype=np.float64).reshape(-1, 2)
+    target = np.asarray(target_xy, dtype=np.float64).reshape(-1, 2)
+    initial = np.asarray(initial_pose, dtype=np.float64).reshape(3)
+    prior = np.zeros((3, 3)) if prior_information is None else np.asarray(prior_information, dtype=np.float64)
+    if source.shape[0] < 3 or target.shape[0] < 3:
+        raise SemanticFusionError(f"scan alignment needs >= 3 points a side, got {source.shape[0]}, {target.shape[0]}")
+    if not (np.all(np.isfinite(source)) and np.all(np.isfinite(target)) and np.all(np.isfinite(initial))
+            and prior.shape == (3, 3) and np.all(np.isfinite(prior))):
+        raise SemanticFusionError("scan alignment input must be finite (prior information (3, 3))")
+    distances = (max_correspondence_m, inlier_m, robust_m, noise_m, radius_m, max_flatness)
+    if min(distances) <= 0 or min(neighbours - 2, max_iterations) < 1:
+        raise SemanticFusionError("alignment distances must be positive, neighbours >= 3, max_iterations >= 1")
+    tree = cKDTree(target)
+    anchors, surface = _surface_weights(target, tree, neighbours=neighbours, radius_m=radius_m,
+                                        max_flatness=max_flatness)
+    pose = initial.copy()
+    hessian = np.zeros((3, 3))
+    for _ in range(max_iterations + 1):
+        moved = se2.transform_points(pose, source)
+        distance, nearest = tree.query(moved, distance_upper_bound=max_correspondence_m)
+        pairs = np.flatnonzero(np.isfinite(distance))
+        if pairs.size < 3:
+            raise SemanticFusionError(f"scan alignment lost its correspondences ({pairs.size} pairs)")
+        error = moved[pairs] - anchors[nearest[pairs]]
+        weight = surface[nearest[pairs]]
+        squared = np.einsum("ni,nij,nj->n", error, weight, error)
+        robust = 1.0 / (1.0 + squared / robust_m**2)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        jac = np.zeros((pairs.size, 2, 3))
+        jac[:, :, :2] = np.array([[c, -s], [s, c]])
+        jac[:, :, 2] = np.column_stack([pose[1] - moved[pairs, 1], moved[pairs, 0] - pose[0]])
+        weighted = np.einsum("nij,njk->nik", weight, jac) * robust[:, None, None]
+        hessian = np.einsum("nij,nik->jk", jac, weighted)
+        gradient = np.einsum("nij,ni->j", weighted, error)
+        offset = se2.between(initial, pose)
+        step = -np.linalg.solve(hessian / noise_m**2 + prior + 1e-9 * np.eye(3),
+                                gradient / noise_m**2 + prior @ offset)
+        if math.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
+            break
+        pose = se2.compose(pose, step)
+    distance, _ = tree.query(se2.transform_points(pose, source))
+    inliers = distance <= inlier_m
+    variance = max(float(np.sum(robust * squared) / np.sum(robust)), noise_m**2)
+    rmse = float(np.sqrt(np.mean(squared[squared <= inlier_m**2]))) if np.any(squared <= inlier_m**2) else math.inf
+    return Alignment(pose, hessian / variance, rmse, float(inliers.mean()))

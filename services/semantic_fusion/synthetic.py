@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from services.semantic_fusion import se2
 from services.semantic_fusion.classes import SemanticClass
-from services.semantic_fusion.scan import ScanObservation, observation_from_arrays
+from services.semantic_fusion.scan import RangeScan, ScanObservation, observation_from_arrays, range_scan_from_arrays
 
 CLASS_NAMES = tuple(c.name.lower() for c in SemanticClass if c is not SemanticClass.NONE)
 """The simulated labeller's ``class_names`` (distribution order)."""
@@ -171,11 +171,13 @@ def _cast(origin: npt.NDArray[np.float64], bearings: npt.NDArray[np.float64], bo
 
 
 class SimulatedRun(NamedTuple):
-    """Scans and the truth behind them: ``true_poses`` / ``odometry_poses`` (n, 3) camera poses per scan."""
+    """Scans and the truth behind them: ``true_poses`` / ``odometry_poses`` (n, 3) camera poses per scan;
+    ``range_scans`` from the lidar (empty without one)."""
 
     scans: list[ScanObservation]
     true_poses: npt.NDArray[np.float64]
     odometry_poses: npt.NDArray[np.float64]
+    range_scans: list[RangeScan]
 
 
 def _route_poses(route: npt.NDArray[np.float64], step_m: float) -> npt.NDArray[np.float64]:
@@ -205,12 +207,19 @@ def simulate_run(
     odometry_sigma_per_m: float = 0.01,
     odometry_yaw_sigma_per_m: float = 0.001,
     odometry_yaw_bias_per_m: float = 0.0005,
+    lidar_beams: int = 0,
+    lidar_fov_rad: float = 1.5 * math.pi,
+    lidar_range_m: float = 20.0,
+    lidar_every: int = 2,
     max_scans: int | None = None,
 ) -> SimulatedRun:
     """Drive the warehouse route and label what the camera sees (see the module docstring).
 
     ``label_noise`` scales the per-class error rates (0 labels perfectly); ``phantom_rate`` is the
     chance per frame of a phantom detection; odometry noise is per metre driven, with a yaw bias.
+    With ``lidar_beams`` > 0 a forward-facing lidar on the robot's centre line (0.3 m ahead of the
+    base, ``lidar_fov_rad`` wide, ``range_sigma_m`` noise) scans every ``lidar_every``-th frame,
+    its pose from the same drifting odometry.
     """
     rng = np.random.default_rng(seed)
     step = speed_mps / rate_hz
@@ -240,6 +249,11 @@ def simulate_run(
     small_ids = np.flatnonzero(small)
     tree = cKDTree((static[small_ids, :2] + static[small_ids, 2:]) / 2)
     rel_bearings = np.linspace(-hfov_rad / 2, hfov_rad / 2, n_cones)
+    lidar_mount = np.array([0.3, 0.0, 0.0])
+    true_lidar, odom_lidar = se2.compose(truth_robot, lidar_mount), se2.compose(odom_robot, lidar_mount)
+    lidar_bearings = np.linspace(-lidar_fov_rad / 2, lidar_fov_rad / 2, max(lidar_beams, 1))
+    range_scans = []
+    lidar_rng = np.random.default_rng([seed, 1])  # its own stream: the labels do not change with the lidar
     names = list(CLASS_NAMES)
     classes_all = np.concatenate([warehouse.classes, warehouse.mover_classes])
     scans = []
@@ -276,7 +290,17 @@ def simulate_run(
             conf[sl] = rng.beta(4.0, 3.0)
             heights[sl] = rng.uniform(0.2, 2.5)
         keep = seen & np.isfinite(ranges) & (ranges > 0.05)
+        if lidar_beams and i % lidar_every == 0:
+            lidar_near = small_ids[tree.query_ball_point(true_lidar[i, :2], lidar_range_m + 3.0)]
+            lidar_ids = np.concatenate([large_ids, lidar_near, static.shape[0] + np.arange(warehouse.movers.shape[0])])
+            lidar_boxes = np.vstack([static, mover_boxes(warehouse, time_s)])[lidar_ids]
+            lidar_ranges, _ = _cast(true_lidar[i, :2], true_lidar[i, 2] + lidar_bearings, lidar_boxes, lidar_range_m)
+            lidar_ranges = lidar_ranges + lidar_rng.normal(0.0, range_sigma_m, lidar_ranges.size)
+            range_scans.append(range_scan_from_arrays(
+                t0_ns + round(time_s * 1e9), odom_lidar[i], float(lidar_bearings[0]),
+                float(lidar_bearings[1] - lidar_bearings[0]) if lidar_beams > 1 else 1.0, lidar_ranges,
+                range_max_m=lidar_range_m))
         scans.append(observation_from_arrays(
             t0_ns + round(time_s * 1e9), odom_cam[i], rel_bearings[keep], ranges[keep],
             np.maximum(heights[keep], 0.0), labels[keep], conf[keep], names))
-    return SimulatedRun(scans, true_cam, odom_cam)
+    return SimulatedRun(scans, true_cam, odom_cam, range_scans)

@@ -20,6 +20,15 @@ robot's newest as ``scans_out_of_order``. After ``restart_after_out_of_order_sca
 robot is taken to have restarted (or a bag to be replayed): it gets a fresh fusion, and its earlier
 evidence stays in the grid.
 
+When ``range_scan_topic`` is set, the robot's lidar (sensor_msgs/LaserScan under the same
+namespace, mounted at ``lidar_*_in_base``) feeds the scan matching behind loop closures and the
+sequential keyframe alignment: each range scan waits until an annotated scan is stamped at or after
+it, takes the robot's pose interpolated between the annotated scans around it, and attaches to the
+current keyframe if none has yet (range scans of keyframes already closed are not used). Range
+scans older than the robot's kept poses are counted as ``range_scans_unplaced``, unusable ones as
+``bad_range_scans``, and the oldest waiting ones dropped when more than a minute's worth wait as
+``range_scans_dropped``.
+
 A corrected pose at stamp ``t`` becomes a camera pose through the fixed mount
 (``camera_*_in_base``), is carried to the keyframe nearest ``t`` by the robot's own motion between
 the two (interpolated from its recent scans' poses) and enters that robot's pose graph as a prior.
@@ -50,7 +59,7 @@ from services.semantic_fusion.fusion import FusionSettings, SemanticFusion
 from services.semantic_fusion.grid import SemanticGrid
 from services.semantic_fusion.inference import infer_labels, rasterise
 from services.semantic_fusion.resume import seed_grid
-from services.semantic_fusion.scan import observation_from_message
+from services.semantic_fusion.scan import RangeScan, observation_from_message, range_scan_from_arrays
 from shared import messages
 from shared.bus import DropPolicy, Subscription
 from shared.store import RevisionWrite, StoreUnavailableError
@@ -63,6 +72,8 @@ _BATCH = 50
 _POSE_HISTORY = 1200
 """Recent scan poses kept per robot to place corrections (two minutes at 10 Hz)."""
 _PENDING_CORRECTIONS = 200
+_PENDING_RANGE_SCANS = 600
+"""Range scans kept per robot while the annotated scans catch up (a minute of a 10 Hz lidar)."""
 
 
 def _stamp_ns(header: Any) -> int:
@@ -79,6 +90,9 @@ class _Robot:
         default_factory=lambda: collections.deque(maxlen=_PENDING_CORRECTIONS))
     corrected_at: float = -float("inf")
     out_of_order: int = 0
+    range_scans: collections.deque[RangeScan] = field(
+        default_factory=lambda: collections.deque(maxlen=_PENDING_RANGE_SCANS))
+    """Range scans waiting for an annotated scan at or after their stamp; poses in the lidar's own frame."""
 
     def pose_at(self, stamp_ns: int) -> npt.NDArray[np.float64] | None:
         """The robot's own camera pose estimate at ``stamp_ns``, interpolated; None outside the history."""
@@ -104,8 +118,12 @@ class FusionStage:
         AnnotatedScan topic under each robot namespace.
     pose_topic
         PoseStamped topic of the robot base in the map frame taken as pose corrections; "" for none.
+    range_scan_topic
+        LaserScan topic of the robot's lidar under each robot namespace, for scan matching; "" for none.
     camera_x_in_base_m, camera_y_in_base_m, camera_yaw_in_base_rad
         The camera's floor frame (the frame of AnnotatedScan's camera pose) in the base frame.
+    lidar_x_in_base_m, lidar_y_in_base_m, lidar_yaw_in_base_rad
+        The lidar's frame in the base frame.
     pose_correction_sigma_m, pose_correction_sigma_rad
         Standard deviations of a correction's prior, metres and radians.
     pose_correction_period_s
@@ -131,6 +149,10 @@ class FusionStage:
         camera_x_in_base_m: float = 0.0,
         camera_y_in_base_m: float = 0.0,
         camera_yaw_in_base_rad: float = 0.0,
+        range_scan_topic: str = "",
+        lidar_x_in_base_m: float = 0.0,
+        lidar_y_in_base_m: float = 0.0,
+        lidar_yaw_in_base_rad: float = 0.0,
         pose_correction_sigma_m: float = 0.05,
         pose_correction_sigma_rad: float = 0.02,
         pose_correction_period_s: float = 5.0,
@@ -151,6 +173,8 @@ class FusionStage:
         self.settings = FusionSettings(resolution_m=resolution_m, dynamic_half_life_s=dynamic_half_life_s)
         self.detect_loops = detect_loops
         self.mount = np.array([camera_x_in_base_m, camera_y_in_base_m, camera_yaw_in_base_rad], dtype=np.float64)
+        lidar = np.array([lidar_x_in_base_m, lidar_y_in_base_m, lidar_yaw_in_base_rad], dtype=np.float64)
+        self.camera_to_lidar = se2.between(self.mount, lidar)
         self.sigmas = (pose_correction_sigma_m, pose_correction_sigma_m, pose_correction_sigma_rad)
         self.pose_correction_period_s = pose_correction_period_s
         self.store_period_s = store_period_s
@@ -169,6 +193,7 @@ class FusionStage:
 
         self.scans = subscribe(scan_topic, messages.ANNOTATED_SCAN, scan_queue_size)
         self.poses = subscribe(pose_topic, messages.POSE_STAMPED, 2000) if pose_topic else None
+        self.ranges = subscribe(range_scan_topic, messages.LASER_SCAN, 200) if range_scan_topic else None
 
     def _resume(self) -> None:
         store, map_id = self.context.store, self.context.map.id
@@ -195,6 +220,7 @@ class FusionStage:
         with threadpool_limits(limits=1, user_api="blas"):
             try:
                 while not stop.is_set():
+                    self._take_range_scans()
                     self._take_scans(timeout_s=0.05)
                     self._take_poses()
                     self._apply_corrections()
@@ -203,9 +229,10 @@ class FusionStage:
                         self._store()
             finally:
                 while self.scans.pending():
+                    self._take_range_scans()
                     self._take_scans(timeout_s=0.0)
                 self._store()
-                for subscription in (self.scans, self.poses):
+                for subscription in (self.scans, self.poses, self.ranges):
                     if subscription is not None:
                         subscription.close()
 
@@ -248,6 +275,8 @@ class FusionStage:
             log.warning("scan from %r skipped: %s", namespace or "/", err)
             return
         robot.out_of_order = 0
+        self._take_range_scans()
+        self._place_range_scans(robot, observation.stamp_ns, observation.camera_pose)
         closures = robot.fusion.add_scan(observation)
         robot.stamps_ns.append(observation.stamp_ns)
         robot.poses.append(observation.camera_pose)
@@ -257,6 +286,41 @@ class FusionStage:
         self.context.count("scans_integrated")
         if closures:
             self.context.count("loop_closures", closures)
+
+    def _take_range_scans(self) -> None:
+        while self.ranges is not None and (item := self.ranges.receive()) is not None:
+            msg = item.message
+            try:
+                scan = range_scan_from_arrays(_stamp_ns(msg.header), self.camera_to_lidar, float(msg.angle_min),
+                                              float(msg.angle_increment), np.asarray(msg.ranges),
+                                              range_min_m=float(msg.range_min), range_max_m=float(msg.range_max))
+            except SemanticFusionError as err:
+                self.context.count("bad_range_scans")
+                log.warning("range scan from %r skipped: %s", item.namespace or "/", err)
+                continue
+            waiting = self._robot(item.namespace).range_scans
+            if len(waiting) == waiting.maxlen:
+                self.context.count("range_scans_dropped")
+            waiting.append(scan)
+
+    def _place_range_scans(self, robot: _Robot, stamp_ns: int, camera: npt.NDArray[np.float64]) -> None:
+        """Attach waiting range scans stamped up to ``stamp_ns`` (the annotated scan about to be added).
+
+        A waiting scan's pose holds the lidar in the camera frame; its map pose comes from the camera
+        pose interpolated between the robot's previous annotated scan and this one.
+        """
+        while robot.range_scans and robot.range_scans[0].stamp_ns <= stamp_ns:
+            scan = robot.range_scans.popleft()
+            if robot.stamps_ns and scan.stamp_ns >= robot.stamps_ns[-1]:
+                before, t0 = robot.poses[-1], robot.stamps_ns[-1]
+                fraction = (scan.stamp_ns - t0) / (stamp_ns - t0) if stamp_ns > t0 else 1.0
+                at: npt.NDArray[np.float64] | None = se2.compose(before, fraction * se2.between(before, camera))
+            else:  # arrived after later annotated scans: placed from the pose history
+                at = robot.pose_at(scan.stamp_ns)
+            if at is None:
+                self.context.count("range_scans_unplaced")
+            elif robot.fusion.add_range_scan(scan._replace(pose=se2.compose(at, scan.pose))):
+                self.context.count("range_scans_attached")
 
     def _take_poses(self) -> None:
         while self.poses is not None and (item := self.poses.receive()) is not None:

@@ -118,3 +118,57 @@ def test_fusions_sharing_a_grid_reproject_only_their_own_points(small_run) -> No
 def test_a_shared_grid_must_have_the_settings_resolution() -> None:
     with pytest.raises(SemanticFusionError, match="grid resolution"):
         SemanticFusion(FusionSettings(resolution_m=0.1), grid=SemanticFusion().grid)
+
+
+def _keyframe_truth(fusion: SemanticFusion, run: syn.SimulatedRun) -> np.ndarray:
+    stamps = np.array([s.stamp_ns for s in run.scans])
+    return run.true_poses[np.searchsorted(stamps, fusion.keyframe_stamps_ns)]
+
+
+def _fused(run: syn.SimulatedRun, *, lidar: bool, long_baseline: int = 0) -> SemanticFusion:
+    fusion = SemanticFusion(FusionSettings(sequential_long_baseline_keyframes=long_baseline))
+    ranges = {r.stamp_ns: r for r in run.range_scans} if lidar else {}
+    for scan in run.scans:
+        fusion.add_scan(scan)
+        if scan.stamp_ns in ranges:
+            fusion.add_range_scan(ranges[scan.stamp_ns])
+    return fusion
+
+
+@pytest.fixture(scope="module")
+def drifting_run() -> syn.SimulatedRun:
+    """A whole route through a small hall with four times the usual yaw bias, and a lidar."""
+    warehouse = syn.make_warehouse(length_m=30.0, width_m=18.0, seed=0)
+    return syn.simulate_run(warehouse, seed=100, odometry_yaw_bias_per_m=0.002, lidar_beams=541)
+
+
+@pytest.mark.parametrize("long_baseline", [0, 20])
+def test_lidar_slam_brings_the_trajectory_error_down_to_a_grid_cell(drifting_run: syn.SimulatedRun,
+                                                                    long_baseline: int) -> None:
+    fusion = _fused(drifting_run, lidar=True, long_baseline=long_baseline)
+    truth = _keyframe_truth(fusion, drifting_run)
+    odometry = absolute_trajectory_error(fusion.graph.odometry_poses, truth)
+    slam = absolute_trajectory_error(fusion.graph.poses, truth)
+    assert fusion.graph.loop_closures and fusion.graph.n_scan_matches > 0.9 * fusion.graph.n_keyframes
+    if long_baseline:  # keyframes also tied to the ones 10 m back
+        assert fusion.graph.n_scan_matches > 1.2 * fusion.graph.n_keyframes
+    assert odometry > 0.5
+    assert slam < 0.05  # one 5 cm cell: the map's own resolution
+    assert np.max(np.hypot(*(fusion.graph.poses[:, :2] - truth[:, :2]).T)) < 0.1
+
+
+def test_a_loop_closure_the_graph_disagrees_with_is_dropped(small_run) -> None:  # type: ignore[no-untyped-def]
+    _, run = small_run
+    fusion = SemanticFusion()
+    for scan in run.scans[:200]:
+        fusion.add_scan(scan)
+    last = fusion.graph.n_keyframes - 1
+    good_poses = fusion.graph.optimise()
+    wrong = se2.between(good_poses[last - 20], good_poses[last]) + np.array([2.0, 0.0, 0.0])
+    fusion.graph.add_loop_closure(last - 20, last, wrong)
+    fusion.graph.optimise()
+    error = fusion.graph.constraint_error(fusion.graph.loop_closures[-1])
+    assert np.hypot(error[0], error[1]) > fusion.settings.loop_max_residual_m  # sequential matches resist it
+    removed = fusion.graph.remove_loop_closure(len(fusion.graph.loop_closures) - 1)
+    assert removed.to_key == last
+    np.testing.assert_allclose(fusion.graph.optimise(), good_poses, atol=1e-3)

@@ -19,6 +19,7 @@ from api import create_app
 from services.semantic_fusion import (
     CLASS_COLOURS,
     DYNAMIC_CLASSES,
+    RangeScan,
     ScanObservation,
     SemanticClass,
     SemanticLayers,
@@ -269,4 +270,43 @@ def test_corrected_poses_pull_a_drifting_robot_onto_the_map(
         _wait_for_input(sqlite_store, run.scans[-1].stamp_ns)
     counters = _counters(sqlite_store)
     assert counters[f"{STAGE}.pose_corrections"] >= 1
+    assert _accuracy(_stored_layers(sqlite_store), warehouse) >= 0.97
+
+
+def _laser_message(scan: RangeScan, *, fov_rad: float, beams: int) -> Any:
+    """sensor_msgs/LaserScan with ``scan``'s returns in their beams (the others +inf)."""
+    cls = messages.message_class
+    increment = fov_rad / (beams - 1)
+    ranges = np.full(beams, np.inf, dtype=np.float32)
+    bearings = np.arctan2(scan.points_xy[:, 1], scan.points_xy[:, 0])
+    ranges[np.round((bearings + fov_rad / 2) / increment).astype(int)] = np.hypot(*scan.points_xy.T)
+    stamp = cls("builtin_interfaces/msg/Time")(sec=scan.stamp_ns // 10**9, nanosec=scan.stamp_ns % 10**9)
+    return cls(messages.LASER_SCAN)(
+        header=cls("std_msgs/msg/Header")(stamp=stamp, frame_id="laser"), angle_min=-fov_rad / 2,
+        angle_max=fov_rad / 2, angle_increment=increment, time_increment=0.0, scan_time=0.1, range_min=0.05,
+        range_max=20.0, ranges=ranges, intensities=np.zeros(0, dtype=np.float32))
+
+
+def test_the_robots_lidar_keeps_a_drifting_robots_map_straight(
+        zenoh_listen: ZenohSettings, sqlite_store: MapStore) -> None:
+    warehouse = make_warehouse(length_m=30.0, width_m=18.0, seed=0)
+    beams = 541
+    run = simulate_run(warehouse, seed=100, odometry_yaw_bias_per_m=0.002, lidar_beams=beams)
+    ranges = {r.stamp_ns: r for r in run.range_scans}
+    factory = functools.partial(FusionStage, store_period_s=0.2, range_scan_topic="scan",
+                                camera_x_in_base_m=MOUNT[0], camera_y_in_base_m=MOUNT[1],
+                                camera_yaw_in_base_rad=MOUNT[2], lidar_x_in_base_m=0.3)
+    with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, _):
+        scans = _publisher(robots, "robot1")
+        lidar = robots.publisher("scan", messages.LASER_SCAN, namespace="robot1")
+        lag = 5  # the labeller's latency: raw lidar scans are half a second ahead of the annotated ones
+        for i, scan in enumerate(run.scans):
+            ahead = run.scans[min(i + lag, len(run.scans) - 1)].stamp_ns if i else -1
+            for stamp in [s for s in ranges if s <= ahead or i == len(run.scans) - 1]:
+                lidar.publish(_laser_message(ranges.pop(stamp), fov_rad=1.5 * np.pi, beams=beams))
+            scans.publish(_message(scan))
+        _wait_for_input(sqlite_store, run.scans[-1].stamp_ns)
+    counters = _counters(sqlite_store)
+    assert counters[f"{STAGE}.range_scans_attached"] > 100
+    assert counters.get(f"{STAGE}.bad_range_scans", 0) == 0
     assert _accuracy(_stored_layers(sqlite_store), warehouse) >= 0.97
