@@ -128,11 +128,13 @@ class _WindowLog:
     bearing: FloatArray = field(default_factory=lambda: np.zeros(0))
     sigma: FloatArray = field(default_factory=lambda: np.zeros(0))
     partial: set[int] = field(default_factory=set)
+    raw: dict[int, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
 
     def add_frame(self, number: int, pose: FloatArray, cov: FloatArray, odometry: FloatArray, track: int, *,
                   keep_after: int) -> None:
         self.frames = [f for f in self.frames if f[0] > keep_after]
         self.frames.append((number, pose.copy(), cov.copy(), odometry.copy(), track))
+        self.raw = {f: b for f, b in self.raw.items() if f > keep_after}
         keep = self.frame > keep_after
         self.partial.update(self.landmark[~keep].tolist())
         self.frame, self.landmark = self.frame[keep], self.landmark[keep]
@@ -143,6 +145,18 @@ class _WindowLog:
         self.landmark = np.concatenate([self.landmark, landmark.astype(np.int64)])
         self.bearing = np.concatenate([self.bearing, bearing])
         self.sigma = np.concatenate([self.sigma, sigma])
+
+    def keep_landmarks(self, keep: npt.NDArray[np.bool_]) -> None:
+        """Forget the bearings of landmarks not in ``keep`` and renumber the others."""
+        number = np.cumsum(keep) - 1
+        mine = keep[self.landmark]
+        self.keep_bearings(mine)
+        self.landmark = number[self.landmark].astype(np.int64)
+        self.partial = {int(number[n]) for n in self.partial if keep[n]}
+
+    def keep_bearings(self, mask: npt.NDArray[np.bool_]) -> None:
+        self.frame, self.landmark = self.frame[mask], self.landmark[mask]
+        self.bearing, self.sigma = self.bearing[mask], self.sigma[mask]
 
     def logs(self) -> tuple[FrameLog, BearingLog]:
         numbers = np.array([f[0] for f in self.frames], dtype=np.int64)
@@ -209,6 +223,8 @@ class BearingOnlyMapper:
         min_pass_ratio: float = 0.4,
         smooth_window_frames: int = 1200,
         odometry_noise: OdometryNoise | None = None,
+        reassociate: bool = True,
+        replay_cov_scale: float = 0.25,
     ) -> None:
         if max_range_m <= 0 or gate_sq <= 0 or sigma_floor_rad <= 0:
             raise PillarMappingError("max_range_m, gate_sq and sigma_floor_rad must be positive")
@@ -228,6 +244,8 @@ class BearingOnlyMapper:
         self.min_pass_ratio = min_pass_ratio
         self.smooth_window_frames = smooth_window_frames
         self.odometry_noise = odometry_noise or OdometryNoise()
+        self.reassociate = reassociate
+        self.replay_cov_scale = replay_cov_scale
         self._log = _WindowLog()
         self._frame_origins: dict[int, FloatArray] = {}
         self._expected = np.zeros(0, dtype=np.int64)
@@ -260,6 +278,7 @@ class BearingOnlyMapper:
             raise PillarMappingError("seed landmarks need finite means, one covariance and a count >= 0 each")
         if len(means) and np.any(np.linalg.eigvalsh(covs)[:, 0] <= 0):
             raise PillarMappingError("seed landmark covariances must be positive definite")
+        self._log.partial.update(range(len(self._means), len(self._means) + len(means)))  # views before the window
         self._append(means, covs, counts, counts, counts >= self.min_observations)
 
     def _append(self, means: FloatArray, covs: FloatArray, counts: IntArray, expected: IntArray,
@@ -295,11 +314,47 @@ class BearingOnlyMapper:
         frames, bearings = self._log.logs()
         if len(frames.poses) == 0 or bearings.frame.size == 0:
             return None
+        result = self._smooth_logged(frames, bearings)
+        if self.reassociate:
+            self._replay(result.poses, frames.covs)
+            frames, bearings = self._log.logs()
+            if bearings.frame.size:
+                result = self._smooth_logged(frames, bearings)
+        return result
+
+    def _smooth_logged(self, frames: FrameLog, bearings: BearingLog) -> SmoothedMap:
         result = smooth_map(frames, bearings, self._means, odometry=self.odometry_noise,
                             fixed=np.array(sorted(self._log.partial), dtype=np.int64), fixed_covs=self._covs)
         self._means[result.landmarks] = result.means
         self._covs[result.landmarks] = result.covs
         return result
+
+    def _replay(self, poses: FloatArray, covs: FloatArray) -> None:
+        """Map the window's frames again from the smoothed ``poses`` (localisation ``covs`` scaled by
+        ``replay_cov_scale``): the landmarks all of whose bearings lie in the window are forgotten and
+        found again with the tight gates good poses allow, so a ghost the raw poses made is not made again,
+        two uprights merged into one landmark come back as two, and an upright missed is initialised. The
+        others (partly seen before the window, or seeded) keep their estimates and statistics; they take
+        part in association only."""
+        keep = np.ones(len(self._means), dtype=bool)
+        keep[self._log.landmark] = False
+        keep[sorted(self._log.partial)] = True
+        self._log.keep_landmarks(keep)
+        self._log.keep_bearings(np.zeros(self._log.frame.size, dtype=bool))  # the replay logs them again
+        state = ("_means", "_covs", "_counts", "_expected", "_run_hits", "_run_expected", "_last_in_range",
+                 "_confirmed")
+        saved = {name: getattr(self, name)[keep].copy() for name in state}
+        for name, value in saved.items():
+            setattr(self, name, value.copy())
+        now, pose_now, cov_now = self._frame, self.vehicle_pose, self.vehicle_cov
+        self._pool, self._frame_origins = _RayPool(), {}
+        for (number, *_), pose, cov in zip(self._log.frames, poses, covs, strict=True):
+            self._frame = number
+            self._process(pose, self.replay_cov_scale * cov, *self._log.raw[number])
+        kept = len(saved["_means"])
+        for name, value in saved.items():
+            getattr(self, name)[:kept] = value
+        self._frame, self.vehicle_pose, self.vehicle_cov = now, pose_now, cov_now
 
     def observe(
         self,
@@ -341,13 +396,18 @@ class BearingOnlyMapper:
             raise PillarMappingError("pose_cov must be a finite positive semi-definite 3x3 matrix")
         if odometry.shape != (3,) or not np.all(np.isfinite(odometry) | (odometry_pose is None)):
             raise PillarMappingError(f"odometry pose must be 3 finite numbers, got {odometry.tolist()}")
-        self.vehicle_pose = pose
-        self.vehicle_cov = cov
         sigmas = np.maximum(sigmas, self.sigma_floor_rad)
         self._frame += 1
+        self._log.add_frame(self._frame, pose, cov, odometry, track, keep_after=self._frame - self.smooth_window_frames)
+        self._log.raw[self._frame] = (bearings, sigmas)
+        return self._process(pose, cov, bearings, sigmas)
+
+    def _process(self, pose: FloatArray, cov: FloatArray, bearings: FloatArray, sigmas: FloatArray) -> FrameReport:
+        """Associate, update, pool and initialise with frame ``self._frame``'s bearings from ``pose``."""
+        self.vehicle_pose = pose
+        self.vehicle_cov = cov
         self._frame_origins = {f: o for f, o in self._frame_origins.items() if f > self._frame - self.window_frames}
         self._frame_origins[self._frame] = pose[:2].copy()
-        self._log.add_frame(self._frame, pose, cov, odometry, track, keep_after=self._frame - self.smooth_window_frames)
         self._count_in_range(self._visible())
         matches, ambiguous, gated_any = self._associate(bearings, sigmas)
         self._update(bearings, sigmas, matches)
