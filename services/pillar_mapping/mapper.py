@@ -204,6 +204,14 @@ class BearingOnlyMapper:
         re-estimates.
     odometry_noise : OdometryNoise, optional
         Noise of the odometry steps between frames of one robot when smoothing.
+    reassociate : bool
+        After smoothing, map the latest frames again from the smoothed poses and smooth again
+        (see :meth:`smooth`).
+    replay_cov_scale : float
+        The localisation covariance is scaled by this for the smoothed poses of that replay: its
+        gates are tight, as the smoothed poses are better than the localisation's.
+    replay_frames : int
+        How many frames before the last replay are replayed again with the frames since.
     """
 
     _CELL_M = 0.25
@@ -225,6 +233,7 @@ class BearingOnlyMapper:
         odometry_noise: OdometryNoise | None = None,
         reassociate: bool = True,
         replay_cov_scale: float = 0.25,
+        replay_frames: int = 120,
     ) -> None:
         if max_range_m <= 0 or gate_sq <= 0 or sigma_floor_rad <= 0:
             raise PillarMappingError("max_range_m, gate_sq and sigma_floor_rad must be positive")
@@ -246,6 +255,7 @@ class BearingOnlyMapper:
         self.odometry_noise = odometry_noise or OdometryNoise()
         self.reassociate = reassociate
         self.replay_cov_scale = replay_cov_scale
+        self.replay_frames = replay_frames
         self._log = _WindowLog()
         self._frame_origins: dict[int, FloatArray] = {}
         self._expected = np.zeros(0, dtype=np.int64)
@@ -258,6 +268,7 @@ class BearingOnlyMapper:
         self._counts = np.zeros(0, dtype=np.int64)
         self._pool = _RayPool()
         self._frame = 0
+        self._replayed = 0
         self.vehicle_pose = np.zeros(3)
         self.vehicle_cov = np.zeros((3, 3))
 
@@ -305,11 +316,14 @@ class BearingOnlyMapper:
 
         A landmark some of whose bearings have left the window enters with its estimate and
         covariance as a prior and is left unchanged (its older views are no longer in the graph).
+        With ``reassociate`` the latest frames are then mapped again from the smoothed poses, with
+        tight gates (:meth:`_replay`: ghosts the raw localisation made go, merged uprights split,
+        missed ones are initialised), and the window is smoothed again with those associations.
 
         Raises
         ------
         PillarMappingError
-            When the optimisation fails (the map is left as it was).
+            When the optimisation fails (the map keeps its front-end estimates).
         """
         frames, bearings = self._log.logs()
         if len(frames.poses) == 0 or bearings.frame.size == 0:
@@ -330,17 +344,22 @@ class BearingOnlyMapper:
         return result
 
     def _replay(self, poses: FloatArray, covs: FloatArray) -> None:
-        """Map the window's frames again from the smoothed ``poses`` (localisation ``covs`` scaled by
-        ``replay_cov_scale``): the landmarks all of whose bearings lie in the window are forgotten and
-        found again with the tight gates good poses allow, so a ghost the raw poses made is not made again,
-        two uprights merged into one landmark come back as two, and an upright missed is initialised. The
-        others (partly seen before the window, or seeded) keep their estimates and statistics; they take
-        part in association only."""
+        """Map the window's latest frames again from the smoothed ``poses`` (localisation ``covs`` scaled
+        by ``replay_cov_scale``): the frames since the last replay and the ``replay_frames`` before them
+        (their poses moved most since they were last replayed). The landmarks all of whose bearings lie
+        in those frames are forgotten and found again with the tight gates good poses allow, so a ghost
+        the raw poses made is not made again, two uprights merged into one landmark come back as two,
+        and an upright missed is initialised. The others (seen before, or seeded) keep their estimates
+        and statistics; they take part in association only."""
+        numbers = np.array([f[0] for f in self._log.frames], dtype=np.int64)
+        span = numbers > self._replayed - self.replay_frames
+        start = int(numbers[span][0])
         keep = np.ones(len(self._means), dtype=bool)
-        keep[self._log.landmark] = False
+        keep[self._log.landmark[self._log.frame >= start]] = False
+        keep[self._log.landmark[self._log.frame < start]] = True
         keep[sorted(self._log.partial)] = True
         self._log.keep_landmarks(keep)
-        self._log.keep_bearings(np.zeros(self._log.frame.size, dtype=bool))  # the replay logs them again
+        self._log.keep_bearings(self._log.frame < start)  # the replay logs the others again
         state = ("_means", "_covs", "_counts", "_expected", "_run_hits", "_run_expected", "_last_in_range",
                  "_confirmed")
         saved = {name: getattr(self, name)[keep].copy() for name in state}
@@ -348,12 +367,13 @@ class BearingOnlyMapper:
             setattr(self, name, value.copy())
         now, pose_now, cov_now = self._frame, self.vehicle_pose, self.vehicle_cov
         self._pool, self._frame_origins = _RayPool(), {}
-        for (number, *_), pose, cov in zip(self._log.frames, poses, covs, strict=True):
+        for number, pose, cov in zip(numbers[span].tolist(), poses[span], covs[span], strict=True):
             self._frame = number
             self._process(pose, self.replay_cov_scale * cov, *self._log.raw[number])
         kept = len(saved["_means"])
         for name, value in saved.items():
             getattr(self, name)[:kept] = value
+        self._replayed = now
         self._frame, self.vehicle_pose, self.vehicle_cov = now, pose_now, cov_now
 
     def observe(
@@ -529,15 +549,14 @@ class BearingOnlyMapper:
     def _initialise(self) -> int:
         points = self._candidates()
         born = 0
+        # Support and range are computed once; a candidate tried leaves them, the rays of a landmark born too.
+        support = self._support(points)
+        origins = np.array([self._frame_origins[f] for f in sorted(self._frame_origins)])
+        in_range = (np.hypot(*(points[:, None, :] - origins[None]).transpose(2, 0, 1)) <= self.max_range_m).sum(axis=1)
         while points.shape[0]:
-            support = self._support(points)
             frames = np.unique(self._pool.frames)
             onehot = self._pool.frames[:, None] == frames[None, :]
             views = (support.astype(np.float64) @ onehot.astype(np.float64) > 0).sum(axis=1)
-            origins = np.array([self._frame_origins[f] for f in sorted(self._frame_origins)])
-            in_range = (np.hypot(*(points[:, None, :] - origins[None]).transpose(2, 0, 1)) <= self.max_range_m).sum(
-                axis=1
-            )
             views = np.where(views >= self.min_support_ratio * in_range, views, 0)
             best = int(np.argmax(views))
             if views[best] < self.min_views:
@@ -547,7 +566,8 @@ class BearingOnlyMapper:
             used[rays] = True
             sigmas = self._pool.sigmas_at(rays, np.hypot(*(points[best] - self._pool.origins[rays]).T))
             expected = max(int(in_range[best]), rays.size)
-            points = np.delete(points, best, axis=0)
+            points, support = np.delete(points, best, axis=0), np.delete(support, best, axis=0)
+            in_range = np.delete(in_range, best)
             try:
                 tri = triangulate_bearings(self._pool.origins[rays], self._pool.angles[rays], sigmas)
             except PillarMappingError:
@@ -558,6 +578,7 @@ class BearingOnlyMapper:
             ray_frames, ray_bearings, ray_sigmas = (self._pool.frames[rays], self._pool.bearings[rays],
                                                     self._pool.bearing_sigmas[rays])
             self._pool.keep(~used)
+            support = support[:, ~used]
             if not self._duplicate(tri.mean, tri.cov):
                 self._log.add_bearings(ray_frames, np.full(rays.size, len(self._means)), ray_bearings, ray_sigmas)
                 self._append(tri.mean[None], tri.cov[None], np.array([rays.size]), np.array([expected]),
