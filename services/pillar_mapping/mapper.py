@@ -208,8 +208,8 @@ class BearingOnlyMapper:
         After smoothing, map the latest frames again from the smoothed poses and smooth again
         (see :meth:`smooth`).
     replay_cov_scale : float
-        The localisation covariance is scaled by this for the smoothed poses of that replay: its
-        gates are tight, as the smoothed poses are better than the localisation's.
+        The localisation covariance is scaled by this for the smoothed poses of that replay (the
+        default, 1/16, takes their error as a quarter of the localisation's): tight gates.
     replay_frames : int
         How many frames before the last replay are replayed again with the frames since.
     """
@@ -232,7 +232,7 @@ class BearingOnlyMapper:
         smooth_window_frames: int = 1200,
         odometry_noise: OdometryNoise | None = None,
         reassociate: bool = True,
-        replay_cov_scale: float = 0.25,
+        replay_cov_scale: float = 0.0625,
         replay_frames: int = 120,
     ) -> None:
         if max_range_m <= 0 or gate_sq <= 0 or sigma_floor_rad <= 0:
