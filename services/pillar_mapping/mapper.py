@@ -5,10 +5,11 @@ SLAM; but the vehicle is neither predicted nor updated here: its pose (and covar
 comes from the localisation topic each frame. The frames of a window are logged with their
 odometry and the bearings associated in them, and :meth:`BearingOnlyMapper.smooth` re-estimates
 poses and landmarks jointly (:mod:`~services.pillar_mapping.smoother`), so a slowly varying
-localisation error is averaged out instead of copied into the map. With the vehicle known, landmarks stay
-uncorrelated, so the joint covariance is kept as its 2x2 landmark blocks, and the vehicle
-covariance enters each update as a considered (not estimated) uncertainty. The measurement
-model (:func:`bearing_model`) gives the Jacobians with respect to both the vehicle and the
+localisation error is averaged out instead of copied into the map; the window's latest frames are
+then mapped again from the smoothed poses with tight gates (re-association) and smoothed again.
+With the vehicle known, landmarks stay uncorrelated, so the joint covariance is kept as its 2x2
+landmark blocks, and the vehicle covariance enters each update as a considered (not estimated) uncertainty.
+The measurement model (:func:`bearing_model`) gives the Jacobians with respect to both the vehicle and the
 landmark, so estimating the vehicle as well (SLAM) adds the vehicle block and the
 vehicle-landmark cross terms to the covariance and a prediction step, not a new model.
 
