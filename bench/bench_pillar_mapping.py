@@ -143,8 +143,8 @@ def bench_detection(frames: int, size_px: int) -> float:
 def _map(frames: list[Frame], truth: FloatArray, tag: str, *, seeds: int, smooth_every: int) -> None:
     """Map the frames with exact poses, then with each localisation noise level: the EKF alone
     (``_rmse``; ``_rmse_within_20cm`` over the matches within 20 cm only), and with poses and landmarks
-    smoothed with odometry every ``smooth_every`` frames (10 s of driving, as the worker does every
-    ``store_period_s``) and at the end (``_smoothed_rmse``)."""
+    smoothed with odometry and re-associated every ``smooth_every`` frames (10 s of driving, as the worker
+    does every ``store_period_s``) and at the end (``_smoothed_rmse``)."""
     cases = {"known_pose": (0.0, 0.0), **POSE_NOISE}
     true_poses = np.array([f[0] for f in frames])
     for case, (sigma_m, sigma_deg) in cases.items():

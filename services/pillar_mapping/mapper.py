@@ -5,10 +5,11 @@ SLAM; but the vehicle is neither predicted nor updated here: its pose (and covar
 comes from the localisation topic each frame. The frames of a window are logged with their
 odometry and the bearings associated in them, and :meth:`BearingOnlyMapper.smooth` re-estimates
 poses and landmarks jointly (:mod:`~services.pillar_mapping.smoother`), so a slowly varying
-localisation error is averaged out instead of copied into the map. With the vehicle known, landmarks stay
-uncorrelated, so the joint covariance is kept as its 2x2 landmark blocks, and the vehicle
-covariance enters each update as a considered (not estimated) uncertainty. The measurement
-model (:func:`bearing_model`) gives the Jacobians with respect to both the vehicle and the
+localisation error is averaged out instead of copied into the map; the window's latest frames are
+then mapped again from the smoothed poses with tight gates (re-association) and smoothed again.
+With the vehicle known, landmarks stay uncorrelated, so the joint covariance is kept as its 2x2
+landmark blocks, and the vehicle covariance enters each update as a considered (not estimated) uncertainty.
+The measurement model (:func:`bearing_model`) gives the Jacobians with respect to both the vehicle and the
 landmark, so estimating the vehicle as well (SLAM) adds the vehicle block and the
 vehicle-landmark cross terms to the covariance and a prediction step, not a new model.
 
@@ -128,11 +129,13 @@ class _WindowLog:
     bearing: FloatArray = field(default_factory=lambda: np.zeros(0))
     sigma: FloatArray = field(default_factory=lambda: np.zeros(0))
     partial: set[int] = field(default_factory=set)
+    raw: dict[int, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
 
     def add_frame(self, number: int, pose: FloatArray, cov: FloatArray, odometry: FloatArray, track: int, *,
                   keep_after: int) -> None:
         self.frames = [f for f in self.frames if f[0] > keep_after]
         self.frames.append((number, pose.copy(), cov.copy(), odometry.copy(), track))
+        self.raw = {f: b for f, b in self.raw.items() if f > keep_after}
         keep = self.frame > keep_after
         self.partial.update(self.landmark[~keep].tolist())
         self.frame, self.landmark = self.frame[keep], self.landmark[keep]
@@ -143,6 +146,18 @@ class _WindowLog:
         self.landmark = np.concatenate([self.landmark, landmark.astype(np.int64)])
         self.bearing = np.concatenate([self.bearing, bearing])
         self.sigma = np.concatenate([self.sigma, sigma])
+
+    def keep_landmarks(self, keep: npt.NDArray[np.bool_]) -> None:
+        """Forget the bearings of landmarks not in ``keep`` and renumber the others."""
+        number = np.cumsum(keep) - 1
+        mine = keep[self.landmark]
+        self.keep_bearings(mine)
+        self.landmark = number[self.landmark].astype(np.int64)
+        self.partial = {int(number[n]) for n in self.partial if keep[n]}
+
+    def keep_bearings(self, mask: npt.NDArray[np.bool_]) -> None:
+        self.frame, self.landmark = self.frame[mask], self.landmark[mask]
+        self.bearing, self.sigma = self.bearing[mask], self.sigma[mask]
 
     def logs(self) -> tuple[FrameLog, BearingLog]:
         numbers = np.array([f[0] for f in self.frames], dtype=np.int64)
@@ -190,6 +205,14 @@ class BearingOnlyMapper:
         re-estimates.
     odometry_noise : OdometryNoise, optional
         Noise of the odometry steps between frames of one robot when smoothing.
+    reassociate : bool
+        After smoothing, map the latest frames again from the smoothed poses and smooth again
+        (see :meth:`smooth`).
+    replay_cov_scale : float
+        The localisation covariance is scaled by this for the smoothed poses of that replay (the
+        default, 1/16, takes their error as a quarter of the localisation's): tight gates.
+    replay_frames : int
+        How many frames before the last replay are replayed again with the frames since.
     """
 
     _CELL_M = 0.25
@@ -209,6 +232,9 @@ class BearingOnlyMapper:
         min_pass_ratio: float = 0.4,
         smooth_window_frames: int = 1200,
         odometry_noise: OdometryNoise | None = None,
+        reassociate: bool = True,
+        replay_cov_scale: float = 0.0625,
+        replay_frames: int = 120,
     ) -> None:
         if max_range_m <= 0 or gate_sq <= 0 or sigma_floor_rad <= 0:
             raise PillarMappingError("max_range_m, gate_sq and sigma_floor_rad must be positive")
@@ -228,6 +254,9 @@ class BearingOnlyMapper:
         self.min_pass_ratio = min_pass_ratio
         self.smooth_window_frames = smooth_window_frames
         self.odometry_noise = odometry_noise or OdometryNoise()
+        self.reassociate = reassociate
+        self.replay_cov_scale = replay_cov_scale
+        self.replay_frames = replay_frames
         self._log = _WindowLog()
         self._frame_origins: dict[int, FloatArray] = {}
         self._expected = np.zeros(0, dtype=np.int64)
@@ -240,6 +269,7 @@ class BearingOnlyMapper:
         self._counts = np.zeros(0, dtype=np.int64)
         self._pool = _RayPool()
         self._frame = 0
+        self._replayed = 0
         self.vehicle_pose = np.zeros(3)
         self.vehicle_cov = np.zeros((3, 3))
 
@@ -260,6 +290,7 @@ class BearingOnlyMapper:
             raise PillarMappingError("seed landmarks need finite means, one covariance and a count >= 0 each")
         if len(means) and np.any(np.linalg.eigvalsh(covs)[:, 0] <= 0):
             raise PillarMappingError("seed landmark covariances must be positive definite")
+        self._log.partial.update(range(len(self._means), len(self._means) + len(means)))  # views before the window
         self._append(means, covs, counts, counts, counts >= self.min_observations)
 
     def _append(self, means: FloatArray, covs: FloatArray, counts: IntArray, expected: IntArray,
@@ -286,20 +317,65 @@ class BearingOnlyMapper:
 
         A landmark some of whose bearings have left the window enters with its estimate and
         covariance as a prior and is left unchanged (its older views are no longer in the graph).
+        With ``reassociate`` the latest frames are then mapped again from the smoothed poses, with
+        tight gates (:meth:`_replay`: ghosts the raw localisation made go, merged uprights split,
+        missed ones are initialised), and the window is smoothed again with those associations.
 
         Raises
         ------
         PillarMappingError
-            When the optimisation fails (the map is left as it was).
+            When the optimisation fails (the map keeps its front-end estimates).
         """
         frames, bearings = self._log.logs()
         if len(frames.poses) == 0 or bearings.frame.size == 0:
             return None
+        result = self._smooth_logged(frames, bearings)
+        if self.reassociate:
+            self._replay(result.poses, frames.covs)
+            frames, bearings = self._log.logs()
+            if bearings.frame.size:
+                result = self._smooth_logged(frames, bearings)
+        return result
+
+    def _smooth_logged(self, frames: FrameLog, bearings: BearingLog) -> SmoothedMap:
         result = smooth_map(frames, bearings, self._means, odometry=self.odometry_noise,
                             fixed=np.array(sorted(self._log.partial), dtype=np.int64), fixed_covs=self._covs)
         self._means[result.landmarks] = result.means
         self._covs[result.landmarks] = result.covs
         return result
+
+    def _replay(self, poses: FloatArray, covs: FloatArray) -> None:
+        """Map the window's latest frames again from the smoothed ``poses`` (localisation ``covs`` scaled
+        by ``replay_cov_scale``): the frames since the last replay and the ``replay_frames`` before them
+        (their poses moved most since they were last replayed). The landmarks all of whose bearings lie
+        in those frames are forgotten and found again with the tight gates good poses allow, so a ghost
+        the raw poses made is not made again, two uprights merged into one landmark come back as two,
+        and an upright missed is initialised. The others (seen before, or seeded) keep their estimates
+        and statistics; they take part in association only."""
+        numbers = np.array([f[0] for f in self._log.frames], dtype=np.int64)
+        span = numbers > self._replayed - self.replay_frames
+        start = int(numbers[span][0])
+        keep = np.ones(len(self._means), dtype=bool)
+        keep[self._log.landmark[self._log.frame >= start]] = False
+        keep[self._log.landmark[self._log.frame < start]] = True
+        keep[sorted(self._log.partial)] = True
+        self._log.keep_landmarks(keep)
+        self._log.keep_bearings(self._log.frame < start)  # the replay logs the others again
+        state = ("_means", "_covs", "_counts", "_expected", "_run_hits", "_run_expected", "_last_in_range",
+                 "_confirmed")
+        saved = {name: getattr(self, name)[keep].copy() for name in state}
+        for name, value in saved.items():
+            setattr(self, name, value.copy())
+        now, pose_now, cov_now = self._frame, self.vehicle_pose, self.vehicle_cov
+        self._pool, self._frame_origins = _RayPool(), {}
+        for number, pose, cov in zip(numbers[span].tolist(), poses[span], covs[span], strict=True):
+            self._frame = number
+            self._process(pose, self.replay_cov_scale * cov, *self._log.raw[number])
+        kept = len(saved["_means"])
+        for name, value in saved.items():
+            getattr(self, name)[:kept] = value
+        self._replayed = now
+        self._frame, self.vehicle_pose, self.vehicle_cov = now, pose_now, cov_now
 
     def observe(
         self,
@@ -341,13 +417,18 @@ class BearingOnlyMapper:
             raise PillarMappingError("pose_cov must be a finite positive semi-definite 3x3 matrix")
         if odometry.shape != (3,) or not np.all(np.isfinite(odometry) | (odometry_pose is None)):
             raise PillarMappingError(f"odometry pose must be 3 finite numbers, got {odometry.tolist()}")
-        self.vehicle_pose = pose
-        self.vehicle_cov = cov
         sigmas = np.maximum(sigmas, self.sigma_floor_rad)
         self._frame += 1
+        self._log.add_frame(self._frame, pose, cov, odometry, track, keep_after=self._frame - self.smooth_window_frames)
+        self._log.raw[self._frame] = (bearings, sigmas)
+        return self._process(pose, cov, bearings, sigmas)
+
+    def _process(self, pose: FloatArray, cov: FloatArray, bearings: FloatArray, sigmas: FloatArray) -> FrameReport:
+        """Associate, update, pool and initialise with frame ``self._frame``'s bearings from ``pose``."""
+        self.vehicle_pose = pose
+        self.vehicle_cov = cov
         self._frame_origins = {f: o for f, o in self._frame_origins.items() if f > self._frame - self.window_frames}
         self._frame_origins[self._frame] = pose[:2].copy()
-        self._log.add_frame(self._frame, pose, cov, odometry, track, keep_after=self._frame - self.smooth_window_frames)
         self._count_in_range(self._visible())
         matches, ambiguous, gated_any = self._associate(bearings, sigmas)
         self._update(bearings, sigmas, matches)
@@ -469,15 +550,14 @@ class BearingOnlyMapper:
     def _initialise(self) -> int:
         points = self._candidates()
         born = 0
+        # Support and range are computed once; a candidate tried leaves them, the rays of a landmark born too.
+        support = self._support(points)
+        origins = np.array([self._frame_origins[f] for f in sorted(self._frame_origins)])
+        in_range = (np.hypot(*(points[:, None, :] - origins[None]).transpose(2, 0, 1)) <= self.max_range_m).sum(axis=1)
         while points.shape[0]:
-            support = self._support(points)
             frames = np.unique(self._pool.frames)
             onehot = self._pool.frames[:, None] == frames[None, :]
             views = (support.astype(np.float64) @ onehot.astype(np.float64) > 0).sum(axis=1)
-            origins = np.array([self._frame_origins[f] for f in sorted(self._frame_origins)])
-            in_range = (np.hypot(*(points[:, None, :] - origins[None]).transpose(2, 0, 1)) <= self.max_range_m).sum(
-                axis=1
-            )
             views = np.where(views >= self.min_support_ratio * in_range, views, 0)
             best = int(np.argmax(views))
             if views[best] < self.min_views:
@@ -487,7 +567,8 @@ class BearingOnlyMapper:
             used[rays] = True
             sigmas = self._pool.sigmas_at(rays, np.hypot(*(points[best] - self._pool.origins[rays]).T))
             expected = max(int(in_range[best]), rays.size)
-            points = np.delete(points, best, axis=0)
+            points, support = np.delete(points, best, axis=0), np.delete(support, best, axis=0)
+            in_range = np.delete(in_range, best)
             try:
                 tri = triangulate_bearings(self._pool.origins[rays], self._pool.angles[rays], sigmas)
             except PillarMappingError:
@@ -498,6 +579,7 @@ class BearingOnlyMapper:
             ray_frames, ray_bearings, ray_sigmas = (self._pool.frames[rays], self._pool.bearings[rays],
                                                     self._pool.bearing_sigmas[rays])
             self._pool.keep(~used)
+            support = support[:, ~used]
             if not self._duplicate(tri.mean, tri.cov):
                 self._log.add_bearings(ray_frames, np.full(rays.size, len(self._means)), ray_bearings, ray_sigmas)
                 self._append(tri.mean[None], tri.cov[None], np.array([rays.size]), np.array([expected]),
