@@ -25,13 +25,13 @@ same namespace; "" turns it off) feeds the scan matching behind loop closures an
 keyframe alignment; a robot that publishes no range scans is fused from its annotated points alone.
 Each range scan waits until an annotated scan is stamped at or after it, takes the robot's pose
 interpolated between the annotated scans around it, and attaches to the current keyframe if none has
-yet (range scans of keyframes already closed are not used; those arriving before the robot's first
-annotated scan are not kept). The lidar's mount is the robot's ``tf_static`` transform from
-``base_frame`` (``<namespace>/base_frame`` where its tree is prefixed so) to the scan's
-``header.frame_id``, looked up when the scan is placed; without one, ``lidar_*_in_base`` is used and
-counted as ``range_scans_mount_from_settings``. Range scans older than the robot's kept poses are
-counted as ``range_scans_unplaced``, unusable ones as ``bad_range_scans``, and the oldest waiting
-ones dropped when more than a minute's worth wait as ``range_scans_dropped``.
+yet (range scans of keyframes already closed are not used). The lidar's mount is the robot's
+``tf_static`` transform from ``base_frame`` (``<namespace>/base_frame`` where its tree is prefixed
+so) to the scan's ``header.frame_id``, looked up when the scan is placed; without one,
+``lidar_*_in_base`` is used and counted as ``range_scans_mount_from_settings``. Range scans older
+than the robot's kept poses are counted as ``range_scans_unplaced``, unusable ones as
+``bad_range_scans``, and the oldest waiting ones dropped when more than a minute's worth wait as
+``range_scans_dropped`` (uncounted for a robot that has sent no annotated scan yet).
 
 A corrected pose at stamp ``t`` becomes a camera pose through the fixed mount
 (``camera_*_in_base``), is carried to the keyframe nearest ``t`` by the robot's own motion between
@@ -95,10 +95,6 @@ class _Robot:
         default_factory=lambda: collections.deque(maxlen=_PENDING_CORRECTIONS))
     corrected_at: float = -float("inf")
     out_of_order: int = 0
-    range_scans: collections.deque[tuple[str, RangeScan]] = field(
-        default_factory=lambda: collections.deque(maxlen=_PENDING_RANGE_SCANS))
-    """Range scans (with their header frame) waiting for an annotated scan at or after their stamp;
-    points and pose in the lidar's own frame."""
 
     def pose_at(self, stamp_ns: int) -> npt.NDArray[np.float64] | None:
         """The robot's own camera pose estimate at ``stamp_ns``, interpolated; None outside the history."""
@@ -191,6 +187,9 @@ class FusionStage:
         self.restart_after = restart_after_out_of_order_scans
         self.grid = SemanticGrid(resolution_m=resolution_m, dynamic_half_life_s=dynamic_half_life_s)
         self._robots: dict[str, _Robot] = {}
+        self._range_scans: dict[str, collections.deque[tuple[str, RangeScan]]] = {}
+        """Range scans (with their header frame) waiting for an annotated scan at or after their stamp, by
+        namespace; points in the lidar's own frame."""
         self._tf: dict[str, TransformBuffer] = {}
         """Each robot's static transforms, by namespace (kept across a robot's restarts)."""
         self._mount_sources: dict[tuple[str, str], str] = {}
@@ -281,6 +280,7 @@ class FusionStage:
                         "starts afresh (earlier evidence stays)", namespace or "/", robot.out_of_order)
             self.context.count("robot_restarts")
             del self._robots[namespace]
+            self._range_scans.pop(namespace, None)
             robot = self._robot(namespace)
         try:
             observation = observation_from_message(message, previous_stamp_ns=robot.fusion.last_stamp_ns)
@@ -309,9 +309,6 @@ class FusionStage:
                 self.context.count("bad_transforms")
                 log.warning("tf_static from %r skipped: %s", item.namespace or "/", err)
         while self.ranges is not None and (item := self.ranges.receive()) is not None:
-            robot = self._robots.get(item.namespace)
-            if robot is None:
-                continue  # no annotated scan yet: nothing to place it by
             msg = item.message
             try:
                 scan = range_scan_from_arrays(_stamp_ns(msg.header), np.zeros(3), float(msg.angle_min),
@@ -321,9 +318,10 @@ class FusionStage:
                 self.context.count("bad_range_scans")
                 log.warning("range scan from %r skipped: %s", item.namespace or "/", err)
                 continue
-            if len(robot.range_scans) == robot.range_scans.maxlen:
-                self.context.count("range_scans_dropped")
-            robot.range_scans.append((str(msg.header.frame_id), scan))
+            waiting = self._range_scans.setdefault(item.namespace, collections.deque(maxlen=_PENDING_RANGE_SCANS))
+            if len(waiting) == waiting.maxlen and item.namespace in self._robots:
+                self.context.count("range_scans_dropped")  # uncounted for a robot without annotated scans
+            waiting.append((str(msg.header.frame_id), scan))
 
     def _place_range_scans(self, namespace: str, robot: _Robot, stamp_ns: int,
                            camera: npt.NDArray[np.float64]) -> None:
@@ -332,8 +330,9 @@ class FusionStage:
         A scan's map pose is the camera pose interpolated between the robot's previous annotated
         scan and this one, composed with the lidar's mount in the camera frame.
         """
-        while robot.range_scans and robot.range_scans[0][1].stamp_ns <= stamp_ns:
-            frame_id, scan = robot.range_scans.popleft()
+        waiting = self._range_scans.get(namespace, ())
+        while waiting and waiting[0][1].stamp_ns <= stamp_ns:
+            frame_id, scan = waiting.popleft()
             if robot.stamps_ns and scan.stamp_ns >= robot.stamps_ns[-1]:
                 before, t0 = robot.poses[-1], robot.stamps_ns[-1]
                 fraction = (scan.stamp_ns - t0) / (stamp_ns - t0) if stamp_ns > t0 else 1.0

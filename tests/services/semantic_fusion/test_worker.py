@@ -297,15 +297,16 @@ def _laser_message(scan: RangeScan, *, fov_rad: float, beams: int, frame_id: str
 
 
 def _publish_drive(robots: Bus, stage_bus: Bus, namespace: str, run: SimulatedRun, *, beams: int, laser_frame: str,
-                   laser_yaw_rad: float, tf_static: bool) -> None:
+                   laser_yaw_rad: float, base_frame: str | None) -> None:
     """Publish ``run``'s annotated scans and lidar (ahead of them, as a labeller's latency makes it) under
-    ``namespace``, the lidar turned ``laser_yaw_rad`` in its place 0.3 m ahead of the base; with ``tf_static``
-    its mount goes out first on tf_static, as the simulator sends it."""
-    if tf_static:
-        mount = transform_stamped(run.scans[0].stamp_ns, f"{namespace}/base_link", laser_frame, (0.3, 0.0, 0.2),
+    ``namespace``, the lidar turned ``laser_yaw_rad`` in its place 0.3 m ahead of the base; unless ``base_frame``
+    is None its mount in that frame goes out first on tf_static, as the simulator sends it."""
+    if base_frame is not None:
+        mount = transform_stamped(run.scans[0].stamp_ns, base_frame, laser_frame, (0.3, 0.0, 0.2),
                                   quaternion_from_yaw(laser_yaw_rad))
+        sent = stage_bus.counters.snapshot().get(f"{STAGE}.tf_static.received", 0) + 1
         robots.publisher("tf_static", messages.TF_MESSAGE, namespace=namespace).publish(tf_message([mount])[1])
-        wait_for(lambda: stage_bus.counters.snapshot().get(f"{STAGE}.tf_static.received", 0) == 1,
+        wait_for(lambda: stage_bus.counters.snapshot().get(f"{STAGE}.tf_static.received", 0) == sent,
                  what="the lidar's mount to reach the stage")
     ranges = {r.stamp_ns: r for r in run.range_scans}
     scans = _publisher(robots, namespace)
@@ -330,7 +331,7 @@ def test_the_robots_lidar_mounted_as_its_tf_says_keeps_a_drifting_robots_map_str
                                 camera_y_in_base_m=MOUNT[1], camera_yaw_in_base_rad=MOUNT[2])
     with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, stage_bus):
         _publish_drive(robots, stage_bus, "robot1", run, beams=beams, laser_frame="robot1/laser", laser_yaw_rad=0.1,
-                       tf_static=True)
+                       base_frame="robot1/base_link")
         _wait_for_input(sqlite_store, run.scans[-1].stamp_ns)
     counters = _counters(sqlite_store)
     assert counters[f"{STAGE}.range_scans_attached"] > 100
@@ -339,7 +340,7 @@ def test_the_robots_lidar_mounted_as_its_tf_says_keeps_a_drifting_robots_map_str
     assert _accuracy(_stored_layers(sqlite_store), warehouse) >= 0.97
 
 
-def test_a_lidar_without_tf_is_mounted_as_the_settings_say(
+def test_each_robot_has_its_own_lidar_mount_from_its_tf_or_else_the_settings(
         zenoh_listen: ZenohSettings, sqlite_store: MapStore) -> None:
     warehouse = make_warehouse(length_m=30.0, width_m=18.0, seed=0)
     beams = 541
@@ -347,10 +348,17 @@ def test_a_lidar_without_tf_is_mounted_as_the_settings_say(
     factory = functools.partial(FusionStage, store_period_s=0.2, camera_x_in_base_m=MOUNT[0],
                                 camera_y_in_base_m=MOUNT[1], camera_yaw_in_base_rad=MOUNT[2], lidar_x_in_base_m=0.3)
     with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, stage_bus):
-        _publish_drive(robots, stage_bus, "robot1", run, beams=beams, laser_frame="laser", laser_yaw_rad=0.0,
-                       tf_static=False)
-        _wait_for_input(sqlite_store, run.scans[-1].stamp_ns)
-    counters = _counters(sqlite_store)
-    assert counters[f"{STAGE}.range_scans_attached"] > 10
-    assert counters[f"{STAGE}.range_scans_mount_from_settings"] >= counters[f"{STAGE}.range_scans_attached"]
+        # same frame names (not prefixed), different lidars: robot1's is turned, and tf says so; robot2 sends no tf
+        _publish_drive(robots, stage_bus, "robot1", run, beams=beams, laser_frame="laser", laser_yaw_rad=0.1,
+                       base_frame="base_link")
+        _publish_drive(robots, stage_bus, "robot2", run, beams=beams, laser_frame="laser", laser_yaw_rad=0.0,
+                       base_frame=None)
+        received = {"annotated_scan": 2 * len(run.scans), "scan": 2 * len(run.range_scans)}
+        wait_for(lambda: all(stage_bus.counters.snapshot().get(f"{STAGE}.{topic}.received", 0) == n
+                             for topic, n in received.items()), what="both robots' scans to reach the stage")
+    counters = _counters(sqlite_store)  # the final heartbeat, after the stop drained every queued scan
+    assert counters[f"{STAGE}.robots"] == 2
+    # at most one range scan per keyframe: more than half the keyframes (the robots drove the same route) is both
+    assert counters[f"{STAGE}.range_scans_attached"] > counters[f"{STAGE}.keyframes"] / 2
+    assert 0 < counters[f"{STAGE}.range_scans_mount_from_settings"] <= len(run.range_scans)  # robot2's only
     assert _accuracy(_stored_layers(sqlite_store), warehouse) >= 0.97
