@@ -330,7 +330,7 @@ class FusionStage:
         A scan's map pose is the camera pose interpolated between the robot's previous annotated
         scan and this one, composed with the lidar's mount in the camera frame.
         """
-        waiting = self._range_scans.get(namespace, ())
+        waiting = self._range_scans.get(namespace)
         while waiting and waiting[0][1].stamp_ns <= stamp_ns:
             frame_id, scan = waiting.popleft()
             if robot.stamps_ns and scan.stamp_ns >= robot.stamps_ns[-1]:
