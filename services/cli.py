@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -192,6 +193,7 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
                 if "rgbd" in args.demo_cameras.split(","):
                     stages += [] if "object_labelling" in stages else ["object_labelling"]
                     _demo_labelling_model(settings)
+                    settings = _demo_camera_mount(settings)
             _check_stages(settings, stages)
             with runtime.stop_on_signals(stop):
                 runtime.run(settings, stages=stages, api=True, stop=stop, extra=extra)
@@ -378,6 +380,20 @@ def _demo_settings(settings: Settings) -> Settings:
     if settings.pillars.localisation_sigma_m == 0 and settings.pillars.localisation_sigma_rad == 0:
         update.update(localisation_sigma_m=0.01, localisation_sigma_rad=0.002)
     return settings.model_copy(update={"pillars": settings.pillars.model_copy(update=update)})
+
+
+def _demo_camera_mount(settings: Settings) -> Settings:
+    """The demo RGB-D camera's floor frame (where its annotated scans are posed) in the robot base frame as
+    the semantic fusion's camera mount, unless the settings give one: the lidar's scans are placed through it."""
+    from services.simulator.cameras import RGBD_MOUNT
+
+    fusion = settings.fusion
+    if (fusion.camera_x_in_base_m, fusion.camera_y_in_base_m, fusion.camera_yaw_in_base_rad) != (0.0, 0.0, 0.0):
+        return settings
+    optical_axis = RGBD_MOUNT[:3, 2]
+    update = {"camera_x_in_base_m": float(RGBD_MOUNT[0, 3]), "camera_y_in_base_m": float(RGBD_MOUNT[1, 3]),
+              "camera_yaw_in_base_rad": math.atan2(float(optical_axis[1]), float(optical_axis[0]))}
+    return settings.model_copy(update={"fusion": fusion.model_copy(update=update)})
 
 
 def _demo_job(cameras: str, *, rate: float) -> Callable[[Bus, threading.Event], None]:

@@ -136,11 +136,14 @@ class SemanticFusionSettings(BaseModel):
     camera_yaw_in_base_rad: float = Field(
         0.0, ge=-3.1416, le=3.1416, description="Camera floor frame (AnnotatedScan camera_pose) in the base frame."
     )
-    range_scan_topic: str = Field("", description="sensor_msgs/LaserScan of the robot's lidar for scan matching "
-                                  "(e.g. scan); empty: match on the annotated scans' points.")
+    range_scan_topic: str = Field("scan", description="sensor_msgs/LaserScan of the robot's lidar for scan matching; "
+                                  "robots without one, or empty: match on the annotated scans' points.")
+    base_frame: str = Field("base_link", description="Robot frame the lidar mount is looked up from in tf_static "
+                            "(prefixed with the robot namespace where its tree is).")
     lidar_x_in_base_m: float = 0.0
     lidar_y_in_base_m: float = 0.0
-    lidar_yaw_in_base_rad: float = Field(0.0, ge=-3.1416, le=3.1416, description="Lidar frame in the base frame.")
+    lidar_yaw_in_base_rad: float = Field(0.0, ge=-3.1416, le=3.1416, description="Lidar frame in the base frame, "
+                                         "for robots whose tf_static does not have it.")
     pose_correction_sigma_m: float = Field(0.05, gt=0.0)
     pose_correction_sigma_rad: float = Field(0.02, gt=0.0)
     pose_correction_period_s: float = Field(5.0, ge=0.0, description="Least time between corrections of one robot.")

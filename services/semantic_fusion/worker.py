@@ -20,14 +20,18 @@ robot's newest as ``scans_out_of_order``. After ``restart_after_out_of_order_sca
 robot is taken to have restarted (or a bag to be replayed): it gets a fresh fusion, and its earlier
 evidence stays in the grid.
 
-When ``range_scan_topic`` is set, the robot's lidar (sensor_msgs/LaserScan under the same
-namespace, mounted at ``lidar_*_in_base``) feeds the scan matching behind loop closures and the
-sequential keyframe alignment: each range scan waits until an annotated scan is stamped at or after
-it, takes the robot's pose interpolated between the annotated scans around it, and attaches to the
-current keyframe if none has yet (range scans of keyframes already closed are not used). Range
-scans older than the robot's kept poses are counted as ``range_scans_unplaced``, unusable ones as
+The robot's lidar (sensor_msgs/LaserScan on ``range_scan_topic``, ``scan`` by default, under the
+same namespace; "" turns it off) feeds the scan matching behind loop closures and the sequential
+keyframe alignment; a robot that publishes no range scans is fused from its annotated points alone.
+Each range scan waits until an annotated scan is stamped at or after it, takes the robot's pose
+interpolated between the annotated scans around it, and attaches to the current keyframe if none has
+yet (range scans of keyframes already closed are not used). The lidar's mount is the robot's
+``tf_static`` transform from ``base_frame`` (``<namespace>/base_frame`` where its tree is prefixed
+so) to the scan's ``header.frame_id``, looked up when the scan is placed; without one,
+``lidar_*_in_base`` is used and counted as ``range_scans_mount_from_settings``. Range scans older
+than the robot's kept poses are counted as ``range_scans_unplaced``, unusable ones as
 ``bad_range_scans``, and the oldest waiting ones dropped when more than a minute's worth wait as
-``range_scans_dropped``.
+``range_scans_dropped`` (uncounted for a robot that has sent no annotated scan yet).
 
 A corrected pose at stamp ``t`` becomes a camera pose through the fixed mount
 (``camera_*_in_base``), is carried to the keyframe nearest ``t`` by the robot's own motion between
@@ -53,6 +57,7 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits
 
+from services.occupancy_mapping.mapper import sensor_pose
 from services.semantic_fusion import se2
 from services.semantic_fusion.errors import SemanticFusionError
 from services.semantic_fusion.fusion import FusionSettings, SemanticFusion
@@ -63,7 +68,7 @@ from services.semantic_fusion.scan import RangeScan, observation_from_message, r
 from shared import messages
 from shared.bus import DropPolicy, Subscription
 from shared.store import RevisionWrite, StoreUnavailableError
-from shared.transforms import yaw_from_quaternion
+from shared.transforms import TransformBuffer, add_tf_message, yaw_from_quaternion
 from shared.worker import StageContext
 
 log = logging.getLogger(__name__)
@@ -90,9 +95,6 @@ class _Robot:
         default_factory=lambda: collections.deque(maxlen=_PENDING_CORRECTIONS))
     corrected_at: float = -float("inf")
     out_of_order: int = 0
-    range_scans: collections.deque[RangeScan] = field(
-        default_factory=lambda: collections.deque(maxlen=_PENDING_RANGE_SCANS))
-    """Range scans waiting for an annotated scan at or after their stamp; poses in the lidar's own frame."""
 
     def pose_at(self, stamp_ns: int) -> npt.NDArray[np.float64] | None:
         """The robot's own camera pose estimate at ``stamp_ns``, interpolated; None outside the history."""
@@ -122,8 +124,10 @@ class FusionStage:
         LaserScan topic of the robot's lidar under each robot namespace, for scan matching; "" for none.
     camera_x_in_base_m, camera_y_in_base_m, camera_yaw_in_base_rad
         The camera's floor frame (the frame of AnnotatedScan's camera pose) in the base frame.
+    base_frame
+        The robot frame the lidar's mount is looked up from in the robot's tf_static.
     lidar_x_in_base_m, lidar_y_in_base_m, lidar_yaw_in_base_rad
-        The lidar's frame in the base frame.
+        The lidar's frame in the base frame, for robots whose tf_static does not have it.
     pose_correction_sigma_m, pose_correction_sigma_rad
         Standard deviations of a correction's prior, metres and radians.
     pose_correction_period_s
@@ -149,7 +153,8 @@ class FusionStage:
         camera_x_in_base_m: float = 0.0,
         camera_y_in_base_m: float = 0.0,
         camera_yaw_in_base_rad: float = 0.0,
-        range_scan_topic: str = "",
+        range_scan_topic: str = "scan",
+        base_frame: str = "base_link",
         lidar_x_in_base_m: float = 0.0,
         lidar_y_in_base_m: float = 0.0,
         lidar_yaw_in_base_rad: float = 0.0,
@@ -173,8 +178,8 @@ class FusionStage:
         self.settings = FusionSettings(resolution_m=resolution_m, dynamic_half_life_s=dynamic_half_life_s)
         self.detect_loops = detect_loops
         self.mount = np.array([camera_x_in_base_m, camera_y_in_base_m, camera_yaw_in_base_rad], dtype=np.float64)
-        lidar = np.array([lidar_x_in_base_m, lidar_y_in_base_m, lidar_yaw_in_base_rad], dtype=np.float64)
-        self.camera_to_lidar = se2.between(self.mount, lidar)
+        self.base_frame = base_frame.strip("/")
+        self.lidar_in_base = np.array([lidar_x_in_base_m, lidar_y_in_base_m, lidar_yaw_in_base_rad], dtype=np.float64)
         self.sigmas = (pose_correction_sigma_m, pose_correction_sigma_m, pose_correction_sigma_rad)
         self.pose_correction_period_s = pose_correction_period_s
         self.store_period_s = store_period_s
@@ -182,6 +187,13 @@ class FusionStage:
         self.restart_after = restart_after_out_of_order_scans
         self.grid = SemanticGrid(resolution_m=resolution_m, dynamic_half_life_s=dynamic_half_life_s)
         self._robots: dict[str, _Robot] = {}
+        self._range_scans: dict[str, collections.deque[tuple[str, RangeScan]]] = {}
+        """Range scans (with their header frame) waiting for an annotated scan at or after their stamp, by
+        namespace; points in the lidar's own frame."""
+        self._tf: dict[str, TransformBuffer] = {}
+        """Each robot's static transforms, by namespace (kept across a robot's restarts)."""
+        self._mount_sources: dict[tuple[str, str], str] = {}
+        """Where each (namespace, lidar frame)'s mount came from last ("tf" or "settings"), to log changes."""
         self._first_stamp_ns: int | None = None
         self._since_store = collections.Counter[str]()
         self._resume()
@@ -194,6 +206,7 @@ class FusionStage:
         self.scans = subscribe(scan_topic, messages.ANNOTATED_SCAN, scan_queue_size)
         self.poses = subscribe(pose_topic, messages.POSE_STAMPED, 2000) if pose_topic else None
         self.ranges = subscribe(range_scan_topic, messages.LASER_SCAN, 200) if range_scan_topic else None
+        self.tf_static = subscribe("tf_static", messages.TF_MESSAGE, 100) if range_scan_topic else None
 
     def _resume(self) -> None:
         store, map_id = self.context.store, self.context.map.id
@@ -232,7 +245,7 @@ class FusionStage:
                     self._take_range_scans()
                     self._take_scans(timeout_s=0.0)
                 self._store()
-                for subscription in (self.scans, self.poses, self.ranges):
+                for subscription in (self.scans, self.poses, self.ranges, self.tf_static):
                     if subscription is not None:
                         subscription.close()
 
@@ -267,6 +280,7 @@ class FusionStage:
                         "starts afresh (earlier evidence stays)", namespace or "/", robot.out_of_order)
             self.context.count("robot_restarts")
             del self._robots[namespace]
+            self._range_scans.pop(namespace, None)
             robot = self._robot(namespace)
         try:
             observation = observation_from_message(message, previous_stamp_ns=robot.fusion.last_stamp_ns)
@@ -276,7 +290,7 @@ class FusionStage:
             return
         robot.out_of_order = 0
         self._take_range_scans()
-        self._place_range_scans(robot, observation.stamp_ns, observation.camera_pose)
+        self._place_range_scans(namespace, robot, observation.stamp_ns, observation.camera_pose)
         closures = robot.fusion.add_scan(observation)
         robot.stamps_ns.append(observation.stamp_ns)
         robot.poses.append(observation.camera_pose)
@@ -288,29 +302,37 @@ class FusionStage:
             self.context.count("loop_closures", closures)
 
     def _take_range_scans(self) -> None:
+        while self.tf_static is not None and (item := self.tf_static.receive()) is not None:
+            try:
+                add_tf_message(self._tf.setdefault(item.namespace, TransformBuffer()), item.message, static=True)
+            except ValueError as err:
+                self.context.count("bad_transforms")
+                log.warning("tf_static from %r skipped: %s", item.namespace or "/", err)
         while self.ranges is not None and (item := self.ranges.receive()) is not None:
             msg = item.message
             try:
-                scan = range_scan_from_arrays(_stamp_ns(msg.header), self.camera_to_lidar, float(msg.angle_min),
+                scan = range_scan_from_arrays(_stamp_ns(msg.header), np.zeros(3), float(msg.angle_min),
                                               float(msg.angle_increment), np.asarray(msg.ranges),
                                               range_min_m=float(msg.range_min), range_max_m=float(msg.range_max))
             except SemanticFusionError as err:
                 self.context.count("bad_range_scans")
                 log.warning("range scan from %r skipped: %s", item.namespace or "/", err)
                 continue
-            waiting = self._robot(item.namespace).range_scans
-            if len(waiting) == waiting.maxlen:
-                self.context.count("range_scans_dropped")
-            waiting.append(scan)
+            waiting = self._range_scans.setdefault(item.namespace, collections.deque(maxlen=_PENDING_RANGE_SCANS))
+            if len(waiting) == waiting.maxlen and item.namespace in self._robots:
+                self.context.count("range_scans_dropped")  # uncounted for a robot without annotated scans
+            waiting.append((str(msg.header.frame_id), scan))
 
-    def _place_range_scans(self, robot: _Robot, stamp_ns: int, camera: npt.NDArray[np.float64]) -> None:
+    def _place_range_scans(self, namespace: str, robot: _Robot, stamp_ns: int,
+                           camera: npt.NDArray[np.float64]) -> None:
         """Attach waiting range scans stamped up to ``stamp_ns`` (the annotated scan about to be added).
 
-        A waiting scan's pose holds the lidar in the camera frame; its map pose comes from the camera
-        pose interpolated between the robot's previous annotated scan and this one.
+        A scan's map pose is the camera pose interpolated between the robot's previous annotated
+        scan and this one, composed with the lidar's mount in the camera frame.
         """
-        while robot.range_scans and robot.range_scans[0].stamp_ns <= stamp_ns:
-            scan = robot.range_scans.popleft()
+        waiting = self._range_scans.get(namespace)
+        while waiting and waiting[0][1].stamp_ns <= stamp_ns:
+            frame_id, scan = waiting.popleft()
             if robot.stamps_ns and scan.stamp_ns >= robot.stamps_ns[-1]:
                 before, t0 = robot.poses[-1], robot.stamps_ns[-1]
                 fraction = (scan.stamp_ns - t0) / (stamp_ns - t0) if stamp_ns > t0 else 1.0
@@ -319,8 +341,41 @@ class FusionStage:
                 at = robot.pose_at(scan.stamp_ns)
             if at is None:
                 self.context.count("range_scans_unplaced")
-            elif robot.fusion.add_range_scan(scan._replace(pose=se2.compose(at, scan.pose))):
+                continue
+            lidar, sweep = self._lidar_in_camera(namespace, frame_id)
+            placed = scan._replace(pose=se2.compose(at, lidar), points_xy=scan.points_xy * (1.0, sweep))
+            if robot.fusion.add_range_scan(placed):
                 self.context.count("range_scans_attached")
+
+    def _lidar_in_camera(self, namespace: str, frame_id: str) -> tuple[npt.NDArray[np.float64], float]:
+        """The lidar frame ``frame_id`` in the camera's floor frame, and -1.0 if its bearings turn
+        clockwise in the base frame (mounted upside down), else 1.0: from the robot's tf_static, or
+        from the ``lidar_*_in_base`` settings when that has no transform from the base frame."""
+        tf = self._tf.get(namespace)
+        base = f"{namespace.strip('/')}/{self.base_frame}" if namespace.strip("/") else self.base_frame
+        try:
+            if tf is None:
+                raise LookupError("no tf_static received")
+            if base not in tf.frames:
+                base = self.base_frame  # a tree with frames not prefixed by the namespace
+            transform = tf.lookup(base, frame_id, None)
+        except LookupError as err:
+            self.context.count("range_scans_mount_from_settings")
+            self._log_mount(namespace, frame_id, "settings", self.lidar_in_base, str(err))
+            return se2.between(self.mount, self.lidar_in_base), 1.0
+        pose, sweep = sensor_pose(transform, np.ones(1))
+        mount = np.array(pose, dtype=np.float64)
+        self._log_mount(namespace, frame_id, "tf", mount, f"from {base!r}")
+        return se2.between(self.mount, mount), float(sweep[0])
+
+    def _log_mount(self, namespace: str, frame_id: str, source: str, mount: npt.NDArray[np.float64],
+                   detail: str) -> None:
+        if self._mount_sources.get((namespace, frame_id)) == source:
+            return
+        self._mount_sources[namespace, frame_id] = source
+        level = logging.INFO if source == "tf" else logging.WARNING
+        log.log(level, "robot %r: lidar %r at (%.3f m, %.3f m, %.3f rad) in the base frame from %s (%s)",
+                namespace or "/", frame_id, *mount, source, detail)
 
     def _take_poses(self) -> None:
         while self.poses is not None and (item := self.poses.receive()) is not None:

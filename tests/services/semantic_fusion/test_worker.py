@@ -26,8 +26,16 @@ from services.semantic_fusion import (
     label_accuracy,
     se2,
 )
-from services.semantic_fusion.synthetic import CLASS_NAMES, Warehouse, make_warehouse, simulate_run, truth_labels
+from services.semantic_fusion.synthetic import (
+    CLASS_NAMES,
+    SimulatedRun,
+    Warehouse,
+    make_warehouse,
+    simulate_run,
+    truth_labels,
+)
 from services.semantic_fusion.worker import FusionStage, fusion_stage
+from services.simulator.rosmsgs import tf_message, transform_stamped
 from shared import messages
 from shared.bus import Bus, Publisher
 from shared.settings import Settings, ZenohSettings
@@ -273,8 +281,9 @@ def test_corrected_poses_pull_a_drifting_robot_onto_the_map(
     assert _accuracy(_stored_layers(sqlite_store), warehouse) >= 0.97
 
 
-def _laser_message(scan: RangeScan, *, fov_rad: float, beams: int) -> Any:
-    """sensor_msgs/LaserScan with ``scan``'s returns in their beams (the others +inf)."""
+def _laser_message(scan: RangeScan, *, fov_rad: float, beams: int, frame_id: str, yaw_rad: float = 0.0) -> Any:
+    """sensor_msgs/LaserScan with ``scan``'s returns in their beams (the others +inf), as a lidar in the same
+    place turned ``yaw_rad`` left of the synthetic one sees them."""
     cls = messages.message_class
     increment = fov_rad / (beams - 1)
     ranges = np.full(beams, np.inf, dtype=np.float32)
@@ -282,31 +291,74 @@ def _laser_message(scan: RangeScan, *, fov_rad: float, beams: int) -> Any:
     ranges[np.round((bearings + fov_rad / 2) / increment).astype(int)] = np.hypot(*scan.points_xy.T)
     stamp = cls("builtin_interfaces/msg/Time")(sec=scan.stamp_ns // 10**9, nanosec=scan.stamp_ns % 10**9)
     return cls(messages.LASER_SCAN)(
-        header=cls("std_msgs/msg/Header")(stamp=stamp, frame_id="laser"), angle_min=-fov_rad / 2,
-        angle_max=fov_rad / 2, angle_increment=increment, time_increment=0.0, scan_time=0.1, range_min=0.05,
-        range_max=20.0, ranges=ranges, intensities=np.zeros(0, dtype=np.float32))
+        header=cls("std_msgs/msg/Header")(stamp=stamp, frame_id=frame_id), angle_min=-fov_rad / 2 - yaw_rad,
+        angle_max=fov_rad / 2 - yaw_rad, angle_increment=increment, time_increment=0.0, scan_time=0.1,
+        range_min=0.05, range_max=20.0, ranges=ranges, intensities=np.zeros(0, dtype=np.float32))
 
 
-def test_the_robots_lidar_keeps_a_drifting_robots_map_straight(
+def _publish_drive(robots: Bus, stage_bus: Bus, namespace: str, run: SimulatedRun, *, beams: int, laser_frame: str,
+                   laser_yaw_rad: float, base_frame: str | None) -> None:
+    """Publish ``run``'s annotated scans and lidar (ahead of them, as a labeller's latency makes it) under
+    ``namespace``, the lidar turned ``laser_yaw_rad`` in its place 0.3 m ahead of the base; unless ``base_frame``
+    is None its mount in that frame goes out first on tf_static, as the simulator sends it."""
+    if base_frame is not None:
+        mount = transform_stamped(run.scans[0].stamp_ns, base_frame, laser_frame, (0.3, 0.0, 0.2),
+                                  quaternion_from_yaw(laser_yaw_rad))
+        sent = stage_bus.counters.snapshot().get(f"{STAGE}.tf_static.received", 0) + 1
+        robots.publisher("tf_static", messages.TF_MESSAGE, namespace=namespace).publish(tf_message([mount])[1])
+        wait_for(lambda: stage_bus.counters.snapshot().get(f"{STAGE}.tf_static.received", 0) == sent,
+                 what="the lidar's mount to reach the stage")
+    ranges = {r.stamp_ns: r for r in run.range_scans}
+    scans = _publisher(robots, namespace)
+    lidar = robots.publisher("scan", messages.LASER_SCAN, namespace=namespace)
+    lag = 5  # the labeller's latency: raw lidar scans are half a second ahead of the annotated ones
+    for i, scan in enumerate(run.scans):
+        ahead = run.scans[min(i + lag, len(run.scans) - 1)].stamp_ns if i else -1
+        for stamp in [s for s in ranges if s <= ahead or i == len(run.scans) - 1]:
+            lidar.publish(_laser_message(ranges.pop(stamp), fov_rad=1.5 * np.pi, beams=beams, frame_id=laser_frame,
+                                         yaw_rad=laser_yaw_rad))
+        scans.publish(_message(scan))
+
+
+def test_the_robots_lidar_mounted_as_its_tf_says_keeps_a_drifting_robots_map_straight(
         zenoh_listen: ZenohSettings, sqlite_store: MapStore) -> None:
     warehouse = make_warehouse(length_m=30.0, width_m=18.0, seed=0)
     beams = 541
     run = simulate_run(warehouse, seed=100, odometry_yaw_bias_per_m=0.002, lidar_beams=beams)
-    ranges = {r.stamp_ns: r for r in run.range_scans}
-    factory = functools.partial(FusionStage, store_period_s=0.2, range_scan_topic="scan",
-                                camera_x_in_base_m=MOUNT[0], camera_y_in_base_m=MOUNT[1],
-                                camera_yaw_in_base_rad=MOUNT[2], lidar_x_in_base_m=0.3)
-    with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, _):
-        scans = _publisher(robots, "robot1")
-        lidar = robots.publisher("scan", messages.LASER_SCAN, namespace="robot1")
-        lag = 5  # the labeller's latency: raw lidar scans are half a second ahead of the annotated ones
-        for i, scan in enumerate(run.scans):
-            ahead = run.scans[min(i + lag, len(run.scans) - 1)].stamp_ns if i else -1
-            for stamp in [s for s in ranges if s <= ahead or i == len(run.scans) - 1]:
-                lidar.publish(_laser_message(ranges.pop(stamp), fov_rad=1.5 * np.pi, beams=beams))
-            scans.publish(_message(scan))
+    # the lidar is on by default; its mount settings (the base origin) are wrong for this robot (on them this
+    # run labels 95.8 % right): tf has it
+    factory = functools.partial(FusionStage, store_period_s=0.2, camera_x_in_base_m=MOUNT[0],
+                                camera_y_in_base_m=MOUNT[1], camera_yaw_in_base_rad=MOUNT[2])
+    with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, stage_bus):
+        _publish_drive(robots, stage_bus, "robot1", run, beams=beams, laser_frame="robot1/laser", laser_yaw_rad=0.1,
+                       base_frame="robot1/base_link")
         _wait_for_input(sqlite_store, run.scans[-1].stamp_ns)
     counters = _counters(sqlite_store)
     assert counters[f"{STAGE}.range_scans_attached"] > 100
+    assert counters.get(f"{STAGE}.range_scans_mount_from_settings", 0) == 0
     assert counters.get(f"{STAGE}.bad_range_scans", 0) == 0
+    assert _accuracy(_stored_layers(sqlite_store), warehouse) >= 0.97
+
+
+def test_each_robot_has_its_own_lidar_mount_from_its_tf_or_else_the_settings(
+        zenoh_listen: ZenohSettings, sqlite_store: MapStore) -> None:
+    warehouse = make_warehouse(length_m=30.0, width_m=18.0, seed=0)
+    beams = 541
+    run = simulate_run(warehouse, seed=100, lidar_beams=beams, max_scans=150)
+    factory = functools.partial(FusionStage, store_period_s=0.2, camera_x_in_base_m=MOUNT[0],
+                                camera_y_in_base_m=MOUNT[1], camera_yaw_in_base_rad=MOUNT[2], lidar_x_in_base_m=0.3)
+    with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, stage_bus):
+        # same frame names (not prefixed), different lidars: robot1's is turned, and tf says so; robot2 sends no tf
+        _publish_drive(robots, stage_bus, "robot1", run, beams=beams, laser_frame="laser", laser_yaw_rad=0.1,
+                       base_frame="base_link")
+        _publish_drive(robots, stage_bus, "robot2", run, beams=beams, laser_frame="laser", laser_yaw_rad=0.0,
+                       base_frame=None)
+        received = {"annotated_scan": 2 * len(run.scans), "scan": 2 * len(run.range_scans)}
+        wait_for(lambda: all(stage_bus.counters.snapshot().get(f"{STAGE}.{topic}.received", 0) == n
+                             for topic, n in received.items()), what="both robots' scans to reach the stage")
+    counters = _counters(sqlite_store)  # the final heartbeat, after the stop drained every queued scan
+    assert counters[f"{STAGE}.robots"] == 2
+    # at most one range scan per keyframe: more than half the keyframes (the robots drove the same route) is both
+    assert counters[f"{STAGE}.range_scans_attached"] > counters[f"{STAGE}.keyframes"] / 2
+    assert 0 < counters[f"{STAGE}.range_scans_mount_from_settings"] <= len(run.range_scans)  # robot2's only
     assert _accuracy(_stored_layers(sqlite_store), warehouse) >= 0.97
