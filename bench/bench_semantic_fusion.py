@@ -206,9 +206,10 @@ def hall_slam(n_scans: int) -> None:
     warehouse = syn.make_warehouse(length_m=250.0, width_m=72.0, n_forklifts=6, n_humans=10, seed=7)
     run = syn.simulate_run(warehouse, seed=8, n_cones=160, lidar_beams=541, max_scans=n_scans)
     print(f"hall_slam_scans {len(run.scans)} count")
-    for tag, lidar, long_baseline in (("slam", False, 0), ("slam_lidar", True, 0), ("slam_lidar_long", True, 20)):
-        fusion = SemanticFusion(FusionSettings(resolution_m=RESOLUTION_M,
-                                               sequential_long_baseline_keyframes=long_baseline))
+    long_baseline = FusionSettings().sequential_long_baseline_keyframes
+    for tag, lidar, back in (("slam", False, long_baseline), ("slam_lidar", True, long_baseline),
+                             ("slam_lidar_no_long_baseline", True, 0)):
+        fusion = SemanticFusion(FusionSettings(resolution_m=RESOLUTION_M, sequential_long_baseline_keyframes=back))
         cpu = _feed(fusion, run, lidar=lidar)
         truth_kf = _keyframe_truth(fusion, run)
         print(f"hall_{tag}_rate {len(run.scans) / cpu:.0f} scans/s (CPU, {fusion.graph.n_keyframes} keyframes, "
