@@ -231,12 +231,14 @@ def main() -> None:
     parser.add_argument("--skip-hall", action="store_true")
     parser.add_argument("--only-hall", action="store_true")
     parser.add_argument("--hall-slam-scans", type=int, default=8000)
+    parser.add_argument("--skip-hall-grid", action="store_true", help="of the big hall, run only the SLAM part")
     args = parser.parse_args()
     with threadpool_limits(1):
         if not args.only_hall:
             accuracy(args.png_dir)
         if not args.skip_hall:
-            hall()
+            if not args.skip_hall_grid:
+                hall()
             hall_slam(args.hall_slam_scans)
 
 
