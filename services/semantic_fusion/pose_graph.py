@@ -76,7 +76,7 @@ class PoseGraph:
         min_yaw_sigma_rad: float = 0.001,
         loop_sigmas: tuple[float, float, float] = (0.05, 0.05, 0.01),
         loop_kernel: float | None = None,
-        relinearize_threshold: float = 0.01,
+        relinearize_threshold: float = 0.001,
     ) -> None:
         if min(odometry_sigma_per_m, odometry_yaw_sigma_per_m, min_sigma_m, min_yaw_sigma_rad,
                1.0 if loop_kernel is None else loop_kernel, relinearize_threshold) <= 0:
