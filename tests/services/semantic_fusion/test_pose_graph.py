@@ -49,6 +49,10 @@ def test_pose_graph_rejects_unknown_keyframes_and_bad_noise() -> None:
         graph.add_loop_closure(0, 3, [1.0, 0.0, 0.0])
     with pytest.raises(SemanticFusionError, match="sigmas"):
         graph.add_pose_prior(0, [0.0, 0.0, 0.0], sigmas=(0.1, -1.0, 0.1))
+    with pytest.raises(SemanticFusionError, match="max_iterations"):
+        graph.optimise(max_iterations=0)
+    with pytest.raises(SemanticFusionError, match="relinearize_threshold"):
+        PoseGraph(relinearize_threshold=0.0)
 
 
 def test_incremental_optimum_matches_a_batch_solve_of_the_same_graph() -> None:
