@@ -322,7 +322,6 @@ class SemanticFusion:
             dropped += 1
             log.debug("loop closure %d -> %d dropped: the optimised graph disagrees with it", closure.from_key,
                       closure.to_key)
-            self.graph.set_poses(before)
             self.graph.optimise()
         self._reproject_moved(before)
         return accepted

@@ -1,4 +1,4 @@
-"""A 2-D pose graph of keyframes, optimised as nonlinear least squares with GTSAM.
+"""A 2-D pose graph of keyframes, optimised incrementally as nonlinear least squares with GTSAM's iSAM2.
 
 Vertices are keyframe poses (x, y, yaw) in the map frame. Edges: odometry between consecutive
 keyframes (noise growing with the distance driven), loop closures from scan matching (optionally
@@ -6,6 +6,11 @@ behind a Cauchy kernel; off by default, since the kernel also mutes the first, l
 after a long drift, the one that matters most -- matches are vetted before they get here), and
 absolute priors: the first keyframe's pose anchors the map frame, and corrected poses the robot
 publishes enter as priors on their keyframes.
+
+New keyframes and factors wait until :meth:`PoseGraph.optimise`, which hands them (and the loop
+closures removed since) to iSAM2 in one update: only the part of the Bayes tree they touch is
+re-eliminated and relinearised, not the whole trajectory as a batch solve would. Until then the
+estimates stay as they were, so a caller can compare them before and after an optimisation.
 """
 
 from __future__ import annotations
@@ -57,6 +62,9 @@ class PoseGraph:
         Default loop-closure noise (x m, y m, yaw rad).
     loop_kernel : float, optional
         Cauchy kernel width on whitened loop-closure residuals; ``None`` for plain least squares.
+    relinearize_threshold : float
+        iSAM2 relinearises a keyframe once its update since its linearisation point exceeds this
+        (metres and radians alike, in the keyframe's tangent space).
     """
 
     def __init__(
@@ -68,22 +76,39 @@ class PoseGraph:
         min_yaw_sigma_rad: float = 0.001,
         loop_sigmas: tuple[float, float, float] = (0.05, 0.05, 0.01),
         loop_kernel: float | None = None,
+        relinearize_threshold: float = 0.001,
     ) -> None:
         if min(odometry_sigma_per_m, odometry_yaw_sigma_per_m, min_sigma_m, min_yaw_sigma_rad,
-               1.0 if loop_kernel is None else loop_kernel) <= 0:
-            raise SemanticFusionError("odometry noise, minimum sigmas and loop_kernel must be positive")
+               1.0 if loop_kernel is None else loop_kernel, relinearize_threshold) <= 0:
+            raise SemanticFusionError(
+                "odometry noise, minimum sigmas, loop_kernel and relinearize_threshold must be positive")
         _sigmas(loop_sigmas, "loop_sigmas")
         self._per_m = (odometry_sigma_per_m, odometry_yaw_sigma_per_m)
         self._min = (min_sigma_m, min_yaw_sigma_rad)
         self._loop_sigmas = loop_sigmas
         self._kernel = loop_kernel
-        self._graph = gtsam.NonlinearFactorGraph()
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(relinearize_threshold)
+        params.relinearizeSkip = 1
+        self._isam = gtsam.ISAM2(params)
+        self._pending: dict[int, gtsam.NonlinearFactor] = {}  # by serial number, not yet in iSAM2
+        self._n_factors = 0  # serial numbers handed out
+        self._n_sent = 0  # keyframes whose values iSAM2 has
+        self._isam_index: dict[int, int] = {}  # serial number -> iSAM2 factor index, loop closures only
+        self._removed: list[int] = []  # iSAM2 indices of loop closures to take out at the next update
         self._odometry = np.zeros((64, 3))
         self._estimate = np.zeros((64, 3))
         self._n = 0
         self.loop_closures: list[Constraint] = []
-        self._loop_factors: list[int] = []
+        self._loop_factors: list[int] = []  # serial numbers, parallel to loop_closures
         self.n_scan_matches = 0
+
+    def _add(self, factor: gtsam.NonlinearFactor) -> int:
+        """Queue ``factor`` for the next iSAM2 update; return its serial number."""
+        serial = self._n_factors
+        self._pending[serial] = factor
+        self._n_factors += 1
+        return serial
 
     @property
     def n_keyframes(self) -> int:
@@ -120,12 +145,12 @@ class PoseGraph:
         key = self.n_keyframes
         if key == 0:
             anchor = _sigmas((self._min[0], self._min[0], self._min[1]), "anchor")
-            self._graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*pose), anchor))
+            self._add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*pose), anchor))
             estimate = pose
         else:
             step = se2.between(self._odometry[key - 1], pose)
-            self._graph.add(gtsam.BetweenFactorPose2(key - 1, key, gtsam.Pose2(*step),
-                                                     _sigmas(self._step_sigmas(step), "odometry")))
+            self._add(gtsam.BetweenFactorPose2(key - 1, key, gtsam.Pose2(*step),
+                                               _sigmas(self._step_sigmas(step), "odometry")))
             estimate = se2.compose(self._estimate[key - 1], step)
         if key == self._odometry.shape[0]:
             self._odometry = np.vstack([self._odometry, np.zeros_like(self._odometry)])
@@ -162,32 +187,28 @@ class PoseGraph:
         noise: gtsam.noiseModel.Base = _sigmas(chosen, "loop closure")
         if self._kernel is not None:
             noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(self._kernel), noise)
-        self._loop_factors.append(self._graph.size())
-        self._graph.add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel), noise))
+        self._loop_factors.append(self._add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel), noise)))
         self.loop_closures.append(Constraint(from_key, to_key, (rel[0], rel[1], rel[2]), chosen))
 
     def remove_loop_closure(self, index: int) -> Constraint:
         """Take loop closure ``index`` (position in :attr:`loop_closures`) out of the graph; return it.
 
-        For a closure the optimised graph disagrees with. Estimates stay as they are: restore or
-        re-optimise them.
+        For a closure the optimised graph disagrees with. Estimates stay as they are until the next
+        :meth:`optimise`, which takes the factor out of iSAM2 and moves them to the optimum without it.
         """
         if not 0 <= index < len(self.loop_closures):
             raise SemanticFusionError(f"loop closure {index} does not exist (have {len(self.loop_closures)})")
-        self._graph.remove(self._loop_factors.pop(index))
+        serial = self._loop_factors.pop(index)
+        if serial in self._pending:
+            del self._pending[serial]
+        else:
+            self._removed.append(self._isam_index.pop(serial))
         return self.loop_closures.pop(index)
 
     def constraint_error(self, constraint: Constraint) -> npt.NDArray[np.float64]:
         """How far the current estimates are from ``constraint``: (x m, y m, yaw rad) in ``to_key``'s frame."""
         estimated = se2.between(self._estimate[constraint.from_key], self._estimate[constraint.to_key])
         return se2.between(estimated, np.asarray(constraint.relative))
-
-    def set_poses(self, poses: npt.ArrayLike) -> None:
-        """Replace every estimate, (n, 3) (e.g. to restore the ones before a rejected optimisation)."""
-        p = np.asarray(poses, dtype=np.float64)
-        if p.shape != (self._n, 3) or not np.all(np.isfinite(p)):
-            raise SemanticFusionError(f"need ({self._n}, 3) finite poses, got {p.shape}")
-        self._estimate[: self._n] = p
 
     def add_scan_match(self, from_key: int, to_key: int, relative_pose: npt.ArrayLike,
                        information: npt.ArrayLike, *, reseed: bool = True) -> None:
@@ -208,8 +229,8 @@ class PoseGraph:
         if info.shape != (3, 3) or not np.all(np.isfinite(info)) or not np.allclose(info, info.T) or np.min(
                 np.linalg.eigvalsh(info)) <= 0:
             raise SemanticFusionError("scan match information must be a symmetric positive definite (3, 3) matrix")
-        self._graph.add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel),
-                                                 gtsam.noiseModel.Gaussian.Information(info)))
+        self._add(gtsam.BetweenFactorPose2(from_key, to_key, gtsam.Pose2(*rel),
+                                           gtsam.noiseModel.Gaussian.Information(info)))
         self.n_scan_matches += 1
         if reseed and to_key == self._n - 1:
             self._estimate[to_key] = se2.compose(self._estimate[from_key], rel)
@@ -217,19 +238,37 @@ class PoseGraph:
     def add_pose_prior(self, key: int, pose: npt.ArrayLike, *, sigmas: tuple[float, float, float]) -> None:
         """Constrain keyframe ``key`` to a corrected map-frame ``pose`` (as a robot's localiser publishes)."""
         self._check_key(key)
-        self._graph.add(gtsam.PriorFactorPose2(key, gtsam.Pose2(*_pose3(pose, "pose prior")),
-                                               _sigmas(sigmas, "pose prior")))
+        self._add(gtsam.PriorFactorPose2(key, gtsam.Pose2(*_pose3(pose, "pose prior")),
+                                         _sigmas(sigmas, "pose prior")))
 
     def optimise(self, *, max_iterations: int = 100) -> npt.NDArray[np.float64]:
-        """Re-optimise every pose (Levenberg-Marquardt from the current estimates); return (n, 3) poses."""
+        """Bring the queued keyframes, factors and removals into iSAM2 and iterate; return (n, 3) poses.
+
+        New keyframes enter at their current estimates. After the update, further (Gauss-Newton)
+        updates run until none relinearises a keyframe or ``max_iterations`` updates have run, so a
+        large correction (a long loop closed, a closure dropped) converges as a batch solve would.
+        """
         if self.n_keyframes == 0:
             return self.poses
+        if max_iterations < 1:
+            raise SemanticFusionError(f"max_iterations must be at least 1, got {max_iterations}")
+        factors = gtsam.NonlinearFactorGraph()
+        for factor in self._pending.values():
+            factors.add(factor)
         initial = gtsam.Values()
-        for key, pose in enumerate(self._estimate[: self._n]):
-            initial.insert(key, gtsam.Pose2(*pose))
-        params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(max_iterations)
-        result = gtsam.LevenbergMarquardtOptimizer(self._graph, initial, params).optimize()
-        optimised = np.asarray(gtsam.utilities.extractPose2(result), dtype=np.float64).reshape(-1, 3)
-        self._estimate[: self._n] = optimised
+        for key in range(self._n_sent, self._n):
+            initial.insert(key, gtsam.Pose2(*self._estimate[key]))
+        result = self._isam.update(factors, initial, self._removed)
+        loops = set(self._loop_factors)
+        for serial, index in zip(self._pending, result.getNewFactorsIndices(), strict=True):
+            if serial in loops:
+                self._isam_index[serial] = index
+        self._pending.clear()
+        self._removed = []
+        self._n_sent = self._n
+        for _ in range(max_iterations - 1):
+            if not self._isam.update().getVariablesRelinearized():
+                break
+        estimate = gtsam.utilities.extractPose2(self._isam.calculateEstimate())
+        self._estimate[: self._n] = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
         return self.poses
