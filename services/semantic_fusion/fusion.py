@@ -220,11 +220,14 @@ class SemanticFusion:
         (scaled by ``sequential_information_scale`` for the correlation between neighbouring points),
         ``key``'s estimate moves to it and its points are re-projected. Directions the points leave
         open stay at odometry, through an odometry prior inside the alignment. With
-        ``sequential_long_baseline_keyframes`` > 0 and a range scan on ``key``, a second alignment,
-        against the range scans around that many keyframes back (accepted with
+        ``sequential_long_baseline_keyframes`` > 0 and a range scan on every
+        ``sequential_long_baseline_every_keyframes``-th ``key``, a second alignment, against the
+        range scans around that many keyframes back (accepted with
         ``sequential_long_baseline_min_inlier_fraction``, since part of what the lidar sees now was
-        out of its range then), ties ``key`` to them directly, so the chain's random error does not
-        add up keyframe by keyframe. The camera cone does not see that far back.
+        out of its range then), ties ``key``'s heading to them directly, so the chain's yaw error
+        does not add up keyframe by keyframe. Only the heading: seen from the other side that far on,
+        the same uprights give a translation the alignment's information overstates. The camera
+        cone does not see that far back.
         """
         cfg = self.settings
         if key < 1 or cfg.sequential_submap_keyframes < 1:
@@ -265,11 +268,10 @@ class SemanticFusion:
         if alignment.inlier_fraction < min_inliers or alignment.rmse_m > cfg.sequential_max_rmse_m:
             return False
         floor = 1.0 / cfg.sequential_min_sigma_m**2
-        information = alignment.information * cfg.sequential_information_scale
-        if heading_only:
-            information = np.diag([floor, floor, 1.0 / np.linalg.inv(information)[2, 2]])
-        values, vectors = np.linalg.eigh(information)
+        values, vectors = np.linalg.eigh(alignment.information * cfg.sequential_information_scale)
         information = (vectors * np.maximum(values, floor)) @ vectors.T
+        if heading_only:  # the yaw marginal; the floor keeps the inverse finite on a lone straight wall
+            information = np.diag([floor, floor, 1.0 / np.linalg.inv(information)[2, 2]])
         self.graph.add_scan_match(anchor, key, alignment.pose, (information + information.T) / 2, reseed=reseed)
         return True
 
