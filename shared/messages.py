@@ -11,6 +11,8 @@ from typing import Any, Final
 
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
+from rosbags.typesys.stores.ros2_jazzy import builtin_interfaces__msg__Time as Time
+from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
 
 MSG_DIR: Final = Path(__file__).parent / "msg"
 
@@ -66,6 +68,22 @@ def deserialize(payload: bytes | memoryview, msgtype: str) -> Any:
 def message_class(msgtype: str) -> Any:
     """The rosbags dataclass for ``msgtype``, to build messages with."""
     return TYPESTORE.types[msgtype]
+
+
+def stamp_ns(header: Header) -> int:
+    """A header's stamp as integer nanoseconds."""
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def time_msg(ns: int) -> Time:
+    """``builtin_interfaces/Time`` at ``ns`` nanoseconds."""
+    sec, nanosec = divmod(int(ns), 1_000_000_000)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def header(ns: int, frame_id: str) -> Header:
+    """``std_msgs/Header`` stamped ``ns`` nanoseconds in frame ``frame_id``."""
+    return Header(stamp=time_msg(ns), frame_id=frame_id)
 
 
 def type_hash(msgtype: str) -> str:
