@@ -14,6 +14,7 @@ import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
@@ -235,6 +236,7 @@ def decompose(
     structure_min_area_m2: float = 0.5,
     neck_half_width_m: float = 0.5,
     room_min_area_m2: float = 1.5,
+    clean: bool = True,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -280,6 +282,9 @@ def decompose(
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
         way and whose lattices line up along diagonals, still vote in the radiograms.
+    clean : bool
+        Clean the map first (:func:`~services.grid_decomposition.cleaning.clean_occupancy`: wall
+        fringes, specks, laser streaks); the outputs then cover the cleaned free space.
     seed : int
         Seed of the clusterings.
 
@@ -293,6 +298,10 @@ def decompose(
         For grids that are not 2-D, too small, out of range, or without free space.
     """
     occ = _check(occupancy, resolution_m)
+    if clean:
+        cleaned, _ = clean_occupancy(occ, resolution_m=resolution_m)
+        if np.any((cleaned >= 0) & (cleaned < FREE_PERCENT)):
+            occ = cleaned
     if n_categories < 1:
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
     free = (occ >= 0) & (occ < FREE_PERCENT)
