@@ -24,7 +24,7 @@ import os
 import statistics
 import time
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -168,7 +168,7 @@ def rose2_occupancy(grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int8]:
     return occ[::-1].copy()
 
 
-def _common(*images: npt.NDArray[np.generic]) -> list[npt.NDArray[np.generic]]:
+def _common(*images: npt.NDArray[Any]) -> list[npt.NDArray[Any]]:
     """Images cut to their common top-left part (one ROSE2 ground truth is a row shorter than its map)."""
     h = min(i.shape[0] for i in images)
     w = min(i.shape[1] for i in images)

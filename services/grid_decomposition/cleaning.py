@@ -65,7 +65,7 @@ def clean_occupancy(
     resolution_m: float,
     clear_free_percent: int = 1,
     fringe_depth_m: float = 0.3,
-    speck_max_area_m2: float = 0.01,
+    speck_max_area_m2: float = 0.0025,
     streak_width_m: float = 0.25,
     fan_gap_m: float = 0.25,
     min_free_area_m2: float = 0.5,
@@ -113,7 +113,7 @@ def clean_occupancy(
     free &= ~fringe
     occupied |= fringe
 
-    speck_px = max(1, round(speck_max_area_m2 / px))
+    speck_px = int(speck_max_area_m2 / px + 1e-9)
     candidate = _small_components(occupied, speck_px)
     # a speck has only free cells around it (a small blob on a wall or at unknown space stays)
     other = cv2.dilate((~free & ~candidate).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
