@@ -225,8 +225,8 @@ def decompose(
     n_texture_regions: int | None = None,
     n_categories: int = 8,
     label_overrides: Mapping[int, Label] | None = None,
-    door_max_width_m: float = 2.5,
-    cut_max_width_m: float | None = None,
+    door_max_width_m: float = 2.0,
+    cut_max_width_m: float = 2.5,
     wall_min_length_m: float = 0.5,
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
@@ -238,6 +238,7 @@ def decompose(
     neck_half_width_m: float = 0.5,
     room_min_area_m2: float = 1.5,
     clean: bool = True,
+    streak_reach_m: float = 2.0,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -260,13 +261,15 @@ def decompose(
         k of the k-means place categorisation.
     label_overrides : mapping, optional
         Place category -> :class:`Label`, replacing the automatic assignment.
-    door_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
-        Doorways up to ``door_max_width_m`` wide. Along lines: gaps between wall runs of at least
+    door_max_width_m, cut_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
+        Along lines, doorways up to ``door_max_width_m`` wide: gaps between wall runs of at least
         ``wall_min_length_m`` are closed when the free space behind them widens by
         ``door_widening_m`` on both sides within ``door_max_depth_m`` of the line (a corridor or a
         passage between blocks does not); walls within ``wall_tolerance_m`` of a line are on it.
-        Off the lines, doorways are found from the free space itself
-        (:func:`~services.grid_decomposition.doorways.find_doorways`, same width and widening).
+        Off the lines, doorways up to ``cut_max_width_m`` wide are found from the free space itself
+        (:func:`~services.grid_decomposition.doorways.find_doorways`, same widening). On real maps
+        the gaps between furniture along a line closed as doors up to 2.5 m and cut furnished
+        rooms apart; 2.0 m keeps the ipa doors.
     face_disparity_threshold, edge_occupancy_threshold : float
         t1, t2 of the cogency test.
     min_region_area_m2 : float
@@ -285,7 +288,11 @@ def decompose(
         way and whose lattices line up along diagonals, still vote in the radiograms.
     clean : bool
         Clean the map first (:func:`~services.grid_decomposition.cleaning.clean_occupancy`: wall
-        fringes, specks, laser streaks); the outputs then cover the cleaned free space.
+        fringes, specks, laser streaks): the decomposition sees the cleaned map; the streaks it
+        took out are labelled with the region they grow from, up to ``streak_reach_m`` from it
+        (a wall fringe is never labelled).
+    streak_reach_m : float
+        See ``clean``.
     seed : int
         Seed of the clusterings.
 
@@ -299,10 +306,11 @@ def decompose(
         For grids that are not 2-D, too small, out of range, or without free space.
     """
     occ = _check(occupancy, resolution_m)
+    streaks = np.zeros(occ.shape, dtype=bool)
     if clean:
-        cleaned, _ = clean_occupancy(occ, resolution_m=resolution_m)
+        cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
         if np.any((cleaned >= 0) & (cleaned < FREE_PERCENT)):
-            occ = cleaned
+            occ, streaks = cleaned, cleaning.streaks
     if n_categories < 1:
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
     free = (occ >= 0) & (occ < FREE_PERCENT)
@@ -384,15 +392,17 @@ def decompose(
         floor_px,
         wall | door,
         resolution_m=resolution_m,
-        door_max_width_m=door_max_width_m if cut_max_width_m is None else cut_max_width_m,
+        door_max_width_m=cut_max_width_m,
         door_widening_m=door_widening_m,
         door_max_depth_m=door_max_depth_m,
         room_min_area_m2=room_min_area_m2,
         neck_half_width_m=neck_half_width_m,
     )
+    # the streaks the cleaning took out are free space: they take the region they grow from
+    segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
-    labels = np.where(free, labels, 0).astype(np.uint8)
+    labels = np.where(free | streaks, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(
         sub,
