@@ -27,6 +27,7 @@ class Cleaning(NamedTuple):
     specks: npt.NDArray[np.bool_]  # isolated obstacle specks in free space, now free
     streaks: npt.NDArray[np.bool_]  # thin free space (laser streaks), now unknown
     filled: npt.NDArray[np.bool_]  # unknown gaps inside dense fans of free space, now free
+    rays: npt.NDArray[np.bool_]  # thin free space that stays (rays near rooms, fans): its edges are no walls
 
 
 def _disk(radius_px: int) -> npt.NDArray[np.uint8]:
@@ -127,12 +128,18 @@ def clean_occupancy(
 
     unknown = ~free & ~occupied
     gap = max(1, round(fan_gap_m / resolution_m))
+    width = max(1, round(streak_width_m / resolution_m / 2))
+    # rays: free space too thin for the opening; a fan of them closes into a body
+    rays = free & ~cv2.morphologyEx(free.astype(np.uint8), cv2.MORPH_OPEN, _disk(width)).astype(bool)
     closed = cv2.morphologyEx(free.astype(np.uint8), cv2.MORPH_CLOSE, _disk(gap)).astype(bool)
+    between_rays = cv2.morphologyEx(rays.astype(np.uint8), cv2.MORPH_CLOSE, _disk(gap)).astype(bool)
     # never next to a wall: the unknown cells along a wall (its grey edge) are wall
     off_walls = cv2.distanceTransform((~occupied).astype(np.uint8), cv2.DIST_L2, 3) > gap
-    filled = closed & unknown & off_walls
+    # only thin unknown (no disk of the gap's radius fits): the wedges between rays, not the
+    # bays of a ragged border with a large unknown space behind it
+    thin = ~cv2.morphologyEx(unknown.astype(np.uint8), cv2.MORPH_OPEN, _disk(gap)).astype(bool)
+    filled = closed & unknown & off_walls & thin & between_rays
     body = free | filled
-    width = max(1, round(streak_width_m / resolution_m / 2))
     opened = cv2.morphologyEx(body.astype(np.uint8), cv2.MORPH_OPEN, _disk(width)).astype(bool)
     kept = opened & ~_small_components(opened, max(1, round(min_free_area_m2 / px)))
     # thin free space near the body (gaps between furniture legs, corners) stays
@@ -146,4 +153,4 @@ def clean_occupancy(
     out[occupied] = np.maximum(out[occupied], 100)
     out[free] = np.where(known[free] & (occ[free] < FREE_PERCENT), occ[free], 0)
     out[streaks] = -1
-    return out, Cleaning(fringe=fringe, specks=specks, streaks=streaks, filled=filled)
+    return out, Cleaning(fringe=fringe, specks=specks, streaks=streaks, filled=filled, rays=rays & free)

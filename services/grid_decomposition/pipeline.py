@@ -306,11 +306,11 @@ def decompose(
         For grids that are not 2-D, too small, out of range, or without free space.
     """
     occ = _check(occupancy, resolution_m)
-    streaks = np.zeros(occ.shape, dtype=bool)
+    streaks = rays = np.zeros(occ.shape, dtype=bool)
     if clean:
         cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
         if np.any((cleaned >= 0) & (cleaned < FREE_PERCENT)):
-            occ, streaks = cleaned, cleaning.streaks
+            occ, streaks, rays = cleaned, cleaning.streaks, cleaning.rays
     if n_categories < 1:
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
     free = (occ >= 0) & (occ < FREE_PERCENT)
@@ -319,7 +319,11 @@ def decompose(
     occupied = known & (occ > OCCUPIED_PERCENT)
     occupancy01 = np.where(known, occ / 100.0, 1.0)
     gradients = oriented_gradients(obstacle)
-    structure = _masked(gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))))
+    # the sides of laser rays are no walls: they would give the map directions of their own
+    ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    structure = _masked(
+        gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
+    )
     global_lines = _lines(gradients, structure, None, resolution_m)
     n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
     texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
