@@ -81,14 +81,14 @@ def clean_occupancy(
        ``clear_free_percent``: an image's grey between the free threshold and white) and lie within
        ``fringe_depth_m`` of an obstacle, joined to it through such cells, are occupied. Maps
        read with integer percentages keep them; trinary maps (0/100/-1) have none.
-    2. *Specks*: occupied components of at most ``speck_max_area_m2`` surrounded by free space are
-       free (single flickering cells); free components of that size in unknown space are unknown.
-    3. *Fans and streaks*: unknown gaps narrower than ``2 * fan_gap_m`` between free cells are
-       bridged (morphological closing of the free space over unknown cells off walls: a room seen
-       through its door as a dense fan of rays stays; with ``fill_fans`` the gaps become free),
-       then free space narrower than
-       ``streak_width_m`` (morphological opening) and free components under ``min_free_area_m2``
-       become unknown (the sparse rays through glass and gaps outside the building).
+    2. *Specks*: occupied components of at most ``speck_max_area_m2`` (one cell at 5 cm: rack
+       uprights are small obstacles too) with only free cells around them are free.
+    3. *Fans and streaks*: free space narrower than ``streak_width_m`` (morphological opening)
+       or in components under ``min_free_area_m2`` becomes unknown where it lies more than
+       ``streak_reach_m`` from the rest: the sparse rays through glass and gaps outside the
+       building; gaps between furniture legs stay. A room seen through its door as a dense fan of
+       rays stays: the unknown wedges between rays (thin, off walls, between rays closer than
+       ``2 * fan_gap_m``) are bridged first, and with ``fill_fans`` they become free.
 
     Parameters
     ----------
