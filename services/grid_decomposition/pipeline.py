@@ -30,7 +30,7 @@ from services.grid_decomposition.regions import (
     road_networks,
     warehouse_floors,
 )
-from services.grid_decomposition.rooms import furniture, segment_rooms
+from services.grid_decomposition.rooms import furniture, segment_rooms, wall_furniture
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
@@ -402,6 +402,10 @@ def decompose(
         room_min_area_m2=room_min_area_m2,
         neck_half_width_m=neck_half_width_m,
     )
+    # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
+    against_walls = wall_furniture(obstacle, resolution_m=resolution_m) & (segments == 0)
+    grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
+    segments = np.where(against_walls, grown, segments)
     # the streaks the cleaning took out are free space: they take the region they grow from
     segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
     pairs = _pairs(segments, sub)
