@@ -14,9 +14,9 @@ from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBea
 
 from api.access import API_KEY_HEADER, READ_METHODS, AccessPolicy, Caller, check_role, required_role
 from api.announce import Announcer
-from api.cache import RevisionCache
-from api.live import LiveMaps
 from api.streams import EventStreams
+from atlas.cache import RevisionCache
+from atlas.live import LiveMaps
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore, Revision

@@ -1,4 +1,4 @@
-"""api.rendering: grid layers as north-up greyscale images."""
+"""atlas.render.layers: grid layers as north-up greyscale images."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from api.rendering import UNKNOWN_GREY, RenderError, encode_png, layer_image
+from atlas.render.layers import UNKNOWN_GREY, RenderError, encode_png, layer_image
 
 
 def test_occupancy_is_white_when_free_black_when_occupied_and_shaded_between() -> None:

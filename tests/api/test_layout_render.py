@@ -1,4 +1,4 @@
-"""api.layout_render and api.layout_svg: what a layout picture shows, where, and that it looks right."""
+"""atlas.render.scene and atlas.render.svg: what a layout picture shows, where, and that it looks right."""
 
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from api.layout_png import render_png
-from api.layout_render import (
+from atlas.render.layers import RenderError
+from atlas.render.png import render_png
+from atlas.render.scene import (
     KIND_STYLES,
     MAX_SIDE_PX,
     NothingToDrawError,
@@ -18,8 +19,7 @@ from api.layout_render import (
     layout_scene,
     view_for,
 )
-from api.layout_svg import render_svg
-from api.rendering import RenderError
+from atlas.render.svg import render_svg
 from services.grid_decomposition.overview import LABEL_COLOURS
 from services.grid_decomposition.semantics import Label
 from services.simulator import ground_truth_features, ground_truth_grids, load_world

@@ -1,4 +1,4 @@
-"""api.exports.mapserver: any grid layer as a ROS map_server YAML + PGM that reads back as the same grid."""
+"""atlas.exports.mapserver: any grid layer as a ROS map_server YAML + PGM that reads back as the same grid."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import numpy.typing as npt
 import pytest
 import yaml
 
-from api.exports import ExportError
-from api.exports.mapserver import map_server_files, occupancy_pixels
+from atlas.exports import ExportError
+from atlas.exports.mapserver import map_server_files, occupancy_pixels
 from services.occupancy_mapping.mapio import read_map_yaml
 from shared.store import GridLayer
 

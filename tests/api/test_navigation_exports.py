@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import yaml
 
-from api.exports.base import ExportNotFoundError, ExportOptions
-from api.exports.lif import export_lif, lif_document
-from api.exports.rmf import export_rmf, rmf_nav_graph
-from api.navigation import Block, write_blocks
+from atlas.exports.base import ExportNotFoundError, ExportOptions
+from atlas.exports.lif import export_lif, lif_document
+from atlas.exports.rmf import export_rmf, rmf_nav_graph
+from atlas.navigation import Block, write_blocks
 from shared.store import GridLayer, MapInfo, MapStore, RevisionWrite
 from tests.api.warehouse_map import warehouse, write_warehouse
 from tests.helpers import data_path

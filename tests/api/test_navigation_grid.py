@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from api.navigation import Frame, find_portals
-from api.navigation.grid import free_cells, grid_path, nearest_cell, segment_clear
+from atlas.navigation import Frame, find_portals
+from atlas.navigation.grid import free_cells, grid_path, nearest_cell, segment_clear
 from shared.store import GridLayer
 
 FRAME = Frame(0.5, -1.0, 2.0, (6, 8))

@@ -7,9 +7,9 @@ import itertools
 import numpy as np
 import pytest
 
-from api.navigation import Block, NavMap, NoRouteError, build_navmap, plan_route
-from api.navigation.graph import region_grid
-from api.navigation.grid import segment_clear
+from atlas.navigation import Block, NavMap, NoRouteError, build_navmap, plan_route
+from atlas.navigation.graph import region_grid
+from atlas.navigation.grid import segment_clear
 from shared.store import GridLayer, TopologyEdge, TopologyNode
 
 RES = 0.1

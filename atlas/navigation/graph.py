@@ -17,17 +17,18 @@ import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
-from api.cache import RevisionCache
-from api.gridlookup import DRIVABLE_PLACES, cached_layer
-from api.navigation.blocks import Block, blocks_of, is_block_edge, is_block_node, region_id
-from api.navigation.errors import NavigationUnavailableError
-from api.navigation.grid import BoolGrid, Frame, Point, free_cells, nearest_cell, region_slices
-from api.navigation.portals import Portal, find_portals
+from atlas.cache import RevisionCache
+from atlas.grids import DRIVABLE_PLACES, cached_layer
+from atlas.navigation.blocks import Block, blocks_of, is_block_edge, is_block_node, region_id
+from atlas.navigation.errors import NavigationUnavailableError
+from atlas.navigation.grid import BoolGrid, Frame, Point, free_cells, nearest_cell, region_slices
+from atlas.navigation.portals import Portal, find_portals
 from shared.store import GridLayer, MapStore, TopologyEdge, TopologyNode
+from shared.vocabulary import FeatureKind, LayerName
 
-SEGMENT_LAYER = "place_segments"
-OCCUPANCY_LAYER = "occupancy"
-RACK_KIND = "bin"
+SEGMENT_LAYER = LayerName.PLACE_SEGMENTS
+OCCUPANCY_LAYER = LayerName.OCCUPANCY
+RACK_KIND = FeatureKind.BIN
 """Features whose footprints are racks, never driven through (the pillar stage's pallet cells)."""
 ROUTE_CONNECTIONS = frozenset({"connected", "door"})
 """Connections a vehicle drives through (not ``storage_access`` nor ``disconnected``)."""

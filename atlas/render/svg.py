@@ -1,4 +1,4 @@
-"""A layout scene (:func:`api.layout_render.layout_scene`) as SVG text.
+"""A layout scene (:func:`atlas.render.scene.layout_scene`) as SVG text.
 
 The map is drawn in map metres inside a group whose transform scales to pixels and flips y (the
 map's y is up, SVG's down); the occupancy background is embedded as a base64 PNG ``<image>`` in
@@ -14,7 +14,8 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-from api.layout_render import (
+from atlas.render.layers import encode_png
+from atlas.render.scene import (
     KIND_STYLES,
     LEGEND_PAD_PX,
     LEGEND_ROW_PX,
@@ -30,7 +31,6 @@ from api.layout_render import (
     legend_size,
     marker_centres,
 )
-from api.rendering import encode_png
 
 MEDIA_TYPE = "image/svg+xml"
 FONT_PX = 11

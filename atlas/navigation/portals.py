@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from api.navigation.grid import Frame
+from atlas.navigation.grid import Frame
 
 
 @dataclass(frozen=True, slots=True)

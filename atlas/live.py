@@ -28,13 +28,16 @@ from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from typing import Any
 
-from api.binindex import BIN_KIND, PLACE_LABELS_LAYER, PLACE_SEGMENTS_LAYER, WMS_STAGE, BinIndex, bin_index
-from api.cache import RevisionCache
-from api.errors import ApiConfigError
-from api.live_features import FeatureIndex
+from atlas.bins import BinAnswer, BinIndex, answer_stored, bin_index
+from atlas.cache import RevisionCache
+from atlas.errors import AtlasConfigError
+from atlas.features import FeatureIndex, stored_feature
+from atlas.reconcile import WMS_STAGE
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus, DropPolicy
 from shared.store import MapInfo, MapStore, Revision
+from shared.store.store import FeatureRow
+from shared.vocabulary import FeatureKind, LayerName
 from shared.worker import MAP_EVENTS_TOPIC
 
 log = logging.getLogger(__name__)
@@ -43,7 +46,7 @@ STALENESS_S = 0.2
 """Default bound on how far behind the store a live answer may be, seconds."""
 CATCH_UP_REVISIONS = 100
 """Revisions a refresh reads through one by one; after more than this many, it reads every live feature."""
-BIN_PLACE_KINDS = frozenset({"junction", "corridor"})
+BIN_PLACE_KINDS = frozenset({FeatureKind.JUNCTION, FeatureKind.CORRIDOR})
 """Feature kinds a bin answer reads besides the bin (its corridor and nearest junction)."""
 
 
@@ -55,7 +58,15 @@ class LiveMap:
     features: FeatureIndex
     bins: BinIndex
     bin_json: dict[int, bytes] = field(default_factory=dict, repr=False)
-    """Bin answers (JSON) made with ``bins`` so far, by the bin's feature row id; the bins route fills it."""
+    """Bin answers (JSON) made with ``bins`` so far, by the bin's feature row id; the API fills it."""
+
+    def bin_row(self, bin_id: str) -> FeatureRow | None:
+        """The live row of the bin a client names ``bin_id`` (its WMS id or Aisle's), or None."""
+        return self.features.feature(FeatureKind.BIN, self.bins.detected_id(bin_id))
+
+    def bin_answer(self, row: FeatureRow) -> BinAnswer:
+        """The answer about the bin of live row ``row``."""
+        return answer_stored(stored_feature(row), self.bins)
 
 
 @dataclass(slots=True)
@@ -88,7 +99,7 @@ class LiveMaps:
     def __init__(self, store: MapStore, cache: RevisionCache, *, staleness_s: float = STALENESS_S,
                  clock: Callable[[], float] = time.monotonic) -> None:
         if not (math.isfinite(staleness_s) and staleness_s >= 0):
-            raise ApiConfigError(f"live staleness must be a number of seconds >= 0, not {staleness_s}")
+            raise AtlasConfigError(f"live staleness must be a number of seconds >= 0, not {staleness_s}")
         self.store = store
         self.cache = cache
         self.staleness_s = staleness_s
@@ -239,5 +250,5 @@ def _changes_bins(revision: Revision, *, matched: bool) -> bool:
     layers, kinds = summary.get("layers_updated"), summary.get("features")
     if not isinstance(layers, list) or not isinstance(kinds, Mapping):
         return True
-    return (bool({PLACE_LABELS_LAYER, PLACE_SEGMENTS_LAYER} & set(layers)) or bool(BIN_PLACE_KINDS & set(kinds))
-            or (matched and BIN_KIND in kinds))
+    return (bool({LayerName.PLACE_LABELS, LayerName.PLACE_SEGMENTS} & set(layers))
+            or bool(BIN_PLACE_KINDS & set(kinds)) or (matched and FeatureKind.BIN in kinds))

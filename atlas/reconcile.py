@@ -3,7 +3,7 @@
 A site keeps its numbering: each WMS bin is matched to at most one detected bin, first by equal
 id (the site adopted Aisle's ids), then by position for WMS bins that give one (nearest detected
 bin centre within a tolerance, on the same level when both know it, each detected bin used once,
-closest pairs first).
+closest pairs first). :func:`wms_matching` matches the WMS list live at a revision to the bins live then.
 """
 
 from __future__ import annotations
@@ -14,7 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from shared.store import WmsBin
+from shared.bins import Bin
+from shared.store import MapStore, WmsBin
+from shared.vocabulary import FeatureKind
+
+WMS_STAGE = "wms"
+"""Stage name of the revisions that import the WMS's bin list."""
+DEFAULT_TOLERANCE_M = 0.5
+"""Matching tolerance of a WMS list imported without one, metres."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,3 +129,42 @@ def _by_position(wms: Sequence[WmsBin], detected: Sequence[DetectedBin], toleran
         used_detected.add(d)
         out.append(Match(wms[w].wms_id, detected[d].id, "position", float(distances[i, j])))
     return out
+
+
+@dataclass(frozen=True, slots=True)
+class WmsMatching:
+    """The WMS list imported by revision ``revision_id`` matched to the detected bins."""
+
+    reconciliation: Reconciliation
+    tolerance_m: float
+    revision_id: int
+    """The revision that imported the WMS list."""
+
+    def wms_of(self, detected_id: str) -> str | None:
+        """The WMS id detected bin ``detected_id`` is matched to, if any."""
+        match = self.reconciliation.by_detected().get(detected_id)
+        return None if match is None else match.wms_id
+
+    def detected_of(self, wms_id: str) -> str | None:
+        """Aisle's id of the bin WMS bin ``wms_id`` is matched to, if any."""
+        match = self.reconciliation.by_wms().get(wms_id)
+        return None if match is None else match.detected_id
+
+
+def detected_bin(record: Bin) -> DetectedBin:
+    """What matching needs of a bin."""
+    return DetectedBin(record.id, record.centre[0], record.centre[1], record.level)
+
+
+def wms_matching(store: MapStore, map_id: int, revision: int | None) -> WmsMatching | None:
+    """The WMS list live at ``revision`` (default: now) matched to the bins live then, or None if no list was
+    imported."""
+    imported = store.latest_revision(map_id, stage=WMS_STAGE, at_or_before=revision)
+    if imported is None:
+        return None
+    tolerance = imported.summary.get("tolerance_m", DEFAULT_TOLERANCE_M)
+    tolerance_m = float(tolerance) if isinstance(tolerance, int | float) and tolerance > 0 else DEFAULT_TOLERANCE_M
+    detected = [detected_bin(Bin.from_feature(item.feature))
+                for item in store.features(map_id, kinds=[FeatureKind.BIN], revision=revision)]
+    result = reconcile(store.wms_bins(map_id, revision=revision), detected, tolerance_m=tolerance_m)
+    return WmsMatching(result, tolerance_m, imported.id)

@@ -1,4 +1,4 @@
-"""A layout scene (:func:`api.layout_render.layout_scene`) drawn with OpenCV as a PNG."""
+"""A layout scene (:func:`atlas.render.scene.layout_scene`) drawn with OpenCV as a PNG."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from api.layout_render import (
+from atlas.render.layers import encode_png
+from atlas.render.scene import (
     FONT,
     FONT_SCALE,
     KIND_STYLES,
@@ -27,7 +28,6 @@ from api.layout_render import (
     legend_size,
     marker_centres,
 )
-from api.rendering import encode_png
 
 _SHIFT = 4
 """Fractional bits of OpenCV's fixed-point coordinates (1/16 px)."""

@@ -7,7 +7,7 @@ Edges stay inside one region: along a corridor its nodes are chained in order al
 corridor's long axis; in the other regions every node is joined to the hub. An edge whose straight
 line would leave the free cells goes round the obstacle through ``via`` nodes (grid search); one
 that cannot is left out. Blocked regions and connections are left out altogether; bins and places
-more than :data:`~api.navigation.graph.LOCATE_TOLERANCE_M` off a usable region are listed in
+more than :data:`~atlas.navigation.graph.LOCATE_TOLERANCE_M` off a usable region are listed in
 ``left_out``.
 """
 
@@ -21,11 +21,12 @@ from typing import Literal
 
 import numpy as np
 
-from api.navigation.ends import geometry_centre, place_pose
-from api.navigation.graph import NavMap
-from api.navigation.grid import BoolGrid, Point, grid_path, grown, segment_clear
-from api.navigation.routes import usable_graph
+from atlas.navigation.ends import geometry_centre, place_pose
+from atlas.navigation.graph import NavMap
+from atlas.navigation.grid import BoolGrid, Point, grid_path, grown, segment_clear
+from atlas.navigation.routes import usable_graph
 from shared.store import Feature
+from shared.vocabulary import FeatureKind
 
 NodeKind = Literal["hub", "portal", "access", "place", "via"]
 
@@ -122,7 +123,7 @@ class _Builder:
         for rid in sorted(self.regions.nodes):
             region = nav.regions[rid]
             hub = nav.hub(rid)
-            if region.kind != "corridor" and hub is not None:
+            if region.kind != FeatureKind.CORRIDOR and hub is not None:
                 self.add(NetNode(f"{region.kind}-{region.key}", *hub, "hub", region.key), rid)
         for a, b, data in sorted(self.regions.edges(data=True)):
             portal = data["portal"]
@@ -145,7 +146,7 @@ class _Builder:
                                     members[0][1], ids), rid)
             for feature, yaw in members:
                 x, y = _bin_centre(feature)
-                self.net.stations.append(Station(feature.key, "bin", feature.key, node.id, x, y, yaw,
+                self.net.stations.append(Station(feature.key, FeatureKind.BIN.value, feature.key, node.id, x, y, yaw,
                                                  _number(feature.properties.get("z_m"))))
 
     def places(self, places: Sequence[Feature]) -> None:
@@ -166,7 +167,7 @@ class _Builder:
     def legs(self) -> None:
         for rid, stops in self.stops.items():
             region = self.nav.regions[rid]
-            if region.kind == "corridor":
+            if region.kind == FeatureKind.CORRIDOR:
                 pairs = list(itertools.pairwise(self._along_axis(rid, stops)))
             else:
                 hub = next((s for s in stops if s.kind == "hub"), None)

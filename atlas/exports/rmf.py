@@ -1,7 +1,7 @@
 """Open-RMF navigation graph of a map, as ``rmf_building_map_tools`` writes it and ``parse_graph`` reads it.
 
 ``{building_name, levels: {L1: {vertices: [[x, y, {name, ...}]], lanes: [[i, j, {...}]]}}, lifts, doors}``:
-vertices are the waypoint network's nodes (:mod:`api.navigation.network`), with their names (a bin
+vertices are the waypoint network's nodes (:mod:`atlas.navigation.network`), with their names (a bin
 access point takes its first bin's id, a place its key) and flags (a charger ``is_charger``,
 ``is_parking_spot``, ``is_holding_point``; a dock ``dock_name``). Each leg becomes two lanes, one
 each way, as the building map generator writes bidirectional lanes (``parse_graph`` reads every lane
@@ -15,11 +15,12 @@ from typing import Any
 
 import yaml
 
-from api.exports.base import Export, ExportNotFoundError, ExportOptions
-from api.exports.lif import map_network
-from api.navigation import NavigationError
-from api.navigation.network import NetNode
+from atlas.exports.base import Export, ExportNotFoundError, ExportOptions
+from atlas.exports.lif import map_network
+from atlas.navigation import NavigationError
+from atlas.navigation.network import NetNode
 from shared.store import MapInfo, MapStore
+from shared.vocabulary import FeatureKind
 
 MEDIA_TYPE = "application/yaml"
 
@@ -37,7 +38,7 @@ def _options(node: NetNode, name: str) -> dict[str, Any]:
     options: dict[str, Any] = {"name": name}
     if node.place is not None and node.place[0] == "charger":
         options.update(is_charger=True, is_parking_spot=True, is_holding_point=True)
-    elif node.place is not None and node.place[0] == "dock":
+    elif node.place is not None and node.place[0] == FeatureKind.DOCK:
         options["dock_name"] = node.place[1]
     if node.bins:
         options["bins"] = list(node.bins)

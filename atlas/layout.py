@@ -1,21 +1,26 @@
-"""The whole layered map as one GeoJSON FeatureCollection (the ``layout``), and its ``geojson`` export."""
+"""The whole layered map at once: as one GeoJSON FeatureCollection (the ``layout``), and as a picture (PNG or SVG)
+with a legend."""
 
 from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
-from api.exports.base import Export, ExportError, ExportOptions
-from api.models import GeoJSONFeature, example_config
-from api.routers.features import geojson_feature
+from atlas.errors import TooLargeError
+from atlas.features import BBox, GeoJSONFeature, geojson_feature
+from atlas.render.png import render_png
+from atlas.render.scene import layout_scene
+from atlas.render.svg import MEDIA_TYPE as SVG_MEDIA_TYPE
+from atlas.render.svg import render_svg
 from shared.store import MapInfo, MapStore, StoredFeature
 from shared.store.records import bounds
 
 MEDIA_TYPE = "application/geo+json"
-BBox = tuple[float, float, float, float]
+"""Media type of GeoJSON."""
 
 
 LAYOUT_EXAMPLE: dict[str, Any] = {
@@ -32,7 +37,7 @@ LAYOUT_EXAMPLE: dict[str, Any] = {
 """An example layout (OpenAPI docs)."""
 
 
-class LayoutTooLargeError(ExportError):
+class LayoutTooLargeError(TooLargeError):
     """More features than a layout request may return at once."""
 
 
@@ -45,8 +50,9 @@ class LayoutFrame(BaseModel):
     axes: str = Field("x, y in the map frame (not WGS84 longitude/latitude); y up, as in ROS",
                       description="What the coordinates mean.")
 
-    model_config = example_config(map="site", frame_id="map", units="m",
-                                  axes="x, y in the map frame (not WGS84 longitude/latitude); y up, as in ROS")
+    model_config = ConfigDict(json_schema_extra={"examples": [{
+        "map": "site", "frame_id": "map", "units": "m",
+        "axes": "x, y in the map frame (not WGS84 longitude/latitude); y up, as in ROS"}]})
 
 
 class LayoutCollection(BaseModel):
@@ -68,7 +74,7 @@ class LayoutCollection(BaseModel):
     kinds: dict[str, int] = Field(description="How many of the features are of each kind.")
     features: list[GeoJSONFeature]
 
-    model_config = example_config(**LAYOUT_EXAMPLE)
+    model_config = ConfigDict(json_schema_extra={"examples": [LAYOUT_EXAMPLE]})
 
     def to_json(self) -> bytes:
         """The collection as GeoJSON text; ``bbox`` is left out when there are no features (RFC 7946 wants
@@ -141,7 +147,59 @@ def layout_collection(store: MapStore, map_info: MapInfo, *, revision: int | Non
     )
 
 
-def export_geojson(store: MapStore, map_info: MapInfo, revision: int, options: ExportOptions) -> Export:
-    """The ``geojson`` export: every feature of the map as of ``revision``, as a :class:`LayoutCollection`."""
-    collection = layout_collection(store, map_info, revision=revision)
-    return Export({f"{options.stem}.geojson": collection.to_json()}, MEDIA_TYPE)
+
+
+@dataclass(frozen=True, slots=True)
+class Picture:
+    """A picture of the layout: its bytes, their media type and the revision drawn (None: no revisions)."""
+
+    content: bytes
+    media_type: str
+    revision_id: int | None
+
+
+def layout_picture(store: MapStore, map_info: MapInfo, *, revision: int | None, kinds: Sequence[str],
+                   bbox: BBox | None, width_px: int, svg: bool, occupancy_layer: str, label_layer: str,
+                   max_features: int) -> Picture:
+    """The map as of ``revision`` (default: the newest) drawn as SVG or PNG (:func:`atlas.render.scene.layout_scene`).
+
+    Parameters
+    ----------
+    store, map_info
+        The store and the map to draw.
+    revision : int, optional
+        Revision id to draw; None: the newest.
+    kinds : sequence of str
+        Feature kinds drawn.
+    bbox : (min_x, min_y, max_x, max_y), optional
+        The area drawn, metres; None: the whole map.
+    width_px : int
+        Width of the map part of the picture, pixels.
+    svg : bool
+        SVG if true, else PNG.
+    occupancy_layer, label_layer : str
+        Names of the background's occupancy layer and of the place-label layer that tints it.
+    max_features : int
+        Refuse (:class:`LayoutTooLargeError`) to draw more features.
+
+    Raises
+    ------
+    LayoutTooLargeError
+        More than ``max_features`` features to draw.
+    NothingToDrawError
+        Nothing to draw and no ``bbox``.
+    RenderError
+        A picture that cannot be drawn as asked.
+    """
+    at = read_revision(store, map_info, revision)
+    found = layout_features(store, map_info, revision=at, kinds=kinds, bbox=bbox, max_features=max_features)
+    occupancy = labels = None
+    if at is not None:
+        occupancy = store.layer(map_info.id, occupancy_layer, revision=at)
+        labels = store.layer(map_info.id, label_layer, revision=at)
+    scene = layout_scene([item.feature for item in found], occupancy=None if occupancy is None else occupancy.layer,
+                         place_labels=None if labels is None else labels.layer, bbox=bbox, width_px=width_px,
+                         title=f"{map_info.name} @ revision {at}")
+    if svg:
+        return Picture(render_svg(scene), SVG_MEDIA_TYPE, at)
+    return Picture(render_png(scene), "image/png", at)

@@ -7,10 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from api.cache import RevisionCache
+from atlas.cache import RevisionCache
+from shared.places import DRIVABLE_LABELS
 from shared.store import GridLayer, MapStore
 
-DRIVABLE_PLACES = frozenset({"corridor", "junction", "room", "open_area"})
+DRIVABLE_PLACES = frozenset(label.name.lower() for label in DRIVABLE_LABELS)
 """Place labels (grid decomposition) a vehicle drives in."""
 
 

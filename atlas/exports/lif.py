@@ -1,7 +1,7 @@
 """VDMA LIF 1.0 (Layout Interchange Format) of a map: its waypoint network as nodes, edges and stations.
 
 Junction, room and open-area hubs, portals between regions, bin access points, docks, gates and
-chargers are nodes (:mod:`api.navigation.network`); each leg inside a region becomes two directed
+chargers are nodes (:mod:`atlas.navigation.network`); each leg inside a region becomes two directed
 edges named after the region (``edgeName``: the corridor's key); every bin (``stationId`` = its WMS
 id) and every place (``dock-G1``, ``charger-C1``) is a station at its access node. One vehicle type
 (``vehicle_type_id``) may use everything; blocked regions and connections are left out.
@@ -14,11 +14,11 @@ import json
 import math
 from typing import Any
 
-from api.exports.base import Export, ExportNotFoundError, ExportOptions
-from api.navigation import NavigationError, load_navmap
-from api.navigation.ends import PLACE_KINDS
-from api.navigation.network import Network, waypoint_network
+from atlas.exports.base import Export, ExportNotFoundError, ExportOptions
+from atlas.navigation import NavigationError, load_navmap
+from atlas.navigation.network import Network, waypoint_network
 from shared.store import Feature, MapInfo, MapStore
+from shared.vocabulary import PLACE_KINDS, FeatureKind
 
 LIF_VERSION = "1.0.0"
 MEDIA_TYPE = "application/json"
@@ -47,7 +47,7 @@ def map_network(store: MapStore, map_info: MapInfo, revision: int | None) -> tup
         The map has not been decomposed into regions.
     """
     nav = load_navmap(store, map_info.id, revision=revision)
-    bins = newest_features(store, map_info.id, ["bin"], nav.revision)
+    bins = newest_features(store, map_info.id, [FeatureKind.BIN], nav.revision)
     places = newest_features(store, map_info.id, list(PLACE_KINDS), nav.revision)
     return waypoint_network(nav, bins=bins, places=places), nav.revision
 

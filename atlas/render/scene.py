@@ -1,7 +1,7 @@
 """The layout as a picture: occupancy as the background, place labels tinted, features by kind, a legend.
 
 :func:`layout_scene` works out what to draw and where (a :class:`LayoutScene`, shared by both
-outputs); :mod:`api.layout_png` draws it with OpenCV and :mod:`api.layout_svg` writes it as SVG.
+outputs); :mod:`atlas.render.png` draws it with OpenCV and :mod:`atlas.render.svg` writes it as SVG.
 The picture is north up: x to the right, y up, as the map frame.
 """
 
@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from api.rendering import DEFAULT_LABEL_COLOURS, RenderError, layer_image
+from atlas.render.layers import DEFAULT_LABEL_COLOURS, RenderError, layer_image
 from shared.store import Feature, GridLayer
 
 log = logging.getLogger(__name__)

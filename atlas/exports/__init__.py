@@ -14,11 +14,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from api.exports.base import Export, Exporter, ExportError, ExportNotFoundError, ExportOptions, safe_stem
-from api.exports.geojson import export_geojson
-from api.exports.lif import export_lif
-from api.exports.mapserver import export_map_server
-from api.exports.rmf import export_rmf
+from atlas.exports.base import Export, Exporter, ExportError, ExportNotFoundError, ExportOptions, safe_stem
+from atlas.exports.geojson import export_geojson
+from atlas.exports.lif import export_lif
+from atlas.exports.mapserver import export_map_server
+from atlas.exports.rmf import export_rmf
 from shared.store import MapInfo, MapStore
 
 

@@ -20,8 +20,8 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
-from api.exports.base import Export, ExportError, ExportNotFoundError, ExportOptions
-from api.rendering import FREE_PERCENT, OCCUPIED_PERCENT, UNKNOWN_GREY
+from atlas.exports.base import Export, ExportError, ExportNotFoundError, ExportOptions
+from atlas.render.layers import FREE_PERCENT, OCCUPIED_PERCENT, UNKNOWN_GREY
 from shared.store import GridLayer, MapInfo, MapStore
 
 DEFAULT_LAYER = "occupancy"

@@ -22,9 +22,9 @@ from typing import Any, Literal
 
 import networkx as nx
 
-from api.navigation.errors import NoRouteError
-from api.navigation.graph import LOCATE_TOLERANCE_M, ROUTE_CONNECTIONS, NavMap
-from api.navigation.grid import BoolGrid, Point, grid_path, grown, segment_clear
+from atlas.navigation.errors import NoRouteError
+from atlas.navigation.graph import LOCATE_TOLERANCE_M, ROUTE_CONNECTIONS, NavMap
+from atlas.navigation.grid import BoolGrid, Point, grid_path, grown, segment_clear
 
 START, GOAL = "start", "goal"
 WaypointKind = Literal["start", "portal", "via", "goal"]

@@ -1,10 +1,11 @@
-"""An in-memory index of one map's live features, so live GeoJSON area queries and bin lookups read no rows.
+"""Map features as GeoJSON, and an in-memory index of one map's live features, so live GeoJSON area queries and
+bin lookups read no rows.
 
 Features are kept as the GeoJSON bytes the API returns, made once per stored row from its JSON text, with
 their bounds in numpy arrays for area queries. A new revision updates the index with just the rows it wrote
 or retired (:meth:`FeatureIndex.updated`); a stage that rewrites all its features changes only the rows of
 those that changed (see :meth:`shared.store.MapStore.write_revision`), so most rows are encoded only once.
-:mod:`api.live` decides when to update it.
+:mod:`atlas.live` decides when to update it.
 """
 
 from __future__ import annotations
@@ -12,19 +13,74 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field
 
 from shared.store import Feature, StoredFeature
 from shared.store.store import FeatureRow
+
+BBox = tuple[float, float, float, float]
+"""(min_x, min_y, max_x, max_y), map-frame metres."""
+
+FEATURE_EXAMPLE: dict[str, Any] = {
+    "type": "Feature", "id": "bin/03-014",
+    "geometry": {"type": "Polygon",
+                 "coordinates": [[[40.6, 17.1], [41.8, 17.1], [41.8, 18.1], [40.6, 18.1], [40.6, 17.1]]]},
+    "properties": {"aisle": 3, "bay": 14, "row": "r0-006", "access_pose": [41.2, 15.6, 1.5708], "kind": "bin",
+                   "key": "03-014", "stage": "pillar_mapping", "revision_id": 1207, "confidence": 0.92},
+}
+"""An example feature (OpenAPI docs)."""
 
 ADDED_PROPERTIES = ("kind", "key", "stage", "confidence", "revision_id")
 """Properties every GeoJSON feature gets from its row; they win over stored properties of the same names."""
 
 
+class GeoJSONFeature(BaseModel):
+    type: Literal["Feature"] = "Feature"
+    id: str = Field(description="`<kind>/<key>`.")
+    geometry: dict[str, Any] = Field(description="GeoJSON geometry in map-frame metres.")
+    properties: dict[str, Any] = Field(
+        description="The feature's own properties plus kind, key, stage, revision_id and confidence."
+    )
+
+    model_config = ConfigDict(json_schema_extra={"examples": [FEATURE_EXAMPLE]})
+
+
+def geojson_feature(stored: StoredFeature) -> GeoJSONFeature:
+    """One stored feature as GeoJSON: its id ``<kind>/<key>``, its properties plus :data:`ADDED_PROPERTIES`."""
+    feature = stored.feature
+    return GeoJSONFeature(
+        id=f"{feature.kind}/{feature.key}",
+        geometry=dict(feature.geometry),
+        properties={
+            **feature.properties,
+            "kind": feature.kind,
+            "key": feature.key,
+            "stage": stored.stage,
+            "revision_id": stored.revision_id,
+            "confidence": feature.confidence,
+        },
+    )
+
+
+def live_collection(index: FeatureIndex, *, kinds: Sequence[str] | None, bbox: BBox | None, limit: int,
+                    offset: int) -> bytes:
+    """A page of the live map's FeatureCollection from its index as JSON (the same document as the store's).
+
+    Features of ``kinds`` whose bounds touch ``bbox``, ``limit`` of them after skipping ``offset``.
+    """
+    page = index.select(kinds=kinds, bbox=bbox)[offset:offset + limit]
+    next_offset = offset + len(page) if len(page) == limit else None
+    return b"".join((b'{"type":"FeatureCollection","features":[', b",".join(index.geojson[p] for p in page),
+                     f'],"revision":null,"limit":{limit},"offset":{offset},"next_offset":'
+                     f'{json.dumps(next_offset)}}}'.encode()))
+
+
 def geojson_bytes(row: FeatureRow) -> bytes:
-    """One feature as the GeoJSON Feature the API returns (see :func:`api.routers.features.geojson_feature`).
+    """One feature as GeoJSON, the same document as :func:`geojson_feature` gives.
 
     The stored geometry text goes in as it is.
     """
@@ -115,7 +171,7 @@ class FeatureIndex:
         """The live row of feature ``kind``/``key`` (the newest if several stages have one), or None."""
         return self.newest.get((kind, key))
 
-    def select(self, *, kinds: Sequence[str] | None, bbox: tuple[float, float, float, float] | None
+    def select(self, *, kinds: Sequence[str] | None, bbox: BBox | None
                ) -> npt.NDArray[np.intp]:
         """Positions of the features of ``kinds`` whose bounds touch ``bbox`` (as the store's query does)."""
         keep = np.ones(len(self.geojson), dtype=bool)

@@ -15,12 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from api.navigation.errors import EndSyntaxError, NoRouteError, UnknownEndError
+from atlas.navigation.errors import EndSyntaxError, NoRouteError, UnknownEndError
 from shared.store import Feature, MapStore
 from shared.store.records import bounds
+from shared.vocabulary import PLACE_KINDS, FeatureKind
 
-PLACE_KINDS = ("dock", "gate", "charger")
-"""Feature kinds that are named places a route can start or end at."""
 KEY_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._:-]{0,127}$"
 """A bin id or place key (the same rule as bin ids in the bins API)."""
 MAX_COORDINATE_M = 100_000.0
@@ -79,7 +78,7 @@ def parse_end(text: str) -> End:
             raise _syntax(text, "a place is written place:<kind>/<key>")
     else:
         kind, key = prefix, rest
-    if kind != "bin" and kind not in PLACE_KINDS:
+    if kind != FeatureKind.BIN and kind not in PLACE_KINDS:
         raise _syntax(text, f"unknown kind {kind!r}")
     if not _KEY.match(key):
         raise _syntax(text, f"{key!r} is not a valid {kind} key (letters, digits, '.', '_', ':', '-'; 1-128)")
@@ -136,9 +135,9 @@ def locate_end(store: MapStore, map_id: int, end: End, *, revision: int | None =
     assert end.key is not None
     found = store.feature(map_id, end.kind, end.key, revision=revision)
     if found is None:
-        listing = "bins" if end.kind == "bin" else f"places?kind={end.kind}"
+        listing = "bins" if end.kind == FeatureKind.BIN else f"places?kind={end.kind}"
         raise UnknownEndError(f"the map has no {end.kind} {end.key!r}; see /v1/maps/<map>/{listing}")
-    if end.kind == "bin":
+    if end.kind == FeatureKind.BIN:
         pose = _pose(found.feature.properties.get("access_pose"))
         if pose is None:
             raise NoRouteError(f"bin {end.key!r} has no access pose yet, so there is nowhere to drive to for it")
