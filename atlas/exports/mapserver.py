@@ -23,8 +23,10 @@ import yaml
 from atlas.exports.base import Export, ExportError, ExportNotFoundError, ExportOptions
 from atlas.render.layers import FREE_PERCENT, OCCUPIED_PERCENT, UNKNOWN_GREY
 from shared.store import GridLayer, MapInfo, MapStore
+from shared.vocabulary import LayerName
 
-DEFAULT_LAYER = "occupancy"
+DEFAULT_LAYER = LayerName.OCCUPANCY.value
+"""The layer exported when none is asked for."""
 FREE_PIXEL = 254
 OCCUPIED_PIXEL = 0
 OCCUPIED_THRESH = OCCUPIED_PERCENT / 100.0

@@ -21,6 +21,7 @@ import numpy.typing as npt
 
 from atlas.render.layers import DEFAULT_LABEL_COLOURS, RenderError, layer_image
 from shared.store import Feature, GridLayer
+from shared.vocabulary import FeatureKind
 
 log = logging.getLogger(__name__)
 
@@ -96,25 +97,25 @@ class KindStyle:
 
 KIND_STYLES: Mapping[str, KindStyle] = {
     # places: outlines in darker shades of their place-label colours (the tint fills them)
-    "region": KindStyle((200, 130, 30), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
-    "open_area": KindStyle((60, 160, 180), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
-    "room": KindStyle((140, 100, 200), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
-    "corridor": KindStyle((60, 150, 60), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
-    "junction": KindStyle((40, 70, 200), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
-    "line": KindStyle((150, 150, 150), 1, 0.0, Marker.DOT, 4, False, Swatch.LINE),
-    "wall": KindStyle((200, 30, 30), 2, 0.0, Marker.SQUARE, 6, False, Swatch.LINE),
-    "rack_row": KindStyle((139, 69, 19), 2, 0.25, Marker.SQUARE, 6, False, Swatch.LINE),
-    "bin": KindStyle((255, 140, 0), 1, 0.35, Marker.SQUARE, 6, False, Swatch.FILL),
-    "pillar": KindStyle((30, 30, 30), 1, 0.0, Marker.DOT, 4, False, Swatch.MARKER),
-    "dock": KindStyle((0, 150, 170), 3, 0.3, Marker.SQUARE, 12, True, Swatch.MARKER),
-    "gate": KindStyle((150, 0, 170), 3, 0.3, Marker.TRIANGLE, 13, True, Swatch.MARKER),
-    "charger": KindStyle((20, 150, 40), 2, 0.3, Marker.DIAMOND, 13, True, Swatch.MARKER),
-    "object": KindStyle((220, 0, 110), 2, 0.3, Marker.CROSS, 12, True, Swatch.MARKER),
+    FeatureKind.REGION: KindStyle((200, 130, 30), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
+    FeatureKind.OPEN_AREA: KindStyle((60, 160, 180), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
+    FeatureKind.ROOM: KindStyle((140, 100, 200), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
+    FeatureKind.CORRIDOR: KindStyle((60, 150, 60), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
+    FeatureKind.JUNCTION: KindStyle((40, 70, 200), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
+    FeatureKind.LINE: KindStyle((150, 150, 150), 1, 0.0, Marker.DOT, 4, False, Swatch.LINE),
+    FeatureKind.WALL: KindStyle((200, 30, 30), 2, 0.0, Marker.SQUARE, 6, False, Swatch.LINE),
+    FeatureKind.RACK_ROW: KindStyle((139, 69, 19), 2, 0.25, Marker.SQUARE, 6, False, Swatch.LINE),
+    FeatureKind.BIN: KindStyle((255, 140, 0), 1, 0.35, Marker.SQUARE, 6, False, Swatch.FILL),
+    FeatureKind.PILLAR: KindStyle((30, 30, 30), 1, 0.0, Marker.DOT, 4, False, Swatch.MARKER),
+    FeatureKind.DOCK: KindStyle((0, 150, 170), 3, 0.3, Marker.SQUARE, 12, True, Swatch.MARKER),
+    FeatureKind.GATE: KindStyle((150, 0, 170), 3, 0.3, Marker.TRIANGLE, 13, True, Swatch.MARKER),
+    FeatureKind.CHARGER: KindStyle((20, 150, 40), 2, 0.3, Marker.DIAMOND, 13, True, Swatch.MARKER),
+    FeatureKind.OBJECT: KindStyle((220, 0, 110), 2, 0.3, Marker.CROSS, 12, True, Swatch.MARKER),
 }
 """Style of every feature kind, in drawing order (first drawn first, so places lie under the rest)."""
 OUTLINE: RGB = (20, 20, 20)
 """Outline of the larger markers."""
-DEFAULT_KINDS = tuple(kind for kind in KIND_STYLES if kind != "line")
+DEFAULT_KINDS = tuple(kind for kind in KIND_STYLES if kind != FeatureKind.LINE)
 """Kinds drawn when none are asked for: all but ``line`` (the decomposition's cut lines, which clutter)."""
 
 
