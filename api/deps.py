@@ -74,6 +74,8 @@ StoreDep = Annotated[MapStore, Depends(get_store)]
 AnnouncerDep = Annotated[Announcer, Depends(get_announcer)]
 """Announce a revision the API wrote (on the bus, when there is one)."""
 SettingsDep = Annotated[Settings, Depends(get_settings)]
+CacheDep = Annotated[RevisionCache, Depends(get_cache)]
+"""What was derived from one revision of a map (decoded layers, bin indexes)."""
 
 _api_key_header = APIKeyHeader(name=API_KEY_HEADER, auto_error=False, scheme_name="ApiKey",
                                description="An Aisle API key, `aisle_<id>_<secret>`.")

@@ -5,11 +5,11 @@ from __future__ import annotations
 from typing import Annotated
 
 import anyio
-from fastapi import APIRouter, Depends, Path, Query, Response, status
+from fastapi import APIRouter, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
 from api.answers import bin_out, live_bin, not_found
-from api.deps import ContextDep, MapDep, RevisionQuery, StoreDep, get_cache
+from api.deps import CacheDep, ContextDep, MapDep, RevisionQuery, StoreDep
 from api.models import COMMON_ERRORS, BinOut, BinStatus, ErrorOut, Responses, example_config
 from api.queries import BIN_ID_PATTERN, BBoxQuery
 from atlas.bins import BinNotFoundError, no_bin, select_bins, stored_bin
@@ -37,14 +37,11 @@ class BinPage(BaseModel):
     next_offset: int | None = Field(description="Pass as `?offset=` for the next page; null on the last.")
 
 
-IndexDep = Annotated[RevisionCache, Depends(get_cache)]
-
-
 @router.get("", summary="List and search bins", responses=_ERRORS)
 def list_bins(
     map_info: MapDep,
     store: StoreDep,
-    cache: IndexDep,
+    cache: CacheDep,
     revision: RevisionQuery,
     bbox: BBoxQuery,
     aisle: Annotated[int | None, Query(ge=0, le=1_000_000, description="Only bins of this aisle.", examples=[3])
@@ -78,7 +75,7 @@ def list_bins(
 async def get_bin(
     map_info: MapDep,
     store: StoreDep,
-    cache: IndexDep,
+    cache: CacheDep,
     context: ContextDep,
     revision: RevisionQuery,
     bin_id: Annotated[str, Path(description="The bin's WMS id (when a WMS list was imported) or Aisle's id.",

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Body, Depends, Path, Response, status
+from fastapi import APIRouter, Body, Path, Response, status
 from pydantic import BaseModel, Field
 
 from api.access import Caller
-from api.deps import AnnouncerDep, CallerDep, MapDep, RevisionQuery, StoreDep, get_cache
+from api.deps import AnnouncerDep, CacheDep, CallerDep, MapDep, RevisionQuery, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, example_config, not_found
 from api.translate import http_error
-from atlas.cache import RevisionCache
 from atlas.errors import AtlasError
 from atlas.navigation import (
     REGION_KEY_PATTERN,
@@ -24,8 +23,6 @@ from atlas.navigation import (
 )
 
 router = APIRouter(prefix="/v1/maps/{map_name}", responses=COMMON_ERRORS)
-
-CacheDep = Annotated[RevisionCache, Depends(get_cache)]
 
 _NO_REGIONS = "The map has no regions yet (not decomposed)."
 _READ_ERRORS: Responses = {**not_found("No such map or revision."), **UNPROCESSABLE}

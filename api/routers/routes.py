@@ -4,20 +4,17 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Depends, Query, status
+from fastapi import APIRouter, Query, status
 from pydantic import BaseModel, Field
 
-from api.deps import MapDep, RevisionQuery, StoreDep, get_cache
+from api.deps import CacheDep, MapDep, RevisionQuery, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, not_found
 from api.translate import http_error
-from atlas.cache import RevisionCache
 from atlas.errors import AtlasError
 from atlas.navigation import FREE_BELOW, NavigationError
 from atlas.navigation.plan import route_between
 
 router = APIRouter(prefix="/v1/maps/{map_name}", responses=COMMON_ERRORS)
-
-CacheDep = Annotated[RevisionCache, Depends(get_cache)]
 
 _ROUTE_ERRORS: Responses = {
     **not_found("No such map, revision, bin or place."),

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Depends, HTTPException, Query, status
+from fastapi import APIRouter, Body, HTTPException, Query, status
 from pydantic import BaseModel, Field
 
-from api.deps import AnnouncerDep, MapDep, RevisionQuery, SettingsDep, StoreDep, get_cache
+from api.deps import AnnouncerDep, CacheDep, MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.queries import MAX_BBOX_SIDE_M
 from atlas import semantics
-from atlas.cache import RevisionCache
 from atlas.errors import InvalidQueryError
 
 router = APIRouter(prefix="/v1/maps/{map_name}", tags=["semantics"], responses=COMMON_ERRORS)
@@ -20,8 +19,6 @@ _ERRORS: Responses = {
     status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map or revision."},
     status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut, "description": "Bad coordinates or label table."},
 }
-
-CacheDep = Annotated[RevisionCache, Depends(get_cache)]
 
 
 class SemanticLabelOut(BaseModel):

@@ -5,18 +5,15 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 import networkx as nx
-from fastapi import APIRouter, Depends, Query, status
+from fastapi import APIRouter, Query, status
 from pydantic import BaseModel, Field
 
-from api.deps import MapDep, RevisionQuery, StoreDep, get_cache
+from api.deps import CacheDep, MapDep, RevisionQuery, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, Responses, example_config, not_found
-from atlas.cache import RevisionCache
 from atlas.navigation import NavigationUnavailableError, load_navmap
 from atlas.navigation.topology import topology_features, topology_graph
 
 router = APIRouter(prefix="/v1/maps/{map_name}", responses=COMMON_ERRORS)
-
-CacheDep = Annotated[RevisionCache, Depends(get_cache)]
 
 _READ_ERRORS: Responses = {**not_found("No such map or revision."), **UNPROCESSABLE}
 
