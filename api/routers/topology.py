@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-import networkx as nx
 from fastapi import APIRouter, Query, status
 from pydantic import BaseModel, Field
 
 from api.deps import CacheDep, MapDep, RevisionQuery, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, Responses, example_config, not_found
 from atlas.navigation import NavigationUnavailableError, load_navmap
-from atlas.navigation.topology import topology_features, topology_graph
+from atlas.navigation.topology import topology_features, topology_node_link
 
 router = APIRouter(prefix="/v1/maps/{map_name}", responses=COMMON_ERRORS)
 
@@ -113,6 +112,6 @@ def get_topology(
     if format == "geojson":
         return TopologyGeoJSONOut(features=[TopologyFeatureOut.model_validate(item) for item in topology_features(nav)],
                                   revision=nav.revision)
-    return TopologyOut.model_validate(nx.node_link_data(topology_graph(nav, map_name=map_info.name), edges="edges"))
+    return TopologyOut.model_validate(topology_node_link(nav, map_name=map_info.name))
 
 

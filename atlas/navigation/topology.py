@@ -25,6 +25,13 @@ def topology_graph(nav: NavMap, *, map_name: str) -> nx.Graph:
     return graph
 
 
+def topology_node_link(nav: NavMap, *, map_name: str) -> dict[str, Any]:
+    """:func:`topology_graph` as networkx node-link data (``networkx.node_link_graph(data, edges="edges")``
+    reads it back)."""
+    data: dict[str, Any] = nx.node_link_data(topology_graph(nav, map_name=map_name), edges="edges")
+    return data
+
+
 def topology_features(nav: NavMap) -> list[dict[str, Any]]:
     """GeoJSON features of ``nav``: each region with a centroid as a Point, each connection with a portal as a
     LineString hub, portal, hub (map metres)."""
