@@ -31,6 +31,7 @@ __all__ = [
     "interpolate",
     "invert",
     "quaternion_from_yaw",
+    "sensor_pose",
     "sensor_pose_2d",
     "to_matrix",
     "yaw_from_quaternion",
@@ -155,6 +156,18 @@ def interpolate(a: Transform, b: Transform, fraction: float) -> Transform:
         theta = math.acos(min(dot, 1.0))
         q = (math.sin((1 - fraction) * theta) * qa + math.sin(fraction * theta) * qb) / math.sin(theta)
     return Transform(a.translation + fraction * (b.translation - a.translation), _normalised(q))
+
+
+def sensor_pose(transform: Transform, angles: npt.NDArray[np.float64]) -> tuple[Pose2D, npt.NDArray[np.float64]]:
+    """Planar pose of a planar scanner and its bearings as seen in the fixed frame.
+
+    ``transform`` maps the sensor frame into the fixed frame; ``angles`` (n,) are the scan's bearings in
+    radians. A sensor mounted upside down (its +z pointing down) sweeps the other way, so its bearings
+    change sign.
+    """
+    x, y, _, _ = transform.rotation
+    z_axis_up = 1.0 - 2.0 * (x * x + y * y)
+    return sensor_pose_2d(transform), (-angles if z_axis_up < 0 else angles)
 
 
 def sensor_pose_2d(transform: Transform) -> Pose2D:

@@ -21,8 +21,7 @@ from services.grid_decomposition.overview import overview_image
 from services.grid_decomposition.pipeline import Decomposition, decompose
 from services.grid_decomposition.semantics import Label, parse_label
 from services.grid_decomposition.subdivision import line_endpoints
-from services.occupancy_mapping.errors import OccupancyMappingError
-from services.occupancy_mapping.mapio import read_map_yaml
+from shared.mapfiles import MapFileError, read_map_yaml
 
 logger = logging.getLogger(__name__)
 
@@ -44,7 +43,7 @@ def read_map_file(
     if path.suffix.lower() in {".yaml", ".yml"}:
         try:
             image = read_map_yaml(path)
-        except OccupancyMappingError as err:
+        except MapFileError as err:
             raise DecompositionError(f"{err}{_missing_image_hint(path, err)}") from err
         if resolution_m is not None and not math.isclose(resolution_m, image.resolution_m, rel_tol=1e-6):
             raise DecompositionError(
@@ -69,7 +68,7 @@ def read_map_file(
     return occ[::-1].copy(), float(resolution_m), (0.0, 0.0)
 
 
-def _missing_image_hint(yaml_path: Path, err: OccupancyMappingError) -> str:
+def _missing_image_hint(yaml_path: Path, err: MapFileError) -> str:
     """For a YAML whose image is missing: the images beside it and how to decompose one of them."""
     if not isinstance(err.__cause__, FileNotFoundError) or not yaml_path.exists():
         return ""

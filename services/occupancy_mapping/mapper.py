@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from services.occupancy_mapping.errors import OccupancyMappingError
 from services.occupancy_mapping.grid import OccupancyGrid
@@ -28,7 +27,7 @@ from shared.transforms import (
     add_tf_message,
     compose,
     invert,
-    sensor_pose_2d,
+    sensor_pose,
 )
 
 log = logging.getLogger(__name__)
@@ -41,13 +40,6 @@ ScanCorrector = Callable[[OccupancyGrid, Pose2D, ScanArrays], Pose2D]
 
 def _is_map_frame(frame: str) -> bool:
     return frame == "map" or frame.endswith("/map")
-
-
-def sensor_pose(transform: Transform, angles: npt.NDArray[np.float64]) -> tuple[Pose2D, npt.NDArray[np.float64]]:
-    """Planar sensor pose and bearings; a sensor mounted upside down sweeps the other way."""
-    x, y, _, _ = transform.rotation
-    z_axis_up = 1.0 - 2.0 * (x * x + y * y)
-    return sensor_pose_2d(transform), (-angles if z_axis_up < 0 else angles)
 
 
 @dataclass
