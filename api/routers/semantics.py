@@ -19,10 +19,10 @@ from services.grid_decomposition.semantics import (
     LABEL_OVERRIDES_KEY,
     LABEL_TABLE,
     LABEL_TABLE_STAGE,
-    Label,
     parse_label_table,
 )
 from shared.store import RevisionWrite, StoredFeature
+from shared.vocabulary import PlaceLabel
 
 router = APIRouter(prefix="/v1/maps/{map_name}", tags=["semantics"], responses=COMMON_ERRORS)
 
@@ -211,7 +211,7 @@ def get_label_table(map_info: MapDep, store: StoreDep, revision: RevisionQuery) 
     ]
     labels = [LabelRow(label=label.name.lower(), functionality=semantics.functionality,
                        connectable=sorted(item.name.lower() for item in semantics.connectable))
-              for label, semantics in LABEL_TABLE.items() if label is not Label.NONE]
+              for label, semantics in LABEL_TABLE.items() if label is not PlaceLabel.NONE]
     return LabelTableOut(labels=labels, categories=categories, overrides=overrides,
                          overrides_revision_id=overrides_revision)
 

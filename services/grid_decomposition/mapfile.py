@@ -19,9 +19,10 @@ from scipy import ndimage
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.overview import overview_image
 from services.grid_decomposition.pipeline import Decomposition, decompose
-from services.grid_decomposition.semantics import Label, parse_label
+from services.grid_decomposition.semantics import parse_label
 from services.grid_decomposition.subdivision import line_endpoints
 from shared.mapfiles import MapFileError, read_map_yaml
+from shared.vocabulary import FeatureKind, PlaceLabel
 
 logger = logging.getLogger(__name__)
 
@@ -82,9 +83,9 @@ def _missing_image_hint(yaml_path: Path, err: MapFileError) -> str:
     )
 
 
-def parse_label_overrides(text: str) -> dict[int, Label]:
+def parse_label_overrides(text: str) -> dict[int, PlaceLabel]:
     """``"0=corridor,3=storage"`` -> {0: CORRIDOR, 3: STORAGE} (the CLI's ``--labels``)."""
-    out: dict[int, Label] = {}
+    out: dict[int, PlaceLabel] = {}
     for item in filter(None, (part.strip() for part in text.split(","))):
         key, sep, value = item.partition("=")
         if not sep or not key.strip().lstrip("-").isdigit():
@@ -124,7 +125,7 @@ def layout_features(decomposition: Decomposition) -> dict[str, Any]:
                 "type": "Feature",
                 "geometry": {"type": "MultiPolygon", "coordinates": polys},
                 "properties": {
-                    "kind": "region",
+                    "kind": FeatureKind.REGION,
                     "id": sid,
                     "label": info.label.name.lower(),
                     "category": info.category,
@@ -140,7 +141,7 @@ def layout_features(decomposition: Decomposition) -> dict[str, Any]:
                 "type": "Feature",
                 "geometry": {"type": "LineString", "coordinates": _to_metres(ends, decomposition)},
                 "properties": {
-                    "kind": "wall",
+                    "kind": FeatureKind.WALL,
                     "id": int(e),
                     "label": "door" if cog.door[e] else "wall",
                     "category": None,
@@ -161,7 +162,7 @@ def layout_features(decomposition: Decomposition) -> dict[str, Any]:
                             "coordinates": _to_metres(np.array([p0, p1], dtype=np.float64) + 0.5, decomposition),
                         },
                         "properties": {
-                            "kind": "line",
+                            "kind": FeatureKind.LINE,
                             "id": n_line,
                             "label": "coarse" if line.coarse else "fine",
                             "category": g_index,
@@ -229,7 +230,7 @@ def decompose_map_file(
     out_dir: Path,
     *,
     resolution_m: float | None = None,
-    label_overrides: Mapping[int, Label] | None = None,
+    label_overrides: Mapping[int, PlaceLabel] | None = None,
 ) -> Decomposition:
     """Decompose a map file and write its outputs (the ``aisle decompose`` command).
 
