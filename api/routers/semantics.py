@@ -14,13 +14,7 @@ from api.deps import AnnouncerDep, MapDep, RevisionQuery, SettingsDep, StoreDep,
 from api.gridlookup import cached_layer, class_name, value_at
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.routers.features import MAX_BBOX_SIDE_M
-from services.grid_decomposition.errors import DecompositionError
-from services.grid_decomposition.semantics import (
-    LABEL_OVERRIDES_KEY,
-    LABEL_TABLE,
-    LABEL_TABLE_STAGE,
-    parse_label_table,
-)
+from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE, LABEL_TABLE_STAGE, PlaceLabelError, parse_label_table
 from shared.store import RevisionWrite, StoredFeature
 from shared.vocabulary import PlaceLabel
 
@@ -233,7 +227,7 @@ def put_label_table(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
     Needs a `write` key."""
     try:
         parsed = parse_label_table(body.overrides)
-    except DecompositionError as err:
+    except PlaceLabelError as err:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
     overrides = {str(c): label.name.lower() for c, label in sorted(parsed.items())}
     written = store.write_revision(map_info.id,

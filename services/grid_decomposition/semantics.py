@@ -1,15 +1,17 @@
-"""Human semantics (paper C, Table II): what each place label is for and which labels it connects to.
+"""Human semantics (paper C, Table II) at work: how two labelled places are linked, and label names parsed.
 
-The labels themselves are :class:`shared.vocabulary.PlaceLabel`; their values are the codes of ``labels.png``.
+The labels are :class:`shared.vocabulary.PlaceLabel` (their values are the codes of ``labels.png``); what each
+means and connects to is :data:`shared.places.LABEL_TABLE`.
 """
 
 from __future__ import annotations
 
 import enum
 from collections.abc import Mapping
-from typing import NamedTuple
 
 from services.grid_decomposition.errors import DecompositionError
+from shared import places
+from shared.places import LABEL_TABLE, PlaceLabelError, parse_place_label
 from shared.vocabulary import PlaceLabel
 
 
@@ -22,36 +24,19 @@ class Connection(enum.Enum):
     DISCONNECTED = "disconnected"
 
 
-class LabelSemantics(NamedTuple):
-    """One row of the label table: what a place is for and which labels it may open onto."""
-
-    functionality: str
-    connectable: frozenset[PlaceLabel]
-
-
-_DRIVABLE = frozenset({PlaceLabel.CORRIDOR, PlaceLabel.JUNCTION, PlaceLabel.ROOM, PlaceLabel.OPEN_AREA})
-
-LABEL_TABLE: dict[PlaceLabel, LabelSemantics] = {
-    PlaceLabel.CORRIDOR: LabelSemantics("drivable & storage access", _DRIVABLE | {PlaceLabel.STORAGE}),
-    PlaceLabel.JUNCTION: LabelSemantics("drivable & connection", _DRIVABLE),
-    PlaceLabel.STORAGE: LabelSemantics("storage", frozenset({PlaceLabel.CORRIDOR, PlaceLabel.OPEN_AREA})),
-    PlaceLabel.ROOM: LabelSemantics("drivable & work", _DRIVABLE),
-    PlaceLabel.OPEN_AREA: LabelSemantics("drivable & storage access", _DRIVABLE | {PlaceLabel.STORAGE}),
-    PlaceLabel.UNIDENTIFIED: LabelSemantics("-", frozenset()),
-    PlaceLabel.NONE: LabelSemantics("-", frozenset()),
-}
-
-
 def parse_label(name: str) -> PlaceLabel:
-    """A :class:`PlaceLabel` from its name (``corridor``, ``junction``, ``storage``, ``pallet_cell``...)."""
-    key = name.strip().upper().replace(" ", "_").replace("-", "_")
-    aliases = {"PALLET_CELL": "STORAGE", "PALLET_CELLS": "STORAGE", "OPEN": "OPEN_AREA", "UNKNOWN": "UNIDENTIFIED"}
-    key = aliases.get(key, key)
+    """A :class:`PlaceLabel` from its name (``corridor``, ``storage``, ``pallet_cell``...); see
+    :func:`shared.places.parse_place_label`.
+
+    Raises
+    ------
+    DecompositionError
+        A name that is not a place label.
+    """
     try:
-        return PlaceLabel[key]
-    except KeyError as err:
-        names = ", ".join(label.name.lower() for label in PlaceLabel)
-        raise DecompositionError(f"unknown place label {name!r}; use one of {names}") from err
+        return parse_place_label(name)
+    except PlaceLabelError as err:
+        raise DecompositionError(str(err)) from err
 
 
 def link_connection(a: PlaceLabel, b: PlaceLabel, *, cogent: bool, door: bool) -> Connection:
@@ -71,28 +56,15 @@ def link_connection(a: PlaceLabel, b: PlaceLabel, *, cogent: bool, door: bool) -
     return Connection.CONNECTED
 
 
-LABEL_TABLE_STAGE = "label_table"
-"""Stage name of the map-store revisions that record a person's label-table overrides; the grid
-decomposition worker re-labels the map from the newest one."""
-LABEL_OVERRIDES_KEY = "label_overrides"
-"""Summary key of those revisions: {category as a decimal string: label name}."""
-
-
 def parse_label_table(raw: Mapping[str, str]) -> dict[int, PlaceLabel]:
-    """``{"0": "corridor", "3": "pallet cell"}`` (category -> label name, as stored) -> {0: CORRIDOR, 3: STORAGE}.
+    """Category -> label overrides as a person stored them; see :func:`shared.places.parse_label_table`.
 
     Raises
     ------
     DecompositionError
-        A category that is not a non-negative integer, or a label that is not a place label (``none`` is
-        not one a person can choose).
+        A category that is not a non-negative integer, or a label that is not a place label.
     """
-    out: dict[int, PlaceLabel] = {}
-    for key, value in raw.items():
-        if not (isinstance(key, str) and key.isdigit() and len(key) <= 6):
-            raise DecompositionError(f"category {key!r} must be a non-negative integer, e.g. '3'")
-        label = parse_label(str(value))
-        if label is PlaceLabel.NONE:
-            raise DecompositionError(f"category {key}: 'none' marks occupied or unknown cells, not a place")
-        out[int(key)] = label
-    return out
+    try:
+        return places.parse_label_table(raw)
+    except PlaceLabelError as err:
+        raise DecompositionError(str(err)) from err

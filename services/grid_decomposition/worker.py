@@ -42,7 +42,8 @@ from services.grid_decomposition.records import (
     decomposition_layers,
     decomposition_topology,
 )
-from services.grid_decomposition.semantics import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE, parse_label_table
+from services.grid_decomposition.semantics import parse_label_table
+from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from shared.store import GridLayer, Revision, RevisionWrite, StoredLayer, StoreUnavailableError
 from shared.vocabulary import PlaceLabel
 from shared.worker import StageContext
