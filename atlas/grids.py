@@ -8,10 +8,11 @@ from typing import Any
 import numpy as np
 
 from atlas.cache import RevisionCache
-from shared.places import DRIVABLE_LABELS
 from shared.store import GridLayer, MapStore
+from shared.vocabulary import PlaceLabel
 
-DRIVABLE_PLACES = frozenset(label.name.lower() for label in DRIVABLE_LABELS)
+DRIVABLE_PLACES = frozenset(label.name.lower() for label in (PlaceLabel.CORRIDOR, PlaceLabel.JUNCTION, PlaceLabel.ROOM,
+                                                             PlaceLabel.OPEN_AREA))
 """Place labels (grid decomposition) a vehicle drives in."""
 
 

@@ -1,42 +1,21 @@
-"""Human semantics of places (paper C, Table II): what each place label is for, which labels may connect, and the
-label-table overrides a person records.
+"""What each place label means (paper C, Table II), and the label table a person sets.
 
-The grid decomposition labels the map with these; the API shows the table and records a person's overrides.
-
-Examples
---------
->>> parse_label_table({"3": "pallet cell"})
-{3: <PlaceLabel.STORAGE: 3>}
->>> link_connection(PlaceLabel.CORRIDOR, PlaceLabel.STORAGE, cogent=False, door=False)
-<Connection.STORAGE_ACCESS: 'storage_access'>
+The grid decomposition labels its regions with :class:`~shared.vocabulary.PlaceLabel`; a person may say which
+label a place category means (``{"3": "storage"}``). That choice is a map-store revision of stage
+:data:`LABEL_TABLE_STAGE` whose summary holds :data:`LABEL_OVERRIDES_KEY`; the API writes it and the
+decomposition worker reads it, so both take the table and its parsing from here.
 """
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Mapping
 from typing import Final, NamedTuple
 
 from shared.vocabulary import PlaceLabel
 
-LABEL_TABLE_STAGE: Final = "label_table"
-"""Stage name of the map-store revisions that record a person's label-table overrides; the grid
-decomposition worker re-labels the map from the newest one."""
-LABEL_OVERRIDES_KEY: Final = "label_overrides"
-"""Summary key of those revisions: {category as a decimal string: label name}."""
-
 
 class PlaceLabelError(ValueError):
-    """A place label or label-table override that is not one."""
-
-
-class Connection(enum.Enum):
-    """Attribute of a link between two regions (dual of an edge's cogency)."""
-
-    CONNECTED = "connected"
-    STORAGE_ACCESS = "storage_access"
-    DOOR = "door"
-    DISCONNECTED = "disconnected"
+    """A name that is not a place label, or a label table that cannot be taken."""
 
 
 class LabelSemantics(NamedTuple):
@@ -46,33 +25,36 @@ class LabelSemantics(NamedTuple):
     connectable: frozenset[PlaceLabel]
 
 
-DRIVABLE_LABELS: Final = frozenset({PlaceLabel.CORRIDOR, PlaceLabel.JUNCTION, PlaceLabel.ROOM,
-                                    PlaceLabel.OPEN_AREA})
-"""Labels of the places a vehicle drives in."""
+_DRIVABLE = frozenset({PlaceLabel.CORRIDOR, PlaceLabel.JUNCTION, PlaceLabel.ROOM, PlaceLabel.OPEN_AREA})
 
-LABEL_TABLE: Final[Mapping[PlaceLabel, LabelSemantics]] = {
-    PlaceLabel.CORRIDOR: LabelSemantics("drivable & storage access", DRIVABLE_LABELS | {PlaceLabel.STORAGE}),
-    PlaceLabel.JUNCTION: LabelSemantics("drivable & connection", DRIVABLE_LABELS),
+LABEL_TABLE: Final[dict[PlaceLabel, LabelSemantics]] = {
+    PlaceLabel.CORRIDOR: LabelSemantics("drivable & storage access", _DRIVABLE | {PlaceLabel.STORAGE}),
+    PlaceLabel.JUNCTION: LabelSemantics("drivable & connection", _DRIVABLE),
     PlaceLabel.STORAGE: LabelSemantics("storage", frozenset({PlaceLabel.CORRIDOR, PlaceLabel.OPEN_AREA})),
-    PlaceLabel.ROOM: LabelSemantics("drivable & work", DRIVABLE_LABELS),
-    PlaceLabel.OPEN_AREA: LabelSemantics("drivable & storage access", DRIVABLE_LABELS | {PlaceLabel.STORAGE}),
+    PlaceLabel.ROOM: LabelSemantics("drivable & work", _DRIVABLE),
+    PlaceLabel.OPEN_AREA: LabelSemantics("drivable & storage access", _DRIVABLE | {PlaceLabel.STORAGE}),
     PlaceLabel.UNIDENTIFIED: LabelSemantics("-", frozenset()),
     PlaceLabel.NONE: LabelSemantics("-", frozenset()),
 }
-"""Each label's functionality and the labels it may connect to."""
+"""Each label's functionality and the labels it connects to."""
+
+LABEL_TABLE_STAGE: Final = "label_table"
+"""Stage name of the map-store revisions that record a person's label-table overrides; the grid
+decomposition worker re-labels the map from the newest one."""
+LABEL_OVERRIDES_KEY: Final = "label_overrides"
+"""Summary key of those revisions: {category as a decimal string: label name}."""
 
 _ALIASES: Final = {"PALLET_CELL": "STORAGE", "PALLET_CELLS": "STORAGE", "OPEN": "OPEN_AREA",
                    "UNKNOWN": "UNIDENTIFIED"}
 
 
-def parse_label(name: str) -> PlaceLabel:
-    """A :class:`~shared.vocabulary.PlaceLabel` from its name (``corridor``, ``junction``, ``storage``,
-    ``pallet_cell``...).
+def parse_place_label(name: str) -> PlaceLabel:
+    """A :class:`PlaceLabel` from its name (``corridor``, ``junction``, ``storage``, ``pallet_cell``...).
 
     Raises
     ------
     PlaceLabelError
-        ``name`` names no place label.
+        A name that is not a place label or one of its aliases.
     """
     key = name.strip().upper().replace(" ", "_").replace("-", "_")
     key = _ALIASES.get(key, key)
@@ -81,23 +63,6 @@ def parse_label(name: str) -> PlaceLabel:
     except KeyError as err:
         names = ", ".join(label.name.lower() for label in PlaceLabel)
         raise PlaceLabelError(f"unknown place label {name!r}; use one of {names}") from err
-
-
-def link_connection(a: PlaceLabel, b: PlaceLabel, *, cogent: bool, door: bool) -> Connection:
-    """Connection of a link between places labelled ``a`` and ``b`` (paper C's C(e), C(l)).
-
-    A cogent edge is a physical separation: a door if a doorway was closed on it, else
-    disconnected. Otherwise labels that the table does not let connect (unidentified, junction to
-    storage) are disconnected, a drivable place next to storage is storage access, and the rest
-    are connected.
-    """
-    if cogent:
-        return Connection.DOOR if door else Connection.DISCONNECTED
-    if b not in LABEL_TABLE[a].connectable or a not in LABEL_TABLE[b].connectable:
-        return Connection.DISCONNECTED
-    if PlaceLabel.STORAGE in (a, b):
-        return Connection.STORAGE_ACCESS
-    return Connection.CONNECTED
 
 
 def parse_label_table(raw: Mapping[str, str]) -> dict[int, PlaceLabel]:
@@ -113,7 +78,7 @@ def parse_label_table(raw: Mapping[str, str]) -> dict[int, PlaceLabel]:
     for key, value in raw.items():
         if not (isinstance(key, str) and key.isdigit() and len(key) <= 6):
             raise PlaceLabelError(f"category {key!r} must be a non-negative integer, e.g. '3'")
-        label = parse_label(str(value))
+        label = parse_place_label(str(value))
         if label is PlaceLabel.NONE:
             raise PlaceLabelError(f"category {key}: 'none' marks occupied or unknown cells, not a place")
         out[int(key)] = label
@@ -121,14 +86,11 @@ def parse_label_table(raw: Mapping[str, str]) -> dict[int, PlaceLabel]:
 
 
 __all__ = [
-    "DRIVABLE_LABELS",
     "LABEL_OVERRIDES_KEY",
     "LABEL_TABLE",
     "LABEL_TABLE_STAGE",
-    "Connection",
     "LabelSemantics",
     "PlaceLabelError",
-    "link_connection",
-    "parse_label",
     "parse_label_table",
+    "parse_place_label",
 ]

@@ -23,7 +23,6 @@ from atlas.navigation.blocks import Block, blocks_of, is_block_edge, is_block_no
 from atlas.navigation.errors import NavigationUnavailableError
 from atlas.navigation.grid import BoolGrid, Frame, Point, free_cells, nearest_cell, region_slices
 from atlas.navigation.portals import Portal, find_portals
-from shared.places import Connection
 from shared.store import GridLayer, MapStore, TopologyEdge, TopologyNode
 from shared.vocabulary import FeatureKind, LayerName
 
@@ -31,7 +30,7 @@ SEGMENT_LAYER = LayerName.PLACE_SEGMENTS
 OCCUPANCY_LAYER = LayerName.OCCUPANCY
 RACK_KIND = FeatureKind.BIN
 """Features whose footprints are racks, never driven through (the pillar stage's pallet cells)."""
-ROUTE_CONNECTIONS = frozenset({Connection.CONNECTED.value, Connection.DOOR.value})
+ROUTE_CONNECTIONS = frozenset({"connected", "door"})
 """Connections a vehicle drives through (not ``storage_access`` nor ``disconnected``)."""
 LOCATE_TOLERANCE_M = 1.0
 """How far a point (a bin's access pose, a dock) may lie off a drivable region and still be placed in it."""

@@ -11,7 +11,7 @@ When the layer changed and ``min_period_s`` has passed since the last attempt, t
 read and compared with the last decomposed one (:func:`changed_fraction`: the larger of the share
 of known cells newly known or forgotten, and the share of obstacle cells whose free / uncertain /
 occupied class changed). At ``min_change_fraction`` or more it is decomposed in the stage thread
-(seconds on a large map) and ONE revision is committed: the label layer (uint8 :class:`Label` codes, meta
+(seconds on a large map) and ONE revision is committed: the label layer (uint8 :class:`PlaceLabel` codes, meta
 ``{"encoding": "place_labels", "classes": [...], "colours": [...], "source_layer", "source_revision"}``),
 the segment layer (uint16 region ids), features (:func:`decomposition_features`: corridor,
 junction, room, open_area, region (storage and unidentified, ``label`` property), wall, line) and
@@ -42,8 +42,10 @@ from services.grid_decomposition.records import (
     decomposition_layers,
     decomposition_topology,
 )
-from services.grid_decomposition.semantics import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE, Label, parse_label_table
+from services.grid_decomposition.semantics import parse_label_table
+from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from shared.store import GridLayer, Revision, RevisionWrite, StoredLayer, StoreUnavailableError
+from shared.vocabulary import PlaceLabel
 from shared.worker import StageContext
 
 log = logging.getLogger(__name__)
@@ -110,7 +112,7 @@ class DecompositionStage:
         self._checked_revision: int | None = None
         self._reference: GridLayer | None = None
         self._last_attempt = -float("inf")
-        self._overrides: dict[int, Label] = {}
+        self._overrides: dict[int, PlaceLabel] = {}
         self._relabel = False
 
     def run(self, stop: threading.Event) -> None:

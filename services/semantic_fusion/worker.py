@@ -57,7 +57,6 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits
 
-from services.occupancy_mapping.mapper import sensor_pose
 from services.semantic_fusion import se2
 from services.semantic_fusion.errors import SemanticFusionError
 from services.semantic_fusion.fusion import FusionSettings, SemanticFusion
@@ -68,7 +67,7 @@ from services.semantic_fusion.scan import RangeScan, observation_from_message, r
 from shared import messages
 from shared.bus import DropPolicy, Subscription
 from shared.store import RevisionWrite, StoreUnavailableError
-from shared.transforms import TransformBuffer, add_tf_message, yaw_from_quaternion
+from shared.transforms import TransformBuffer, add_tf_message, sensor_pose, yaw_from_quaternion
 from shared.worker import StageContext
 
 log = logging.getLogger(__name__)

@@ -1,31 +1,32 @@
-"""Place labels as people write them, and the label table's connect-ability."""
+"""The place-label table and its parsing, shared by the grid decomposition and the API."""
 
 from __future__ import annotations
 
 import pytest
 
-from shared.places import Connection, PlaceLabelError, link_connection, parse_label, parse_label_table
+from shared.places import LABEL_TABLE, PlaceLabelError, parse_label_table, parse_place_label
 from shared.vocabulary import PlaceLabel
 
 
-@pytest.mark.parametrize(("name", "label"), [
-    ("corridor", PlaceLabel.CORRIDOR), ("Pallet cell", PlaceLabel.STORAGE), ("open-area", PlaceLabel.OPEN_AREA),
-    ("unknown", PlaceLabel.UNIDENTIFIED)])
-def test_parse_label_takes_names_and_aliases(name: str, label: PlaceLabel) -> None:
-    assert parse_label(name) is label
+def test_label_table_has_a_row_per_label_and_is_symmetric_where_it_connects() -> None:
+    assert set(LABEL_TABLE) == set(PlaceLabel)
+    for label, row in LABEL_TABLE.items():
+        for other in row.connectable:
+            assert label in LABEL_TABLE[other].connectable or other is PlaceLabel.STORAGE
 
 
-@pytest.mark.parametrize(("raw", "message"), [
-    ({"3": "shelf"}, "unknown place label 'shelf'"), ({"-1": "corridor"}, "non-negative integer"),
-    ({"2": "none"}, "not a place")])
-def test_parse_label_table_refuses_what_is_not_a_choice(raw: dict[str, str], message: str) -> None:
-    with pytest.raises(PlaceLabelError, match=message):
-        parse_label_table(raw)
+def test_parse_place_label_accepts_names_and_aliases_in_any_spelling() -> None:
+    assert parse_place_label(" Corridor ") is PlaceLabel.CORRIDOR
+    assert parse_place_label("pallet-cells") is PlaceLabel.STORAGE
+    assert parse_place_label("open") is PlaceLabel.OPEN_AREA
+    with pytest.raises(PlaceLabelError, match="unknown place label 'shelf'; use one of none, corridor"):
+        parse_place_label("shelf")
 
 
-def test_storage_opens_only_onto_drivable_places_that_give_access() -> None:
-    assert link_connection(PlaceLabel.CORRIDOR, PlaceLabel.STORAGE, cogent=False, door=False) \
-        is Connection.STORAGE_ACCESS
-    assert link_connection(PlaceLabel.JUNCTION, PlaceLabel.STORAGE, cogent=False, door=False) \
-        is Connection.DISCONNECTED
-    assert link_connection(PlaceLabel.ROOM, PlaceLabel.CORRIDOR, cogent=True, door=True) is Connection.DOOR
+def test_parse_label_table_takes_decimal_categories_and_rejects_none() -> None:
+    assert parse_label_table({"0": "corridor", "3": "pallet cell"}) == {0: PlaceLabel.CORRIDOR,
+                                                                         3: PlaceLabel.STORAGE}
+    with pytest.raises(PlaceLabelError, match="category '-1' must be a non-negative integer"):
+        parse_label_table({"-1": "corridor"})
+    with pytest.raises(PlaceLabelError, match="category 2: 'none' marks occupied or unknown cells"):
+        parse_label_table({"2": "none"})
