@@ -3,10 +3,9 @@ per version of a bin, for the bins route and the fast path alike."""
 
 from __future__ import annotations
 
-from fastapi import HTTPException, status
-
 from api.models import AccessPose, BinOut, Opening, PlaceRef
-from atlas.bins import BinAnswer, BinNotFoundError, no_bin
+from api.translate import http_error
+from atlas.bins import BinAnswer, no_bin
 from atlas.bins import PlaceRef as MapPlaceRef
 from atlas.live import LiveMap
 from shared.store import MapInfo
@@ -43,17 +42,12 @@ def bin_out(answer: BinAnswer) -> BinOut:
     )
 
 
-def not_found(err: BinNotFoundError) -> HTTPException:
-    """The 404 of a bin the map does not have."""
-    return HTTPException(status.HTTP_404_NOT_FOUND, str(err))
-
-
 def live_bin(live: LiveMap, map_info: MapInfo, bin_id: str) -> bytes:
     """Bin ``bin_id`` of the live map as JSON (404 if there is none), made once per version of the bin and of
     what it reads besides."""
     row = live.bin_row(bin_id)
     if row is None:
-        raise not_found(no_bin(map_info, bin_id, None))
+        raise http_error(no_bin(map_info, bin_id, None))
     body = live.bin_json.get(row.id)
     if body is None:
         body = live.bin_json[row.id] = bin_out(live.bin_answer(row)).model_dump_json().encode()

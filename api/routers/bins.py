@@ -8,10 +8,11 @@ import anyio
 from fastapi import APIRouter, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
-from api.answers import bin_out, live_bin, not_found
+from api.answers import bin_out, live_bin
 from api.deps import CacheDep, ContextDep, MapDep, RevisionQuery, StoreDep
 from api.models import COMMON_ERRORS, BinOut, BinStatus, ErrorOut, Responses, example_config
 from api.queries import BIN_ID_PATTERN, BBoxQuery
+from api.translate import http_error
 from atlas.bins import BinNotFoundError, no_bin, select_bins, stored_bin
 from atlas.bins import BinStatus as MapBinStatus
 from atlas.cache import RevisionCache
@@ -91,7 +92,7 @@ async def get_bin(
         return await anyio.to_thread.run_sync(_stored_bin, store, cache, map_info, revision, bin_id)
     live = await context.live.get(map_info)
     if live is None:
-        raise not_found(no_bin(map_info, bin_id, revision))
+        raise http_error(no_bin(map_info, bin_id, revision))
     return Response(live_bin(live, map_info, bin_id), media_type="application/json",
                     headers={REVISION_HEADER: str(live.revision_id)})
 
@@ -101,4 +102,4 @@ def _stored_bin(store: MapStore, cache: RevisionCache, map_info: MapInfo, revisi
     try:
         return bin_out(stored_bin(store, cache, map_info, bin_id, revision=revision))
     except BinNotFoundError as err:
-        raise not_found(err) from err
+        raise http_error(err) from err

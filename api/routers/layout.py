@@ -10,6 +10,7 @@ from fastapi.responses import JSONResponse
 from api.deps import MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, as_json, not_found
 from api.queries import BBoxQuery, KindsQuery
+from api.translate import http_error
 from atlas.features import BBox
 from atlas.layout import MEDIA_TYPE as GEOJSON_MEDIA_TYPE
 from atlas.layout import LayoutCollection, LayoutTooLargeError, Picture, layout_collection, layout_picture
@@ -62,7 +63,7 @@ def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds
         collection = layout_collection(store, map_info, revision=revision, kinds=kinds, bbox=bbox,
                                        max_features=MAX_LAYOUT_FEATURES)
     except LayoutTooLargeError as err:
-        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(err)) from err
+        raise http_error(err) from err
     return Response(collection.to_json(), media_type=GEOJSON_MEDIA_TYPE)
 
 
@@ -92,7 +93,7 @@ def _scene_response(store: MapStore, settings: Settings, map_info: MapInfo, revi
             occupancy_layer=settings.occupancy.layer, label_layer=settings.decomposition.label_layer,
             max_features=MAX_PICTURE_FEATURES)
     except LayoutTooLargeError as err:
-        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(err)) from err
+        raise http_error(err) from err
     except NothingToDrawError as err:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"map {map_info.name!r}: {err}; pass ?bbox= to draw an "
                                                        "empty area") from err

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, HTTPException, Query, status
+from fastapi import APIRouter, Body, Query, status
 from pydantic import BaseModel, Field
 
 from api.deps import AnnouncerDep, CacheDep, MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.queries import MAX_BBOX_SIDE_M
+from api.translate import http_error
 from atlas import semantics
 from atlas.errors import InvalidQueryError
 
@@ -155,6 +156,6 @@ def put_label_table(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
     try:
         written, overrides = semantics.write_overrides(store, map_info, body.overrides)
     except InvalidQueryError as err:
-        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
+        raise http_error(err) from err
     announcer.announce(map_info, written)
     return LabelTableAccepted(revision_id=written.id, overrides=overrides)
