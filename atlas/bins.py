@@ -47,12 +47,15 @@ class BinNotFoundError(NotInMapError):
 
 @dataclass(frozen=True, slots=True)
 class CorridorShape:
+    """A corridor feature's key, the aisle it is (pillar mapping's aisles), and its outline."""
+
     key: str
     aisle: int | None
     rings: list[npt.NDArray[np.float32]]
     """Outer rings (N, 1, 2) in map metres, as cv2.pointPolygonTest takes them; holes are ignored."""
 
     def holds(self, x_m: float, y_m: float) -> bool:
+        """Whether map point (x_m, y_m) is inside (or on) the outline."""
         return any(cv2.pointPolygonTest(ring, (x_m, y_m), False) >= 0 for ring in self.rings)
 
 
@@ -91,6 +94,7 @@ class BinIndex:
         return chosen[0].key if chosen else None
 
     def nearest_junction(self, x_m: float, y_m: float) -> tuple[str, float] | None:
+        """(key, distance in metres) of the junction whose bounds' centre is nearest (x, y); None without any."""
         if not self.junction_keys:
             return None
         distance = np.hypot(self.junction_xy[:, 0] - x_m, self.junction_xy[:, 1] - y_m)

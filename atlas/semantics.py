@@ -46,6 +46,8 @@ class PlaceAt:
 
 @dataclass(frozen=True, slots=True)
 class FeatureAtPoint:
+    """A feature at a point: an area holding it, or a point or line within :data:`NEAR_M`."""
+
     kind: str
     key: str
     label: str | None
@@ -123,6 +125,8 @@ def semantics_at(store: MapStore, cache: RevisionCache, settings: Settings, map_
 
 @dataclass(frozen=True, slots=True)
 class LabelRow:
+    """One label of the table: what places with it are for and the labels they may open onto."""
+
     label: str
     functionality: str
     connectable: list[str]
@@ -141,6 +145,8 @@ class CategoryRow:
 
 @dataclass(frozen=True, slots=True)
 class LabelTable:
+    """The label table of a map: every label, the categories of its decomposition, and a person's overrides."""
+
     labels: list[LabelRow]
     categories: list[CategoryRow]
     overrides: dict[str, str]
