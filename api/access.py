@@ -159,7 +159,7 @@ class AccessPolicy:
     recheck_s : float
         Seconds a verified key is trusted for reads before its row is read again (>= 0).
     clock : callable, optional
-        Monotonic seconds; tests pass a fake one.
+        Monotonic seconds, for key rechecks and the rate limiter; tests pass a fake one.
     """
 
     def __init__(self, *, require_keys_for_reads: bool, rate_limit_per_s: float | None,
@@ -168,7 +168,7 @@ class AccessPolicy:
             raise ApiConfigError(f"key recheck interval must be a number of seconds >= 0, not {recheck_s}")
         self.require_keys_for_reads = require_keys_for_reads
         self.limiter = (None if rate_limit_per_s is None
-                        else TokenBucketLimiter(rate_per_s=rate_limit_per_s, burst=rate_limit_burst))
+                        else TokenBucketLimiter(rate_per_s=rate_limit_per_s, burst=rate_limit_burst, clock=clock))
         self.recheck_s = recheck_s
         self._clock = clock
         self._verified: dict[str, _Verified] = {}
