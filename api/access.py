@@ -89,12 +89,12 @@ def required_role(method: str, path: str, *, require_keys_for_reads: bool) -> Ro
 
 def check_role(caller: Caller, required: Role | None) -> None:
     """Raise 401 without a key and 403 with a key whose role is below ``required``."""
-    refusal = role_refusal(caller, required)
+    refusal = _role_refusal(caller, required)
     if refusal is not None:
         raise refusal
 
 
-def role_refusal(caller: Caller, required: Role | None) -> HTTPException | None:
+def _role_refusal(caller: Caller, required: Role | None) -> HTTPException | None:
     """The 401 (no key) or 403 (a key whose role is below ``required``) for ``caller``, or None if they may."""
     if required is None:
         return None
@@ -252,14 +252,14 @@ class AccessPolicy:
         required = required_role(method, route, require_keys_for_reads=self.require_keys_for_reads)
         if secret is None:
             anonymous = Caller(None, address)
-            return Verdict(anonymous, f"address:{address}", role_refusal(anonymous, required))
+            return Verdict(anonymous, f"address:{address}", _role_refusal(anonymous, required))
         if parse_key_id(secret) is None:
             return Verdict(Caller(None, address), f"address:{address}", _malformed())
         key = self.remembered(secret) if method in READ_METHODS else None
         if key is None:
             return None
         caller = Caller(key, address)
-        return Verdict(caller, f"key:{key.key_id}", role_refusal(caller, required))
+        return Verdict(caller, f"key:{key.key_id}", _role_refusal(caller, required))
 
     def settle(self, verdict: Verdict) -> Caller:
         """Carry out ``verdict``: charge its bucket (429 when spent), then refuse (401/403) or let the caller in."""
