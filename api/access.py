@@ -202,7 +202,9 @@ class AccessPolicy:
 
         Charges nothing: charge ``key:<key id>`` for a request it lets through (:meth:`charge`).
         """
-        key_id = parse_key_id(secret)
+        return self._remembered(secret, parse_key_id(secret))
+
+    def _remembered(self, secret: str, key_id: str | None) -> ApiKey | None:
         known = None if key_id is None else self._verified.get(key_id)
         if (known is None or self._clock() - known.read_at > self.recheck_s
                 or not hmac.compare_digest(known.digest, hashlib.sha256(secret.encode()).digest())):
@@ -253,9 +255,10 @@ class AccessPolicy:
         if secret is None:
             anonymous = Caller(None, address)
             return Verdict(anonymous, f"address:{address}", _role_refusal(anonymous, required))
-        if parse_key_id(secret) is None:
+        key_id = parse_key_id(secret)
+        if key_id is None:
             return Verdict(Caller(None, address), f"address:{address}", _malformed())
-        key = self.remembered(secret) if method in READ_METHODS else None
+        key = self._remembered(secret, key_id) if method in READ_METHODS else None
         if key is None:
             return None
         caller = Caller(key, address)
