@@ -3,11 +3,11 @@
 FastAPI's routing and dependency handling cost several times what answering these from the live state does
 (:mod:`api.live`), so :class:`LiveReads` answers them before FastAPI when nothing needs more: a plain ``GET`` of
 ``/v1/maps/{map}/bins/{id}`` or ``/v1/maps/{map}/features`` with only ``bbox``, ``kind``, ``limit`` and
-``offset``, all valid; a map already found, whose live state is fresh; and an access decision that memory suffices
-for (:meth:`api.access.AccessPolicy.judge`, the in-memory part of the one decision the routes make too). It
-answers that decision's refusals (401, 403, 429) as FastAPI would, and uses the routes' own checks and encoders,
-so every answer is the one the route gives. Any other request goes to FastAPI unchanged and uncharged, which
-answers it (or explains the refusal) as always.
+``offset``, all valid, of a map already found; an access decision that memory suffices for
+(:meth:`api.access.AccessPolicy.judge`, the in-memory part of :meth:`~api.access.AccessPolicy.admit`, the one
+decision the routes make too); and, unless that decision is a refusal (401, 403, 429: answered as FastAPI answers
+it), a fresh live state. It uses the routes' own checks and encoders, so every answer is the one the route gives.
+Any other request goes to FastAPI unchanged and uncharged, which answers it (or explains the refusal) as always.
 """
 
 from __future__ import annotations
