@@ -34,10 +34,10 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from services.labelling_training.commands import train_from_sources
+from services.labelling_training.sim_views import SimView, render_view
 from services.object_labelling import EfficientNetLite0, LabelModel, ObjectLabeller, PriorDatabase
 from services.object_labelling.cnn import default_weights_path
-from services.object_labelling.commands import train_from_sources
-from services.object_labelling.sim_views import SimView, render_view
 from services.object_labelling.worker import LabellingStage
 from services.simulator import photo_textures, rosmsgs, world_from_layout
 from services.simulator.cameras import RGBD_MOUNT

@@ -295,7 +295,7 @@ def _export(args: argparse.Namespace, settings: Settings) -> int:
 
 
 def _classifier(args: argparse.Namespace, settings: Settings) -> None:
-    from services.object_labelling.commands import evaluate_from_sources, train_from_sources
+    from services.labelling_training.commands import evaluate_from_sources, train_from_sources
     from services.object_labelling.worker import model_path_of
 
     if args.command == "train-classifier":
@@ -361,7 +361,7 @@ def _check_stages(settings: Settings, stages: Sequence[str]) -> None:
 
 
 def _demo_labelling_model(settings: Settings) -> None:
-    from services.object_labelling.commands import ensure_demo_model
+    from services.labelling_training.commands import ensure_demo_model
     from services.object_labelling.worker import model_path_of
 
     ensure_demo_model(model_path_of(settings))

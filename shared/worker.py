@@ -11,12 +11,14 @@ import datetime as dt
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
+
+from pydantic import BaseModel, ValidationError
 
 from shared import messages
-from shared.bus import WORKER_NAMESPACE, Bus, Publisher
+from shared.bus import WORKER_NAMESPACE, Bus, DropPolicy, Publisher, Received, Subscription
 from shared.metrics import Counters
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore, Revision, RevisionWrite, StoreError, StoreUnavailableError
@@ -26,6 +28,9 @@ log = logging.getLogger(__name__)
 HEARTBEAT_PERIOD_S = 5.0
 MAP_EVENTS_TOPIC = "map_events"
 """Map events go to ROS topic ``/aisle/map_events`` (aisle_msgs/msg/MapEvent)."""
+LATEST_ONLY = frozenset({messages.IMAGE, messages.CAMERA_INFO})
+"""Message types whose subscriptions keep the newest samples (camera frames: only the latest matters); every
+other type holds the sender instead of dropping (scans, poses, tf)."""
 
 
 @dataclass
@@ -43,6 +48,22 @@ class StageContext:
 
     def count(self, what: str, amount: int = 1) -> None:
         self.counters.incr(f"{self.name}.{what}", amount)
+
+    def subscribe(self, topic: str, msgtype: str, *, maxsize: int) -> Subscription:
+        """``topic`` of ``msgtype`` under every robot namespace of the settings, queued up to ``maxsize``.
+
+        Camera frames and camera info (:data:`LATEST_ONLY`) keep the newest and count what they drop; every
+        other type holds the sender (:attr:`DropPolicy.BLOCK`). Malformed samples are counted as
+        ``<stage>.<topic>.malformed`` and skipped by ``receive``.
+        """
+        policy = DropPolicy.KEEP_NEWEST if msgtype in LATEST_ONLY else DropPolicy.BLOCK
+        return self.bus.subscribe(topic, msgtype, namespaces=self.settings.robot_namespaces, policy=policy,
+                                  maxsize=maxsize, name=f"{self.name}.{topic}")
+
+    def map_events(self) -> Subscription:
+        """The map events every worker and the API announce on ``/aisle/map_events`` (newest 64 kept)."""
+        return self.bus.subscribe(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespaces=[WORKER_NAMESPACE],
+                                  policy=DropPolicy.KEEP_NEWEST, maxsize=64, name=f"{self.name}.{MAP_EVENTS_TOPIC}")
 
     def commit(self, write: RevisionWrite) -> Revision | None:
         """Store ``write`` as one revision and announce it; None (counted, logged) if the store is down.
@@ -68,9 +89,8 @@ class StageContext:
 def map_event(map_name: str, revision: Revision) -> Any:
     """The ``aisle_msgs/msg/MapEvent`` announcing ``revision`` (from its stored summary), stamped now."""
     features = revision.summary.get("features", {})
-    now = time.time_ns()
     return messages.message_class(messages.MAP_EVENT)(
-        stamp=messages.message_class("builtin_interfaces/msg/Time")(sec=now // 10**9, nanosec=now % 10**9),
+        stamp=messages.time_msg(time.time_ns()),
         map_name=map_name,
         revision_id=revision.id,
         stage=revision.stage,
@@ -81,6 +101,23 @@ def map_event(map_name: str, revision: Revision) -> Any:
         features_moved=sum(f["moved"] for f in features.values()),
         topology_changed=bool(revision.summary.get("topology_changed", False)),
     )
+
+
+SectionT = TypeVar("SectionT", bound=BaseModel)
+
+
+def checked(section: SectionT, error: type[Exception]) -> SectionT:
+    """``section`` validated again (built with ``model_construct``, or changed since); ``error`` if invalid."""
+    try:
+        return type(section).model_validate(section.model_dump())
+    except ValidationError as err:
+        raise error(f"{type(section).__name__}: {err}") from err
+
+
+def drain(subscription: Subscription | None) -> Iterator[Received]:
+    """Every message queued on ``subscription`` now (none for None), without waiting."""
+    while subscription is not None and (item := subscription.receive()) is not None:
+        yield item
 
 
 class Stage(Protocol):
