@@ -22,6 +22,7 @@ from shared.bus import WORKER_NAMESPACE, Bus, DropPolicy, Publisher, Received, S
 from shared.metrics import Counters
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore, Revision, RevisionWrite, StoreError, StoreUnavailableError
+from shared.transforms import TransformBuffer, add_tf_message
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +119,22 @@ def drain(subscription: Subscription | None) -> Iterator[Received]:
     """Every message queued on ``subscription`` now (none for None), without waiting."""
     while subscription is not None and (item := subscription.receive()) is not None:
         yield item
+
+
+def take_transforms(context: StageContext, buffer_of: Callable[[str], TransformBuffer], *,
+                    static: Subscription | None, dynamic: Subscription | None = None,
+                    counter: str = "bad_transforms") -> None:
+    """Add every queued tf_static (first), then tf message to ``buffer_of(namespace)`` of the robot it came from.
+
+    Bad transforms (non-finite, zero quaternion) are counted as ``counter``, logged and skipped.
+    """
+    for subscription, is_static in ((static, True), (dynamic, False)):
+        for item in drain(subscription):
+            try:
+                add_tf_message(buffer_of(item.namespace), item.message, static=is_static)
+            except ValueError as err:
+                context.count(counter)
+                log.warning("%s: tf from %r skipped: %s", context.name, item.namespace or "/", err)
 
 
 class Stage(Protocol):
