@@ -46,9 +46,12 @@ class StageContext:
     counters: Counters
     started_at: dt.datetime = field(default_factory=lambda: dt.datetime.now(dt.UTC))
     _events: Publisher | None = None
+    _subscriptions: list[Subscription] = field(default_factory=list)
 
     def count(self, what: str, amount: int = 1) -> None:
-        self.counters.incr(f"{self.name}.{what}", amount)
+        """Add ``amount`` to counter ``<stage>.<what>`` (nothing for 0: a counter appears when it first counts)."""
+        if amount:
+            self.counters.incr(f"{self.name}.{what}", amount)
 
     def subscribe(self, topic: str, msgtype: str, *, maxsize: int) -> Subscription:
         """``topic`` of ``msgtype`` under every robot namespace of the settings, queued up to ``maxsize``.
@@ -58,13 +61,25 @@ class StageContext:
         ``<stage>.<topic>.malformed`` and skipped by ``receive``.
         """
         policy = DropPolicy.KEEP_NEWEST if msgtype in LATEST_ONLY else DropPolicy.BLOCK
-        return self.bus.subscribe(topic, msgtype, namespaces=self.settings.robot_namespaces, policy=policy,
-                                  maxsize=maxsize, name=f"{self.name}.{topic}")
+        subscription = self.bus.subscribe(topic, msgtype, namespaces=self.settings.robot_namespaces, policy=policy,
+                                          maxsize=maxsize, name=f"{self.name}.{topic}")
+        self._subscriptions.append(subscription)
+        return subscription
 
     def map_events(self) -> Subscription:
         """The map events every worker and the API announce on ``/aisle/map_events`` (newest 64 kept)."""
-        return self.bus.subscribe(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespaces=[WORKER_NAMESPACE],
-                                  policy=DropPolicy.KEEP_NEWEST, maxsize=64, name=f"{self.name}.{MAP_EVENTS_TOPIC}")
+        subscription = self.bus.subscribe(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespaces=[WORKER_NAMESPACE],
+                                          policy=DropPolicy.KEEP_NEWEST, maxsize=64,
+                                          name=f"{self.name}.{MAP_EVENTS_TOPIC}")
+        self._subscriptions.append(subscription)
+        return subscription
+
+    def close_subscriptions(self) -> None:
+        """Stop receiving on every subscription made through this context (:func:`run_stage` does so when the
+        stage stops or fails; what is queued stays readable)."""
+        for subscription in self._subscriptions:
+            subscription.close()
+        self._subscriptions.clear()
 
     def commit(self, write: RevisionWrite) -> Revision | None:
         """Store ``write`` as one revision and announce it; None (counted, logged) if the store is down.
@@ -104,6 +119,20 @@ def map_event(map_name: str, revision: Revision) -> Any:
     )
 
 
+@dataclass
+class InputSpan:
+    """The stamps of the inputs a stage took since its last revision: the oldest and newest (ns) and how many."""
+
+    first_ns: int | None = None
+    last_ns: int | None = None
+    count: int = 0
+
+    def add(self, stamp_ns: int) -> None:
+        self.first_ns = stamp_ns if self.first_ns is None else min(self.first_ns, stamp_ns)
+        self.last_ns = stamp_ns if self.last_ns is None else max(self.last_ns, stamp_ns)
+        self.count += 1
+
+
 SectionT = TypeVar("SectionT", bound=BaseModel)
 
 
@@ -138,7 +167,8 @@ def take_transforms(context: StageContext, buffer_of: Callable[[str], TransformB
 
 
 class Stage(Protocol):
-    """One pipeline stage: subscribes in ``__init__``, works in ``run`` until ``stop`` is set."""
+    """One pipeline stage: subscribes in ``__init__`` (through :meth:`StageContext.subscribe`, closed when ``run``
+    returns), works in ``run`` until ``stop`` is set."""
 
     def run(self, stop: threading.Event) -> None: ...
 
@@ -193,6 +223,8 @@ def run_stage(name: str, factory: StageFactory, *, bus: Bus, store: MapStore, se
                 context.count("crashes")
                 log.exception("%s: stage failed; restarting in %.1f s", name, restart_delay_s)
                 stop.wait(restart_delay_s)
+            finally:
+                context.close_subscriptions()
     finally:
         if token is not None:
             token.undeclare()

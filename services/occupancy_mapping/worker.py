@@ -41,7 +41,6 @@ class OccupancyStage:
         self.tf_static = context.subscribe("tf_static", messages.TF_MESSAGE, maxsize=100)
         pose_topic = settings.pose_topic
         self.poses = context.subscribe(pose_topic, messages.POSE_STAMPED, maxsize=2000) if pose_topic else None
-        self._subscriptions = tuple(s for s in (self.scans, self.odometry, self.tf, self.tf_static, self.poses) if s)
         self.matcher = (
             ScanMatcher(window_m=self.settings.scan_matching_window_m,
                         window_rad=self.settings.scan_matching_window_rad, max_range_m=self.settings.max_range_m)
@@ -92,8 +91,6 @@ class OccupancyStage:
             self._integrated_since_store += self.mapper.drain(final=True)
             self._sync_counts()
             self._store()
-            for subscription in self._subscriptions:
-                subscription.close()
 
     def _take_poses(self) -> None:
         for subscription, static in ((self.tf_static, True), (self.tf, False)):

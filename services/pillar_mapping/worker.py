@@ -54,7 +54,6 @@ class PillarStage:
         self.infos = context.subscribe(settings.info_topic, messages.CAMERA_INFO, maxsize=4)
         self.tf = context.subscribe("tf", messages.TF_MESSAGE, maxsize=2000)
         self.tf_static = context.subscribe("tf_static", messages.TF_MESSAGE, maxsize=100)
-        self._subscriptions = (self.images, self.infos, self.tf, self.tf_static)
         self.mapper = BearingOnlyMapper(max_range_m=settings.max_range_m)
         self.profiles = [rack_profile(p.levels_m, p.area) for p in settings.rack_profiles]
         sigma_m, sigma_rad = settings.localisation_sigma_m, settings.localisation_sigma_rad
@@ -91,8 +90,6 @@ class PillarStage:
             self._take_inputs(timeout_s=0.0)
             self._process_waiting(final=True)
             self._store()
-            for subscription in self._subscriptions:
-                subscription.close()
 
     def _robot(self, namespace: str) -> RobotView:
         return self.robots.setdefault(namespace, RobotView())
