@@ -43,7 +43,7 @@ from services.simulator import photo_textures, rosmsgs, world_from_layout
 from services.simulator.cameras import RGBD_MOUNT
 from services.simulator.world import World
 from shared.bus import Bus
-from shared.settings import Settings, ZenohSettings
+from shared.settings import LabellingSettings, Settings, ZenohSettings
 from shared.store import MapStore
 from shared.transforms import from_matrix
 from shared.worker import StageContext, run_stage
@@ -154,7 +154,7 @@ def _bench_worker(model_path: Path, frames: list[SimView], xs: list[float], *, s
         stop = threading.Event()
 
         def factory(context: StageContext) -> _Timed:
-            stages.append(_Timed(LabellingStage(context, model_path=model_path)))
+            stages.append(_Timed(LabellingStage(context, LabellingSettings(model_path=model_path))))
             return stages[-1]
 
         robot = ZenohSettings(listen=[], connect=listen.listen)

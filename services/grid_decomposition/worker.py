@@ -62,8 +62,9 @@ class DecompositionStage:
                 try:
                     self._look()
                     look_at = time.monotonic() + self.settings.safety_poll_period_s
-                    if self._pending:  # held back by min_period_s
-                        look_at = min(look_at, self._last_attempt + self.settings.min_period_s)
+                    if self._pending:  # held back by min_period_s, or its revision was not stored
+                        held = self._last_attempt + self.settings.min_period_s
+                        look_at = min(look_at, max(held, time.monotonic() + _RETRY_S))
                 except StoreUnavailableError as err:
                     self.context.count("store_unavailable")
                     log.warning("store unavailable, will retry: %s", err)

@@ -23,6 +23,7 @@ import time
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__PoseStamped as PoseStamped
 from threadpoolctl import threadpool_limits
 
@@ -134,10 +135,9 @@ class FusionStage:
         self.context.count("scans_integrated")
         self.context.count("loop_closures", closures)
 
-    def _lidar(self, namespace: str, frame_id: str) -> tuple[np.ndarray, float]:
+    def _lidar(self, namespace: str, frame_id: str) -> tuple[npt.NDArray[np.float64], float]:
         lidar, sweep, from_tf = self.mounts.lidar_in_camera(namespace, frame_id)
-        if not from_tf:
-            self.context.count("range_scans_mount_from_settings")
+        self.context.count("range_scans_mount_from_settings", int(not from_tf))
         return lidar, sweep
 
     def _take_range_scans(self) -> None:
@@ -163,7 +163,7 @@ class FusionStage:
                 continue
             self.fleet.track(item.namespace).corrections.append((messages.stamp_ns(message.header), camera))
 
-    def _correct(self, namespace: str, robot: RobotTrack, stamp_ns: int, camera: np.ndarray) -> None:
+    def _correct(self, namespace: str, robot: RobotTrack, stamp_ns: int, camera: npt.NDArray[np.float64]) -> None:
         correction = robot.correction(stamp_ns, camera)
         if correction is None:
             self.context.count("pose_corrections_too_old")
