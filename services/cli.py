@@ -416,7 +416,8 @@ def _replay_job(bus: Bus, stop: threading.Event, *, bag: Path, rate: float, loop
 
 
 def _map_build(args: argparse.Namespace, settings: Settings) -> int:
-    from services.occupancy_mapping import ScanMatcher, build_map, sharpness, write_map_yaml
+    from services.occupancy_mapping import ScanMatcher, build_map, sharpness
+    from shared.mapfiles import write_map_yaml
 
     occupancy_settings = settings.occupancy
     max_range_m = occupancy_settings.max_range_m

@@ -14,15 +14,9 @@ from api.deps import AnnouncerDep, MapDep, RevisionQuery, SettingsDep, StoreDep,
 from api.gridlookup import cached_layer, class_name, value_at
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.routers.features import MAX_BBOX_SIDE_M
-from services.grid_decomposition.errors import DecompositionError
-from services.grid_decomposition.semantics import (
-    LABEL_OVERRIDES_KEY,
-    LABEL_TABLE,
-    LABEL_TABLE_STAGE,
-    Label,
-    parse_label_table,
-)
+from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE, LABEL_TABLE_STAGE, PlaceLabelError, parse_label_table
 from shared.store import RevisionWrite, StoredFeature
+from shared.vocabulary import PlaceLabel
 
 router = APIRouter(prefix="/v1/maps/{map_name}", tags=["semantics"], responses=COMMON_ERRORS)
 
@@ -211,7 +205,7 @@ def get_label_table(map_info: MapDep, store: StoreDep, revision: RevisionQuery) 
     ]
     labels = [LabelRow(label=label.name.lower(), functionality=semantics.functionality,
                        connectable=sorted(item.name.lower() for item in semantics.connectable))
-              for label, semantics in LABEL_TABLE.items() if label is not Label.NONE]
+              for label, semantics in LABEL_TABLE.items() if label is not PlaceLabel.NONE]
     return LabelTableOut(labels=labels, categories=categories, overrides=overrides,
                          overrides_revision_id=overrides_revision)
 
@@ -233,7 +227,7 @@ def put_label_table(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
     Needs a `write` key."""
     try:
         parsed = parse_label_table(body.overrides)
-    except DecompositionError as err:
+    except PlaceLabelError as err:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
     overrides = {str(c): label.name.lower() for c, label in sorted(parsed.items())}
     written = store.write_revision(map_info.id,

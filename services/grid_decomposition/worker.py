@@ -24,9 +24,11 @@ from services.grid_decomposition.change import changed_fraction
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.pipeline import decompose
 from services.grid_decomposition.records import decomposition_features, decomposition_layers, decomposition_topology
-from services.grid_decomposition.semantics import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE, Label, parse_label_table
+from services.grid_decomposition.semantics import parse_label_table
+from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from shared.settings import DecompositionSettings
 from shared.store import GridLayer, Revision, RevisionWrite, StoredLayer, StoreUnavailableError
+from shared.vocabulary import PlaceLabel
 from shared.worker import StageContext, checked
 
 log = logging.getLogger(__name__)
@@ -52,7 +54,7 @@ class DecompositionStage:
         self._checked_revision: int | None = None
         self._reference: GridLayer | None = None
         self._last_attempt = -float("inf")
-        self._overrides: dict[int, Label] = {}
+        self._overrides: dict[int, PlaceLabel] = {}
         self._relabel = False
 
     def run(self, stop: threading.Event) -> None:

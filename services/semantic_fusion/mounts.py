@@ -15,11 +15,10 @@ import numpy as np
 import numpy.typing as npt
 from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Pose as Pose
 
-from services.occupancy_mapping.mapper import sensor_pose
 from services.semantic_fusion import se2
 from services.semantic_fusion.errors import SemanticFusionError
 from shared.settings import SemanticFusionSettings
-from shared.transforms import TransformBuffer, yaw_from_quaternion
+from shared.transforms import TransformBuffer, sensor_pose, yaw_from_quaternion
 
 log = logging.getLogger(__name__)
 

@@ -17,10 +17,11 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from services.semantic_fusion.classes import DYNAMIC_CLASSES, N_CLASSES, SemanticClass
+from services.semantic_fusion.classes import DYNAMIC_CLASSES, N_CLASSES
 from services.semantic_fusion.errors import SemanticFusionError
 from services.semantic_fusion.grid import SemanticGrid
 from shared.store import StoredLayer
+from shared.vocabulary import SemanticClass
 
 _TABLE_STEPS = 4001
 

@@ -21,12 +21,12 @@ from api.layout_render import (
 from api.layout_svg import render_svg
 from api.rendering import RenderError
 from services.grid_decomposition.overview import LABEL_COLOURS
-from services.grid_decomposition.semantics import Label
 from services.simulator import ground_truth_features, ground_truth_grids, load_world
 from shared.store import FEATURE_KINDS, Feature, GridLayer
+from shared.vocabulary import PlaceLabel
 
-LABEL_META = {"encoding": "place_labels", "classes": [label.name.lower() for label in Label],
-              "colours": [list(LABEL_COLOURS[label]) for label in Label]}
+LABEL_META = {"encoding": "place_labels", "classes": [label.name.lower() for label in PlaceLabel],
+              "colours": [list(LABEL_COLOURS[label]) for label in PlaceLabel]}
 
 
 def _box(min_x: float, min_y: float, max_x: float, max_y: float) -> dict[str, Any]:
@@ -147,15 +147,15 @@ def test_shrinking_a_large_grid_keeps_one_cell_walls_visible() -> None:
 
 def test_place_labels_tint_free_space_and_are_listed() -> None:
     labels = np.zeros((10, 20), np.uint8)
-    labels[:, :10] = Label.CORRIDOR
-    labels[:, 10:] = Label.STORAGE
+    labels[:, :10] = PlaceLabel.CORRIDOR
+    labels[:, 10:] = PlaceLabel.STORAGE
     layer = GridLayer("place_labels", labels, 0.5, 0.0, 0.0, LABEL_META)
 
     scene = layout_scene([], occupancy=None, place_labels=layer, bbox=None, width_px=200, title="t")
 
     assert [entry.text for entry in scene.places] == ["corridor", "storage"]
     left = scene.base[scene.view.height_px // 2, 50].astype(int)
-    green = np.array(LABEL_COLOURS[Label.CORRIDOR])
+    green = np.array(LABEL_COLOURS[PlaceLabel.CORRIDOR])
     assert np.abs(left - (255 * 0.55 + green * 0.45)).max() <= 1
 
 

@@ -13,7 +13,7 @@ import yaml
 
 from api.exports import ExportError
 from api.exports.mapserver import map_server_files, occupancy_pixels
-from services.occupancy_mapping.mapio import read_map_yaml
+from shared.mapfiles import read_map_yaml
 from shared.store import GridLayer
 
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import DecompositionError
-from services.grid_decomposition.semantics import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from services.grid_decomposition.worker import DecompositionStage, decomposition_stage
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus
+from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from shared.settings import DecompositionSettings, Settings, ZenohSettings
 from shared.store import GridLayer, MapStore, Revision, RevisionWrite
 from shared.worker import MAP_EVENTS_TOPIC, StageContext, map_event

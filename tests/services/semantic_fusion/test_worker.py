@@ -20,7 +20,6 @@ from services.semantic_fusion import (
     DYNAMIC_CLASSES,
     RangeScan,
     ScanObservation,
-    SemanticClass,
     SemanticLayers,
     label_accuracy,
     se2,
@@ -40,6 +39,7 @@ from shared.bus import Bus, Publisher
 from shared.settings import SemanticFusionSettings, Settings, ZenohSettings
 from shared.store import MapStore, Revision
 from shared.transforms import quaternion_from_yaw
+from shared.vocabulary import SemanticClass
 from shared.worker import StageFactory, run_stage
 from tests.helpers import wait_for
 

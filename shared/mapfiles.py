@@ -1,4 +1,8 @@
-"""Read and write ROS map_server maps (YAML + PGM/PNG image)."""
+"""Read and write ROS map_server maps (YAML + PGM/PNG image).
+
+The occupancy mapper writes them (``aisle map build``), the grid decomposition and the benchmarks read
+them, and the simulator writes its ground truth as one.
+"""
 
 from __future__ import annotations
 
@@ -11,11 +15,13 @@ import numpy.typing as npt
 import yaml
 from PIL import Image, UnidentifiedImageError
 
-from services.occupancy_mapping.errors import OccupancyMappingError
-
 FREE_PIXEL = 254
 OCCUPIED_PIXEL = 0
 UNKNOWN_PIXEL = 205
+
+
+class MapFileError(ValueError):
+    """A map file that cannot be read or a map that cannot be written: missing, malformed, bad geometry."""
 
 
 class MapImage(NamedTuple):
@@ -46,18 +52,18 @@ def write_map_yaml(
     """
     occ = np.asarray(occupancy)
     if occ.ndim != 2 or 0 in occ.shape:
-        raise OccupancyMappingError(f"occupancy must be a non-empty 2-D array, got shape {occ.shape}")
+        raise MapFileError(f"occupancy must be a non-empty 2-D array, got shape {occ.shape}")
     if not (
         math.isfinite(resolution_m)
         and resolution_m > 0
         and math.isfinite(origin_x_m)
         and math.isfinite(origin_y_m)
     ):
-        raise OccupancyMappingError(
+        raise MapFileError(
             f"bad map geometry: resolution {resolution_m}, origin ({origin_x_m}, {origin_y_m})"
         )
     if not 0 <= free_percent < occupied_percent <= 100:
-        raise OccupancyMappingError(
+        raise MapFileError(
             f"need 0 <= free_percent < occupied_percent <= 100, got {free_percent}, {occupied_percent}"
         )
     path_yaml = Path(path_yaml)
@@ -84,14 +90,14 @@ def _load_yaml(path: Path) -> dict[str, Any]:
     try:
         meta = yaml.safe_load(path.read_text())
     except FileNotFoundError as err:
-        raise OccupancyMappingError(f"map file {path} does not exist") from err
+        raise MapFileError(f"map file {path} does not exist") from err
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
-        raise OccupancyMappingError(f"map file {path} is not readable YAML: {err}") from err
+        raise MapFileError(f"map file {path} is not readable YAML: {err}") from err
     if not isinstance(meta, dict):
-        raise OccupancyMappingError(f"map file {path} is not a YAML mapping")
+        raise MapFileError(f"map file {path} is not a YAML mapping")
     missing = {"image", "resolution", "origin"} - set(meta)
     if missing:
-        raise OccupancyMappingError(f"map file {path} lacks {sorted(missing)}")
+        raise MapFileError(f"map file {path} lacks {sorted(missing)}")
     return meta
 
 
@@ -111,23 +117,23 @@ def read_map_yaml(path: Path) -> MapImage:
         occupied_thresh = float(meta.get("occupied_thresh", 0.65))
         free_thresh = float(meta.get("free_thresh", 0.196))
     except (TypeError, ValueError) as err:
-        raise OccupancyMappingError(f"map file {path}: bad resolution/origin/thresholds: {err}") from err
+        raise MapFileError(f"map file {path}: bad resolution/origin/thresholds: {err}") from err
     mode = str(meta.get("mode", "trinary"))
     if mode not in {"trinary", "scale", "raw"}:
-        raise OccupancyMappingError(f"map file {path}: unknown mode {mode!r}")
+        raise MapFileError(f"map file {path}: unknown mode {mode!r}")
     if not (math.isfinite(resolution) and resolution > 0):
-        raise OccupancyMappingError(f"map file {path}: resolution {resolution} must be positive")
+        raise MapFileError(f"map file {path}: resolution {resolution} must be positive")
     if abs(yaw) > 1e-9:
-        raise OccupancyMappingError(f"map file {path}: origin yaw {yaw} rad is not supported")
+        raise MapFileError(f"map file {path}: origin yaw {yaw} rad is not supported")
     image_path = path.parent / str(meta["image"])
     try:
         with Image.open(image_path) as image:
             has_alpha = "A" in image.getbands()
             pixels = np.asarray(image.convert("LA" if has_alpha else "L"), dtype=np.float64)
     except FileNotFoundError as err:
-        raise OccupancyMappingError(f"map image {image_path} does not exist") from err
+        raise MapFileError(f"map image {image_path} does not exist") from err
     except (OSError, UnidentifiedImageError) as err:
-        raise OccupancyMappingError(f"map image {image_path} is not a readable image: {err}") from err
+        raise MapFileError(f"map image {image_path} is not a readable image: {err}") from err
     alpha = pixels[..., 1] if has_alpha else None
     value = pixels[..., 0] if has_alpha else pixels
     if mode == "raw":
@@ -144,3 +150,14 @@ def read_map_yaml(path: Path) -> MapImage:
         if alpha is not None:
             occ[alpha < 1.0] = -1
     return MapImage(occ[::-1].copy(), resolution, origin_x, origin_y)
+
+
+__all__ = [
+    "FREE_PIXEL",
+    "OCCUPIED_PIXEL",
+    "UNKNOWN_PIXEL",
+    "MapFileError",
+    "MapImage",
+    "read_map_yaml",
+    "write_map_yaml",
+]

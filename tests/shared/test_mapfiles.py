@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from services.occupancy_mapping import OccupancyMappingError, read_map_yaml, write_map_yaml
+from shared.mapfiles import MapFileError, read_map_yaml, write_map_yaml
 
-DATA = Path(__file__).resolve().parents[4] / "shared" / "data"
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 
 
 def test_write_then_read_round_trips_trinary_map(tmp_path: Path) -> None:
@@ -64,12 +64,12 @@ def test_read_rejects_bad_map_files(
         (tmp_path / "m.yaml").write_text(yaml_text)
     if image_bytes is not None:
         (tmp_path / "m.pgm").write_bytes(image_bytes)
-    with pytest.raises(OccupancyMappingError, match=match):
+    with pytest.raises(MapFileError, match=match):
         read_map_yaml(tmp_path / "m.yaml")
 
 
 def test_write_rejects_empty_map(tmp_path: Path) -> None:
-    with pytest.raises(OccupancyMappingError, match="non-empty"):
+    with pytest.raises(MapFileError, match="non-empty"):
         write_map_yaml(
             tmp_path / "x.yaml", np.zeros((0, 3), np.int8), resolution_m=0.05, origin_x_m=0, origin_y_m=0
         )
