@@ -145,7 +145,8 @@ def test_worker_skips_a_small_change_and_takes_a_large_one(store: MapStore, sett
         source = _write_occupancy(store, settings, large, bus)
         revision = _wait_decompositions(store, settings, 2)
         assert revision.summary["source_revision"] == source.id
-        assert factory.count("decompositions") == 2
+        wait_for(lambda: factory.count("decompositions") == 2, what="the second decomposition to be counted")
+        assert factory.count("decompositions") == 2 and factory.count("crashes") == 0
 
 
 def test_worker_counts_an_unknown_grid_and_carries_on(store: MapStore, settings: Settings) -> None:
