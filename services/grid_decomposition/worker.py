@@ -34,10 +34,8 @@ from shared.worker import StageContext, checked
 log = logging.getLogger(__name__)
 
 _PAGE = 100
-_WAKE_S = 0.25
-"""Longest wait for a map event before the stop flag is looked at again, seconds."""
-_RETRY_S = 2.0
-"""How soon the store is looked at again after it was unavailable, seconds."""
+_WAKE_S = 0.25  # longest wait for a map event before the stop flag is looked at again, seconds
+_RETRY_S = 2.0  # how soon the store is looked at again after it was unavailable, seconds
 
 
 class DecompositionStage:
