@@ -295,8 +295,8 @@ def _export(args: argparse.Namespace, settings: Settings) -> int:
 
 
 def _classifier(args: argparse.Namespace, settings: Settings) -> None:
-    from services.object_labelling.commands import evaluate_from_sources, train_from_sources
-    from services.object_labelling.worker import model_path_of
+    from services.labelling_training.commands import evaluate_from_sources, train_from_sources
+    from services.object_labelling.recogniser import model_path_of
 
     if args.command == "train-classifier":
         out = args.out or model_path_of(settings)
@@ -355,14 +355,14 @@ def _sim(args: argparse.Namespace, settings: Settings, stop: threading.Event) ->
 def _check_stages(settings: Settings, stages: Sequence[str]) -> None:
     """Fail before starting anything when a stage cannot run (object labelling without a usable model)."""
     if "object_labelling" in stages:
-        from services.object_labelling.worker import check_recogniser
+        from services.object_labelling.recogniser import check_recogniser
 
         check_recogniser(settings)
 
 
 def _demo_labelling_model(settings: Settings) -> None:
-    from services.object_labelling.commands import ensure_demo_model
-    from services.object_labelling.worker import model_path_of
+    from services.labelling_training.commands import ensure_demo_model
+    from services.object_labelling.recogniser import model_path_of
 
     ensure_demo_model(model_path_of(settings))
 

@@ -14,13 +14,9 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from services.object_labelling.classifier import LabelModel
-from services.object_labelling.cnn import EfficientNetLite0, default_weights_path
-from services.object_labelling.datasets import Samples, YoloSet
-from services.object_labelling.errors import ObjectLabellingError
-from services.object_labelling.retrieval import PriorDatabase
-from services.object_labelling.sim_training import sim_samples, simulated_views, training_textures
-from services.object_labelling.training import (
+from services.labelling_training.datasets import Samples, YoloSet
+from services.labelling_training.sim_training import sim_samples, simulated_views, training_textures
+from services.labelling_training.training import (
     ROI_CLASSES,
     Evaluation,
     FeatureCache,
@@ -28,6 +24,10 @@ from services.object_labelling.training import (
     real_samples,
     train_classifier,
 )
+from services.object_labelling.classifier import LabelModel
+from services.object_labelling.cnn import EfficientNetLite0, default_weights_path
+from services.object_labelling.errors import ObjectLabellingError
+from services.object_labelling.retrieval import PriorDatabase
 from services.simulator.cameras import photo_textures
 
 log = logging.getLogger(__name__)

@@ -13,11 +13,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from services.object_labelling.datasets import box_iou
+from services.labelling_training.sim_views import Box, SimView
+from services.object_labelling.crops import box_iou
 from services.object_labelling.range_scan import range_height_scan
 from services.object_labelling.retrieval import PriorDatabase, retrieve
 from services.object_labelling.segments import segments
-from services.object_labelling.sim_views import Box, SimView
 
 
 def match_boxes(truth: list[Box], found: list[Box], *, min_iou: float = 0.5) -> list[tuple[int, int, float]]:

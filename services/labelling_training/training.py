@@ -1,9 +1,9 @@
 """Train and evaluate the ROI and whole-image SVM banks.
 
-Samples (:class:`~services.object_labelling.datasets.Samples`) come from real labelled photos
+Samples (:class:`~services.labelling_training.datasets.Samples`) come from real labelled photos
 (:func:`real_samples`, split by source photo with
-:func:`~services.object_labelling.datasets.in_test_split`) and from simulated views
-(:mod:`~services.object_labelling.sim_training`). Features are the pooled EfficientNet-Lite0
+:func:`~services.labelling_training.datasets.in_test_split`) and from simulated views
+(:mod:`~services.labelling_training.sim_training`). Features are the pooled EfficientNet-Lite0
 activations; each class gets a linear SVM (one-vs-all) on standardised features. The SVM ``C`` is
 chosen by 3-fold cross-validation grouped by source on the training samples, and the same
 out-of-fold margins fit each class's Platt scaling (a logistic regression of the label on the
@@ -27,9 +27,7 @@ from sklearn.metrics import confusion_matrix, roc_auc_score
 from sklearn.model_selection import StratifiedGroupKFold
 from sklearn.svm import LinearSVC
 
-from services.object_labelling.classifier import UNKNOWN, LabelModel, SvmBank, best_class
-from services.object_labelling.cnn import FEATURE_SIZE, EfficientNetLite0, resize_for_cnn
-from services.object_labelling.datasets import (
+from services.labelling_training.datasets import (
     BACKGROUND,
     Samples,
     YoloSet,
@@ -39,6 +37,8 @@ from services.object_labelling.datasets import (
     roi_crops,
     source_of,
 )
+from services.object_labelling.classifier import UNKNOWN, LabelModel, SvmBank, best_class
+from services.object_labelling.cnn import FEATURE_SIZE, EfficientNetLite0, resize_for_cnn
 from services.object_labelling.errors import ObjectLabellingError
 
 log = logging.getLogger(__name__)

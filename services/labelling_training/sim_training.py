@@ -19,11 +19,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.object_labelling.datasets import BACKGROUND, ROI_PAD_FRACTION, Crop, Samples, crop_box
+from services.labelling_training.datasets import BACKGROUND, Crop, Samples
+from services.labelling_training.sim_views import SimView, sample_views, scatter_hall
+from services.object_labelling.crops import ROI_PAD_FRACTION, crop_box
 from services.object_labelling.range_scan import range_height_scan
 from services.object_labelling.retrieval import PriorDatabase, retrieve
 from services.object_labelling.segments import segments
-from services.object_labelling.sim_views import SimView, sample_views, scatter_hall
 from services.simulator.render import Textures
 from services.simulator.world import ObjectClass
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from services.labelling_training.matching import match_boxes, score_segmentation
+from services.labelling_training.sim_views import SimView, sample_views, scatter_hall
 from services.object_labelling import PriorDatabase
-from services.object_labelling.datasets import box_iou
-from services.object_labelling.matching import match_boxes, score_segmentation
-from services.object_labelling.sim_views import SimView, sample_views, scatter_hall
+from services.object_labelling.crops import box_iou
 
 
 @pytest.fixture(scope="module")

@@ -6,17 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.object_labelling import (
-    ObjectLabellingError,
-    YoloSet,
-    in_test_split,
-    read_scene_labels,
-    roi_crops,
-    source_of,
-)
+from services.labelling_training import YoloSet, in_test_split, read_scene_labels, roi_crops, source_of
+from services.object_labelling import ObjectLabellingError
 from tests.helpers import data_path
 
-SCENE_LABELS = Path(__file__).resolve().parents[3] / "services" / "object_labelling" / "data" / "scene_labels.csv"
+SCENE_LABELS = Path(__file__).resolve().parents[3] / "services" / "labelling_training" / "data" / "scene_labels.csv"
 
 
 def test_source_of_strips_the_roboflow_augmentation_suffix() -> None:

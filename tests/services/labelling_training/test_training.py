@@ -6,8 +6,8 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from services.labelling_training.training import fit_bank
 from services.object_labelling import ObjectLabellingError
-from services.object_labelling.training import fit_bank
 
 
 def _draw(rng: np.random.Generator, n: int) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
