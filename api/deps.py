@@ -14,9 +14,9 @@ from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBea
 
 from api.access import API_KEY_HEADER, AccessPolicy, Caller, check_role, credentials_of
 from api.announce import Announcer
-from api.cache import RevisionCache
-from api.live import LiveMaps
 from api.streams import EventStreams
+from atlas.cache import RevisionCache
+from atlas.live import LiveMaps
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore, Revision
@@ -74,6 +74,8 @@ StoreDep = Annotated[MapStore, Depends(get_store)]
 AnnouncerDep = Annotated[Announcer, Depends(get_announcer)]
 """Announce a revision the API wrote (on the bus, when there is one)."""
 SettingsDep = Annotated[Settings, Depends(get_settings)]
+CacheDep = Annotated[RevisionCache, Depends(get_cache)]
+"""What was derived from one revision of a map (decoded layers, bin indexes)."""
 
 _api_key_header = APIKeyHeader(name=API_KEY_HEADER, auto_error=False, scheme_name="ApiKey",
                                description="An Aisle API key, `aisle_<id>_<secret>`.")

@@ -1,7 +1,7 @@
 """The two hottest reads of a WMS, answered straight from memory: one bin by id, and live features by area.
 
 FastAPI's routing and dependency handling cost several times what answering these from the live state does
-(:mod:`api.live`), so :class:`LiveReads` answers them before FastAPI when nothing needs more: a plain ``GET`` of
+(:mod:`atlas.live`), so :class:`LiveReads` answers them before FastAPI when nothing needs more: a plain ``GET`` of
 ``/v1/maps/{map}/bins/{id}`` or ``/v1/maps/{map}/features`` with only ``bbox``, ``kind``, ``limit`` and
 ``offset``, all valid, of a map already found; an access decision that memory suffices for
 (:meth:`api.access.AccessPolicy.judge`, the in-memory part of :meth:`~api.access.AccessPolicy.admit`, the one
@@ -21,18 +21,11 @@ from fastapi.exception_handlers import http_exception_handler
 from starlette.requests import Request
 
 from api.access import AccessPolicy, Verdict, credentials_of
+from api.answers import live_bin
 from api.deps import ApiContext
-from api.routers.bins import BIN_ID_REGEX, live_bin
-from api.routers.features import (
-    DEFAULT_LIMIT,
-    MAX_BBOX_TEXT,
-    MAX_LIMIT,
-    MAX_OFFSET,
-    REVISION_HEADER,
-    bbox_of,
-    check_kinds,
-    live_collection,
-)
+from api.queries import BIN_ID_REGEX, DEFAULT_LIMIT, MAX_BBOX_TEXT, MAX_LIMIT, MAX_OFFSET, bbox_of, check_kinds
+from atlas.features import live_collection
+from shared.vocabulary import REVISION_HEADER
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]

@@ -18,10 +18,10 @@ from pathlib import Path
 from fastapi.testclient import TestClient
 
 from api import create_app
-from api.exports import ExportOptions, export_map
-from api.layout_png import render_png
-from api.layout_render import layout_scene
-from api.layout_svg import render_svg
+from atlas.exports import ExportOptions, export_map
+from atlas.render.png import render_png
+from atlas.render.scene import layout_scene
+from atlas.render.svg import render_svg
 from services.grid_decomposition.overview import LABEL_COLOURS
 from services.simulator import ground_truth_features, ground_truth_grids, load_world
 from shared.settings import Settings

@@ -270,7 +270,7 @@ def _keys(args: argparse.Namespace, settings: Settings) -> int:
 
 def _export(args: argparse.Namespace, settings: Settings) -> int:
     """``aisle export``: exit code 2, with the reason on stderr, for an unknown map, format, revision or layer."""
-    from api.exports import ExportError, export_to_path
+    from atlas.exports import ExportError, export_to_path
     from services import runtime
 
     store = runtime.open_store(settings)

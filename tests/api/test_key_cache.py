@@ -10,7 +10,7 @@ import pytest
 from fastapi import HTTPException
 
 from api.access import AccessPolicy, Caller, Credentials
-from api.cache import RevisionCache
+from atlas.cache import RevisionCache
 from shared.store import MapStore
 from shared.store.keys import Role, create_key, revoke_key
 
