@@ -9,16 +9,16 @@ import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.pipeline import Decomposition
-from services.grid_decomposition.semantics import Label
+from shared.vocabulary import PlaceLabel
 
-LABEL_COLOURS: dict[Label, tuple[int, int, int]] = {
-    Label.NONE: (40, 40, 40),
-    Label.CORRIDOR: (120, 200, 120),
-    Label.JUNCTION: (70, 110, 230),
-    Label.STORAGE: (240, 170, 60),
-    Label.ROOM: (190, 160, 230),
-    Label.OPEN_AREA: (150, 220, 230),
-    Label.UNIDENTIFIED: (200, 200, 200),
+LABEL_COLOURS: dict[PlaceLabel, tuple[int, int, int]] = {
+    PlaceLabel.NONE: (40, 40, 40),
+    PlaceLabel.CORRIDOR: (120, 200, 120),
+    PlaceLabel.JUNCTION: (70, 110, 230),
+    PlaceLabel.STORAGE: (240, 170, 60),
+    PlaceLabel.ROOM: (190, 160, 230),
+    PlaceLabel.OPEN_AREA: (150, 220, 230),
+    PlaceLabel.UNIDENTIFIED: (200, 200, 200),
 }
 WALL_COLOUR = (230, 30, 30)
 DOOR_COLOUR = (230, 0, 230)
@@ -83,13 +83,13 @@ def _with_legend(
     """``image`` with a white legend panel on its right."""
     labels = decomposition.labels
     free = labels > 0
-    share = np.bincount(labels[free], minlength=len(Label)) / max(int(free.sum()), 1)
+    share = np.bincount(labels[free], minlength=len(PlaceLabel)) / max(int(free.sum()), 1)
     rows: list[tuple[str, tuple[int, int, int], str]] = []
-    for label in Label:
-        if label is not Label.NONE and share[label.value] > 0:
+    for label in PlaceLabel:
+        if label is not PlaceLabel.NONE and share[label.value] > 0:
             name = label.name.lower().replace("_", " ")
             rows.append(("box", LABEL_COLOURS[label], f"{name} {100 * share[label]:.1f} % of free space"))
-    rows.append(("box", LABEL_COLOURS[Label.NONE], "occupied / unknown"))
+    rows.append(("box", LABEL_COLOURS[PlaceLabel.NONE], "occupied / unknown"))
     rows.append(("line", WALL_COLOUR, "wall (cogent edge)"))
     rows.append(("line", DOOR_COLOUR, "door (closed doorway)"))
     rows.append(("line", BORDER_COLOUR, "region border"))

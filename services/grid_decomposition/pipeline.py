@@ -32,10 +32,10 @@ from services.grid_decomposition.regions import (
 )
 from services.grid_decomposition.rooms import furniture, segment_rooms, wall_furniture
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
-from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
+from shared.vocabulary import PlaceLabel
 
 logger = logging.getLogger(__name__)
 
@@ -59,7 +59,7 @@ class Decomposition:
     Attributes
     ----------
     labels : (H, W) uint8
-        :class:`Label` code per pixel, 0 off free space.
+        :class:`PlaceLabel` code per pixel, 0 off free space.
     segments : (H, W) int32
         Region id per pixel, 0 where no region.
     regions : dict[int, RegionInfo]
@@ -224,7 +224,7 @@ def decompose(
     resolution: Resolution = Resolution.COARSE,
     n_texture_regions: int | None = None,
     n_categories: int = 8,
-    label_overrides: Mapping[int, Label] | None = None,
+    label_overrides: Mapping[int, PlaceLabel] | None = None,
     door_max_width_m: float = 2.0,
     cut_max_width_m: float = 2.5,
     wall_min_length_m: float = 0.5,
@@ -260,7 +260,7 @@ def decompose(
     n_categories : int
         k of the k-means place categorisation.
     label_overrides : mapping, optional
-        Place category -> :class:`Label`, replacing the automatic assignment.
+        Place category -> :class:`PlaceLabel`, replacing the automatic assignment.
     door_max_width_m, cut_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
         Along lines, doorways up to ``door_max_width_m`` wide: gaps between wall runs of at least
         ``wall_min_length_m`` are closed when the free space behind them widens by
@@ -370,8 +370,8 @@ def decompose(
     found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
     evidence = found.label.copy()
     # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)
-    evidence[majority_faces(sub.face_image, sub.n_faces, banks.storage, free)] = Label.STORAGE.value
-    evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = Label.CORRIDOR.value
+    evidence[majority_faces(sub.face_image, sub.n_faces, banks.storage, free)] = PlaceLabel.STORAGE.value
+    evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = PlaceLabel.CORRIDOR.value
     rows, cols, cats = categorize_places(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )
@@ -380,7 +380,7 @@ def decompose(
     # regions come from the automatic labels: a person's overrides rename places, they do not
     # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
     # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
-    cut_like_cells = np.where(found.off_pitch, Label.STORAGE.value, evidence)
+    cut_like_cells = np.where(found.off_pitch, PlaceLabel.STORAGE.value, evidence)
     automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
     # warehouse floors and road networks are split by their labels and left alone by the room stage
     roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
@@ -491,13 +491,13 @@ def _region_records(
 ) -> tuple[dict[int, RegionInfo], npt.NDArray[np.uint8]]:
     """Region records (label: its faces' majority) and the label image (each face's own label)."""
     n_seg = int(segments.max()) + 1
-    n_lab = len(Label)
+    n_lab = len(PlaceLabel)
     lab_votes = np.bincount(
         pairs.segment * n_lab + face_labels.label[pairs.face], weights=pairs.pixels, minlength=n_seg * n_lab
     ).reshape(n_seg, n_lab)
     lab_votes[:, 0] = 0
     seg_label = np.argmax(lab_votes, axis=1)
-    seg_label[lab_votes.sum(axis=1) == 0] = Label.UNIDENTIFIED.value
+    seg_label[lab_votes.sum(axis=1) == 0] = PlaceLabel.UNIDENTIFIED.value
     n_cat = int(max(face_labels.category.max(), 0)) + 2
     cat_votes = np.bincount(
         pairs.segment * n_cat + face_labels.category[pairs.face] + 1, weights=pairs.pixels, minlength=n_seg * n_cat
@@ -513,7 +513,7 @@ def _region_records(
         cx = origin_xy_m[0] + (sx[sid] / area[sid] + 0.5) * resolution_m
         cy = origin_xy_m[1] + (sy[sid] / area[sid] + 0.5) * resolution_m
         regions[int(sid)] = RegionInfo(
-            int(sid), Label(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
+            int(sid), PlaceLabel(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
         )
     inside = segments > 0
     labels = np.where(inside, face_labels.label.astype(np.int32)[sub.face_image], 0).astype(np.int32)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.grid_decomposition import Label, decompose, overview_image
+from services.grid_decomposition import decompose, overview_image
 from services.grid_decomposition.overview import LABEL_COLOURS
+from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.warehouse import synthetic_warehouse
 
 
@@ -16,11 +17,12 @@ def test_overview_shows_every_place_colour_and_a_legend_beside_the_map() -> None
     h, w = d.labels.shape
     assert image.dtype == np.uint8 and image.shape[0] >= h and image.shape[1] > w + 100
     map_part, legend = image[:h, :w], image[:, w:]
-    for label in (Label.CORRIDOR, Label.JUNCTION, Label.STORAGE):
+    for label in (PlaceLabel.CORRIDOR, PlaceLabel.JUNCTION, PlaceLabel.STORAGE):
         colour = np.array(LABEL_COLOURS[label])
         assert (map_part == colour).all(axis=-1).any(), label
         assert (legend == colour).all(axis=-1).any(), label  # its swatch
-    assert (map_part[::-1][d.labels == Label.STORAGE.value] == LABEL_COLOURS[Label.STORAGE]).all(axis=-1).mean() > 0.8
+    storage = map_part[::-1][d.labels == PlaceLabel.STORAGE.value]
+    assert (storage == LABEL_COLOURS[PlaceLabel.STORAGE]).all(axis=-1).mean() > 0.8
 
 
 def test_a_small_map_is_enlarged_for_reading() -> None:
