@@ -34,8 +34,10 @@ def read_map_file(
 ) -> tuple[npt.NDArray[np.int8], float, tuple[float, float]]:
     """Occupancy (GridLayer order), resolution and origin of a map_server YAML or a bare image.
 
-    A bare image is read with map_server's trinary thresholds (occupied above 0.65, free below
-    0.196 of darkness) and needs ``resolution_m``; its origin is (0, 0). For a YAML,
+    A bare image is read with map_server's thresholds (occupied above 0.65, free below 0.196 of
+    darkness, the rest unknown) and needs ``resolution_m``; its origin is (0, 0). Its free cells
+    keep their darkness in percent (0..19, rounded down): grey fringes at walls are not clearly
+    free (:func:`~services.grid_decomposition.cleaning.clean_occupancy`). For a YAML,
     ``resolution_m`` (if given) must match the file's.
     """
     path = Path(map_path)
@@ -65,7 +67,8 @@ def read_map_file(
     p = (255.0 - grey) / 255.0
     occ = np.full(grey.shape, -1, dtype=np.int8)
     occ[p > 0.65] = 100
-    occ[p < 0.196] = 0
+    free = p < 0.196
+    occ[free] = np.floor(p[free] * 100.0).astype(np.int8)
     return occ[::-1].copy(), float(resolution_m), (0.0, 0.0)
 
 

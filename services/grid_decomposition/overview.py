@@ -28,13 +28,15 @@ _ROW_PX = 26
 
 
 def overview_image(
-    decomposition: Decomposition, *, max_side_px: int = 2000, min_side_px: int = 1000
+    decomposition: Decomposition, *, max_side_px: int = 2000, min_side_px: int = 1000, margin_m: float | None = 2.0
 ) -> npt.NDArray[np.uint8]:
     """RGB image (top row = highest y): label colours, region borders, walls red, doors magenta, lines faint, legend.
 
     The map is scaled to at most ``max_side_px`` on its longer side (small maps are enlarged by an
     integer factor, nearest neighbour, to about ``min_side_px``); the legend to its right names every
     colour with its share of the free space, the line styles, the region count and a scale bar.
+    The picture shows the labelled part of the map and ``margin_m`` around it (a robot's map is
+    often a small building in a large unknown canvas); ``None`` shows the whole map.
 
     Returns
     -------
@@ -57,6 +59,13 @@ def overview_image(
     flat[sub.edge_pixels[cog.cogent[edge_of_pixel]]] = WALL_COLOUR
     flat[sub.edge_pixels[cog.door[edge_of_pixel]]] = DOOR_COLOUR
     image = np.ascontiguousarray(rgb[::-1])
+    labelled = decomposition.labels[::-1] > 0
+    if margin_m is not None and labelled.any():
+        pad = max(0, round(margin_m / decomposition.resolution_m))
+        rows, cols = np.flatnonzero(labelled.any(axis=1)), np.flatnonzero(labelled.any(axis=0))
+        image = np.ascontiguousarray(
+            image[max(0, rows[0] - pad) : rows[-1] + pad + 1, max(0, cols[0] - pad) : cols[-1] + pad + 1]
+        )
     h, w = image.shape[:2]
     scale = min(1.0, max_side_px / max(h, w))
     if scale < 1.0:

@@ -14,6 +14,7 @@ import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
@@ -29,7 +30,7 @@ from services.grid_decomposition.regions import (
     road_networks,
     warehouse_floors,
 )
-from services.grid_decomposition.rooms import furniture, segment_rooms
+from services.grid_decomposition.rooms import furniture, segment_rooms, wall_furniture
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -224,7 +225,8 @@ def decompose(
     n_texture_regions: int | None = None,
     n_categories: int = 8,
     label_overrides: Mapping[int, PlaceLabel] | None = None,
-    door_max_width_m: float = 2.5,
+    door_max_width_m: float = 2.0,
+    cut_max_width_m: float = 2.5,
     wall_min_length_m: float = 0.5,
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
@@ -235,6 +237,8 @@ def decompose(
     structure_min_area_m2: float = 0.5,
     neck_half_width_m: float = 0.5,
     room_min_area_m2: float = 1.5,
+    clean: bool = True,
+    streak_reach_m: float = 2.0,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -257,13 +261,15 @@ def decompose(
         k of the k-means place categorisation.
     label_overrides : mapping, optional
         Place category -> :class:`PlaceLabel`, replacing the automatic assignment.
-    door_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
-        Doorways up to ``door_max_width_m`` wide. Along lines: gaps between wall runs of at least
+    door_max_width_m, cut_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
+        Along lines, doorways up to ``door_max_width_m`` wide: gaps between wall runs of at least
         ``wall_min_length_m`` are closed when the free space behind them widens by
         ``door_widening_m`` on both sides within ``door_max_depth_m`` of the line (a corridor or a
         passage between blocks does not); walls within ``wall_tolerance_m`` of a line are on it.
-        Off the lines, doorways are found from the free space itself
-        (:func:`~services.grid_decomposition.doorways.find_doorways`, same width and widening).
+        Off the lines, doorways up to ``cut_max_width_m`` wide are found from the free space itself
+        (:func:`~services.grid_decomposition.doorways.find_doorways`, same widening). On real maps
+        the gaps between furniture along a line closed as doors up to 2.5 m and cut furnished
+        rooms apart; 2.0 m keeps the ipa doors.
     face_disparity_threshold, edge_occupancy_threshold : float
         t1, t2 of the cogency test.
     min_region_area_m2 : float
@@ -280,6 +286,13 @@ def decompose(
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
         way and whose lattices line up along diagonals, still vote in the radiograms.
+    clean : bool
+        Clean the map first (:func:`~services.grid_decomposition.cleaning.clean_occupancy`: wall
+        fringes, specks, laser streaks): the decomposition sees the cleaned map; the streaks it
+        took out are labelled with the region they grow from, up to ``streak_reach_m`` from it
+        (a wall fringe is never labelled).
+    streak_reach_m : float
+        See ``clean``.
     seed : int
         Seed of the clusterings.
 
@@ -293,6 +306,11 @@ def decompose(
         For grids that are not 2-D, too small, out of range, or without free space.
     """
     occ = _check(occupancy, resolution_m)
+    streaks = rays = np.zeros(occ.shape, dtype=bool)
+    if clean:
+        cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
+        if np.any((cleaned >= 0) & (cleaned < FREE_PERCENT)):
+            occ, streaks, rays = cleaned, cleaning.streaks, cleaning.rays
     if n_categories < 1:
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
     free = (occ >= 0) & (occ < FREE_PERCENT)
@@ -301,7 +319,11 @@ def decompose(
     occupied = known & (occ > OCCUPIED_PERCENT)
     occupancy01 = np.where(known, occ / 100.0, 1.0)
     gradients = oriented_gradients(obstacle)
-    structure = _masked(gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))))
+    # the sides of laser rays are no walls: they would give the map directions of their own
+    ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    structure = _masked(
+        gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
+    )
     global_lines = _lines(gradients, structure, None, resolution_m)
     n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
     texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
@@ -374,15 +396,21 @@ def decompose(
         floor_px,
         wall | door,
         resolution_m=resolution_m,
-        door_max_width_m=door_max_width_m,
+        door_max_width_m=cut_max_width_m,
         door_widening_m=door_widening_m,
         door_max_depth_m=door_max_depth_m,
         room_min_area_m2=room_min_area_m2,
         neck_half_width_m=neck_half_width_m,
     )
+    # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
+    against_walls = wall_furniture(obstacle, resolution_m=resolution_m) & (segments == 0)
+    grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
+    segments = np.where(against_walls, grown, segments)
+    # the streaks the cleaning took out are free space: they take the region they grow from
+    segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
-    labels = np.where(free, labels, 0).astype(np.uint8)
+    labels = np.where(free | streaks, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(
         sub,

@@ -30,3 +30,13 @@ def test_a_small_map_is_enlarged_for_reading() -> None:
     occ[:2], occ[-2:], occ[:, :2], occ[:, -2:] = 100, 100, 100, 100
     image = overview_image(decompose(occ, resolution_m=0.05), min_side_px=400)
     assert image.shape[0] >= 300 and image.shape[1] >= 400
+
+
+def test_a_small_building_in_a_large_unknown_canvas_is_cropped_to_it() -> None:
+    occ = np.full((400, 400), -1, dtype=np.int8)
+    occ[100:160, 200:280] = 100
+    occ[102:158, 202:278] = 0
+    d = decompose(occ, resolution_m=0.05)
+    whole = overview_image(d, min_side_px=0, margin_m=None)
+    cropped = overview_image(d, min_side_px=0, margin_m=1.0)
+    assert whole.shape[1] > 400 and cropped.shape[1] < whole.shape[1] - 200
