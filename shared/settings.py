@@ -192,8 +192,6 @@ class DecompositionSettings(BaseModel):
         "share of known cells newly known or forgotten, or of obstacle cells that changed class, whichever is larger."
     )
     min_period_s: float = Field(10.0, ge=0.0, description="Least time between two decompositions.")
-    poll_period_s: float = Field(2.0, gt=0.0, description="Unused since the worker follows /aisle/map_events "
-                                 "(safety_poll_period_s is its fallback); kept so configurations that set it load.")
     safety_poll_period_s: float = Field(
         30.0, gt=0.0, description="How often the store is checked for revisions no map event announced (a writer "
         "on another bus, an event lost); map events are followed at once."

@@ -191,7 +191,7 @@ class DecompositionStage:
         self.context.count("decompositions")
         log.info("revision %d: %s revision %d decomposed in %.2f s: %d regions, %s", revision.id, self.source_layer,
                  stored.revision_id, seconds, len(result.regions),
-                 {kind: len(items) for kind, items in features.items() if items})
+                 {str(kind): len(items) for kind, items in features.items() if items})
 
 
 def decomposition_stage(context: StageContext) -> DecompositionStage:

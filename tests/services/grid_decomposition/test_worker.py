@@ -202,7 +202,7 @@ def test_stage_factory_starts_the_worker(store: MapStore, settings: Settings) ->
         pass
 
 
-@pytest.mark.parametrize("options", [{"min_change_fraction": 1.5}, {"poll_period_s": 0.0},
+@pytest.mark.parametrize("options", [{"min_change_fraction": 1.5}, {"safety_poll_period_s": 0.0},
                                      {"source_layer": "place_labels"}, {"neck_half_width_m": -1.0}])
 def test_stage_rejects_nonsense_options(store: MapStore, settings: Settings, options: dict[str, object]) -> None:
     context = StageContext(STAGE, None, store, settings, store.ensure_map(settings.map_name), None)  # type: ignore[arg-type]
