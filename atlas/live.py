@@ -40,6 +40,9 @@ from shared.store.store import FeatureRow
 from shared.vocabulary import FeatureKind, LayerName
 from shared.worker import MAP_EVENTS_TOPIC
 
+_BIN = FeatureKind.BIN.value
+"""The bin kind as a plain string: live look-ups hash it, and a plain string hashes without a Python call."""
+
 log = logging.getLogger(__name__)
 
 STALENESS_S = 0.2
@@ -62,7 +65,7 @@ class LiveMap:
 
     def bin_row(self, bin_id: str) -> FeatureRow | None:
         """The live row of the bin a client names ``bin_id`` (its WMS id or Aisle's), or None."""
-        return self.features.feature(FeatureKind.BIN, self.bins.detected_id(bin_id))
+        return self.features.feature(_BIN, self.bins.detected_id(bin_id))
 
     def bin_answer(self, row: FeatureRow) -> BinAnswer:
         """The answer about the bin of live row ``row``."""
