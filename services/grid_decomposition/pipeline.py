@@ -6,7 +6,7 @@ import enum
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import cv2
@@ -20,6 +20,7 @@ from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
+from services.grid_decomposition.racks import face_places, find_racks, place_segments
 from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
 from services.grid_decomposition.regions import (
     RegionInfo,
@@ -75,6 +76,8 @@ class Decomposition:
     resolution : Resolution
     resolution_m : float
     origin_xy_m : tuple[float, float]
+    rack_rows_px : (R, 4, 2) float64
+        Corners (x = column, y = row) of every rack row found (:func:`find_racks`), pixels.
     """
 
     labels: npt.NDArray[np.uint8]
@@ -89,6 +92,7 @@ class Decomposition:
     resolution: Resolution
     resolution_m: float
     origin_xy_m: tuple[float, float]
+    rack_rows_px: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4, 2)))
 
 
 def _check(occupancy: npt.NDArray[np.integer], resolution_m: float) -> npt.NDArray[np.int16]:
@@ -317,7 +321,8 @@ def decompose(
     ]
     logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
     banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
-    sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline)
+    racks = find_racks(obstacle & known, known, resolution_m=resolution_m, angles_rad=sorted(global_lines))
+    sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
     clutter = furniture(obstacle, resolution_m=resolution_m)
     walls = (occupied | ~known) & ~clutter
     wall, door = wall_evidence(
@@ -354,6 +359,8 @@ def decompose(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )
     face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
+    rack_place = face_places(sub.face_image, sub.n_faces, racks, free)
+    evidence = np.where(rack_place > 0, rack_place, evidence)
     face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
     # regions come from the automatic labels: a person's overrides rename places, they do not
     # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
@@ -380,8 +387,11 @@ def decompose(
         room_min_area_m2=room_min_area_m2,
         neck_half_width_m=neck_half_width_m,
     )
+    # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
+    segments, places = place_segments(segments, racks, free, min_area_px=round(room_min_area_m2 / resolution_m**2))
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    labels = np.where(places > 0, racks.cell_labels[places], labels)
     labels = np.where(free, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(
@@ -406,6 +416,7 @@ def decompose(
         resolution=resolution,
         resolution_m=resolution_m,
         origin_xy_m=origin_xy_m,
+        rack_rows_px=racks.rows_px,
     )
 
 

@@ -164,107 +164,155 @@ def _free_reach(free: npt.NDArray[np.bool_], start: int, step: int, span: tuple[
 
 
 class _Grid(NamedTuple):
-    cells: list[tuple[float, float, float, float, int]]  # x0, x1, y0, y1, label (turned frame)
-    rows: list[tuple[float, float, float, float]]  # rack rows facing an aisle
+    """A rack grid in turned pixel-centre coordinates: cell (k, g) spans ys[k]..ys[k+1] x xs[g]..xs[g+1]."""
+
+    xs: npt.NDArray[np.float64]  # (2 S + 2,) the end cross aisles' outer edges, then every section's ends
+    ys: npt.NDArray[np.float64]  # (2 R + 2 + D,) likewise for rows, a back-to-back row split in two
+    labels: npt.NDArray[np.int64]  # (len(ys) - 1, len(xs) - 1) Label value, 0 = no place
+    rack: npt.NDArray[np.bool_]  # same shape: a rack row facing an aisle
 
 
 def _grid(
-    racks: list[_Rack], free: npt.NDArray[np.bool_], *, double_px: float, max_aisle_px: int, min_free: float
+    racks: list[_Rack],
+    free: npt.NDArray[np.bool_],
+    refine: _Refine,
+    *,
+    double_px: float,
+    max_aisle_px: int,
+    min_free: float,
 ) -> _Grid:
-    """Storage, aisle, cross-aisle and junction rectangles of racks standing in rows and sections."""
+    """Storage, aisle, cross-aisle and junction places of racks standing in rows and sections."""
     bands = _merge([(r.y0, r.y1) for r in racks], 0.0)
     sections = _merge([(float(r.x0), float(r.x1)) for r in racks], 0.0)
     n_r, n_s = len(bands), len(sections)
     have = np.zeros((n_r, n_s), dtype=bool)
     for r in racks:
         i = next(k for k, b in enumerate(bands) if b.lo - 1 <= (r.y0 + r.y1) / 2 <= b.hi + 1)
-        for j, s in enumerate(sections):
-            if min(r.x1, s.hi) - max(r.x0, s.lo) > 0.5 * (s.hi - s.lo):
+        for j, sec in enumerate(sections):
+            if min(r.x1, sec.hi) - max(r.x0, sec.lo) > 0.5 * (sec.hi - sec.lo):
                 have[i, j] = True
-    # aisle bands: below the first row, between rows, above the last; gaps likewise along x
     h, w = free.shape
 
-    def reach_y(i: int, up: bool) -> float:
-        spans = [(int(s.lo), int(s.hi)) for j, s in enumerate(sections) if have[i, j]]
-        vals = [
-            _free_reach(free, int(round(bands[i].hi)) + 1 if up else int(round(bands[i].lo)) - 1, 1 if up else -1, sp,
-                        max_aisle_px)
-            for sp in spans
-        ]
+    def density(i: int, j: int) -> float:
+        a, b = int(sections[j].lo), int(math.ceil(sections[j].hi))
+        c, d = max(int(bands[i].lo), 0), min(int(math.ceil(bands[i].hi)), h)
+        return float((~free[c:d, a:b]).mean()) if b > a and d > c else 0.0
+
+    # a place of the grid whose rack was missed (many uprights missing) holds obstacles as densely
+    typical = float(np.median([density(i, j) for i, j in zip(*np.nonzero(have), strict=True)]))
+    for i, j in zip(*np.nonzero(~have), strict=True):
+        have[i, j] = density(i, j) >= 0.4 * typical
+
+    def reach(i: int, up: bool, transpose: bool) -> float:
+        lines, across = (sections, bands) if transpose else (bands, sections)
+        spans = [(int(c.lo), int(c.hi)) for j, c in enumerate(across) if (have[j, i] if transpose else have[i, j])]
+        start = int(round(lines[i].hi)) if up else int(round(lines[i].lo)) - 1
+        image = free.T if transpose else free
+        vals = [_free_reach(image, start, 1 if up else -1, sp, max_aisle_px) for sp in spans]
         return float(np.median(vals)) if vals else 0.0
 
-    def reach_x(j: int, right: bool) -> float:
-        spans = [(int(b.lo), int(b.hi)) for i, b in enumerate(bands) if have[i, j]]
-        vals = [
-            _free_reach(free.T, int(round(sections[j].hi)) + 1 if right else int(round(sections[j].lo)) - 1,
-                        1 if right else -1, sp, max_aisle_px)
-            for sp in spans
-        ]
-        return float(np.median(vals)) if vals else 0.0
-
-    ys = [(bands[0].lo - reach_y(0, False), bands[0].lo)]
-    ys += [(bands[i].hi, bands[i + 1].lo) for i in range(n_r - 1)]
-    ys.append((bands[-1].hi, bands[-1].hi + reach_y(n_r - 1, True)))
-    xs = [(sections[0].lo - reach_x(0, False), sections[0].lo)]
-    xs += [(sections[j].hi, sections[j + 1].lo) for j in range(n_s - 1)]
-    xs.append((sections[-1].hi, sections[-1].hi + reach_x(n_s - 1, True)))
+    # edges in pixel-centre coordinates: a band of rows lo..hi - 1 spans lo - 0.5 .. hi - 0.5
+    y_in = [refine.edge(False, b.lo - 0.5, sections, have[i], low=True) for i, b in enumerate(bands)]
+    y_out = [refine.edge(False, b.hi - 0.5, sections, have[i], low=False) for i, b in enumerate(bands)]
+    x_in = [refine.edge(True, sec.lo - 0.5, bands, have[:, j], low=True) for j, sec in enumerate(sections)]
+    x_out = [refine.edge(True, sec.hi - 0.5, bands, have[:, j], low=False) for j, sec in enumerate(sections)]
+    ys = [y_in[0] - reach(0, False, False) - 2.0]
+    for i in range(n_r):
+        ys.append(y_in[i])
+        if bands[i].hi - bands[i].lo >= double_px:  # back to back: a row facing each aisle
+            ys.append((y_in[i] + y_out[i]) / 2)
+        ys.append(y_out[i])
+    ys.append(y_out[-1] + reach(n_r - 1, True, False) + 2.0)
+    xs = [x_in[0] - reach(0, False, True) - 2.0]
+    for j in range(n_s):
+        xs += [x_in[j], x_out[j]]
+    xs.append(x_out[-1] + reach(n_s - 1, True, True) + 2.0)
+    # which y interval is which: ("aisle", k) for k = 0..n_r, ("rack", i)
+    y_kind: list[tuple[str, int]] = [("aisle", 0)]
+    for i in range(n_r):
+        y_kind.append(("rack", i))
+        if bands[i].hi - bands[i].lo >= double_px:
+            y_kind.append(("rack", i))
+        y_kind.append(("aisle", i + 1))
+    x_kind: list[tuple[str, int]] = [("gap", 0)]
+    for j in range(n_s):
+        x_kind += [("section", j), ("gap", j + 1)]
 
     def open_rect(x0: float, x1: float, y0: float, y1: float) -> bool:
-        a, b, c, d = max(int(x0), 0), min(int(math.ceil(x1)), w), max(int(y0), 0), min(int(math.ceil(y1)), h)
-        if b - a < 2 or d - c < 2 or x1 - x0 > max_aisle_px + 2 and y1 - y0 > max_aisle_px + 2:
+        a, b = max(int(x0 + 2.5), 0), min(int(x1 - 1.5), w)
+        c, d = max(int(y0 + 2.5), 0), min(int(y1 - 1.5), h)
+        if b - a < 2 or d - c < 2:
             return False
         return bool(free[c:d, a:b].mean() >= min_free)
 
-    cells: list[tuple[float, float, float, float, int]] = []
-    rows: list[tuple[float, float, float, float]] = []
-    # aisle pieces (k = aisle band, j = section): racks on both sides, or one side at the perimeter
     aisle = np.zeros((n_r + 1, n_s), dtype=bool)
-    for k in range(n_r + 1):
-        for j in range(n_s):
-            below = have[k - 1, j] if k > 0 else False
-            above = have[k, j] if k < n_r else False
-            edge = k in (0, n_r)
-            if (below and above) or (edge and (below or above)):
-                y0, y1 = ys[k]
-                if y1 - y0 >= 2 and open_rect(sections[j].lo, sections[j].hi, y0, y1):
-                    aisle[k, j] = True
-                    cells.append((sections[j].lo, sections[j].hi, y0, y1, Label.CORRIDOR.value))
     cross = np.zeros((n_r, n_s + 1), dtype=bool)
-    for i in range(n_r):
-        for g in range(n_s + 1):
-            left = have[i, g - 1] if g > 0 else False
-            right = have[i, g] if g < n_s else False
-            edge = g in (0, n_s)
-            if (left and right) or (edge and (left or right)):
-                x0, x1 = xs[g]
-                if x1 - x0 >= 2 and open_rect(x0, x1, bands[i].lo, bands[i].hi):
-                    cross[i, g] = True
-                    cells.append((x0, x1, bands[i].lo, bands[i].hi, Label.CORRIDOR.value))
-    for k in range(n_r + 1):
-        for g in range(n_s + 1):
-            arms = [
-                aisle[k, g - 1] if g > 0 else False,
-                aisle[k, g] if g < n_s else False,
-                cross[k - 1, g] if k > 0 else False,
-                cross[k, g] if k < n_r else False,
-            ]
-            if sum(arms) < 2:
-                continue
-            (x0, x1), (y0, y1) = xs[g], ys[k]
-            if x1 - x0 >= 2 and y1 - y0 >= 2 and open_rect(x0, x1, y0, y1):
-                cells.append((x0, x1, y0, y1, Label.JUNCTION.value if sum(arms) >= 3 else Label.CORRIDOR.value))
-    for i, band in enumerate(bands):
-        for j, s in enumerate(sections):
-            if not have[i, j]:
-                continue
-            halves = [(band.lo, band.hi)]
-            if band.hi - band.lo >= double_px:  # back to back: a row facing each aisle
-                mid = (band.lo + band.hi) / 2
-                halves = [(band.lo, mid), (mid, band.hi)]
-            for y0, y1 in halves:
-                cells.append((s.lo, s.hi, y0, y1, Label.STORAGE.value))
-                rows.append((s.lo, s.hi, y0, y1))
-    return _Grid(cells, rows)
+    for ky, (yk, a_i) in enumerate(y_kind):
+        for kx, (xk, b_j) in enumerate(x_kind):
+            box = (xs[kx], xs[kx + 1], ys[ky], ys[ky + 1])
+            if yk == "aisle" and xk == "section":
+                below = have[a_i - 1, b_j] if a_i > 0 else False
+                above = have[a_i, b_j] if a_i < n_r else False
+                edge = a_i in (0, n_r)
+                aisle[a_i, b_j] = ((below and above) or (edge and (below or above))) and open_rect(*box)
+            elif yk == "rack" and xk == "gap":
+                left = have[a_i, b_j - 1] if b_j > 0 else False
+                right = have[a_i, b_j] if b_j < n_s else False
+                edge = b_j in (0, n_s)
+                cross[a_i, b_j] = ((left and right) or (edge and (left or right))) and open_rect(*box)
+    labels = np.zeros((len(y_kind), len(x_kind)), dtype=np.int64)
+    rack = np.zeros(labels.shape, dtype=bool)
+    for ky, (yk, a_i) in enumerate(y_kind):
+        for kx, (xk, b_j) in enumerate(x_kind):
+            if yk == "rack" and xk == "section":
+                rack[ky, kx] = have[a_i, b_j]
+                labels[ky, kx] = Label.STORAGE.value if have[a_i, b_j] else 0
+            elif yk == "aisle" and xk == "section":
+                labels[ky, kx] = Label.CORRIDOR.value if aisle[a_i, b_j] else 0
+            elif yk == "rack" and xk == "gap":
+                labels[ky, kx] = Label.CORRIDOR.value if cross[a_i, b_j] else 0
+            else:
+                arms = [
+                    aisle[a_i, b_j - 1] if b_j > 0 else False,
+                    aisle[a_i, b_j] if b_j < n_s else False,
+                    cross[a_i - 1, b_j] if a_i > 0 else False,
+                    cross[a_i, b_j] if a_i < n_r else False,
+                ]
+                box = (xs[kx], xs[kx + 1], ys[ky], ys[ky + 1])
+                if sum(arms) >= 2 and open_rect(*box):
+                    labels[ky, kx] = Label.JUNCTION.value if sum(arms) >= 3 else Label.CORRIDOR.value
+    return _Grid(np.array(xs), np.array(ys), labels, rack)
+
+
+class _Refine:
+    """Sub-pixel rack edges from the obstacle pixels of the original map (turned exactly, not resampled).
+
+    The turned image is resampled to the nearest pixel, so an edge found there is up to a pixel off
+    along a turned wall; the obstacle pixels bordering free space, turned exactly, give the edge
+    between the last free and the first obstacle pixel centre.
+    """
+
+    def __init__(self, border_uv: npt.NDArray[np.float64]) -> None:
+        self.uv = border_uv  # (N, 2) turned coordinates of obstacle pixels next to free space
+
+    def transposed(self) -> _Refine:
+        return _Refine(self.uv[:, ::-1])
+
+    def edge(self, along_x: bool, guess: float, spans: list[_Band], use: npt.NDArray[np.bool_], *, low: bool) -> float:
+        """The edge near ``guess`` (pixel-centre coordinate across ``spans``): just outside the obstacles there."""
+        coord = self.uv[:, 0] if along_x else self.uv[:, 1]
+        other = self.uv[:, 1] if along_x else self.uv[:, 0]
+        near = np.abs(coord - guess) <= 1.0
+        inside = np.zeros(near.shape, dtype=bool)
+        for span, ok in zip(spans, use, strict=True):
+            if ok:
+                inside |= (other >= span.lo) & (other <= span.hi - 1)
+        values = coord[near & inside]
+        if values.size < 4:
+            return guess
+        # a straight edge turned spreads its first obstacle centres evenly over one pixel: the
+        # 30th percentile less 0.3 px finds its start and shrugs off a stray or overhanging pixel
+        return float(np.quantile(values, 0.3) - 0.3) if low else float(np.quantile(values, 0.7) + 0.3)
 
 
 def _turn(shape: tuple[int, int], angle_rad: float) -> tuple[npt.NDArray[np.float64], tuple[int, int]]:
@@ -276,6 +324,43 @@ def _turn(shape: tuple[int, int], angle_rad: float) -> tuple[npt.NDArray[np.floa
     lo, hi = corners.min(axis=0), corners.max(axis=0)
     matrix = np.hstack([rot, -lo[:, None]])
     return matrix, (int(math.ceil(hi[0] - lo[0])) + 1, int(math.ceil(hi[1] - lo[1])) + 1)
+
+
+def _rasterise(
+    grid: _Grid, matrix: npt.NDArray[np.float64], transpose: bool, shape: tuple[int, int], first_id: int
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64], list[npt.NDArray[np.float64]]]:
+    """Place ids (from ``first_id``) of the original pixels, their labels, and the rack rows' corners."""
+    inverse = cv2.invertAffineTransform(matrix)
+    xs, ys = (grid.ys, grid.xs) if transpose else (grid.xs, grid.ys)
+    corners = np.array([[xs[0], ys[0]], [xs[-1], ys[0]], [xs[-1], ys[-1]], [xs[0], ys[-1]]])
+    back = corners @ inverse[:, :2].T + inverse[:, 2]
+    h, w = shape
+    c0, r0 = np.maximum(np.floor(back.min(axis=0)).astype(int), 0)
+    c1, r1 = np.minimum(np.ceil(back.max(axis=0)).astype(int) + 1, [w, h])
+    out = np.zeros(shape, dtype=np.int32)
+    rows_px: list[npt.NDArray[np.float64]] = []
+    ids = np.zeros(grid.labels.shape, dtype=np.int64)
+    ids[grid.labels > 0] = first_id + np.arange(int((grid.labels > 0).sum()))
+    if c1 <= c0 or r1 <= r0:
+        return out, np.zeros(0, np.int64), rows_px
+    cc, rr = np.meshgrid(np.arange(c0, c1, dtype=np.float64), np.arange(r0, r1, dtype=np.float64))
+    u = matrix[0, 0] * cc + matrix[0, 1] * rr + matrix[0, 2]
+    v = matrix[1, 0] * cc + matrix[1, 1] * rr + matrix[1, 2]
+    if transpose:
+        u, v = v, u
+    ku = np.searchsorted(grid.xs, u, side="right") - 1
+    kv = np.searchsorted(grid.ys, v, side="right") - 1
+    ok = (ku >= 0) & (ku < grid.xs.size - 1) & (kv >= 0) & (kv < grid.ys.size - 1)
+    out[r0:r1, c0:c1] = np.where(ok, ids[np.clip(kv, 0, ids.shape[0] - 1), np.clip(ku, 0, ids.shape[1] - 1)], 0)
+    for ky, kx in zip(*np.nonzero(grid.rack), strict=True):
+        box = np.array(
+            [[grid.xs[kx], grid.ys[ky]], [grid.xs[kx + 1], grid.ys[ky]], [grid.xs[kx + 1], grid.ys[ky + 1]],
+             [grid.xs[kx], grid.ys[ky + 1]]]
+        )
+        if transpose:
+            box = box[:, ::-1]
+        rows_px.append(box @ inverse[:, :2].T + inverse[:, 2])
+    return out, grid.labels[grid.labels > 0], rows_px
 
 
 def find_racks(
@@ -322,6 +407,9 @@ def find_racks(
     """
     shape = occupied.shape
     code = np.where(known, np.where(occupied, _OCCUPIED, 0), _UNKNOWN).astype(np.uint8)
+    free = code == 0
+    border = (code != 0) & (cv2.dilate(free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+    border_rc = np.argwhere(border).astype(np.float64)
     families: list[float] = []
     for a in angles_rad:
         a = math.remainder(a, math.pi / 2)
@@ -329,18 +417,19 @@ def find_racks(
             families.append(a)
     px = 1.0 / resolution_m
     cells = np.zeros(shape, np.int32)
-    labels: list[int] = [0]
+    labels: list[npt.NDArray[np.int64]] = [np.zeros(1, np.int64)]
     rows: list[npt.NDArray[np.float64]] = []
+    n_ids = 1
     for angle in families:
         matrix, size = _turn(shape, angle)
-        flags = cv2.INTER_NEAREST
-        turned = cv2.warpAffine(code, matrix, size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=_UNKNOWN)
-        turned_cells = np.zeros((size[1], size[0]), np.int32)
-        inverse = cv2.invertAffineTransform(matrix)
+        turned = cv2.warpAffine(
+            code, matrix, size, flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=_UNKNOWN
+        )
+        refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
         for transpose in (False, True):
-            image = turned.T if transpose else turned
+            image = np.ascontiguousarray(turned.T) if transpose else turned
             racks = _racks(
-                np.ascontiguousarray(image),
+                image,
                 gap_px=2 * round(max_bay_gap_m * px / 2) + 1,
                 depth_gap_px=2 * round(max_depth_gap_m * px / 2) + 1,
                 min_length_px=min_length_m * px,
@@ -351,26 +440,75 @@ def find_racks(
             if not racks:
                 continue
             grid = _grid(
-                racks, image == 0, double_px=double_m * px, max_aisle_px=round(max_aisle_m * px), min_free=min_free
+                racks,
+                image == 0,
+                refine.transposed() if transpose else refine,
+                double_px=double_m * px,
+                max_aisle_px=round(max_aisle_m * px),
+                min_free=min_free,
             )
-            target = turned_cells.T if transpose else turned_cells
-            for x0, x1, y0, y1, label in grid.cells:
-                labels.append(label)
-                target[int(round(y0)) : int(round(y1)), int(round(x0)) : int(round(x1))] = len(labels) - 1
-            for x0, x1, y0, y1 in grid.rows:
-                corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
-                if transpose:
-                    corners = corners[:, ::-1]
-                rows.append(corners @ inverse[:, :2].T + inverse[:, 2])
-        if turned_cells.any():
-            back = cv2.warpAffine(
-                turned_cells.astype(np.float32), matrix, (shape[1], shape[0]),
-                flags=flags | cv2.WARP_INVERSE_MAP, borderValue=0,
-            ).astype(np.int32)
-            cells = np.where(cells == 0, back, cells)
-    if len(labels) == 1:
+            placed, placed_labels, placed_rows = _rasterise(grid, matrix, transpose, shape, n_ids)
+            cells = np.where(cells == 0, placed, cells)
+            labels.append(placed_labels)
+            rows += placed_rows
+            n_ids += placed_labels.size
+    if n_ids == 1:
         return _empty(shape)
     outline = np.zeros(shape, dtype=bool)
     outline[:, 1:] |= cells[:, 1:] != cells[:, :-1]
     outline[1:, :] |= cells[1:, :] != cells[:-1, :]
-    return RackLayout(cells, np.array(labels, dtype=np.int64), outline, np.array(rows).reshape(-1, 4, 2))
+    return RackLayout(cells, np.concatenate(labels), outline, np.array(rows).reshape(-1, 4, 2))
+
+
+def face_places(
+    face_image: npt.NDArray[np.int32], n_faces: int, layout: RackLayout, free: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.int64]:
+    """(F + 1,) :class:`Label` value of the place holding most of each face's free pixels; 0 off the racks."""
+    out = np.zeros(n_faces + 1, dtype=np.int64)
+    if layout.cell_labels.size <= 1:
+        return out
+    faces = face_image[free]
+    place = layout.cell_labels[layout.cells[free]]
+    n_lab = len(Label)
+    votes = np.bincount(faces * n_lab + place, minlength=(n_faces + 1) * n_lab).reshape(n_faces + 1, n_lab)
+    best = votes[:, 1:].argmax(axis=1) + 1
+    majority = votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1)
+    out[majority] = best[majority]
+    out[0] = 0
+    return out
+
+
+def place_segments(
+    segments: npt.NDArray[np.int32], layout: RackLayout, free: npt.NDArray[np.bool_], *, min_area_px: int
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    """``segments`` with every rack place its own segment, ids renumbered 1..N without gaps.
+
+    What the places leave of a segment joins the nearest place when it is under ``min_area_px`` or
+    under half of the segment (the slivers of a hall the places cover). Also returns the place of
+    every free pixel now in one (0 elsewhere).
+    """
+    if layout.cell_labels.size <= 1:
+        return segments, np.zeros(segments.shape, dtype=np.int32)
+    inside = (layout.cells > 0) & free
+    n_old = int(segments.max()) + 1
+    before = np.bincount(segments.ravel(), minlength=n_old)
+    after = np.bincount(segments[~inside], minlength=n_old)
+    left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
+    left[0] = False
+    sliver = left[segments] & ~inside & free
+    place = layout.cells.copy()
+    if sliver.any():
+        _, nearest = cv2.distanceTransformWithLabels(
+            (layout.cells == 0).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
+        )
+        seeds = layout.cells > 0
+        lut = np.zeros(int(nearest.max()) + 1, dtype=np.int32)
+        lut[nearest[seeds]] = layout.cells[seeds]
+        place[sliver] = lut[nearest[sliver]]
+        inside |= sliver & (place > 0)
+    out = segments.astype(np.int64)
+    out[inside] = n_old + place[inside]
+    present = np.bincount(out.ravel(), minlength=int(out.max()) + 1) > 0
+    present[0] = True
+    lut64 = np.cumsum(present) - 1
+    return lut64[out].astype(np.int32), np.where(inside, place, 0).astype(np.int32)

@@ -32,8 +32,6 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-_SHIFT = 4
-_SCALE = 1 << _SHIFT
 UPRIGHT_M = 0.1
 FLUE_M = 0.2
 WALL_M = 0.2
@@ -115,16 +113,21 @@ class _Canvas:
         return self.px(np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]], dtype=np.float64))
 
     def fill(self, image: npt.NDArray[np.generic], rects: list[tuple[float, float, float, float]], value: int) -> None:
-        """Fill axis-aligned hall rectangles (u0, u1, v0, v1) with ``value`` (pixel centres inside)."""
-        if not rects:
-            return
-        r = np.asarray(rects, dtype=np.float64)
-        u = np.stack([r[:, 0], r[:, 1], r[:, 1], r[:, 0]], axis=1)
-        v = np.stack([r[:, 2], r[:, 2], r[:, 3], r[:, 3]], axis=1)
-        # pixel (row, col) covers [col, col + 1): its centre is at col + 0.5; cv2 fills integer points
-        pts = self.px(np.stack([u, v], axis=-1)) - 0.5
-        polys = [p for p in np.round(pts * _SCALE).astype(np.int32)]
-        cv2.fillPoly(image, polys, value, cv2.LINE_8, _SHIFT)  # type: ignore[call-overload]
+        """Fill axis-aligned hall rectangles [u0, u1) x [v0, v1) with ``value``: the pixels whose centre is inside."""
+        h, w = image.shape[:2]
+        for u0, u1, v0, v1 in rects:
+            box = self.corners(u0, u1, v0, v1)
+            c0, r0 = np.maximum(np.floor(box.min(axis=0) - 0.5).astype(int), 0)
+            c1, r1 = np.minimum(np.ceil(box.max(axis=0) + 0.5).astype(int), [w, h])
+            if c1 <= c0 or r1 <= r0:
+                continue
+            cc, rr = np.meshgrid(np.arange(c0, c1) + 0.5, np.arange(r0, r1) + 0.5)
+            # pixel centre -> hall metres (inverse of px)
+            x, y = cc * self.res - self.offset[0], rr * self.res - self.offset[1]
+            u = self.rot[0, 0] * x + self.rot[1, 0] * y
+            v = self.rot[0, 1] * x + self.rot[1, 1] * y
+            inside = (u >= u0) & (u < u1) & (v >= v0) & (v < v1)
+            image[r0:r1, c0:c1][inside] = value
 
 
 class _Layout(NamedTuple):
