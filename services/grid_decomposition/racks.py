@@ -144,12 +144,16 @@ def _racks(
         inside = mask[int(y0) : int(math.ceil(y1))].mean(axis=0)
         band = inside.sum() * (int(math.ceil(y1)) - int(y0))
         if cols.mean() >= 0.95 and (inside >= 0.3).mean() >= min_fill and mask.sum() <= 1.5 * band:
-            out.append(_Rack(x, x + ww, y + y0, y + y1))
+            rows = mask[int(y0) : int(math.ceil(y1))]
+            rows = rows[rows.any(axis=1)]
+            x0 = _edge(np.argmax(rows, axis=1), ww)
+            x1 = ww - _edge(np.argmax(rows[:, ::-1], axis=1), ww)
+            out.append(_Rack(x + int(x0), x + int(x1), y + y0, y + y1))
     return out
 
 
 def _free_reach(free: npt.NDArray[np.bool_], start: int, step: int, span: tuple[int, int], cap: int) -> float:
-    """Median free run (px) from row ``start`` in direction ``step`` over columns ``span``, at most ``cap``."""
+    """Upper-quartile free run (px) from row ``start`` in direction ``step`` over columns ``span``, at most ``cap``."""
     h = free.shape[0]
     stop = start + step * cap
     lo, hi = (start, min(stop, h - 1)) if step > 0 else (max(stop, 0), start)
@@ -160,7 +164,38 @@ def _free_reach(free: npt.NDArray[np.bool_], start: int, step: int, span: tuple[
         window = window[::-1]
     blocked = ~window
     first = np.where(blocked.any(axis=0), np.argmax(blocked, axis=0), window.shape[0])
-    return float(np.median(first))
+    return float(np.quantile(first, 0.75))
+
+
+def _dots(
+    free: npt.NDArray[np.bool_], row: int, step: int, spans: list[_Band], use: npt.NDArray[np.bool_]
+) -> float:
+    """Half the thickness of the obstacles on ``row`` when they are sparse dots (uprights), else 0.
+
+    ``row`` is the first obstacle row of an edge, ``step`` points into the rack. Uprights cover
+    under 30 % of the edge; a solid rack, a beam or a row of pallet faces covers more.
+    """
+    h = free.shape[0]
+    if not 0 <= row < h:
+        return 0.0
+    cols = np.concatenate([np.arange(int(b.lo), int(b.hi)) for b, ok in zip(spans, use, strict=True) if ok] or [[]])
+    cols = cols.astype(np.int64)
+    if cols.size == 0:
+        return 0.0
+    hit = cols[~free[row, cols]]
+    nxt = row + step
+    covered = ~free[row, cols] | (~free[nxt, cols] if 0 <= nxt < h else False)
+    if hit.size == 0 or covered.mean() >= 0.3:  # a turned edge steps between two rows
+        return 0.0
+    depth = np.zeros(hit.size)
+    solid = np.ones(hit.size, dtype=bool)
+    for k in range(8):
+        r = row + step * k
+        if not 0 <= r < h:
+            break
+        solid &= ~free[r, hit]
+        depth += solid
+    return float(np.median(depth)) / 2.0
 
 
 class _Grid(NamedTuple):
@@ -209,13 +244,28 @@ def _grid(
         start = int(round(lines[i].hi)) if up else int(round(lines[i].lo)) - 1
         image = free.T if transpose else free
         vals = [_free_reach(image, start, 1 if up else -1, sp, max_aisle_px) for sp in spans]
-        return float(np.median(vals)) if vals else 0.0
+        return float(np.quantile(vals, 0.75)) if vals else 0.0
 
-    # edges in pixel-centre coordinates: a band of rows lo..hi - 1 spans lo - 0.5 .. hi - 0.5
-    y_in = [refine.edge(False, b.lo - 0.5, sections, have[i], low=True) for i, b in enumerate(bands)]
-    y_out = [refine.edge(False, b.hi - 0.5, sections, have[i], low=False) for i, b in enumerate(bands)]
-    x_in = [refine.edge(True, sec.lo - 0.5, bands, have[:, j], low=True) for j, sec in enumerate(sections)]
-    x_out = [refine.edge(True, sec.hi - 0.5, bands, have[:, j], low=False) for j, sec in enumerate(sections)]
+    # edges in pixel-centre coordinates: a band of rows lo..hi - 1 spans lo - 0.5 .. hi - 0.5; an
+    # edge drawn only by uprights lies on their centres
+    y_in = [
+        refine.edge(False, b.lo - 0.5, sections, have[i], low=True) + _dots(free, int(b.lo), 1, sections, have[i])
+        for i, b in enumerate(bands)
+    ]
+    y_out = [
+        refine.edge(False, b.hi - 0.5, sections, have[i], low=False)
+        - _dots(free, int(round(b.hi)) - 1, -1, sections, have[i])
+        for i, b in enumerate(bands)
+    ]
+    x_in = [
+        refine.edge(True, sec.lo - 0.5, bands, have[:, j], low=True) + _dots(free.T, int(sec.lo), 1, bands, have[:, j])
+        for j, sec in enumerate(sections)
+    ]
+    x_out = [
+        refine.edge(True, sec.hi - 0.5, bands, have[:, j], low=False)
+        - _dots(free.T, int(round(sec.hi)) - 1, -1, bands, have[:, j])
+        for j, sec in enumerate(sections)
+    ]
     ys = [y_in[0] - reach(0, False, False) - 2.0]
     for i in range(n_r):
         ys.append(y_in[i])

@@ -157,12 +157,12 @@ def _layout(
     sections, cross = [], []
     u = WALL_M
     for s in range(n_sections + 1):
-        # a cross aisle runs between the uprights' outer faces
+        # rack footprints and cross aisles meet on the uprights' centres
         cross.append((u, u + float(cross_w[s])))
         u += float(cross_w[s])
         if s < n_sections:
-            sections.append((u + UPRIGHT_M / 2, u + UPRIGHT_M / 2 + bays_per_section * pitch))
-            u += bays_per_section * pitch + UPRIGHT_M
+            sections.append((u, u + bays_per_section * pitch))
+            u += bays_per_section * pitch
     rows, aisles = [], []
     v = WALL_M
     for r in range(n_double_rows + 1):
@@ -205,20 +205,19 @@ def _rack_section(
     free: _Rects = []
     xs = [u0 + k * lay.pitch_m for k in range(lay.bays + 1)]
     if style is RackStyle.SOLID:
-        occ += [(u0 - half, u1 + half, va, va + d), (u0 - half, u1 + half, vb - d, vb)]
-        unk.append((u0 - half, u1 + half, va + d, vb - d))
+        occ += [(u0, u1, va, va + d), (u0, u1, vb - d, vb)]
+        unk.append((u0, u1, va + d, vb - d))
         return _Draw(occ, unk, free)
     for ux in xs:
         for k, uv in enumerate(lines):
             inner = k in (1, 2)
             if rng.random() >= missing or (style is RackStyle.BEAMS and not inner):
-                vv = uv + (half if k in (0, 2) else -half)
-                occ.append((ux - half, ux + half, vv - half, vv + half))
+                occ.append((ux - half, ux + half, uv - half, uv + half))
     if style is RackStyle.UPRIGHTS:
         return _Draw(occ, unk, free)
     if style is RackStyle.BEAMS:
-        occ += [(u0 - half, u1 + half, va, va + 0.06), (u0 - half, u1 + half, vb - 0.06, vb)]
-        unk.append((u0 + half, u1 - half, va + 0.06, vb - 0.06))
+        occ += [(u0, u1, va - 0.03, va + 0.03), (u0, u1, vb - 0.03, vb + 0.03)]
+        unk.append((u0 + half, u1 - half, va + 0.03, vb - 0.03))
         return _Draw(occ, unk, free)
     # pallet height: each bay loaded or empty
     over = style is RackStyle.OVERHANG
@@ -354,9 +353,9 @@ def rack_hall_map(
         for va in lay.rows_v:
             vb = va + 2 * lay.depth_m + FLUE_M
             for u0, u1 in lay.sections_u:
-                canvas.fill(truth, [(u0 - half, u1 + half, va, vb)], PlaceTruth.STORAGE.value)
-                racks.append(canvas.corners(u0 - half, u1 + half, va, va + lay.depth_m))
-                racks.append(canvas.corners(u0 - half, u1 + half, vb - lay.depth_m, vb))
+                canvas.fill(truth, [(u0, u1, va, vb)], PlaceTruth.STORAGE.value)
+                racks.append(canvas.corners(u0, u1, va, va + lay.depth_m))
+                racks.append(canvas.corners(u0, u1, vb - lay.depth_m, vb))
                 for b in range(lay.bays):
                     x0 = u0 + b * lay.pitch_m
                     canvas.fill(cells, [(x0, x0 + lay.pitch_m, va, va + lay.depth_m)], cell)
