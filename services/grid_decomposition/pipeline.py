@@ -20,7 +20,7 @@ from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
-from services.grid_decomposition.racks import face_places, find_racks, place_segments
+from services.grid_decomposition.racks import combine, face_places, find_racks, place_segments
 from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
 from services.grid_decomposition.regions import (
     RegionInfo,
@@ -321,7 +321,16 @@ def decompose(
     ]
     logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
     banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
-    racks = find_racks(obstacle & known, known, resolution_m=resolution_m, angles_rad=sorted(global_lines))
+    racks = combine(  # each texture region with its own directions
+        [
+            find_racks(
+                obstacle & known, known, resolution_m=resolution_m, angles_rad=sorted({ln.angle_rad for ln in g.lines}),
+                domain=g.mask,
+            )
+            for g in groups
+        ],
+        occ.shape,
+    )
     sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
     clutter = furniture(obstacle, resolution_m=resolution_m)
     walls = (occupied | ~known) & ~clutter

@@ -27,6 +27,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 from services.grid_decomposition.semantics import Label
 
@@ -196,6 +198,22 @@ def _dots(
         solid &= ~free[r, hit]
         depth += solid
     return float(np.median(depth)) / 2.0
+
+
+def _blocks(racks: list[_Rack], *, max_aisle_px: float) -> list[list[_Rack]]:
+    """Racks grouped into blocks: neighbours across an aisle or a cross aisle (at most ``max_aisle_px``)."""
+    n = len(racks)
+    x0 = np.array([r.x0 for r in racks], dtype=np.float64)
+    x1 = np.array([r.x1 for r in racks], dtype=np.float64)
+    y0 = np.array([r.y0 for r in racks])
+    y1 = np.array([r.y1 for r in racks])
+    gap_x = np.maximum(x0[:, None], x0[None, :]) - np.minimum(x1[:, None], x1[None, :])
+    gap_y = np.maximum(y0[:, None], y0[None, :]) - np.minimum(y1[:, None], y1[None, :])
+    overlap_x = -gap_x > 0.5 * np.minimum((x1 - x0)[:, None], (x1 - x0)[None, :])
+    overlap_y = -gap_y > 0.5 * np.minimum((y1 - y0)[:, None], (y1 - y0)[None, :])
+    linked = (overlap_x & (gap_y <= max_aisle_px)) | (overlap_y & (gap_x <= max_aisle_px))
+    _, group = connected_components(csr_matrix(linked), directed=False)
+    return [[racks[k] for k in np.flatnonzero(group == g)] for g in range(int(group.max()) + 1 if n else 0)]
 
 
 class _Grid(NamedTuple):
@@ -419,6 +437,7 @@ def find_racks(
     *,
     resolution_m: float,
     angles_rad: list[float],
+    domain: npt.NDArray[np.bool_] | None = None,
     max_bay_gap_m: float = 2.95,
     max_depth_gap_m: float = 1.3,
     min_length_m: float = 6.0,
@@ -439,6 +458,8 @@ def find_racks(
         Metres per cell.
     angles_rad : list of float
         Directions to look along (x = column, y = row); each is tried with its normal too.
+    domain : (H, W) bool, optional
+        Look only here (a texture region with its own directions); outside counts as unknown.
     max_bay_gap_m, max_depth_gap_m : float
         Gaps closed along a row (a bay, not a cross aisle) and across it (a rack's depth or the
         flue, not an aisle).
@@ -457,6 +478,8 @@ def find_racks(
     """
     shape = occupied.shape
     code = np.where(known, np.where(occupied, _OCCUPIED, 0), _UNKNOWN).astype(np.uint8)
+    if domain is not None:
+        code[~domain] = _UNKNOWN
     free = code == 0
     border = (code != 0) & (cv2.dilate(free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
     border_rc = np.argwhere(border).astype(np.float64)
@@ -487,27 +510,48 @@ def find_racks(
                 max_depth_px=max_depth_m * px,
                 min_fill=min_fill,
             )
-            if not racks:
-                continue
-            grid = _grid(
-                racks,
-                image == 0,
-                refine.transposed() if transpose else refine,
-                double_px=double_m * px,
-                max_aisle_px=round(max_aisle_m * px),
-                min_free=min_free,
-            )
-            placed, placed_labels, placed_rows = _rasterise(grid, matrix, transpose, shape, n_ids)
-            cells = np.where(cells == 0, placed, cells)
-            labels.append(placed_labels)
-            rows += placed_rows
-            n_ids += placed_labels.size
+            for block in _blocks(racks, max_aisle_px=max_aisle_m * px):
+                grid = _grid(
+                    block,
+                    image == 0,
+                    refine.transposed() if transpose else refine,
+                    double_px=double_m * px,
+                    max_aisle_px=round(max_aisle_m * px),
+                    min_free=min_free,
+                )
+                placed, placed_labels, placed_rows = _rasterise(grid, matrix, transpose, shape, n_ids)
+                cells = np.where(cells == 0, placed, cells)
+                labels.append(placed_labels)
+                rows += placed_rows
+                n_ids += placed_labels.size
+    if domain is not None:
+        cells[~domain] = 0
     if n_ids == 1:
         return _empty(shape)
     outline = np.zeros(shape, dtype=bool)
     outline[:, 1:] |= cells[:, 1:] != cells[:, :-1]
     outline[1:, :] |= cells[1:, :] != cells[:-1, :]
     return RackLayout(cells, np.concatenate(labels), outline, np.array(rows).reshape(-1, 4, 2))
+
+
+def combine(layouts: list[RackLayout], shape: tuple[int, int]) -> RackLayout:
+    """One layout of several (of disjoint texture regions); place ids renumbered."""
+    cells = np.zeros(shape, dtype=np.int32)
+    labels = [np.zeros(1, dtype=np.int64)]
+    rows = [np.zeros((0, 4, 2))]
+    offset = 0
+    for lay in layouts:
+        n = lay.cell_labels.size - 1
+        if n == 0:
+            continue
+        cells = np.where((cells == 0) & (lay.cells > 0), lay.cells + offset, cells)
+        labels.append(lay.cell_labels[1:])
+        rows.append(lay.rows_px)
+        offset += n
+    outline = np.zeros(shape, dtype=bool)
+    outline[:, 1:] |= cells[:, 1:] != cells[:, :-1]
+    outline[1:, :] |= cells[1:, :] != cells[:-1, :]
+    return RackLayout(cells, np.concatenate(labels), outline, np.concatenate(rows))
 
 
 def face_places(
