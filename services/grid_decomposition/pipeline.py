@@ -20,7 +20,14 @@ from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
-from services.grid_decomposition.racks import combine, face_places, find_racks, place_segments
+from services.grid_decomposition.racks import (
+    combine,
+    face_places,
+    find_racks,
+    floor_objects,
+    place_segments,
+    pocket_merges,
+)
 from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
 from services.grid_decomposition.regions import (
     RegionInfo,
@@ -400,6 +407,22 @@ def decompose(
     segments, places = place_segments(segments, racks, free, min_area_px=round(room_min_area_m2 / resolution_m**2))
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
+    rooms = [k for k, r in regions.items() if r.label is Label.ROOM]
+    merges = pocket_merges(segments, rooms, floor_objects(occupied, known, resolution_m=resolution_m), free)
+    if merges:
+        lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
+        lut[list(merges)] = list(merges.values())
+        segments = lut[lut[segments]]
+        pairs = _pairs(segments, sub)
+        regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
+    for k, r in regions.items():
+        region_label[k] = r.label.value
+    own = region_label[segments]
+    loose = (labels == Label.ROOM.value) | (labels == Label.STORAGE.value) & ~floor_px & ~banks.storage
+    loose |= (own == Label.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
+    labels = np.where(loose & (own > 0), own, labels)
     labels = np.where(places > 0, racks.cell_labels[places], labels)
     labels = np.where(free, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)

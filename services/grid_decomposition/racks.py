@@ -201,7 +201,7 @@ def _dots(
 
 
 def _blocks(racks: list[_Rack], *, max_aisle_px: float) -> list[list[_Rack]]:
-    """Racks grouped into blocks: neighbours across an aisle or a cross aisle (at most ``max_aisle_px``)."""
+    """Racks grouped into blocks of at least two: neighbours across an aisle or a cross aisle (``max_aisle_px``)."""
     n = len(racks)
     x0 = np.array([r.x0 for r in racks], dtype=np.float64)
     x1 = np.array([r.x1 for r in racks], dtype=np.float64)
@@ -213,7 +213,9 @@ def _blocks(racks: list[_Rack], *, max_aisle_px: float) -> list[list[_Rack]]:
     overlap_y = -gap_y > 0.5 * np.minimum((y1 - y0)[:, None], (y1 - y0)[None, :])
     linked = (overlap_x & (gap_y <= max_aisle_px)) | (overlap_y & (gap_x <= max_aisle_px))
     _, group = connected_components(csr_matrix(linked), directed=False)
-    return [[racks[k] for k in np.flatnonzero(group == g)] for g in range(int(group.max()) + 1 if n else 0)]
+    blocks = [[racks[k] for k in np.flatnonzero(group == g)] for g in range(int(group.max()) + 1 if n else 0)]
+    # racks stand in rows: a lone long obstacle (a block of pallets on the floor, a wall) is none
+    return [b for b in blocks if len(b) >= 2]
 
 
 class _Grid(NamedTuple):
@@ -606,3 +608,66 @@ def place_segments(
     present[0] = True
     lut64 = np.cumsum(present) - 1
     return lut64[out].astype(np.int32), np.where(inside, place, 0).astype(np.int32)
+
+
+def floor_objects(
+    occupied: npt.NDArray[np.bool_],
+    known: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    max_area_m2: float = 12.0,
+    max_length_m: float = 6.0,
+) -> npt.NDArray[np.bool_]:
+    """(H, W) bool: things standing on the floor (pallets, box stacks, blocks of pallets).
+
+    Occupied components of at most ``max_area_m2`` and ``max_length_m`` that touch neither unknown
+    space nor the map border (walls and racks seen from one side do).
+    """
+    n, parts, stats, _ = cv2.connectedComponentsWithStats(occupied.astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return np.zeros(occupied.shape, dtype=bool)
+    near_unknown = cv2.dilate((~known).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    walled = np.zeros(n, dtype=bool)
+    walled[np.unique(parts[near_unknown & occupied])] = True
+    edge = np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]]
+    walled[np.unique(edge)] = True
+    size = np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]) * resolution_m
+    small = (stats[:, cv2.CC_STAT_AREA] * resolution_m**2 <= max_area_m2) & (size <= max_length_m)
+    keep = small & ~walled
+    keep[0] = False
+    out: npt.NDArray[np.bool_] = keep[parts]
+    return out
+
+
+def pocket_merges(
+    segments: npt.NDArray[np.int32],
+    rooms: list[int],
+    objects: npt.NDArray[np.bool_],
+    free: npt.NDArray[np.bool_],
+    *,
+    min_object_share: float = 0.3,
+) -> dict[int, int]:
+    """Rooms that are pockets of open floor between pallets: room segment -> the neighbour it joins.
+
+    A room among ``rooms`` whose bordering obstacle pixels are at least ``min_object_share`` floor
+    objects (:func:`floor_objects`) is floor around pallets, not a room: it joins the neighbouring
+    segment it shares the longest free border with.
+    """
+    merges: dict[int, int] = {}
+    kernel = np.ones((3, 3), np.uint8)
+    h, w = segments.shape
+    for sid in rooms:
+        rr, cc = np.nonzero(segments == sid)
+        if rr.size == 0:
+            continue
+        r0, r1, c0, c1 = max(rr.min() - 2, 0), min(rr.max() + 3, h), max(cc.min() - 2, 0), min(cc.max() + 3, w)
+        mask = segments[r0:r1, c0:c1] == sid
+        ring = (cv2.dilate(mask.astype(np.uint8), kernel) > 0) & ~mask
+        wall = ring & ~free[r0:r1, c0:c1]
+        if not wall.any() or objects[r0:r1, c0:c1][wall].mean() < min_object_share:
+            continue
+        others = segments[r0:r1, c0:c1][ring & free[r0:r1, c0:c1]]
+        others = others[(others > 0) & (others != sid)]
+        if others.size:
+            merges[sid] = int(np.bincount(others).argmax())
+    return merges
