@@ -128,7 +128,7 @@ def _racks(
     # a free pixel stays free only inside a free bay-by-depth rectangle: every such rectangle over a
     # bay holds an upright, an aisle or a cross aisle is wider
     body = cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8))
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(body, connectivity=4)
+    _, parts, stats, _ = cv2.connectedComponentsWithStats(body, connectivity=4)
     w, h, area = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT], stats[:, cv2.CC_STAT_AREA]
     keep = np.flatnonzero((w >= min_length_px) & (h >= min_depth_px) & (area >= 0.3 * w * h))
     keep = keep[keep > 0]
@@ -143,10 +143,10 @@ def _racks(
         if not min_depth_px <= y1 - y0 <= max_depth_px:
             continue
         # a rack fills its band in most columns (a missing upright leaves a notch, not a hole through)
-        inside = mask[int(y0) : int(math.ceil(y1))].mean(axis=0)
-        band = inside.sum() * (int(math.ceil(y1)) - int(y0))
+        inside = mask[int(y0) : math.ceil(y1)].mean(axis=0)
+        band = inside.sum() * (math.ceil(y1) - int(y0))
         if cols.mean() >= 0.95 and (inside >= 0.3).mean() >= min_fill and mask.sum() <= 1.5 * band:
-            rows = mask[int(y0) : int(math.ceil(y1))]
+            rows = mask[int(y0) : math.ceil(y1)]
             rows = rows[rows.any(axis=1)]
             x0 = _edge(np.argmax(rows, axis=1), ww)
             x1 = ww - _edge(np.argmax(rows[:, ::-1], axis=1), ww)
@@ -180,8 +180,8 @@ def _dots(
     h = free.shape[0]
     if not 0 <= row < h:
         return 0.0
-    cols = np.concatenate([np.arange(int(b.lo), int(b.hi)) for b, ok in zip(spans, use, strict=True) if ok] or [[]])
-    cols = cols.astype(np.int64)
+    parts = [np.arange(int(b.lo), int(b.hi), dtype=np.int64) for b, ok in zip(spans, use, strict=True) if ok]
+    cols = np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
     if cols.size == 0:
         return 0.0
     hit = cols[~free[row, cols]]
@@ -249,8 +249,8 @@ def _grid(
     h, w = free.shape
 
     def density(i: int, j: int) -> float:
-        a, b = int(sections[j].lo), int(math.ceil(sections[j].hi))
-        c, d = max(int(bands[i].lo), 0), min(int(math.ceil(bands[i].hi)), h)
+        a, b = int(sections[j].lo), math.ceil(sections[j].hi)
+        c, d = max(int(bands[i].lo), 0), min(math.ceil(bands[i].hi), h)
         return float((~free[c:d, a:b]).mean()) if b > a and d > c else 0.0
 
     # a place of the grid whose rack was missed (many uprights missing) holds obstacles as densely
@@ -261,7 +261,7 @@ def _grid(
     def reach(i: int, up: bool, transpose: bool) -> float:
         lines, across = (sections, bands) if transpose else (bands, sections)
         spans = [(int(c.lo), int(c.hi)) for j, c in enumerate(across) if (have[j, i] if transpose else have[i, j])]
-        start = int(round(lines[i].hi)) if up else int(round(lines[i].lo)) - 1
+        start = round(lines[i].hi) if up else round(lines[i].lo) - 1
         image = free.T if transpose else free
         vals = [_free_reach(image, start, 1 if up else -1, sp, max_aisle_px) for sp in spans]
         return float(np.quantile(vals, 0.75)) if vals else 0.0
@@ -274,7 +274,7 @@ def _grid(
     ]
     y_out = [
         refine.edge(False, b.hi - 0.5, sections, have[i], low=False)
-        - _dots(free, int(round(b.hi)) - 1, -1, sections, have[i])
+        - _dots(free, round(b.hi) - 1, -1, sections, have[i])
         for i, b in enumerate(bands)
     ]
     x_in = [
@@ -283,7 +283,7 @@ def _grid(
     ]
     x_out = [
         refine.edge(True, sec.hi - 0.5, bands, have[:, j], low=False)
-        - _dots(free.T, int(round(sec.hi)) - 1, -1, bands, have[:, j])
+        - _dots(free.T, round(sec.hi) - 1, -1, bands, have[:, j])
         for j, sec in enumerate(sections)
     ]
     ys = [y_in[0] - reach(0, False, False) - 2.0]
@@ -393,7 +393,7 @@ def _turn(shape: tuple[int, int], angle_rad: float) -> tuple[npt.NDArray[np.floa
     corners = np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64) @ rot.T
     lo, hi = corners.min(axis=0), corners.max(axis=0)
     matrix = np.hstack([rot, -lo[:, None]])
-    return matrix, (int(math.ceil(hi[0] - lo[0])) + 1, int(math.ceil(hi[1] - lo[1])) + 1)
+    return matrix, (math.ceil(hi[0] - lo[0]) + 1, math.ceil(hi[1] - lo[1]) + 1)
 
 
 def _rasterise(
@@ -421,7 +421,8 @@ def _rasterise(
     ku = np.searchsorted(grid.xs, u, side="right") - 1
     kv = np.searchsorted(grid.ys, v, side="right") - 1
     ok = (ku >= 0) & (ku < grid.xs.size - 1) & (kv >= 0) & (kv < grid.ys.size - 1)
-    out[r0:r1, c0:c1] = np.where(ok, ids[np.clip(kv, 0, ids.shape[0] - 1), np.clip(ku, 0, ids.shape[1] - 1)], 0)
+    n_y, n_x = grid.labels.shape
+    out[r0:r1, c0:c1] = np.where(ok, ids[np.clip(kv, 0, n_y - 1), np.clip(ku, 0, n_x - 1)], 0)
     for ky, kx in zip(*np.nonzero(grid.rack), strict=True):
         box = np.array(
             [[grid.xs[kx], grid.ys[ky]], [grid.xs[kx + 1], grid.ys[ky]], [grid.xs[kx + 1], grid.ys[ky + 1]],
@@ -429,7 +430,7 @@ def _rasterise(
         )
         if transpose:
             box = box[:, ::-1]
-        rows_px.append(box @ inverse[:, :2].T + inverse[:, 2])
+        rows_px.append(np.asarray(box @ inverse[:, :2].T + inverse[:, 2], dtype=np.float64))
     return out, grid.labels[grid.labels > 0], rows_px
 
 
@@ -486,8 +487,8 @@ def find_racks(
     border = (code != 0) & (cv2.dilate(free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
     border_rc = np.argwhere(border).astype(np.float64)
     families: list[float] = []
-    for a in angles_rad:
-        a = math.remainder(a, math.pi / 2)
+    for angle in angles_rad:
+        a = math.remainder(angle, math.pi / 2)
         if all(abs(math.remainder(a - b, math.pi / 2)) > math.radians(2.0) for b in families):
             families.append(a)
     px = 1.0 / resolution_m
@@ -497,8 +498,11 @@ def find_racks(
     n_ids = 1
     for angle in families:
         matrix, size = _turn(shape, angle)
-        turned = cv2.warpAffine(
-            code, matrix, size, flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=_UNKNOWN
+        turned = np.asarray(
+            cv2.warpAffine(
+                code, matrix, size, flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=_UNKNOWN
+            ),
+            dtype=np.uint8,
         )
         refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
         for transpose in (False, True):

@@ -28,7 +28,6 @@ import enum
 import math
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -348,7 +347,6 @@ def rack_hall_map(
         canvas.fill(truth, [inner], PlaceTruth.CORRIDOR.value)
         share = float(rng.uniform(*load))
         draws: list[_Draw] = []
-        half = UPRIGHT_M / 2
         cell = 1
         for va in lay.rows_v:
             vb = va + 2 * lay.depth_m + FLUE_M
