@@ -408,7 +408,8 @@ def decompose(
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
     # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
-    rooms = [k for k, r in regions.items() if r.label is Label.ROOM]
+    structured_segments = set(np.unique(segments[(places > 0) | floor_px]).tolist())
+    rooms = [k for k, r in regions.items() if r.label is Label.ROOM and k not in structured_segments]
     merges = pocket_merges(segments, rooms, floor_objects(occupied, known, resolution_m=resolution_m), free)
     if merges:
         lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
@@ -423,7 +424,9 @@ def decompose(
     loose = (labels == Label.ROOM.value) | (labels == Label.STORAGE.value) & ~floor_px & ~banks.storage
     loose |= (own == Label.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
     labels = np.where(loose & (own > 0), own, labels)
-    labels = np.where(places > 0, racks.cell_labels[places], labels)
+    # a rack place's label, unless a person renamed the category of the face there
+    renamed = np.isin(face_labels.category[sub.face_image], list(label_overrides or {}))
+    labels = np.where((places > 0) & ~renamed, racks.cell_labels[places], labels)
     labels = np.where(free, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(

@@ -583,19 +583,23 @@ def place_segments(
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
     """``segments`` with every rack place its own segment, ids renumbered 1..N without gaps.
 
+    A rack place keeps the pieces ``segments`` cut it into (the pallet cells of a warehouse floor).
+
     What the places leave of a segment joins the nearest place when it is under ``min_area_px`` or
     under half of the segment (the slivers of a hall the places cover). Also returns the place of
     every free pixel now in one (0 elsewhere).
     """
     if layout.cell_labels.size <= 1:
         return segments, np.zeros(segments.shape, dtype=np.int32)
-    inside = (layout.cells > 0) & free
+    region = free | (segments > 0)  # furniture inside a room is part of its segment
+    in_cells = layout.cells > 0
+    inside = in_cells & free
     n_old = int(segments.max()) + 1
     before = np.bincount(segments.ravel(), minlength=n_old)
-    after = np.bincount(segments[~inside], minlength=n_old)
+    after = np.bincount(segments[~in_cells], minlength=n_old)
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
-    sliver = left[segments] & ~inside & free
+    sliver = left[segments] & ~in_cells & region
     place = layout.cells.copy()
     if sliver.any():
         _, nearest = cv2.distanceTransformWithLabels(
@@ -607,7 +611,22 @@ def place_segments(
         place[sliver] = lut[nearest[sliver]]
         inside |= sliver & (place > 0)
     out = segments.astype(np.int64)
+    out[in_cells & ~free] = 0  # uprights and pallets in a rack place belong to no region
     out[inside] = n_old + place[inside]
+    # a rack keeps the pallet cells the warehouse floor cut it into (a region per bay and side)
+    cell = inside & (layout.cell_labels[place] == Label.STORAGE.value) & (segments > 0)
+    if cell.any():
+        keys, pieces = np.unique(place[cell].astype(np.int64) * n_old + segments[cell], return_inverse=True)
+        pieces = pieces.ravel()
+        size = np.bincount(pieces)
+        # a crumb joins the largest piece of its rack
+        owner = keys // n_old
+        order = np.lexsort((-size, owner))
+        first = np.r_[True, owner[order][1:] != owner[order][:-1]]
+        largest = np.zeros(int(owner.max()) + 1, dtype=np.int64)
+        largest[owner[order][first]] = order[first]
+        target = np.where(size >= min_area_px, np.arange(size.size), largest[owner])
+        out[cell] = n_old + layout.cell_labels.size + target[pieces]
     present = np.bincount(out.ravel(), minlength=int(out.max()) + 1) > 0
     present[0] = True
     lut64 = np.cumsum(present) - 1
