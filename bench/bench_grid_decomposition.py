@@ -227,9 +227,9 @@ def _rack_halls() -> None:
 
 
 def big_rack_hall() -> RackMap:
-    """250 m x 90 m pallet-height hall at 5 cm: 15 double rows, 4 sections of 22 bays."""
+    """250 m x 90 m pallet-height hall at 5 cm: 16 double rows, 4 sections of 22 bays."""
     return rack_hall_map(
-        11, style=RackStyle.PALLET_HEIGHT, n_double_rows=15, n_sections=4, bays_per_section=22,
+        11, style=RackStyle.PALLET_HEIGHT, n_double_rows=16, n_sections=4, bays_per_section=22,
         aisle_width_m=(2.9, 3.2), margin_m=0.5,
     )
 

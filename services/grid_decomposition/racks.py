@@ -170,7 +170,7 @@ def _free_reach(free: npt.NDArray[np.bool_], start: int, step: int, span: tuple[
 
 
 def _dots(
-    free: npt.NDArray[np.bool_], row: int, step: int, spans: list[_Band], use: npt.NDArray[np.bool_]
+    free: npt.NDArray[np.bool_], row: int, step: int, spans: list[_Band], use: npt.NDArray[np.bool_], max_px: int
 ) -> float:
     """Half the thickness of the obstacles on ``row`` when they are sparse dots (uprights), else 0.
 
@@ -191,13 +191,14 @@ def _dots(
         return 0.0
     depth = np.zeros(hit.size)
     solid = np.ones(hit.size, dtype=bool)
-    for k in range(8):
+    for k in range(max_px + 1):
         r = row + step * k
         if not 0 <= r < h:
             break
         solid &= ~free[r, hit]
         depth += solid
-    return float(np.median(depth)) / 2.0
+    thin = depth[depth <= max_px]  # an upright, not a pallet face with unknown space behind it
+    return float(np.median(thin)) / 2.0 if thin.size else 0.0
 
 
 def _blocks(racks: list[_Rack], *, max_aisle_px: float) -> list[list[_Rack]]:
@@ -235,8 +236,12 @@ def _grid(
     double_px: float,
     max_aisle_px: int,
     min_free: float,
+    dot_px: int,
 ) -> _Grid:
-    """Storage, aisle, cross-aisle and junction places of racks standing in rows and sections."""
+    """Storage, aisle, cross-aisle and junction places of racks standing in rows and sections.
+
+    Uprights (obstacles at most ``dot_px`` thick along the normal) put an edge on their centres.
+    """
     bands = _merge([(r.y0, r.y1) for r in racks], 0.0)
     sections = _merge([(float(r.x0), float(r.x1)) for r in racks], 0.0)
     n_r, n_s = len(bands), len(sections)
@@ -269,21 +274,23 @@ def _grid(
     # edges in pixel-centre coordinates: a band of rows lo..hi - 1 spans lo - 0.5 .. hi - 0.5; an
     # edge drawn only by uprights lies on their centres
     y_in = [
-        refine.edge(False, b.lo - 0.5, sections, have[i], low=True) + _dots(free, int(b.lo), 1, sections, have[i])
+        refine.edge(False, b.lo - 0.5, sections, have[i], low=True)
+        + _dots(free, int(b.lo), 1, sections, have[i], dot_px)
         for i, b in enumerate(bands)
     ]
     y_out = [
         refine.edge(False, b.hi - 0.5, sections, have[i], low=False)
-        - _dots(free, round(b.hi) - 1, -1, sections, have[i])
+        - _dots(free, round(b.hi) - 1, -1, sections, have[i], dot_px)
         for i, b in enumerate(bands)
     ]
     x_in = [
-        refine.edge(True, sec.lo - 0.5, bands, have[:, j], low=True) + _dots(free.T, int(sec.lo), 1, bands, have[:, j])
+        refine.edge(True, sec.lo - 0.5, bands, have[:, j], low=True)
+        + _dots(free.T, int(sec.lo), 1, bands, have[:, j], dot_px)
         for j, sec in enumerate(sections)
     ]
     x_out = [
         refine.edge(True, sec.hi - 0.5, bands, have[:, j], low=False)
-        - _dots(free.T, round(sec.hi) - 1, -1, bands, have[:, j])
+        - _dots(free.T, round(sec.hi) - 1, -1, bands, have[:, j], dot_px)
         for j, sec in enumerate(sections)
     ]
     ys = [y_in[0] - reach(0, False, False) - 2.0]
@@ -413,16 +420,19 @@ def _rasterise(
     ids[grid.labels > 0] = first_id + np.arange(int((grid.labels > 0).sum()))
     if c1 <= c0 or r1 <= r0:
         return out, np.zeros(0, np.int64), rows_px
-    cc, rr = np.meshgrid(np.arange(c0, c1, dtype=np.float64), np.arange(r0, r1, dtype=np.float64))
-    u = matrix[0, 0] * cc + matrix[0, 1] * rr + matrix[0, 2]
-    v = matrix[1, 0] * cc + matrix[1, 1] * rr + matrix[1, 2]
+    cols = np.arange(c0, c1, dtype=np.float64)
+    rows = np.arange(r0, r1, dtype=np.float64)[:, None]
+    u = matrix[0, 0] * cols + (matrix[0, 1] * rows + matrix[0, 2])
+    v = matrix[1, 0] * cols + (matrix[1, 1] * rows + matrix[1, 2])
     if transpose:
         u, v = v, u
-    ku = np.searchsorted(grid.xs, u, side="right") - 1
-    kv = np.searchsorted(grid.ys, v, side="right") - 1
-    ok = (ku >= 0) & (ku < grid.xs.size - 1) & (kv >= 0) & (kv < grid.ys.size - 1)
+    # interval k of each pixel along both axes; 0 and the last are outside the grid
+    ku = np.searchsorted(grid.xs, u, side="right").astype(np.int32)
+    kv = np.searchsorted(grid.ys, v, side="right").astype(np.int32)
     n_y, n_x = grid.labels.shape
-    out[r0:r1, c0:c1] = np.where(ok, ids[np.clip(kv, 0, n_y - 1), np.clip(ku, 0, n_x - 1)], 0)
+    padded = np.zeros((n_y + 2, n_x + 2), dtype=np.int32)
+    padded[1:-1, 1:-1] = ids
+    out[r0:r1, c0:c1] = padded.ravel()[kv * np.int32(n_x + 2) + ku]
     for ky, kx in zip(*np.nonzero(grid.rack), strict=True):
         box = np.array(
             [[grid.xs[kx], grid.ys[ky]], [grid.xs[kx + 1], grid.ys[ky]], [grid.xs[kx + 1], grid.ys[ky + 1]],
@@ -450,6 +460,7 @@ def find_racks(
     max_aisle_m: float = 6.0,
     min_fill: float = 0.7,
     min_free: float = 0.85,
+    max_upright_m: float = 0.25,
 ) -> RackLayout:
     """Rack rows (any drawing: solid, uprights, pallet faces, beams) and the places between them.
 
@@ -473,6 +484,9 @@ def find_racks(
     max_aisle_m, min_free : float
         Perimeter aisles and end cross aisles reach at most this far; an aisle, cross aisle or
         junction must be at least ``min_free`` free.
+    max_upright_m : float
+        An edge drawn by obstacles at most this thick, covering under 30 % of it, is a row of
+        uprights: the rack's edge runs through their centres.
 
     Returns
     -------
@@ -524,6 +538,7 @@ def find_racks(
                     double_px=double_m * px,
                     max_aisle_px=round(max_aisle_m * px),
                     min_free=min_free,
+                    dot_px=max(1, round(max_upright_m * px)),
                 )
                 placed, placed_labels, placed_rows = _rasterise(grid, matrix, transpose, shape, n_ids)
                 cells = np.where(cells == 0, placed, cells)
@@ -593,21 +608,26 @@ def place_segments(
         return segments, np.zeros(segments.shape, dtype=np.int32)
     region = free | (segments > 0)  # furniture inside a room is part of its segment
     in_cells = layout.cells > 0
-    inside = in_cells & free
+    # a place with a crumb of free space (a solid rack's edge pixel) is no region of its own
+    n_free = np.bincount(layout.cells[free], minlength=layout.cell_labels.size)
+    crumb = (n_free > 0) & (n_free < min_area_px)
+    crumb[0] = False
+    cells = np.where(crumb[layout.cells], 0, layout.cells)
+    inside = (cells > 0) & free
     n_old = int(segments.max()) + 1
     before = np.bincount(segments.ravel(), minlength=n_old)
     after = np.bincount(segments[~in_cells], minlength=n_old)
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
-    sliver = left[segments] & ~in_cells & region
-    place = layout.cells.copy()
+    sliver = (left[segments] & ~in_cells & region) | (crumb[layout.cells] & free)
+    place = cells.copy()
     if sliver.any():
         _, nearest = cv2.distanceTransformWithLabels(
-            (layout.cells == 0).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
+            (cells == 0).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
         )
-        seeds = layout.cells > 0
+        seeds = cells > 0
         lut = np.zeros(int(nearest.max()) + 1, dtype=np.int32)
-        lut[nearest[seeds]] = layout.cells[seeds]
+        lut[nearest[seeds]] = cells[seeds]
         place[sliver] = lut[nearest[sliver]]
         inside |= sliver & (place > 0)
     out = segments.astype(np.int64)
