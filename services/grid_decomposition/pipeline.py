@@ -21,9 +21,8 @@ from services.grid_decomposition.labelling import FaceLabels, assign_labels, evi
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.racks import (
-    combine,
     face_places,
-    find_racks,
+    find_racks_by_region,
     floor_objects,
     place_segments,
     pocket_merges,
@@ -328,15 +327,9 @@ def decompose(
     ]
     logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
     banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
-    racks = combine(  # each texture region with its own directions
-        [
-            find_racks(
-                obstacle & known, known, resolution_m=resolution_m, angles_rad=sorted({ln.angle_rad for ln in g.lines}),
-                domain=g.mask,
-            )
-            for g in groups
-        ],
-        occ.shape,
+    racks = find_racks_by_region(  # each texture region with its own directions
+        obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
+        resolution_m=resolution_m,
     )
     sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
     clutter = furniture(obstacle, resolution_m=resolution_m)

@@ -555,6 +555,79 @@ def find_racks(
     return RackLayout(cells, np.concatenate(labels), outline, np.array(rows).reshape(-1, 4, 2))
 
 
+def structure_angles(
+    occupied: npt.NDArray[np.bool_], *, resolution_m: float, min_length_m: float = 6.0, share: float = 0.2
+) -> list[float]:
+    """Directions (radians, x = column, y = row) of long obstacle components: solid racks and walls.
+
+    Each component at least ``min_length_m`` long votes for the direction of its minimum-area
+    rectangle's long side with that length (mod 90 degrees); directions with at
+    least ``share`` of the top vote are returned, each the weighted mean of its cluster (within 2
+    degrees). Rasterised edges at a shallow angle can mislead gradient histograms; the rectangle of
+    a 20 m rack cannot.
+    """
+    _, parts, stats, _ = cv2.connectedComponentsWithStats(occupied.astype(np.uint8), connectivity=8)
+    extent = np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT])
+    long = np.flatnonzero(extent >= min_length_m / resolution_m)
+    found: list[tuple[float, float]] = []  # (angle mod 90 degrees in radians, length)
+    for k in long[long > 0]:
+        x, y, w, h = stats[k, :4]
+        rows, cols = np.nonzero(parts[y : y + h, x : x + w] == k)
+        (_, _), (rw, rh), angle = cv2.minAreaRect(np.column_stack([cols + x, rows + y]).astype(np.float32))
+        theta = math.radians(angle) + (0.0 if rw >= rh else math.pi / 2)
+        found.append((theta % (math.pi / 2), max(rw, rh)))
+    # clusters within 2 degrees (mod 90), each the length-weighted mean of its members
+    clusters: list[list[tuple[float, float]]] = []
+    for theta, length in sorted(found, key=lambda t: -t[1]):
+        for c in clusters:
+            if abs(math.remainder(theta - c[0][0], math.pi / 2)) <= math.radians(2.0):
+                c.append((c[0][0] + math.remainder(theta - c[0][0], math.pi / 2), length))
+                break
+        else:
+            clusters.append([(theta, length)])
+    if not clusters:
+        return []
+    weight = [sum(w for _, w in c) for c in clusters]
+    return [
+        sum(a * w for a, w in c) / wc for c, wc in zip(clusters, weight, strict=True) if wc >= share * max(weight)
+    ]
+
+
+def find_racks_by_region(
+    occupied: npt.NDArray[np.bool_],
+    known: npt.NDArray[np.bool_],
+    regions: list[tuple[npt.NDArray[np.bool_] | None, list[float]]],
+    *,
+    resolution_m: float,
+) -> RackLayout:
+    """:func:`find_racks` in each texture region (mask, its line directions), regions of one direction as one.
+
+    A region's directions are its lines' and those of its long obstacle components
+    (:func:`structure_angles`); regions whose strongest direction agrees within 2 degrees are
+    searched together, so a texture border through a hall does not cut its racks.
+    """
+    shape = occupied.shape
+    merged: list[tuple[npt.NDArray[np.bool_] | None, list[float], float]] = []
+    for mask, angles in regions:
+        inside = occupied if mask is None else occupied & mask
+        own = structure_angles(inside, resolution_m=resolution_m)
+        # a line direction near a long component's is that direction, less precisely
+        tol = math.radians(10.0)
+        every = own + [a for a in angles if all(abs(math.remainder(a - b, math.pi / 2)) > tol for b in own)]
+        key = every[0] if every else 0.0
+        for k, (m, a, ky) in enumerate(merged):
+            if abs(math.remainder(key - ky, math.pi / 2)) <= math.radians(2.0):
+                union = None if m is None or mask is None else m | mask
+                merged[k] = (union, a + every, ky)
+                break
+        else:
+            merged.append((mask, every, key))
+    layouts = [
+        find_racks(occupied, known, resolution_m=resolution_m, angles_rad=a, domain=m) for m, a, _ in merged if a
+    ]
+    return combine(layouts, shape)
+
+
 def combine(layouts: list[RackLayout], shape: tuple[int, int]) -> RackLayout:
     """One layout of several (of disjoint texture regions); place ids renumbered."""
     cells = np.zeros(shape, dtype=np.int32)

@@ -216,7 +216,7 @@ def _rack_section(
         return _Draw(occ, unk, free)
     if style is RackStyle.BEAMS:
         occ += [(u0, u1, va - 0.03, va + 0.03), (u0, u1, vb - 0.03, vb + 0.03)]
-        unk.append((u0 + half, u1 - half, va + 0.03, vb - 0.03))
+        unk.append((u0, u1, va + 0.03, vb - 0.03))
         return _Draw(occ, unk, free)
     # pallet height: each bay loaded or empty
     over = style is RackStyle.OVERHANG
