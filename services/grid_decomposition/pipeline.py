@@ -410,6 +410,11 @@ def decompose(
         segments = lut[lut[segments]]
         pairs = _pairs(segments, sub)
         regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    if label_overrides:  # a region of a renamed category is a place of that name (a rack place mixes categories)
+        regions = {
+            k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
+            for k, r in regions.items()
+        }
     region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
     for k, r in regions.items():
         region_label[k] = r.label.value
