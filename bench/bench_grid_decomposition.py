@@ -27,6 +27,9 @@ Prints ``name value unit`` lines, one BLAS thread, seconds as wall time and CPU 
 * A 250 m x 90 m pallet-height hall at 5 cm (5000 x 1800 px): wall seconds of a fresh process
   reading it and decomposing it (start-up and imports included) and its figures.
 
+``--overview docs/solid_rack_hall_overview.png`` writes the overview picture of a turned solid-rack
+hall instead.
+
 Run from the repository root: ``PYTHONPATH=. .venv/bin/python bench/bench_grid_decomposition.py``.
 """
 
@@ -47,7 +50,7 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits
 
-from services.grid_decomposition import Decomposition, Label, decompose, read_map_file
+from services.grid_decomposition import Decomposition, Label, decompose, overview_image, read_map_file
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
 from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse, tuw_truth
 
@@ -269,7 +272,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--no-ipa", action="store_true", help="skip the ipa timings")
     parser.add_argument("--racks-only", action="store_true", help="only the rack-hall sets and the big rack hall")
+    parser.add_argument("--overview", type=Path, help="write the overview picture of a solid-rack hall here and stop")
     args = parser.parse_args()
+    if args.overview:
+        hall = rack_hall_map(1, style=RackStyle.SOLID, rotation_rad=0.35, n_double_rows=5, n_sections=3)
+        picture = overview_image(decompose(hall.occupancy, resolution_m=hall.resolution_m))
+        cv2.imwrite(str(args.overview), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
+        return
     print(f"load_average_start {os.getloadavg()[0]:.2f} ratio")
     with threadpool_limits(1):
         if not args.racks_only:
