@@ -226,6 +226,7 @@ class _Grid(NamedTuple):
     ys: npt.NDArray[np.float64]  # (2 R + 2 + D,) likewise for rows, a back-to-back row split in two
     labels: npt.NDArray[np.int64]  # (len(ys) - 1, len(xs) - 1) Label value, 0 = no place
     rack: npt.NDArray[np.bool_]  # same shape: a rack row facing an aisle
+    twin: npt.NDArray[np.bool_]  # (len(ys) - 1,) the second half of a back-to-back row
 
 
 def _grid(
@@ -358,7 +359,8 @@ def _grid(
                 box = (xs[kx], xs[kx + 1], ys[ky], ys[ky + 1])
                 if sum(arms) >= 2 and open_rect(*box):
                     labels[ky, kx] = Label.JUNCTION.value if sum(arms) >= 3 else Label.CORRIDOR.value
-    return _Grid(np.array(xs), np.array(ys), labels, rack)
+    twin = np.array([k > 0 and y_kind[k] == y_kind[k - 1] for k in range(len(y_kind))])
+    return _Grid(np.array(xs), np.array(ys), labels, rack, twin)
 
 
 class _Refine:
@@ -418,6 +420,14 @@ def _rasterise(
     rows_px: list[npt.NDArray[np.float64]] = []
     ids = np.zeros(grid.labels.shape, dtype=np.int64)
     ids[grid.labels > 0] = first_id + np.arange(int((grid.labels > 0).sum()))
+    # a cross-aisle piece beside a back-to-back row is one place, not one per rack
+    for ky in np.flatnonzero(grid.twin):
+        same = (grid.labels[ky] > 0) & ~grid.rack[ky] & (grid.labels[ky - 1] == grid.labels[ky])
+        ids[ky, same] = ids[ky - 1, same]
+    used = np.unique(ids[ids > 0])
+    renumber = np.zeros(int(ids.max()) + 1, dtype=np.int64)
+    renumber[used] = first_id + np.arange(used.size)
+    ids = renumber[ids]
     if c1 <= c0 or r1 <= r0:
         return out, np.zeros(0, np.int64), rows_px
     cols = np.arange(c0, c1, dtype=np.float64)
@@ -441,7 +451,9 @@ def _rasterise(
         if transpose:
             box = box[:, ::-1]
         rows_px.append(np.asarray(box @ inverse[:, :2].T + inverse[:, 2], dtype=np.float64))
-    return out, grid.labels[grid.labels > 0], rows_px
+    place_labels = np.zeros(used.size, dtype=np.int64)
+    place_labels[ids[ids > 0] - first_id] = grid.labels[ids > 0]
+    return out, place_labels, rows_px
 
 
 def find_racks(
