@@ -403,7 +403,9 @@ def decompose(
     # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
     structured_segments = set(np.unique(segments[(places > 0) | floor_px]).tolist())
     rooms = [k for k, r in regions.items() if r.label is Label.ROOM and k not in structured_segments]
-    merges = pocket_merges(segments, rooms, floor_objects(occupied, known, resolution_m=resolution_m), free)
+    open_areas = {k for k, r in regions.items() if r.label is Label.OPEN_AREA}
+    objects = floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
+    merges = pocket_merges(segments, rooms, open_areas, objects, free)
     if merges:
         lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
         lut[list(merges)] = list(merges.values())

@@ -770,16 +770,18 @@ def floor_objects(
 def pocket_merges(
     segments: npt.NDArray[np.int32],
     rooms: list[int],
+    open_areas: set[int],
     objects: npt.NDArray[np.bool_],
     free: npt.NDArray[np.bool_],
     *,
     min_object_share: float = 0.3,
 ) -> dict[int, int]:
-    """Rooms that are pockets of open floor between pallets: room segment -> the neighbour it joins.
+    """Rooms that are pockets of open floor between pallets: room segment -> the open area it joins.
 
     A room among ``rooms`` whose bordering obstacle pixels are at least ``min_object_share`` floor
-    objects (:func:`floor_objects`) is floor around pallets, not a room: it joins the neighbouring
-    segment it shares the longest free border with.
+    objects (:func:`floor_objects`) and whose longest free border is with an open area (a segment
+    of ``open_areas``) is floor around pallets, not a room: it joins that open area. Rooms off
+    rooms and corridors (an office, a lab with cupboards) stay.
     """
     merges: dict[int, int] = {}
     kernel = np.ones((3, 3), np.uint8)
@@ -796,6 +798,6 @@ def pocket_merges(
             continue
         others = segments[r0:r1, c0:c1][ring & free[r0:r1, c0:c1]]
         others = others[(others > 0) & (others != sid)]
-        if others.size:
+        if others.size and int(np.bincount(others).argmax()) in open_areas:
             merges[sid] = int(np.bincount(others).argmax())
     return merges
