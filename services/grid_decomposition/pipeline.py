@@ -48,6 +48,7 @@ logger = logging.getLogger(__name__)
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
 _REGION_CORE_M = 1.0
+_POCKET_MAX_M2 = 6.0  # a room this small among pallets, open to an open area, is floor between them
 _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by their pixels
 
 
@@ -405,7 +406,9 @@ def decompose(
     rooms = [k for k, r in regions.items() if r.label is Label.ROOM and k not in structured_segments]
     open_areas = {k for k, r in regions.items() if r.label is Label.OPEN_AREA}
     objects = floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
-    merges = pocket_merges(segments, rooms, open_areas, objects, free)
+    merges = pocket_merges(
+        segments, rooms, open_areas, objects, free, max_area_px=round(_POCKET_MAX_M2 / resolution_m**2)
+    )
     if merges:
         lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
         lut[list(merges)] = list(merges.values())

@@ -745,11 +745,14 @@ def floor_objects(
     resolution_m: float,
     max_area_m2: float = 12.0,
     max_length_m: float = 6.0,
+    min_thickness_m: float = 0.4,
+    min_fill: float = 0.75,
 ) -> npt.NDArray[np.bool_]:
     """(H, W) bool: things standing on the floor (pallets, box stacks, blocks of pallets).
 
     Occupied components of at most ``max_area_m2`` and ``max_length_m`` that touch neither unknown
-    space nor the map border (walls and racks seen from one side do).
+    space nor the map border (walls and racks seen from one side do), blocks at least
+    ``min_thickness_m`` thick filling ``min_fill`` of their rectangle (not a piece of wall).
     """
     n, parts, stats, _ = cv2.connectedComponentsWithStats(occupied.astype(np.uint8), connectivity=8)
     if n <= 1:
@@ -763,6 +766,12 @@ def floor_objects(
     small = (stats[:, cv2.CC_STAT_AREA] * resolution_m**2 <= max_area_m2) & (size <= max_length_m)
     keep = small & ~walled
     keep[0] = False
+    for k in np.flatnonzero(keep):  # a block (a pallet, a box stack), not a piece of wall
+        x, y, w, h = stats[k, :4]
+        rows, cols = np.nonzero(parts[y : y + h, x : x + w] == k)
+        (_, _), (rw, rh), _ = cv2.minAreaRect(np.column_stack([cols, rows]).astype(np.float32))
+        thick = (min(rw, rh) + 1) * resolution_m
+        keep[k] = thick >= min_thickness_m and rows.size >= min_fill * (rw + 1) * (rh + 1)
     out: npt.NDArray[np.bool_] = keep[parts]
     return out
 
@@ -775,20 +784,21 @@ def pocket_merges(
     free: npt.NDArray[np.bool_],
     *,
     min_object_share: float = 0.3,
+    max_area_px: int | None = None,
 ) -> dict[int, int]:
     """Rooms that are pockets of open floor between pallets: room segment -> the open area it joins.
 
     A room among ``rooms`` whose bordering obstacle pixels are at least ``min_object_share`` floor
     objects (:func:`floor_objects`) and whose longest free border is with an open area (a segment
-    of ``open_areas``) is floor around pallets, not a room: it joins that open area. Rooms off
-    rooms and corridors (an office, a lab with cupboards) stay.
+    of ``open_areas``) is floor around pallets, not a room: it joins that open area. Rooms over
+    ``max_area_px``, and rooms off rooms and corridors (an office, a lab with cupboards), stay.
     """
     merges: dict[int, int] = {}
     kernel = np.ones((3, 3), np.uint8)
     h, w = segments.shape
     for sid in rooms:
         rr, cc = np.nonzero(segments == sid)
-        if rr.size == 0:
+        if rr.size == 0 or (max_area_px is not None and rr.size > max_area_px):
             continue
         r0, r1, c0, c1 = max(rr.min() - 2, 0), min(rr.max() + 3, h), max(cc.min() - 2, 0), min(cc.max() + 3, w)
         mask = segments[r0:r1, c0:c1] == sid
