@@ -19,7 +19,7 @@ run: $(STAMP)
 ## test: the whole test suite (PostgreSQL tests run when AISLE_TEST_POSTGRES_URL is set)
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/mypy shared services api migrations bench tests
+	$(BIN)/mypy shared services atlas api migrations bench tests
 	$(BIN)/pytest
 
 ## test-fast: skip the slow end-to-end runs

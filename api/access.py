@@ -3,6 +3,10 @@
 Reads (GET, HEAD, OPTIONS) need a ``read`` key only when the app requires keys for reads;
 everything that changes anything needs ``write`` (or ``admin``); key management needs ``admin``.
 A key comes in ``X-API-Key: <secret>`` or ``Authorization: Bearer <secret>``.
+
+One function decides every request, whichever path answers it: :meth:`AccessPolicy.admit` (its in-memory part,
+:meth:`AccessPolicy.judge`, for what needs no store), from the :class:`Credentials` that
+:func:`credentials_of` reads off the request.
 """
 
 from __future__ import annotations
@@ -12,9 +16,9 @@ import hmac
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from fastapi import HTTPException, status
 
@@ -30,6 +34,41 @@ API_KEY_HEADER = "X-API-Key"
 _LOCK_STRIPES = 64
 """Locks that make one request per key verify it (keys share them by hash), bounded whatever ids callers send."""
 CHALLENGE = {"WWW-Authenticate": f'Bearer, ApiKey header="{API_KEY_HEADER}"'}
+_KEY_HEADER = API_KEY_HEADER.lower().encode("latin-1")
+
+
+class Credentials(NamedTuple):
+    """What a request presents: the API key it carries (None: none) and the client's address."""
+
+    secret: str | None
+    address: str
+
+
+def credentials_of(scope: Mapping[str, Any]) -> Credentials:
+    """The key and client address of an ASGI HTTP request, read as FastAPI reads them.
+
+    The key is the first ``X-API-Key`` header if it is not empty (as ``APIKeyHeader``), else the credentials of
+    the first ``Authorization`` header if its scheme is ``Bearer`` in any case and they are not empty (as
+    ``HTTPBearer``); header values are Latin-1, as Starlette decodes them. The address is the client's host, or
+    ``unknown`` when the server does not say.
+    """
+    api_key = authorization = None
+    for name, value in scope["headers"]:
+        if name == _KEY_HEADER and api_key is None:
+            api_key = value.decode("latin-1")
+        elif name == b"authorization" and authorization is None:
+            authorization = value.decode("latin-1")
+    client = scope.get("client")
+    return Credentials(api_key or _bearer_credentials(authorization), client[0] if client else "unknown")
+
+
+def _bearer_credentials(authorization: str | None) -> str | None:
+    """The token of an ``Authorization: Bearer <token>`` value, split as ``fastapi.security.HTTPBearer`` does."""
+    if not authorization:
+        return None
+    scheme, _, token = authorization.partition(" ")
+    token = token.strip()
+    return token if scheme.lower() == "bearer" and token else None
 
 
 class Caller(NamedTuple):
@@ -50,21 +89,42 @@ def required_role(method: str, path: str, *, require_keys_for_reads: bool) -> Ro
 
 def check_role(caller: Caller, required: Role | None) -> None:
     """Raise 401 without a key and 403 with a key whose role is below ``required``."""
+    refusal = _role_refusal(caller, required)
+    if refusal is not None:
+        raise refusal
+
+
+def _role_refusal(caller: Caller, required: Role | None) -> HTTPException | None:
+    """The 401 (no key) or 403 (a key whose role is below ``required``) for ``caller``, or None if they may."""
     if required is None:
-        return
+        return None
     if caller.key is None:
-        raise HTTPException(
+        return HTTPException(
             status.HTTP_401_UNAUTHORIZED,
             f"this request needs an API key with role {required.value!r} or above; send it as "
             f"'{API_KEY_HEADER}: <secret>' or 'Authorization: Bearer <secret>'",
             headers=CHALLENGE,
         )
     if not caller.key.role.covers(required):
-        raise HTTPException(
+        return HTTPException(
             status.HTTP_403_FORBIDDEN,
             f"API key {caller.key.key_id} ({caller.key.name!r}) has role {caller.key.role.value!r}; "
             f"this request needs {required.value!r} or above",
         )
+    return None
+
+
+class Verdict(NamedTuple):
+    """What the access rules decide about a request from memory: the bucket to charge, then let in or refuse.
+
+    :meth:`AccessPolicy.settle` carries it out.
+    """
+
+    caller: Caller
+    bucket: str
+    """The rate-limit bucket the request is charged to: ``key:<key id>`` or ``address:<address>``."""
+    refusal: HTTPException | None
+    """The 401 or 403 to answer (once charged), or None to let ``caller`` in."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,7 +159,7 @@ class AccessPolicy:
     recheck_s : float
         Seconds a verified key is trusted for reads before its row is read again (>= 0).
     clock : callable, optional
-        Monotonic seconds; tests pass a fake one.
+        Monotonic seconds, for key rechecks and the rate limiter; tests pass a fake one.
     """
 
     def __init__(self, *, require_keys_for_reads: bool, rate_limit_per_s: float | None,
@@ -108,7 +168,7 @@ class AccessPolicy:
             raise ApiConfigError(f"key recheck interval must be a number of seconds >= 0, not {recheck_s}")
         self.require_keys_for_reads = require_keys_for_reads
         self.limiter = (None if rate_limit_per_s is None
-                        else TokenBucketLimiter(rate_per_s=rate_limit_per_s, burst=rate_limit_burst))
+                        else TokenBucketLimiter(rate_per_s=rate_limit_per_s, burst=rate_limit_burst, clock=clock))
         self.recheck_s = recheck_s
         self._clock = clock
         self._verified: dict[str, _Verified] = {}
@@ -142,12 +202,74 @@ class AccessPolicy:
 
         Charges nothing: charge ``key:<key id>`` for a request it lets through (:meth:`charge`).
         """
-        key_id = parse_key_id(secret)
+        return self._remembered(secret, parse_key_id(secret))
+
+    def _remembered(self, secret: str, key_id: str | None) -> ApiKey | None:
         known = None if key_id is None else self._verified.get(key_id)
         if (known is None or self._clock() - known.read_at > self.recheck_s
                 or not hmac.compare_digest(known.digest, hashlib.sha256(secret.encode()).digest())):
             return None
         return known.key
+
+    def admit(self, store: MapStore, credentials: Credentials, *, method: str, route: str) -> Caller:
+        """The caller of a request if it may go on: the one access decision, for every path that answers requests.
+
+        Decides from memory when :meth:`judge` can; otherwise reads the key's row (:meth:`authenticate`; always for
+        a request that changes something), so it may block: call it in a worker thread from async code.
+
+        Parameters
+        ----------
+        store : MapStore
+            Where the keys are.
+        credentials : Credentials
+            The key presented and the client's address (:func:`credentials_of`).
+        method : str
+            The HTTP method.
+        route : str
+            The route's path template, e.g. ``/v1/maps/{map_name}/bins/{bin_id}``.
+
+        Raises
+        ------
+        HTTPException
+            401 for no key where one is needed, or a malformed, unknown, revoked or wrong one (with a
+            ``WWW-Authenticate`` challenge); 403 for a key whose role is below what the request needs; 429 with
+            ``Retry-After`` over the rate limit. Each request is charged to one bucket (an unverified secret is
+            also charged to the address, as :meth:`authenticate` says).
+        """
+        verdict = self.judge(credentials, method=method, route=route)
+        if verdict is not None:
+            return self.settle(verdict)
+        caller = self.authenticate(store, credentials.secret, address=credentials.address,
+                                   fresh=method not in READ_METHODS)
+        check_role(caller, required_role(method, route, require_keys_for_reads=self.require_keys_for_reads))
+        return caller
+
+    def judge(self, credentials: Credentials, *, method: str, route: str) -> Verdict | None:
+        """What :meth:`admit` decides, if memory suffices to decide it; None when the key's row must be read.
+
+        Memory suffices without a key, with a malformed one, and for a read with a key verified less than
+        ``recheck_s`` ago (:meth:`remembered`). Charges nothing and never blocks: :meth:`settle` the verdict.
+        """
+        secret, address = credentials
+        required = required_role(method, route, require_keys_for_reads=self.require_keys_for_reads)
+        if secret is None:
+            anonymous = Caller(None, address)
+            return Verdict(anonymous, f"address:{address}", _role_refusal(anonymous, required))
+        key_id = parse_key_id(secret)
+        if key_id is None:
+            return Verdict(Caller(None, address), f"address:{address}", _malformed())
+        key = self._remembered(secret, key_id) if method in READ_METHODS else None
+        if key is None:
+            return None
+        caller = Caller(key, address)
+        return Verdict(caller, f"key:{key.key_id}", _role_refusal(caller, required))
+
+    def settle(self, verdict: Verdict) -> Caller:
+        """Carry out ``verdict``: charge its bucket (429 when spent), then refuse (401/403) or let the caller in."""
+        self.charge(verdict.bucket)
+        if verdict.refusal is not None:
+            raise verdict.refusal
+        return verdict.caller
 
     def authenticate(self, store: MapStore, secret: str | None, *, address: str, fresh: bool = False) -> Caller:
         """The caller of a request carrying ``secret`` (None: no key), charged to its rate bucket.
@@ -174,9 +296,7 @@ class AccessPolicy:
         key_id = parse_key_id(secret)
         if key_id is None:
             self.charge(f"address:{address}")
-            raise HTTPException(status.HTTP_401_UNAUTHORIZED,
-                                "malformed API key; keys look like aisle_<12 hex>_<43 characters>",
-                                headers=CHALLENGE)
+            raise _malformed()
         return key_id
 
     def _read_key(self, store: MapStore, key_id: str, secret: str, digest: bytes, *, address: str,
@@ -197,3 +317,8 @@ class AccessPolicy:
                                     headers=CHALLENGE)
         verified = self._verified[key_id] = _Verified(digest, key, read_at)
         return verified
+
+
+def _malformed() -> HTTPException:
+    return HTTPException(status.HTTP_401_UNAUTHORIZED,
+                         "malformed API key; keys look like aisle_<12 hex>_<43 characters>", headers=CHALLENGE)

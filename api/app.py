@@ -13,13 +13,12 @@ from fastapi.responses import JSONResponse
 
 from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
-from api.cache import RevisionCache
 from api.deps import ApiContext, enforce_policy
 from api.errors import ApiConfigError
 from api.fastpath import LiveReads
-from api.live import STALENESS_S, LiveMaps
 from api.routers import (
     bins,
+    blocks,
     events,
     exports,
     features,
@@ -30,15 +29,18 @@ from api.routers import (
     layout,
     maps,
     places,
+    routes,
     semantics,
     topology,
     wms,
 )
-from api.routers.layers import REVISION_HEADER
 from api.streams import EventStreams
+from atlas.cache import RevisionCache
+from atlas.live import STALENESS_S, LiveMaps
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import MapStore, StoreError, StoreUnavailableError
+from shared.vocabulary import REVISION_HEADER
 
 log = logging.getLogger(__name__)
 
@@ -140,8 +142,8 @@ def create_app(
     app.add_exception_handler(StoreUnavailableError, _store_unavailable)
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
-    for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, places, history,
-                   events, keys):
+    for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, blocks, routes,
+                   places, history, events, keys):
         app.include_router(module.router)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too
     if cors_origins:

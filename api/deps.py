@@ -12,11 +12,11 @@ import anyio
 from fastapi import Depends, HTTPException, Path, Query, Request, Security, status
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
-from api.access import API_KEY_HEADER, READ_METHODS, AccessPolicy, Caller, check_role, required_role
+from api.access import API_KEY_HEADER, AccessPolicy, Caller, check_role, credentials_of
 from api.announce import Announcer
-from api.cache import RevisionCache
-from api.live import LiveMaps
 from api.streams import EventStreams
+from atlas.cache import RevisionCache
+from atlas.live import LiveMaps
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore, Revision
@@ -74,6 +74,8 @@ StoreDep = Annotated[MapStore, Depends(get_store)]
 AnnouncerDep = Annotated[Announcer, Depends(get_announcer)]
 """Announce a revision the API wrote (on the bus, when there is one)."""
 SettingsDep = Annotated[Settings, Depends(get_settings)]
+CacheDep = Annotated[RevisionCache, Depends(get_cache)]
+"""What was derived from one revision of a map (decoded layers, bin indexes)."""
 
 _api_key_header = APIKeyHeader(name=API_KEY_HEADER, auto_error=False, scheme_name="ApiKey",
                                description="An Aisle API key, `aisle_<id>_<secret>`.")
@@ -86,28 +88,27 @@ async def get_caller(
     api_key: Annotated[str | None, Security(_api_key_header)],
     bearer: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)],
 ) -> Caller:
-    """The verified caller (401 for a bad key), charged to their rate limit (429 when spent).
+    """The caller, let in by :meth:`api.access.AccessPolicy.admit` (401, 403 or 429 otherwise).
 
-    A read with a key verified recently is answered from memory; otherwise the key is read in a worker thread.
+    Decided from memory when it can be (:meth:`~api.access.AccessPolicy.judge`), as the fast path does; otherwise
+    the key is read in a worker thread. ``api_key`` and ``bearer`` are here to document both ways to send a key
+    in OpenAPI; the key is read off the request by :func:`api.access.credentials_of`, as on the fast path.
     """
-    secret = api_key if api_key is not None else (None if bearer is None else bearer.credentials)
-    address = request.client.host if request.client is not None else "unknown"
-    read = request.method in READ_METHODS
-    if read and secret is not None and (key := context.access.remembered(secret)) is not None:
-        context.access.charge(f"key:{key.key_id}")
-        return Caller(key, address)
-    return await anyio.to_thread.run_sync(partial(context.access.authenticate, context.store, secret,
-                                                  address=address, fresh=not read))
+    credentials = credentials_of(request.scope)
+    route = str(getattr(request.scope.get("route"), "path", request.url.path))
+    verdict = context.access.judge(credentials, method=request.method, route=route)
+    if verdict is not None:
+        return context.access.settle(verdict)
+    return await anyio.to_thread.run_sync(partial(context.access.admit, context.store, credentials,
+                                                  method=request.method, route=route))
 
 
 CallerDep = Annotated[Caller, Depends(get_caller)]
 
 
-async def enforce_policy(request: Request, caller: CallerDep, context: ContextDep) -> None:
-    """App-wide: writes need a ``write`` key, reads a ``read`` key when the app requires keys for reads."""
-    route_path = str(getattr(request.scope.get("route"), "path", request.url.path))
-    check_role(caller, required_role(request.method, route_path,
-                                     require_keys_for_reads=context.access.require_keys_for_reads))
+async def enforce_policy(caller: CallerDep) -> None:
+    """App-wide: every request is let in by :func:`get_caller` (writes need a ``write`` key, reads a ``read`` key
+    when the app requires keys for reads)."""
 
 
 async def require_admin(caller: CallerDep) -> Caller:

@@ -1,12 +1,13 @@
 """The two hottest reads of a WMS, answered straight from memory: one bin by id, and live features by area.
 
 FastAPI's routing and dependency handling cost several times what answering these from the live state does
-(:mod:`api.live`), so :class:`LiveReads` answers them before FastAPI when nothing needs more: a plain ``GET`` of
+(:mod:`atlas.live`), so :class:`LiveReads` answers them before FastAPI when nothing needs more: a plain ``GET`` of
 ``/v1/maps/{map}/bins/{id}`` or ``/v1/maps/{map}/features`` with only ``bbox``, ``kind``, ``limit`` and
-``offset``, all valid; a map already found, whose live state is fresh; no key where none is needed, or a key
-verified recently (:meth:`api.access.AccessPolicy.remembered`) with the role needed, within its rate limit.
-It uses the routes' own checks and encoders, so the answer is the one the route gives. Any other request,
-and any that would be refused, goes to FastAPI unchanged, which answers it (or explains the refusal) as always.
+``offset``, all valid, of a map already found; an access decision that memory suffices for
+(:meth:`api.access.AccessPolicy.judge`, the in-memory part of :meth:`~api.access.AccessPolicy.admit`, the one
+decision the routes make too); and, unless that decision is a refusal (401, 403, 429: answered as FastAPI answers
+it), a fresh live state. It uses the routes' own checks and encoders, so every answer is the one the route gives.
+Any other request goes to FastAPI unchanged and uncharged, which answers it (or explains the refusal) as always.
 """
 
 from __future__ import annotations
@@ -16,21 +17,15 @@ from typing import Any
 from urllib.parse import parse_qsl
 
 from fastapi import HTTPException
-from fastapi.security.utils import get_authorization_scheme_param
+from fastapi.exception_handlers import http_exception_handler
+from starlette.requests import Request
 
-from api.access import API_KEY_HEADER, required_role
+from api.access import AccessPolicy, Verdict, credentials_of
+from api.answers import live_bin
 from api.deps import ApiContext
-from api.routers.bins import BIN_ID_REGEX, live_bin
-from api.routers.features import (
-    DEFAULT_LIMIT,
-    MAX_BBOX_TEXT,
-    MAX_LIMIT,
-    MAX_OFFSET,
-    REVISION_HEADER,
-    bbox_of,
-    check_kinds,
-    live_collection,
-)
+from api.queries import BIN_ID_REGEX, DEFAULT_LIMIT, MAX_BBOX_TEXT, MAX_LIMIT, MAX_OFFSET, bbox_of, check_kinds
+from atlas.features import live_collection
+from shared.vocabulary import REVISION_HEADER
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -38,9 +33,11 @@ Receive = Callable[[], Awaitable[Message]]
 Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
+_Area = tuple[list[str] | None, tuple[float, float, float, float] | None, int, int]
+"""A features query: kinds (None: all), bbox (None: everywhere), limit, offset."""
+
 BIN_ROUTE = "/v1/maps/{map_name}/bins/{bin_id}"
 FEATURES_ROUTE = "/v1/maps/{map_name}/features"
-_KEY_HEADER = API_KEY_HEADER.lower().encode("latin-1")
 
 
 class LiveReads:
@@ -62,15 +59,20 @@ class LiveReads:
         answer = self._answer(scope) if scope["type"] == "http" and scope["method"] == "GET" else None
         if answer is None:
             await self.app(scope, receive, send)
-            return
-        body, revision_id = answer
-        await send({"type": "http.response.start", "status": 200, "headers": [
-            (b"content-length", str(len(body)).encode()), (b"content-type", b"application/json"),
-            (REVISION_HEADER.lower().encode(), str(revision_id).encode())]})
-        await send({"type": "http.response.body", "body": body})
+        elif isinstance(answer, HTTPException):  # as FastAPI answers a refusal raised by a dependency
+            await (await http_exception_handler(Request(scope), answer))(scope, receive, send)
+        else:
+            body, revision_id = answer
+            await send({"type": "http.response.start", "status": 200, "headers": [
+                (b"content-length", str(len(body)).encode()), (b"content-type", b"application/json"),
+                (REVISION_HEADER.lower().encode(), str(revision_id).encode())]})
+            await send({"type": "http.response.body", "body": body})
 
-    def _answer(self, scope: Scope) -> tuple[bytes, int] | None:
-        """The JSON answer and the revision it covers, or None to leave the request to FastAPI."""
+    def _answer(self, scope: Scope) -> tuple[bytes, int] | HTTPException | None:
+        """The JSON answer and the revision it covers, the access refusal, or None to leave the request to FastAPI.
+
+        Charges the caller's rate limit when it answers, never when it leaves the request to FastAPI (which does).
+        """
         parts = scope["path"].split("/")
         if scope.get("root_path") or len(parts) not in (5, 6) or parts[:3] != ["", "v1", "maps"]:
             return None
@@ -79,57 +81,44 @@ class LiveReads:
             return None
         query = parse_qsl(scope["query_string"].decode("latin-1"), keep_blank_values=True)
         if len(parts) == 6 and parts[4] == "bins" and not query and BIN_ID_REGEX.fullmatch(parts[5]):
-            route = BIN_ROUTE
+            route, area = BIN_ROUTE, None
         elif len(parts) == 5 and parts[4] == "features":
             route = FEATURES_ROUTE
-        else:
-            return None
-        live = self.context.live.peek(map_info)
-        if live is None or not self._let_in(scope, route):
-            return None
-        try:
-            if route == BIN_ROUTE:
-                return live_bin(live, map_info, parts[5]), live.revision_id
-            area = _area_query(query)
+            try:
+                area = _area_query(query)
+            except HTTPException:  # a 422: the route explains it, after the access decision
+                return None
             if area is None:
                 return None
-            kinds, bbox, limit, offset = area
-            return live_collection(live.features, kinds=kinds, bbox=bbox, limit=limit, offset=offset), \
-                live.revision_id
-        except HTTPException:  # a 404 or 422: the route explains it
-            return None
-
-    def _let_in(self, scope: Scope, route: str) -> bool:
-        """Whether the caller may read ``route`` with what is known in memory; charges their rate limit if so."""
-        access = self.context.access
-        api_key = bearer = None
-        for name, value in scope["headers"]:
-            if name == _KEY_HEADER and api_key is None:
-                api_key = value.decode("latin-1")
-            elif name == b"authorization" and bearer is None:
-                scheme, credentials = get_authorization_scheme_param(value.decode("latin-1"))
-                bearer = credentials if scheme.lower() == "bearer" and credentials else ""
-        secret = api_key or bearer or None
-        required = required_role("GET", route, require_keys_for_reads=access.require_keys_for_reads)
-        if secret is None:
-            if required is not None:
-                return False
-            client = scope.get("client")
-            bucket = f"address:{client[0] if client else 'unknown'}"
         else:
-            key = access.remembered(secret)
-            if key is None or (required is not None and not key.role.covers(required)):
-                return False
-            bucket = f"key:{key.key_id}"
+            return None
+        access = self.context.access
+        verdict = access.judge(credentials_of(scope), method="GET", route=route)
+        if verdict is None:  # the key's row must be read: the route does it in a worker thread
+            return None
+        if verdict.refusal is not None:
+            return _settle(access, verdict)
+        live = self.context.live.peek(map_info)
+        if live is None:
+            return None
         try:
-            access.charge(bucket)
-        except HTTPException:  # over the limit: the route refuses with 429 and Retry-After
-            return False
-        return True
+            body = (live_bin(live, map_info, parts[5]) if area is None
+                    else live_collection(live.features, kinds=area[0], bbox=area[1], limit=area[2], offset=area[3]))
+        except HTTPException:  # a 404: the route explains it
+            return None
+        return _settle(access, verdict) or (body, live.revision_id)
 
 
-def _area_query(query: list[tuple[str, str]]) -> tuple[list[str] | None, tuple[float, float, float, float] | None,
-                                                       int, int] | None:
+def _settle(access: AccessPolicy, verdict: Verdict) -> HTTPException | None:
+    """Carry out ``verdict`` (charge the caller's rate limit): the refusal to answer, or None to let them in."""
+    try:
+        access.settle(verdict)
+    except HTTPException as refusal:
+        return refusal
+    return None
+
+
+def _area_query(query: list[tuple[str, str]]) -> _Area | None:
     """(kinds, bbox, limit, offset) of a features query, or None unless it is plainly valid and has only those.
 
     Raises the route's 422 for a bad bbox or kind.

@@ -12,6 +12,8 @@ from typing import Any, Literal
 from fastapi import status
 from pydantic import BaseModel, ConfigDict, Field
 
+from atlas.features import FEATURE_EXAMPLE, GeoJSONFeature
+
 Responses = dict[int | str, dict[str, Any]]
 """The type of a route's ``responses=`` (extra OpenAPI responses)."""
 
@@ -196,26 +198,6 @@ class LayerValuesOut(LayerOut):
 
 
 # -- features -------------------------------------------------------------------------------
-_FEATURE_EXAMPLE = {
-    "type": "Feature", "id": "bin/03-014",
-    "geometry": {"type": "Polygon",
-                 "coordinates": [[[40.6, 17.1], [41.8, 17.1], [41.8, 18.1], [40.6, 18.1], [40.6, 17.1]]]},
-    "properties": {"aisle": 3, "bay": 14, "row": "r0-006", "access_pose": [41.2, 15.6, 1.5708], "kind": "bin",
-                   "key": "03-014", "stage": "pillar_mapping", "revision_id": 1207, "confidence": 0.92},
-}
-
-
-class GeoJSONFeature(BaseModel):
-    type: Literal["Feature"] = "Feature"
-    id: str = Field(description="`<kind>/<key>`.")
-    geometry: dict[str, Any] = Field(description="GeoJSON geometry in map-frame metres.")
-    properties: dict[str, Any] = Field(
-        description="The feature's own properties plus kind, key, stage, revision_id and confidence."
-    )
-
-    model_config = example_config(**_FEATURE_EXAMPLE)
-
-
 class FeatureCollection(BaseModel):
     type: Literal["FeatureCollection"] = "FeatureCollection"
     features: list[GeoJSONFeature]
@@ -224,5 +206,66 @@ class FeatureCollection(BaseModel):
     offset: int
     next_offset: int | None = Field(description="Pass as `?offset=` for the next page; null on the last.")
 
-    model_config = example_config(type="FeatureCollection", features=[_FEATURE_EXAMPLE], revision=None, limit=1000,
+    model_config = example_config(type="FeatureCollection", features=[FEATURE_EXAMPLE], revision=None, limit=1000,
                             offset=0, next_offset=None)
+
+
+# -- bins ---------------------------------------------------------------------------------
+class AccessPose(BaseModel):
+    x_m: float
+    y_m: float
+    yaw_rad: float = Field(description="Heading to face the bin opening, radians from the map x axis.")
+
+
+class Opening(BaseModel):
+    left: tuple[float, float] = Field(description="(x, y) of one end of the front edge, metres.")
+    right: tuple[float, float] = Field(description="(x, y) of the other end, metres.")
+    width_m: float = Field(description="Clear width between the uprights at the front, metres.")
+
+
+class PlaceRef(BaseModel):
+    key: str = Field(description="Feature key of the place (a `corridor`, `junction`, ... feature).")
+    label: str = Field(description="Place label: corridor, junction, room, open_area.")
+    distance_m: float | None = Field(None, description="From the bin's access pose (or centre), metres.")
+
+
+BinStatus = Literal["matched", "unknown_to_wms", "unreconciled"]
+
+
+class BinOut(BaseModel):
+    id: str = Field(description="The id to use: the WMS's own id when the bin is matched to an imported WMS bin, "
+                                "else Aisle's (`AA-BBB`: aisle, bay).")
+    detected_id: str = Field(description="Aisle's id of the detected bin.")
+    wms_id: str | None = Field(description="The WMS id it is matched to, if a WMS bin list was imported.")
+    status: BinStatus = Field(description="`matched` to an imported WMS bin, `unknown_to_wms` (imported list "
+                                          "lacks it) or `unreconciled` (no WMS list imported).")
+    aisle: int | None
+    bay: int | None
+    level: int | None = Field(description="Shelf level, 0 = floor; null while unknown.")
+    centre: tuple[float, float] = Field(description="(x, y) in map-frame metres.")
+    footprint: list[tuple[float, float]] | None = Field(
+        description="Closed polygon ring (x, y) in metres, front edge first; null for point bins.")
+    opening: Opening | None = Field(description="The front edge a fork enters by, from the footprint.")
+    access_pose: AccessPose | None = Field(description="Where a vehicle stands in the aisle to reach the bin.")
+    row: str | None = Field(description="Key of the aisle-facing rack row (a `rack_row` feature).")
+    back_row: str | None = Field(description="Key of the rack row behind the bin, if any.")
+    corridor: PlaceRef | None = Field(description="The corridor feature the access pose is in: the bin's aisle "
+                                                  "(`aisle-03`, from the rack rows) where there is one, else a "
+                                                  "decomposition corridor.")
+    region: PlaceRef | None = Field(description="The drivable region of the grid decomposition the access pose is "
+                                                "in (a topology node); null without place layers.")
+    nearest_junction: PlaceRef | None = Field(description="The junction nearest the access pose, if any.")
+    confidence: float | None
+    stage: str = Field(description="The stage that wrote the bin.")
+    revision_id: int = Field(description="Revision that wrote this version of the bin.")
+
+    model_config = {"json_schema_extra": {"examples": [{
+        "id": "A-03-014", "detected_id": "03-014", "wms_id": "A-03-014", "status": "matched", "aisle": 3, "bay": 14,
+        "level": None, "centre": [41.2, 17.6],
+        "footprint": [[40.6, 17.1], [41.8, 17.1], [41.8, 18.1], [40.6, 18.1], [40.6, 17.1]],
+        "opening": {"left": [40.6, 17.1], "right": [41.8, 17.1], "width_m": 1.2},
+        "access_pose": {"x_m": 41.2, "y_m": 15.6, "yaw_rad": 1.5708}, "row": "r0-006", "back_row": "r0-007",
+        "corridor": {"key": "aisle-03", "label": "corridor", "distance_m": None},
+        "region": {"key": "r12", "label": "corridor", "distance_m": None},
+        "nearest_junction": {"key": "r3", "label": "junction", "distance_m": 18.4},
+        "confidence": 0.92, "stage": "pillar_mapping", "revision_id": 1207}]}}

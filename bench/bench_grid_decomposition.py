@@ -50,8 +50,9 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits
 
-from services.grid_decomposition import Decomposition, Label, decompose, overview_image, read_map_file
+from services.grid_decomposition import Decomposition, decompose, overview_image, read_map_file
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
+from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse, tuw_truth
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
@@ -70,13 +71,13 @@ def _timed(occupancy: npt.NDArray[np.int8], resolution_m: float) -> tuple[Decomp
 
 def _report_warehouse(tag: str, wh: Warehouse, d: Decomposition) -> None:
     free = wh.occupancy == 0
-    found = sum(d.labels[round(y), round(x)] == Label.JUNCTION.value for x, y in wh.junctions_px)
-    storage = free & (wh.truth == Label.STORAGE.value)
+    found = sum(d.labels[round(y), round(x)] == PlaceLabel.JUNCTION.value for x, y in wh.junctions_px)
+    storage = free & (wh.truth == PlaceLabel.STORAGE.value)
     cells = cell_labels(d.labels, wh)
     print(f"{tag}_accuracy {100 * _accuracy(d.labels, wh.truth, free):.2f} %")
     print(f"{tag}_junctions_found {found}/{len(wh.junctions_px)} count")
-    print(f"{tag}_cells_as_corridor {(cells == Label.CORRIDOR.value).sum()}/{(cells >= 0).sum()} count")
-    print(f"{tag}_storage_px_as_corridor {100 * (d.labels[storage] == Label.CORRIDOR.value).mean():.2f} %")
+    print(f"{tag}_cells_as_corridor {(cells == PlaceLabel.CORRIDOR.value).sum()}/{(cells >= 0).sum()} count")
+    print(f"{tag}_storage_px_as_corridor {100 * (d.labels[storage] == PlaceLabel.CORRIDOR.value).mean():.2f} %")
 
 
 def _synthetic() -> None:
@@ -106,18 +107,18 @@ def _tuw() -> None:
         d, wall, cpu = _timed(occ, res)
         truth = tuw_truth(occ)
         free = occ == 0
-        junction = free & (truth == Label.JUNCTION.value)
+        junction = free & (truth == PlaceLabel.JUNCTION.value)
         n, parts = cv2.connectedComponents(junction.astype(np.uint8), connectivity=4)
-        hit = np.bincount(parts[junction], weights=d.labels[junction] == Label.JUNCTION.value, minlength=n)
+        hit = np.bincount(parts[junction], weights=d.labels[junction] == PlaceLabel.JUNCTION.value, minlength=n)
         size = np.bincount(parts[junction], minlength=n)
         found = int((hit[1:] > 0.5 * size[1:]).sum())
         print(f"tuw_{name}_accuracy {100 * _accuracy(d.labels, truth, free):.2f} %")
         print(f"tuw_{name}_junctions_found {found}/{n - 1} count")
-        print(f"tuw_{name}_junction_px_found {100 * (d.labels[junction] == Label.JUNCTION.value).mean():.2f} %")
+        print(f"tuw_{name}_junction_px_found {100 * (d.labels[junction] == PlaceLabel.JUNCTION.value).mean():.2f} %")
         kinds = [info.label for info in d.regions.values()]
         print(f"tuw_{name}_regions {len(kinds)} count")
-        print(f"tuw_{name}_junction_regions {kinds.count(Label.JUNCTION)} count")
-        print(f"tuw_{name}_corridor_regions {kinds.count(Label.CORRIDOR)} count")
+        print(f"tuw_{name}_junction_regions {kinds.count(PlaceLabel.JUNCTION)} count")
+        print(f"tuw_{name}_corridor_regions {kinds.count(PlaceLabel.CORRIDOR)} count")
         print(f"tuw_{name}_topology_links {d.topology.number_of_edges()} count")
         print(f"tuw_{name}_seconds {wall:.2f} s")
         print(f"tuw_{name}_cpu_seconds {cpu:.2f} s")
@@ -177,7 +178,7 @@ def _junction_regions(hall: RackMap, d: Decomposition) -> int:
     """Cross-aisle junctions most of whose free pixels lie in one junction region."""
     free = hall.occupancy == 0
     found = 0
-    junction_regions = np.array([k for k, r in d.regions.items() if r.label is Label.JUNCTION], dtype=np.int64)
+    junction_regions = np.array([k for k, r in d.regions.items() if r.label is PlaceLabel.JUNCTION], dtype=np.int64)
     for k in range(1, int(hall.junctions.max()) + 1):
         seg = d.segments[(hall.junctions == k) & free]
         if seg.size == 0:
@@ -191,18 +192,18 @@ def _junction_regions(hall: RackMap, d: Decomposition) -> int:
 def report_rack_hall(tag: str, hall: RackMap, d: Decomposition) -> None:
     """Print the rack-hall figures of one decomposition."""
     free = hall.occupancy == 0
-    storage = free & (hall.truth == Label.STORAGE.value)
+    storage = free & (hall.truth == PlaceLabel.STORAGE.value)
     kinds = [info.label for info in d.regions.values()]
     print(f"{tag}_accuracy {100 * _accuracy(d.labels, hall.truth, free):.2f} %")
     if storage.any():
-        print(f"{tag}_storage_recall {100 * (d.labels[storage] == Label.STORAGE.value).mean():.2f} %")
-        print(f"{tag}_storage_as_corridor {100 * (d.labels[storage] == Label.CORRIDOR.value).mean():.2f} %")
-    floor = free & (hall.truth == Label.OPEN_AREA.value)
+        print(f"{tag}_storage_recall {100 * (d.labels[storage] == PlaceLabel.STORAGE.value).mean():.2f} %")
+        print(f"{tag}_storage_as_corridor {100 * (d.labels[storage] == PlaceLabel.CORRIDOR.value).mean():.2f} %")
+    floor = free & (hall.truth == PlaceLabel.OPEN_AREA.value)
     if floor.any():
-        print(f"{tag}_open_floor_as_storage {100 * (d.labels[floor] == Label.STORAGE.value).mean():.2f} %")
+        print(f"{tag}_open_floor_as_storage {100 * (d.labels[floor] == PlaceLabel.STORAGE.value).mean():.2f} %")
     print(f"{tag}_junction_regions {_junction_regions(hall, d)}/{int(hall.junctions.max())} count")
     print(f"{tag}_rack_rows_found {_rows_found(hall, d)}/{len(hall.racks_px)} count")
-    print(f"{tag}_rooms {kinds.count(Label.ROOM)} count")
+    print(f"{tag}_rooms {kinds.count(PlaceLabel.ROOM)} count")
 
 
 RACK_SETS = {
@@ -262,10 +263,10 @@ def _big_rack_hall() -> None:
         labels = np.load(lab)
     print(f"big_rack_hall_process_seconds {wall:.2f} s")
     free = hall.occupancy == 0
-    storage = free & (hall.truth == Label.STORAGE.value)
+    storage = free & (hall.truth == PlaceLabel.STORAGE.value)
     print(f"big_rack_hall_accuracy {100 * _accuracy(labels, hall.truth, free):.2f} %")
-    print(f"big_rack_hall_storage_recall {100 * (labels[storage] == Label.STORAGE.value).mean():.2f} %")
-    print(f"big_rack_hall_storage_as_corridor {100 * (labels[storage] == Label.CORRIDOR.value).mean():.2f} %")
+    print(f"big_rack_hall_storage_recall {100 * (labels[storage] == PlaceLabel.STORAGE.value).mean():.2f} %")
+    print(f"big_rack_hall_storage_as_corridor {100 * (labels[storage] == PlaceLabel.CORRIDOR.value).mean():.2f} %")
 
 
 def main() -> None:

@@ -18,15 +18,15 @@ from pathlib import Path
 from fastapi.testclient import TestClient
 
 from api import create_app
-from api.exports import ExportOptions, export_map
-from api.layout_png import render_png
-from api.layout_render import layout_scene
-from api.layout_svg import render_svg
+from atlas.exports import ExportOptions, export_map
+from atlas.render.png import render_png
+from atlas.render.scene import layout_scene
+from atlas.render.svg import render_svg
 from services.grid_decomposition.overview import LABEL_COLOURS
-from services.grid_decomposition.semantics import Label
 from services.simulator import ground_truth_features, ground_truth_grids, load_world
 from shared.settings import Settings
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
+from shared.vocabulary import PlaceLabel
 
 REPEATS = 5
 WIDTHS_PX = (1024, 2048, 4096)
@@ -47,8 +47,8 @@ def _hall_store(url: str) -> MapStore:
     world = load_world("hall", seed=0)
     grids = ground_truth_grids(world)
     geometry = (grids.resolution_m, grids.origin_x_m, grids.origin_y_m)
-    labels_meta = {"encoding": "place_labels", "classes": [label.name.lower() for label in Label],
-                   "colours": [list(LABEL_COLOURS[label]) for label in Label]}
+    labels_meta = {"encoding": "place_labels", "classes": [label.name.lower() for label in PlaceLabel],
+                   "colours": [list(LABEL_COLOURS[label]) for label in PlaceLabel]}
     features: dict[str, list[Feature]] = {}
     for item in ground_truth_features(world)["features"]:
         properties = dict(item["properties"])

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from api.cache import RevisionCache
-from api.exports.lif import lif_document
-from api.exports.rmf import rmf_nav_graph
-from api.navigation import NoRouteError, load_navmap, plan_route
+from atlas.cache import RevisionCache
+from atlas.exports.lif import lif_document
+from atlas.exports.rmf import rmf_nav_graph
+from atlas.navigation import NoRouteError, load_navmap, plan_route
 from services.grid_decomposition import decompose
 from services.grid_decomposition.records import decomposition_layers, decomposition_topology
 from shared.store import GridLayer, MapInfo, MapStore, RevisionWrite

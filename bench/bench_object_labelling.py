@@ -34,16 +34,16 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from services.labelling_training.commands import train_from_sources
+from services.labelling_training.sim_views import SimView, render_view
 from services.object_labelling import EfficientNetLite0, LabelModel, ObjectLabeller, PriorDatabase
 from services.object_labelling.cnn import default_weights_path
-from services.object_labelling.commands import train_from_sources
-from services.object_labelling.sim_views import SimView, render_view
 from services.object_labelling.worker import LabellingStage
 from services.simulator import photo_textures, rosmsgs, world_from_layout
 from services.simulator.cameras import RGBD_MOUNT
 from services.simulator.world import World
 from shared.bus import Bus
-from shared.settings import Settings, ZenohSettings
+from shared.settings import LabellingSettings, Settings, ZenohSettings
 from shared.store import MapStore
 from shared.transforms import from_matrix
 from shared.worker import StageContext, run_stage
@@ -154,7 +154,7 @@ def _bench_worker(model_path: Path, frames: list[SimView], xs: list[float], *, s
         stop = threading.Event()
 
         def factory(context: StageContext) -> _Timed:
-            stages.append(_Timed(LabellingStage(context, model_path=model_path)))
+            stages.append(_Timed(LabellingStage(context, LabellingSettings(model_path=model_path))))
             return stages[-1]
 
         robot = ZenohSettings(listen=[], connect=listen.listen)

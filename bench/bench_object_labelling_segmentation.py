@@ -17,10 +17,10 @@ import time
 
 import numpy as np
 
+from services.labelling_training.matching import score_segmentation
+from services.labelling_training.sim_training import simulated_views
+from services.labelling_training.sim_views import SimView
 from services.object_labelling import PriorDatabase
-from services.object_labelling.matching import score_segmentation
-from services.object_labelling.sim_training import simulated_views
-from services.object_labelling.sim_views import SimView
 from services.simulator import photo_textures
 
 

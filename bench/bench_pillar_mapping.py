@@ -361,13 +361,14 @@ def bench_live(seeds: int) -> None:
 
 def _read_odometry(reader: Any, connections: list[Any]) -> tuple[FloatArray, FloatArray]:
     """Stamps (n,) and base poses (n, 3) in the odometry frame of nav_msgs/Odometry messages."""
+    from shared.messages import stamp_ns
     from shared.transforms import yaw_from_quaternion
 
     rows = []
     for connection, _, raw in reader.messages(connections=connections):
         msg = reader.deserialize(raw, connection.msgtype)
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        rows.append((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, p.x, p.y,
+        rows.append((stamp_ns(msg.header), p.x, p.y,
                      yaw_from_quaternion([q.x, q.y, q.z, q.w])))
     table = np.array(sorted(rows), dtype=np.float64).reshape(-1, 4)
     table[:, 3] = np.unwrap(table[:, 3])
@@ -379,9 +380,9 @@ def _survey_frames(bag: Path) -> Iterator[Frame]:
     from rosbags.highlevel import AnyReader
 
     from services.pillar_mapping import camera_from_info, image_bgr
-    from services.pillar_mapping.bag import _mount, _pose_at, _read_poses, _stamp_ns
+    from services.pillar_mapping.bag import _mount, _pose_at, _read_poses
     from services.pillar_mapping.mount import sensor_pose
-    from shared.messages import CAMERA_INFO, ODOMETRY, POSE_STAMPED, TYPESTORE
+    from shared.messages import CAMERA_INFO, ODOMETRY, POSE_STAMPED, TYPESTORE, stamp_ns
 
     with AnyReader([bag], default_typestore=TYPESTORE) as reader:
         conns = reader.connections
@@ -394,9 +395,9 @@ def _survey_frames(bag: Path) -> Iterator[Frame]:
         stamps, table = _read_poses(reader, [c for c in conns if c.msgtype == POSE_STAMPED])
         odom_stamps, odom_table = _read_odometry(reader, [c for c in conns if c.msgtype == ODOMETRY])
         for connection, _, raw in reader.messages(connections=images):
-            message = reader.deserialize(raw, connection.msgtype)
-            pose = _pose_at(stamps, table, _stamp_ns(message))
-            odometry = _pose_at(odom_stamps, odom_table, _stamp_ns(message))
+            message: Any = reader.deserialize(raw, connection.msgtype)
+            pose = _pose_at(stamps, table, stamp_ns(message.header))
+            odometry = _pose_at(odom_stamps, odom_table, stamp_ns(message.header))
             if pose is not None and odometry is not None:
                 seen = detect_pillars(image_bgr(message), camera)
                 x, y, yaw = sensor_pose(mount, pose)

@@ -1,10 +1,20 @@
-"""Room segmentation on the ipa maps with the ipa protocol: per-map table and averages.
+"""Room segmentation on real maps, scored with the ipa protocol: every set in one command.
 
-Prints one row per map (recall, precision, weighted forms, mean best IoU, rooms, segments,
-wall and CPU seconds) for the plain maps and for each furnished variant, then ``name value unit``
-summary lines. Room segments include the furniture standing in them (the ground truth rooms do);
-the column "recall free %" scores the same segments cut back to free pixels. Run:
-``PYTHONPATH=. .venv/bin/python bench/eval_ipa.py`` (the table is Markdown; one BLAS thread).
+Sets (``--sets``, all by default):
+
+* ``ipa``: the ipa maps read as ``aisle decompose MAP.png --resolution 0.05`` reads them
+  (map_server's trinary thresholds) and scored exactly as ipa's ``evaluation_segmentation.cpp``:
+  every labelled pixel of the segmentation counts, so a segment's pixels on walls lower its
+  precision. The plain maps and each furnished variant (``--variants``).
+* ``rose2``: the ROSE\u00b2 full maps (real robot maps, 0.05 m/px, free = grey >= 250, dark =
+  occupied, the rest unknown), each ground-truth colour one room, scored on pixels free in the
+  map only (both sides); ROSE\u00b2's own ``rose2_rooms.png`` scored the same way beside ours.
+* ``partial``: the 15 steps of one growing ubremen map, scored like ``rose2``, plus the share of
+  region ids kept from step k to k+1 where the room still exists (ids carried over by overlap,
+  as a live map would; :func:`~services.grid_decomposition.evaluation.carry_ids`).
+
+Prints a Markdown table per set and ``name value unit`` summary lines. Run (one BLAS thread):
+``PYTHONPATH=. .venv/bin/python bench/eval_ipa.py [--sets ipa rose2 partial] [--variants '' _furnitures]``.
 """
 
 from __future__ import annotations
@@ -14,90 +24,220 @@ import os
 import statistics
 import time
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 from PIL import Image
 from threadpoolctl import threadpool_limits
 
 from services.grid_decomposition import IpaScores, decompose, ground_truth_rooms, ipa_scores
-from services.grid_decomposition.evaluation import FREE_GREY
+from services.grid_decomposition.evaluation import (
+    FREE_GREY,
+    align_offset,
+    carry_ids,
+    colour_rooms,
+    id_stability,
+    on_free,
+    shift_into,
+)
+from services.grid_decomposition.mapfile import read_map_file
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps" / "ipa_room_segmentation"
+MAPS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
+IPA = MAPS / "ipa_room_segmentation"
+ROSE2 = MAPS / "rose2"
 RESOLUTION_M = 0.05
 VARIANTS = ("", "_furnitures", "_trashbins", "_furnitures_trashbins")
+SETS = ("ipa", "rose2", "partial")
+OCCUPIED_GREY = 89  # map_server: darkness above 0.65 is occupied
+WHITE = ((0, 0, 0), (255, 255, 255))
 
 
-def _grey(path: Path) -> np.ndarray:
+class Row(NamedTuple):
+    scores: IpaScores
+    seconds: float
+    cpu: float
+
+
+def _grey(path: Path) -> npt.NDArray[np.uint8]:
     with Image.open(path) as image:
         return np.asarray(image.convert("L"))
 
 
+def _rgb(path: Path) -> npt.NDArray[np.uint8]:
+    with Image.open(path) as image:
+        return np.asarray(image.convert("RGB"))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--variants", nargs="*", default=list(VARIANTS), help="suffixes, '' = plain")
-    variants = parser.parse_args().variants
-    names = sorted(p.name[: -len("_gt_segmentation.png")] for p in DATA.glob("*_gt_segmentation.png"))
+    parser.add_argument("--sets", nargs="*", default=list(SETS), choices=SETS, help="which sets to run")
+    parser.add_argument("--variants", nargs="*", default=list(VARIANTS), help="ipa suffixes, '' = plain")
+    parser.add_argument("--maps", nargs="*", default=None, help="only these ROSE2 full maps / ipa map names")
+    args = parser.parse_args()
     print(f"load average at start {os.getloadavg()[0]:.2f}")
-    print(
-        "| variant | map | recall % | precision % | recall_w % | precision_w % | mean IoU | recall free % "
-        "| rooms | segments | s | CPU s |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     with threadpool_limits(1):
-        for variant in variants:
-            _variant(variant, names)
+        if "ipa" in args.sets:
+            _ipa(args.variants, args.maps)
+        if "rose2" in args.sets:
+            _rose2_full(args.maps)
+        if "partial" in args.sets:
+            _partial()
     print(f"load average at end {os.getloadavg()[0]:.2f}")
 
 
-def _variant(variant: str, names: list[str]) -> None:
-    """Rows of one variant, its mean row and its ``name value unit`` summary lines."""
-    tag = variant.strip("_") or "plain"
-    rows: list[tuple[IpaScores, IpaScores, float, float]] = []
-    for name in names:
-        path = DATA / f"{name}{variant}.png"
-        if not path.exists():
-            continue
-        grey = _grey(path)
-        truth = _grey(DATA / f"{name}_gt_segmentation.png")
-        if grey.shape != truth.shape:
-            print(f"| {tag} | {name} | skipped: map {grey.shape} != ground truth {truth.shape} |")
-            continue
-        occupancy = np.where(grey >= FREE_GREY, 0, 100).astype(np.int8)[::-1].copy()
-        start, cpu_start = time.perf_counter(), time.process_time()
-        result = decompose(occupancy, resolution_m=RESOLUTION_M)
-        seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
-        rooms = ground_truth_rooms(truth)
-        segments = result.segments[::-1]
-        s = ipa_scores(segments, rooms)
-        on_free = ipa_scores(np.where(grey >= FREE_GREY, segments, 0), rooms)
-        rows.append((s, on_free, seconds, cpu))
-        print(
-            f"| {tag} | {name} | {100 * s.recall:.1f} | {100 * s.precision:.1f} | "
-            f"{100 * s.recall_weighted:.1f} | {100 * s.precision_weighted:.1f} | {s.mean_iou:.3f} | "
-            f"{100 * on_free.recall:.1f} | {s.n_rooms} | {s.n_segments} | {seconds:.2f} | {cpu:.2f} |"
-        )
+def _header(first: str) -> None:
+    print(
+        f"\n| {first} | map | recall % | precision % | recall_w % | precision_w % | mean IoU | rooms | segments "
+        "| s | CPU s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def _row(tag: str, name: str, s: IpaScores, seconds: float = float("nan"), cpu: float = float("nan")) -> None:
+    print(
+        f"| {tag} | {name} | {100 * s.recall:.1f} | {100 * s.precision:.1f} | {100 * s.recall_weighted:.1f} | "
+        f"{100 * s.precision_weighted:.1f} | {s.mean_iou:.3f} | {s.n_rooms} | {s.n_segments} | "
+        f"{seconds:.2f} | {cpu:.2f} |"
+    )
+
+
+def _summary(tag: str, rows: list[Row]) -> None:
+    """The mean row of a table and its ``name value unit`` lines."""
     if not rows:
         return
-    recall = 100 * statistics.fmean(r[0].recall for r in rows)
-    precision = 100 * statistics.fmean(r[0].precision for r in rows)
-    iou = statistics.fmean(r[0].mean_iou for r in rows)
-    recall_free = 100 * statistics.fmean(r[1].recall for r in rows)
-    median_s = statistics.median(r[2] for r in rows)
-    median_cpu = statistics.median(r[3] for r in rows)
-    collapsed = sum(1 for r in rows if r[0].n_segments <= 1)
+    recall = 100 * statistics.fmean(r.scores.recall for r in rows)
+    precision = 100 * statistics.fmean(r.scores.precision for r in rows)
+    iou = statistics.fmean(r.scores.mean_iou for r in rows)
+    worst = 100 * min(r.scores.precision for r in rows)
+    collapsed = sum(1 for r in rows if r.scores.n_segments <= 1)
+    median_cpu = statistics.median(r.cpu for r in rows)
     print(
         f"| {tag} | **mean of {len(rows)}** | **{recall:.1f}** | **{precision:.1f}** | "
-        f"{100 * statistics.fmean(r[0].recall_weighted for r in rows):.1f} | "
-        f"{100 * statistics.fmean(r[0].precision_weighted for r in rows):.1f} | **{iou:.3f}** | {recall_free:.1f} "
-        f"| | {collapsed} collapsed | median {median_s:.2f} | median {median_cpu:.2f} |"
+        f"{100 * statistics.fmean(r.scores.recall_weighted for r in rows):.1f} | "
+        f"{100 * statistics.fmean(r.scores.precision_weighted for r in rows):.1f} | **{iou:.3f}** | | "
+        f"{collapsed} collapsed | median {statistics.median(r.seconds for r in rows):.2f} | "
+        f"median {median_cpu:.2f} |"
     )
-    print(f"ipa_{tag}_recall {recall:.2f} %")
-    print(f"ipa_{tag}_precision {precision:.2f} %")
-    print(f"ipa_{tag}_mean_iou {iou:.4f} ratio")
-    print(f"ipa_{tag}_recall_free_pixels {recall_free:.2f} %")
-    print(f"ipa_{tag}_collapsed_maps {collapsed} count")
-    print(f"ipa_{tag}_median_seconds {median_s:.3f} s")
-    print(f"ipa_{tag}_median_cpu_seconds {median_cpu:.3f} s")
+    print(f"{tag}_recall {recall:.2f} %")
+    print(f"{tag}_precision {precision:.2f} %")
+    print(f"{tag}_mean_iou {iou:.4f} ratio")
+    print(f"{tag}_worst_precision {worst:.2f} %")
+    print(f"{tag}_collapsed_maps {collapsed} count")
+    print(f"{tag}_median_cpu_seconds {median_cpu:.3f} s")
+    print(f"{tag}_max_cpu_seconds {max(r.cpu for r in rows):.3f} s")
+
+
+def _timed(occupancy: npt.NDArray[np.int8]) -> tuple[npt.NDArray[np.int32], float, float]:
+    """Segments (image row order) of a decomposition, wall and CPU seconds."""
+    start, cpu_start = time.perf_counter(), time.process_time()
+    result = decompose(occupancy, resolution_m=RESOLUTION_M)
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+    return np.ascontiguousarray(result.segments[::-1]), seconds, cpu
+
+
+def _ipa(variants: list[str], only: list[str] | None) -> None:
+    names = sorted(p.name[: -len("_gt_segmentation.png")] for p in IPA.glob("*_gt_segmentation.png"))
+    if only:
+        names = [n for n in names if n in only]
+    _header("variant")
+    for variant in variants:
+        tag = f"ipa_{variant.strip('_') or 'plain'}"
+        rows: list[Row] = []
+        for name in names:
+            path = IPA / f"{name}{variant}.png"
+            if not path.exists():
+                continue
+            truth = _grey(IPA / f"{name}_gt_segmentation.png")
+            occupancy, _, _ = read_map_file(path, resolution_m=RESOLUTION_M)
+            if occupancy.shape != truth.shape:
+                print(f"| {tag} | {name} | skipped: map {occupancy.shape} != ground truth {truth.shape} |")
+                continue
+            segments, seconds, cpu = _timed(occupancy)
+            s = ipa_scores(segments, ground_truth_rooms(truth))
+            rows.append(Row(s, seconds, cpu))
+            _row(tag, name, s, seconds, cpu)
+        _summary(tag, rows)
+
+
+def rose2_occupancy(grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int8]:
+    """Occupancy (GridLayer order) of a ROSE\u00b2 map: >= 250 free, <= 89 occupied, the rest unknown."""
+    occ = np.full(grey.shape, -1, dtype=np.int8)
+    occ[grey >= FREE_GREY] = 0
+    occ[grey <= OCCUPIED_GREY] = 100
+    return occ[::-1].copy()
+
+
+def _common(*images: npt.NDArray[Any]) -> list[npt.NDArray[Any]]:
+    """Images cut to their common top-left part (one ROSE2 ground truth is a row shorter than its map)."""
+    h = min(i.shape[0] for i in images)
+    w = min(i.shape[1] for i in images)
+    return [i[:h, :w] for i in images]
+
+
+def _rose2_map(folder: Path) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], IpaScores, IpaScores, Row]:
+    """Our segments, the free mask, our scores, ROSE2's scores and our row for one map folder."""
+    grey = _grey(folder / "map.png")
+    segments, seconds, cpu = _timed(rose2_occupancy(grey))
+    grey, gt, theirs, ours = _common(grey, _rgb(folder / "gt.png"), _rgb(folder / "rose2_rooms.png"), segments)
+    free = grey >= FREE_GREY
+    rooms = on_free(colour_rooms(gt), free)
+    s = ipa_scores(on_free(ours, free), rooms)
+    peer = ipa_scores(on_free(colour_rooms(theirs, background=WHITE), free), rooms)
+    return np.asarray(ours, dtype=np.int32), free, s, peer, Row(s, seconds, cpu)
+
+
+def _rose2_full(only: list[str] | None) -> None:
+    _header("set")
+    ours: list[Row] = []
+    theirs: list[Row] = []
+    for folder in sorted(p for p in (ROSE2 / "full").iterdir() if p.is_dir()):
+        if only and folder.name not in only:
+            continue
+        _, _, s, peer, row = _rose2_map(folder)
+        ours.append(row)
+        theirs.append(Row(peer, float("nan"), float("nan")))
+        _row("rose2", folder.name, s, row.seconds, row.cpu)
+        _row("rose2_peer", folder.name, peer)
+    _summary("rose2", ours)
+    _summary("rose2_peer", theirs)
+
+
+def _partial() -> None:
+    steps = sorted(
+        (p for p in (ROSE2 / "partial_ubremen").iterdir() if p.is_dir()), key=lambda p: int(p.name[3:])
+    )
+    _header("step")
+    ours: list[Row] = []
+    theirs: list[Row] = []
+    shares: list[float] = []
+    previous: tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]] | None = None
+    for folder in steps:
+        segments, free, s, peer, row = _rose2_map(folder)
+        step = int(folder.name[3:])
+        _row("partial", folder.name, s, row.seconds, row.cpu)
+        _row("partial_peer", folder.name, peer)
+        if step >= 5:
+            ours.append(row)
+            theirs.append(Row(peer, float("nan"), float("nan")))
+        segments = on_free(segments, free)
+        if previous is not None:
+            before, before_free = previous
+            offset = align_offset(before_free, free)
+            moved = shift_into(before, offset, segments.shape)
+            carried = carry_ids(moved, segments)
+            rooms = on_free(colour_rooms(_common(_rgb(folder / "gt.png"), segments)[0]), free)
+            kept = id_stability(moved, carried, rooms)
+            shares.append(kept.share)
+            print(f"| partial_ids | {folder.name} | kept {kept.kept} of {kept.matched} ({100 * kept.share:.0f} %) "
+                  f"| offset {offset} | | | | | | | |")
+            segments = carried
+        previous = (segments, free)
+    _summary("partial_from_step5", ours)
+    _summary("partial_peer_from_step5", theirs)
+    if shares:
+        print(f"partial_ids_kept_mean {100 * statistics.fmean(shares):.2f} %")
+        print(f"partial_ids_kept_worst {100 * min(shares):.2f} %")
 
 
 if __name__ == "__main__":

@@ -12,7 +12,8 @@ import sys
 import time
 from pathlib import Path
 
-from services.occupancy_mapping import ScanMatcher, build_map, read_map_yaml, sharpness, wall_agreement
+from services.occupancy_mapping import ScanMatcher, build_map, sharpness, wall_agreement
+from shared.mapfiles import read_map_yaml
 from shared.store import GridLayer
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bags" / "mac_first_floor"

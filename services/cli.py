@@ -270,7 +270,7 @@ def _keys(args: argparse.Namespace, settings: Settings) -> int:
 
 def _export(args: argparse.Namespace, settings: Settings) -> int:
     """``aisle export``: exit code 2, with the reason on stderr, for an unknown map, format, revision or layer."""
-    from api.exports import ExportError, export_to_path
+    from atlas.exports import ExportError, export_to_path
     from services import runtime
 
     store = runtime.open_store(settings)
@@ -295,8 +295,8 @@ def _export(args: argparse.Namespace, settings: Settings) -> int:
 
 
 def _classifier(args: argparse.Namespace, settings: Settings) -> None:
-    from services.object_labelling.commands import evaluate_from_sources, train_from_sources
-    from services.object_labelling.worker import model_path_of
+    from services.labelling_training.commands import evaluate_from_sources, train_from_sources
+    from services.object_labelling.recogniser import model_path_of
 
     if args.command == "train-classifier":
         out = args.out or model_path_of(settings)
@@ -355,14 +355,14 @@ def _sim(args: argparse.Namespace, settings: Settings, stop: threading.Event) ->
 def _check_stages(settings: Settings, stages: Sequence[str]) -> None:
     """Fail before starting anything when a stage cannot run (object labelling without a usable model)."""
     if "object_labelling" in stages:
-        from services.object_labelling.worker import check_recogniser
+        from services.object_labelling.recogniser import check_recogniser
 
         check_recogniser(settings)
 
 
 def _demo_labelling_model(settings: Settings) -> None:
-    from services.object_labelling.commands import ensure_demo_model
-    from services.object_labelling.worker import model_path_of
+    from services.labelling_training.commands import ensure_demo_model
+    from services.object_labelling.recogniser import model_path_of
 
     ensure_demo_model(model_path_of(settings))
 
@@ -416,7 +416,8 @@ def _replay_job(bus: Bus, stop: threading.Event, *, bag: Path, rate: float, loop
 
 
 def _map_build(args: argparse.Namespace, settings: Settings) -> int:
-    from services.occupancy_mapping import ScanMatcher, build_map, sharpness, write_map_yaml
+    from services.occupancy_mapping import ScanMatcher, build_map, sharpness
+    from shared.mapfiles import write_map_yaml
 
     occupancy_settings = settings.occupancy
     max_range_m = occupancy_settings.max_range_m

@@ -18,17 +18,20 @@ log = logging.getLogger(__name__)
 
 
 def stage_factories() -> dict[str, StageFactory]:
-    """Every stage Aisle can run, by name (imported lazily: stages pull in heavy libraries)."""
+    """Every stage Aisle can run, by name (imported lazily: stages pull in heavy libraries).
+
+    Each factory builds its stage from the stage's own settings section (``context.settings.<section>``).
+    """
     from services.grid_decomposition.worker import decomposition_stage
     from services.object_labelling.worker import labelling_stage
-    from services.occupancy_mapping.worker import OccupancyStage
-    from services.pillar_mapping.worker import PillarStage
+    from services.occupancy_mapping.worker import occupancy_stage
+    from services.pillar_mapping.worker import pillar_stage
     from services.semantic_fusion.worker import fusion_stage
 
     factories: dict[str, StageFactory] = {
-        "occupancy_mapping": OccupancyStage,
+        "occupancy_mapping": occupancy_stage,
         "grid_decomposition": decomposition_stage,
-        "pillar_mapping": PillarStage,
+        "pillar_mapping": pillar_stage,
         "object_labelling": labelling_stage,
         "semantic_fusion": fusion_stage,
     }

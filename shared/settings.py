@@ -20,6 +20,8 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
+from shared.vocabulary import LayerName
+
 STAGES = ("occupancy_mapping", "grid_decomposition", "pillar_mapping", "object_labelling", "semantic_fusion")
 """Every stage worker Aisle has (``aisle worker STAGE``)."""
 
@@ -60,7 +62,7 @@ class OccupancySettings(BaseModel):
     base_frame: str = Field("base_link", description="The robot frame that pose_topic places.")
     map_frame: str = "map"
     max_range_m: float = Field(30.0, gt=0.0, description="Returns beyond this are not marked occupied.")
-    layer: str = "occupancy"
+    layer: str = LayerName.OCCUPANCY
     scan_matching: bool = Field(
         True, description="Correct odometry drift by matching scans to the map (robots without a map frame)."
     )
@@ -151,8 +153,8 @@ class SemanticFusionSettings(BaseModel):
     resolution_m: float = Field(0.05, gt=0.0, le=1.0)
     dynamic_half_life_s: float = Field(20.0, gt=0.0)
     detect_loops: bool = True
-    label_layer: str = "semantic_label"
-    entropy_layer: str = "semantic_entropy"
+    label_layer: str = LayerName.SEMANTIC_LABEL
+    entropy_layer: str = LayerName.SEMANTIC_ENTROPY
     scan_queue_size: int = Field(2000, ge=1)
     restart_after_out_of_order_scans: int = Field(50, ge=1)
 
@@ -182,15 +184,18 @@ class LabellingSettings(BaseModel):
 class DecompositionSettings(BaseModel):
     """The grid-decomposition stage: the occupancy layer into place labels, regions and topology."""
 
-    source_layer: str = Field("occupancy", min_length=1, description="The occupancy layer decomposed.")
-    label_layer: str = Field("place_labels", min_length=1)
-    segment_layer: str = Field("place_segments", min_length=1)
+    source_layer: str = Field(LayerName.OCCUPANCY, min_length=1, description="The occupancy layer decomposed.")
+    label_layer: str = Field(LayerName.PLACE_LABELS, min_length=1)
+    segment_layer: str = Field(LayerName.PLACE_SEGMENTS, min_length=1)
     min_change_fraction: float = Field(
         0.02, ge=0.0, le=1.0, description="How much of the map must change before it is decomposed again: the "
         "share of known cells newly known or forgotten, or of obstacle cells that changed class, whichever is larger."
     )
     min_period_s: float = Field(10.0, ge=0.0, description="Least time between two decompositions.")
-    poll_period_s: float = Field(2.0, gt=0.0, description="How often the store is checked for new occupancy.")
+    safety_poll_period_s: float = Field(
+        30.0, gt=0.0, description="How often the store is checked for revisions no map event announced (a writer "
+        "on another bus, an event lost); map events are followed at once."
+    )
     neck_half_width_m: float = Field(
         0.5, ge=0.0, description="Regions that fall apart when shrunk by this half-width are split; 0: off."
     )

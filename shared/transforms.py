@@ -14,10 +14,14 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
+from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Odometry as Odometry
+from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMessage
+
+from shared import messages
 
 __all__ = [
     "Pose2D",
@@ -31,6 +35,7 @@ __all__ = [
     "interpolate",
     "invert",
     "quaternion_from_yaw",
+    "sensor_pose",
     "sensor_pose_2d",
     "to_matrix",
     "yaw_from_quaternion",
@@ -155,6 +160,18 @@ def interpolate(a: Transform, b: Transform, fraction: float) -> Transform:
         theta = math.acos(min(dot, 1.0))
         q = (math.sin((1 - fraction) * theta) * qa + math.sin(fraction * theta) * qb) / math.sin(theta)
     return Transform(a.translation + fraction * (b.translation - a.translation), _normalised(q))
+
+
+def sensor_pose(transform: Transform, angles: npt.NDArray[np.float64]) -> tuple[Pose2D, npt.NDArray[np.float64]]:
+    """Planar pose of a planar scanner and its bearings as seen in the fixed frame.
+
+    ``transform`` maps the sensor frame into the fixed frame; ``angles`` (n,) are the scan's bearings in
+    radians. A sensor mounted upside down (its +z pointing down) sweeps the other way, so its bearings
+    change sign.
+    """
+    x, y, _, _ = transform.rotation
+    z_axis_up = 1.0 - 2.0 * (x * x + y * y)
+    return sensor_pose_2d(transform), (-angles if z_axis_up < 0 else angles)
 
 
 def sensor_pose_2d(transform: Transform) -> Pose2D:
@@ -345,15 +362,14 @@ class TransformBuffer:
         return min(newest, default=2**63 - 1)
 
 
-def add_tf_message(buffer: TransformBuffer, message: Any, *, static: bool = False) -> int:
+def add_tf_message(buffer: TransformBuffer, message: TFMessage, *, static: bool = False) -> int:
     """Feed a tf2_msgs/TFMessage into ``buffer``; return the number of transforms taken."""
     for item in message.transforms:
-        stamp_ns = item.header.stamp.sec * 1_000_000_000 + item.header.stamp.nanosec
         t, q = item.transform.translation, item.transform.rotation
         buffer.set_transform(
             item.header.frame_id,
             item.child_frame_id,
-            stamp_ns,
+            messages.stamp_ns(item.header),
             (t.x, t.y, t.z),
             (q.x, q.y, q.z, q.w),
             static=static,
@@ -361,10 +377,8 @@ def add_tf_message(buffer: TransformBuffer, message: Any, *, static: bool = Fals
     return len(message.transforms)
 
 
-def add_odometry(buffer: TransformBuffer, message: Any) -> None:
+def add_odometry(buffer: TransformBuffer, message: Odometry) -> None:
     """Feed a nav_msgs/Odometry pose (``header.frame_id`` -> ``child_frame_id``) into ``buffer``."""
-    stamp_ns = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
     p, q = message.pose.pose.position, message.pose.pose.orientation
-    buffer.set_transform(
-        message.header.frame_id, message.child_frame_id, stamp_ns, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)
-    )
+    buffer.set_transform(message.header.frame_id, message.child_frame_id, messages.stamp_ns(message.header),
+                         (p.x, p.y, p.z), (q.x, q.y, q.z, q.w))

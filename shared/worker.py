@@ -11,21 +11,27 @@ import datetime as dt
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
+
+from pydantic import BaseModel, ValidationError
 
 from shared import messages
-from shared.bus import WORKER_NAMESPACE, Bus, Publisher
+from shared.bus import WORKER_NAMESPACE, Bus, DropPolicy, Publisher, Received, Subscription
 from shared.metrics import Counters
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore, Revision, RevisionWrite, StoreError, StoreUnavailableError
+from shared.transforms import TransformBuffer, add_tf_message
 
 log = logging.getLogger(__name__)
 
 HEARTBEAT_PERIOD_S = 5.0
 MAP_EVENTS_TOPIC = "map_events"
 """Map events go to ROS topic ``/aisle/map_events`` (aisle_msgs/msg/MapEvent)."""
+LATEST_ONLY = frozenset({messages.IMAGE, messages.CAMERA_INFO})
+"""Message types whose subscriptions keep the newest samples (camera frames: only the latest matters); every
+other type holds the sender instead of dropping (scans, poses, tf)."""
 
 
 @dataclass
@@ -40,9 +46,40 @@ class StageContext:
     counters: Counters
     started_at: dt.datetime = field(default_factory=lambda: dt.datetime.now(dt.UTC))
     _events: Publisher | None = None
+    _subscriptions: list[Subscription] = field(default_factory=list)
 
     def count(self, what: str, amount: int = 1) -> None:
-        self.counters.incr(f"{self.name}.{what}", amount)
+        """Add ``amount`` to counter ``<stage>.<what>`` (nothing for 0: a counter appears when it first counts)."""
+        if amount:
+            self.counters.incr(f"{self.name}.{what}", amount)
+
+    def subscribe(self, topic: str, msgtype: str, *, maxsize: int) -> Subscription:
+        """``topic`` of ``msgtype`` under every robot namespace of the settings, queued up to ``maxsize``.
+
+        Camera frames and camera info (:data:`LATEST_ONLY`) keep the newest and count what they drop; every
+        other type holds the sender (:attr:`DropPolicy.BLOCK`). Malformed samples are counted as
+        ``<stage>.<topic>.malformed`` and skipped by ``receive``.
+        """
+        policy = DropPolicy.KEEP_NEWEST if msgtype in LATEST_ONLY else DropPolicy.BLOCK
+        subscription = self.bus.subscribe(topic, msgtype, namespaces=self.settings.robot_namespaces, policy=policy,
+                                          maxsize=maxsize, name=f"{self.name}.{topic}")
+        self._subscriptions.append(subscription)
+        return subscription
+
+    def map_events(self) -> Subscription:
+        """The map events every worker and the API announce on ``/aisle/map_events`` (newest 64 kept)."""
+        subscription = self.bus.subscribe(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespaces=[WORKER_NAMESPACE],
+                                          policy=DropPolicy.KEEP_NEWEST, maxsize=64,
+                                          name=f"{self.name}.{MAP_EVENTS_TOPIC}")
+        self._subscriptions.append(subscription)
+        return subscription
+
+    def close_subscriptions(self) -> None:
+        """Stop receiving on every subscription made through this context (:func:`run_stage` does so when the
+        stage stops or fails; what is queued stays readable)."""
+        for subscription in self._subscriptions:
+            subscription.close()
+        self._subscriptions.clear()
 
     def commit(self, write: RevisionWrite) -> Revision | None:
         """Store ``write`` as one revision and announce it; None (counted, logged) if the store is down.
@@ -68,9 +105,8 @@ class StageContext:
 def map_event(map_name: str, revision: Revision) -> Any:
     """The ``aisle_msgs/msg/MapEvent`` announcing ``revision`` (from its stored summary), stamped now."""
     features = revision.summary.get("features", {})
-    now = time.time_ns()
     return messages.message_class(messages.MAP_EVENT)(
-        stamp=messages.message_class("builtin_interfaces/msg/Time")(sec=now // 10**9, nanosec=now % 10**9),
+        stamp=messages.time_msg(time.time_ns()),
         map_name=map_name,
         revision_id=revision.id,
         stage=revision.stage,
@@ -83,8 +119,56 @@ def map_event(map_name: str, revision: Revision) -> Any:
     )
 
 
+@dataclass
+class InputSpan:
+    """The stamps of the inputs a stage took since its last revision: the oldest and newest (ns) and how many."""
+
+    first_ns: int | None = None
+    last_ns: int | None = None
+    count: int = 0
+
+    def add(self, stamp_ns: int) -> None:
+        self.first_ns = stamp_ns if self.first_ns is None else min(self.first_ns, stamp_ns)
+        self.last_ns = stamp_ns if self.last_ns is None else max(self.last_ns, stamp_ns)
+        self.count += 1
+
+
+SectionT = TypeVar("SectionT", bound=BaseModel)
+
+
+def checked(section: SectionT, error: type[Exception]) -> SectionT:
+    """``section`` validated again (built with ``model_construct``, or changed since); ``error`` if invalid."""
+    try:
+        return type(section).model_validate(section.model_dump())
+    except ValidationError as err:
+        raise error(f"{type(section).__name__}: {err}") from err
+
+
+def drain(subscription: Subscription | None) -> Iterator[Received]:
+    """Every message queued on ``subscription`` now (none for None), without waiting."""
+    while subscription is not None and (item := subscription.receive()) is not None:
+        yield item
+
+
+def take_transforms(context: StageContext, buffer_of: Callable[[str], TransformBuffer], *,
+                    static: Subscription | None, dynamic: Subscription | None = None,
+                    counter: str = "bad_transforms") -> None:
+    """Add every queued tf_static (first), then tf message to ``buffer_of(namespace)`` of the robot it came from.
+
+    Bad transforms (non-finite, zero quaternion) are counted as ``counter``, logged and skipped.
+    """
+    for subscription, is_static in ((static, True), (dynamic, False)):
+        for item in drain(subscription):
+            try:
+                add_tf_message(buffer_of(item.namespace), item.message, static=is_static)
+            except ValueError as err:
+                context.count(counter)
+                log.warning("%s: tf from %r skipped: %s", context.name, item.namespace or "/", err)
+
+
 class Stage(Protocol):
-    """One pipeline stage: subscribes in ``__init__``, works in ``run`` until ``stop`` is set."""
+    """One pipeline stage: subscribes in ``__init__`` (through :meth:`StageContext.subscribe`, closed when ``run``
+    returns), works in ``run`` until ``stop`` is set."""
 
     def run(self, stop: threading.Event) -> None: ...
 
@@ -139,6 +223,8 @@ def run_stage(name: str, factory: StageFactory, *, bus: Bus, store: MapStore, se
                 context.count("crashes")
                 log.exception("%s: stage failed; restarting in %.1f s", name, restart_delay_s)
                 stop.wait(restart_delay_s)
+            finally:
+                context.close_subscriptions()
     finally:
         if token is not None:
             token.undeclare()

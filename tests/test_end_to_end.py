@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from services.occupancy_mapping import read_map_yaml, wall_agreement
+from services.occupancy_mapping import wall_agreement
+from shared.mapfiles import read_map_yaml
 from shared.settings import Settings
 from shared.store import GridLayer, MapStore
 from tests.helpers import data_path, wait_for

@@ -24,8 +24,8 @@ import pytest
 from rosbags.rosbag2 import Reader
 from skimage.graph import route_through_array
 
-from services.occupancy_mapping import MapImage, read_map_yaml
 from services.simulator import load_world, sim_run
+from shared.mapfiles import MapImage, read_map_yaml
 from tests.helpers import data_path, wait_for
 from tests.stack import aisle_run, counter
 

@@ -8,7 +8,8 @@ from fastapi import APIRouter, HTTPException, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
 from api.deps import MapDep, RevisionQuery, StoreDep
-from api.exports import (
+from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, example_config, not_found
+from atlas.exports import (
     EXPORT_FORMATS,
     ExportError,
     ExportNotFoundError,
@@ -19,10 +20,9 @@ from api.exports import (
     export_stem,
     zip_files,
 )
-from api.exports.geojson import LAYOUT_EXAMPLE
-from api.exports.mapserver import DEFAULT_LAYER
-from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, example_config, not_found
-from api.routers.layers import REVISION_HEADER
+from atlas.exports.mapserver import DEFAULT_LAYER
+from atlas.layout import LAYOUT_EXAMPLE
+from shared.vocabulary import REVISION_HEADER
 
 _LIF_EXAMPLE = {
     "metaInformation": {"projectIdentification": "Aisle", "creator": "Aisle",

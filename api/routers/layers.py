@@ -19,16 +19,15 @@ from api.models import (
     Origin,
     not_found,
 )
-from api.rendering import RenderError, encode_npy, encode_png, render_layer
+from atlas.render.layers import RenderError, encode_npy, encode_png, render_layer
 from shared.store import StoredLayer
+from shared.vocabulary import REVISION_HEADER
 
 router = APIRouter(prefix="/v1/maps/{map_name}/layers", tags=["layers"], responses=COMMON_ERRORS)
 
 MAX_JSON_CELLS = 1_000_000
 """Larger layers are refused as JSON (413); fetch them as .npy."""
 
-REVISION_HEADER = "X-Aisle-Revision-Id"
-"""Response header naming the revision that wrote the layer version returned."""
 
 _NOT_FOUND = not_found("No such map, revision or layer.")
 

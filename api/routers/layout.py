@@ -8,24 +8,18 @@ from fastapi import APIRouter, HTTPException, Query, Response, status
 from fastapi.responses import JSONResponse
 
 from api.deps import MapDep, RevisionQuery, SettingsDep, StoreDep
-from api.exports.geojson import MEDIA_TYPE as GEOJSON_MEDIA_TYPE
-from api.exports.geojson import (
-    LayoutCollection,
-    LayoutTooLargeError,
-    layout_collection,
-    layout_features,
-    read_revision,
-)
-from api.layout_png import render_png
-from api.layout_render import DEFAULT_KINDS, MAX_SIDE_PX, MIN_WIDTH_PX, NothingToDrawError, layout_scene
-from api.layout_svg import MEDIA_TYPE as SVG_MEDIA_TYPE
-from api.layout_svg import render_svg
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, as_json, not_found
-from api.rendering import RenderError
-from api.routers.features import BBox, BBoxQuery, KindsQuery
-from api.routers.layers import REVISION_HEADER
+from api.queries import BBoxQuery, KindsQuery
+from api.translate import http_error
+from atlas.features import BBox
+from atlas.layout import MEDIA_TYPE as GEOJSON_MEDIA_TYPE
+from atlas.layout import LayoutCollection, LayoutTooLargeError, Picture, layout_collection, layout_picture
+from atlas.render.layers import RenderError
+from atlas.render.scene import DEFAULT_KINDS, MAX_SIDE_PX, MIN_WIDTH_PX, NothingToDrawError
+from atlas.render.svg import MEDIA_TYPE as SVG_MEDIA_TYPE
 from shared.settings import Settings
 from shared.store import MapInfo, MapStore
+from shared.vocabulary import REVISION_HEADER
 
 router = APIRouter(prefix="/v1/maps/{map_name}", tags=["layout"])
 
@@ -69,7 +63,7 @@ def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds
         collection = layout_collection(store, map_info, revision=revision, kinds=kinds, bbox=bbox,
                                        max_features=MAX_LAYOUT_FEATURES)
     except LayoutTooLargeError as err:
-        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(err)) from err
+        raise http_error(err) from err
     return Response(collection.to_json(), media_type=GEOJSON_MEDIA_TYPE)
 
 
@@ -93,29 +87,20 @@ lines); `bbox` the area shown (default: the whole map); `width` the map's width 
 
 def _scene_response(store: MapStore, settings: Settings, map_info: MapInfo, revision: int | None,
                     kinds: list[str] | None, bbox: BBox | None, width: int, *, svg: bool) -> Response:
-    at = read_revision(store, map_info, revision)
     try:
-        found = layout_features(store, map_info, revision=at, kinds=kinds or DEFAULT_KINDS, bbox=bbox,
-                                max_features=MAX_PICTURE_FEATURES)
+        picture: Picture = layout_picture(
+            store, map_info, revision=revision, kinds=kinds or DEFAULT_KINDS, bbox=bbox, width_px=width, svg=svg,
+            occupancy_layer=settings.occupancy.layer, label_layer=settings.decomposition.label_layer,
+            max_features=MAX_PICTURE_FEATURES)
     except LayoutTooLargeError as err:
-        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(err)) from err
-    occupancy = labels = None
-    if at is not None:
-        occupancy = store.layer(map_info.id, settings.occupancy.layer, revision=at)
-        labels = store.layer(map_info.id, settings.decomposition.label_layer, revision=at)
-    try:
-        scene = layout_scene([item.feature for item in found],
-                             occupancy=None if occupancy is None else occupancy.layer,
-                             place_labels=None if labels is None else labels.layer, bbox=bbox, width_px=width,
-                             title=f"{map_info.name} @ revision {at}")
-        content = render_svg(scene) if svg else render_png(scene)
+        raise http_error(err) from err
     except NothingToDrawError as err:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"map {map_info.name!r}: {err}; pass ?bbox= to draw an "
                                                        "empty area") from err
     except RenderError as err:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
-    headers = {} if at is None else {REVISION_HEADER: str(at)}
-    return Response(content, media_type=SVG_MEDIA_TYPE if svg else "image/png", headers=headers)
+    headers = {} if picture.revision_id is None else {REVISION_HEADER: str(picture.revision_id)}
+    return Response(picture.content, media_type=picture.media_type, headers=headers)
 
 
 @router.get(

@@ -12,10 +12,11 @@ from pydantic import BaseModel, Field
 
 from api.deps import AnnouncerDep, MapDep, RevisionQuery, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, Responses, example_config, not_found
-from api.navigation import KEY_PATTERN, OPERATOR_STAGE, PLACE_KINDS, place_pose
-from api.navigation.blocks import OPERATOR_LOCK
-from api.navigation.ends import MAX_COORDINATE_M, geometry_centre
+from atlas.navigation import KEY_PATTERN, OPERATOR_STAGE, place_pose
+from atlas.navigation.blocks import OPERATOR_LOCK
+from atlas.navigation.ends import MAX_COORDINATE_M, geometry_centre
 from shared.store import Feature, MapStore, RevisionWrite, StoredFeature
+from shared.vocabulary import PLACE_KINDS
 
 router = APIRouter(prefix="/v1/maps/{map_name}/places", tags=["places"], responses=COMMON_ERRORS)
 

@@ -2,38 +2,24 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
-import cv2
-import numpy as np
-from fastapi import APIRouter, Body, Depends, HTTPException, Query, status
+from fastapi import APIRouter, Body, Query, status
 from pydantic import BaseModel, Field
 
-from api.cache import RevisionCache
-from api.deps import AnnouncerDep, MapDep, RevisionQuery, SettingsDep, StoreDep, get_cache
-from api.gridlookup import cached_layer, class_name, value_at
+from api.deps import AnnouncerDep, CacheDep, MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
-from api.routers.features import MAX_BBOX_SIDE_M
-from services.grid_decomposition.errors import DecompositionError
-from services.grid_decomposition.semantics import (
-    LABEL_OVERRIDES_KEY,
-    LABEL_TABLE,
-    LABEL_TABLE_STAGE,
-    Label,
-    parse_label_table,
-)
-from shared.store import RevisionWrite, StoredFeature
+from api.queries import MAX_BBOX_SIDE_M
+from api.translate import http_error
+from atlas import semantics
+from atlas.errors import InvalidQueryError
 
 router = APIRouter(prefix="/v1/maps/{map_name}", tags=["semantics"], responses=COMMON_ERRORS)
-
-REGION_KINDS = ("corridor", "junction", "room", "open_area", "region")
 
 _ERRORS: Responses = {
     status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": "No such map or revision."},
     status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut, "description": "Bad coordinates or label table."},
 }
-
-CacheDep = Annotated[RevisionCache, Depends(get_cache)]
 
 
 class SemanticLabelOut(BaseModel):
@@ -74,19 +60,6 @@ class PointOut(BaseModel):
 
 
 _COORD = Query(ge=-MAX_BBOX_SIDE_M, le=MAX_BBOX_SIDE_M, description="Map-frame metres.", examples=[12.4])
-NEAR_M = 0.25
-
-
-def _contains(stored: StoredFeature, x: float, y: float) -> bool:
-    geometry = stored.feature.geometry
-    kind, coords = geometry.get("type"), geometry.get("coordinates") or []
-    if kind == "Polygon":
-        ring = np.asarray(coords[0], dtype=np.float32).reshape(-1, 1, 2)
-        return bool(cv2.pointPolygonTest(ring, (x, y), False) >= 0)
-    if kind == "MultiPolygon":
-        return any(cv2.pointPolygonTest(np.asarray(p[0], dtype=np.float32).reshape(-1, 1, 2), (x, y), False) >= 0
-                   for p in coords)
-    return True  # points and lines: the bbox query already kept those within NEAR_M
 
 
 @router.get("/semantics", summary="What is at a point", responses=_ERRORS)
@@ -101,43 +74,16 @@ def semantics_at(
 ) -> PointOut:
     """Occupancy, semantic class and its entropy, place region and label, and the features at map point (x, y)
     (as of ``?revision=``). Parts with no layer yet, or outside it, are null."""
-    fusion, places_cfg = settings.fusion, settings.decomposition
-    occupancy = cached_layer(store, cache, map_info.id, places_cfg.source_layer, revision)
-    semantic = None
-    labels = cached_layer(store, cache, map_info.id, fusion.label_layer, revision)
-    if labels is not None and (code := value_at(labels, x, y)) is not None:
-        entropy_layer = cached_layer(store, cache, map_info.id, fusion.entropy_layer, revision)
-        entropy = None if entropy_layer is None else value_at(entropy_layer, x, y)
-        no_data = None if entropy_layer is None else entropy_layer.meta.get("no_data")
-        finite = isinstance(entropy, float) and np.isfinite(entropy) and entropy != no_data and entropy >= 0
-        semantic = SemanticLabelOut(label=class_name(labels, int(code)), code=int(code),
-                                    entropy=float(entropy) if finite and entropy is not None else None,
-                                    layer_revision_id=store.layer_revision(map_info.id, fusion.label_layer,
-                                                                           revision=revision) or 0)
-    place = None
-    places = cached_layer(store, cache, map_info.id, places_cfg.label_layer, revision)
-    segments = cached_layer(store, cache, map_info.id, places_cfg.segment_layer, revision)
-    if places is not None and segments is not None:
-        region, code = value_at(segments, x, y), value_at(places, x, y)
-        if region and code is not None:
-            place = PlaceOut(region=f"r{region}", label=class_name(places, int(code)) or str(code),
-                             layer_revision_id=store.layer_revision(map_info.id, places_cfg.label_layer,
-                                                                    revision=revision) or 0)
-    near = store.features(map_info.id, bbox=(x - NEAR_M, y - NEAR_M, x + NEAR_M, y + NEAR_M), revision=revision,
-                          limit=500)
-    found = [FeatureAt(kind=f.feature.kind, key=f.feature.key,
-                       label=_label(f.feature.properties))
-             for f in near if f.feature.kind not in ("line", "pillar") and _contains(f, x, y)]
-    return PointOut(x_m=x, y_m=y, occupancy=None if occupancy is None else value_at(occupancy, x, y),
-                    semantic=semantic, place=place, features=found)
-
-
-def _label(properties: Any) -> str | None:
-    for name in ("label", "id", "name"):
-        value = properties.get(name)
-        if isinstance(value, str):
-            return value
-    return None
+    found = semantics.semantics_at(store, cache, settings, map_info, x_m=x, y_m=y, revision=revision)
+    semantic, place = found.semantic, found.place
+    return PointOut(
+        x_m=found.x_m, y_m=found.y_m, occupancy=found.occupancy,
+        semantic=None if semantic is None else SemanticLabelOut(
+            label=semantic.label, code=semantic.code, entropy=semantic.entropy,
+            layer_revision_id=semantic.layer_revision_id),
+        place=None if place is None else PlaceOut(region=place.region, label=place.label,
+                                                  layer_revision_id=place.layer_revision_id),
+        features=[FeatureAt(kind=item.kind, key=item.key, label=item.label) for item in found.features])
 
 
 # -- the label table ---------------------------------------------------------------------------------
@@ -179,41 +125,17 @@ class LabelTableIn(BaseModel):
         examples=[{"0": "corridor", "3": "storage"}])
 
 
-def stored_overrides(store: StoreDep, map_id: int, revision: int | None) -> tuple[dict[str, str], int | None]:
-    found = store.latest_revision(map_id, stage=LABEL_TABLE_STAGE, at_or_before=revision)
-    if found is None:
-        return {}, None
-    raw = found.summary.get(LABEL_OVERRIDES_KEY, {})
-    return ({str(k): str(v) for k, v in raw.items()} if isinstance(raw, dict) else {}), found.id
-
-
 @router.get("/label-table", summary="The place label table", responses=_ERRORS)
 def get_label_table(map_info: MapDep, store: StoreDep, revision: RevisionQuery) -> LabelTableOut:
     """The human label semantics of grid decomposition: each label's functionality and connect-ability, each
     place category of the current decomposition with its label, and the overrides a person set."""
-    overrides, overrides_revision = stored_overrides(store, map_info.id, revision)
-    rows: dict[int, dict[str, Any]] = {}
-    for stored in store.features(map_info.id, kinds=list(REGION_KINDS), revision=revision):
-        props = stored.feature.properties
-        category, label = props.get("category"), props.get("label")
-        if not isinstance(category, int) or category < 0 or not isinstance(label, str):
-            continue
-        row = rows.setdefault(category, {"labels": {}, "regions": 0, "area_m2": 0.0})
-        area = props.get("area_m2")
-        area = float(area) if isinstance(area, int | float) else 0.0
-        row["labels"][label] = row["labels"].get(label, 0.0) + area
-        row["regions"] += 1
-        row["area_m2"] += area
-    categories = [
-        CategoryRow(category=c, label=max(row["labels"], key=row["labels"].get), overridden=str(c) in overrides,
-                    regions=row["regions"], area_m2=round(row["area_m2"], 2))
-        for c, row in sorted(rows.items())
-    ]
-    labels = [LabelRow(label=label.name.lower(), functionality=semantics.functionality,
-                       connectable=sorted(item.name.lower() for item in semantics.connectable))
-              for label, semantics in LABEL_TABLE.items() if label is not Label.NONE]
-    return LabelTableOut(labels=labels, categories=categories, overrides=overrides,
-                         overrides_revision_id=overrides_revision)
+    table = semantics.label_table(store, map_info, revision=revision)
+    return LabelTableOut(
+        labels=[LabelRow(label=row.label, functionality=row.functionality, connectable=row.connectable)
+                for row in table.labels],
+        categories=[CategoryRow(category=row.category, label=row.label, overridden=row.overridden,
+                                regions=row.regions, area_m2=row.area_m2) for row in table.categories],
+        overrides=table.overrides, overrides_revision_id=table.overrides_revision_id)
 
 
 class LabelTableAccepted(BaseModel):
@@ -232,11 +154,8 @@ def put_label_table(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
     revision; the grid decomposition worker then re-labels the map as a new revision (watch the events).
     Needs a `write` key."""
     try:
-        parsed = parse_label_table(body.overrides)
-    except DecompositionError as err:
-        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
-    overrides = {str(c): label.name.lower() for c, label in sorted(parsed.items())}
-    written = store.write_revision(map_info.id,
-                                   RevisionWrite(LABEL_TABLE_STAGE, summary={LABEL_OVERRIDES_KEY: overrides}))
+        written, overrides = semantics.write_overrides(store, map_info, body.overrides)
+    except InvalidQueryError as err:
+        raise http_error(err) from err
     announcer.announce(map_info, written)
     return LabelTableAccepted(revision_id=written.id, overrides=overrides)

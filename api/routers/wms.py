@@ -8,10 +8,10 @@ from typing import Annotated
 from fastapi import APIRouter, Body, HTTPException, status
 from pydantic import BaseModel, Field, model_validator
 
-from api.binindex import WMS_STAGE, wms_matching
 from api.deps import AnnouncerDep, MapDep, RevisionQuery, StoreDep
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
-from api.routers.bins import BIN_ID_PATTERN
+from api.queries import BIN_ID_PATTERN
+from atlas.reconcile import WMS_STAGE, wms_matching
 from shared.store import WmsBin
 
 router = APIRouter(prefix="/v1/maps/{map_name}/wms-bins", tags=["bins"], responses=COMMON_ERRORS)

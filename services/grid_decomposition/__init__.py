@@ -22,7 +22,7 @@ from services.grid_decomposition.radiogram import Line, Radiogram, line_offsets,
 from services.grid_decomposition.records import (
     PLACE_LABELS,
     PLACE_SEGMENTS,
-    REGION_KINDS,
+    REGION_FEATURE_KINDS,
     decomposition_features,
     decomposition_layers,
     decomposition_topology,
@@ -30,22 +30,19 @@ from services.grid_decomposition.records import (
 )
 from services.grid_decomposition.regions import RegionInfo, face_regions, region_topology
 from services.grid_decomposition.semantics import (
-    LABEL_TABLE,
     Connection,
-    Label,
-    LabelSemantics,
     link_connection,
     parse_label,
+    parse_label_table,
 )
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.templates import Template, match_templates, template_branches
 from services.grid_decomposition.texture import gabor_features, segment_texture_regions
 
 __all__ = [
-    "LABEL_TABLE",
     "PLACE_LABELS",
     "PLACE_SEGMENTS",
-    "REGION_KINDS",
+    "REGION_FEATURE_KINDS",
     "Connection",
     "Decomposition",
     "DecompositionError",
@@ -55,8 +52,6 @@ __all__ = [
     "FaceLabels",
     "Gradients",
     "IpaScores",
-    "Label",
-    "LabelSemantics",
     "Line",
     "LineGroup",
     "Radiogram",
@@ -92,6 +87,7 @@ __all__ = [
     "overview_image",
     "parse_label",
     "parse_label_overrides",
+    "parse_label_table",
     "radiogram",
     "raycast_features",
     "read_map_file",

@@ -1,4 +1,8 @@
-"""The ipa room-segmentation protocol: per-room recall, per-segment precision and best IoU."""
+"""The ipa room-segmentation protocol: per-room recall, per-segment precision and best IoU.
+
+Also the ROSE\u00b2 form of it (colour ground truth, scored on the map's free pixels only) and the
+stability of region ids over the steps of a growing map.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ import numpy.typing as npt
 from services.grid_decomposition.errors import DecompositionError
 
 FREE_GREY = 250
+GT_ROOM_GREY = 250  # ipa: cv::threshold(gt, 250, THRESH_BINARY), rooms are the pixels above it
 MIN_AREA_PX = 100
 
 
@@ -32,7 +37,7 @@ class IpaScores(NamedTuple):
 
 
 def ground_truth_rooms(gt_grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
-    """Rooms of an ipa ``_gt_segmentation.png`` (grey levels): 8-connected white regions > 100 px.
+    """Rooms of an ipa ``_gt_segmentation.png`` (grey levels): 8-connected regions above grey 250, > 100 px.
 
     Returns
     -------
@@ -42,7 +47,7 @@ def ground_truth_rooms(gt_grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
     grey = np.asarray(gt_grey)
     if grey.ndim != 2 or grey.size == 0:
         raise DecompositionError(f"ground truth must be a non-empty 2-D grey image, got shape {grey.shape}")
-    n, labels = cv2.connectedComponents((grey >= FREE_GREY).astype(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    n, labels = cv2.connectedComponents((grey > GT_ROOM_GREY).astype(np.uint8), connectivity=8, ltype=cv2.CV_32S)
     return _drop_small(np.asarray(labels, dtype=np.int32), int(n))
 
 
@@ -93,3 +98,151 @@ def ipa_scores(segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]) 
         n_rooms=n_room,
         n_segments=n_seg,
     )
+
+
+def colour_rooms(
+    gt_rgb: npt.NDArray[np.uint8], *, background: tuple[tuple[int, int, int], ...] = ((0, 0, 0),)
+) -> npt.NDArray[np.int32]:
+    """Rooms of a colour ground truth (ROSE\u00b2 ``gt.png``): each colour is one room.
+
+    Parameters
+    ----------
+    gt_rgb : (H, W, 3 or 4) uint8
+        One colour per room; an alpha channel is ignored.
+    background : tuple of (r, g, b)
+        Colours that are no room (black in ``gt.png``; ROSE\u00b2's ``rose2_rooms.png`` leaves
+        white where it found no room).
+
+    Returns
+    -------
+    (H, W) int32
+        Room id per pixel (colours numbered in sorted order), 0 outside rooms; rooms of at most
+        100 px dropped.
+    """
+    rgb = np.asarray(gt_rgb)
+    if rgb.ndim != 3 or rgb.shape[2] < 3 or rgb.size == 0:
+        raise DecompositionError(f"colour ground truth must be an (H, W, 3|4) image, got shape {rgb.shape}")
+    key = (rgb[..., 0].astype(np.int64) << 16) | (rgb[..., 1].astype(np.int64) << 8) | rgb[..., 2]
+    for r, g, b in background:
+        key[key == (r << 16) | (g << 8) | b] = -1
+    key += 1
+    values, inverse = np.unique(key, return_inverse=True)
+    dense = inverse.reshape(key.shape).astype(np.int32) + np.int32(0 if values[0] == 0 else 1)
+    return _drop_small(dense, int(dense.max()) + 1)
+
+
+def on_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
+    """``labels`` kept on ``free`` pixels only (the ROSE\u00b2 scoring: free in the map on both sides)."""
+    lab = np.asarray(labels)
+    if lab.shape != free.shape:
+        raise DecompositionError(f"labels shape {lab.shape} differs from the free mask {free.shape}")
+    return np.where(free, lab, 0).astype(np.int32)
+
+
+def align_offset(
+    before: npt.NDArray[np.bool_], after: npt.NDArray[np.bool_], *, max_shift_px: int = 400
+) -> tuple[int, int]:
+    """(row, col) offset of ``before`` inside ``after`` that best overlaps their free pixels.
+
+    A growing map keeps its resolution but may grow on any side: the offset of the older map's
+    origin in the newer one, searched within ``max_shift_px`` (and the size difference) by the
+    overlap of the two free masks (FFT correlation).
+    """
+    a = np.asarray(before, dtype=np.float32)
+    b = np.asarray(after, dtype=np.float32)
+    if a.ndim != 2 or b.ndim != 2:
+        raise DecompositionError(f"free masks must be 2-D, got {a.shape} and {b.shape}")
+    h, w = b.shape[0] + a.shape[0], b.shape[1] + a.shape[1]
+    corr = np.fft.irfft2(np.fft.rfft2(b, (h, w)) * np.conj(np.fft.rfft2(a, (h, w))), (h, w))
+    rows = np.fft.fftfreq(h, 1.0 / h).astype(np.int64)  # offsets -h/2 .. h/2
+    cols = np.fft.fftfreq(w, 1.0 / w).astype(np.int64)
+    ok_r = np.abs(rows) <= max_shift_px + abs(b.shape[0] - a.shape[0])
+    ok_c = np.abs(cols) <= max_shift_px + abs(b.shape[1] - a.shape[1])
+    corr = np.where(ok_r[:, None] & ok_c[None, :], corr, -np.inf)
+    r, c = np.unravel_index(int(np.argmax(corr)), corr.shape)
+    return int(rows[r]), int(cols[c])
+
+
+def shift_into(
+    image: npt.NDArray[np.integer], offset: tuple[int, int], shape: tuple[int, int]
+) -> npt.NDArray[np.int32]:
+    """``image`` placed at ``offset`` (row, col) in a zero image of ``shape`` (parts outside cut off)."""
+    out = np.zeros(shape, dtype=np.int32)
+    dr, dc = offset
+    h, w = image.shape
+    r0, c0 = max(dr, 0), max(dc, 0)
+    r1, c1 = min(dr + h, shape[0]), min(dc + w, shape[1])
+    if r1 > r0 and c1 > c0:
+        out[r0:r1, c0:c1] = image[r0 - dr : r1 - dr, c0 - dc : c1 - dc]
+    return out
+
+
+class IdStability(NamedTuple):
+    """Region ids of one step kept in the next: ``kept`` of ``matched`` regions (``share`` = kept / matched)."""
+
+    kept: int
+    matched: int
+    share: float
+
+
+def id_stability(
+    before: npt.NDArray[np.integer],
+    after: npt.NDArray[np.integer],
+    rooms_after: npt.NDArray[np.int32],
+    *,
+    min_overlap: float = 0.5,
+) -> IdStability:
+    """How many regions of a step keep their id in the next step, where their room still exists.
+
+    Regions are matched by overlap (both images in the newer map's frame, 0 = none): a region of
+    ``before`` whose pixels lie mostly (> ``min_overlap``) in rooms of ``rooms_after`` is counted;
+    it is kept when the region of ``after`` it overlaps most carries the same id and holds more
+    than ``min_overlap`` of it. Region ids of a decomposition are its own: give ``after`` with ids
+    carried over by :func:`carry_ids` to score what a live map would show.
+    """
+    b, a = np.asarray(before), np.asarray(after)
+    if b.shape != a.shape or rooms_after.shape != a.shape:
+        raise DecompositionError(f"shapes differ: {b.shape}, {a.shape}, {rooms_after.shape}")
+    kept = matched = 0
+    for rid in np.unique(b[b > 0]):
+        mask = b == rid
+        size = int(mask.sum())
+        if size <= MIN_AREA_PX or (rooms_after[mask] > 0).mean() <= min_overlap:
+            continue
+        matched += 1
+        ids, counts = np.unique(a[mask], return_counts=True)
+        best = int(np.argmax(np.where(ids > 0, counts, -1)))
+        if ids[best] == rid and counts[best] > min_overlap * size:
+            kept += 1
+    return IdStability(kept, matched, kept / matched if matched else 1.0)
+
+
+def carry_ids(
+    before: npt.NDArray[np.integer], after: npt.NDArray[np.integer], *, min_overlap: float = 0.5
+) -> npt.NDArray[np.int32]:
+    """``after`` renumbered so that each region takes the id of the ``before`` region it continues.
+
+    A region of ``after`` continues a region of ``before`` when more than ``min_overlap`` of the
+    older region lies in it and it is that region's best match (one new region per old id); other
+    regions get fresh ids above every id of ``before``. The same images as :func:`id_stability`.
+    """
+    b, a = np.asarray(before), np.asarray(after)
+    if b.shape != a.shape:
+        raise DecompositionError(f"shapes differ: {b.shape}, {a.shape}")
+    both = (b > 0) & (a > 0)
+    pairs, counts = np.unique(np.stack([b[both], a[both]]).astype(np.int64), axis=1, return_counts=True)
+    size_b = dict(zip(*np.unique(b[b > 0], return_counts=True), strict=True))
+    new_id: dict[int, int] = {}
+    for k in np.argsort(-counts, kind="stable"):
+        old, new = int(pairs[0, k]), int(pairs[1, k])
+        if new in new_id or old in new_id.values() or counts[k] <= min_overlap * size_b[old]:
+            continue
+        new_id[new] = old
+    nxt = int(max(b.max(initial=0), 0)) + 1
+    lut = np.zeros(int(a.max(initial=0)) + 1, dtype=np.int32)
+    for rid in np.unique(a[a > 0]):
+        if int(rid) in new_id:
+            lut[rid] = new_id[int(rid)]
+        else:
+            lut[rid], nxt = nxt, nxt + 1
+    return lut[np.maximum(a, 0)]

@@ -11,8 +11,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from services.grid_decomposition.faces import FaceGeometry
-from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.templates import template_branches
+from shared.vocabulary import PlaceLabel
 
 
 class FaceLabels(NamedTuple):
@@ -21,11 +21,11 @@ class FaceLabels(NamedTuple):
     Attributes
     ----------
     evidence : (F + 1,) int64
-        :class:`Label` value each face gets from geometry and the templates alone.
+        :class:`PlaceLabel` value each face gets from geometry and the templates alone.
     category : (F + 1,) int64
         Place category by vote of the face's samples, -1 where it has none.
     label : (F + 1,) int64
-        Final :class:`Label` value.
+        Final :class:`PlaceLabel` value.
     category_labels : dict
         The category -> label assignment used (automatic, then overridden by a person).
     """
@@ -33,7 +33,7 @@ class FaceLabels(NamedTuple):
     evidence: npt.NDArray[np.int64]
     category: npt.NDArray[np.int64]
     label: npt.NDArray[np.int64]
-    category_labels: dict[int, Label]
+    category_labels: dict[int, PlaceLabel]
 
 
 class Evidence(NamedTuple):
@@ -42,7 +42,7 @@ class Evidence(NamedTuple):
     Attributes
     ----------
     label : (F + 1,) int64
-        :class:`Label` value.
+        :class:`PlaceLabel` value.
     off_pitch : (F + 1,) bool
         Bay-shaped faces between uprights left out of storage because they are longer than the
         bays around them (a cross aisle one bay wide); they are drivable in ``label``.
@@ -112,7 +112,7 @@ def evidence_labels(
         Connected (non-cogent) links between faces, ids 1..F.
     """
     n = geometry.short_m.size
-    ev = np.full(n, Label.NONE.value, dtype=np.int64)
+    ev = np.full(n, PlaceLabel.NONE.value, dtype=np.int64)
     is_free = face_free_px > 0
     bay = (
         is_free
@@ -141,13 +141,13 @@ def evidence_labels(
         if not grown.any():
             break
         storage |= grown
-    ev[storage] = Label.STORAGE.value
+    ev[storage] = PlaceLabel.STORAGE.value
     has_storage = np.zeros(component_elongation.size, dtype=bool)
     has_storage[component[storage]] = True
     area_m2 = np.bincount(component, weights=face_free_px, minlength=has_storage.size) * resolution_m**2
     network = has_storage | (component_elongation >= corridor_min_elongation)
     compact = is_free & ~storage & ~network[component]
-    ev[compact] = np.where(area_m2[component[compact]] >= open_area_min_m2, Label.OPEN_AREA, Label.ROOM)
+    ev[compact] = np.where(area_m2[component[compact]] >= open_area_min_m2, PlaceLabel.OPEN_AREA, PlaceLabel.ROOM)
     drivable = is_free & ~storage & network[component]
     e = np.asarray(links, dtype=np.int64).reshape(-1, 2)
     e = e[drivable[e[:, 0]] & drivable[e[:, 1]]]
@@ -160,9 +160,9 @@ def evidence_labels(
         face_free_px.astype(np.float64) * resolution_m**2,
         max_area_m2=corridor_max_width_m**2,
     )
-    ev[drivable] = Label.OPEN_AREA.value
-    ev[junction] = Label.JUNCTION.value
-    ev[corridor] = Label.CORRIDOR.value
+    ev[drivable] = PlaceLabel.OPEN_AREA.value
+    ev[junction] = PlaceLabel.JUNCTION.value
+    ev[corridor] = PlaceLabel.CORRIDOR.value
     return Evidence(ev, off_pitch)
 
 
@@ -203,7 +203,7 @@ def assign_labels(
     category: npt.NDArray[np.int64],
     face_free_px: npt.NDArray[np.int64],
     *,
-    overrides: Mapping[int, Label] | None = None,
+    overrides: Mapping[int, PlaceLabel] | None = None,
     min_purity: float = 0.9,
 ) -> FaceLabels:
     """Map place categories to labels and label faces.
@@ -217,25 +217,25 @@ def assign_labels(
     categories, no category, decisive evidence) it keeps its own evidence.
     """
     n_cat = int(category.max()) + 1 if category.size else 0
-    votes = np.zeros((max(n_cat, 1), len(Label)), dtype=np.float64)
+    votes = np.zeros((max(n_cat, 1), len(PlaceLabel)), dtype=np.float64)
     has = category >= 0
     np.add.at(votes, (category[has], evidence[has]), face_free_px[has].astype(np.float64))
-    votes[:, Label.NONE.value] = 0.0
+    votes[:, PlaceLabel.NONE.value] = 0.0
     total = votes.sum(axis=1)
     purity = np.divide(votes.max(axis=1), total, out=np.zeros_like(total), where=total > 0)
-    mapping: dict[int, Label] = {}
+    mapping: dict[int, PlaceLabel] = {}
     for c in range(n_cat):
-        mapping[c] = Label(int(np.argmax(votes[c]))) if total[c] > 0 else Label.UNIDENTIFIED
+        mapping[c] = PlaceLabel(int(np.argmax(votes[c]))) if total[c] > 0 else PlaceLabel.UNIDENTIFIED
     trusted = purity >= min_purity
     for c, label in (overrides or {}).items():
         mapping[c] = label
-    lut = np.array([mapping.get(c, Label.UNIDENTIFIED).value for c in range(max(n_cat, 1))], dtype=np.int64)
-    decisive = np.isin(evidence, [Label.STORAGE.value, Label.CORRIDOR.value, Label.JUNCTION.value])
+    lut = np.array([mapping.get(c, PlaceLabel.UNIDENTIFIED).value for c in range(max(n_cat, 1))], dtype=np.int64)
+    decisive = np.isin(evidence, [PlaceLabel.STORAGE.value, PlaceLabel.CORRIDOR.value, PlaceLabel.JUNCTION.value])
     overridden = np.zeros(trusted.size, dtype=bool)
     overridden[[c for c in (overrides or {}) if 0 <= c < trusted.size]] = True
     cat = np.maximum(category, 0)
     use = has & (overridden[cat] | (trusted[cat] & ~decisive))
     final = np.where(use, lut[np.maximum(category, 0)], evidence).astype(np.int64)
-    final[(final == Label.NONE.value) & (face_free_px > 0)] = Label.UNIDENTIFIED.value
-    final[face_free_px == 0] = Label.NONE.value
+    final[(final == PlaceLabel.NONE.value) & (face_free_px > 0)] = PlaceLabel.UNIDENTIFIED.value
+    final[face_free_px == 0] = PlaceLabel.NONE.value
     return FaceLabels(evidence, category, final, mapping)

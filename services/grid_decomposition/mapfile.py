@@ -19,10 +19,10 @@ from scipy import ndimage
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.overview import overview_image
 from services.grid_decomposition.pipeline import Decomposition, decompose
-from services.grid_decomposition.semantics import Label, parse_label
+from services.grid_decomposition.semantics import parse_label
 from services.grid_decomposition.subdivision import line_endpoints
-from services.occupancy_mapping.errors import OccupancyMappingError
-from services.occupancy_mapping.mapio import read_map_yaml
+from shared.mapfiles import MapFileError, read_map_yaml
+from shared.vocabulary import FeatureKind, PlaceLabel
 
 logger = logging.getLogger(__name__)
 
@@ -34,8 +34,10 @@ def read_map_file(
 ) -> tuple[npt.NDArray[np.int8], float, tuple[float, float]]:
     """Occupancy (GridLayer order), resolution and origin of a map_server YAML or a bare image.
 
-    A bare image is read with map_server's trinary thresholds (occupied above 0.65, free below
-    0.196 of darkness) and needs ``resolution_m``; its origin is (0, 0). For a YAML,
+    A bare image is read with map_server's thresholds (occupied above 0.65, free below 0.196 of
+    darkness, the rest unknown) and needs ``resolution_m``; its origin is (0, 0). Its free cells
+    keep their darkness in percent (0..19, rounded down): grey fringes at walls are not clearly
+    free (:func:`~services.grid_decomposition.cleaning.clean_occupancy`). For a YAML,
     ``resolution_m`` (if given) must match the file's.
     """
     path = Path(map_path)
@@ -44,7 +46,7 @@ def read_map_file(
     if path.suffix.lower() in {".yaml", ".yml"}:
         try:
             image = read_map_yaml(path)
-        except OccupancyMappingError as err:
+        except MapFileError as err:
             raise DecompositionError(f"{err}{_missing_image_hint(path, err)}") from err
         if resolution_m is not None and not math.isclose(resolution_m, image.resolution_m, rel_tol=1e-6):
             raise DecompositionError(
@@ -65,11 +67,12 @@ def read_map_file(
     p = (255.0 - grey) / 255.0
     occ = np.full(grey.shape, -1, dtype=np.int8)
     occ[p > 0.65] = 100
-    occ[p < 0.196] = 0
+    free = p < 0.196
+    occ[free] = np.floor(p[free] * 100.0).astype(np.int8)
     return occ[::-1].copy(), float(resolution_m), (0.0, 0.0)
 
 
-def _missing_image_hint(yaml_path: Path, err: OccupancyMappingError) -> str:
+def _missing_image_hint(yaml_path: Path, err: MapFileError) -> str:
     """For a YAML whose image is missing: the images beside it and how to decompose one of them."""
     if not isinstance(err.__cause__, FileNotFoundError) or not yaml_path.exists():
         return ""
@@ -83,9 +86,9 @@ def _missing_image_hint(yaml_path: Path, err: OccupancyMappingError) -> str:
     )
 
 
-def parse_label_overrides(text: str) -> dict[int, Label]:
+def parse_label_overrides(text: str) -> dict[int, PlaceLabel]:
     """``"0=corridor,3=storage"`` -> {0: CORRIDOR, 3: STORAGE} (the CLI's ``--labels``)."""
-    out: dict[int, Label] = {}
+    out: dict[int, PlaceLabel] = {}
     for item in filter(None, (part.strip() for part in text.split(","))):
         key, sep, value = item.partition("=")
         if not sep or not key.strip().lstrip("-").isdigit():
@@ -125,7 +128,7 @@ def layout_features(decomposition: Decomposition) -> dict[str, Any]:
                 "type": "Feature",
                 "geometry": {"type": "MultiPolygon", "coordinates": polys},
                 "properties": {
-                    "kind": "region",
+                    "kind": FeatureKind.REGION,
                     "id": sid,
                     "label": info.label.name.lower(),
                     "category": info.category,
@@ -141,7 +144,7 @@ def layout_features(decomposition: Decomposition) -> dict[str, Any]:
                 "type": "Feature",
                 "geometry": {"type": "LineString", "coordinates": _to_metres(ends, decomposition)},
                 "properties": {
-                    "kind": "wall",
+                    "kind": FeatureKind.WALL,
                     "id": int(e),
                     "label": "door" if cog.door[e] else "wall",
                     "category": None,
@@ -162,7 +165,7 @@ def layout_features(decomposition: Decomposition) -> dict[str, Any]:
                             "coordinates": _to_metres(np.array([p0, p1], dtype=np.float64) + 0.5, decomposition),
                         },
                         "properties": {
-                            "kind": "line",
+                            "kind": FeatureKind.LINE,
                             "id": n_line,
                             "label": "coarse" if line.coarse else "fine",
                             "category": g_index,
@@ -230,7 +233,7 @@ def decompose_map_file(
     out_dir: Path,
     *,
     resolution_m: float | None = None,
-    label_overrides: Mapping[int, Label] | None = None,
+    label_overrides: Mapping[int, PlaceLabel] | None = None,
 ) -> Decomposition:
     """Decompose a map file and write its outputs (the ``aisle decompose`` command).
 

@@ -9,16 +9,16 @@ import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.pipeline import Decomposition
-from services.grid_decomposition.semantics import Label
+from shared.vocabulary import PlaceLabel
 
-LABEL_COLOURS: dict[Label, tuple[int, int, int]] = {
-    Label.NONE: (40, 40, 40),
-    Label.CORRIDOR: (120, 200, 120),
-    Label.JUNCTION: (70, 110, 230),
-    Label.STORAGE: (240, 170, 60),
-    Label.ROOM: (190, 160, 230),
-    Label.OPEN_AREA: (150, 220, 230),
-    Label.UNIDENTIFIED: (200, 200, 200),
+LABEL_COLOURS: dict[PlaceLabel, tuple[int, int, int]] = {
+    PlaceLabel.NONE: (40, 40, 40),
+    PlaceLabel.CORRIDOR: (120, 200, 120),
+    PlaceLabel.JUNCTION: (70, 110, 230),
+    PlaceLabel.STORAGE: (240, 170, 60),
+    PlaceLabel.ROOM: (190, 160, 230),
+    PlaceLabel.OPEN_AREA: (150, 220, 230),
+    PlaceLabel.UNIDENTIFIED: (200, 200, 200),
 }
 WALL_COLOUR = (230, 30, 30)
 RACK_COLOUR = (150, 80, 10)
@@ -29,7 +29,7 @@ _ROW_PX = 26
 
 
 def overview_image(
-    decomposition: Decomposition, *, max_side_px: int = 2000, min_side_px: int = 1000
+    decomposition: Decomposition, *, max_side_px: int = 2000, min_side_px: int = 1000, margin_m: float | None = 2.0
 ) -> npt.NDArray[np.uint8]:
     """RGB image (top row = highest y): label colours, region borders, walls, doors, rack rows, lines, legend.
 
@@ -39,6 +39,8 @@ def overview_image(
     The map is scaled to at most ``max_side_px`` on its longer side (small maps are enlarged by an
     integer factor, nearest neighbour, to about ``min_side_px``); the legend to its right names every
     colour with its share of the free space, the line styles, the region count and a scale bar.
+    The picture shows the labelled part of the map and ``margin_m`` around it (a robot's map is
+    often a small building in a large unknown canvas); ``None`` shows the whole map.
 
     Returns
     -------
@@ -64,6 +66,13 @@ def overview_image(
     if racks:
         cv2.polylines(rgb, racks, True, RACK_COLOUR, 2, cv2.LINE_8)
     image = np.ascontiguousarray(rgb[::-1])
+    labelled = decomposition.labels[::-1] > 0
+    if margin_m is not None and labelled.any():
+        pad = max(0, round(margin_m / decomposition.resolution_m))
+        rows, cols = np.flatnonzero(labelled.any(axis=1)), np.flatnonzero(labelled.any(axis=0))
+        image = np.ascontiguousarray(
+            image[max(0, rows[0] - pad) : rows[-1] + pad + 1, max(0, cols[0] - pad) : cols[-1] + pad + 1]
+        )
     h, w = image.shape[:2]
     scale = min(1.0, max_side_px / max(h, w))
     if scale < 1.0:
@@ -81,13 +90,13 @@ def _with_legend(
     """``image`` with a white legend panel on its right."""
     labels = decomposition.labels
     free = labels > 0
-    share = np.bincount(labels[free], minlength=len(Label)) / max(int(free.sum()), 1)
+    share = np.bincount(labels[free], minlength=len(PlaceLabel)) / max(int(free.sum()), 1)
     rows: list[tuple[str, tuple[int, int, int], str]] = []
-    for label in Label:
-        if label is not Label.NONE and share[label.value] > 0:
+    for label in PlaceLabel:
+        if label is not PlaceLabel.NONE and share[label.value] > 0:
             name = label.name.lower().replace("_", " ")
             rows.append(("box", LABEL_COLOURS[label], f"{name} {100 * share[label]:.1f} % of free space"))
-    rows.append(("box", LABEL_COLOURS[Label.NONE], "occupied / unknown"))
+    rows.append(("box", LABEL_COLOURS[PlaceLabel.NONE], "occupied / unknown"))
     rows.append(("line", WALL_COLOUR, "wall (cogent edge)"))
     rows.append(("line", DOOR_COLOUR, "door (closed doorway)"))
     rows.append(("line", BORDER_COLOUR, "region border"))

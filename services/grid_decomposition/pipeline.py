@@ -14,6 +14,7 @@ import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
@@ -36,12 +37,12 @@ from services.grid_decomposition.regions import (
     road_networks,
     warehouse_floors,
 )
-from services.grid_decomposition.rooms import furniture, segment_rooms
+from services.grid_decomposition.rooms import furniture, segment_rooms, wall_furniture
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
-from services.grid_decomposition.semantics import Label
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
+from shared.vocabulary import PlaceLabel
 
 logger = logging.getLogger(__name__)
 
@@ -66,7 +67,7 @@ class Decomposition:
     Attributes
     ----------
     labels : (H, W) uint8
-        :class:`Label` code per pixel, 0 off free space.
+        :class:`PlaceLabel` code per pixel, 0 off free space.
     segments : (H, W) int32
         Region id per pixel, 0 where no region.
     regions : dict[int, RegionInfo]
@@ -234,8 +235,9 @@ def decompose(
     resolution: Resolution = Resolution.COARSE,
     n_texture_regions: int | None = None,
     n_categories: int = 8,
-    label_overrides: Mapping[int, Label] | None = None,
-    door_max_width_m: float = 2.5,
+    label_overrides: Mapping[int, PlaceLabel] | None = None,
+    door_max_width_m: float = 2.0,
+    cut_max_width_m: float = 2.5,
     wall_min_length_m: float = 0.5,
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
@@ -246,6 +248,8 @@ def decompose(
     structure_min_area_m2: float = 0.5,
     neck_half_width_m: float = 0.5,
     room_min_area_m2: float = 1.5,
+    clean: bool = True,
+    streak_reach_m: float = 2.0,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -267,14 +271,16 @@ def decompose(
     n_categories : int
         k of the k-means place categorisation.
     label_overrides : mapping, optional
-        Place category -> :class:`Label`, replacing the automatic assignment.
-    door_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
-        Doorways up to ``door_max_width_m`` wide. Along lines: gaps between wall runs of at least
+        Place category -> :class:`PlaceLabel`, replacing the automatic assignment.
+    door_max_width_m, cut_max_width_m, wall_min_length_m, wall_tolerance_m, door_widening_m, door_max_depth_m : float
+        Along lines, doorways up to ``door_max_width_m`` wide: gaps between wall runs of at least
         ``wall_min_length_m`` are closed when the free space behind them widens by
         ``door_widening_m`` on both sides within ``door_max_depth_m`` of the line (a corridor or a
         passage between blocks does not); walls within ``wall_tolerance_m`` of a line are on it.
-        Off the lines, doorways are found from the free space itself
-        (:func:`~services.grid_decomposition.doorways.find_doorways`, same width and widening).
+        Off the lines, doorways up to ``cut_max_width_m`` wide are found from the free space itself
+        (:func:`~services.grid_decomposition.doorways.find_doorways`, same widening). On real maps
+        the gaps between furniture along a line closed as doors up to 2.5 m and cut furnished
+        rooms apart; 2.0 m keeps the ipa doors.
     face_disparity_threshold, edge_occupancy_threshold : float
         t1, t2 of the cogency test.
     min_region_area_m2 : float
@@ -291,6 +297,13 @@ def decompose(
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
         way and whose lattices line up along diagonals, still vote in the radiograms.
+    clean : bool
+        Clean the map first (:func:`~services.grid_decomposition.cleaning.clean_occupancy`: wall
+        fringes, specks, laser streaks): the decomposition sees the cleaned map; the streaks it
+        took out are labelled with the region they grow from, up to ``streak_reach_m`` from it
+        (a wall fringe is never labelled).
+    streak_reach_m : float
+        See ``clean``.
     seed : int
         Seed of the clusterings.
 
@@ -304,6 +317,11 @@ def decompose(
         For grids that are not 2-D, too small, out of range, or without free space.
     """
     occ = _check(occupancy, resolution_m)
+    streaks = rays = np.zeros(occ.shape, dtype=bool)
+    if clean:
+        cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
+        if np.any((cleaned >= 0) & (cleaned < FREE_PERCENT)):
+            occ, streaks, rays = cleaned, cleaning.streaks, cleaning.rays
     if n_categories < 1:
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
     free = (occ >= 0) & (occ < FREE_PERCENT)
@@ -312,7 +330,11 @@ def decompose(
     occupied = known & (occ > OCCUPIED_PERCENT)
     occupancy01 = np.where(known, occ / 100.0, 1.0)
     gradients = oriented_gradients(obstacle)
-    structure = _masked(gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))))
+    # the sides of laser rays are no walls: they would give the map directions of their own
+    ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    structure = _masked(
+        gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
+    )
     global_lines = _lines(gradients, structure, None, resolution_m)
     n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
     texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
@@ -363,8 +385,8 @@ def decompose(
     found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
     evidence = found.label.copy()
     # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)
-    evidence[majority_faces(sub.face_image, sub.n_faces, banks.storage, free)] = Label.STORAGE.value
-    evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = Label.CORRIDOR.value
+    evidence[majority_faces(sub.face_image, sub.n_faces, banks.storage, free)] = PlaceLabel.STORAGE.value
+    evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = PlaceLabel.CORRIDOR.value
     rows, cols, cats = categorize_places(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )
@@ -375,7 +397,7 @@ def decompose(
     # regions come from the automatic labels: a person's overrides rename places, they do not
     # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
     # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
-    cut_like_cells = np.where(found.off_pitch, Label.STORAGE.value, evidence)
+    cut_like_cells = np.where(found.off_pitch, PlaceLabel.STORAGE.value, evidence)
     automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
     # warehouse floors and road networks are split by their labels and left alone by the room stage
     roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
@@ -391,20 +413,26 @@ def decompose(
         floor_px,
         wall | door,
         resolution_m=resolution_m,
-        door_max_width_m=door_max_width_m,
+        door_max_width_m=cut_max_width_m,
         door_widening_m=door_widening_m,
         door_max_depth_m=door_max_depth_m,
         room_min_area_m2=room_min_area_m2,
         neck_half_width_m=neck_half_width_m,
     )
+    # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
+    against_walls = wall_furniture(obstacle, resolution_m=resolution_m) & (segments == 0)
+    grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
+    segments = np.where(against_walls, grown, segments)
+    # the streaks the cleaning took out are free space: they take the region they grow from
+    segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
     # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
     segments, places = place_segments(segments, racks, free, min_area_px=round(room_min_area_m2 / resolution_m**2))
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
     # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
     structured_segments = set(np.unique(segments[(places > 0) | floor_px]).tolist())
-    rooms = [k for k, r in regions.items() if r.label is Label.ROOM and k not in structured_segments]
-    open_areas = {k for k, r in regions.items() if r.label is Label.OPEN_AREA}
+    rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
+    open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
     objects = floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
     merges = pocket_merges(
         segments, rooms, open_areas, objects, free, max_area_px=round(_POCKET_MAX_M2 / resolution_m**2)
@@ -424,13 +452,13 @@ def decompose(
     for k, r in regions.items():
         region_label[k] = r.label.value
     own = region_label[segments]
-    loose = (labels == Label.ROOM.value) | (labels == Label.STORAGE.value) & ~floor_px & ~banks.storage
-    loose |= (own == Label.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
+    loose = (labels == PlaceLabel.ROOM.value) | (labels == PlaceLabel.STORAGE.value) & ~floor_px & ~banks.storage
+    loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
     labels = np.where(loose & (own > 0), own, labels)
     # a rack place's label, unless a person renamed the category of the face there
     renamed = np.isin(face_labels.category[sub.face_image], list(label_overrides or {}))
     labels = np.where((places > 0) & ~renamed, racks.cell_labels[places], labels)
-    labels = np.where(free, labels, 0).astype(np.uint8)
+    labels = np.where(free | streaks, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(
         sub,
@@ -512,13 +540,13 @@ def _region_records(
 ) -> tuple[dict[int, RegionInfo], npt.NDArray[np.uint8]]:
     """Region records (label: its faces' majority) and the label image (each face's own label)."""
     n_seg = int(segments.max()) + 1
-    n_lab = len(Label)
+    n_lab = len(PlaceLabel)
     lab_votes = np.bincount(
         pairs.segment * n_lab + face_labels.label[pairs.face], weights=pairs.pixels, minlength=n_seg * n_lab
     ).reshape(n_seg, n_lab)
     lab_votes[:, 0] = 0
     seg_label = np.argmax(lab_votes, axis=1)
-    seg_label[lab_votes.sum(axis=1) == 0] = Label.UNIDENTIFIED.value
+    seg_label[lab_votes.sum(axis=1) == 0] = PlaceLabel.UNIDENTIFIED.value
     n_cat = int(max(face_labels.category.max(), 0)) + 2
     cat_votes = np.bincount(
         pairs.segment * n_cat + face_labels.category[pairs.face] + 1, weights=pairs.pixels, minlength=n_seg * n_cat
@@ -534,7 +562,7 @@ def _region_records(
         cx = origin_xy_m[0] + (sx[sid] / area[sid] + 0.5) * resolution_m
         cy = origin_xy_m[1] + (sy[sid] / area[sid] + 0.5) * resolution_m
         regions[int(sid)] = RegionInfo(
-            int(sid), Label(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
+            int(sid), PlaceLabel(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
         )
     inside = segments > 0
     labels = np.where(inside, face_labels.label.astype(np.int32)[sub.face_image], 0).astype(np.int32)

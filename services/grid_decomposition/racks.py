@@ -30,7 +30,7 @@ import numpy.typing as npt
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.semantics import Label
+from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
 _OCCUPIED = 1
@@ -45,7 +45,7 @@ class RackLayout(NamedTuple):
         Place id (1..N) of every pixel of a rack row, aisle piece, cross-aisle piece or junction
         (free and obstacle pixels alike), 0 elsewhere.
     cell_labels : (N + 1,) int64
-        :class:`Label` value of each place (index 0 unused).
+        :class:`PlaceLabel` value of each place (index 0 unused).
     outline : (H, W) bool
         Borders of the places, 1 px wide: cuts for the planar subdivision.
     rows_px : (R, 4, 2) float64
@@ -61,7 +61,7 @@ class RackLayout(NamedTuple):
     @property
     def storage(self) -> npt.NDArray[np.bool_]:
         """(H, W) bool: rack footprints."""
-        out: npt.NDArray[np.bool_] = self.cell_labels[self.cells] == Label.STORAGE.value
+        out: npt.NDArray[np.bool_] = self.cell_labels[self.cells] == PlaceLabel.STORAGE.value
         return out
 
 
@@ -224,7 +224,7 @@ class _Grid(NamedTuple):
 
     xs: npt.NDArray[np.float64]  # (2 S + 2,) the end cross aisles' outer edges, then every section's ends
     ys: npt.NDArray[np.float64]  # (2 R + 2 + D,) likewise for rows, a back-to-back row split in two
-    labels: npt.NDArray[np.int64]  # (len(ys) - 1, len(xs) - 1) Label value, 0 = no place
+    labels: npt.NDArray[np.int64]  # (len(ys) - 1, len(xs) - 1) PlaceLabel value, 0 = no place
     rack: npt.NDArray[np.bool_]  # same shape: a rack row facing an aisle
     twin: npt.NDArray[np.bool_]  # (len(ys) - 1,) the second half of a back-to-back row
 
@@ -344,11 +344,11 @@ def _grid(
         for kx, (xk, b_j) in enumerate(x_kind):
             if yk == "rack" and xk == "section":
                 rack[ky, kx] = have[a_i, b_j]
-                labels[ky, kx] = Label.STORAGE.value if have[a_i, b_j] else 0
+                labels[ky, kx] = PlaceLabel.STORAGE.value if have[a_i, b_j] else 0
             elif yk == "aisle" and xk == "section":
-                labels[ky, kx] = Label.CORRIDOR.value if aisle[a_i, b_j] else 0
+                labels[ky, kx] = PlaceLabel.CORRIDOR.value if aisle[a_i, b_j] else 0
             elif yk == "rack" and xk == "gap":
-                labels[ky, kx] = Label.CORRIDOR.value if cross[a_i, b_j] else 0
+                labels[ky, kx] = PlaceLabel.CORRIDOR.value if cross[a_i, b_j] else 0
             else:
                 arms = [
                     aisle[a_i, b_j - 1] if b_j > 0 else False,
@@ -358,7 +358,7 @@ def _grid(
                 ]
                 box = (xs[kx], xs[kx + 1], ys[ky], ys[ky + 1])
                 if sum(arms) >= 2 and open_rect(*box):
-                    labels[ky, kx] = Label.JUNCTION.value if sum(arms) >= 3 else Label.CORRIDOR.value
+                    labels[ky, kx] = PlaceLabel.JUNCTION.value if sum(arms) >= 3 else PlaceLabel.CORRIDOR.value
     twin = np.array([k > 0 and y_kind[k] == y_kind[k - 1] for k in range(len(y_kind))])
     return _Grid(np.array(xs), np.array(ys), labels, rack, twin)
 
@@ -663,13 +663,13 @@ def combine(layouts: list[RackLayout], shape: tuple[int, int]) -> RackLayout:
 def face_places(
     face_image: npt.NDArray[np.int32], n_faces: int, layout: RackLayout, free: npt.NDArray[np.bool_]
 ) -> npt.NDArray[np.int64]:
-    """(F + 1,) :class:`Label` value of the place holding most of each face's free pixels; 0 off the racks."""
+    """(F + 1,) :class:`PlaceLabel` value of the place holding most of each face's free pixels; 0 off the racks."""
     out = np.zeros(n_faces + 1, dtype=np.int64)
     if layout.cell_labels.size <= 1:
         return out
     faces = face_image[free]
     place = layout.cell_labels[layout.cells[free]]
-    n_lab = len(Label)
+    n_lab = len(PlaceLabel)
     votes = np.bincount(faces * n_lab + place, minlength=(n_faces + 1) * n_lab).reshape(n_faces + 1, n_lab)
     best = votes[:, 1:].argmax(axis=1) + 1
     majority = votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1)
@@ -719,7 +719,7 @@ def place_segments(
     out[in_cells & ~free] = 0  # uprights and pallets in a rack place belong to no region
     out[inside] = n_old + place[inside]
     # a rack keeps the pallet cells the warehouse floor cut it into (a region per bay and side)
-    cell = inside & (layout.cell_labels[place] == Label.STORAGE.value) & (segments > 0)
+    cell = inside & (layout.cell_labels[place] == PlaceLabel.STORAGE.value) & (segments > 0)
     if cell.any():
         keys, pieces = np.unique(place[cell].astype(np.int64) * n_old + segments[cell], return_inverse=True)
         pieces = pieces.ravel()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 
@@ -11,27 +11,27 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.mapfile import layout_features
 from services.grid_decomposition.overview import LABEL_COLOURS
 from services.grid_decomposition.pipeline import Decomposition
-from services.grid_decomposition.semantics import Label
 from shared.store import Feature, GridLayer, TopologyEdge, TopologyNode
+from shared.vocabulary import REGION_KINDS, FeatureKind, LayerName, PlaceLabel
 
 PLACE_LABELS = "place_labels"
-"""``meta["encoding"]`` of the label layer: uint8 :class:`Label` codes, ``meta["classes"][code]`` names each."""
+"""``meta["encoding"]`` of the label layer: uint8 :class:`PlaceLabel` codes, ``meta["classes"][code]`` names each."""
 PLACE_SEGMENTS = "place_segments"
 """``meta["encoding"]`` of the segment layer: uint16 region ids, 0 where no region."""
 
-REGION_KINDS: dict[Label, str] = {
-    Label.NONE: "region",
-    Label.CORRIDOR: "corridor",
-    Label.JUNCTION: "junction",
-    Label.STORAGE: "region",
-    Label.ROOM: "room",
-    Label.OPEN_AREA: "open_area",
-    Label.UNIDENTIFIED: "region",
+REGION_FEATURE_KINDS: Final[dict[PlaceLabel, FeatureKind]] = {
+    PlaceLabel.NONE: FeatureKind.REGION,
+    PlaceLabel.CORRIDOR: FeatureKind.CORRIDOR,
+    PlaceLabel.JUNCTION: FeatureKind.JUNCTION,
+    PlaceLabel.STORAGE: FeatureKind.REGION,
+    PlaceLabel.ROOM: FeatureKind.ROOM,
+    PlaceLabel.OPEN_AREA: FeatureKind.OPEN_AREA,
+    PlaceLabel.UNIDENTIFIED: FeatureKind.REGION,
 }
 """Store feature kind of a region of each label; labels without a kind of their own are ``region``
 features whose ``label`` property names them (``storage``, ``unidentified``)."""
 
-FEATURE_KINDS = ("corridor", "junction", "line", "open_area", "region", "room", "wall")
+FEATURE_KINDS: Final = tuple(sorted((*REGION_KINDS, FeatureKind.LINE, FeatureKind.WALL)))
 """Every kind :func:`decomposition_features` returns (each key is always present)."""
 
 
@@ -43,11 +43,11 @@ def region_key(region_id: int) -> str:
 def decomposition_layers(
     decomposition: Decomposition,
     *,
-    label_layer: str = "place_labels",
-    segment_layer: str = "place_segments",
+    label_layer: str = LayerName.PLACE_LABELS,
+    segment_layer: str = LayerName.PLACE_SEGMENTS,
     meta: Mapping[str, Any] | None = None,
 ) -> list[GridLayer]:
-    """The label layer (uint8 :class:`Label` codes) and the segment layer (uint16 region ids).
+    """The label layer (uint8 :class:`PlaceLabel` codes) and the segment layer (uint16 region ids).
 
     Parameters
     ----------
@@ -77,8 +77,8 @@ def decomposition_layers(
     res, (ox, oy) = decomposition.resolution_m, decomposition.origin_xy_m
     labels = GridLayer(label_layer, decomposition.labels.astype(np.uint8), res, ox, oy, {
         "encoding": PLACE_LABELS,
-        "classes": [label.name.lower() for label in Label],
-        "colours": [list(LABEL_COLOURS[label]) for label in Label],
+        "classes": [label.name.lower() for label in PlaceLabel],
+        "colours": [list(LABEL_COLOURS[label]) for label in PlaceLabel],
         **extra,
     })
     segs = GridLayer(segment_layer, segments.astype(np.uint16), res, ox, oy,
@@ -105,18 +105,19 @@ def decomposition_features(decomposition: Decomposition) -> dict[str, list[Featu
     for item in layout_features(decomposition)["features"]:
         props = item["properties"]
         kind, ident = props["kind"], int(props["id"])
-        if kind == "region":
-            label = Label[props["label"].upper()]
-            out[REGION_KINDS[label]].append(Feature(REGION_KINDS[label], region_key(ident), item["geometry"], {
+        if kind == FeatureKind.REGION:
+            region_kind = REGION_FEATURE_KINDS[PlaceLabel[props["label"].upper()]]
+            out[region_kind].append(Feature(region_kind, region_key(ident), item["geometry"], {
                 "label": props["label"],
                 "region_id": ident,
                 "category": int(props["category"]),
                 "area_m2": float(props["area_m2"]),
             }))
-        elif kind == "wall":
-            out["wall"].append(Feature("wall", f"e{ident}", item["geometry"], {"label": props["label"]}))
+        elif kind == FeatureKind.WALL:
+            wall = Feature(FeatureKind.WALL, f"e{ident}", item["geometry"], {"label": props["label"]})
+            out[FeatureKind.WALL].append(wall)
         else:
-            out["line"].append(Feature("line", f"l{ident}", item["geometry"], {
+            out[FeatureKind.LINE].append(Feature(FeatureKind.LINE, f"l{ident}", item["geometry"], {
                 "label": props["label"],
                 "texture_region": int(props["category"]),
                 "angle_rad": float(props["angle_rad"]),
@@ -136,7 +137,7 @@ def decomposition_topology(decomposition: Decomposition) -> tuple[list[TopologyN
     graph = decomposition.topology
     nodes = [
         TopologyNode(region_key(int(n)), data["label"], float(data["x"]), float(data["y"]), {
-            "feature_kind": REGION_KINDS[Label[data["label"].upper()]],
+            "feature_kind": REGION_FEATURE_KINDS[PlaceLabel[data["label"].upper()]],
             "category": int(data["category"]),
             "area_m2": float(data["area_m2"]),
         })

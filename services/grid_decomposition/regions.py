@@ -12,8 +12,9 @@ from scipy.sparse.csgraph import connected_components
 
 from services.grid_decomposition.cogency import EdgeCogency
 from services.grid_decomposition.segments import border_closure
-from services.grid_decomposition.semantics import Label, link_connection
+from services.grid_decomposition.semantics import link_connection
 from services.grid_decomposition.subdivision import Subdivision
+from shared.vocabulary import PlaceLabel
 
 
 def link_components(n_nodes: int, links: npt.NDArray[np.int64], keep: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
@@ -48,7 +49,7 @@ def warehouse_floors(
         Component id per face (0 = none), from :func:`link_components`.
     face_free_px : (F + 1,) int64
     face_label : (F + 1,) int64
-        :class:`Label` value per face.
+        :class:`PlaceLabel` value per face.
 
     Returns
     -------
@@ -57,8 +58,8 @@ def warehouse_floors(
     """
     n_comp = int(component.max()) + 1
     area = np.bincount(component, weights=face_free_px, minlength=n_comp)
-    stored = np.bincount(component, weights=face_free_px * (face_label == Label.STORAGE.value), minlength=n_comp)
-    cells = np.bincount(component, weights=face_label == Label.STORAGE.value, minlength=n_comp)
+    stored = np.bincount(component, weights=face_free_px * (face_label == PlaceLabel.STORAGE.value), minlength=n_comp)
+    cells = np.bincount(component, weights=face_label == PlaceLabel.STORAGE.value, minlength=n_comp)
     faces = np.bincount(component, weights=face_free_px > 0, minlength=n_comp)
     floor: npt.NDArray[np.bool_] = (
         (stored >= min_storage_share * np.maximum(area, 1))
@@ -92,9 +93,9 @@ def road_networks(
     """
     n_comp = int(component.max()) + 1
     area = np.bincount(component, weights=face_free_px, minlength=n_comp)
-    road = np.isin(face_label, [Label.CORRIDOR.value, Label.JUNCTION.value])
+    road = np.isin(face_label, [PlaceLabel.CORRIDOR.value, PlaceLabel.JUNCTION.value])
     road_area = np.bincount(component, weights=face_free_px * road, minlength=n_comp)
-    is_junction = (face_label == Label.JUNCTION.value) & (face_free_px > 0)
+    is_junction = (face_label == PlaceLabel.JUNCTION.value) & (face_free_px > 0)
     junctions = np.bincount(component, weights=is_junction, minlength=n_comp)
     door_faces = sub.edge_faces[cogency.door].ravel()
     has_door = np.bincount(component[door_faces], minlength=n_comp) > 0
@@ -122,7 +123,7 @@ def face_regions(
     apart = split[component]
     a, b = sub.edge_faces[:, 0], sub.edge_faces[:, 1]
     same = (component[a] == component[b]) & ~cogency.cogent & (component[a] > 0)
-    join = same & (~apart[a] | ((face_label[a] == face_label[b]) & (face_label[a] != Label.STORAGE.value)))
+    join = same & (~apart[a] | ((face_label[a] == face_label[b]) & (face_label[a] != PlaceLabel.STORAGE.value)))
     return link_components(n, sub.edge_faces[join], component > 0)
 
 
@@ -134,7 +135,7 @@ class RegionInfo(NamedTuple):
     """
 
     region_id: int
-    label: Label
+    label: PlaceLabel
     category: int
     area_m2: float
     centroid_xy_m: tuple[float, float]

@@ -67,6 +67,36 @@ def furniture(
     return np.asarray(keep[parts], dtype=bool)
 
 
+def wall_furniture(
+    obstacle: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    min_thickness_m: float = 0.55,
+    max_area_m2: float = 3.0,
+) -> npt.NDArray[np.bool_]:
+    """Furniture pushed against a wall: the thick parts of obstacles, off the map border.
+
+    Walls are thin: an opening of the obstacle mask with a disk ``min_thickness_m`` wide removes
+    them and leaves cupboards, desks and shelves standing against them (and pillars, which are
+    furniture to :func:`furniture` as well). Parts of at most ``max_area_m2`` not touching the
+    map border are returned; a room's segment covers them like the furniture standing free in it
+    (the room's floor is under them).
+
+    Returns
+    -------
+    (H, W) bool
+        A subset of ``obstacle``.
+    """
+    radius = max(1, round(min_thickness_m / resolution_m / 2))
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    thick = cv2.morphologyEx(obstacle.astype(np.uint8), cv2.MORPH_OPEN, disk)
+    n, parts, stats, _ = cv2.connectedComponentsWithStats(thick, connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] <= max_area_m2 / resolution_m**2
+    keep[0] = False
+    keep[np.unique(np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]])] = False
+    return np.asarray(keep[parts], dtype=bool) if n > 1 else np.zeros(obstacle.shape, dtype=bool)
+
+
 def segment_rooms(
     segments: npt.NDArray[np.int32],
     clutter: npt.NDArray[np.bool_],

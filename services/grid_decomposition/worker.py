@@ -1,31 +1,17 @@
 """The grid-decomposition worker: occupancy revisions in, place labels, regions and topology out.
 
-It watches the map store, not the bus: every ``poll_period_s`` it lists the revisions committed
-since the last look (a small query on the revisions table; no grid is read) and notes whether one
-updated ``source_layer``. The store is where the occupancy layer is authoritative: each version
-has a revision id to record as the decomposition's source, a restarted worker finds it again,
-and a worker in another process (or on another host sharing the database) sees the same grids.
-``/aisle/map`` carries no revision and would cost a full decode every publish period.
+It follows the map events (``/aisle/map_events``): an event of this map that updated ``source_layer``, or a new
+label table, makes it look at the store at once, where each occupancy version has a revision id to record as the
+decomposition's source. A look lists the revisions since the last one (no grid is read). The bus is
+fire-and-forget and a writer on another bus (a worker in another process sharing the database) announces nothing
+here, so the store is also looked at every ``safety_poll_period_s``, and once on start.
 
-When the layer changed and ``min_period_s`` has passed since the last attempt, the newest layer is
-read and compared with the last decomposed one (:func:`changed_fraction`: the larger of the share
-of known cells newly known or forgotten, and the share of obstacle cells whose free / uncertain /
-occupied class changed). At ``min_change_fraction`` or more it is decomposed in the stage thread
-(seconds on a large map) and ONE revision is committed: the label layer (uint8 :class:`Label` codes, meta
-``{"encoding": "place_labels", "classes": [...], "colours": [...], "source_layer", "source_revision"}``),
-the segment layer (uint16 region ids), features (:func:`decomposition_features`: corridor,
-junction, room, open_area, region (storage and unidentified, ``label`` property), wall, line) and
-the region graph (edges with ``connection``). Smaller changes accumulate against the last
-decomposed grid until they pass the threshold.
-
-A person's label table (category -> label, a revision of stage ``label_table`` that the API writes)
-is read on start and whenever a new one is committed; a new one re-decomposes the current grid at
-once with those overrides, whatever its change, so the map is re-labelled as a new revision.
-
-A grid the decomposition cannot use (no free cell, all unknown) is counted as
-``decomposition_errors`` and logged; it becomes the reference all the same, so it is not retried
-until it changes enough. On start the source revision is read back from the stored label layer:
-a grid that was decomposed before a restart is not decomposed again.
+When the layer changed and ``min_period_s`` has passed since the last attempt, the newest layer is compared with
+the last decomposed one (:func:`changed_fraction`); at ``min_change_fraction`` or more it is decomposed and ONE
+revision is committed: label layer (meta ``source_layer``, ``source_revision``), segment layer, features and the
+region graph. A new label table (stage ``label_table``) re-decomposes the current grid at once with its overrides.
+A grid the decomposition cannot use is counted as ``decomposition_errors`` and becomes the reference all the same.
+On start the source revision is read back from the stored label layer: a grid is not decomposed twice.
 """
 
 from __future__ import annotations
@@ -37,100 +23,73 @@ import time
 from services.grid_decomposition.change import changed_fraction
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.pipeline import decompose
-from services.grid_decomposition.records import (
-    decomposition_features,
-    decomposition_layers,
-    decomposition_topology,
-)
-from services.grid_decomposition.semantics import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE, Label, parse_label_table
+from services.grid_decomposition.records import decomposition_features, decomposition_layers, decomposition_topology
+from services.grid_decomposition.semantics import parse_label_table
+from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
+from shared.settings import DecompositionSettings
 from shared.store import GridLayer, Revision, RevisionWrite, StoredLayer, StoreUnavailableError
-from shared.worker import StageContext
+from shared.vocabulary import PlaceLabel
+from shared.worker import StageContext, checked
 
 log = logging.getLogger(__name__)
 
 _PAGE = 100
+_WAKE_S = 0.25  # longest wait for a map event before the stop flag is looked at again, seconds
+_RETRY_S = 2.0  # how soon the store is looked at again after it was unavailable, seconds
 
 
 class DecompositionStage:
-    """Stage ``grid_decomposition``; see the module docstring.
+    """Stage ``grid_decomposition``, built from its settings section; see the module docstring."""
 
-    Parameters
-    ----------
-    context
-        The stage context.
-    source_layer
-        The occupancy layer decomposed (int8, -1 unknown, 0..100).
-    label_layer, segment_layer
-        Names of the layers written.
-    min_change_fraction
-        How much of the map must have changed since the last decomposition (:func:`changed_fraction`),
-        in [0, 1].
-    min_period_s
-        Least time between two decompositions, seconds.
-    poll_period_s
-        How often the store is asked for new revisions, seconds.
-    neck_half_width_m, door_max_width_m
-        Passed to :func:`decompose` (metres).
-    """
-
-    def __init__(
-        self,
-        context: StageContext,
-        *,
-        source_layer: str = "occupancy",
-        label_layer: str = "place_labels",
-        segment_layer: str = "place_segments",
-        min_change_fraction: float = 0.02,
-        min_period_s: float = 10.0,
-        poll_period_s: float = 2.0,
-        neck_half_width_m: float = 0.5,
-        door_max_width_m: float = 2.5,
-    ) -> None:
-        if not 0.0 <= min_change_fraction <= 1.0:
-            raise DecompositionError(f"min_change_fraction must be in [0, 1], got {min_change_fraction}")
-        if min_period_s < 0 or poll_period_s <= 0:
-            raise DecompositionError(f"min_period_s must be >= 0 and poll_period_s > 0, got {min_period_s}, "
-                                     f"{poll_period_s}")
-        if source_layer in (label_layer, segment_layer) or label_layer == segment_layer:
-            raise DecompositionError(f"layers {source_layer!r} (read), {label_layer!r}, {segment_layer!r} (written) "
-                                     "must differ")
-        if neck_half_width_m < 0 or door_max_width_m < 0:
-            raise DecompositionError(f"neck_half_width_m and door_max_width_m must be >= 0, got {neck_half_width_m}, "
-                                     f"{door_max_width_m}")
+    def __init__(self, context: StageContext, settings: DecompositionSettings) -> None:
         self.context = context
-        self.source_layer = source_layer
-        self.layer_names = (label_layer, segment_layer)
-        self.min_change_fraction = min_change_fraction
-        self.min_period_s = min_period_s
-        self.poll_period_s = poll_period_s
-        self.neck_half_width_m = neck_half_width_m
-        self.door_max_width_m = door_max_width_m
+        self.settings = settings = checked(settings, DecompositionError)
+        self.source_layer = settings.source_layer
+        self.layer_names = (settings.label_layer, settings.segment_layer)
+        self.events = context.map_events()
         self._seen_revision: int | None = None
         self._pending = True
         self._checked_revision: int | None = None
         self._reference: GridLayer | None = None
         self._last_attempt = -float("inf")
-        self._overrides: dict[int, Label] = {}
+        self._overrides: dict[int, PlaceLabel] = {}
         self._relabel = False
 
     def run(self, stop: threading.Event) -> None:
-        while True:
-            try:
-                self._poll()
-            except StoreUnavailableError as err:
-                self.context.count("store_unavailable")
-                log.warning("store unavailable, will retry: %s", err)
-            if stop.wait(self.poll_period_s):
-                return
+        look_at = 0.0  # monotonic time of the next look at the store: at once on start
+        while not stop.is_set():
+            if time.monotonic() >= look_at:
+                try:
+                    self._look()
+                    look_at = time.monotonic() + self.settings.safety_poll_period_s
+                    if self._pending:  # held back by min_period_s, or its revision was not stored
+                        held = self._last_attempt + self.settings.min_period_s
+                        look_at = min(look_at, max(held, time.monotonic() + _RETRY_S))
+                except StoreUnavailableError as err:
+                    self.context.count("store_unavailable")
+                    log.warning("store unavailable, will retry: %s", err)
+                    look_at = time.monotonic() + _RETRY_S
+            if self._announced(timeout_s=min(_WAKE_S, max(0.0, look_at - time.monotonic()))):
+                look_at = 0.0
 
-    # -- watching the store -----------------------------------------------------------------------
+    def _announced(self, *, timeout_s: float) -> bool:
+        """Whether map events (waiting up to ``timeout_s`` for the first) announced a new source layer or label
+        table of this map."""
+        announced = False
+        item = self.events.receive(timeout_s)
+        while item is not None:
+            event = item.message
+            announced |= str(event.map_name) == self.context.map.name and (
+                self.source_layer in event.layers_updated or event.stage == LABEL_TABLE_STAGE)
+            item = self.events.receive()
+        return announced
 
-    def _poll(self) -> None:
+    def _look(self) -> None:
         if self._seen_revision is None:
             self._seen_revision = self._resume()
         elif self._source_updated(self._seen_revision):
             self._pending = True
-        if not self._pending or time.monotonic() - self._last_attempt < self.min_period_s:
+        if not self._pending or time.monotonic() - self._last_attempt < self.settings.min_period_s:
             return
         stored = self.context.store.layer(self.context.map.id, self.source_layer)
         self._pending = False
@@ -139,10 +98,10 @@ class DecompositionStage:
             return
         self._checked_revision = stored.revision_id
         fraction = 1.0 if self._reference is None or relabel else changed_fraction(self._reference, stored.layer)
-        if fraction < self.min_change_fraction:
+        if fraction < self.settings.min_change_fraction:
             self.context.count("small_changes_skipped")
             log.debug("%s revision %d changed by %.4f, below %.4f: not decomposed", self.source_layer,
-                      stored.revision_id, fraction, self.min_change_fraction)
+                      stored.revision_id, fraction, self.settings.min_change_fraction)
             return
         self._decompose(stored)
 
@@ -193,8 +152,6 @@ class DecompositionStage:
                  {c: label.name.lower() for c, label in sorted(overrides.items())} or "automatic")
         return changed
 
-    # -- decomposing ------------------------------------------------------------------------------
-
     def _decompose(self, stored: StoredLayer) -> None:
         layer = stored.layer
         self._last_attempt = time.monotonic()
@@ -202,7 +159,8 @@ class DecompositionStage:
         try:
             result = decompose(layer.data, resolution_m=layer.resolution_m,
                                origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
-                               neck_half_width_m=self.neck_half_width_m, door_max_width_m=self.door_max_width_m,
+                               neck_half_width_m=self.settings.neck_half_width_m,
+                               door_max_width_m=self.settings.door_max_width_m,
                                label_overrides=self._overrides or None)
             source = {"source_layer": self.source_layer, "source_revision": stored.revision_id}
             layers = decomposition_layers(result, label_layer=self.layer_names[0],
@@ -233,9 +191,9 @@ class DecompositionStage:
         self.context.count("decompositions")
         log.info("revision %d: %s revision %d decomposed in %.2f s: %d regions, %s", revision.id, self.source_layer,
                  stored.revision_id, seconds, len(result.regions),
-                 {kind: len(items) for kind, items in features.items() if items})
+                 {str(kind): len(items) for kind, items in features.items() if items})
 
 
 def decomposition_stage(context: StageContext) -> DecompositionStage:
-    """The stage built from ``context.settings.decomposition``."""
-    return DecompositionStage(context, **context.settings.decomposition.model_dump())
+    """The stage built from its settings section, ``context.settings.decomposition``."""
+    return DecompositionStage(context, context.settings.decomposition)

@@ -7,6 +7,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__CameraInfo as CameraInfo
 
 from services.object_labelling.errors import ObjectLabellingError
 
@@ -27,7 +28,7 @@ class CameraIntrinsics(NamedTuple):
         return math.atan(self.cx / self.fx) + math.atan((self.width - self.cx) / self.fx)
 
 
-def intrinsics_from_camera_info(message: Any) -> CameraIntrinsics:
+def intrinsics_from_camera_info(message: CameraInfo) -> CameraIntrinsics:
     """Intrinsics of a sensor_msgs/CameraInfo ``message`` (its 3x3 ``k`` matrix and image size)."""
     k = np.asarray(message.k, dtype=np.float64).ravel()
     if k.size != 9:

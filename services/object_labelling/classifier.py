@@ -2,7 +2,7 @@
 
 Each SVM's margin is turned into a probability by Platt scaling, ``p = 1 / (1 + exp(-(a s + b)))``,
 with ``a`` and ``b`` fitted on out-of-fold margins of the training split (see
-:mod:`~services.object_labelling.training`), so one threshold (``min_probability``) means the same
+:mod:`~services.labelling_training.training`), so one threshold (``min_probability``) means the same
 for every class: a proposal is ``unknown`` unless some allowed class is at least that likely.
 
 The model file is a numpy ``.npz`` written and read without pickle: per bank the class names,

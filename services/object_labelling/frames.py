@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import numpy.typing as npt
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
 
 from services.object_labelling.errors import ObjectLabellingError
 
@@ -13,7 +12,7 @@ _RGB_ENCODINGS = {"rgb8": False, "bgr8": True}
 _DEPTH_ENCODINGS = ("16UC1", "mono16")
 
 
-def _rows(message: Any, bytes_per_pixel: int) -> npt.NDArray[np.uint8]:
+def _rows(message: Image, bytes_per_pixel: int) -> npt.NDArray[np.uint8]:
     height, width, step = int(message.height), int(message.width), int(message.step)
     data = np.asarray(message.data, dtype=np.uint8).ravel()
     if height <= 0 or width <= 0:
@@ -26,7 +25,7 @@ def _rows(message: Any, bytes_per_pixel: int) -> npt.NDArray[np.uint8]:
     return data[: step * height].reshape(height, step)[:, : width * bytes_per_pixel]
 
 
-def decode_rgb(message: Any) -> npt.NDArray[np.uint8]:
+def decode_rgb(message: Image) -> npt.NDArray[np.uint8]:
     """(h, w, 3) uint8 RGB of an ``rgb8`` or ``bgr8`` sensor_msgs/Image."""
     if message.encoding not in _RGB_ENCODINGS:
         raise ObjectLabellingError(f"colour image encoding {message.encoding!r} is not one of {sorted(_RGB_ENCODINGS)}")
@@ -34,7 +33,7 @@ def decode_rgb(message: Any) -> npt.NDArray[np.uint8]:
     return np.ascontiguousarray(rgb[:, :, ::-1] if _RGB_ENCODINGS[message.encoding] else rgb)
 
 
-def decode_depth(message: Any) -> npt.NDArray[np.uint16]:
+def decode_depth(message: Image) -> npt.NDArray[np.uint16]:
     """(h, w) uint16 millimetres of a ``16UC1`` sensor_msgs/Image."""
     if message.encoding not in _DEPTH_ENCODINGS:
         raise ObjectLabellingError(f"depth image encoding {message.encoding!r} is not 16UC1 (millimetres)")

@@ -26,7 +26,7 @@ import numpy.typing as npt
 from services.object_labelling.camera import CameraIntrinsics, check_depth, depth_to_points, subsample
 from services.object_labelling.classifier import UNKNOWN, LabelModel
 from services.object_labelling.cnn import EfficientNetLite0, resize_for_cnn
-from services.object_labelling.datasets import ROI_PAD_FRACTION, box_iou, crop_box
+from services.object_labelling.crops import ROI_PAD_FRACTION, box_iou, crop_box
 from services.object_labelling.errors import ObjectLabellingError
 from services.object_labelling.ground_plane import GroundCheck, GroundPlane, check_ground_plane
 from services.object_labelling.range_scan import RangeHeightScan, range_height_scan

@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 from services.object_labelling.errors import ObjectLabellingError
 from shared.store import Feature
+from shared.vocabulary import FeatureKind
 
 
 class Detection(NamedTuple):
@@ -54,7 +55,7 @@ class TrackedObject:
     def feature(self) -> Feature:
         """The ``object`` feature: a GeoJSON Point in map metres with class, times and robot."""
         return Feature(
-            "object",
+            FeatureKind.OBJECT,
             self.key,
             {"type": "Point", "coordinates": [self.x_m, self.y_m]},
             {

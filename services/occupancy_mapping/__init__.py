@@ -1,8 +1,7 @@
-"""Occupancy mapping: log-odds grids from laser scans, map files, offline building and map quality."""
+"""Occupancy mapping: log-odds grids from laser scans, offline building and map quality."""
 
 from services.occupancy_mapping.errors import OccupancyMappingError
 from services.occupancy_mapping.grid import OccupancyGrid
-from services.occupancy_mapping.mapio import MapImage, read_map_yaml, write_map_yaml
 from services.occupancy_mapping.offline import BuildStats, build_map, build_map_with_stats
 from services.occupancy_mapping.quality import WallAgreement, sharpness, wall_agreement
 from services.occupancy_mapping.raycast import RayCasting
@@ -11,7 +10,6 @@ from services.occupancy_mapping.scanmatch import MatchResult, ScanMatcher, likel
 
 __all__ = [
     "BuildStats",
-    "MapImage",
     "MatchResult",
     "OccupancyGrid",
     "OccupancyMappingError",
@@ -23,10 +21,8 @@ __all__ = [
     "build_map_with_stats",
     "likelihood_field",
     "match_scan",
-    "read_map_yaml",
     "scan_angles",
     "scan_arrays",
     "sharpness",
     "wall_agreement",
-    "write_map_yaml",
 ]

@@ -12,14 +12,17 @@ import logging
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
-import numpy.typing as npt
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__PoseStamped as PoseStamped
+from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Odometry as Odometry
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__LaserScan as LaserScan
+from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMessage
 
 from services.occupancy_mapping.errors import OccupancyMappingError
 from services.occupancy_mapping.grid import OccupancyGrid
 from services.occupancy_mapping.scan import ScanArrays, scan_arrays
+from shared import messages
 from shared.transforms import (
     Pose2D,
     Transform,
@@ -28,7 +31,7 @@ from shared.transforms import (
     add_tf_message,
     compose,
     invert,
-    sensor_pose_2d,
+    sensor_pose,
 )
 
 log = logging.getLogger(__name__)
@@ -41,13 +44,6 @@ ScanCorrector = Callable[[OccupancyGrid, Pose2D, ScanArrays], Pose2D]
 
 def _is_map_frame(frame: str) -> bool:
     return frame == "map" or frame.endswith("/map")
-
-
-def sensor_pose(transform: Transform, angles: npt.NDArray[np.float64]) -> tuple[Pose2D, npt.NDArray[np.float64]]:
-    """Planar sensor pose and bearings; a sensor mounted upside down sweeps the other way."""
-    x, y, _, _ = transform.rotation
-    z_axis_up = 1.0 - 2.0 * (x * x + y * y)
-    return sensor_pose_2d(transform), (-angles if z_axis_up < 0 else angles)
 
 
 @dataclass
@@ -94,26 +90,26 @@ class ScanMapper:
             self._robots[namespace] = _Robot(TransformBuffer(cache_s=self._cache_s))
         return self._robots[namespace]
 
-    def add_tf(self, namespace: str, message: Any, *, static: bool = False) -> None:
+    def add_tf(self, namespace: str, message: TFMessage, *, static: bool = False) -> None:
         """Feed a tf2_msgs/TFMessage of robot ``namespace``."""
         robot = self._robot(namespace)
         robot.tf_children.update(t.child_frame_id.lstrip("/") for t in message.transforms)
         add_tf_message(robot.buffer, message, static=static)
 
-    def add_odometry(self, namespace: str, message: Any) -> None:
+    def add_odometry(self, namespace: str, message: Odometry) -> None:
         """Feed a nav_msgs/Odometry; ignored for frames the robot's TF already carries."""
         robot = self._robot(namespace)
         if message.child_frame_id.lstrip("/") not in robot.tf_children:
             add_odometry(robot.buffer, message)
 
-    def add_map_pose(self, namespace: str, message: Any, *, base_frame: str) -> None:
+    def add_map_pose(self, namespace: str, message: PoseStamped, *, base_frame: str) -> None:
         """Feed a geometry_msgs/PoseStamped: the robot's ``base_frame`` in a map frame (localisation).
 
         If the base hangs under an odometry frame, the pose becomes the map -> odom correction, as a
         localisation node would publish it; otherwise it links the map frame to the base directly.
         """
         robot = self._robot(namespace)
-        stamp_ns = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+        stamp_ns = messages.stamp_ns(message.header)
         p, q = message.pose.position, message.pose.orientation
         pose = Transform(np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w]))
         map_frame = message.header.frame_id.lstrip("/")
@@ -131,7 +127,7 @@ class ScanMapper:
         correction = compose(pose, invert(odometry))
         robot.buffer.set_transform(map_frame, parent, stamp_ns, correction.translation, correction.rotation)
 
-    def add_scan(self, namespace: str, message: Any, *, fallback_stamp_ns: int = 0) -> None:
+    def add_scan(self, namespace: str, message: LaserScan, *, fallback_stamp_ns: int = 0) -> None:
         """Queue a sensor_msgs/LaserScan; raises :class:`OccupancyMappingError` if it is malformed."""
         scan = scan_arrays(message)
         if scan.stamp_ns == 0:

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__LaserScan as LaserScan
 
 from services.occupancy_mapping.errors import OccupancyMappingError
+from shared.messages import stamp_ns
 
 
 class ScanArrays(NamedTuple):
@@ -43,7 +45,7 @@ def scan_angles(angle_min_rad: float, angle_increment_rad: float, n: int) -> npt
     return angle_min_rad + angle_increment_rad * np.arange(n, dtype=np.float64)
 
 
-def scan_arrays(message: Any) -> ScanArrays:
+def scan_arrays(message: LaserScan) -> ScanArrays:
     """Validated arrays of a sensor_msgs/LaserScan ``message``.
 
     Raises :class:`OccupancyMappingError` for an empty scan, a zero angle increment, a
@@ -66,5 +68,5 @@ def scan_arrays(message: Any) -> ScanArrays:
     range_min, range_max = float(message.range_min), float(message.range_max)
     if not (np.isfinite(range_min) and np.isfinite(range_max) and 0.0 <= range_min < range_max):
         raise OccupancyMappingError(f"scan range interval [{range_min}, {range_max}] is not usable")
-    stamp_ns = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
-    return ScanArrays(ranges, angles, range_min, range_max, message.header.frame_id.lstrip("/"), stamp_ns)
+    return ScanArrays(ranges, angles, range_min, range_max, message.header.frame_id.lstrip("/"),
+                      stamp_ns(message.header))

@@ -17,10 +17,11 @@ from services.occupancy_mapping.grid import OccupancyGrid
 from services.occupancy_mapping.mapper import AUTO_FRAME, ScanMapper
 from services.occupancy_mapping.scanmatch import ScanMatcher
 from shared import messages
-from shared.bus import WORKER_NAMESPACE, DropPolicy, Subscription
+from shared.bus import WORKER_NAMESPACE
 from shared.grids import occupancy_grid_message
+from shared.settings import OccupancySettings
 from shared.store import RevisionWrite, StoreUnavailableError
-from shared.worker import StageContext
+from shared.worker import StageContext, drain
 
 log = logging.getLogger(__name__)
 
@@ -31,24 +32,15 @@ _BATCH = 50
 class OccupancyStage:
     """Stage ``occupancy_mapping``; see the module docstring."""
 
-    def __init__(self, context: StageContext) -> None:
+    def __init__(self, context: StageContext, settings: OccupancySettings) -> None:
         self.context = context
-        settings = context.settings
-        self.settings = settings.occupancy
-        namespaces = settings.robot_namespaces
-        bus = context.bus
-
-        def subscribe(topic: str, msgtype: str, maxsize: int) -> Subscription:
-            return bus.subscribe(topic, msgtype, namespaces=namespaces, policy=DropPolicy.BLOCK, maxsize=maxsize,
-                                 name=f"{context.name}.{topic}")
-
-        self.scans = subscribe(self.settings.scan_topic, messages.LASER_SCAN, 500)
-        self.odometry = subscribe(self.settings.odom_topic, messages.ODOMETRY, 2000)
-        self.tf = subscribe("tf", messages.TF_MESSAGE, 2000)
-        self.tf_static = subscribe("tf_static", messages.TF_MESSAGE, 100)
-        pose_topic = self.settings.pose_topic
-        self.poses = subscribe(pose_topic, messages.POSE_STAMPED, 2000) if pose_topic else None
-        self._subscriptions = tuple(s for s in (self.scans, self.odometry, self.tf, self.tf_static, self.poses) if s)
+        self.settings = settings
+        self.scans = context.subscribe(settings.scan_topic, messages.LASER_SCAN, maxsize=500)
+        self.odometry = context.subscribe(settings.odom_topic, messages.ODOMETRY, maxsize=2000)
+        self.tf = context.subscribe("tf", messages.TF_MESSAGE, maxsize=2000)
+        self.tf_static = context.subscribe("tf_static", messages.TF_MESSAGE, maxsize=100)
+        pose_topic = settings.pose_topic
+        self.poses = context.subscribe(pose_topic, messages.POSE_STAMPED, maxsize=2000) if pose_topic else None
         self.matcher = (
             ScanMatcher(window_m=self.settings.scan_matching_window_m,
                         window_rad=self.settings.scan_matching_window_rad, max_range_m=self.settings.max_range_m)
@@ -57,7 +49,7 @@ class OccupancyStage:
         )
         self.mapper = ScanMapper(self._resume(), fixed_frame=AUTO_FRAME, max_range_m=self.settings.max_range_m,
                                  corrector=self.matcher)
-        self._publisher = bus.publisher(MAP_TOPIC, messages.OCCUPANCY_GRID, namespace=WORKER_NAMESPACE)
+        self._publisher = context.bus.publisher(MAP_TOPIC, messages.OCCUPANCY_GRID, namespace=WORKER_NAMESPACE)
         self._integrated_since_store = 0
         self._integrated_since_publish = 0
 
@@ -99,16 +91,14 @@ class OccupancyStage:
             self._integrated_since_store += self.mapper.drain(final=True)
             self._sync_counts()
             self._store()
-            for subscription in self._subscriptions:
-                subscription.close()
 
     def _take_poses(self) -> None:
         for subscription, static in ((self.tf_static, True), (self.tf, False)):
-            while (item := subscription.receive()) is not None:
+            for item in drain(subscription):
                 self.mapper.add_tf(item.namespace, item.message, static=static)
-        while (item := self.odometry.receive()) is not None:
+        for item in drain(self.odometry):
             self.mapper.add_odometry(item.namespace, item.message)
-        while self.poses is not None and (item := self.poses.receive()) is not None:
+        for item in drain(self.poses):
             self.mapper.add_map_pose(item.namespace, item.message, base_frame=self.settings.base_frame)
 
     def _take_scans(self, *, timeout_s: float) -> None:
@@ -151,3 +141,8 @@ class OccupancyStage:
         message = occupancy_grid_message(layer, stamp_ns=self.mapper.last_stamp_ns or time.time_ns(),
                                          frame_id=self.settings.map_frame)
         self._publisher.publish(message)
+
+
+def occupancy_stage(context: StageContext) -> OccupancyStage:
+    """The stage built from its settings section, ``context.settings.occupancy``."""
+    return OccupancyStage(context, context.settings.occupancy)

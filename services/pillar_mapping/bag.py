@@ -4,12 +4,17 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
 from rosbags.highlevel import AnyReader
 from rosbags.highlevel.anyreader import AnyReaderError
+from rosbags.interfaces import Connection
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__PoseStamped as PoseStamped
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__CameraInfo as CameraInfo
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
+from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMessage
 
 from services.pillar_mapping.camera import FisheyeCamera, camera_from_info
 from services.pillar_mapping.detection import detect_pillars
@@ -23,6 +28,7 @@ from services.pillar_mapping.mount import (
     sensor_pose,
     vehicle_bearings,
 )
+from shared import messages
 from shared.messages import CAMERA_INFO, IMAGE, POSE_STAMPED, TF_MESSAGE, TYPESTORE
 from shared.transforms import TransformBuffer, add_tf_message, yaw_from_quaternion
 
@@ -43,11 +49,7 @@ class PillarMapResult(NamedTuple):
     frames_skipped: int
 
 
-def _stamp_ns(message: Any) -> int:
-    return int(message.header.stamp.sec) * 1_000_000_000 + int(message.header.stamp.nanosec)
-
-
-def image_bgr(message: Any) -> npt.NDArray[np.uint8]:
+def image_bgr(message: Image) -> npt.NDArray[np.uint8]:
     """The BGR pixels of a sensor_msgs/Image in ``bgr8``, ``rgb8``, ``bgra8``, ``rgba8`` or ``mono8``."""
     channels = {"bgr8": 3, "rgb8": 3, "bgra8": 4, "rgba8": 4, "mono8": 1}.get(message.encoding)
     if channels is None:
@@ -68,12 +70,12 @@ def _namespace(topic: str, suffix: str) -> str | None:
     return topic[: -len(suffix)] if topic.endswith(suffix) else None
 
 
-def _read_poses(reader: Any, connections: list[Any]) -> tuple[FloatArray, FloatArray]:
+def _read_poses(reader: AnyReader, connections: list[Connection]) -> tuple[FloatArray, FloatArray]:
     stamps, poses = [], []
     for connection, _, raw in reader.messages(connections=connections):
-        msg = reader.deserialize(raw, connection.msgtype)
+        msg = cast(PoseStamped, reader.deserialize(raw, connection.msgtype))
         q = msg.pose.orientation
-        stamps.append(_stamp_ns(msg))
+        stamps.append(messages.stamp_ns(msg.header))
         poses.append([msg.pose.position.x, msg.pose.position.y, yaw_from_quaternion([q.x, q.y, q.z, q.w])])
     order = np.argsort(stamps)
     table = np.asarray(poses, dtype=np.float64).reshape(-1, 3)[order]
@@ -87,10 +89,10 @@ def _pose_at(stamps: FloatArray, poses: FloatArray, stamp_ns: int) -> FloatArray
     return np.array([np.interp(stamp_ns, stamps, poses[:, i]) for i in range(3)])
 
 
-def _mount(reader: Any, connections: list[Any], camera_frame: str, base_frame: str) -> CameraMount:
+def _mount(reader: AnyReader, connections: list[Connection], camera_frame: str, base_frame: str) -> CameraMount:
     buffer = TransformBuffer()
     for connection, _, raw in reader.messages(connections=connections) if connections else ():
-        add_tf_message(buffer, reader.deserialize(raw, connection.msgtype), static=True)
+        add_tf_message(buffer, cast(TFMessage, reader.deserialize(raw, connection.msgtype)), static=True)
     if camera_frame and buffer.can_transform(base_frame, camera_frame, None):
         return mount_from_transform(buffer.lookup(base_frame, camera_frame, None))
     logger.info("no static transform %s -> %s; assuming the default downward mount", camera_frame, base_frame)
@@ -136,14 +138,15 @@ def map_pillars_from_bag(
             for what, found in (("image", images), ("camera info", infos), ("pose", poses)):
                 if not found:
                     raise PillarMappingError(f"bag {bag_path} has no {what} topic under namespace {namespace!r}")
-            info_msg: Any = next(reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=infos))
+            info_msg = cast(CameraInfo, next(reader.deserialize(raw, c.msgtype)
+                                             for c, _, raw in reader.messages(connections=infos)))
             camera: FisheyeCamera = camera_from_info(info_msg)
             tf_static = [c for c in conns if c.msgtype == TF_MESSAGE and c.topic.endswith("tf_static")]
             mount = _mount(reader, tf_static, str(info_msg.header.frame_id), base_frame)
             stamps, table = _read_poses(reader, poses)
             for connection, _, raw in reader.messages(connections=images):
-                msg = reader.deserialize(raw, connection.msgtype)
-                pose = _pose_at(stamps, table, _stamp_ns(msg))
+                msg = cast(Image, reader.deserialize(raw, connection.msgtype))
+                pose = _pose_at(stamps, table, messages.stamp_ns(msg.header))
                 if pose is None:
                     skipped += 1
                     continue
@@ -151,7 +154,7 @@ def map_pillars_from_bag(
                     seen = detect_pillars(image_bgr(msg), camera)
                 except PillarMappingError as err:
                     skipped += 1
-                    logger.warning("frame at %d ns skipped: %s", _stamp_ns(msg), err)
+                    logger.warning("frame at %d ns skipped: %s", messages.stamp_ns(msg.header), err)
                     continue
                 mapper.observe(
                     tuple(sensor_pose(mount, pose)), vehicle_bearings(mount, seen.bearings_rad), seen.sigmas_rad

@@ -4,17 +4,21 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
 import yaml
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__CameraInfo as CameraInfo
 
 from services.pillar_mapping.errors import PillarMappingError
 
 FloatArray = npt.NDArray[np.float64]
 
 _MODELS = frozenset({"equidistant", "fisheye", "kannala_brandt"})
+
+CameraInfoLike: TypeAlias = CameraInfo | Mapping[str, Any]
+"""A sensor_msgs/CameraInfo, or the same fields (or the camera_calibration YAML layout) as a mapping."""
 
 
 class FisheyeCamera(NamedTuple):
@@ -36,7 +40,7 @@ class FisheyeCamera(NamedTuple):
         return float(self.k[0, 2]), float(self.k[1, 2])
 
 
-def _field(info: Any, *names: str) -> Any:
+def _field(info: CameraInfoLike, *names: str) -> Any:
     for name in names:
         if isinstance(info, Mapping):
             if name in info:
@@ -55,7 +59,7 @@ def _data(value: Any) -> FloatArray:
         raise PillarMappingError(f"camera info array {value!r} is not numeric") from err
 
 
-def camera_from_info(info: Any, *, fov_rad: float = float(np.deg2rad(185.0))) -> FisheyeCamera:
+def camera_from_info(info: CameraInfoLike, *, fov_rad: float = float(np.deg2rad(185.0))) -> FisheyeCamera:
     """A :class:`FisheyeCamera` from a CameraInfo message or its YAML/dict form.
 
     Accepts a sensor_msgs/CameraInfo (attributes ``k``, ``d``, ``width``, ``height``,

@@ -4,13 +4,19 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.pillar_mapping.camera import FisheyeCamera, camera_from_info, project_angles, read_camera_info_yaml
+from services.pillar_mapping.camera import (
+    CameraInfoLike,
+    FisheyeCamera,
+    camera_from_info,
+    project_angles,
+    read_camera_info_yaml,
+)
 from services.pillar_mapping.errors import PillarMappingError
 from services.pillar_mapping.paint import DEFAULT_PAINT, PaintModel, paint_likelihood
 from services.pillar_mapping.wavelet import WaveletPeaks, dog_peaks
@@ -44,7 +50,7 @@ class PillarDetections(NamedTuple):
     strengths: FloatArray
 
 
-def _as_camera(camera_info: Any) -> FisheyeCamera:
+def _as_camera(camera_info: CameraInfoLike | FisheyeCamera) -> FisheyeCamera:
     return camera_info if isinstance(camera_info, FisheyeCamera) else camera_from_info(camera_info)
 
 
@@ -109,7 +115,7 @@ def _painted(peaks: WaveletPeaks, paint: FloatArray, *, min_centre_fraction: flo
 
 def detect_pillars(
     image_bgr: npt.NDArray[np.uint8],
-    camera_info: Any,
+    camera_info: CameraInfoLike | FisheyeCamera,
     *,
     paint: PaintModel = DEFAULT_PAINT,
     bins: int = 1440,

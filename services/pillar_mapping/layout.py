@@ -17,6 +17,7 @@ from services.pillar_mapping.landmark_io import read_landmarks_csv
 from services.pillar_mapping.levels import RackProfile, bins_on_levels
 from services.pillar_mapping.mapper import LandmarkMap
 from services.pillar_mapping.rows import RackRow, fit_rack_rows
+from shared.bins import AccessPose, Bin
 from shared.store import Feature
 
 logger = logging.getLogger(__name__)
@@ -117,23 +118,18 @@ def layout_features(layout: RackLayout) -> dict[str, list[Feature]]:
         )
     row_keys = [f.key for f in rows]
     bins = [
-        Feature(
-            "bin",
-            b.id,
-            {"type": "Polygon", "coordinates": [[*b.footprint.tolist(), b.footprint[0].tolist()]]},
-            {
-                "kind": "bin",
-                "id": b.id,
-                "aisle": b.aisle,
-                "bay": b.bay,
-                "level": b.level,
-                "z_m": b.z_m,
-                "access_pose": list(b.access_pose),
-                "row": row_keys[b.row],
-                "back_row": row_keys[b.back_row],
-                "centre": b.centre.tolist(),
-            },
-        )
+        Bin(
+            id=b.id,
+            centre=(float(b.centre[0]), float(b.centre[1])),
+            aisle=b.aisle,
+            bay=b.bay,
+            level=b.level,
+            z_m=b.z_m,
+            footprint=tuple((float(x), float(y)) for x, y in [*b.footprint.tolist(), b.footprint[0].tolist()]),
+            access_pose=AccessPose(*b.access_pose),
+            row=row_keys[b.row],
+            back_row=row_keys[b.back_row],
+        ).feature()
         for b in layout.bins
     ]
     unique = {f.key: f for f in pillars}

@@ -18,12 +18,25 @@ import logging
 import math
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Literal, NamedTuple
+from typing import Literal, NamedTuple
 
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Point as Point
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Pose as Pose
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__PoseWithCovariance as PoseWithCovariance
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Quaternion as Quaternion
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Transform as Transform
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__TransformStamped as TransformStamped
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Twist as Twist
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__TwistWithCovariance as TwistWithCovariance
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Vector3 as Vector3
+from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Odometry as Odometry
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__LaserScan as LaserScan
+from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
+from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMessage
 
-from shared.messages import LASER_SCAN, ODOMETRY, TF_MESSAGE, TYPESTORE, message_class, serialize
+from shared.messages import LASER_SCAN, ODOMETRY, TF_MESSAGE, TYPESTORE, header, serialize
 from shared.transforms import quaternion_from_yaw
 
 logger = logging.getLogger(__name__)
@@ -85,33 +98,24 @@ def _parse_flaser(fields: list[str]) -> _Flaser:
     return _Flaser(ranges, float(pose[0]), float(pose[1]), float(pose[2]), stamp)
 
 
-def _stamp(seconds: float) -> Any:
-    time_cls = message_class("builtin_interfaces/msg/Time")
-    ns = round(seconds * 1e9)
-    return time_cls(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+def _header(seconds: float, frame_id: str) -> Header:
+    return header(round(seconds * 1e9), frame_id)
 
 
-def _header(seconds: float, frame_id: str) -> Any:
-    return message_class("std_msgs/msg/Header")(stamp=_stamp(seconds), frame_id=frame_id)
-
-
-def _transform(seconds: float, parent: str, child: str, *, x: float, y: float, yaw: float) -> Any:
+def _transform(seconds: float, parent: str, child: str, *, x: float, y: float, yaw: float) -> TransformStamped:
     q = quaternion_from_yaw(yaw)
-    return message_class("geometry_msgs/msg/TransformStamped")(
+    return TransformStamped(
         header=_header(seconds, parent),
         child_frame_id=child,
-        transform=message_class("geometry_msgs/msg/Transform")(
-            translation=message_class("geometry_msgs/msg/Vector3")(x=x, y=y, z=0.0),
-            rotation=message_class("geometry_msgs/msg/Quaternion")(x=q[0], y=q[1], z=q[2], w=q[3]),
-        ),
+        transform=Transform(translation=Vector3(x=x, y=y, z=0.0), rotation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])),
     )
 
 
-def _scan(reading: _Flaser, seconds: float, max_range_m: float) -> Any:
+def _scan(reading: _Flaser, seconds: float, max_range_m: float) -> LaserScan:
     n = reading.ranges.size
     angle_min, increment = beam_layout(n)
     ranges = np.where(reading.ranges >= max_range_m, np.inf, reading.ranges).astype(np.float32)
-    return message_class(LASER_SCAN)(
+    return LaserScan(
         header=_header(seconds, LASER_FRAME),
         angle_min=angle_min,
         angle_max=angle_min + increment * (n - 1),
@@ -125,25 +129,18 @@ def _scan(reading: _Flaser, seconds: float, max_range_m: float) -> Any:
     )
 
 
-def _odometry(reading: _Flaser, seconds: float) -> Any:
+def _odometry(reading: _Flaser, seconds: float) -> Odometry:
     q = quaternion_from_yaw(reading.yaw_rad)
-    pose_cls = message_class("geometry_msgs/msg/PoseWithCovariance")
-    twist_cls = message_class("geometry_msgs/msg/TwistWithCovariance")
-    vector = message_class("geometry_msgs/msg/Vector3")
-    return message_class(ODOMETRY)(
+    return Odometry(
         header=_header(seconds, ODOM_FRAME),
         child_frame_id=BASE_FRAME,
-        pose=pose_cls(
-            pose=message_class("geometry_msgs/msg/Pose")(
-                position=message_class("geometry_msgs/msg/Point")(x=reading.x_m, y=reading.y_m, z=0.0),
-                orientation=message_class("geometry_msgs/msg/Quaternion")(x=q[0], y=q[1], z=q[2], w=q[3]),
-            ),
+        pose=PoseWithCovariance(
+            pose=Pose(position=Point(x=reading.x_m, y=reading.y_m, z=0.0),
+                      orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])),
             covariance=np.zeros(36),
         ),
-        twist=twist_cls(
-            twist=message_class("geometry_msgs/msg/Twist")(
-                linear=vector(x=0.0, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=0.0)
-            ),
+        twist=TwistWithCovariance(
+            twist=Twist(linear=Vector3(x=0.0, y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=0.0)),
             covariance=np.zeros(36),
         ),
     )
@@ -214,7 +211,6 @@ def import_carmen(
             static_conn = writer.add_connection(
                 _topic(namespace, "tf_static"), TF_MESSAGE, typestore=TYPESTORE
             )
-            tf_cls = message_class(TF_MESSAGE)
             for reading in readings:
                 seconds = reading.stamp_s
                 if not (math.isfinite(seconds) and seconds > previous and seconds - previous > 1e-6):
@@ -223,11 +219,11 @@ def import_carmen(
                 previous = seconds
                 ns = round(seconds * 1e9)
                 if reading is readings[0]:
-                    static = tf_cls(
+                    static = TFMessage(
                         transforms=[_transform(seconds, BASE_FRAME, LASER_FRAME, x=0.0, y=0.0, yaw=0.0)]
                     )
                     writer.write(static_conn, ns, serialize(static, TF_MESSAGE))
-                tf = tf_cls(
+                tf = TFMessage(
                     transforms=[
                         _transform(
                             seconds, ODOM_FRAME, BASE_FRAME, x=reading.x_m, y=reading.y_m, yaw=reading.yaw_rad

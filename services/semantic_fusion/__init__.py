@@ -5,7 +5,6 @@ from services.semantic_fusion.classes import (
     DISTRIBUTION_CLASSES,
     DYNAMIC_CLASSES,
     N_CLASSES,
-    SemanticClass,
     class_columns,
 )
 from services.semantic_fusion.errors import SemanticFusionError
@@ -52,7 +51,6 @@ __all__ = [
     "RangeScan",
     "ScanMatch",
     "ScanObservation",
-    "SemanticClass",
     "SemanticFusion",
     "SemanticFusionError",
     "SemanticGrid",

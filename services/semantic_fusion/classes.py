@@ -1,4 +1,4 @@
-"""The semantic classes of the map, their order in the grid and their colours.
+"""The semantic classes of the map (:class:`shared.vocabulary.SemanticClass`), their order in the grid and colours.
 
 ``SemanticClass`` values are the uint8 codes of the label layer. ``NONE`` (0) marks cells with no
 evidence (free or never seen) and is not part of the per-cell distribution; every other class is,
@@ -7,27 +7,13 @@ in value order, so distribution column ``k`` is class ``k + 1``.
 
 from __future__ import annotations
 
-from enum import IntEnum
 from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 
 from services.semantic_fusion.errors import SemanticFusionError
-
-
-class SemanticClass(IntEnum):
-    """Label-layer codes."""
-
-    NONE = 0
-    UNKNOWN = 1
-    WALL = 2
-    RACK = 3
-    PALLET = 4
-    GATE = 5
-    FORKLIFT = 6
-    HUMAN = 7
-
+from shared.vocabulary import SemanticClass
 
 DISTRIBUTION_CLASSES: Final = tuple(c for c in SemanticClass if c is not SemanticClass.NONE)
 """Classes of the per-cell distribution, column ``k`` being ``DISTRIBUTION_CLASSES[k]``."""

@@ -8,9 +8,9 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from services.semantic_fusion.classes import SemanticClass
 from services.semantic_fusion.errors import SemanticFusionError
 from services.semantic_fusion.inference import SemanticLayers
+from shared.vocabulary import SemanticClass
 
 
 class LabelAccuracy(NamedTuple):

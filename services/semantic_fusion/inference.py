@@ -20,10 +20,11 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from services.semantic_fusion.classes import CLASS_COLOURS, DISTRIBUTION_CLASSES, N_CLASSES, SemanticClass
+from services.semantic_fusion.classes import CLASS_COLOURS, DISTRIBUTION_CLASSES, N_CLASSES
 from services.semantic_fusion.errors import SemanticFusionError
 from services.semantic_fusion.grid import GridCells
 from shared.store.records import GridLayer
+from shared.vocabulary import LayerName, SemanticClass
 
 NO_ENTROPY = -1.0
 """Entropy-layer value of cells with no evidence."""
@@ -60,8 +61,8 @@ class SemanticLayers(NamedTuple):
     origin_x_m: float
     origin_y_m: float
 
-    def grid_layers(self, *, label_name: str = "semantic_label",
-                    entropy_name: str = "semantic_entropy") -> tuple[GridLayer, GridLayer]:
+    def grid_layers(self, *, label_name: str = LayerName.SEMANTIC_LABEL,
+                    entropy_name: str = LayerName.SEMANTIC_ENTROPY) -> tuple[GridLayer, GridLayer]:
         """The two rasters as store layers, each described by its meta.
 
         The label layer's meta is ``{"encoding": "semantic_labels", "classes": [name of code 0, 1,

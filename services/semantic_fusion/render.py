@@ -6,8 +6,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.semantic_fusion.classes import CLASS_COLOURS, SemanticClass
+from services.semantic_fusion.classes import CLASS_COLOURS
 from services.semantic_fusion.errors import SemanticFusionError
+from shared.vocabulary import SemanticClass
 
 _ROW_PX = 18
 _LEGEND_WIDTH_PX = 110

@@ -17,9 +17,11 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from services.semantic_fusion.classes import DYNAMIC_CLASSES, N_CLASSES, SemanticClass
+from services.semantic_fusion.classes import DYNAMIC_CLASSES, N_CLASSES
 from services.semantic_fusion.errors import SemanticFusionError
 from services.semantic_fusion.grid import SemanticGrid
+from shared.store import StoredLayer
+from shared.vocabulary import SemanticClass
 
 _TABLE_STEPS = 4001
 
@@ -102,3 +104,21 @@ def seed_grid(
     grid.accumulate(np.tile(cell_rows, hits), np.tile(columns, hits),
                     np.tile(weights, hits), np.zeros(n * hits), np.zeros(n * hits))
     return int(n)
+
+
+def seed_from_stored(grid: SemanticGrid, labels: StoredLayer | None, entropy: StoredLayer | None) -> int:
+    """Seed ``grid`` (:func:`seed_grid`) from the stored label and entropy layers; the cells seeded (0 with none).
+
+    Raises
+    ------
+    SemanticFusionError
+        When the two layers are of different revisions or shapes, or of another resolution than ``grid``.
+    """
+    if labels is None or entropy is None:
+        return 0
+    lab, ent = labels.layer, entropy.layer
+    if (labels.revision_id != entropy.revision_id or lab.data.shape != ent.data.shape
+            or abs(lab.resolution_m - grid.resolution_m) > 1e-9):
+        raise SemanticFusionError(f"stored semantic layers (revisions {labels.revision_id}, {entropy.revision_id}; "
+                                  f"{lab.resolution_m} m) do not fit this grid ({grid.resolution_m} m)")
+    return seed_grid(grid, lab.data, ent.data, origin_x_m=lab.origin_x_m, origin_y_m=lab.origin_y_m)

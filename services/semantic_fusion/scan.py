@@ -11,6 +11,7 @@ import numpy.typing as npt
 
 from services.semantic_fusion.classes import class_columns
 from services.semantic_fusion.errors import SemanticFusionError
+from shared import messages
 from shared.transforms import yaw_from_quaternion
 
 
@@ -137,7 +138,7 @@ def observation_from_message(message: Any, *, previous_stamp_ns: int | None = No
     +x (optical) axis. Raises :class:`SemanticFusionError` as :func:`observation_from_arrays`
     does, and for an unusable orientation quaternion.
     """
-    stamp_ns = int(message.header.stamp.sec) * 1_000_000_000 + int(message.header.stamp.nanosec)
+    stamp_ns = messages.stamp_ns(message.header)
     p, q = message.camera_pose.position, message.camera_pose.orientation
     try:
         yaw = yaw_from_quaternion((q.x, q.y, q.z, q.w))

@@ -24,8 +24,8 @@ from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
 from services.semantic_fusion import se2
-from services.semantic_fusion.classes import SemanticClass
 from services.semantic_fusion.scan import RangeScan, ScanObservation, observation_from_arrays, range_scan_from_arrays
+from shared.vocabulary import SemanticClass
 
 CLASS_NAMES = tuple(c.name.lower() for c in SemanticClass if c is not SemanticClass.NONE)
 """The simulated labeller's ``class_names`` (distribution order)."""

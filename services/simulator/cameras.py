@@ -13,11 +13,13 @@ import logging
 import math
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import cv2
 import numpy as np
 import numpy.typing as npt
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__CameraInfo as CameraInfo
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
 
 from services.simulator import rosmsgs
 from services.simulator.actors import dynamic_boxes
@@ -200,7 +202,7 @@ def fisheye_sensor(*, rate_hz: float = 5.0, model: FisheyeModel | None = None, p
     textures = photo_textures() if photos else None
 
     def render(world: World, time_s: float, optical: FloatArray, stamp_ns: int, frame: str
-               ) -> list[tuple[str, str, Any]]:
+               ) -> list[tuple[str, str, Image | CameraInfo]]:
         rgb, _ = render_fisheye(_scene(world, time_s), optical, model, textures=textures)
         return [("fisheye/image_raw", *rosmsgs.image(stamp_ns, frame, rgb)),
                 ("fisheye/camera_info", *rosmsgs.camera_info(stamp_ns, frame, width=model.size, height=model.size,
@@ -220,7 +222,7 @@ def rgbd_sensor(*, rate_hz: float = 5.0, model: RgbdModel | None = None, photos:
     rng = np.random.default_rng(seed)
 
     def render(world: World, time_s: float, optical: FloatArray, stamp_ns: int, frame: str
-               ) -> list[tuple[str, str, Any]]:
+               ) -> list[tuple[str, str, Image | CameraInfo]]:
         rendered = render_boxes(_scene(world, time_s), optical, camera, textures=textures)
         depth = depth_image_mm(rendered.depth_m, model, rng)
         return [("rgbd/color/image_raw", *rosmsgs.image(stamp_ns, frame, rendered.rgb)),

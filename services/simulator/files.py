@@ -12,11 +12,11 @@ import cv2
 import numpy as np
 import yaml
 
-from services.occupancy_mapping import write_map_yaml
 from services.simulator.actors import actor_pose
 from services.simulator.errors import SimulatorError
 from services.simulator.groundtruth import ground_truth_features, ground_truth_grids, uprights_csv
 from services.simulator.world import FloatArray, World
+from shared.mapfiles import write_map_yaml
 
 log = logging.getLogger(__name__)
 

@@ -17,8 +17,9 @@ import numpy.typing as npt
 
 from services.simulator.errors import SimulatorError
 from services.simulator.world import AreaKind, FloatArray, World
+from shared.vocabulary import FeatureKind, PlaceLabel
 
-UNIDENTIFIED_FREE = 6
+UNIDENTIFIED_FREE = int(PlaceLabel.UNIDENTIFIED)
 """Label of free floor no area claims."""
 _PAINT_ORDER = (AreaKind.OPEN_AREA, AreaKind.ROOM, AreaKind.STORAGE, AreaKind.CORRIDOR, AreaKind.JUNCTION)
 _SHIFT = 4
@@ -43,7 +44,7 @@ def _ring(polygon: FloatArray) -> list[list[float]]:
     return [*points, points[0]]
 
 
-def _feature(kind: str, key: str, geometry: dict[str, Any], **properties: Any) -> dict[str, Any]:
+def _feature(kind: FeatureKind, key: str, geometry: dict[str, Any], **properties: Any) -> dict[str, Any]:
     return {"type": "Feature", "geometry": geometry, "properties": {"kind": kind, "id": key, **properties}}
 
 
@@ -56,35 +57,38 @@ def ground_truth_features(world: World, *, tracks: Mapping[str, FloatArray] | No
     with its docking pose), ``object`` (actor path, with sampled ``track`` [t, x, y, yaw] rows when
     ``tracks`` maps the actor id to an (n, 4) array).
     """
-    features = [_feature("wall", f"W{i}", {"type": "LineString", "coordinates": seg.round(4).tolist()})
+    features = [_feature(FeatureKind.WALL, f"W{i}", {"type": "LineString", "coordinates": seg.round(4).tolist()})
                 for i, seg in enumerate(world.walls)]
     for area in world.areas:
         if area.kind is AreaKind.STORAGE:
             continue  # the rack_row features below carry the storage footprints
         polygon = {"type": "Polygon", "coordinates": [_ring(area.polygon)]}
-        features.append(_feature(area.kind.name.lower(), area.id, polygon, label=area.kind.value, **dict(area.detail)))
+        features.append(_feature(FeatureKind[area.kind.name], area.id, polygon, label=area.kind.value,
+                                 **dict(area.detail)))
     for row in world.rows:
         polygon = {"type": "Polygon", "coordinates": [_ring(row.polygon)]}
-        features.append(_feature("rack_row", row.id, polygon, aisle=row.aisle, front_yaw_rad=row.front_yaw_rad,
-                                 bays=row.bays, levels=row.levels))
+        features.append(_feature(FeatureKind.RACK_ROW, row.id, polygon, aisle=row.aisle,
+                                 front_yaw_rad=row.front_yaw_rad, bays=row.bays, levels=row.levels))
     for b in world.bins:
-        features.append(_feature("bin", b.id, {"type": "Polygon", "coordinates": [_ring(b.polygon)]}, row=b.row,
-                                 aisle=b.aisle, bay=b.bay, level=b.level, z_m=b.z_m,
+        features.append(_feature(FeatureKind.BIN, b.id, {"type": "Polygon", "coordinates": [_ring(b.polygon)]},
+                                 row=b.row, aisle=b.aisle, bay=b.bay, level=b.level, z_m=b.z_m,
                                  access_pose=[round(v, 4) for v in b.access_pose], occupied=b.occupied))
     for (x, y), uid, row_index in zip(world.uprights.xy, world.uprights.ids, world.uprights.row, strict=True):
         point = {"type": "Point", "coordinates": [round(float(x), 4), round(float(y), 4)]}
-        features.append(_feature("pillar", uid, point, row=world.rows[int(row_index)].id))
+        features.append(_feature(FeatureKind.PILLAR, uid, point, row=world.rows[int(row_index)].id))
     for gate in world.gates:
         line = {"type": "LineString", "coordinates": [list(gate.a), list(gate.b)]}
-        features.append(_feature("dock" if gate.kind == "dock" else "gate", gate.id, line, gate_kind=gate.kind))
+        kind = FeatureKind.DOCK if gate.kind == "dock" else FeatureKind.GATE
+        features.append(_feature(kind, gate.id, line, gate_kind=gate.kind))
     for charger in world.chargers:
-        features.append(_feature("charger", charger.id, {"type": "Point", "coordinates": list(charger.pose[:2])},
-                                 pose=list(charger.pose)))
+        spot = {"type": "Point", "coordinates": list(charger.pose[:2])}
+        features.append(_feature(FeatureKind.CHARGER, charger.id, spot, pose=list(charger.pose)))
     for actor in world.actors:
         path = actor.path if len(actor.path) > 1 else np.vstack([actor.path, actor.path])
         extra = {"track": np.asarray(tracks[actor.id]).round(4).tolist()} if tracks and actor.id in tracks else {}
-        features.append(_feature("object", actor.id, {"type": "LineString", "coordinates": path.round(4).tolist()},
-                                 object_class=actor.kind.value, speed_mps=actor.speed_mps, **extra))
+        line = {"type": "LineString", "coordinates": path.round(4).tolist()}
+        features.append(_feature(FeatureKind.OBJECT, actor.id, line, object_class=actor.kind.value,
+                                 speed_mps=actor.speed_mps, **extra))
     return {"type": "FeatureCollection", "name": world.name, "features": features}
 
 

@@ -15,6 +15,8 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
+from shared.vocabulary import PlaceLabel
+
 FloatArray = npt.NDArray[np.float64]
 
 
@@ -89,11 +91,11 @@ class Uprights(NamedTuple):
 class AreaKind(enum.Enum):
     """Kinds of floor area, with their ground-truth label codes."""
 
-    CORRIDOR = 1
-    JUNCTION = 2
-    STORAGE = 3
-    ROOM = 4
-    OPEN_AREA = 5
+    CORRIDOR = int(PlaceLabel.CORRIDOR)
+    JUNCTION = int(PlaceLabel.JUNCTION)
+    STORAGE = int(PlaceLabel.STORAGE)
+    ROOM = int(PlaceLabel.ROOM)
+    OPEN_AREA = int(PlaceLabel.OPEN_AREA)
 
 
 class Area(NamedTuple):

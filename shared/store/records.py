@@ -5,15 +5,15 @@ from __future__ import annotations
 import datetime as dt
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
 
-FEATURE_KINDS = frozenset(
-    {"wall", "corridor", "junction", "room", "rack_row", "pillar", "bin", "dock", "gate", "charger", "object",
-     "region", "line", "open_area"}
-)
+from shared.vocabulary import FeatureKind
+
+FEATURE_KINDS: Final = frozenset(kind.value for kind in FeatureKind)
+"""Every feature kind the store takes (the values of :class:`shared.vocabulary.FeatureKind`)."""
 
 
 class StoreError(RuntimeError):

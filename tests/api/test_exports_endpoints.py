@@ -12,9 +12,9 @@ import pytest
 import yaml
 from fastapi.testclient import TestClient
 
-from api.routers.layers import REVISION_HEADER
-from services.occupancy_mapping.mapio import read_map_yaml
+from shared.mapfiles import read_map_yaml
 from shared.store import GridLayer, MapStore, RevisionWrite
+from shared.vocabulary import REVISION_HEADER
 from tests.api.conftest import OCCUPANCY_1, OCCUPANCY_2
 from tests.api.warehouse_map import write_warehouse
 

@@ -9,8 +9,8 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 from fastapi import HTTPException
 
-from api.access import AccessPolicy
-from api.cache import RevisionCache
+from api.access import AccessPolicy, Caller, Credentials
+from atlas.cache import RevisionCache
 from shared.store import MapStore
 from shared.store.keys import Role, create_key, revoke_key
 
@@ -109,3 +109,38 @@ def test_a_failed_build_is_not_cached_and_the_next_get_builds_again() -> None:
         cache.get("key", fail)
 
     assert cache.get("key", lambda: "built") == "built"
+
+
+def test_memory_decides_reads_with_a_remembered_key_and_requests_without_a_key(store: MapStore) -> None:
+    policy = _policy(FakeClock())
+    key_id, secret = create_key(store, role=Role.READ, name="wms")
+    bins = "/v1/maps/{map_name}/bins/{bin_id}"
+    before = policy.judge(Credentials(secret, "10.0.0.1"), method="GET", route=bins)
+    policy.authenticate(store, secret, address="10.0.0.1")
+
+    read = policy.judge(Credentials(secret, "10.0.0.1"), method="GET", route=bins)
+    write = policy.judge(Credentials(secret, "10.0.0.1"), method="POST", route=bins)
+    anonymous = policy.judge(Credentials(None, "10.0.0.1"), method="GET", route=bins)
+    malformed = policy.judge(Credentials("not-a-key", "10.0.0.1"), method="POST", route=bins)
+
+    assert before is None and write is None  # the key's row must be read
+    assert read is not None and read.refusal is None and read.bucket == f"key:{key_id}"
+    assert anonymous is not None and anonymous.bucket == "address:10.0.0.1"
+    assert anonymous.refusal is not None and anonymous.refusal.status_code == 401
+    assert malformed is not None and malformed.refusal is not None
+    assert malformed.refusal.detail.startswith("malformed API key")
+
+
+def test_a_verdict_is_charged_once_when_settled_and_never_when_judged(store: MapStore) -> None:
+    policy = AccessPolicy(require_keys_for_reads=False, rate_limit_per_s=0.001, rate_limit_burst=2,
+                          clock=FakeClock())
+    anonymous = Credentials(None, "10.0.0.1")
+    verdicts = [policy.judge(anonymous, method="GET", route="/v1/maps") for _ in range(5)]
+
+    settled = [policy.settle(verdict) for verdict in verdicts[:2] if verdict is not None]
+    with pytest.raises(HTTPException) as limited:
+        policy.admit(store, anonymous, method="GET", route="/v1/maps")
+
+    assert settled == [Caller(None, "10.0.0.1")] * 2
+    assert limited.value.status_code == 429 and limited.value.headers is not None
+    assert int(limited.value.headers["Retry-After"]) >= 1

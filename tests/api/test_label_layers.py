@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.rendering import DEFAULT_LABEL_COLOURS, SEMANTIC_LABELS, RenderError, label_image, render_layer
+from atlas.render.layers import DEFAULT_LABEL_COLOURS, SEMANTIC_LABELS, RenderError, label_image, render_layer
 from shared.store import GridLayer, MapStore, RevisionWrite
 from tests.api.conftest import ClientFactory
 

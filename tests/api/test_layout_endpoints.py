@@ -10,8 +10,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from api.routers import layout
-from api.routers.layers import REVISION_HEADER
 from shared.store import Feature, MapStore, RevisionWrite
+from shared.vocabulary import REVISION_HEADER
 
 SVG = "{http://www.w3.org/2000/svg}"
 

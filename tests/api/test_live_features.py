@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.cache import RevisionCache
-from api.live import LiveMaps
-from api.live_features import FeatureIndex, geojson_bytes
+from atlas.cache import RevisionCache
+from atlas.features import FeatureIndex, geojson_bytes
+from atlas.live import LiveMaps
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
 from tests.api.conftest import ClientFactory
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.cache import RevisionCache
-from api.live import LiveMaps
+from atlas.cache import RevisionCache
+from atlas.live import LiveMaps
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite

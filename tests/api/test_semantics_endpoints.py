@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from services.grid_decomposition.semantics import LABEL_TABLE_STAGE
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus
+from shared.places import LABEL_TABLE_STAGE
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
 from shared.store.keys import Role, create_key
 from shared.worker import MAP_EVENTS_TOPIC

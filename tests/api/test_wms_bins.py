@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.reconcile import DetectedBin, reconcile
+from atlas.reconcile import DetectedBin, reconcile
 from services.pillar_mapping import fit_layout
 from services.pillar_mapping.layout import layout_features
 from services.pillar_mapping.synthetic import noisy_landmarks, rack_region

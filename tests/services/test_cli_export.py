@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from services.cli import main
-from services.occupancy_mapping.mapio import read_map_yaml
+from shared.mapfiles import read_map_yaml
 from shared.settings import get_settings
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
 

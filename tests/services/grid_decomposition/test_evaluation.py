@@ -6,6 +6,14 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import DecompositionError, ground_truth_rooms, ipa_scores
+from services.grid_decomposition.evaluation import (
+    align_offset,
+    carry_ids,
+    colour_rooms,
+    id_stability,
+    on_free,
+    shift_into,
+)
 
 
 def _two_rooms() -> np.ndarray:
@@ -37,3 +45,61 @@ def test_small_segments_and_rooms_are_dropped() -> None:
 def test_shape_mismatch_is_an_error() -> None:
     with pytest.raises(DecompositionError, match="shape"):
         ipa_scores(np.zeros((3, 3), np.int32), ground_truth_rooms(_two_rooms()))
+
+
+def test_ground_truth_rooms_take_only_grey_above_250_like_ipa() -> None:
+    gt = _two_rooms()
+    gt[5:35, 41:76] = 250  # ipa thresholds at 250: this room is not above it
+    assert int(ground_truth_rooms(gt).max()) == 1
+
+
+def test_segment_pixels_on_walls_lower_precision() -> None:
+    rooms = ground_truth_rooms(_two_rooms())
+    seg = rooms.copy()
+    seg[5:35, 40] = 1  # the wall column between the rooms labelled as room 1
+    s = ipa_scores(seg, rooms)
+    assert s.recall == 1.0
+    assert s.precision == pytest.approx((1.0 + 35 / 36) / 2)
+
+
+def test_colour_rooms_make_one_room_per_colour_and_skip_background() -> None:
+    rgb = np.zeros((20, 40, 3), dtype=np.uint8)
+    rgb[:, :15] = (200, 10, 10)
+    rgb[:, 25:] = (200, 10, 10)  # the same colour apart: still one room
+    rgb[:, 15:25] = (255, 255, 255)
+    rooms = colour_rooms(rgb)
+    assert int(rooms.max()) == 2 and rooms[0, 0] == rooms[0, 30] != rooms[0, 20]
+    no_white = colour_rooms(rgb, background=((0, 0, 0), (255, 255, 255)))
+    assert int(no_white.max()) == 1 and no_white[0, 20] == 0
+
+
+def test_scores_on_free_pixels_ignore_segments_off_the_map() -> None:
+    rooms = ground_truth_rooms(_two_rooms())
+    free = rooms > 0
+    seg = (rooms > 0).astype(np.int32) * 3 + rooms
+    seg[0:5, :] = 9  # a segment outside the rooms, off the free space
+    s = ipa_scores(on_free(seg, free), on_free(rooms, free))
+    assert (s.recall, s.precision, s.n_segments) == (1.0, 1.0, 2)
+
+
+def test_align_offset_finds_where_a_map_grew() -> None:
+    rng = np.random.default_rng(0)
+    after = rng.random((60, 90)) > 0.5
+    before = after[7:50, 20:80]
+    assert align_offset(before, after) == (7, 20)
+    moved = shift_into(before.astype(np.int32), (7, 20), after.shape)
+    assert np.array_equal(moved[7:50, 20:80] > 0, before)
+
+
+def test_carried_ids_survive_and_split_rooms_lose_theirs() -> None:
+    before = np.zeros((30, 60), dtype=np.int32)
+    before[:, :30], before[:, 30:] = 4, 7
+    after = np.zeros_like(before)
+    after[:, :30] = 1  # room 4 again, under another id
+    after[:15, 30:], after[15:, 30:] = 2, 3  # room 7 split in two halves
+    rooms = ground_truth_rooms(np.full((30, 60), 255, np.uint8))
+    carried = carry_ids(before, after)
+    assert set(np.unique(carried[:, :30])) == {4}
+    kept = id_stability(before, carried, rooms)
+    assert (kept.kept, kept.matched) == (1, 2)
+    assert id_stability(before, before, rooms).share == 1.0

@@ -12,11 +12,11 @@ from PIL import Image
 
 from services.grid_decomposition import (
     DecompositionError,
-    Label,
     decompose_map_file,
     parse_label_overrides,
     read_map_file,
 )
+from shared.vocabulary import PlaceLabel
 from tests.helpers import data_path
 from tests.services.grid_decomposition.warehouse import tuw_truth
 
@@ -110,7 +110,7 @@ def test_missing_map_file_raises_decomposition_error(tmp_path: Path) -> None:
 
 
 def test_parse_label_overrides() -> None:
-    assert parse_label_overrides("0=corridor, 3=pallet_cell") == {0: Label.CORRIDOR, 3: Label.STORAGE}
+    assert parse_label_overrides("0=corridor, 3=pallet_cell") == {0: PlaceLabel.CORRIDOR, 3: PlaceLabel.STORAGE}
     with pytest.raises(DecompositionError, match="CATEGORY=LABEL"):
         parse_label_overrides("corridor")
 
@@ -123,7 +123,7 @@ def test_tuw_warehouse_roads_are_corridors_and_every_crossing_a_junction(tmp_pat
     truth = tuw_truth(occupancy)
     free = occupancy == 0
     assert (d.labels[free] == truth[free]).mean() >= 0.95
-    junction = free & (truth == Label.JUNCTION.value)
+    junction = free & (truth == PlaceLabel.JUNCTION.value)
     n, parts = cv2.connectedComponents(junction.astype(np.uint8), connectivity=4)
-    found = np.bincount(parts[junction], weights=d.labels[junction] == Label.JUNCTION.value, minlength=n)
+    found = np.bincount(parts[junction], weights=d.labels[junction] == PlaceLabel.JUNCTION.value, minlength=n)
     assert (found[1:] > 0.5 * np.bincount(parts[junction], minlength=n)[1:]).all()

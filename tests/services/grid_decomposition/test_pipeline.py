@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from services.grid_decomposition import Connection, Decomposition, DecompositionError, Label, Resolution, decompose
+from services.grid_decomposition import Connection, Decomposition, DecompositionError, Resolution, decompose
+from shared.vocabulary import PlaceLabel
 from tests.api.warehouse_map import warehouse
 from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse
 
@@ -29,7 +30,7 @@ def test_decompose_splits_two_rooms_at_their_door() -> None:
     left, right = d.segments[50, 40], d.segments[50, 140]
     assert left > 0 and right > 0 and left != right
     assert d.topology.edges[left, right]["connection"] == Connection.DOOR.value
-    assert {info.label for info in d.regions.values()} == {Label.ROOM}
+    assert {info.label for info in d.regions.values()} == {PlaceLabel.ROOM}
 
 
 def test_segments_and_labels_cover_exactly_the_free_space() -> None:
@@ -43,11 +44,11 @@ def test_segments_and_labels_cover_exactly_the_free_space() -> None:
 
 def _check_warehouse(wh: Warehouse, d: Decomposition) -> None:
     """Every cross-aisle junction found, no pallet cell labelled corridor, 95 % of free space right."""
-    missed = [(x, y) for x, y in wh.junctions_px if d.labels[round(y), round(x)] != Label.JUNCTION.value]
+    missed = [(x, y) for x, y in wh.junctions_px if d.labels[round(y), round(x)] != PlaceLabel.JUNCTION.value]
     assert not missed
     cells = cell_labels(d.labels, wh)
-    assert not (cells == Label.CORRIDOR.value).any()
-    assert (cells == Label.STORAGE.value).mean() > 0.95
+    assert not (cells == PlaceLabel.CORRIDOR.value).any()
+    assert (cells == PlaceLabel.STORAGE.value).mean() > 0.95
     free = wh.occupancy == 0
     assert (d.labels[free] == wh.truth[free]).mean() >= 0.95
 
@@ -76,8 +77,8 @@ def test_warehouse_regions_are_aisles_junctions_and_pallet_cells() -> None:
     wh = synthetic_warehouse(4, n_double_rows=2, n_sections=2, bays_per_section=4)
     d = decompose(wh.occupancy, resolution_m=wh.resolution_m)
     labels = [info.label for info in d.regions.values()]
-    assert labels.count(Label.STORAGE) > labels.count(Label.CORRIDOR) > 1
-    assert Label.JUNCTION in labels
+    assert labels.count(PlaceLabel.STORAGE) > labels.count(PlaceLabel.CORRIDOR) > 1
+    assert PlaceLabel.JUNCTION in labels
     kinds = {data["connection"] for _, _, data in d.topology.edges(data=True)}
     assert Connection.STORAGE_ACCESS.value in kinds
 
@@ -93,16 +94,16 @@ def test_label_overrides_relabel_a_category() -> None:
     occ = _two_rooms_and_a_door()
     auto = decompose(occ, resolution_m=0.05, n_categories=3)
     category = int(auto.face_labels.category[auto.subdivision.face_image[50, 40]])
-    forced = decompose(occ, resolution_m=0.05, n_categories=3, label_overrides={category: Label.STORAGE})
-    assert forced.labels[50, 40] == Label.STORAGE.value
-    assert forced.face_labels.category_labels[category] is Label.STORAGE
+    forced = decompose(occ, resolution_m=0.05, n_categories=3, label_overrides={category: PlaceLabel.STORAGE})
+    assert forced.labels[50, 40] == PlaceLabel.STORAGE.value
+    assert forced.face_labels.category_labels[category] is PlaceLabel.STORAGE
 
 
-@pytest.mark.parametrize("label", [Label.ROOM, Label.UNIDENTIFIED])
-def test_overriding_a_storage_category_renames_its_places_and_keeps_every_region(label: Label) -> None:
+@pytest.mark.parametrize("label", [PlaceLabel.ROOM, PlaceLabel.UNIDENTIFIED])
+def test_overriding_a_storage_category_renames_its_places_and_keeps_every_region(label: PlaceLabel) -> None:
     wh = synthetic_warehouse(4, n_double_rows=2, n_sections=2, bays_per_section=4)
     auto = decompose(wh.occupancy, resolution_m=wh.resolution_m)
-    storage = [c for c, lab in auto.face_labels.category_labels.items() if lab is Label.STORAGE]
+    storage = [c for c, lab in auto.face_labels.category_labels.items() if lab is PlaceLabel.STORAGE]
     assert storage
     forced = decompose(wh.occupancy, resolution_m=wh.resolution_m, label_overrides=dict.fromkeys(storage, label))
     assert len(forced.regions) == len(auto.regions)
@@ -112,7 +113,7 @@ def test_overriding_a_storage_category_renames_its_places_and_keeps_every_region
     assert renamed.any() and (forced.labels[renamed] == label.value).all()
     assert (forced.labels[in_face & ~renamed] == auto.labels[in_face & ~renamed]).all()
     assert sum(info.label is label for info in forced.regions.values()) >= sum(
-        info.label is Label.STORAGE for info in auto.regions.values()
+        info.label is PlaceLabel.STORAGE for info in auto.regions.values()
     ) // 2
 
 
@@ -147,12 +148,12 @@ def test_a_cross_aisle_one_bay_wide_is_corridor_not_storage() -> None:
     """The simulator's hall: 2.7 m bays, 3.0 m cross and end aisles (a bay-sized rectangle between uprights)."""
     wh = warehouse()
     free = wh.grids.occupancy == 0
-    aisle = free & np.isin(wh.grids.labels, [Label.CORRIDOR.value, Label.JUNCTION.value])
-    storage = free & (wh.grids.labels == Label.STORAGE.value)
-    assert (wh.decomposition.labels[aisle] == Label.STORAGE.value).mean() < 0.01
-    assert (wh.decomposition.labels[storage] == Label.STORAGE.value).mean() > 0.9
+    aisle = free & np.isin(wh.grids.labels, [PlaceLabel.CORRIDOR.value, PlaceLabel.JUNCTION.value])
+    storage = free & (wh.grids.labels == PlaceLabel.STORAGE.value)
+    assert (wh.decomposition.labels[aisle] == PlaceLabel.STORAGE.value).mean() < 0.01
+    assert (wh.decomposition.labels[storage] == PlaceLabel.STORAGE.value).mean() > 0.9
     kinds = {info.label for info in wh.decomposition.regions.values()}
-    assert {Label.CORRIDOR, Label.JUNCTION, Label.STORAGE} <= kinds
+    assert {PlaceLabel.CORRIDOR, PlaceLabel.JUNCTION, PlaceLabel.STORAGE} <= kinds
 
 
 
@@ -170,12 +171,12 @@ def _road_grid() -> np.ndarray:
 def test_a_grid_of_roads_is_split_into_corridors_and_junctions_linked_in_the_topology() -> None:
     d = decompose(_road_grid(), resolution_m=0.05)
     kinds = {info.label for info in d.regions.values()}
-    assert kinds == {Label.CORRIDOR, Label.JUNCTION}
-    junctions = [r for r, info in d.regions.items() if info.label is Label.JUNCTION]
+    assert kinds == {PlaceLabel.CORRIDOR, PlaceLabel.JUNCTION}
+    junctions = [r for r, info in d.regions.items() if info.label is PlaceLabel.JUNCTION]
     assert len(junctions) >= 4  # the four crossings inside the grid
     for r in junctions:
-        corridors = [n for n in d.topology.neighbors(r) if d.regions[n].label is Label.CORRIDOR]
+        corridors = [n for n in d.topology.neighbors(r) if d.regions[n].label is PlaceLabel.CORRIDOR]
         assert len(corridors) >= 2
         assert all(d.topology.edges[r, n]["connection"] == Connection.CONNECTED.value for n in corridors)
     # road pieces are linked through the crossings, not to each other
-    assert not [(a, b) for a, b in d.topology.edges if d.regions[a].label is d.regions[b].label is Label.CORRIDOR]
+    assert not [(a, b) for a, b in d.topology.edges if d.regions[a].label is d.regions[b].label is PlaceLabel.CORRIDOR]

@@ -9,9 +9,10 @@ import cv2
 import numpy as np
 import pytest
 
-from services.grid_decomposition import Label, decompose
+from services.grid_decomposition import decompose
 from services.grid_decomposition.racks import find_racks
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
+from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.test_rooms import RES, _furnish, _office_row
 
 
@@ -38,12 +39,12 @@ def test_the_strip_between_two_solid_racks_is_one_corridor_region_with_a_junctio
     ids, counts = np.unique(d.segments[strip], return_counts=True)
     aisle = int(ids[np.argmax(counts)])
     assert counts.max() == strip.sum()  # one region
-    assert d.regions[aisle].label is Label.CORRIDOR
+    assert d.regions[aisle].label is PlaceLabel.CORRIDOR
     for end in (left, middle):
         inside = np.zeros(free.shape, dtype=bool)
         inside[end[0] : end[1], end[2] : end[3]] = True
         junction = int(np.bincount(d.segments[inside & free]).argmax())
-        assert d.regions[junction].label is Label.JUNCTION
+        assert d.regions[junction].label is PlaceLabel.JUNCTION
         assert d.topology.has_edge(aisle, junction)
 
 
@@ -59,7 +60,7 @@ def test_every_solid_rack_is_a_rack_row(rotation_rad: float) -> None:
             for row in d.rack_rows_px
         ]
         assert sum(inside) == 1
-    assert not any(r.label is Label.ROOM for r in d.regions.values())
+    assert not any(r.label is PlaceLabel.ROOM for r in d.regions.values())
 
 
 @pytest.mark.parametrize("style", [RackStyle.UPRIGHTS, RackStyle.PALLET_HEIGHT])
@@ -67,12 +68,12 @@ def test_rows_of_upright_dots_and_pallet_faces_with_unknown_behind_are_racks(sty
     hall = _small(style, seed=2, rotation_rad=math.radians(20))
     d = decompose(hall.occupancy, resolution_m=hall.resolution_m)
     free = hall.occupancy == 0
-    storage = free & (hall.truth == Label.STORAGE.value)
-    assert (d.labels[storage] == Label.STORAGE.value).mean() > 0.9
-    assert (d.labels[storage] == Label.CORRIDOR.value).mean() < 0.05
+    storage = free & (hall.truth == PlaceLabel.STORAGE.value)
+    assert (d.labels[storage] == PlaceLabel.STORAGE.value).mean() > 0.9
+    assert (d.labels[storage] == PlaceLabel.CORRIDOR.value).mean() < 0.05
     for k in range(1, int(hall.junctions.max()) + 1):  # every cross aisle is a junction region
         seg = d.segments[(hall.junctions == k) & free]
-        assert d.regions[int(np.bincount(seg).argmax())].label is Label.JUNCTION
+        assert d.regions[int(np.bincount(seg).argmax())].label is PlaceLabel.JUNCTION
 
 
 def test_a_pallet_on_open_floor_is_no_room_and_open_floor_is_no_storage() -> None:
@@ -80,8 +81,8 @@ def test_a_pallet_on_open_floor_is_no_room_and_open_floor_is_no_storage() -> Non
     assert len(hall.pallets_px) > 0
     d = decompose(hall.occupancy, resolution_m=hall.resolution_m)
     free = hall.occupancy == 0
-    assert not any(r.label is Label.ROOM for r in d.regions.values())
-    assert not (d.labels[free] == Label.STORAGE.value).any()
+    assert not any(r.label is PlaceLabel.ROOM for r in d.regions.values())
+    assert not (d.labels[free] == PlaceLabel.STORAGE.value).any()
     assert len(d.rack_rows_px) == 0
 
 

@@ -14,13 +14,13 @@ from services.grid_decomposition import (
     Connection,
     Decomposition,
     DecompositionError,
-    Label,
     decompose,
     decomposition_features,
     decomposition_layers,
     decomposition_topology,
 )
 from shared.store import FEATURE_KINDS, RevisionWrite
+from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.warehouse import Warehouse, synthetic_warehouse
 
 RES_M = 0.1
@@ -76,7 +76,7 @@ def _points(coordinates: object) -> list[tuple[float, float]]:
 def test_storage_regions_are_region_features_labelled_storage() -> None:
     _, result = _warehouse(0)
     features = decomposition_features(result)
-    storage = [r.region_id for r in result.regions.values() if r.label is Label.STORAGE]
+    storage = [r.region_id for r in result.regions.values() if r.label is PlaceLabel.STORAGE]
     assert storage, "the synthetic warehouse should show pallet cells"
     by_id = {f.properties["region_id"]: f for f in features["region"]}
     assert all(by_id[rid].properties["label"] == "storage" for rid in storage)
@@ -104,7 +104,7 @@ def test_layers_carry_labels_and_segments_in_grid_order() -> None:
     assert labels.data.shape == segments.data.shape == house.occupancy.shape
     assert (labels.origin_x_m, labels.origin_y_m, labels.resolution_m) == (*ORIGIN_XY_M, RES_M)
     assert labels.meta["encoding"] == PLACE_LABELS
-    assert labels.meta["classes"][Label.JUNCTION] == "junction"
+    assert labels.meta["classes"][PlaceLabel.JUNCTION] == "junction"
     assert labels.meta["source_revision"] == segments.meta["source_revision"] == 7
     free = (house.occupancy >= 0) & (house.occupancy < 25)
     assert not np.any((labels.data > 0) & ~free)

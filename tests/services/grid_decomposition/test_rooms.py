@@ -93,3 +93,23 @@ def test_segment_rooms_leaves_warehouse_floors_alone() -> None:
     )
     assert len(np.unique(out[5:35, 40:75])) == 2
     assert out[10, 42] != out[10, 60]
+
+
+def test_a_cupboard_against_a_wall_is_in_its_rooms_segment_and_the_wall_is_not() -> None:
+    from services.grid_decomposition.rooms import wall_furniture
+
+    occ = np.full((100, 200), -1, dtype=np.int8)
+    occ[10:90, 10:190] = 100
+    occ[14:86, 14:186] = 0  # 8.6 m x 3.6 m inside 0.2 m walls
+    occ[14:86, 98:102] = 100  # a 0.2 m wall between two rooms, a door in it
+    occ[44:62, 98:102] = 0
+    occ[20:36, 58:98] = 100  # a 2 m x 0.8 m cupboard against that wall, left room
+    cupboard = np.zeros(occ.shape, dtype=bool)
+    cupboard[20:36, 58:98] = True
+    found = wall_furniture(occ != 0, resolution_m=0.05)
+    assert found[24:32, 62:94].all()
+    assert not found[70:86, 98:102].any() and not found[10:14, 20:180].any()  # walls are thin
+    segments = decompose(occ, resolution_m=0.05).segments
+    left = np.bincount(segments[20:80, 20:50].ravel()).argmax()
+    assert left > 0 and (segments[cupboard] == left).mean() > 0.9
+    assert not segments[10:13, :].any()  # the outer wall is in no segment

@@ -8,12 +8,12 @@ import pytest
 from services.grid_decomposition import (
     Connection,
     DecompositionError,
-    Label,
     Template,
     link_connection,
     match_templates,
     parse_label,
 )
+from shared.vocabulary import PlaceLabel
 
 
 def test_match_templates_marks_cross_and_tee_but_not_a_grid_of_cells() -> None:
@@ -28,16 +28,18 @@ def test_match_templates_marks_cross_and_tee_but_not_a_grid_of_cells() -> None:
 
 
 def test_link_connection_follows_the_connectability_table() -> None:
-    assert link_connection(Label.CORRIDOR, Label.STORAGE, cogent=False, door=False) is Connection.STORAGE_ACCESS
-    assert link_connection(Label.JUNCTION, Label.STORAGE, cogent=False, door=False) is Connection.DISCONNECTED
-    assert link_connection(Label.UNIDENTIFIED, Label.CORRIDOR, cogent=False, door=False) is Connection.DISCONNECTED
-    assert link_connection(Label.ROOM, Label.CORRIDOR, cogent=True, door=True) is Connection.DOOR
-    assert link_connection(Label.ROOM, Label.CORRIDOR, cogent=True, door=False) is Connection.DISCONNECTED
-    assert link_connection(Label.JUNCTION, Label.CORRIDOR, cogent=False, door=False) is Connection.CONNECTED
+    assert (link_connection(PlaceLabel.CORRIDOR, PlaceLabel.STORAGE, cogent=False, door=False)
+            is Connection.STORAGE_ACCESS)
+    assert link_connection(PlaceLabel.JUNCTION, PlaceLabel.STORAGE, cogent=False, door=False) is Connection.DISCONNECTED
+    assert (link_connection(PlaceLabel.UNIDENTIFIED, PlaceLabel.CORRIDOR, cogent=False, door=False)
+            is Connection.DISCONNECTED)
+    assert link_connection(PlaceLabel.ROOM, PlaceLabel.CORRIDOR, cogent=True, door=True) is Connection.DOOR
+    assert link_connection(PlaceLabel.ROOM, PlaceLabel.CORRIDOR, cogent=True, door=False) is Connection.DISCONNECTED
+    assert link_connection(PlaceLabel.JUNCTION, PlaceLabel.CORRIDOR, cogent=False, door=False) is Connection.CONNECTED
 
 
 def test_parse_label_accepts_aliases_and_rejects_nonsense() -> None:
-    assert parse_label("pallet cell") is Label.STORAGE
-    assert parse_label("Open-Area") is Label.OPEN_AREA
+    assert parse_label("pallet cell") is PlaceLabel.STORAGE
+    assert parse_label("Open-Area") is PlaceLabel.OPEN_AREA
     with pytest.raises(DecompositionError, match="unknown place label 'shelf'"):
         parse_label("shelf")

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.grid_decomposition import Label, decompose
+from services.grid_decomposition import decompose
 from services.grid_decomposition.shelves import find_shelf_banks
+from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.test_rooms import RES, _furnish, _office_row
 
 _X0, _PITCH, _DASH, _N = 60, 36, 18, 6  # px: first rack, rack pitch 1.8 m, frames 0.9 m deep
@@ -30,9 +31,9 @@ def test_a_bank_of_racks_seen_as_dashes_is_storage_with_aisles_between() -> None
     mid = _X0 + _DASH // 2
     rack = d.labels[_ROWS[0] + 5 : _ROWS[-1] - 3, mid - 4 : mid + 5]
     aisle = d.labels[_ROWS[0] + 5 : _ROWS[-1] - 3, mid + 14 : mid + 23]
-    assert (rack == Label.STORAGE.value).mean() > 0.9
-    assert (aisle == Label.CORRIDOR.value).mean() > 0.9
-    assert (d.labels[180:210, 20:260] != Label.STORAGE.value).all()  # the floor beside the bank is no rack
+    assert (rack == PlaceLabel.STORAGE.value).mean() > 0.9
+    assert (aisle == PlaceLabel.CORRIDOR.value).mean() > 0.9
+    assert (d.labels[180:210, 20:260] != PlaceLabel.STORAGE.value).all()  # the floor beside the bank is no rack
 
 
 def test_one_row_of_dashes_or_unaligned_rows_are_no_racks() -> None:
@@ -52,4 +53,4 @@ def test_a_furnished_office_has_no_racks_and_no_storage() -> None:
     occ = _furnish(_office_row())
     banks = find_shelf_banks(occ == 100, occ == 0, resolution_m=RES)
     assert not banks.storage.any() and not banks.aisle.any() and not banks.outline.any()
-    assert not (decompose(occ, resolution_m=RES).labels == Label.STORAGE.value).any()
+    assert not (decompose(occ, resolution_m=RES).labels == PlaceLabel.STORAGE.value).any()

@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import DecompositionError
-from services.grid_decomposition.semantics import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from services.grid_decomposition.worker import DecompositionStage, decomposition_stage
-from shared.settings import Settings, ZenohSettings
+from shared import messages
+from shared.bus import WORKER_NAMESPACE, Bus
+from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
+from shared.settings import DecompositionSettings, Settings, ZenohSettings
 from shared.store import GridLayer, MapStore, Revision, RevisionWrite
-from shared.worker import StageContext
+from shared.worker import MAP_EVENTS_TOPIC, StageContext, map_event
 from tests import stages
 from tests.helpers import wait_for
 from tests.services.grid_decomposition.warehouse import synthetic_warehouse
@@ -28,14 +30,15 @@ TIMEOUT_S = 30.0
 
 
 class _Stages:
-    """A factory of quickly polling stages that keeps the one it built last, to read its counters."""
+    """A factory of stages without a least period between decompositions that keeps the one it built last, to read
+    its counters (they follow the map events; the safety poll stays at its default unless ``options`` set it)."""
 
     def __init__(self, **options: float) -> None:
-        self.options = {"min_period_s": 0.0, "poll_period_s": 0.05} | options
+        self.settings = DecompositionSettings(**{"min_period_s": 0.0} | options)
         self.built: list[DecompositionStage] = []
 
     def __call__(self, context: StageContext) -> DecompositionStage:
-        self.built.append(DecompositionStage(context, **self.options))  # type: ignore[arg-type]
+        self.built.append(DecompositionStage(context, self.settings))
         return self.built[-1]
 
     def count(self, what: str) -> int:
@@ -55,10 +58,20 @@ def settings(store: MapStore, zenoh_listen: ZenohSettings) -> Settings:
     return Settings(database_url=store.url, zenoh=zenoh_listen)
 
 
-def _write_occupancy(store: MapStore, settings: Settings, occupancy: np.ndarray) -> Revision:
+def _announce(bus: Bus, settings: Settings, revision: Revision) -> Revision:
+    """Announce ``revision`` on ``/aisle/map_events``, as every stage and the API do after a write."""
+    publisher = bus.publisher(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespace=WORKER_NAMESPACE)
+    publisher.publish(map_event(settings.map_name, revision))
+    publisher.close()
+    return revision
+
+
+def _write_occupancy(store: MapStore, settings: Settings, occupancy: np.ndarray, bus: Bus | None = None) -> Revision:
+    """Store ``occupancy`` as a revision of the occupancy stage, announced on ``bus`` if given."""
     map_id = store.ensure_map(settings.map_name).id
     layer = GridLayer("occupancy", occupancy.astype(np.int8), RES_M, *ORIGIN_XY_M)
-    return store.write_revision(map_id, RevisionWrite("occupancy_mapping", layers=[layer]))
+    revision = store.write_revision(map_id, RevisionWrite("occupancy_mapping", layers=[layer]))
+    return revision if bus is None else _announce(bus, settings, revision)
 
 
 def _decompositions(store: MapStore, settings: Settings) -> list[Revision]:
@@ -85,8 +98,8 @@ def _add_obstacles(occupancy: np.ndarray, fraction: float, seed: int) -> np.ndar
 def test_worker_decomposes_an_occupancy_revision_into_places_on_free_space(
         store: MapStore, settings: Settings) -> None:
     house = synthetic_warehouse(0, resolution_m=RES_M)
-    with stages.running_stage(STAGE, _Stages(), settings, store):
-        source = _write_occupancy(store, settings, house.occupancy)
+    with stages.running_stage(STAGE, _Stages(), settings, store) as bus:
+        source = _write_occupancy(store, settings, house.occupancy, bus)
         revision = _wait_decompositions(store, settings, 1)
     map_id = store.ensure_map(settings.map_name).id
     assert revision.summary["source_revision"] == source.id
@@ -120,29 +133,30 @@ def test_worker_decomposes_an_occupancy_revision_into_places_on_free_space(
 def test_worker_skips_a_small_change_and_takes_a_large_one(store: MapStore, settings: Settings) -> None:
     house = synthetic_warehouse(1, resolution_m=RES_M)
     factory = _Stages(min_change_fraction=0.02)
-    with stages.running_stage(STAGE, factory, settings, store):
-        _write_occupancy(store, settings, house.occupancy)
+    with stages.running_stage(STAGE, factory, settings, store) as bus:
+        _write_occupancy(store, settings, house.occupancy, bus)
         _wait_decompositions(store, settings, 1)
         small = _add_obstacles(house.occupancy, 0.005, seed=1)
-        _write_occupancy(store, settings, small)
+        _write_occupancy(store, settings, small, bus)
         wait_for(lambda: factory.count("small_changes_skipped") == 1, timeout_s=TIMEOUT_S,
                  what="the small change to be seen and skipped")
         assert len(_decompositions(store, settings)) == 1
         large = _add_obstacles(small, 0.1, seed=2)
-        source = _write_occupancy(store, settings, large)
+        source = _write_occupancy(store, settings, large, bus)
         revision = _wait_decompositions(store, settings, 2)
         assert revision.summary["source_revision"] == source.id
-        assert factory.count("decompositions") == 2
+        wait_for(lambda: factory.count("decompositions") == 2, what="the second decomposition to be counted")
+        assert factory.count("decompositions") == 2 and factory.count("crashes") == 0
 
 
 def test_worker_counts_an_unknown_grid_and_carries_on(store: MapStore, settings: Settings) -> None:
     house = synthetic_warehouse(2, resolution_m=RES_M)
     factory = _Stages()
     with stages.running_stage(STAGE, factory, settings, store) as bus:
-        _write_occupancy(store, settings, np.full((40, 60), -1, dtype=np.int8))
+        _write_occupancy(store, settings, np.full((40, 60), -1, dtype=np.int8), bus)
         wait_for(lambda: factory.count("decomposition_errors") == 1, timeout_s=TIMEOUT_S,
                  what="the unknown grid to be counted")
-        source = _write_occupancy(store, settings, house.occupancy)
+        source = _write_occupancy(store, settings, house.occupancy, bus)
         revision = _wait_decompositions(store, settings, 1)
         assert revision.summary["source_revision"] == source.id
         assert bus.alive_workers() == [STAGE]
@@ -152,15 +166,35 @@ def test_worker_counts_an_unknown_grid_and_carries_on(store: MapStore, settings:
 
 def test_restarted_worker_does_not_decompose_the_same_grid_again(store: MapStore, settings: Settings) -> None:
     house = synthetic_warehouse(0, resolution_m=RES_M)
-    with stages.running_stage(STAGE, _Stages(), settings, store):
-        _write_occupancy(store, settings, house.occupancy)
+    with stages.running_stage(STAGE, _Stages(), settings, store) as bus:
+        _write_occupancy(store, settings, house.occupancy, bus)
         _wait_decompositions(store, settings, 1)
     factory = _Stages(min_change_fraction=0.02)
-    with stages.running_stage(STAGE, factory, settings, store):
-        _write_occupancy(store, settings, _add_obstacles(house.occupancy, 0.005, seed=3))
+    with stages.running_stage(STAGE, factory, settings, store) as bus:
+        _write_occupancy(store, settings, _add_obstacles(house.occupancy, 0.005, seed=3), bus)
         wait_for(lambda: factory.count("small_changes_skipped") == 1, timeout_s=TIMEOUT_S,
                  what="the small change to be measured against the resumed grid")
     assert len(_decompositions(store, settings)) == 1
+
+
+def test_worker_decomposes_a_grid_stored_before_it_started(store: MapStore, settings: Settings) -> None:
+    """Its event went out while no worker listened: the look at the store on start finds it."""
+    house = synthetic_warehouse(0, resolution_m=RES_M)
+    source = _write_occupancy(store, settings, house.occupancy)
+    with stages.running_stage(STAGE, _Stages(), settings, store):
+        revision = _wait_decompositions(store, settings, 1)
+    assert revision.summary["source_revision"] == source.id
+
+
+def test_the_safety_poll_finds_a_revision_no_event_announced(store: MapStore, settings: Settings) -> None:
+    """A writer on another bus (or a lost event) announces nothing here: the slow look at the store catches it."""
+    house = synthetic_warehouse(1, resolution_m=RES_M)
+    factory = _Stages(safety_poll_period_s=0.5)
+    with stages.running_stage(STAGE, factory, settings, store):
+        wait_for(lambda: bool(factory.built), what="the stage to be built")
+        source = _write_occupancy(store, settings, house.occupancy)
+        revision = _wait_decompositions(store, settings, 1)
+    assert revision.summary["source_revision"] == source.id
 
 
 def test_stage_factory_starts_the_worker(store: MapStore, settings: Settings) -> None:
@@ -168,12 +202,12 @@ def test_stage_factory_starts_the_worker(store: MapStore, settings: Settings) ->
         pass
 
 
-@pytest.mark.parametrize("options", [{"min_change_fraction": 1.5}, {"poll_period_s": 0.0},
+@pytest.mark.parametrize("options", [{"min_change_fraction": 1.5}, {"safety_poll_period_s": 0.0},
                                      {"source_layer": "place_labels"}, {"neck_half_width_m": -1.0}])
 def test_stage_rejects_nonsense_options(store: MapStore, settings: Settings, options: dict[str, object]) -> None:
     context = StageContext(STAGE, None, store, settings, store.ensure_map(settings.map_name), None)  # type: ignore[arg-type]
     with pytest.raises(DecompositionError):
-        DecompositionStage(context, **options)  # type: ignore[arg-type]
+        DecompositionStage(context, DecompositionSettings.model_construct(**options))  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(("chosen_label", "stored_as"), [("pallet cell", "storage"), ("room", "room")])
@@ -181,16 +215,16 @@ def test_a_label_table_revision_relabels_the_map_as_a_new_revision(
         store: MapStore, settings: Settings, chosen_label: str, stored_as: str) -> None:
     house = synthetic_warehouse(0, resolution_m=RES_M)
     map_id = store.ensure_map(settings.map_name).id
-    with stages.running_stage(STAGE, _Stages(), settings, store):
-        _write_occupancy(store, settings, house.occupancy)
+    with stages.running_stage(STAGE, _Stages(), settings, store) as bus:
+        _write_occupancy(store, settings, house.occupancy, bus)
         first = _wait_decompositions(store, settings, 1)
         before = store.features(map_id, kinds=list(REGION_KINDS))
         labels: dict[int, set[str]] = {}
         for f in before:
             labels.setdefault(f.feature.properties["category"], set()).add(f.feature.properties["label"])
         chosen = min(c for c, names in labels.items() if "storage" in names)
-        store.write_revision(map_id, RevisionWrite(LABEL_TABLE_STAGE,
-                                                   summary={LABEL_OVERRIDES_KEY: {str(chosen): chosen_label}}))
+        _announce(bus, settings, store.write_revision(
+            map_id, RevisionWrite(LABEL_TABLE_STAGE, summary={LABEL_OVERRIDES_KEY: {str(chosen): chosen_label}})))
         second = _wait_decompositions(store, settings, 2)
 
     assert second.summary["source_revision"] == first.summary["source_revision"]

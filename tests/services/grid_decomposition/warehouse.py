@@ -4,7 +4,7 @@ Rack rows are uprights (0.1 m squares) at about 2.7 m pitch along the row, rows 
 placed back to back with a 0.2 m flue; aisles 2.8-3.5 m (or any range); cross aisles 3.2-4 m
 cut every row into sections; a perimeter aisle runs inside the outer walls; 10 % of the uprights
 are missing. An optional second building holds a rotated block of racks, and the whole map can be
-turned. Ground truth codes follow ``Label``: corridor (aisles and cross aisles), junction (aisle
+turned. Ground truth codes follow ``PlaceLabel``: corridor (aisles and cross aisles), junction (aisle
 x cross-aisle crossings, not the L bends of the perimeter aisle), storage (rack footprints), 0
 off free space; and every pallet cell (one bay, one side of the flue) has an id.
 Also the ground truth of the tuw grid warehouses (``../shared/data/maps/tuw_warehouse``), and rack halls
@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition import Label
 from services.simulator.rackmaps import RackStyle, rack_hall_map
+from shared.vocabulary import PlaceLabel
 
 UPRIGHT_M = 0.1
 DEPTH_M = 1.1
@@ -38,7 +38,7 @@ class Warehouse(NamedTuple):
     occupancy : (H, W) int8
         100 occupied, 0 free, -1 unknown.
     truth : (H, W) uint8
-        Ground-truth :class:`Label` code, 0 off free space.
+        Ground-truth :class:`PlaceLabel` code, 0 off free space.
     cells : (H, W) int32
         Pallet-cell id (1..N) over each bay's footprint, 0 elsewhere (the flue belongs to no cell).
     junctions_px : list of (x, y)
@@ -83,7 +83,7 @@ def _block(
     height = y + wall
     h, w = round(height / resolution_m), round(width / resolution_m)
     occ = np.zeros((h, w), dtype=np.int8)
-    truth = np.full((h, w), Label.CORRIDOR.value, dtype=np.uint8)
+    truth = np.full((h, w), PlaceLabel.CORRIDOR.value, dtype=np.uint8)
     cells = np.zeros((h, w), dtype=np.int32)
     px = round(wall / resolution_m)
     occ[:px, :] = occ[-px:, :] = occ[:, :px] = occ[:, -px:] = 100
@@ -99,7 +99,7 @@ def _block(
         lines = [y0, y0 + DEPTH_M, y0 + DEPTH_M + FLUE_M, y0 + 2 * DEPTH_M + FLUE_M]
         for xs in xs_sections:
             xe = xs + bays_per_section * pitch
-            fill(truth, xs, xe, y0, y0 + 2 * DEPTH_M + FLUE_M, Label.STORAGE.value)
+            fill(truth, xs, xe, y0, y0 + 2 * DEPTH_M + FLUE_M, PlaceLabel.STORAGE.value)
             for k in range(bays_per_section + 1):
                 ux = xs + k * pitch
                 for uy in lines:
@@ -117,7 +117,7 @@ def _block(
             corner = i in (0, len(cross_x) - 1) and j in (0, len(aisle_y) - 1)
             if corner:  # an L bend of the perimeter aisle, not a junction
                 continue
-            fill(truth, cx, cx + cross[i], ay, ay + aisles[j], Label.JUNCTION.value)
+            fill(truth, cx, cx + cross[i], ay, ay + aisles[j], PlaceLabel.JUNCTION.value)
             junctions.append(((cx + cross[i] / 2) / resolution_m, (ay + aisles[j] / 2) / resolution_m))
     truth[occ > 0] = 0
     truth[:px, :] = truth[-px:, :] = truth[:, :px] = truth[:, -px:] = 0
@@ -218,7 +218,7 @@ def cell_labels(labels: npt.NDArray[np.uint8], wh: Warehouse) -> npt.NDArray[np.
     """The majority label of each pallet cell's free pixels, (N,) for cells 1..N; -1 for a cell without any."""
     ok = (wh.cells > 0) & (wh.occupancy == 0)
     n = int(wh.cells.max()) + 1
-    votes = np.zeros((n, len(Label)), dtype=np.int64)
+    votes = np.zeros((n, len(PlaceLabel)), dtype=np.int64)
     np.add.at(votes, (wh.cells[ok], labels[ok]), 1)
     out: npt.NDArray[np.int64] = np.where(votes.sum(axis=1) > 0, votes.argmax(axis=1), -1)
     return out[1:]
@@ -245,15 +245,15 @@ def tuw_truth(occupancy: npt.NDArray[np.int8]) -> npt.NDArray[np.uint8]:
     free = occupancy == 0
     h_run, v_run = _runs(free), _runs(free.T).T
     road = int(np.bincount(np.minimum(h_run, v_run)[free]).argmax())
-    truth = np.where(free, Label.CORRIDOR.value, 0).astype(np.uint8)
-    truth[free & (h_run > 1.5 * road) & (v_run > 1.5 * road)] = Label.JUNCTION.value
+    truth = np.where(free, PlaceLabel.CORRIDOR.value, 0).astype(np.uint8)
+    truth[free & (h_run > 1.5 * road) & (v_run > 1.5 * road)] = PlaceLabel.JUNCTION.value
     return truth
 
 
 def styled_warehouse(seed: int, *, style: RackStyle, rotation_rad: float = 0.0, **options: Any) -> Warehouse:
     """A rack hall drawn as ``style`` (:func:`services.simulator.rackmaps.rack_hall_map`) as a :class:`Warehouse`.
 
-    The simulator's truth codes are those of :class:`Label` (corridor, junction, storage, open area).
+    The simulator's truth codes are those of :class:`PlaceLabel` (corridor, junction, storage, open area).
     """
     hall = rack_hall_map(seed, style=style, rotation_rad=rotation_rad, **options)
     return Warehouse(hall.occupancy, hall.truth, hall.cells, hall.junctions_px, hall.resolution_m)

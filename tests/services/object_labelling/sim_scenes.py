@@ -4,7 +4,7 @@ per-cone ground truth by ray casting.
 The test hall has one rack block at the back and a forklift, a person and a loose pallet standing
 in front of it; the robot drives along ``y = 2 m`` with the RGB-D camera looking left at them. The
 classifier is trained on renders of *other* halls (the scatter halls of
-:mod:`services.object_labelling.sim_views`: other positions, headings and distances).
+:mod:`services.labelling_training.sim_views`: other positions, headings and distances).
 """
 
 from __future__ import annotations

@@ -1,19 +1,18 @@
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
 
 from services.object_labelling import ObjectLabellingError, decode_depth, decode_rgb
+from shared.messages import header
 
 
-def _message(array: np.ndarray, encoding: str, *, bigendian: bool = False) -> SimpleNamespace:
+def _message(array: np.ndarray, encoding: str, *, bigendian: bool = False) -> Image:
     height, width = array.shape[:2]
     data = np.ascontiguousarray(array).view(np.uint8).ravel()
-    return SimpleNamespace(
-        height=height, width=width, step=data.size // height, encoding=encoding, is_bigendian=int(bigendian), data=data
-    )
+    return Image(header=header(0, "camera"), height=height, width=width, step=data.size // height, encoding=encoding,
+                 is_bigendian=int(bigendian), data=data)
 
 
 def test_decode_rgb_reads_rgb8_and_swaps_bgr8() -> None:

@@ -20,7 +20,7 @@ from services.simulator import Output, robot_specs, simulate
 from services.simulator.live import publish_live
 from shared import messages
 from shared.bus import Bus
-from shared.settings import Settings, ZenohSettings
+from shared.settings import LabellingSettings, Settings, ZenohSettings
 from shared.store import MapStore
 from shared.transforms import yaw_from_quaternion
 from shared.worker import StageContext, run_stage
@@ -82,7 +82,8 @@ def _store(tmp_path: Path) -> MapStore:
 
 
 def _factory(model: Path, weights: Path, **params: Any) -> Callable[[StageContext], LabellingStage]:
-    return lambda context: LabellingStage(context, model_path=model, weights_path=weights, **params)
+    settings = LabellingSettings(model_path=model, weights_path=weights, **params)
+    return lambda context: LabellingStage(context, settings)
 
 
 def _publish(bus: Bus, outputs: list[Output], *, rate: float) -> None:
@@ -156,7 +157,7 @@ def test_annotated_scans_of_simulated_traffic_label_the_objects_the_cones_hit(
 def test_missing_model_file_fails_at_start_with_how_to_train_one(tmp_path: Path, weights_path: Path) -> None:
     context = StageContext("object_labelling", None, None, Settings(), None, None)  # type: ignore[arg-type]
     with pytest.raises(ObjectLabellingError, match=r"does not exist.*aisle train-classifier"):
-        LabellingStage(context, model_path=tmp_path / "absent.npz", weights_path=weights_path)
+        LabellingStage(context, LabellingSettings(model_path=tmp_path / "absent.npz", weights_path=weights_path))
 
 
 def test_corrupt_model_file_fails_at_start_with_how_to_train_one(tmp_path: Path, weights_path: Path) -> None:
@@ -164,7 +165,7 @@ def test_corrupt_model_file_fails_at_start_with_how_to_train_one(tmp_path: Path,
     model.write_bytes(b"PK\x03\x04 not really a zip")
     context = StageContext("object_labelling", None, None, Settings(), None, None)  # type: ignore[arg-type]
     with pytest.raises(ObjectLabellingError, match=r"corrupt.*aisle train-classifier"):
-        LabellingStage(context, model_path=model, weights_path=weights_path)
+        LabellingStage(context, LabellingSettings(model_path=model, weights_path=weights_path))
 
 
 def _corrupt_pairs(traffic: list[Output]) -> list[Output]:

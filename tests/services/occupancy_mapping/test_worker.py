@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.occupancy_mapping.worker import OccupancyStage
+from services.occupancy_mapping.worker import occupancy_stage
 from shared import messages
 from shared.keyexpr import Attachment, topic_key
 from shared.settings import Settings, ZenohSettings
@@ -21,7 +21,7 @@ from tests.helpers import wait_for
 TALKER = Path(__file__).resolve().parents[2] / "rmw_zenoh_talker.py"
 
 
-running_stage = partial(stages.running_stage, "occupancy_mapping", OccupancyStage)
+running_stage = partial(stages.running_stage, "occupancy_mapping", occupancy_stage)
 
 
 def _settings(zenoh_listen: ZenohSettings, url: str) -> Settings:

@@ -14,7 +14,7 @@ from fastapi.testclient import TestClient
 from scipy.spatial import cKDTree
 
 from api.app import create_app
-from services.pillar_mapping.worker import PillarStage
+from services.pillar_mapping.worker import pillar_stage
 from services.simulator import ground_truth_features, publish_live, robot_specs, simulate, world_from_layout
 from services.simulator.world import World
 from shared import messages
@@ -43,7 +43,7 @@ def store(tmp_path: Path) -> Iterator[MapStore]:
     map_store.close()
 
 
-running_stage = partial(stages.running_stage, "pillar_mapping", PillarStage)
+running_stage = partial(stages.running_stage, "pillar_mapping", pillar_stage)
 
 
 def _settings(zenoh_listen: ZenohSettings, url: str) -> Settings:

@@ -1,6 +1,7 @@
 import pytest
 
-from services.semantic_fusion import DISTRIBUTION_CLASSES, SemanticClass, SemanticFusionError, class_columns
+from services.semantic_fusion import DISTRIBUTION_CLASSES, SemanticFusionError, class_columns
+from shared.vocabulary import SemanticClass
 
 
 def test_class_columns_maps_names_aliases_and_strangers() -> None:

@@ -2,13 +2,13 @@ import numpy as np
 import pytest
 
 from services.semantic_fusion import (
-    SemanticClass,
     SemanticFusionError,
     SemanticGrid,
     evidence_weights,
     infer_labels,
 )
 from services.semantic_fusion.classes import column_of
+from shared.vocabulary import SemanticClass
 
 WALL, HUMAN = column_of(SemanticClass.WALL), column_of(SemanticClass.HUMAN)
 

@@ -5,13 +5,13 @@ from services.semantic_fusion import (
     N_CLASSES,
     NO_ENTROPY,
     GridCells,
-    SemanticClass,
     SemanticFusionError,
     infer_labels,
     normalised_entropy,
     rasterise,
 )
 from services.semantic_fusion.classes import column_of
+from shared.vocabulary import SemanticClass
 
 
 def _cells(entries: list[tuple[int, int, dict[SemanticClass, float], float]]) -> GridCells:

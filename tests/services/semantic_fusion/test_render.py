@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from services.semantic_fusion import CLASS_COLOURS, SemanticClass, SemanticFusionError, render_labels
+from services.semantic_fusion import CLASS_COLOURS, SemanticFusionError, render_labels
+from shared.vocabulary import SemanticClass
 
 
 def test_render_labels_colours_cells_with_north_up() -> None:

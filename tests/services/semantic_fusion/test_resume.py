@@ -3,7 +3,6 @@ import pytest
 
 from services.semantic_fusion import (
     N_CLASSES,
-    SemanticClass,
     SemanticFusionError,
     SemanticGrid,
     evidence_for_entropy,
@@ -12,6 +11,7 @@ from services.semantic_fusion import (
     rasterise,
     seed_grid,
 )
+from shared.vocabulary import SemanticClass
 
 
 def test_evidence_for_entropy_inverts_the_one_hot_entropy() -> None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import io
 import threading
 from collections.abc import Iterator
@@ -21,7 +20,6 @@ from services.semantic_fusion import (
     DYNAMIC_CLASSES,
     RangeScan,
     ScanObservation,
-    SemanticClass,
     SemanticLayers,
     label_accuracy,
     se2,
@@ -38,15 +36,23 @@ from services.semantic_fusion.worker import FusionStage, fusion_stage
 from services.simulator.rosmsgs import tf_message, transform_stamped
 from shared import messages
 from shared.bus import Bus, Publisher
-from shared.settings import Settings, ZenohSettings
+from shared.settings import SemanticFusionSettings, Settings, ZenohSettings
 from shared.store import MapStore, Revision
 from shared.transforms import quaternion_from_yaw
+from shared.vocabulary import SemanticClass
 from shared.worker import StageFactory, run_stage
 from tests.helpers import wait_for
 
 STAGE = "semantic_fusion"
 RESOLUTION_M = 0.05
-FAST_STORE = functools.partial(FusionStage, store_period_s=0.2)
+
+
+def _stage(**settings: Any) -> StageFactory:
+    """The stage built from its settings section with ``settings`` changed from the defaults."""
+    return lambda context: FusionStage(context, SemanticFusionSettings(**settings))
+
+
+FAST_STORE = _stage(store_period_s=0.2)
 """The stage with its defaults except a short store period."""
 
 
@@ -263,10 +269,10 @@ def test_corrected_poses_pull_a_drifting_robot_onto_the_map(
         zenoh_listen: ZenohSettings, sqlite_store: MapStore) -> None:
     warehouse = make_warehouse(length_m=30.0, width_m=20.0, seed=4)
     run = simulate_run(warehouse, seed=4, odometry_yaw_bias_per_m=0.01)
-    factory = functools.partial(FusionStage, store_period_s=0.2, pose_topic="localization_pose",
-                                pose_correction_period_s=0.0, detect_loops=False,
-                                camera_x_in_base_m=MOUNT[0], camera_y_in_base_m=MOUNT[1],
-                                camera_yaw_in_base_rad=MOUNT[2])
+    factory = _stage(store_period_s=0.2, pose_topic="localization_pose",
+                     pose_correction_period_s=0.0, detect_loops=False,
+                     camera_x_in_base_m=MOUNT[0], camera_y_in_base_m=MOUNT[1],
+                     camera_yaw_in_base_rad=MOUNT[2])
     base = se2.compose(run.true_poses, se2.inverse(MOUNT))
     with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, _):
         scans = _publisher(robots, "robot1")
@@ -327,8 +333,8 @@ def test_the_robots_lidar_mounted_as_its_tf_says_keeps_a_drifting_robots_map_str
     run = simulate_run(warehouse, seed=100, odometry_yaw_bias_per_m=0.002, lidar_beams=beams)
     # the lidar is on by default; its mount settings (the base origin) are wrong for this robot (on them this
     # run labels 95.8 % right): tf has it
-    factory = functools.partial(FusionStage, store_period_s=0.2, camera_x_in_base_m=MOUNT[0],
-                                camera_y_in_base_m=MOUNT[1], camera_yaw_in_base_rad=MOUNT[2])
+    factory = _stage(store_period_s=0.2, camera_x_in_base_m=MOUNT[0],
+                     camera_y_in_base_m=MOUNT[1], camera_yaw_in_base_rad=MOUNT[2])
     with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, stage_bus):
         _publish_drive(robots, stage_bus, "robot1", run, beams=beams, laser_frame="robot1/laser", laser_yaw_rad=0.1,
                        base_frame="robot1/base_link")
@@ -345,8 +351,8 @@ def test_each_robot_has_its_own_lidar_mount_from_its_tf_or_else_the_settings(
     warehouse = make_warehouse(length_m=30.0, width_m=18.0, seed=0)
     beams = 541
     run = simulate_run(warehouse, seed=100, lidar_beams=beams, max_scans=150)
-    factory = functools.partial(FusionStage, store_period_s=0.2, camera_x_in_base_m=MOUNT[0],
-                                camera_y_in_base_m=MOUNT[1], camera_yaw_in_base_rad=MOUNT[2], lidar_x_in_base_m=0.3)
+    factory = _stage(store_period_s=0.2, camera_x_in_base_m=MOUNT[0],
+                     camera_y_in_base_m=MOUNT[1], camera_yaw_in_base_rad=MOUNT[2], lidar_x_in_base_m=0.3)
     with running_stage(zenoh_listen, sqlite_store, factory=factory) as (robots, stage_bus):
         # same frame names (not prefixed), different lidars: robot1's is turned, and tf says so; robot2 sends no tf
         _publish_drive(robots, stage_bus, "robot1", run, beams=beams, laser_frame="laser", laser_yaw_rad=0.1,

@@ -7,7 +7,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from services.occupancy_mapping import read_map_yaml
 from services.simulator import (
     demo_layout,
     ground_truth_features,
@@ -17,6 +16,7 @@ from services.simulator import (
     write_ground_truth,
 )
 from services.simulator.world import AreaKind
+from shared.mapfiles import read_map_yaml
 from shared.store.records import FEATURE_KINDS
 
 

@@ -1,0 +1,54 @@
+"""Bin answers in WMS form (:class:`api.models.BinOut`) from the map's typed ones, and the live ones encoded once
+per version of a bin, for the bins route and the fast path alike."""
+
+from __future__ import annotations
+
+from api.models import AccessPose, BinOut, Opening, PlaceRef
+from api.translate import http_error
+from atlas.bins import BinAnswer, no_bin
+from atlas.bins import PlaceRef as MapPlaceRef
+from atlas.live import LiveMap
+from shared.store import MapInfo
+
+
+def _place(ref: MapPlaceRef | None) -> PlaceRef | None:
+    return None if ref is None else PlaceRef(key=ref.key, label=ref.label, distance_m=ref.distance_m)
+
+
+def bin_out(answer: BinAnswer) -> BinOut:
+    """A bin answer in WMS form; what the bin lacks comes out null."""
+    record = answer.bin
+    opening, pose = record.opening, record.access_pose
+    return BinOut(
+        id=answer.id,
+        detected_id=record.id,
+        wms_id=answer.wms_id,
+        status=answer.status.value,
+        aisle=record.aisle,
+        bay=record.bay,
+        level=record.level,
+        centre=record.centre,
+        footprint=None if record.footprint is None else list(record.footprint),
+        opening=None if opening is None else Opening(left=opening.left, right=opening.right, width_m=opening.width_m),
+        access_pose=None if pose is None else AccessPose(x_m=pose.x_m, y_m=pose.y_m, yaw_rad=pose.yaw_rad),
+        row=record.row,
+        back_row=record.back_row,
+        corridor=_place(answer.corridor),
+        region=_place(answer.region),
+        nearest_junction=_place(answer.nearest_junction),
+        confidence=record.confidence,
+        stage=answer.stage,
+        revision_id=answer.revision_id,
+    )
+
+
+def live_bin(live: LiveMap, map_info: MapInfo, bin_id: str) -> bytes:
+    """Bin ``bin_id`` of the live map as JSON (404 if there is none), made once per version of the bin and of
+    what it reads besides."""
+    row = live.bin_row(bin_id)
+    if row is None:
+        raise http_error(no_bin(map_info, bin_id, None))
+    body = live.bin_json.get(row.id)
+    if body is None:
+        body = live.bin_json[row.id] = bin_out(live.bin_answer(row)).model_dump_json().encode()
+    return body

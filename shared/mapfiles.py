@@ -1,0 +1,163 @@
+"""Read and write ROS map_server maps (YAML + PGM/PNG image).
+
+The occupancy mapper writes them (``aisle map build``), the grid decomposition and the benchmarks read
+them, and the simulator writes its ground truth as one.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+from PIL import Image, UnidentifiedImageError
+
+FREE_PIXEL = 254
+OCCUPIED_PIXEL = 0
+UNKNOWN_PIXEL = 205
+
+
+class MapFileError(ValueError):
+    """A map file that cannot be read or a map that cannot be written: missing, malformed, bad geometry."""
+
+
+class MapImage(NamedTuple):
+    """A map read from disk: occupancy int8 (-1 unknown, 0..100), GridLayer row order (row 0 = lowest y)."""
+
+    occupancy: npt.NDArray[np.int8]
+    resolution_m: float
+    origin_x_m: float
+    origin_y_m: float
+
+
+def write_map_yaml(
+    path_yaml: Path,
+    occupancy: npt.NDArray[np.int8],
+    *,
+    resolution_m: float,
+    origin_x_m: float,
+    origin_y_m: float,
+    occupied_percent: int = 65,
+    free_percent: int = 25,
+) -> Path:
+    """Write ``occupancy`` as a trinary map_server map; return the image path.
+
+    The image (same stem, ``.pgm``) has free 254 (cells below ``free_percent``), occupied 0 (above
+    ``occupied_percent``), unknown 205 (the rest), and its top row is the grid's last (highest-y)
+    row. The YAML says ``free_thresh: 0.196`` like ROS 1 map_saver, so that 205 reads back as
+    unknown under either threshold convention.
+    """
+    occ = np.asarray(occupancy)
+    if occ.ndim != 2 or 0 in occ.shape:
+        raise MapFileError(f"occupancy must be a non-empty 2-D array, got shape {occ.shape}")
+    if not (
+        math.isfinite(resolution_m)
+        and resolution_m > 0
+        and math.isfinite(origin_x_m)
+        and math.isfinite(origin_y_m)
+    ):
+        raise MapFileError(
+            f"bad map geometry: resolution {resolution_m}, origin ({origin_x_m}, {origin_y_m})"
+        )
+    if not 0 <= free_percent < occupied_percent <= 100:
+        raise MapFileError(
+            f"need 0 <= free_percent < occupied_percent <= 100, got {free_percent}, {occupied_percent}"
+        )
+    path_yaml = Path(path_yaml)
+    path_image = path_yaml.with_suffix(".pgm")
+    pixels = np.full(occ.shape, UNKNOWN_PIXEL, dtype=np.uint8)
+    known = occ >= 0
+    pixels[known & (occ > occupied_percent)] = OCCUPIED_PIXEL
+    pixels[known & (occ < free_percent)] = FREE_PIXEL
+    Image.fromarray(pixels[::-1]).save(path_image)
+    meta = {
+        "image": path_image.name,
+        "mode": "trinary",
+        "resolution": float(resolution_m),
+        "origin": [float(origin_x_m), float(origin_y_m), 0.0],
+        "negate": 0,
+        "occupied_thresh": 0.65,
+        "free_thresh": 0.196,
+    }
+    path_yaml.write_text(yaml.safe_dump(meta, sort_keys=False))
+    return path_image
+
+
+def _load_yaml(path: Path) -> dict[str, Any]:
+    try:
+        meta = yaml.safe_load(path.read_text())
+    except FileNotFoundError as err:
+        raise MapFileError(f"map file {path} does not exist") from err
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        raise MapFileError(f"map file {path} is not readable YAML: {err}") from err
+    if not isinstance(meta, dict):
+        raise MapFileError(f"map file {path} is not a YAML mapping")
+    missing = {"image", "resolution", "origin"} - set(meta)
+    if missing:
+        raise MapFileError(f"map file {path} lacks {sorted(missing)}")
+    return meta
+
+
+def read_map_yaml(path: Path) -> MapImage:
+    """Read a map_server map, honouring ``negate``, ``occupied_thresh``, ``free_thresh`` and ``mode``.
+
+    ``trinary`` and ``raw`` give -1/0/100 and raw pixel values respectively; ``scale`` gives the
+    probability in percent between the thresholds, as map_server does. A non-zero origin yaw is
+    rejected (the grid layer has none).
+    """
+    path = Path(path)
+    meta = _load_yaml(path)
+    try:
+        resolution = float(meta["resolution"])
+        origin_x, origin_y, yaw = (float(v) for v in meta["origin"])
+        negate = bool(int(meta.get("negate", 0)))
+        occupied_thresh = float(meta.get("occupied_thresh", 0.65))
+        free_thresh = float(meta.get("free_thresh", 0.196))
+    except (TypeError, ValueError) as err:
+        raise MapFileError(f"map file {path}: bad resolution/origin/thresholds: {err}") from err
+    mode = str(meta.get("mode", "trinary"))
+    if mode not in {"trinary", "scale", "raw"}:
+        raise MapFileError(f"map file {path}: unknown mode {mode!r}")
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise MapFileError(f"map file {path}: resolution {resolution} must be positive")
+    if abs(yaw) > 1e-9:
+        raise MapFileError(f"map file {path}: origin yaw {yaw} rad is not supported")
+    image_path = path.parent / str(meta["image"])
+    try:
+        with Image.open(image_path) as image:
+            has_alpha = "A" in image.getbands()
+            pixels = np.asarray(image.convert("LA" if has_alpha else "L"), dtype=np.float64)
+    except FileNotFoundError as err:
+        raise MapFileError(f"map image {image_path} does not exist") from err
+    except (OSError, UnidentifiedImageError) as err:
+        raise MapFileError(f"map image {image_path} is not a readable image: {err}") from err
+    alpha = pixels[..., 1] if has_alpha else None
+    value = pixels[..., 0] if has_alpha else pixels
+    if mode == "raw":
+        occ = np.clip(value, -1, 100).astype(np.int8)
+        return MapImage(occ[::-1].copy(), resolution, origin_x, origin_y)
+    p = value / 255.0 if negate else (255.0 - value) / 255.0
+    occ = np.full(value.shape, -1, dtype=np.int8)
+    occ[p > occupied_thresh] = 100
+    occ[p < free_thresh] = 0
+    if mode == "scale":
+        between = (p >= free_thresh) & (p <= occupied_thresh)
+        scaled = 99.0 * (p - free_thresh) / (occupied_thresh - free_thresh)
+        occ[between] = np.rint(scaled[between]).astype(np.int8)
+        if alpha is not None:
+            occ[alpha < 1.0] = -1
+    return MapImage(occ[::-1].copy(), resolution, origin_x, origin_y)
+
+
+__all__ = [
+    "FREE_PIXEL",
+    "OCCUPIED_PIXEL",
+    "UNKNOWN_PIXEL",
+    "MapFileError",
+    "MapImage",
+    "read_map_yaml",
+    "write_map_yaml",
+]

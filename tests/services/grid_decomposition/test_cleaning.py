@@ -1,0 +1,126 @@
+"""Cleaning a real SLAM map before decomposing it."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from services.grid_decomposition import decompose
+from services.grid_decomposition.cleaning import clean_occupancy
+
+RES = 0.05
+
+
+def _room() -> npt.NDArray[np.int8]:
+    """A 6 m x 4 m walled room in unknown space (0.1 m walls), GridLayer order."""
+    occ = np.full((120, 160), -1, dtype=np.int8)
+    occ[20:100, 20:140] = 100
+    occ[22:98, 22:138] = 0
+    return occ
+
+
+def test_a_speck_in_the_room_becomes_free() -> None:
+    occ = _room()
+    occ[60, 80] = 100
+    cleaned, what = clean_occupancy(occ, resolution_m=RES)
+    assert cleaned[60, 80] == 0 and what.specks[60, 80]
+
+
+def test_a_blob_on_the_wall_is_no_speck() -> None:
+    occ = _room()
+    occ[22, 80] = 100  # on the wall's inner face
+    cleaned, _ = clean_occupancy(occ, resolution_m=RES)
+    assert cleaned[22, 80] == 100
+
+
+def test_a_laser_streak_outside_the_building_is_removed() -> None:
+    occ = _room()
+    occ[60, 138:140] = 0  # a gap in the wall (glass) ...
+    occ[60, 140:159] = 0  # ... and the ray beyond it, 1 px wide in unknown space
+    cleaned, what = clean_occupancy(occ, resolution_m=RES)
+    assert np.all(cleaned[60, 150:159] == -1) and what.streaks[60, 150:159].all()
+    assert np.all(cleaned[30:90, 30:130] == 0)  # the room's floor stays
+
+
+def test_an_isolated_free_speck_in_unknown_space_is_removed() -> None:
+    occ = _room()
+    occ[5:8, 5:8] = 0
+    cleaned, _ = clean_occupancy(occ, resolution_m=RES)
+    assert np.all(cleaned[5:8, 5:8] == -1)
+
+
+def test_grey_fringe_at_a_wall_becomes_wall_and_clear_floor_stays() -> None:
+    occ = _room()
+    occ[22:98, 22:24] = 12  # half-seen cells along the left wall
+    occ[50:52, 80:82] = 12  # the same grey alone in the middle of the room
+    cleaned, what = clean_occupancy(occ, resolution_m=RES)
+    assert np.all(cleaned[22:98, 22:24] == 100) and what.fringe[22:98, 22:24].all()
+    assert np.all(cleaned[50:52, 80:82] == 12)
+
+
+def test_trinary_map_of_clean_rooms_is_unchanged() -> None:
+    occ = _room()
+    cleaned, _ = clean_occupancy(occ, resolution_m=RES)
+    assert np.array_equal(cleaned, occ)
+
+
+def test_decomposition_labels_no_fringe_and_a_streak_only_near_its_room() -> None:
+    occ = np.full((120, 300), -1, dtype=np.int8)
+    occ[:, :160] = _room()
+    occ[22:98, 22:24] = 12
+    occ[60, 138:140] = 0  # a gap in the wall and a 1 px ray 8 m out through it
+    occ[60, 140:299] = 0
+    result = decompose(occ, resolution_m=RES)
+    room = result.segments[60, 80]
+    assert room > 0
+    assert not result.segments[22:98, 22:24].any()
+    assert result.segments[60, 145] == room  # the ray by the room is the room's free space
+    assert not result.segments[60, 220:299].any()  # far out it is no region
+
+
+def _two_furnished_rooms() -> npt.NDArray[np.int8]:
+    """Two 5 m x 4 m rooms side by side, a 0.9 m door between them, desks, specks and a ray outside."""
+    occ = np.full((120, 260), -1, dtype=np.int8)
+    occ[20:102, 20:226] = 100
+    occ[22:100, 22:122] = 0
+    occ[22:100, 124:224] = 0
+    occ[55:73, 122:124] = 0  # the door
+    rng = np.random.default_rng(3)
+    for r0, c0 in ((30, 35), (70, 80), (35, 140), (75, 190)):  # 1.5 m x 0.8 m desks
+        occ[r0 : r0 + 16, c0 : c0 + 30] = 100
+    for r, c in rng.integers((25, 25), (97, 220), size=(30, 2)):  # lone flickering cells
+        if occ[r, c] == 0:
+            occ[r, c] = 100
+    occ[90, 224:226] = 0  # glass: a gap in the outer wall ...
+    occ[90, 226:259] = 0  # ... and a ray beyond it
+    return occ
+
+
+def test_two_rooms_joined_by_a_door_stay_two_regions_on_a_cluttered_map() -> None:
+    occ = _two_furnished_rooms()
+    segments = decompose(occ, resolution_m=RES).segments
+    left, right = segments[22:100, 22:122], segments[22:100, 124:224]
+    assert (left > 0).mean() > 0.8 and (right > 0).mean() > 0.8
+    # no region holds a tenth of both rooms
+    for region in np.unique(segments[segments > 0]):
+        assert min((left == region).mean(), (right == region).mean()) < 0.1, region
+
+
+def test_wall_fringes_of_the_ipa_maps_lie_outside_every_ground_truth_room() -> None:
+    from pathlib import Path
+
+    from PIL import Image
+
+    from services.grid_decomposition.mapfile import read_map_file
+
+    folder = Path(__file__).resolve().parents[4] / "shared" / "data" / "maps" / "ipa_room_segmentation"
+    if not folder.exists():
+        pytest.skip(f"{folder} is absent: the ipa maps are not on this machine")
+    for name in ("Freiburg52_scan", "lab_intel", "office_b"):
+        occ, _, _ = read_map_file(folder / f"{name}.png", resolution_m=RES)
+        _, what = clean_occupancy(occ, resolution_m=RES)
+        with Image.open(folder / f"{name}_gt_segmentation.png") as image:
+            rooms = np.asarray(image.convert("L"))[::-1] > 250
+        assert what.fringe.any(), name
+        assert not (what.fringe & rooms).any(), name

@@ -1,0 +1,85 @@
+"""map_server YAML + PGM maps."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from shared.mapfiles import MapFileError, read_map_yaml, write_map_yaml
+
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
+
+
+def test_write_then_read_round_trips_trinary_map(tmp_path: Path) -> None:
+    occ = np.full((4, 6), -1, np.int8)
+    occ[0, :] = 0
+    occ[1, 2] = 100
+    occ[3, 5] = 90
+    occ[2, 2] = 50  # uncertain: written as unknown
+    image = write_map_yaml(tmp_path / "site.yaml", occ, resolution_m=0.05, origin_x_m=-1.0, origin_y_m=2.5)
+    pixels = np.asarray(Image.open(image))
+    assert pixels[-1, 0] == 254 and pixels[-2, 2] == 0 and pixels[0, 5] == 0  # row 0 of the image = top
+    read = read_map_yaml(tmp_path / "site.yaml")
+    assert (read.resolution_m, read.origin_x_m, read.origin_y_m) == (0.05, -1.0, 2.5)
+    expected = occ.copy()
+    expected[expected == 90] = 100
+    expected[2, 2] = -1
+    np.testing.assert_array_equal(read.occupancy, expected)
+
+
+def test_read_honours_negate_and_thresholds(tmp_path: Path) -> None:
+    Image.fromarray(np.array([[0, 100, 255]], np.uint8)).save(tmp_path / "m.png")
+    (tmp_path / "m.yaml").write_text(
+        "image: m.png\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 1\n"
+        "occupied_thresh: 0.9\nfree_thresh: 0.1\n"
+    )
+    np.testing.assert_array_equal(read_map_yaml(tmp_path / "m.yaml").occupancy, [[0, -1, 100]])
+    (tmp_path / "m.yaml").write_text(
+        "image: m.png\nresolution: 0.1\norigin: [0, 0, 0]\nmode: scale\n"
+        "occupied_thresh: 0.9\nfree_thresh: 0.1\n"
+    )
+    np.testing.assert_array_equal(read_map_yaml(tmp_path / "m.yaml").occupancy, [[100, 63, 0]])
+
+
+@pytest.mark.parametrize(
+    ("yaml_text", "image_bytes", "match"),
+    [
+        (None, None, "does not exist"),
+        ("image: [unclosed\n", None, "not readable YAML"),
+        ("- just a list\n", None, "not a YAML mapping"),
+        ("image: m.pgm\nresolution: 0.05\n", None, r"lacks \['origin'\]"),
+        ("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nmode: fancy\n", None, "unknown mode"),
+        ("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n", None, "map image .* does not exist"),
+        ("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n", b"not an image", "not a readable image"),
+        ("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0.5]\n", None, "origin yaw"),
+    ],
+)
+def test_read_rejects_bad_map_files(
+    tmp_path: Path, yaml_text: str | None, image_bytes: bytes | None, match: str
+) -> None:
+    if yaml_text is not None:
+        (tmp_path / "m.yaml").write_text(yaml_text)
+    if image_bytes is not None:
+        (tmp_path / "m.pgm").write_bytes(image_bytes)
+    with pytest.raises(MapFileError, match=match):
+        read_map_yaml(tmp_path / "m.yaml")
+
+
+def test_write_rejects_empty_map(tmp_path: Path) -> None:
+    with pytest.raises(MapFileError, match="non-empty"):
+        write_map_yaml(
+            tmp_path / "x.yaml", np.zeros((0, 3), np.int8), resolution_m=0.05, origin_x_m=0, origin_y_m=0
+        )
+
+
+@pytest.mark.skipif(
+    not (DATA / "bags" / "mac_first_floor").is_dir(), reason="shared data folder ../shared/data absent"
+)
+def test_reads_the_mac_floor_map() -> None:
+    read = read_map_yaml(DATA / "bags" / "mac_first_floor" / "mac_1st_floor_final.yaml")
+    assert read.occupancy.shape == (1706, 903)
+    assert read.resolution_m == pytest.approx(0.03)
+    assert 10_000 < np.count_nonzero(read.occupancy == 100) < 30_000
