@@ -426,7 +426,9 @@ def decompose(
     # the streaks the cleaning took out are free space: they take the region they grow from
     segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
     # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
-    segments, places = place_segments(segments, racks, free, min_area_px=round(room_min_area_m2 / resolution_m**2))
+    segments, places = place_segments(
+        segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2)
+    )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
     # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
