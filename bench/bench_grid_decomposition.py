@@ -16,6 +16,19 @@ Prints ``name value unit`` lines, one BLAS thread, seconds as wall time and CPU 
   regions, topology links).
 * A 5000 x 1440 px warehouse (250 m x 72 m at 5 cm): median of three runs.
 * The ipa maps (every variant), one run each: median seconds (``--no-ipa`` skips them).
+* Rack halls drawn the ways other maps draw racks (``services/simulator/rackmaps.py``), seeds 0-2,
+  each straight and turned by 0.2 + 0.16 * seed rad (11-30 degrees): ``solid`` and ``uprights``
+  (tuned on), ``pallet_height``, ``overhang``, ``beams``, ``mixed`` (held out) and ``depot`` (pallets
+  and box stacks on open floor). Per map: free cells right, storage recall, storage labelled
+  corridor, cross aisles found as junction regions (most of a junction's free pixels in one
+  junction region), rack rows found (a true rack row whose centre lies in a found one of
+  similar area), rooms (a depot's pallets must not make any), seconds. ``--racks-only`` runs only
+  these and the large hall below.
+* A 250 m x 90 m pallet-height hall at 5 cm (5000 x 1800 px): wall seconds of a fresh process
+  reading it and decomposing it (start-up and imports included) and its figures.
+
+``--overview docs/solid_rack_hall_overview.png`` writes the overview picture of a turned solid-rack
+hall instead.
 
 Run from the repository root: ``PYTHONPATH=. .venv/bin/python bench/bench_grid_decomposition.py``.
 """
@@ -26,6 +39,9 @@ import argparse
 import os
 import resource
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -34,7 +50,8 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits
 
-from services.grid_decomposition import Decomposition, decompose, read_map_file
+from services.grid_decomposition import Decomposition, decompose, overview_image, read_map_file
+from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
 from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse, tuw_truth
 
@@ -143,17 +160,136 @@ def _ipa() -> None:
     print(f"ipa_max_seconds {max(t[0] for t in times):.2f} s")
 
 
+def _rows_found(hall: RackMap, d: Decomposition) -> int:
+    """True rack rows whose centre lies in a found row of area within 25 %."""
+    found = 0
+    for truth in hall.racks_px:
+        centre = truth.mean(axis=0)
+        area = cv2.contourArea(truth.astype(np.float32))
+        for row in d.rack_rows_px:
+            inside = cv2.pointPolygonTest(row.astype(np.float32), (float(centre[0]), float(centre[1])), False) >= 0
+            if inside and abs(cv2.contourArea(row.astype(np.float32)) - area) <= 0.25 * area:
+                found += 1
+                break
+    return found
+
+
+def _junction_regions(hall: RackMap, d: Decomposition) -> int:
+    """Cross-aisle junctions most of whose free pixels lie in one junction region."""
+    free = hall.occupancy == 0
+    found = 0
+    junction_regions = np.array([k for k, r in d.regions.items() if r.label is PlaceLabel.JUNCTION], dtype=np.int64)
+    for k in range(1, int(hall.junctions.max()) + 1):
+        seg = d.segments[(hall.junctions == k) & free]
+        if seg.size == 0:
+            continue
+        ids, counts = np.unique(seg, return_counts=True)
+        best = ids[np.argmax(counts)]
+        found += int(counts.max() > 0.5 * seg.size and best in junction_regions)
+    return found
+
+
+def report_rack_hall(tag: str, hall: RackMap, d: Decomposition) -> None:
+    """Print the rack-hall figures of one decomposition."""
+    free = hall.occupancy == 0
+    storage = free & (hall.truth == PlaceLabel.STORAGE.value)
+    kinds = [info.label for info in d.regions.values()]
+    print(f"{tag}_accuracy {100 * _accuracy(d.labels, hall.truth, free):.2f} %")
+    if storage.any():
+        print(f"{tag}_storage_recall {100 * (d.labels[storage] == PlaceLabel.STORAGE.value).mean():.2f} %")
+        print(f"{tag}_storage_as_corridor {100 * (d.labels[storage] == PlaceLabel.CORRIDOR.value).mean():.2f} %")
+    floor = free & (hall.truth == PlaceLabel.OPEN_AREA.value)
+    if floor.any():
+        print(f"{tag}_open_floor_as_storage {100 * (d.labels[floor] == PlaceLabel.STORAGE.value).mean():.2f} %")
+    print(f"{tag}_junction_regions {_junction_regions(hall, d)}/{int(hall.junctions.max())} count")
+    print(f"{tag}_rack_rows_found {_rows_found(hall, d)}/{len(hall.racks_px)} count")
+    print(f"{tag}_rooms {kinds.count(PlaceLabel.ROOM)} count")
+
+
+RACK_SETS = {
+    "solid": RackStyle.SOLID,
+    "uprights": RackStyle.UPRIGHTS,
+    "pallet_height": RackStyle.PALLET_HEIGHT,
+    "overhang": RackStyle.OVERHANG,
+    "beams": RackStyle.BEAMS,
+    "mixed": RackStyle.MIXED,
+    "depot": RackStyle.DEPOT,
+}
+
+
+def _rack_halls() -> None:
+    for name, style in RACK_SETS.items():
+        for seed in (0, 1, 2):
+            for turned in (False, True):
+                rotation = 0.2 + 0.16 * seed if turned else 0.0
+                hall = rack_hall_map(seed, style=style, rotation_rad=rotation)
+                d, wall, cpu = _timed(hall.occupancy, hall.resolution_m)
+                tag = f"racks_{name}{'_turned' if turned else ''}_seed{seed}"
+                report_rack_hall(tag, hall, d)
+                print(f"{tag}_seconds {wall:.2f} s")
+                print(f"{tag}_cpu_seconds {cpu:.2f} s")
+
+
+def big_rack_hall() -> RackMap:
+    """250 m x 90 m pallet-height hall at 5 cm: 16 double rows, 4 sections of 22 bays."""
+    return rack_hall_map(
+        11, style=RackStyle.PALLET_HEIGHT, n_double_rows=16, n_sections=4, bays_per_section=22,
+        aisle_width_m=(2.9, 3.2), margin_m=0.5,
+    )
+
+
+_CHILD = """
+import sys, time, numpy as np
+from threadpoolctl import threadpool_limits
+from services.grid_decomposition import decompose
+occ = np.load(sys.argv[1])
+with threadpool_limits(1):
+    d = decompose(occ, resolution_m=0.05)
+np.save(sys.argv[2], d.labels)
+np.save(sys.argv[3], d.segments)
+"""
+
+
+def _big_rack_hall() -> None:
+    hall = big_rack_hall()
+    h, w = hall.occupancy.shape
+    print(f"big_rack_hall_shape {w}x{h} px")
+    with tempfile.TemporaryDirectory() as tmp:
+        occ, lab, seg = (Path(tmp) / n for n in ("occ.npy", "labels.npy", "segments.npy"))
+        np.save(occ, hall.occupancy)
+        wall = time.perf_counter()
+        subprocess.run([sys.executable, "-c", _CHILD, str(occ), str(lab), str(seg)], check=True)
+        wall = time.perf_counter() - wall
+        labels = np.load(lab)
+    print(f"big_rack_hall_process_seconds {wall:.2f} s")
+    free = hall.occupancy == 0
+    storage = free & (hall.truth == PlaceLabel.STORAGE.value)
+    print(f"big_rack_hall_accuracy {100 * _accuracy(labels, hall.truth, free):.2f} %")
+    print(f"big_rack_hall_storage_recall {100 * (labels[storage] == PlaceLabel.STORAGE.value).mean():.2f} %")
+    print(f"big_rack_hall_storage_as_corridor {100 * (labels[storage] == PlaceLabel.CORRIDOR.value).mean():.2f} %")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--no-ipa", action="store_true", help="skip the ipa timings")
+    parser.add_argument("--racks-only", action="store_true", help="only the rack-hall sets and the big rack hall")
+    parser.add_argument("--overview", type=Path, help="write the overview picture of a solid-rack hall here and stop")
     args = parser.parse_args()
+    if args.overview:
+        hall = rack_hall_map(1, style=RackStyle.SOLID, rotation_rad=0.35, n_double_rows=5, n_sections=3)
+        picture = overview_image(decompose(hall.occupancy, resolution_m=hall.resolution_m))
+        cv2.imwrite(str(args.overview), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
+        return
     print(f"load_average_start {os.getloadavg()[0]:.2f} ratio")
     with threadpool_limits(1):
-        _synthetic()
-        _tuw()
-        _large()
-        if not args.no_ipa:
-            _ipa()
+        if not args.racks_only:
+            _synthetic()
+            _tuw()
+            _large()
+            if not args.no_ipa:
+                _ipa()
+        _rack_halls()
+        _big_rack_hall()
     print(f"load_average_end {os.getloadavg()[0]:.2f} ratio")
     print(f"peak_rss {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
 

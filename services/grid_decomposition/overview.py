@@ -21,6 +21,7 @@ LABEL_COLOURS: dict[PlaceLabel, tuple[int, int, int]] = {
     PlaceLabel.UNIDENTIFIED: (200, 200, 200),
 }
 WALL_COLOUR = (230, 30, 30)
+RACK_COLOUR = (150, 80, 10)
 DOOR_COLOUR = (230, 0, 230)
 BORDER_COLOUR = (20, 20, 20)
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
@@ -30,7 +31,10 @@ _ROW_PX = 26
 def overview_image(
     decomposition: Decomposition, *, max_side_px: int = 2000, min_side_px: int = 1000, margin_m: float | None = 2.0
 ) -> npt.NDArray[np.uint8]:
-    """RGB image (top row = highest y): label colours, region borders, walls red, doors magenta, lines faint, legend.
+    """RGB image (top row = highest y): label colours, region borders, walls, doors, rack rows, lines, legend.
+
+    Walls are red, doors magenta, rack rows (:func:`~services.grid_decomposition.racks.find_racks`) brown
+    outlines, decomposition lines faint.
 
     The map is scaled to at most ``max_side_px`` on its longer side (small maps are enlarged by an
     integer factor, nearest neighbour, to about ``min_side_px``); the legend to its right names every
@@ -58,6 +62,9 @@ def overview_image(
     flat = rgb.reshape(-1, 3)
     flat[sub.edge_pixels[cog.cogent[edge_of_pixel]]] = WALL_COLOUR
     flat[sub.edge_pixels[cog.door[edge_of_pixel]]] = DOOR_COLOUR
+    racks = [np.round(r).astype(np.int32) for r in decomposition.rack_rows_px]
+    if racks:
+        cv2.polylines(rgb, racks, True, RACK_COLOUR, 2, cv2.LINE_8)
     image = np.ascontiguousarray(rgb[::-1])
     labelled = decomposition.labels[::-1] > 0
     if margin_m is not None and labelled.any():
@@ -93,6 +100,8 @@ def _with_legend(
     rows.append(("line", WALL_COLOUR, "wall (cogent edge)"))
     rows.append(("line", DOOR_COLOUR, "door (closed doorway)"))
     rows.append(("line", BORDER_COLOUR, "region border"))
+    if len(decomposition.rack_rows_px):
+        rows.append(("line", RACK_COLOUR, f"rack row ({len(decomposition.rack_rows_px)})"))
     title = f"{len(decomposition.regions)} regions, {decomposition.subdivision.n_faces} cells"
     width = 20 + max(cv2.getTextSize(t, _FONT, 0.5, 1)[0][0] for t in [title] + [r[2] for r in rows]) + 40
     height = max(image.shape[0], _ROW_PX * (len(rows) + 4))

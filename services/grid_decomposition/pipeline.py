@@ -6,7 +6,7 @@ import enum
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import cv2
@@ -21,6 +21,13 @@ from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
+from services.grid_decomposition.racks import (
+    face_places,
+    find_racks_by_region,
+    floor_objects,
+    place_segments,
+    pocket_merges,
+)
 from services.grid_decomposition.radiogram import Line, line_offsets, radiogram
 from services.grid_decomposition.regions import (
     RegionInfo,
@@ -42,6 +49,7 @@ logger = logging.getLogger(__name__)
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
 _REGION_CORE_M = 1.0
+_POCKET_MAX_M2 = 6.0  # a room this small among pallets, open to an open area, is floor between them
 _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by their pixels
 
 
@@ -76,6 +84,8 @@ class Decomposition:
     resolution : Resolution
     resolution_m : float
     origin_xy_m : tuple[float, float]
+    rack_rows_px : (R, 4, 2) float64
+        Corners (x = column, y = row) of every rack row found (:func:`find_racks`), pixels.
     """
 
     labels: npt.NDArray[np.uint8]
@@ -90,6 +100,7 @@ class Decomposition:
     resolution: Resolution
     resolution_m: float
     origin_xy_m: tuple[float, float]
+    rack_rows_px: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4, 2)))
 
 
 def _check(occupancy: npt.NDArray[np.integer], resolution_m: float) -> npt.NDArray[np.int16]:
@@ -339,7 +350,11 @@ def decompose(
     ]
     logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
     banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
-    sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline)
+    racks = find_racks_by_region(  # each texture region with its own directions
+        obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
+        resolution_m=resolution_m,
+    )
+    sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
     clutter = furniture(obstacle, resolution_m=resolution_m)
     walls = (occupied | ~known) & ~clutter
     wall, door = wall_evidence(
@@ -376,6 +391,8 @@ def decompose(
         obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
     )
     face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
+    rack_place = face_places(sub.face_image, sub.n_faces, racks, free)
+    evidence = np.where(rack_place > 0, rack_place, evidence)
     face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
     # regions come from the automatic labels: a person's overrides rename places, they do not
     # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
@@ -389,7 +406,7 @@ def decompose(
     segments = segment_image(
         sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
     )
-    floor_px = structured[component[sub.face_image]]
+    floor_px = structured[component[sub.face_image]] | (racks.cells > 0)  # the room stage leaves racks alone
     segments, cuts = segment_rooms(
         segments,
         clutter,
@@ -408,8 +425,41 @@ def decompose(
     segments = np.where(against_walls, grown, segments)
     # the streaks the cleaning took out are free space: they take the region they grow from
     segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
+    # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
+    segments, places = place_segments(
+        segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2)
+    )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
     pairs = _pairs(segments, sub)
     regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
+    structured_segments = set(np.unique(segments[(places > 0) | floor_px]).tolist())
+    rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
+    open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
+    objects = floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
+    merges = pocket_merges(
+        segments, rooms, open_areas, objects, free, max_area_px=round(_POCKET_MAX_M2 / resolution_m**2)
+    )
+    if merges:
+        lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
+        lut[list(merges)] = list(merges.values())
+        segments = lut[lut[segments]]
+        pairs = _pairs(segments, sub)
+        regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    if label_overrides:  # a region of a renamed category is a place of that name (a rack place mixes categories)
+        regions = {
+            k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
+            for k, r in regions.items()
+        }
+    region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
+    for k, r in regions.items():
+        region_label[k] = r.label.value
+    own = region_label[segments]
+    loose = (labels == PlaceLabel.ROOM.value) | (labels == PlaceLabel.STORAGE.value) & ~floor_px & ~banks.storage
+    loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
+    labels = np.where(loose & (own > 0), own, labels)
+    # a rack place's label, unless a person renamed the category of the face there
+    renamed = np.isin(face_labels.category[sub.face_image], list(label_overrides or {}))
+    labels = np.where((places > 0) & ~renamed, racks.cell_labels[places], labels)
     labels = np.where(free | streaks, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(
@@ -434,6 +484,7 @@ def decompose(
         resolution=resolution,
         resolution_m=resolution_m,
         origin_xy_m=origin_xy_m,
+        rack_rows_px=racks.rows_px,
     )
 
 

@@ -204,6 +204,8 @@ def majority_faces(
     face_image: npt.NDArray[np.int32], n_faces: int, mask: npt.NDArray[np.bool_], free: npt.NDArray[np.bool_]
 ) -> npt.NDArray[np.bool_]:
     """(F + 1,) faces with more than half of their free pixels in ``mask`` (index 0 False)."""
+    if not mask.any():
+        return np.zeros(n_faces + 1, dtype=bool)
     faces = face_image[free]
     total = np.bincount(faces, minlength=n_faces + 1)
     inside = np.bincount(faces, weights=mask[free], minlength=n_faces + 1)

@@ -7,18 +7,20 @@ are missing. An optional second building holds a rotated block of racks, and the
 turned. Ground truth codes follow ``PlaceLabel``: corridor (aisles and cross aisles), junction (aisle
 x cross-aisle crossings, not the L bends of the perimeter aisle), storage (rack footprints), 0
 off free space; and every pallet cell (one bay, one side of the flue) has an id.
-Also the ground truth of the tuw grid warehouses (``../shared/data/maps/tuw_warehouse``).
+Also the ground truth of the tuw grid warehouses (``../shared/data/maps/tuw_warehouse``), and rack halls
+drawn the ways other maps draw racks (``styled_warehouse``: solid, uprights, pallet height, ...).
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.simulator.rackmaps import RackStyle, rack_hall_map
 from shared.vocabulary import PlaceLabel
 
 UPRIGHT_M = 0.1
@@ -246,3 +248,12 @@ def tuw_truth(occupancy: npt.NDArray[np.int8]) -> npt.NDArray[np.uint8]:
     truth = np.where(free, PlaceLabel.CORRIDOR.value, 0).astype(np.uint8)
     truth[free & (h_run > 1.5 * road) & (v_run > 1.5 * road)] = PlaceLabel.JUNCTION.value
     return truth
+
+
+def styled_warehouse(seed: int, *, style: RackStyle, rotation_rad: float = 0.0, **options: Any) -> Warehouse:
+    """A rack hall drawn as ``style`` (:func:`services.simulator.rackmaps.rack_hall_map`) as a :class:`Warehouse`.
+
+    The simulator's truth codes are those of :class:`PlaceLabel` (corridor, junction, storage, open area).
+    """
+    hall = rack_hall_map(seed, style=style, rotation_rad=rotation_rad, **options)
+    return Warehouse(hall.occupancy, hall.truth, hall.cells, hall.junctions_px, hall.resolution_m)

@@ -1,0 +1,92 @@
+"""Racks however a map draws them (solid blocks, upright dots, pallet faces) are rack rows and storage; the
+strips between them aisles with a junction at each end; pallets standing on open floor are no rooms."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from services.grid_decomposition import decompose
+from services.grid_decomposition.racks import find_racks
+from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
+from shared.vocabulary import PlaceLabel
+from tests.services.grid_decomposition.test_rooms import RES, _furnish, _office_row
+
+
+def _small(style: RackStyle, seed: int = 0, rotation_rad: float = 0.0) -> RackMap:
+    return rack_hall_map(seed, style=style, rotation_rad=rotation_rad, n_double_rows=2, bays_per_section=4)
+
+
+def _box(mask: np.ndarray) -> tuple[int, int, int, int]:
+    rows, cols = np.nonzero(mask)
+    return int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
+
+
+def test_the_strip_between_two_solid_racks_is_one_corridor_region_with_a_junction_at_each_end() -> None:
+    hall = _small(RackStyle.SOLID)
+    d = decompose(hall.occupancy, resolution_m=hall.resolution_m)
+    free = hall.occupancy == 0
+    # the aisle between the two double rows: between the end cross aisle's and the middle cross aisle's junctions
+    boxes = [_box(hall.junctions == k) for k in range(1, int(hall.junctions.max()) + 1)]
+    r0, r1 = sorted({(b[0], b[1]) for b in boxes})[1]  # the middle aisle band (the others are perimeter aisles)
+    left, middle = sorted((b for b in boxes if (b[0], b[1]) == (r0, r1)), key=lambda b: b[2])[:2]
+    strip = np.zeros(free.shape, dtype=bool)
+    strip[r0:r1, left[3] : middle[2]] = True
+    strip &= free
+    ids, counts = np.unique(d.segments[strip], return_counts=True)
+    aisle = int(ids[np.argmax(counts)])
+    assert counts.max() == strip.sum()  # one region
+    assert d.regions[aisle].label is PlaceLabel.CORRIDOR
+    for end in (left, middle):
+        inside = np.zeros(free.shape, dtype=bool)
+        inside[end[0] : end[1], end[2] : end[3]] = True
+        junction = int(np.bincount(d.segments[inside & free]).argmax())
+        assert d.regions[junction].label is PlaceLabel.JUNCTION
+        assert d.topology.has_edge(aisle, junction)
+
+
+@pytest.mark.parametrize("rotation_rad", [0.0, 0.35])
+def test_every_solid_rack_is_a_rack_row(rotation_rad: float) -> None:
+    hall = _small(RackStyle.SOLID, seed=1, rotation_rad=rotation_rad)
+    d = decompose(hall.occupancy, resolution_m=hall.resolution_m)
+    assert len(d.rack_rows_px) == len(hall.racks_px)
+    for truth in hall.racks_px:
+        centre = truth.mean(axis=0)
+        inside = [
+            cv2.pointPolygonTest(row.astype(np.float32), (float(centre[0]), float(centre[1])), False) >= 0
+            for row in d.rack_rows_px
+        ]
+        assert sum(inside) == 1
+    assert not any(r.label is PlaceLabel.ROOM for r in d.regions.values())
+
+
+@pytest.mark.parametrize("style", [RackStyle.UPRIGHTS, RackStyle.PALLET_HEIGHT])
+def test_rows_of_upright_dots_and_pallet_faces_with_unknown_behind_are_racks(style: RackStyle) -> None:
+    hall = _small(style, seed=2, rotation_rad=math.radians(20))
+    d = decompose(hall.occupancy, resolution_m=hall.resolution_m)
+    free = hall.occupancy == 0
+    storage = free & (hall.truth == PlaceLabel.STORAGE.value)
+    assert (d.labels[storage] == PlaceLabel.STORAGE.value).mean() > 0.9
+    assert (d.labels[storage] == PlaceLabel.CORRIDOR.value).mean() < 0.05
+    for k in range(1, int(hall.junctions.max()) + 1):  # every cross aisle is a junction region
+        seg = d.segments[(hall.junctions == k) & free]
+        assert d.regions[int(np.bincount(seg).argmax())].label is PlaceLabel.JUNCTION
+
+
+def test_a_pallet_on_open_floor_is_no_room_and_open_floor_is_no_storage() -> None:
+    hall = rack_hall_map(0, style=RackStyle.DEPOT, rotation_rad=0.2)
+    assert len(hall.pallets_px) > 0
+    d = decompose(hall.occupancy, resolution_m=hall.resolution_m)
+    free = hall.occupancy == 0
+    assert not any(r.label is PlaceLabel.ROOM for r in d.regions.values())
+    assert not (d.labels[free] == PlaceLabel.STORAGE.value).any()
+    assert len(d.rack_rows_px) == 0
+
+
+def test_an_office_has_no_racks() -> None:
+    occ = _furnish(_office_row())
+    layout = find_racks(occ == 100, occ >= 0, resolution_m=RES, angles_rad=[0.0])
+    assert not layout.cells.any() and len(layout.rows_px) == 0
