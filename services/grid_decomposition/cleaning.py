@@ -77,10 +77,13 @@ def clean_occupancy(
 
     Steps, each on the result of the one before:
 
-    1. *Wall fringe*: free cells that are not clearly free (occupancy above
-       ``clear_free_percent``: an image's grey between the free threshold and white) and lie within
-       ``fringe_depth_m`` of an obstacle, joined to it through such cells, are occupied. Maps
-       read with integer percentages keep them; trinary maps (0/100/-1) have none.
+    1. *Wall fringe*: free cells that are not clearly free (occupancy more than
+       ``clear_free_percent`` above the map's clearest free cell: an image's grey between the free
+       threshold and white, a live log-odds map's cells seen free fewer times than its clamp) and lie
+       within ``fringe_depth_m`` of an obstacle, joined to it through such cells, are occupied. Maps
+       read with integer percentages keep them; trinary maps (0/100/-1) have none. Measuring from the
+       clearest free cell matters for live maps, whose free cells never read 0: from 0, every free
+       cell of the demo warehouse's map within 0.3 m of an upright became wall and its racks were lost.
     2. *Specks*: occupied components of at most ``speck_max_area_m2`` (one cell at 5 cm: rack
        uprights are small obstacles too) with only free cells around them are free.
     3. *Fans and streaks*: free space narrower than ``streak_width_m`` (morphological opening)
@@ -110,7 +113,9 @@ def clean_occupancy(
     occupied = known & (occ > OCCUPIED_PERCENT)
     px = resolution_m**2
 
-    fringe = _fringe(free, free & (occ > clear_free_percent), max(1, round(fringe_depth_m / resolution_m)))
+    clearest = int(occ[free].min()) if free.any() else 0  # 0 in an image; a live map's clamp (12 % by default)
+    fringe = _fringe(free, free & (occ > clearest + clear_free_percent),
+                     max(1, round(fringe_depth_m / resolution_m)))
     free &= ~fringe
     occupied |= fringe
 

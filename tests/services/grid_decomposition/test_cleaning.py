@@ -43,6 +43,19 @@ def test_a_laser_streak_outside_the_building_is_removed() -> None:
     assert np.all(cleaned[30:90, 30:130] == 0)  # the room's floor stays
 
 
+def test_a_live_map_keeps_its_floor_along_walls_and_uprights() -> None:
+    """A log-odds map's free cells never read 0 (they stop at the clamp, 12 % by default): floor
+    seen as often as the rest is no fringe, however near an obstacle, and an upright keeps its aisle."""
+    occ = _room()
+    occ[22:98, 22:138] = 12
+    occ[60:62, 60:62] = 100  # an upright 2 x 2 cells
+    occ[22:98, 22:24] = 20  # seen free fewer times along the left wall: fringe, as in an image
+    cleaned, what = clean_occupancy(occ, resolution_m=RES)
+    assert np.all(cleaned[22:98, 24:30] == 12) and not what.fringe[22:98, 24:30].any()
+    assert np.all(cleaned[57:65, 57:60] == 12) and np.all(cleaned[60:62, 60:62] == 100)
+    assert np.all(cleaned[22:98, 22:24] == 100) and what.fringe[22:98, 22:24].all()
+
+
 def test_an_isolated_free_speck_in_unknown_space_is_removed() -> None:
     occ = _room()
     occ[5:8, 5:8] = 0
