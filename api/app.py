@@ -8,6 +8,7 @@ from contextlib import asynccontextmanager
 from importlib.metadata import version
 
 from fastapi import Depends, FastAPI, Request, status
+from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 
@@ -16,6 +17,7 @@ from api.announce import Announcer
 from api.deps import ApiContext, enforce_policy
 from api.errors import ApiConfigError
 from api.fastpath import LiveReads
+from api.invalid import invalid_request
 from api.routers import (
     bins,
     blocks,
@@ -139,6 +141,7 @@ def create_app(
         store=store, settings=settings, bus=bus, expected_workers=tuple(expected_workers), access=access,
         events=EventStreams(poll_s=event_poll_s, heartbeat_s=event_heartbeat_s),
         announcer=Announcer(bus, on_revision=live.written), cache=cache, live=live)
+    app.add_exception_handler(RequestValidationError, invalid_request)
     app.add_exception_handler(StoreUnavailableError, _store_unavailable)
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)

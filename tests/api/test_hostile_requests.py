@@ -9,11 +9,14 @@ added later are covered with nothing to list here:
   strings, NUL bytes, over-long strings, negative, non-finite and out-of-range numbers and huge
   bounding boxes, with an admin key: the answer is a 4xx with a JSON ``detail`` or, for a free-text
   filter, exactly what a harmless literal that matches nothing gets;
+* every number of every documented JSON body is sent as ``NaN``, ``Infinity``, ``-Infinity`` and ``1e400``
+  (which Python's JSON parser reads as non-finite floats): a 422 saying the number must be finite;
 * afterwards every table holds the same rows as before.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterator
 from typing import Any, NamedTuple
@@ -253,3 +256,69 @@ def test_hostile_parameters_get_a_clear_4xx_and_change_nothing(
     assert probed > 100
     assert not wrong, f"{len(wrong)} of {probed} hostile requests answered badly:\n" + "\n".join(wrong[:60])
     assert _snapshot(store) == before
+
+
+NON_FINITE_JSON = ["NaN", "Infinity", "-Infinity", "1e400"]
+"""Numbers Python's JSON parser reads as non-finite floats (schemathesis never sends them)."""
+
+
+def _number_paths(value: Any, path: tuple[Any, ...] = ()) -> Iterator[tuple[Any, ...]]:
+    """Paths to every number (not a bool) in a JSON document."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield from _number_paths(item, (*path, key))
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            yield from _number_paths(item, (*path, index))
+    elif isinstance(value, int | float) and not isinstance(value, bool):
+        yield path
+
+
+def _with_literal(document: Any, path: tuple[Any, ...], literal: str) -> bytes:
+    """``document`` as JSON text with the number at ``path`` written as ``literal`` (``NaN``, ``1e400``...)."""
+    marker = "\u0000hostile\u0000"
+    parent = document
+    for step in path[:-1]:
+        parent = parent[step]
+    saved, parent[path[-1]] = parent[path[-1]], marker
+    try:
+        return json.dumps(document).replace(json.dumps(marker), literal).encode()
+    finally:
+        parent[path[-1]] = saved
+
+
+def test_non_finite_numbers_in_a_json_body_get_a_clear_422_and_change_nothing(
+    store: MapStore, hostile_client: TestClient, secrets: dict[Role, str]
+) -> None:
+    spec = hostile_client.get("/openapi.json").json()
+    admin = {"X-API-Key": secrets[Role.ADMIN], "Content-Type": "application/json"}
+    before = _snapshot(store)
+    wrong: list[str] = []
+    probed = 0
+
+    for operation in _operations(spec):
+        body = _body(spec, operation)
+        for path in _number_paths(body) if body is not None else ():
+            for literal in NON_FINITE_JSON:
+                probed += 1
+                response = hostile_client.request(operation.method.upper(), _url(operation), headers=admin,
+                                                  content=_with_literal(body, path, literal))
+                what = f"{operation.label} with {'.'.join(map(str, path))} = {literal}"
+                detail = response.json().get("detail") if response.status_code == 422 else None
+                if response.status_code != 422 or not detail:
+                    wrong.append(f"{what}: {response.status_code} {response.text[:200]!r}")
+                elif "finite" not in json.dumps(detail):
+                    wrong.append(f"{what}: the detail does not say the number must be finite: {detail!r:.300}")
+
+    assert probed, "no documented request body has a number"
+    assert not wrong, "\n".join(wrong)
+    assert _snapshot(store) == before
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-Infinity"])
+def test_a_non_finite_coordinate_is_called_not_finite(hostile_client: TestClient, secrets: dict[Role, str],
+                                                      value: str) -> None:
+    response = hostile_client.get("/v1/maps/site/semantics", params={"x": value, "y": "1"},
+                                  headers={"X-API-Key": secrets[Role.READ]})
+    assert response.status_code == 422
+    assert "finite" in response.text and "less than" not in response.text
