@@ -43,7 +43,7 @@ def write_map_yaml(
     occupied_percent: int = 65,
     free_percent: int = 25,
 ) -> Path:
-    """Write ``occupancy`` as a trinary map_server map; return the image path.
+    """Write ``occupancy`` as a trinary map_server map (creating its folder); return the image path.
 
     The image (same stem, ``.pgm``) has free 254 (cells below ``free_percent``), occupied 0 (above
     ``occupied_percent``), unknown 205 (the rest), and its top row is the grid's last (highest-y)
@@ -68,6 +68,7 @@ def write_map_yaml(
         )
     path_yaml = Path(path_yaml)
     path_image = path_yaml.with_suffix(".pgm")
+    path_yaml.parent.mkdir(parents=True, exist_ok=True)
     pixels = np.full(occ.shape, UNKNOWN_PIXEL, dtype=np.uint8)
     known = occ >= 0
     pixels[known & (occ > occupied_percent)] = OCCUPIED_PIXEL

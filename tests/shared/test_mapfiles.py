@@ -68,6 +68,14 @@ def test_read_rejects_bad_map_files(
         read_map_yaml(tmp_path / "m.yaml")
 
 
+def test_write_creates_the_folder_it_is_told_to_write_into(tmp_path: Path) -> None:
+    """``aisle map-build BAG --out new_dir/map.yaml`` must not fail because ``new_dir`` does not exist yet."""
+    occupancy = np.zeros((4, 6), dtype=np.int8)
+    image = write_map_yaml(tmp_path / "new" / "dir" / "map.yaml", occupancy, resolution_m=0.05, origin_x_m=0.0,
+                           origin_y_m=0.0)
+    assert image.exists() and read_map_yaml(tmp_path / "new" / "dir" / "map.yaml").occupancy.shape == (4, 6)
+
+
 def test_write_rejects_empty_map(tmp_path: Path) -> None:
     with pytest.raises(MapFileError, match="non-empty"):
         write_map_yaml(
