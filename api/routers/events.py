@@ -14,7 +14,7 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 from pydantic import BaseModel, Field
 
 from api.deps import MAX_ID, ContextDep, MapDep, StoreDep
-from api.models import COMMON_ERRORS, UNPROCESSABLE, as_json, not_found
+from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, as_json, not_found
 from shared.store import MapInfo, MapStore, Revision
 
 log = logging.getLogger(__name__)
@@ -70,17 +70,24 @@ def get_cursor(
     last_event_id: Annotated[str | None, Header(alias="Last-Event-ID", max_length=20, examples=["1206"], description=(
         "The id of the last event received; a reconnecting EventSource sends it. Wins over `?after=`."))] = None,
 ) -> int:
-    """The revision id after which the stream starts, or 422 for a Last-Event-ID that is not one."""
-    if last_event_id is not None:
-        if not (last_event_id.isascii() and last_event_id.isdigit() and int(last_event_id) <= MAX_ID):
-            raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
-                                f"Last-Event-ID must be a revision id (an integer from 0 to {MAX_ID}), "
-                                f"not {last_event_id!r}")
-        return int(last_event_id)
-    if after is not None:
-        return after
+    """The revision id after which the stream starts: 422 for a Last-Event-ID that is not one, 409 for one (or an
+    ``?after=``) beyond the map's newest revision, which the stream would wait for for ever."""
+    if last_event_id is not None and not (last_event_id.isascii() and last_event_id.isdigit()
+                                          and int(last_event_id) <= MAX_ID):
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
+                            f"Last-Event-ID must be a revision id (an integer from 0 to {MAX_ID}), "
+                            f"not {last_event_id!r}")
     latest = store.latest_revision(map_info.id)
-    return 0 if latest is None else latest.id
+    newest = 0 if latest is None else latest.id
+    asked, name = (int(last_event_id), "Last-Event-ID") if last_event_id is not None else (after, "after")
+    if asked is None:
+        return newest
+    if asked > newest:
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"{name} {asked} is beyond the newest revision of map {map_info.name!r} ({newest}); "
+                            "the map store may have been replaced: reconnect without it to follow from now, or "
+                            f"with ?after={newest}")
+    return asked
 
 
 @router.get(
@@ -89,7 +96,9 @@ def get_cursor(
     response_class=EventSourceResponse,
     responses={status.HTTP_200_OK: {"content": {"text/event-stream": {}},
                                     "description": "`event: revision`, `id: <revision id>`, `data: <JSON>`."},
-               **as_json({**COMMON_ERRORS, **not_found("No such map."), **UNPROCESSABLE})},
+               **as_json({**COMMON_ERRORS, **not_found("No such map."), **UNPROCESSABLE,
+                          status.HTTP_409_CONFLICT: {"model": ErrorOut, "description": "`Last-Event-ID` or `?after=` "
+                                                     "is beyond the map's newest revision."}})},
 )
 async def map_events(
     request: Request,

@@ -140,6 +140,8 @@ def test_the_stream_ends_when_the_client_goes(store: MapStore, make_client: Clie
     (URL, {"after": -1}, {}, 422, "greater than or equal to 0"),
     (URL, {"after": "x"}, {}, 422, "valid integer"),
     ("/v1/maps/nowhere/events", {}, {}, 404, "no map named 'nowhere'"),
+    (URL, {}, {"Last-Event-ID": "999999"}, 409, "beyond the newest revision of map 'site'"),
+    (URL, {"after": 999999}, {}, 409, "beyond the newest revision of map 'site'"),
 ])
 def test_bad_cursors_are_a_clear_4xx(store: MapStore, make_client: ClientFactory, site: dict[str, int], path: str,
                                      params: dict[str, Any], headers: dict[str, str], status: int,
