@@ -130,3 +130,72 @@ def test_routes_take_the_wms_id_of_a_matched_bin(client: TestClient, store: MapS
 
     assert by_wms.status_code == by_aisle_id.status_code  # no place layers here: both 409, never 404
     assert by_wms.json()["detail"] == by_aisle_id.json()["detail"]
+
+
+def test_an_id_match_far_from_its_wms_position_is_reported_with_both_positions() -> None:
+    detected = [DetectedBin("01-002-01", 2.28, 6.10, 0), DetectedBin("01-004-01", 6.40, 6.05, 0)]
+    wms = [WmsBin("01-002-01", 6.37, 6.05, level=0)]
+
+    result = reconcile(wms, detected, tolerance_m=0.5)
+
+    assert [(m.wms_id, m.detected_id, m.by) for m in result.matched] == [("01-002-01", "01-002-01", "id")]
+    (far,) = result.discrepancies
+    assert far.wms_xy == (6.37, 6.05) and far.detected_xy == (2.28, 6.10)
+    assert far.delta_m == pytest.approx((-4.09, 0.05)) and far.distance_m == pytest.approx(4.09, abs=0.01)
+    assert far.nearest_detected_id == "01-004-01"
+    assert result.numbering.far == 1 and result.numbering.verdict != "consistent"
+
+
+def test_positions_in_another_frame_are_told_apart_from_a_renumbering() -> None:
+    detected = [DetectedBin(f"01-{bay:03d}", 2.7 * bay, 0.0) for bay in range(1, 11)]
+    wms = [WmsBin(d.id, d.x_m + 20.0, d.y_m - 3.0) for d in detected]
+
+    check = reconcile(wms, detected, tolerance_m=0.5).numbering
+
+    assert check.verdict == "shifted" and check.far == check.id_matches == 10
+    assert check.offset_m == pytest.approx((-20.0, 3.0)) and check.offset_support == 10
+    assert "another frame" in check.message
+
+
+def _renumbered(detected: list[Feature]) -> list[dict[str, Any]]:
+    """A site that counts bays from 2 lower than Aisle: the WMS's bin (a, b) is Aisle's (a, b + 2), with Aisle's
+    id format, at its surveyed position (5 cm off)."""
+    ids = {f.key for f in detected}
+    out = []
+    for item in detected:
+        aisle, bay = (int(part) for part in item.key.split("-"))
+        if bay > 2 and f"{aisle:02d}-{bay - 2:03d}" in ids:
+            x, y = item.properties["centre"]
+            out.append({"id": f"{aisle:02d}-{bay - 2:03d}", "x_m": x + 0.05, "y_m": y})
+    return out
+
+
+def test_a_site_numbering_bays_differently_is_detected_at_once(
+    client: TestClient, hall: int, detected: list[Feature], writer: dict[str, str]
+) -> None:
+    wms = _renumbered(detected)
+
+    body = client.put(f"{URL}/wms-bins", json={"bins": wms}, headers=writer).json()
+
+    assert body["counts"]["discrepancies"] == len(wms) == len(body["discrepancies"])
+    numbering = body["numbering"]
+    assert numbering["verdict"] == "renumbered" and numbering["far"] == len(wms)
+    assert numbering["id_shift"] == {"aisle": 0, "bay": 2, "level": 0, "support": len(wms)}
+    assert "numbers bins differently" in numbering["message"] and "match_by=position" in numbering["message"]
+    first = body["discrepancies"][0]
+    assert first["distance_m"] > 0.5 and set(first) >= {"wms_position", "detected_position", "delta_m"}
+    assert client.get(f"{URL}/wms-bins/reconciliation").json()["numbering"] == numbering
+
+
+def test_matching_by_position_first_follows_the_site_numbering(
+    client: TestClient, hall: int, detected: list[Feature], writer: dict[str, str]
+) -> None:
+    wms = _renumbered(detected)
+
+    body = client.put(f"{URL}/wms-bins", json={"bins": wms, "match_by": "position"}, headers=writer).json()
+
+    assert body["match_by"] == "position" and body["discrepancies"] == []
+    assert all(m["by"] == "position" and m["distance_m"] < 0.1 for m in body["matched"])
+    moved = {m["wms_id"]: m["detected_id"] for m in body["matched"]}
+    aisle, bay = (int(part) for part in wms[0]["id"].split("-"))
+    assert moved[wms[0]["id"]] == f"{aisle:02d}-{bay + 2:03d}"
