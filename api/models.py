@@ -255,7 +255,10 @@ class BinOut(BaseModel):
     region: PlaceRef | None = Field(description="The drivable region of the grid decomposition the access pose is "
                                                 "in (a topology node); null without place layers.")
     nearest_junction: PlaceRef | None = Field(description="The junction nearest the access pose, if any.")
-    confidence: float | None
+    confidence: float | None = Field(
+        description="How sure the pillar stage is of the bin, probability 0..1: the expected fraction of its four "
+                    "uprights within 10 cm of where the map puts them (from their landmarks' covariance; an "
+                    "upright no landmark supports counts 0); null for bins written without one.")
     stage: str = Field(description="The stage that wrote the bin.")
     revision_id: int = Field(description="Revision that wrote this version of the bin.")
 

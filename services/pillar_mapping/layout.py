@@ -129,6 +129,7 @@ def layout_features(layout: RackLayout) -> dict[str, list[Feature]]:
             access_pose=AccessPose(*b.access_pose),
             row=row_keys[b.row],
             back_row=row_keys[b.back_row],
+            confidence=b.confidence,
         ).feature()
         for b in layout.bins
     ]

@@ -55,7 +55,8 @@ class RackRow(NamedTuple):
     ``uprights`` (n, 2) metres; ``observed`` (n,) whether a landmark supports each;
     ``members`` indices of the input landmarks in the row; ``region`` its region number (rows of
     one orientation close together) and ``block`` the block of the region it lies in (0, 1, ...
-    along the rows, between cross aisles).
+    along the rows, between cross aisles); ``sigma_m`` (n,) the largest standard deviation of the
+    landmark supporting each upright, metres, inf where none does.
     """
 
     n: int
@@ -68,6 +69,7 @@ class RackRow(NamedTuple):
     uprights: FloatArray
     observed: npt.NDArray[np.bool_]
     members: IntArray
+    sigma_m: FloatArray
 
 
 def _split(table: FloatArray, members: IntArray, u: FloatArray, max_gap_m: float) -> list[IntArray]:
@@ -465,6 +467,8 @@ def fit_rack_rows(
         cut = split_rows(table, group, cuts, u0, d_step) if cuts.size else [(0, r) for r in group]
         for b, k in enumerate(sorted({k for k, _ in cut})):
             blocks.append((number, b, [r for j, r in cut if j == k]))
+    sxx, sxy, syy = table[:, 2], table[:, 3], table[:, 4]
+    largest_sigma = np.sqrt(np.maximum(0.5 * (sxx + syy) + np.hypot(0.5 * (sxx - syy), sxy), 0.0))
     free = np.ones(len(table), dtype=bool)
     for _, _, block_rows in blocks:
         for row in block_rows:
@@ -482,7 +486,9 @@ def fit_rack_rows(
         for row in group:
             uprights = _place(table, row, sigma_floor_m)
             mu = table[row.members, :2]
-            gap = np.min(np.hypot(*(uprights[:, None, :] - mu[None]).transpose(2, 0, 1)), axis=1)
+            distance = np.hypot(*(uprights[:, None, :] - mu[None]).transpose(2, 0, 1))
+            nearest = np.argmin(distance, axis=1)
+            observed = distance[np.arange(row.n), nearest] <= min(0.25 * row.d, 0.3)
             theta = float(np.arctan2(row.direction[1], row.direction[0]))
             out.append(
                 RackRow(
@@ -494,8 +500,9 @@ def fit_rack_rows(
                     number,
                     b,
                     uprights,
-                    gap <= min(0.25 * row.d, 0.3),
+                    observed,
                     row.members,
+                    np.where(observed, largest_sigma[row.members[nearest]], np.inf),
                 )
             )
     return out

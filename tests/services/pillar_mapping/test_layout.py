@@ -92,3 +92,38 @@ def test_racks_fit_puts_bins_on_the_levels_given(tmp_path: Path) -> None:
             if f["properties"]["kind"] == "bin"]
     assert {(b["level"], b["z_m"], b["id"][-3:]) for b in bins} == {(0, 0.0, "-01"), (1, 1.6, "-02"), (2, 3.2, "-03")}
     assert main(["racks", "fit", str(csv), "--out", str(tmp_path / "out"), "--levels", "0,3.2,1.6"]) == 1
+
+
+def test_bin_confidence_falls_with_the_uncertainty_of_its_uprights_and_is_stored() -> None:
+    hall = rack_region(aisles=2, bays=8)
+    rng = np.random.default_rng(3)
+    xy = hall.uprights + rng.normal(0.0, 0.01, hall.uprights.shape)
+    sigma = np.full(len(xy), 0.01)
+    vague = np.argmin(np.hypot(*(hall.uprights - hall.uprights.mean(axis=0)).T))  # one upright mid-hall
+    sigma[vague] = 0.08
+    table = np.column_stack([xy, sigma**2, np.zeros(len(xy)), sigma**2])
+
+    layout = fit_racks(table)
+    features = {f.key: f for f in layout_features(layout)["bin"]}
+
+    confidence = np.array([b.confidence for b in layout.bins])
+    assert np.all((confidence >= 0.0) & (confidence <= 1.0))
+    corners = np.array([np.hypot(*(b.footprint - xy[vague]).T).min() < 0.05 for b in layout.bins])
+    assert corners.any() and not corners.all()
+    assert confidence[corners].max() < confidence[~corners].min()
+    assert confidence[~corners].min() > 0.99
+    assert all(features[b.id].confidence == b.confidence for b in layout.bins)
+
+
+def test_bins_bounded_by_an_unseen_upright_get_less_confidence() -> None:
+    hall = rack_region(aisles=2, bays=8)
+    xy = hall.uprights + np.random.default_rng(4).normal(0.0, 0.01, hall.uprights.shape)
+    unseen = np.argmin(np.hypot(*(hall.uprights - hall.uprights.mean(axis=0)).T))  # restored from its row's lattice
+    table = np.delete(np.column_stack([xy, np.tile([1e-4, 0.0, 1e-4], (len(xy), 1))]), unseen, axis=0)
+
+    layout = fit_racks(table)
+
+    beside = np.array([np.hypot(*(b.footprint - hall.uprights[unseen]).T).min() < 0.05 for b in layout.bins])
+    confidence = np.array([b.confidence for b in layout.bins])
+    assert beside.any() and confidence[beside].max() <= 0.75
+    assert confidence[~beside].min() > 0.99
