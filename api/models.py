@@ -13,6 +13,7 @@ from fastapi import status
 from pydantic import BaseModel, ConfigDict, Field
 
 from atlas.features import FEATURE_EXAMPLE, GeoJSONFeature
+from shared.bins import ID_FORMAT
 
 Responses = dict[int | str, dict[str, Any]]
 """The type of a route's ``responses=`` (extra OpenAPI responses)."""
@@ -234,8 +235,9 @@ BinStatus = Literal["matched", "unknown_to_wms", "unreconciled"]
 
 class BinOut(BaseModel):
     id: str = Field(description="The id to use: the WMS's own id when the bin is matched to an imported WMS bin, "
-                                "else Aisle's (`AA-BBB`: aisle, bay).")
-    detected_id: str = Field(description="Aisle's id of the detected bin.")
+                                f"else Aisle's: {ID_FORMAT}.", examples=["A-03-014", "03-014-02"])
+    detected_id: str = Field(description=f"Aisle's id of the detected bin: {ID_FORMAT}.",
+                             examples=["03-014", "03-014-02"])
     wms_id: str | None = Field(description="The WMS id it is matched to, if a WMS bin list was imported.")
     status: BinStatus = Field(description="`matched` to an imported WMS bin, `unknown_to_wms` (imported list "
                                           "lacks it) or `unreconciled` (no WMS list imported).")

@@ -23,7 +23,7 @@ MAX_OFFSET = 10_000_000
 """Largest ``?offset=``; a map has far fewer features."""
 
 BIN_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._:-]{0,127}$"
-"""What a bin id may look like (the pillar stage writes ``AA-BBB``: aisle, bay)."""
+"""What a bin id may look like: a WMS's own, or Aisle's (:data:`shared.bins.ID_FORMAT`)."""
 BIN_ID_REGEX = re.compile(BIN_ID_PATTERN)
 
 

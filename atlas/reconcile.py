@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from shared.bins import XY, Bin
+from shared.bins import ID_PATTERN, XY, Bin
 from shared.store import MapStore, WmsBin
 from shared.vocabulary import FeatureKind
 
@@ -33,8 +33,7 @@ WMS_STAGE = "wms"
 DEFAULT_TOLERANCE_M = 0.5
 """Matching tolerance of a WMS list imported without one, metres."""
 
-_AISLE_ID = re.compile(r"^(\d+)-(\d+)(?:-(\d+))?$")
-"""Aisle's bin ids: ``AA-BBB`` (aisle, bay) or ``AA-BBB-LL`` (level + 1)."""
+_AISLE_ID = re.compile(ID_PATTERN)
 
 
 class MatchBy(enum.StrEnum):

@@ -26,6 +26,12 @@ from shared.vocabulary import FeatureKind
 XY = tuple[float, float]
 """(x, y) in map-frame metres."""
 
+ID_FORMAT = "`AA-BBB` (aisle, bay), or `AA-BBB-LL` (LL = level + 1, `01` the floor) where the site's rack profiles " \
+            "give levels"
+"""Aisle's bin ids in words (documentation and API schema)."""
+ID_PATTERN = r"^(\d{2,})-(\d{3,})(?:-(\d{2,}))?$"
+"""Aisle's bin ids (:data:`ID_FORMAT`); the groups are aisle, bay and level + 1."""
+
 
 class BinError(ValueError):
     """A feature that is not a storage bin, or a bin record that cannot be stored."""
@@ -203,4 +209,4 @@ def _footprint(geometry: Mapping[str, Any]) -> tuple[XY, ...] | None:
     return tuple(points) if len(points) == len(ring) else None
 
 
-__all__ = ["XY", "AccessPose", "Bin", "BinError", "Opening"]
+__all__ = ["ID_FORMAT", "ID_PATTERN", "XY", "AccessPose", "Bin", "BinError", "Opening"]

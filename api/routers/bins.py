@@ -16,6 +16,7 @@ from api.translate import http_error
 from atlas.bins import BinNotFoundError, no_bin, select_bins, stored_bin
 from atlas.bins import BinStatus as MapBinStatus
 from atlas.cache import RevisionCache
+from shared.bins import ID_FORMAT
 from shared.store import MapInfo, MapStore
 from shared.vocabulary import REVISION_HEADER
 
@@ -79,8 +80,8 @@ async def get_bin(
     cache: CacheDep,
     context: ContextDep,
     revision: RevisionQuery,
-    bin_id: Annotated[str, Path(description="The bin's WMS id (when a WMS list was imported) or Aisle's id.",
-                                pattern=BIN_ID_PATTERN, examples=["03-014"])],
+    bin_id: Annotated[str, Path(description="The bin's WMS id (when a WMS list was imported) or Aisle's id: "
+                                            f"{ID_FORMAT}.", pattern=BIN_ID_PATTERN, examples=["03-014-02"])],
 ) -> Response | BinOut:
     """One bin by its WMS id or Aisle's id (as of ``?revision=``), with where it is, its opening, where to stand,
     the corridor that leads to it and the nearest junction; 404 if there is none.

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from services.pillar_mapping import fit_layout
+from services.pillar_mapping import fit_layout, rack_profile
 from services.pillar_mapping.layout import layout_features
 from services.pillar_mapping.synthetic import noisy_landmarks, rack_region
+from shared.bins import ID_PATTERN
 from shared.store import Feature, MapStore, RevisionWrite
 
 URL = "/v1/maps/hall/bins"
@@ -147,3 +149,25 @@ def test_bad_requests_get_a_clear_4xx_and_change_nothing(
     assert client.get(URL).json() == before
     latest = store.latest_revision(store.ensure_map("hall").id)
     assert latest is not None and latest.id == hall[1]
+
+
+def test_bins_on_levels_come_with_the_id_format_the_schema_documents_and_a_confidence(
+    client: TestClient, store: MapStore
+) -> None:
+    hall = rack_region(aisles=2, bays=4)
+    table = noisy_landmarks(hall, np.random.default_rng(2))[0]
+    features = layout_features(fit_layout(table, profiles=[rack_profile([0.0, 1.5, 3.0])]))
+    store.write_revision(store.ensure_map("hall").id, RevisionWrite("pillar_mapping", features=features))
+    schema = client.get("/openapi.json").json()["components"]["schemas"]["BinOut"]["properties"]
+
+    served = _all_bins(client)
+
+    assert len(served) == len(features["bin"]) > 0
+    for documented in (schema["id"], schema["detected_id"]):
+        assert "`AA-BBB-LL`" in documented["description"]
+        assert all(re.fullmatch(ID_PATTERN, example) for example in documented["examples"][1:])
+    assert all(re.fullmatch(ID_PATTERN, item["id"]) and item["id"].endswith(f"-{item['level'] + 1:02d}")
+               for item in served)
+    assert {item["level"] for item in served} == {0, 1, 2}
+    assert all(0.0 <= item["confidence"] <= 1.0 for item in served)
+    assert "0..1" in schema["confidence"]["description"]
