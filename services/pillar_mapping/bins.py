@@ -33,8 +33,8 @@ class StorageBin(NamedTuple):
 
     ``id`` is ``"AA-BBB"`` (aisle, bay; odd bays on the aisle's left looking along the row
     direction, even on its right), with ``"-LL"`` appended (``LL`` = ``level`` + 1) when the rack's
-    levels are known (:data:`shared.bins.ID_FORMAT`); ``footprint`` (4, 2) metres, front edge first; ``centre`` (2,) metres;
-    ``access_pose`` (x, y, yaw) in the aisle facing the opening; ``row`` the index of the
+    levels are known (:data:`shared.bins.ID_FORMAT`); ``footprint`` (4, 2) metres, front edge
+    first; ``centre`` (2,) metres; ``access_pose`` (x, y, yaw) in the aisle facing the opening; ``row`` the index of the
     aisle-facing row in the row list; ``back_row`` the row behind; ``confidence`` in [0, 1]
     (:func:`bin_confidence` of its four uprights); ``level`` 0 for the floor, None when unknown;
     ``z_m`` the height of the cell's floor (beam top), metres, None when unknown.
