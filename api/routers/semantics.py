@@ -46,14 +46,18 @@ class FeatureAt(BaseModel):
 class PointOut(BaseModel):
     x_m: float
     y_m: float
-    occupancy: int | None = Field(description="Occupancy there: -1 unknown, 0 free .. 100 occupied; null outside.")
+    occupancy: int | None = Field(description="Occupancy of the cell there as the ROS OccupancyGrid gives it: the "
+                                              "probability that it is occupied in percent, 0 (free) .. 100 "
+                                              "(occupied), -1 never observed; null outside the layer.")
+    occupancy_probability: float | None = Field(description="The same as a probability 0..1 that the cell is "
+                                                            "occupied; null where never observed or outside.")
     semantic: SemanticLabelOut | None
     place: PlaceOut | None
     features: list[FeatureAt] = Field(description="Area features (bins, regions, docks...) whose polygon holds "
                                                   "the point, and point/line features within 0.25 m.")
 
     model_config = {"json_schema_extra": {"examples": [{
-        "x_m": 12.4, "y_m": 7.9, "occupancy": 0,
+        "x_m": 12.4, "y_m": 7.9, "occupancy": 0, "occupancy_probability": 0.0,
         "semantic": {"label": "pallet", "code": 3, "entropy": 0.21, "layer_revision_id": 311},
         "place": {"region": "r12", "label": "corridor", "layer_revision_id": 305},
         "features": [{"kind": "corridor", "key": "r12", "label": "corridor"}]}]}}
@@ -78,6 +82,7 @@ def semantics_at(
     semantic, place = found.semantic, found.place
     return PointOut(
         x_m=found.x_m, y_m=found.y_m, occupancy=found.occupancy,
+        occupancy_probability=None if found.occupancy is None or found.occupancy < 0 else found.occupancy / 100.0,
         semantic=None if semantic is None else SemanticLabelOut(
             label=semantic.label, code=semantic.code, entropy=semantic.entropy,
             layer_revision_id=semantic.layer_revision_id),

@@ -77,6 +77,20 @@ def test_a_point_tells_its_place_class_and_features(client: TestClient, hall: di
     assert outside["occupancy"] is None and outside["semantic"] is None and outside["features"] == []
 
 
+def test_occupancy_says_its_scale(client: TestClient, store: MapStore, hall: dict[str, int]) -> None:
+    grid = np.array([[-1, 0, 65, 100]], np.int8)
+    store.write_revision(store.ensure_map("hall").id, RevisionWrite("occupancy_mapping", layers=[
+        GridLayer("occupancy", grid, RES, 0.0, 0.0)]))
+    schema = client.get("/openapi.json").json()["components"]["schemas"]["PointOut"]["properties"]
+
+    answers = [client.get(f"{URL}/semantics", params={"x": RES * (k + 0.5), "y": 0.1}).json() for k in range(4)]
+
+    assert [a["occupancy"] for a in answers] == [-1, 0, 65, 100]
+    assert [a["occupancy_probability"] for a in answers] == [None, 0.0, 0.65, 1.0]
+    assert "percent" in schema["occupancy"]["description"]
+    assert "0..1" in schema["occupancy_probability"]["description"]
+
+
 def test_a_point_reads_the_map_as_it_was(client: TestClient, hall: dict[str, int]) -> None:
     then = client.get(f"{URL}/semantics", params={"x": 2.2, "y": 4.7, "revision": hall["places"]}).json()
 
