@@ -42,20 +42,27 @@ router = APIRouter(prefix="/v1/maps/{map_name}/exports", tags=["exports"], respo
 class ExportFormatOut(BaseModel):
     name: str = Field(description="What to ask for: `/exports/<name>`.")
     description: str
-    extension: str = Field(description="Extension of the main file, e.g. `.geojson`.")
+    extension: str = Field(description="Extension of the file `/exports/<name>` serves, e.g. `.geojson`, or `.zip` "
+                                       "for a format of several files.")
+    media_type: str = Field(description="Content-Type `/exports/<name>` serves, e.g. `application/zip`.")
+    files: list[str] = Field(description="Extensions of the files the format makes, main file first (inside the "
+                                         "zip for several; `aisle export --out` writes them side by side).")
     options: list[str] = Field(description="Query options the format takes besides `revision`, e.g. `layer`.")
 
     model_config = example_config(
-        name="map_server", extension=".yaml", options=["layer"],
-        description="a grid layer (?layer=, default occupancy) as a ROS map_server YAML + PGM",
+        name="map_server", extension=".zip", media_type="application/zip", files=[".yaml", ".pgm"],
+        options=["layer"],
+        description="a grid layer (?layer=, default occupancy) as a ROS map_server YAML + PGM (served as a zip of "
+                    "both)",
     )
 
 
 @router.get("", summary="List export formats", responses={**not_found("No such map."), **UNPROCESSABLE})
 def list_exports(map_info: MapDep) -> list[ExportFormatOut]:
-    """The formats the map can be exported in."""
-    return [ExportFormatOut(name=item.name, description=item.description, extension=item.extension,
-                            options=sorted(item.options)) for item in EXPORT_FORMATS.values()]
+    """The formats the map can be exported in, with the file each serves."""
+    return [ExportFormatOut(name=item.name, description=item.description, extension=item.download[0],
+                            media_type=item.download[1], files=list(item.files), options=sorted(item.options))
+            for item in EXPORT_FORMATS.values()]
 
 
 @router.get(
@@ -112,10 +119,10 @@ def get_export(
         raise HTTPException(status.HTTP_404_NOT_FOUND, str(err)) from err
     except ExportError as err:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
+    extension, media_type = chosen.download
     if len(export.files) == 1:
         filename, content = next(iter(export.files.items()))
-        media_type = export.media_type
     else:
-        filename, content, media_type = f"{stem}.zip", zip_files(export.files), "application/zip"
+        filename, content = f"{stem}{extension}", zip_files(export.files)
     return Response(content, media_type=media_type,
                     headers={"Content-Disposition": f'attachment; filename="{filename}"', REVISION_HEADER: str(at)})

@@ -16,9 +16,13 @@ from pathlib import Path
 
 from atlas.exports.base import Export, Exporter, ExportError, ExportNotFoundError, ExportOptions, safe_stem
 from atlas.exports.geojson import export_geojson
+from atlas.exports.lif import MEDIA_TYPE as LIF_MEDIA_TYPE
 from atlas.exports.lif import export_lif
+from atlas.exports.mapserver import MEDIA_TYPE as MAP_SERVER_MEDIA_TYPE
 from atlas.exports.mapserver import export_map_server
+from atlas.exports.rmf import MEDIA_TYPE as RMF_MEDIA_TYPE
 from atlas.exports.rmf import export_rmf
+from atlas.layout import MEDIA_TYPE as GEOJSON_MEDIA_TYPE
 from shared.store import MapInfo, MapStore
 
 
@@ -32,8 +36,10 @@ class ExportFormat:
         What clients ask for (``geojson``, ``map_server``, ...).
     description : str
         One line for people.
-    extension : str
-        Extension of the main file, with its dot.
+    files : tuple of str
+        Extensions of the files it makes (with their dots), the main file first.
+    media_type : str
+        Media type of the main file.
     exporter : Exporter
         Makes the export.
     options : frozenset of str
@@ -42,20 +48,36 @@ class ExportFormat:
 
     name: str
     description: str
-    extension: str
+    files: tuple[str, ...]
+    media_type: str
     exporter: Exporter
     options: frozenset[str] = frozenset()
 
+    @property
+    def extension(self) -> str:
+        """Extension of the main file, with its dot (``aisle export --out`` names it)."""
+        return self.files[0]
+
+    @property
+    def download(self) -> tuple[str, str]:
+        """(extension, media type) of what the API serves: the one file itself, or a zip of several."""
+        return (self.extension, self.media_type) if len(self.files) == 1 else (".zip", ZIP_MEDIA_TYPE)
+
+
+ZIP_MEDIA_TYPE = "application/zip"
+"""How the API serves an export of several files."""
 
 EXPORT_FORMATS: Mapping[str, ExportFormat] = {
     item.name: item for item in (
         ExportFormat("geojson", "every feature of the map as one GeoJSON FeatureCollection (map-frame metres)",
-                     ".geojson", export_geojson),
-        ExportFormat("map_server", "a grid layer (?layer=, default occupancy) as a ROS map_server YAML + PGM",
-                     ".yaml", export_map_server, frozenset({"layer"})),
+                     (".geojson",), GEOJSON_MEDIA_TYPE, export_geojson),
+        ExportFormat("map_server", "a grid layer (?layer=, default occupancy) as a ROS map_server YAML + PGM "
+                     "(served as a zip of both)", (".yaml", ".pgm"), MAP_SERVER_MEDIA_TYPE, export_map_server,
+                     frozenset({"layer"})),
         ExportFormat("lif", "the waypoint network as a VDMA LIF 1.0 layout (nodes, edges, stations), JSON",
-                     ".lif.json", export_lif),
-        ExportFormat("rmf", "the waypoint network as an Open-RMF nav graph, YAML", ".nav.yaml", export_rmf),
+                     (".lif.json",), LIF_MEDIA_TYPE, export_lif),
+        ExportFormat("rmf", "the waypoint network as an Open-RMF nav graph, YAML", (".nav.yaml",), RMF_MEDIA_TYPE,
+                     export_rmf),
     )
 }
 """Every format, by name."""
@@ -146,6 +168,7 @@ def export_to_path(store: MapStore, map_info: MapInfo, format_name: str, out: Pa
 
 __all__ = [
     "EXPORT_FORMATS",
+    "ZIP_MEDIA_TYPE",
     "Export",
     "ExportError",
     "ExportFormat",

@@ -26,6 +26,22 @@ def test_export_formats_are_listed_with_their_options(client: TestClient, site: 
     assert formats["map_server"]["options"] == ["layer"] and formats["geojson"]["options"] == []
 
 
+def test_each_format_is_listed_with_the_file_and_media_type_it_serves(client: TestClient, store: MapStore) -> None:
+    write_warehouse(store)
+    for item in client.get("/v1/maps/site/exports").json():
+        served = client.get(f"/v1/maps/site/exports/{item['name']}")
+
+        assert served.status_code == 200, served.text
+        assert served.headers["content-type"] == item["media_type"]
+        assert served.headers["content-disposition"].endswith(f'{item["extension"]}"')
+        if item["extension"] == ".zip":
+            with zipfile.ZipFile(io.BytesIO(served.content)) as archive:
+                names = archive.namelist()
+            assert len(names) == len(item["files"]) and all(map(str.endswith, names, item["files"]))
+        else:
+            assert item["files"] == [item["extension"]]
+
+
 def test_geojson_export_is_one_file_of_every_feature(client: TestClient, site: dict[str, int]) -> None:
     response = client.get("/v1/maps/site/exports/geojson")
 
