@@ -1,14 +1,28 @@
 """Bin answers in WMS form (:class:`api.models.BinOut`) from the map's typed ones, and the live ones encoded once
-per version of a bin, for the bins route and the fast path alike."""
+per version of a bin, for the bins route and the fast path alike; and :class:`MetricJSONResponse`, how every JSON
+answer is encoded (numbers rounded as :mod:`atlas.precision` says)."""
 
 from __future__ import annotations
+
+from typing import Any
+
+from fastapi.responses import JSONResponse
 
 from api.models import AccessPose, BinOut, Opening, PlaceRef
 from api.translate import http_error
 from atlas.bins import BinAnswer, no_bin
 from atlas.bins import PlaceRef as MapPlaceRef
 from atlas.live import LiveMap
+from atlas.precision import json_bytes
 from shared.store import MapInfo
+
+
+class MetricJSONResponse(JSONResponse):
+    """JSON with metres to the millimetre and angles to 0.1 mrad (:func:`atlas.precision.json_bytes`): the app's
+    default response class, so every route's JSON answer is rounded the same way."""
+
+    def render(self, content: Any) -> bytes:
+        return json_bytes(content)
 
 
 def _place(ref: MapPlaceRef | None) -> PlaceRef | None:
@@ -50,5 +64,5 @@ def live_bin(live: LiveMap, map_info: MapInfo, bin_id: str) -> bytes:
         raise http_error(no_bin(map_info, bin_id, None))
     body = live.bin_json.get(row.id)
     if body is None:
-        body = live.bin_json[row.id] = bin_out(live.bin_answer(row)).model_dump_json().encode()
+        body = live.bin_json[row.id] = json_bytes(bin_out(live.bin_answer(row)).model_dump(mode="json"))
     return body

@@ -14,6 +14,7 @@ from fastapi.responses import JSONResponse
 
 from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
+from api.answers import MetricJSONResponse
 from api.deps import ApiContext, enforce_policy
 from api.errors import ApiConfigError
 from api.fastpath import LiveReads
@@ -65,6 +66,8 @@ A live semantic map of the warehouse for a Warehouse Management System.
 * **health**: database, bus and stage workers.
 
 Every read accepts `?revision=<id>` to see the map as it was then. Errors are JSON with a `detail`.
+Positions are metres in the map frame (x, y; not WGS84), rounded to the millimetre; angles are radians from the map
+frame's x axis, to 4 decimals; each numeric field's schema names its unit.
 Live feature and bin reads (without `?revision=`) come from memory and may be up to 0.2 s (by default) behind
 the newest revision (the `X-Aisle-Revision-Id` header names the revision they cover); a client always reads
 the revisions it wrote itself.
@@ -134,7 +137,7 @@ def create_app(
             live.close()
 
     app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url="/docs",
-                  dependencies=[Depends(enforce_policy)], lifespan=lifespan)
+                  dependencies=[Depends(enforce_policy)], lifespan=lifespan, default_response_class=MetricJSONResponse)
     access = AccessPolicy(require_keys_for_reads=require_keys_for_reads, rate_limit_per_s=rate_limit_per_s,
                           rate_limit_burst=rate_limit_burst, recheck_s=key_recheck_s)
     context = app.state.context = ApiContext(

@@ -27,7 +27,8 @@ def example_config(**example: Any) -> ConfigDict:
 class ValidationIssue(BaseModel):
     """One invalid part of a request, as FastAPI reports it."""
 
-    loc: list[str | int] = Field(description="Where: `path`, `query`, `header` or `body`, then the name.")
+    loc: list[str | int] = Field(description="Where: `path`, `query`, `header` or `body`, then the name (or the "
+                                             "index of a list item).")
     msg: str = Field(description="What is wrong with it.")
     type: str = Field(description="Error type, e.g. `string_too_long`.")
     input: Any = Field(None, description="The value sent.")
@@ -130,7 +131,7 @@ _REVISION_EXAMPLE = {
 
 
 class RevisionOut(BaseModel):
-    id: int
+    id: int = Field(description="Revision id (increasing with time; pass as `?revision=`).")
     stage: str = Field(description="The stage worker that wrote this revision.")
     created_at: dt.datetime
     input_start_ns: int | None = Field(description="Earliest sensor stamp the stage used, ns since epoch.")
@@ -142,7 +143,8 @@ class RevisionOut(BaseModel):
 
 class RevisionPage(BaseModel):
     revisions: list[RevisionOut]
-    next_after: int | None = Field(description="Pass as `?after=` for the next page; null on the last page.")
+    next_after: int | None = Field(description="Pass as `?after=` for the next page (a revision id); null on the "
+                                               "last page.")
 
     model_config = example_config(revisions=[_REVISION_EXAMPLE], next_after=None)
 
@@ -155,7 +157,7 @@ class MapSummary(BaseModel):
     name: str
     frame_id: str
     created_at: dt.datetime
-    latest_revision_id: int | None
+    latest_revision_id: int | None = Field(description="Id of the map's newest revision; null before the first.")
     layers: list[str]
 
     model_config = example_config(**_MAP_EXAMPLE)
@@ -169,8 +171,8 @@ class MapDetail(MapSummary):
 
 # -- layers ---------------------------------------------------------------------------------
 class Origin(BaseModel):
-    x_m: float
-    y_m: float
+    x_m: float = Field(description="x, metres, map frame.")
+    y_m: float = Field(description="y, metres, map frame.")
 
 
 _LAYER_EXAMPLE = {"name": "occupancy", "revision_id": 1206, "dtype": "int8", "shape": [500, 800],
@@ -182,10 +184,11 @@ class LayerOut(BaseModel):
     name: str
     revision_id: int = Field(description="Revision that wrote this version of the layer.")
     dtype: str = Field(description="numpy dtype name, e.g. int8 (occupancy: -1 unknown, 0..100).")
-    shape: tuple[int, int] = Field(description="(rows, cols); row 0 is the lowest y.")
+    shape: tuple[int, int] = Field(description="(rows, cols), count of cells; row 0 is the lowest y.")
     resolution_m: float = Field(description="Cell side in metres.")
     origin: Origin = Field(description="Map-frame position of the outer corner of cell (0, 0).")
-    extent: tuple[float, float, float, float] = Field(description="(min_x, min_y, max_x, max_y) in metres.")
+    extent: tuple[float, float, float, float] = Field(description="(min_x, min_y, max_x, max_y), metres, map "
+                                                                  "frame.")
     meta: dict[str, Any]
 
     model_config = example_config(**_LAYER_EXAMPLE)
@@ -203,9 +206,10 @@ class FeatureCollection(BaseModel):
     type: Literal["FeatureCollection"] = "FeatureCollection"
     features: list[GeoJSONFeature]
     revision: int | None = Field(description="The revision read at, or null for the live map.")
-    limit: int
-    offset: int
-    next_offset: int | None = Field(description="Pass as `?offset=` for the next page; null on the last.")
+    limit: int = Field(description="Page size asked for, count of features.")
+    offset: int = Field(description="Features skipped, count.")
+    next_offset: int | None = Field(description="Pass as `?offset=` for the next page (a count of features); null "
+                                                "on the last.")
 
     model_config = example_config(type="FeatureCollection", features=[FEATURE_EXAMPLE], revision=None, limit=1000,
                             offset=0, next_offset=None)
@@ -213,14 +217,14 @@ class FeatureCollection(BaseModel):
 
 # -- bins ---------------------------------------------------------------------------------
 class AccessPose(BaseModel):
-    x_m: float
-    y_m: float
-    yaw_rad: float = Field(description="Heading to face the bin opening, radians from the map x axis.")
+    x_m: float = Field(description="x, metres, map frame.")
+    y_m: float = Field(description="y, metres, map frame.")
+    yaw_rad: float = Field(description="Heading to face the bin opening, radians from the map frame's x axis.")
 
 
 class Opening(BaseModel):
-    left: tuple[float, float] = Field(description="(x, y) of one end of the front edge, metres.")
-    right: tuple[float, float] = Field(description="(x, y) of the other end, metres.")
+    left: tuple[float, float] = Field(description="(x, y) of one end of the front edge, metres, map frame.")
+    right: tuple[float, float] = Field(description="(x, y) of the other end, metres, map frame.")
     width_m: float = Field(description="Clear width between the uprights at the front, metres.")
 
 
@@ -241,12 +245,13 @@ class BinOut(BaseModel):
     wms_id: str | None = Field(description="The WMS id it is matched to, if a WMS bin list was imported.")
     status: BinStatus = Field(description="`matched` to an imported WMS bin, `unknown_to_wms` (imported list "
                                           "lacks it) or `unreconciled` (no WMS list imported).")
-    aisle: int | None
-    bay: int | None
-    level: int | None = Field(description="Shelf level, 0 = floor; null while unknown.")
-    centre: tuple[float, float] = Field(description="(x, y) in map-frame metres.")
+    aisle: int | None = Field(description="Aisle number (Aisle's numbering); null if the bin has none.")
+    bay: int | None = Field(description="Bay number along the aisle (odd on its left, even on its right); null if "
+                                        "the bin has none.")
+    level: int | None = Field(description="Shelf level number, 0 = floor; null while unknown.")
+    centre: tuple[float, float] = Field(description="(x, y), metres, map frame.")
     footprint: list[tuple[float, float]] | None = Field(
-        description="Closed polygon ring (x, y) in metres, front edge first; null for point bins.")
+        description="Closed polygon ring (x, y), metres, map frame, front edge first; null for point bins.")
     opening: Opening | None = Field(description="The front edge a fork enters by, from the footprint.")
     access_pose: AccessPose | None = Field(description="Where a vehicle stands in the aisle to reach the bin.")
     row: str | None = Field(description="Key of the aisle-facing rack row (a `rack_row` feature).")

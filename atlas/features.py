@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
+from atlas.precision import json_bytes
 from shared.store import Feature, StoredFeature
 from shared.store.store import FeatureRow
 
@@ -43,7 +44,10 @@ class GeoJSONFeature(BaseModel):
     id: str = Field(description="`<kind>/<key>`.")
     geometry: dict[str, Any] = Field(description="GeoJSON geometry in map-frame metres.")
     properties: dict[str, Any] = Field(
-        description="The feature's own properties plus kind, key, stage, revision_id and confidence."
+        description="The feature's own properties plus kind, key, stage, revision_id and confidence (0..1). Lengths "
+                    "and positions are metres in the map frame (`*_m`, `centre`, `x`, `y`, the first two values of "
+                    "an `access_pose`), areas m² (`*_m2`), angles radians from the map frame's x axis (`*_rad`, "
+                    "`theta`, the third value of an `access_pose`)."
     )
 
     model_config = ConfigDict(json_schema_extra={"examples": [FEATURE_EXAMPLE]})
@@ -80,16 +84,14 @@ def live_collection(index: FeatureIndex, *, kinds: Sequence[str] | None, bbox: B
 
 
 def geojson_bytes(row: FeatureRow) -> bytes:
-    """One feature as GeoJSON, the same document as :func:`geojson_feature` gives.
-
-    The stored geometry text goes in as it is.
-    """
+    """One feature as GeoJSON, the same document as :func:`geojson_feature` gives (rounded as
+    :mod:`atlas.precision` says)."""
     properties = {name: value for name, value in json.loads(row.properties_json).items()
                   if name not in ADDED_PROPERTIES}
     properties.update(kind=row.kind, key=row.key, stage=row.stage, confidence=row.confidence,
                       revision_id=row.revision_id)
-    return (f'{{"type":"Feature","id":{json.dumps(f"{row.kind}/{row.key}")},"geometry":{row.geometry_json},'
-            f'"properties":{json.dumps(properties, separators=(",", ":"))}}}').encode()
+    return json_bytes({"type": "Feature", "id": f"{row.kind}/{row.key}", "geometry": json.loads(row.geometry_json),
+                       "properties": properties})
 
 
 def stored_feature(row: FeatureRow) -> StoredFeature:

@@ -12,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from atlas.errors import TooLargeError
 from atlas.features import BBox, GeoJSONFeature, geojson_feature
+from atlas.precision import json_bytes
 from atlas.render.png import render_png
 from atlas.render.scene import layout_scene
 from atlas.render.svg import MEDIA_TYPE as SVG_MEDIA_TYPE
@@ -64,7 +65,8 @@ class LayoutCollection(BaseModel):
 
     type: Literal["FeatureCollection"] = "FeatureCollection"
     bbox: BBox | None = Field(
-        None, description="[min_x, min_y, max_x, max_y] of the features' geometries in metres (RFC 7946 bbox)."
+        None, description="[min_x, min_y, max_x, max_y] of the features' geometries, metres, map frame (RFC 7946 "
+                          "bbox)."
     )
     frame: LayoutFrame
     revision_id: int | None = Field(
@@ -79,7 +81,7 @@ class LayoutCollection(BaseModel):
     def to_json(self) -> bytes:
         """The collection as GeoJSON text; ``bbox`` is left out when there are no features (RFC 7946 wants
         an array or nothing)."""
-        return self.model_dump_json(exclude={"bbox"} if self.bbox is None else None).encode()
+        return json_bytes(self.model_dump(mode="json", exclude={"bbox"} if self.bbox is None else None))
 
 
 def read_revision(store: MapStore, map_info: MapInfo, revision: int | None) -> int | None:

@@ -32,11 +32,12 @@ class BinPage(BaseModel):
     model_config = example_config(bins=[], total=240, revision=None, limit=100, offset=200, next_offset=None)
 
     bins: list[BinOut]
-    total: int = Field(description="Bins matching the filters, over all pages.")
+    total: int = Field(description="Bins matching the filters over all pages, count.")
     revision: int | None = Field(description="The revision read at, or null for the live map.")
-    limit: int
-    offset: int
-    next_offset: int | None = Field(description="Pass as `?offset=` for the next page; null on the last.")
+    limit: int = Field(description="Page size asked for, count of bins.")
+    offset: int = Field(description="Bins skipped, count.")
+    next_offset: int | None = Field(description="Pass as `?offset=` for the next page (a count of bins); null on "
+                                                "the last.")
 
 
 @router.get("", summary="List and search bins", responses=_ERRORS)
@@ -46,19 +47,19 @@ def list_bins(
     cache: CacheDep,
     revision: RevisionQuery,
     bbox: BBoxQuery,
-    aisle: Annotated[int | None, Query(ge=0, le=1_000_000, description="Only bins of this aisle.", examples=[3])
+    aisle: Annotated[int | None, Query(ge=0, le=1_000_000, description="Only bins of this aisle number.", examples=[3])
                      ] = None,
     row: Annotated[str | None, Query(max_length=128, description="Only bins facing this rack row (its key).",
                                      examples=["r0-006"])] = None,
-    level: Annotated[int | None, Query(ge=0, le=1000, description="Only bins on this level (0 = floor).",
+    level: Annotated[int | None, Query(ge=0, le=1000, description="Only bins on this level number (0 = floor).",
                                        examples=[0])] = None,
     id_prefix: Annotated[str | None, Query(max_length=128, description="Only bins whose id (WMS id when matched) "
                                                                        "or detected id starts so.", examples=["03-"])
                          ] = None,
     bin_status: Annotated[BinStatus | None, Query(alias="status", description="Only bins of this WMS status.",
                                                   examples=["matched"])] = None,
-    limit: Annotated[int, Query(ge=1, le=1000, description="Page size.", examples=[100])] = 100,
-    offset: Annotated[int, Query(ge=0, le=10_000_000, description="Bins to skip.", examples=[0])] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000, description="Page size, count of bins.", examples=[100])] = 100,
+    offset: Annotated[int, Query(ge=0, le=10_000_000, description="Bins to skip, count.", examples=[0])] = 0,
 ) -> BinPage:
     """Bins of the map (as of ``?revision=``), filtered, sorted by id and paged.
 

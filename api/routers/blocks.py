@@ -45,8 +45,9 @@ class BlockOut(BaseModel):
         description="The region (or the two regions of the connection) the block applies to now; null when "
                     "nothing lies at its point any more (the map changed), so it has no effect.")
     blocked_keys: list[str] = Field(description="The region keys named when it was blocked.")
-    x_m: float = Field(description="A point inside the region, or the connection's portal, when blocked (metres).")
-    y_m: float
+    x_m: float = Field(description="A point inside the region, or the connection's portal, when blocked: x, "
+                                   "metres, map frame.")
+    y_m: float = Field(description="y, metres, map frame.")
     reason: str | None
     blocked_at: str = Field(description="When, ISO 8601 UTC.")
     blocked_by: str | None = Field(description="Name of the API key that blocked it.")

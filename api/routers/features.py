@@ -28,8 +28,10 @@ async def list_features(
     revision: RevisionQuery,
     kinds: KindsQuery,
     bbox: BBoxQuery,
-    limit: Annotated[int, Query(ge=1, le=MAX_LIMIT, description="Page size.", examples=[1000])] = DEFAULT_LIMIT,
-    offset: Annotated[int, Query(ge=0, le=MAX_OFFSET, description="Features to skip (paging).", examples=[0])] = 0,
+    limit: Annotated[int, Query(ge=1, le=MAX_LIMIT, description="Page size, count of features.",
+                                examples=[1000])] = DEFAULT_LIMIT,
+    offset: Annotated[int, Query(ge=0, le=MAX_OFFSET, description="Features to skip (paging), count.",
+                                 examples=[0])] = 0,
 ) -> Response | FeatureCollection:
     """A GeoJSON FeatureCollection of the map's features live at ``?revision=`` (default: now).
 

@@ -37,8 +37,8 @@ class LayerDiff(BaseModel):
 
 
 class RevisionDiff(BaseModel):
-    from_revision: int
-    to_revision: int
+    from_revision: int = Field(description="Revision id compared from.")
+    to_revision: int = Field(description="Revision id compared to.")
     features: dict[str, KindDiff] = Field(description="Per feature kind that changed.")
     layers: list[LayerDiff] = Field(description="Layers whose version differs.")
     topology: dict[str, int] = Field(description="Region-graph nodes and edges added and removed.")

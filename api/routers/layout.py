@@ -5,8 +5,8 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, Response, status
-from fastapi.responses import JSONResponse
 
+from api.answers import MetricJSONResponse
 from api.deps import MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, as_json, not_found
 from api.queries import BBoxQuery, KindsQuery
@@ -37,7 +37,7 @@ _ERRORS: Responses = {
 }
 
 
-class GeoJSONResponse(JSONResponse):
+class GeoJSONResponse(MetricJSONResponse):
     media_type = GEOJSON_MEDIA_TYPE
 
 

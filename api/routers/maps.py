@@ -58,7 +58,7 @@ def list_revisions(
     store: StoreDep,
     after: Annotated[int, Query(ge=0, le=MAX_ID, description="Only revisions with a larger id (a page cursor).",
                                 examples=[1200])] = 0,
-    limit: Annotated[int, Query(ge=1, le=1000, description="Page size.", examples=[100])] = 100,
+    limit: Annotated[int, Query(ge=1, le=1000, description="Page size, count of revisions.", examples=[100])] = 100,
 ) -> RevisionPage:
     """Revisions of the map, oldest first, one page at a time."""
     revisions = store.revisions(map_info.id, after_id=after, limit=limit)

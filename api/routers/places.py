@@ -47,16 +47,16 @@ class PolygonIn(BaseModel):
     type: Literal["Polygon"]
     coordinates: Annotated[
         list[Annotated[list[Position], Field(min_length=4, max_length=MAX_RING_POINTS)]],
-        Field(min_length=1, max_length=1, description="One closed ring (first point repeated last), metres; "
-                                                      "no holes."),
+        Field(min_length=1, max_length=1, description="One closed ring (first point repeated last) of (x, y), "
+                                                      "metres, map frame; no holes."),
     ]
 
 
 class PlacePose(BaseModel):
-    x_m: Coordinate
-    y_m: Coordinate
+    x_m: Coordinate = Field(description="x, metres, map frame.")
+    y_m: Coordinate = Field(description="y, metres, map frame.")
     yaw_rad: Annotated[float, Field(ge=-2 * math.pi, le=2 * math.pi, allow_inf_nan=False,
-                                    description="Heading on arrival, radians from the map x axis.")]
+                                    description="Heading on arrival, radians from the map frame's x axis.")]
 
 
 class NamedPlaceIn(BaseModel):
@@ -88,11 +88,11 @@ class NamedPlaceOut(BaseModel):
     name: str | None
     geometry: dict[str, Any] = Field(description="GeoJSON geometry in map-frame metres.")
     approach_pose: PlacePose | None
-    target: tuple[float, float] = Field(description="Where routes to the place end (x, y): the approach pose, "
-                                                    "else the middle of the geometry.")
+    target: tuple[float, float] = Field(description="Where routes to the place end (x, y), metres, map frame: the "
+                                                    "approach pose, else the middle of the geometry.")
     properties: dict[str, Any]
     stage: str = Field(description="Who wrote it: `operator` for places set through this API.")
-    revision_id: int
+    revision_id: int = Field(description="Revision that wrote this version of the place.")
 
     model_config = example_config(**_PLACE_EXAMPLE)
 

@@ -27,15 +27,17 @@ _ROUTE_ERRORS: Responses = {
 
 class RouteEnd(BaseModel):
     spec: str = Field(description="The end as asked, e.g. `bin:01-003-02`.")
-    x_m: float = Field(description="Where the end is (a bin's access pose, a place's approach point), metres.")
-    y_m: float
-    yaw_rad: float | None = Field(description="Heading there, if the end has one (radians from the map x axis).")
+    x_m: float = Field(description="Where the end is (a bin's access pose, a place's approach point): x, metres, "
+                                   "map frame.")
+    y_m: float = Field(description="y, metres, map frame.")
+    yaw_rad: float | None = Field(description="Heading there, if the end has one (radians from the map frame's x "
+                                              "axis).")
     region: str = Field(description="Key of the drivable region the route starts or ends in.")
 
 
 class WaypointOut(BaseModel):
-    x_m: float
-    y_m: float
+    x_m: float = Field(description="x, metres, map frame.")
+    y_m: float = Field(description="y, metres, map frame.")
     region: str = Field(description="Region key: where the route is from here on.")
     kind: Literal["start", "portal", "via", "goal"] = Field(
         description="`portal`: the route enters `region` here; `via`: a corner inside `region` around an obstacle.")
@@ -53,7 +55,7 @@ class RouteOut(BaseModel):
     regions: list[RegionPassed] = Field(description="Regions passed, in order.")
     corridors: list[str] = Field(description="Keys of the corridor features the route runs through, in order: "
                                              "aisles (`aisle-03`, from the rack rows) and decomposition corridors.")
-    length_m: float
+    length_m: float = Field(description="Along the waypoints, metres.")
     revision: int | None = Field(description="The revision the route was planned on.")
     free_below: int = Field(description="Occupancy values 0 <= v < free_below count as free.")
 

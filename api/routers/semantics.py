@@ -25,16 +25,16 @@ _ERRORS: Responses = {
 class SemanticLabelOut(BaseModel):
     label: str | None = Field(description="Class of the semantic grid (semantic fusion), e.g. `rack`; null where "
                                           "nothing was observed.")
-    code: int
+    code: int = Field(description="Class code in the semantic layer (its index in the layer's classes).")
     entropy: float | None = Field(description="Normalised Shannon entropy of the cell's class distribution, 0 "
                                               "(certain) to 1; null where there is none.")
-    layer_revision_id: int
+    layer_revision_id: int = Field(description="Revision that wrote the semantic layer read.")
 
 
 class PlaceOut(BaseModel):
     region: str = Field(description="Key of the region feature and topology node, e.g. `r12`.")
     label: str = Field(description="Place label: corridor, junction, storage, room, open_area, unidentified.")
-    layer_revision_id: int
+    layer_revision_id: int = Field(description="Revision that wrote the place layers read.")
 
 
 class FeatureAt(BaseModel):
@@ -44,8 +44,8 @@ class FeatureAt(BaseModel):
 
 
 class PointOut(BaseModel):
-    x_m: float
-    y_m: float
+    x_m: float = Field(description="x, metres, map frame.")
+    y_m: float = Field(description="y, metres, map frame.")
     occupancy: int | None = Field(description="Occupancy of the cell there as the ROS OccupancyGrid gives it: the "
                                               "probability that it is occupied in percent, 0 (free) .. 100 "
                                               "(occupied), -1 never observed; null outside the layer.")
@@ -100,11 +100,12 @@ class LabelRow(BaseModel):
 
 
 class CategoryRow(BaseModel):
-    category: int = Field(description="Place category found by unsupervised clustering of ray-cast features.")
+    category: int = Field(description="Place category number found by unsupervised clustering of ray-cast "
+                                      "features.")
     label: str = Field(description="The label its regions carry now.")
     overridden: bool = Field(description="Whether a person set this category's label.")
-    regions: int
-    area_m2: float
+    regions: int = Field(description="Regions of this category, count.")
+    area_m2: float = Field(description="Their total floor area, m².")
 
 
 class LabelTableOut(BaseModel):

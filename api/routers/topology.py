@@ -20,9 +20,9 @@ _READ_ERRORS: Responses = {**not_found("No such map or revision."), **UNPROCESSA
 class TopologyNodeOut(BaseModel):
     id: str = Field(description="Region key (`r<id>`), also the key of the region's feature.")
     kind: str = Field(description="Place label: corridor, junction, room, open_area, storage, unidentified, ...")
-    x: float | None = Field(description="Centroid x, map metres (may lie outside a concave region).")
-    y: float | None = Field(description="Centroid y, map metres.")
-    area_m2: float | None
+    x: float | None = Field(description="Centroid x, metres, map frame (may lie outside a concave region).")
+    y: float | None = Field(description="Centroid y, metres, map frame.")
+    area_m2: float | None = Field(description="Floor area of the region, m².")
     drivable: bool = Field(description="Whether vehicles drive in it (corridor, junction, room, open area).")
     blocked: bool = Field(description="Closed by an operator.")
 
@@ -33,7 +33,7 @@ class TopologyEdgeOut(BaseModel):
     connection: str = Field(description="connected, storage_access, door or disconnected.")
     blocked: bool = Field(description="Closed by an operator.")
     portal: tuple[float, float] | None = Field(
-        description="Middle of the regions' shared boundary (x, y), map metres; null when they share none.")
+        description="Middle of the regions' shared boundary (x, y), metres, map frame; null when they share none.")
     width_m: float | None = Field(description="Length of the shared boundary, metres (approximate).")
 
 
@@ -82,7 +82,7 @@ class TopologyFeatureOut(BaseModel):
 class TopologyGeoJSONOut(BaseModel):
     type: Literal["FeatureCollection"] = "FeatureCollection"
     features: list[TopologyFeatureOut]
-    revision: int | None
+    revision: int | None = Field(description="The revision read at, or null for the newest.")
 
     model_config = example_config(**_TOPOLOGY_GEOJSON_EXAMPLE)
 

@@ -29,11 +29,11 @@ class WmsBinIn(BaseModel):
     model_config = example_config(id="A-03-014", x_m=41.2, y_m=17.6, aisle=3, bay=14, level=0)
 
     id: str = Field(pattern=BIN_ID_PATTERN, description="The WMS's id of the bin.", examples=["A-03-014"])
-    x_m: float | None = Field(None, ge=-_COORD, le=_COORD, description="Bin centre x in map metres, if known.")
-    y_m: float | None = Field(None, ge=-_COORD, le=_COORD, description="Bin centre y in map metres, if known.")
-    aisle: int | None = Field(None, ge=0, le=1_000_000)
-    bay: int | None = Field(None, ge=0, le=1_000_000)
-    level: int | None = Field(None, ge=0, le=1000, description="Shelf level, 0 = floor.")
+    x_m: float | None = Field(None, ge=-_COORD, le=_COORD, description="Bin centre x, metres, map frame, if known.")
+    y_m: float | None = Field(None, ge=-_COORD, le=_COORD, description="Bin centre y, metres, map frame, if known.")
+    aisle: int | None = Field(None, ge=0, le=1_000_000, description="The WMS's aisle number, if it has one.")
+    bay: int | None = Field(None, ge=0, le=1_000_000, description="The WMS's bay number, if it has one.")
+    level: int | None = Field(None, ge=0, le=1000, description="Shelf level number, 0 = floor.")
 
     @model_validator(mode="after")
     def _both_or_neither(self) -> WmsBinIn:
@@ -61,7 +61,8 @@ class MatchOut(BaseModel):
     wms_id: str
     detected_id: str = Field(description="Aisle's id of the matched bin.")
     by: str = Field(description="`id` (same id on both sides) or `position`.")
-    distance_m: float | None = Field(description="WMS position to detected centre; null without a WMS position.")
+    distance_m: float | None = Field(description="WMS position to detected centre, metres; null without a WMS "
+                                                 "position.")
 
 
 class DiscrepancyOut(BaseModel):

@@ -10,13 +10,13 @@ id) and every place (``dock-G1``, ``charger-C1``) is a station at its access nod
 from __future__ import annotations
 
 import datetime as dt
-import json
 import math
 from typing import Any
 
 from atlas.exports.base import Export, ExportNotFoundError, ExportOptions
 from atlas.navigation import NavigationError, load_navmap
 from atlas.navigation.network import Network, waypoint_network
+from atlas.precision import json_bytes
 from shared.store import Feature, MapInfo, MapStore
 from shared.vocabulary import PLACE_KINDS, FeatureKind
 
@@ -144,4 +144,4 @@ def export_lif(store: MapStore, map_info: MapInfo, revision: int, options: Expor
         document = lif_document(store, map_info, revision)
     except NavigationError as err:
         raise ExportNotFoundError(str(err)) from err
-    return Export({f"{options.stem}.lif.json": json.dumps(document, indent=1).encode()}, MEDIA_TYPE)
+    return Export({f"{options.stem}.lif.json": json_bytes(document, indent=1)}, MEDIA_TYPE)

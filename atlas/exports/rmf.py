@@ -19,6 +19,7 @@ from atlas.exports.base import Export, ExportNotFoundError, ExportOptions
 from atlas.exports.lif import map_network
 from atlas.navigation import NavigationError
 from atlas.navigation.network import NetNode
+from atlas.precision import rounded
 from shared.store import MapInfo, MapStore
 from shared.vocabulary import FeatureKind
 
@@ -72,4 +73,4 @@ def export_rmf(store: MapStore, map_info: MapInfo, revision: int, options: Expor
         graph = rmf_nav_graph(store, map_info, revision)
     except NavigationError as err:
         raise ExportNotFoundError(str(err)) from err
-    return Export({f"{options.stem}.nav.yaml": yaml.safe_dump(graph, sort_keys=False).encode()}, MEDIA_TYPE)
+    return Export({f"{options.stem}.nav.yaml": yaml.safe_dump(rounded(graph), sort_keys=False).encode()}, MEDIA_TYPE)
