@@ -62,6 +62,27 @@ def open_store(settings: Settings) -> MapStore:
     return store
 
 
+def key_box(secret: str) -> str:
+    """The first admin key framed in a box of ``#``, with how to use it, so that nobody scrolling a log misses it."""
+    lines = ["FIRST ADMIN API KEY (shown only this once; keep it safe):", "", f"    {secret}", "",
+             "Send it as the header `X-API-Key: <key>`; make more keys with",
+             "`aisle keys create --role read|write|admin --name NAME`."]
+    width = max(len(line) for line in lines)
+    rule = "#" * (width + 6)
+    return "\n".join(["", rule, *(f"#  {line:<{width}}  #" for line in lines), rule])
+
+
+def announce_first_admin_key(store: MapStore) -> str | None:
+    """Create the first admin API key when the store has no active one, and log it in a :func:`key_box` (as a
+    warning, so every log level shows it); its secret, or None when an admin key exists already."""
+    from shared.store.keys import ensure_admin_key
+
+    secret = ensure_admin_key(store)
+    if secret is not None:
+        log.warning("%s", key_box(secret))
+    return secret
+
+
 def run(
     settings: Settings,
     *,
@@ -92,12 +113,8 @@ def run(
             import uvicorn
 
             from api.app import create_app
-            from shared.store.keys import ensure_admin_key
 
-            first_admin = ensure_admin_key(store)
-            if first_admin is not None:
-                log.warning("first admin API key, shown only now (create others with `aisle keys create`): %s",
-                            first_admin)
+            announce_first_admin_key(store)
             app = create_app(store=store, settings=settings, bus=bus, expected_workers=stages,
                              require_keys_for_reads=settings.reads_need_key,
                              rate_limit_per_s=settings.api_rate_limit_per_s,

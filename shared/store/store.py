@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import logging
 import os
 import socket
 import zlib
@@ -41,6 +42,8 @@ from shared.store.records import (
 )
 
 MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+
+log = logging.getLogger(__name__)
 _IDS_PER_STATEMENT = 5000
 """Row ids named in one ``IN (...)``, well below SQLite's and PostgreSQL's limits on bound parameters."""
 
@@ -133,16 +136,36 @@ class MapStore:
         self.engine.dispose()
 
     # -- schema ---------------------------------------------------------------------------
-    def upgrade(self) -> None:
-        """Bring the schema to the newest Alembic revision."""
-        from alembic import command
-        from alembic.config import Config
+    def upgrade(self) -> bool:
+        """Bring the schema to the newest Alembic revision; whether there was anything to do.
 
-        config = Config()
-        config.set_main_option("script_location", str(MIGRATIONS_DIR))
-        with self._begin() as connection:
-            config.attributes["connection"] = connection
-            command.upgrade(config, "head")
+        Alembic says nothing unless it migrates (then one line per migration), so commands that open the store
+        (``aisle keys list``) print only their own output.
+        """
+        alembic_log = logging.getLogger("alembic")
+        level = alembic_log.level
+        alembic_log.setLevel(logging.WARNING)  # importing alembic logs its plugins, too
+        try:
+            from alembic import command
+            from alembic.config import Config
+            from alembic.runtime.migration import MigrationContext
+            from alembic.script import ScriptDirectory
+
+            config = Config()
+            config.set_main_option("script_location", str(MIGRATIONS_DIR))
+            heads = set(ScriptDirectory.from_config(config).get_heads())
+            with self._begin() as connection:
+                current = set(MigrationContext.configure(connection).get_current_heads())
+                if current == heads:
+                    return False
+                log.info("migrating the map store schema from %s to %s", sorted(current) or "nothing", sorted(heads))
+                logging.getLogger("alembic.runtime.migration").setLevel(logging.INFO)
+                config.attributes["connection"] = connection
+                command.upgrade(config, "head")
+                return True
+        finally:
+            logging.getLogger("alembic.runtime.migration").setLevel(logging.NOTSET)
+            alembic_log.setLevel(level)
 
     @contextmanager
     def _begin(self) -> Iterator[Connection]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 
 import numpy as np
@@ -163,3 +164,17 @@ def test_heartbeats_upsert_worker_state(store: MapStore) -> None:
     store.heartbeat("occupancy_mapping", {"scans": 5}, started_at=started)
     (worker,) = store.workers()
     assert worker.name == "occupancy_mapping" and worker.counters == {"scans": 5}
+
+
+def test_upgrade_says_nothing_unless_it_migrates(store_url: str, caplog: pytest.LogCaptureFixture) -> None:
+    fresh = MapStore(store_url)
+    with caplog.at_level(logging.DEBUG):
+        assert fresh.upgrade() is True
+        migrated = [r.getMessage() for r in caplog.records]
+        caplog.clear()
+        assert fresh.upgrade() is False
+    fresh.close()
+
+    assert any("Running upgrade" in message for message in migrated)
+    assert not any("setup plugin" in message for message in migrated)
+    assert [r.getMessage() for r in caplog.records if r.levelno >= logging.INFO] == []
