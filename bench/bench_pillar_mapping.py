@@ -3,7 +3,9 @@ localisation noise), rack-row and bin fitting on simulated halls, and fits of a 
 
 Prints ``name value unit`` lines. Run:
 ``PYTHONPATH=. .venv/bin/python bench/bench_pillar_mapping.py [--quick] [--rows-only] [--seeds N] [--sim-survey]``.
-``--sim-survey`` also records the simulator's demo survey (photo-textured fisheye, about 3 minutes) and maps it.
+``--sim-survey`` also records the simulator's demo survey (photo-textured fisheye, about 3 minutes) and maps it;
+``--cli-only`` times just ``aisle racks fit`` as a user runs it (a fresh process: start-up, imports, fit, file) on a
+4,680-upright hall turned 7 degrees, and ``aisle --help``.
 """
 
 from __future__ import annotations
@@ -11,6 +13,10 @@ from __future__ import annotations
 import argparse
 import copy
 import math
+import os
+import resource
+import subprocess
+import sys
 import tempfile
 import time
 import tracemalloc
@@ -41,6 +47,7 @@ from services.pillar_mapping.evaluation import (
     score_frame,
     simulated_bearings,
 )
+from services.pillar_mapping.landmark_io import write_landmarks_csv
 from services.pillar_mapping.synthetic import (
     HallLayout,
     default_camera,
@@ -516,6 +523,36 @@ def bench_demo_rounds(rounds: int) -> None:
         report(f"demo_{case}_fewest_cells_after_round1", fewest, "count")
 
 
+def _child_run(args: list[str]) -> tuple[float, float]:
+    """(wall, CPU of the child) seconds of ``python -m services.cli ARGS`` in a fresh process."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "services.cli", *args], check=True, capture_output=True,
+                   env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def bench_racks_cli(runs: int) -> None:
+    """``aisle racks fit`` on a 4,680-upright hall turned 7 degrees (13 aisles of 89 bays, 3 cm noise) and
+    ``aisle --help``, each in a fresh process as a user runs them; medians of ``runs``."""
+    hall = rack_region(aisles=13, bays=89, theta_rad=math.radians(7.0))
+    rng = np.random.default_rng(0)
+    xy = hall.uprights + rng.normal(0.0, 0.03, hall.uprights.shape)
+    with tempfile.TemporaryDirectory() as tmp:
+        csv = Path(tmp) / "hall.csv"
+        write_landmarks_csv(csv, xy, np.tile(np.eye(2) * 0.03**2, (len(xy), 1, 1)))
+        fits = [_child_run(["racks", "fit", str(csv), "--out", str(Path(tmp) / "out")]) for _ in range(runs)]
+        helps = [_child_run(["--help"]) for _ in range(runs)]
+    report("racks_cli_uprights", len(xy), "count")
+    report("racks_cli_fit_wall_median", float(np.median([w for w, _ in fits])), "s")
+    report("racks_cli_fit_cpu_median", float(np.median([c for _, c in fits])), "s")
+    report("racks_cli_help_wall_median", float(np.median([w for w, _ in helps])), "s")
+    report("racks_cli_help_cpu_median", float(np.median([c for _, c in helps])), "s")
+    report("racks_cli_load_1min", os.getloadavg()[0], "procs")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer frames and seeds")
@@ -525,7 +562,11 @@ def main() -> None:
     parser.add_argument("--sim-survey", action="store_true", help="also map the simulator's demo fisheye survey")
     parser.add_argument("--demo-rounds", type=int, default=0,
                         help="also drive this many rounds of the live demo offline and count its cells per round")
+    parser.add_argument("--cli-only", action="store_true", help="only `aisle racks fit` and `aisle --help` as run")
     args = parser.parse_args()
+    if args.cli_only:
+        bench_racks_cli(3 if args.quick else 5)
+        return
     frames = 8 if args.quick else 30
     seeds = args.seeds or (2 if args.quick else 5)
     if not args.rows_only:

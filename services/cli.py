@@ -178,6 +178,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
+    if args.command in ("pillars", "racks"):  # offline on files: neither bus nor store
+        _pillars(args, settings)
+        return 0
     from services import runtime
 
     stop = threading.Event()
@@ -235,8 +238,6 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             overrides = parse_label_overrides(args.labels) if args.labels else None
             decompose_map_file(args.map, args.out, resolution_m=args.resolution, label_overrides=overrides)
             log.info("wrote the decomposition of %s to %s", args.map, args.out)
-        case "pillars" | "racks":
-            _pillars(args, settings)
         case "train-classifier" | "eval-classifier":
             _classifier(args, settings)
         case "keys":

@@ -131,7 +131,7 @@ def _site_bin_list(truth: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
 
 
 def _first_admin_key(log: Path) -> str:
-    found = re.search(r"first admin API key.*: (\S+)", log.read_text())
+    found = re.search(r"FIRST ADMIN API KEY.*\n#\s+#\n#\s+(\S+)\s+#\n", log.read_text())  # in its box
     assert found, "aisle run printed no first admin key"
     return found.group(1)
 

@@ -7,9 +7,9 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
-from scipy.signal import find_peaks
 from scipy.spatial import cKDTree
-from sklearn.cluster import DBSCAN
+
+from services.pillar_mapping.lean import dbscan, find_peaks
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -71,7 +71,7 @@ def dominant_orientations(
     smooth = gaussian_filter1d(hist.astype(np.float64), 2.0, mode="wrap")
     spread = round(np.deg2rad(1.5) / bin_rad)
     mass = np.convolve(np.concatenate([hist[-spread:], hist, hist[:spread]]), np.ones(2 * spread + 1), "valid")
-    peaks, _ = find_peaks(np.concatenate([smooth, smooth[:1]]), distance=max(1, int(min_separation_rad / bin_rad)))
+    peaks = find_peaks(np.concatenate([smooth, smooth[:1]]), distance=max(1, int(min_separation_rad / bin_rad)))
     peaks = peaks[peaks < bins]
     peaks = peaks[mass[peaks] >= min_fraction * alpha.size]
     peaks = peaks[np.argsort(-mass[peaks])][:max_orientations]
@@ -102,7 +102,9 @@ def local_orientations(
     if pairs.alpha.size == 0:
         return np.zeros(0)
     mid = 0.5 * (points[pairs.i] + points[pairs.j])
-    _, tile = np.unique(np.floor(mid / tile_m).astype(np.int64), axis=0, return_inverse=True)
+    cell = np.floor(mid / tile_m).astype(np.int64)
+    cell -= cell.min(axis=0)
+    _, tile = np.unique(cell[:, 0] * (int(cell[:, 1].max()) + 1) + cell[:, 1], return_inverse=True)  # row order
     tile = tile.ravel()
     found = dominant_orientations(pairs.alpha, max_orientations=per_tile).tolist() + [
         peak
@@ -110,7 +112,11 @@ def local_orientations(
         if np.count_nonzero(tile == t) >= min_pairs
         for peak in dominant_orientations(pairs.alpha[tile == t], max_orientations=per_tile)
     ]
-    support = [int(np.sum(np.abs(wrap_half(pairs.alpha - peak)) <= min_separation_rad)) for peak in found]
+    around = np.sort(pairs.alpha)
+    around = np.concatenate([around - np.pi, around, around + np.pi])  # directions wrap every pi
+    peaks = np.asarray(found, dtype=np.float64)
+    support = (np.searchsorted(around, peaks + min_separation_rad, side="right")
+               - np.searchsorted(around, peaks - min_separation_rad, side="left")).tolist()
     kept: list[float] = []
     for k in np.argsort(support)[::-1]:
         if all(abs(float(wrap_half(found[k] - other))) >= min_separation_rad for other in kept):
@@ -130,10 +136,14 @@ def refine_orientation(
 
     Repeated with the tolerance halved down to a fifth, so pairs of neighbouring peaks drop out.
     """
-    delta = points[pairs.j] - points[pairs.i]
+    # the mean moves at most the tolerance at each pass, so later passes look only at pairs within twice the
+    # sum of the tolerances of the first direction
+    candidates = np.abs(wrap_half(pairs.alpha - orientation_rad)) <= 2 * (1.0 + 0.5 + 0.25 + 0.2) * tolerance_rad
+    alpha = pairs.alpha[candidates]
+    delta = points[pairs.j[candidates]] - points[pairs.i[candidates]]
     weight = np.sum(delta**2, axis=1)
     for scale in (1.0, 0.5, 0.25, 0.2):
-        deviation = wrap_half(pairs.alpha - orientation_rad)
+        deviation = wrap_half(alpha - orientation_rad)
         normal = np.array([-np.sin(orientation_rad), np.cos(orientation_rad)])
         near = (np.abs(deviation) <= scale * tolerance_rad) & (np.abs(delta @ normal) <= max_offset_m)
         if not near.any():
@@ -182,7 +192,7 @@ def segment_aligned(
     mid = 0.5 * (points[pairs.i[near]] + points[pairs.j[near]])
     along = mid @ np.array([normal[1], -normal[0]])
     features = np.column_stack([mid @ normal, metres_per_rad * deviation[near], along_scale * along])
-    clusters = DBSCAN(eps=eps_m, min_samples=min_samples).fit_predict(features).astype(np.int64)
+    clusters = dbscan(features, eps=eps_m, min_samples=min_samples)
     good = clusters >= 0
     if not good.any():
         return labels

@@ -6,7 +6,7 @@ import json
 import logging
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -15,10 +15,12 @@ from services.pillar_mapping.bins import StorageBin, storage_bins
 from services.pillar_mapping.errors import PillarMappingError
 from services.pillar_mapping.landmark_io import read_landmarks_csv
 from services.pillar_mapping.levels import RackProfile, bins_on_levels
-from services.pillar_mapping.mapper import LandmarkMap
 from services.pillar_mapping.rows import RackRow, fit_rack_rows
 from shared.bins import AccessPose, Bin
 from shared.store import Feature
+
+if TYPE_CHECKING:
+    from services.pillar_mapping.mapper import LandmarkMap  # importing it imports GTSAM
 
 logger = logging.getLogger(__name__)
 
@@ -139,10 +141,11 @@ def layout_features(layout: RackLayout) -> dict[str, list[Feature]]:
 
 def layout_geojson(layout: RackLayout) -> dict[str, Any]:
     """A GeoJSON FeatureCollection (map metres) of a layout; ``properties.kind`` tells the feature kind."""
+    by_kind = layout_features(layout)
     features = [
         {"type": "Feature", "id": f.key, "geometry": dict(f.geometry), "properties": dict(f.properties)}
         for kind in ("rack_row", "pillar", "bin")
-        for f in layout_features(layout)[kind]
+        for f in by_kind[kind]
     ]
     return {"type": "FeatureCollection", "features": features}
 
