@@ -15,6 +15,7 @@ from fastapi.responses import JSONResponse
 from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
 from api.deps import ApiContext, enforce_policy
+from api.docpages import add_docs
 from api.errors import ApiConfigError
 from api.fastpath import LiveReads
 from api.invalid import invalid_request
@@ -133,8 +134,9 @@ def create_app(
         finally:
             live.close()
 
-    app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url="/docs",
+    app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url=None, redoc_url=None,
                   dependencies=[Depends(enforce_policy)], lifespan=lifespan)
+    add_docs(app)
     access = AccessPolicy(require_keys_for_reads=require_keys_for_reads, rate_limit_per_s=rate_limit_per_s,
                           rate_limit_burst=rate_limit_burst, recheck_s=key_recheck_s)
     context = app.state.context = ApiContext(
