@@ -14,6 +14,7 @@ from fastapi.responses import JSONResponse
 
 from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
+from api.bodylimit import BodyLimit
 from api.deps import ApiContext, enforce_policy
 from api.docpages import add_docs
 from api.errors import ApiConfigError
@@ -98,7 +99,8 @@ def create_app(
     store : MapStore
         The map store to serve, already upgraded to the current schema.
     settings : Settings
-        Aisle settings (the zenoh mode is reported by the health check).
+        Aisle settings (the zenoh mode is reported by the health check; request bodies over
+        ``api_max_body_bytes`` are refused with a 413).
     bus : Bus, optional
         A zenoh bus for worker liveliness; without one, liveness comes from stored heartbeats.
     expected_workers : sequence of str
@@ -150,6 +152,7 @@ def create_app(
     for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, blocks, routes,
                    places, history, events, keys):
         app.include_router(module.router)
+    app.add_middleware(BodyLimit, max_bytes=settings.api_max_body_bytes)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too
     if cors_origins:
         app.add_middleware(

@@ -46,13 +46,15 @@ COMMON_ERRORS: Responses = {
                                                                     "refused the request as asked."},
     status.HTTP_401_UNAUTHORIZED: {"model": ErrorOut, "description": "No API key where one is needed, or a bad one."},
     status.HTTP_403_FORBIDDEN: {"model": ErrorOut, "description": "The API key's role is too low for this request."},
+    status.HTTP_413_CONTENT_TOO_LARGE: {"model": ErrorOut, "description": "The request body is over the API's "
+                                        "limit (`AISLE_API_MAX_BODY_BYTES`, 32 MiB by default)."},
     status.HTTP_429_TOO_MANY_REQUESTS: {"model": ErrorOut,
                                         "description": "Rate limit spent; retry after `Retry-After` seconds."},
     status.HTTP_503_SERVICE_UNAVAILABLE: {"model": ErrorOut,
                                           "description": "Database unreachable; retry after `Retry-After` seconds."},
 }
-"""Errors any route can answer: the app-wide key check and rate limit, a malformed body, the store's refusal and
-an unreachable database."""
+"""Errors any route can answer: the app-wide key check and rate limit, a malformed or too large body, the store's
+refusal and an unreachable database."""
 
 UNPROCESSABLE: Responses = {
     status.HTTP_422_UNPROCESSABLE_CONTENT: {
