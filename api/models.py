@@ -13,6 +13,7 @@ from fastapi import status
 from pydantic import BaseModel, ConfigDict, Field
 
 from atlas.features import FEATURE_EXAMPLE, GeoJSONFeature
+from shared.vocabulary import REVISION_HEADER
 
 Responses = dict[int | str, dict[str, Any]]
 """The type of a route's ``responses=`` (extra OpenAPI responses)."""
@@ -65,6 +66,20 @@ UNPROCESSABLE: Responses = {
 def not_found(description: str) -> Responses:
     """A documented 404 saying what may be missing, e.g. ``"No such map or revision."``."""
     return {status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": description}}
+
+
+REVISION_HEADER_DOC: dict[str, Any] = {
+    "description": "The revision the answer covers: `?revision=` (or the cursor's) when given, else the newest "
+                   "revision of the map when the request was served.",
+    "schema": {"type": "integer"}}
+
+
+def naming_revision(responses: Responses) -> Responses:
+    """``responses`` with the success documented to carry the ``X-Aisle-Revision-Id`` header."""
+    success = dict(responses.get(status.HTTP_200_OK, {}))
+    success["headers"] = {**success.get("headers", {}), REVISION_HEADER: REVISION_HEADER_DOC}
+    success.setdefault("description", "Successful Response")
+    return {**responses, status.HTTP_200_OK: success}
 
 
 def as_json(responses: Responses) -> Responses:
@@ -203,13 +218,17 @@ class LayerValuesOut(LayerOut):
 class FeatureCollection(BaseModel):
     type: Literal["FeatureCollection"] = "FeatureCollection"
     features: list[GeoJSONFeature]
-    revision: int | None = Field(description="The revision read at, or null for the live map.")
+    revision: int | None = Field(description="The revision read at (also in the `X-Aisle-Revision-Id` header): "
+                                             "`?revision=` or the cursor's if given, else the newest; null only "
+                                             "for a map without revisions.")
     limit: int
     offset: int
     next_offset: int | None = Field(description="Pass as `?offset=` for the next page; null on the last.")
+    next_cursor: str | None = Field(None, description="Pass as `?cursor=` for the next page, read at the same "
+                                                      "revision as this one; null on the last.")
 
-    model_config = example_config(type="FeatureCollection", features=[FEATURE_EXAMPLE], revision=None, limit=1000,
-                            offset=0, next_offset=None)
+    model_config = example_config(type="FeatureCollection", features=[FEATURE_EXAMPLE], revision=1207, limit=1000,
+                                  offset=0, next_offset=None, next_cursor=None)
 
 
 # -- bins ---------------------------------------------------------------------------------
