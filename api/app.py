@@ -66,10 +66,12 @@ A live semantic map of the warehouse for a Warehouse Management System.
 * **keys**: API keys (admin only);
 * **health**: database, bus and stage workers.
 
-Every read accepts `?revision=<id>` to see the map as it was then. Errors are JSON with a `detail`.
+Every read accepts `?revision=<id>` to see the map as it was then, and names the revision it covers in the
+`X-Aisle-Revision-Id` header (lists, layout and topology in their body too). Lists page with
+`?cursor=<next_cursor>`: every page is read at the revision of the first, however many revisions arrive
+meanwhile. Errors are JSON with a `detail`; a request body over the server's limit (32 MiB by default) is a 413.
 Live feature and bin reads (without `?revision=`) come from memory and may be up to 0.2 s (by default) behind
-the newest revision (the `X-Aisle-Revision-Id` header names the revision they cover); a client always reads
-the revisions it wrote itself.
+the newest revision; a client always reads the revisions it wrote itself.
 
 Send an API key as `X-API-Key: <secret>` or `Authorization: Bearer <secret>`. Anything that changes
 something needs a `write` key (keys: `admin`); reads need a `read` key when the server requires keys
