@@ -55,15 +55,16 @@ def wms_list(count: int, *, rng: np.random.Generator) -> bytes:
     return json.dumps({"bins": bins, "tolerance_m": 0.5}).encode()
 
 
-def _reads(port: int, key: str, bin_ids: list[str], *, rate_per_s: float, stop: threading.Event,
+def _reads(port: int, key: str, bin_ids: list[str], *, rate_per_s: float, until: list[float],
            into: list[tuple[float, float]]) -> None:
-    """Read random bins by id, one every 1/``rate_per_s`` s, until ``stop``; (due time, latency) of each into
-    ``into``. A read is timed from when it was due, so a stall counts once for every read it held up."""
+    """Read random bins by id, one every 1/``rate_per_s`` s, until one falls due after ``until[0]`` (once the
+    caller has set it); (due time, latency) of each into ``into``. A read is timed from when it was due, and
+    every read due before the end is made, so a stall counts once for every read it held up."""
     connection = http.client.HTTPConnection("127.0.0.1", port, timeout=600)
     rng = random.Random(0)
     due = time.perf_counter()
     try:
-        while not stop.is_set():
+        while not until or due <= until[0]:
             due += 1.0 / rate_per_s
             time.sleep(max(0.0, due - time.perf_counter()))
             connection.request("GET", f"/v1/maps/{MAP_NAME}/bins/{rng.choice(bin_ids)}", headers={"X-API-Key": key})
@@ -106,9 +107,9 @@ def run(url: str, *, bins: int, rate_per_s: float, quiet_s: float, settle_s: flo
     with server(url, port, workers=1) as process:
         _warm_up(port, reader, bin_ids)
         latencies: list[tuple[float, float]] = []
-        stop = threading.Event()
+        until: list[float] = []
         thread = threading.Thread(target=_reads, args=(port, reader, bin_ids),
-                                  kwargs={"rate_per_s": rate_per_s, "stop": stop, "into": latencies})
+                                  kwargs={"rate_per_s": rate_per_s, "until": until, "into": latencies})
         thread.start()
         try:
             time.sleep(quiet_s)
@@ -125,7 +126,7 @@ def run(url: str, *, bins: int, rate_per_s: float, quiet_s: float, settle_s: flo
             cpu_import = _cpu_s(process.pid) - cpu_before
             rss_after = _rss_mb(process.pid)
         finally:
-            stop.set()
+            until.append(time.perf_counter())
             thread.join()
         time.sleep(settle_s)
         rss_settled = _rss_mb(process.pid)
