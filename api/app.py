@@ -15,7 +15,9 @@ from fastapi.responses import JSONResponse
 from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
 from api.answers import MetricJSONResponse
+from api.bodylimit import BodyLimit
 from api.deps import ApiContext, enforce_policy
+from api.docpages import add_docs
 from api.errors import ApiConfigError
 from api.fastpath import LiveReads
 from api.invalid import invalid_request
@@ -65,12 +67,14 @@ A live semantic map of the warehouse for a Warehouse Management System.
 * **keys**: API keys (admin only);
 * **health**: database, bus and stage workers.
 
-Every read accepts `?revision=<id>` to see the map as it was then. Errors are JSON with a `detail`.
+Every read accepts `?revision=<id>` to see the map as it was then, and names the revision it covers in the
+`X-Aisle-Revision-Id` header (lists, layout and topology in their body too). Lists page with
+`?cursor=<next_cursor>`: every page is read at the revision of the first, however many revisions arrive
+meanwhile. Errors are JSON with a `detail`; a request body over the server's limit (32 MiB by default) is a 413.
 Positions are metres in the map frame (x, y; not WGS84), rounded to the millimetre; angles are radians from the map
 frame's x axis, to 4 decimals; each numeric field's schema names its unit.
 Live feature and bin reads (without `?revision=`) come from memory and may be up to 0.2 s (by default) behind
-the newest revision (the `X-Aisle-Revision-Id` header names the revision they cover); a client always reads
-the revisions it wrote itself.
+the newest revision; a client always reads the revisions it wrote itself.
 
 Send an API key as `X-API-Key: <secret>` or `Authorization: Bearer <secret>`. Anything that changes
 something needs a `write` key (keys: `admin`); reads need a `read` key when the server requires keys
@@ -100,7 +104,8 @@ def create_app(
     store : MapStore
         The map store to serve, already upgraded to the current schema.
     settings : Settings
-        Aisle settings (the zenoh mode is reported by the health check).
+        Aisle settings (the zenoh mode is reported by the health check; request bodies over
+        ``api_max_body_bytes`` are refused with a 413).
     bus : Bus, optional
         A zenoh bus for worker liveliness; without one, liveness comes from stored heartbeats.
     expected_workers : sequence of str
@@ -136,8 +141,9 @@ def create_app(
         finally:
             live.close()
 
-    app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url="/docs",
+    app = FastAPI(title="Aisle", description=DESCRIPTION, version=version("aisle"), docs_url=None, redoc_url=None,
                   dependencies=[Depends(enforce_policy)], lifespan=lifespan, default_response_class=MetricJSONResponse)
+    add_docs(app)
     access = AccessPolicy(require_keys_for_reads=require_keys_for_reads, rate_limit_per_s=rate_limit_per_s,
                           rate_limit_burst=rate_limit_burst, recheck_s=key_recheck_s)
     context = app.state.context = ApiContext(
@@ -151,6 +157,7 @@ def create_app(
     for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, blocks, routes,
                    places, history, events, keys):
         app.include_router(module.router)
+    app.add_middleware(BodyLimit, max_bytes=settings.api_max_body_bytes)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too
     if cors_origins:
         app.add_middleware(

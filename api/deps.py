@@ -163,11 +163,12 @@ async def get_revision(
 ) -> int | None:
     """The ``?revision=`` to read at, after checking it is a revision of the map (404 otherwise)."""
     if revision is not None:
-        await anyio.to_thread.run_sync(_check_revision, store, map_info, revision)
+        await anyio.to_thread.run_sync(check_revision, store, map_info, revision)
     return revision
 
 
-def _check_revision(store: MapStore, map_info: MapInfo, revision: int) -> None:
+def check_revision(store: MapStore, map_info: MapInfo, revision: int) -> None:
+    """404 unless ``revision`` is a revision of the map, saying which is its newest."""
     if find_revision(store, map_info, revision) is None:
         latest = store.latest_revision(map_info.id)
         newest = "it has no revisions yet" if latest is None else f"its newest is {latest.id}"

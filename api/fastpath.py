@@ -23,7 +23,16 @@ from starlette.requests import Request
 from api.access import AccessPolicy, Verdict, credentials_of
 from api.answers import live_bin
 from api.deps import ApiContext
-from api.queries import BIN_ID_REGEX, DEFAULT_LIMIT, MAX_BBOX_TEXT, MAX_LIMIT, MAX_OFFSET, bbox_of, check_kinds
+from api.queries import (
+    BIN_ID_REGEX,
+    DEFAULT_LIMIT,
+    MAX_BBOX_TEXT,
+    MAX_LIMIT,
+    MAX_OFFSET,
+    bbox_of,
+    check_kinds,
+    cursors_at,
+)
 from atlas.features import live_collection
 from shared.vocabulary import REVISION_HEADER
 
@@ -104,7 +113,8 @@ class LiveReads:
             return None
         try:
             body = (live_bin(live, map_info, parts[5]) if area is None
-                    else live_collection(live.features, kinds=area[0], bbox=area[1], limit=area[2], offset=area[3]))
+                    else live_collection(live.features, kinds=area[0], bbox=area[1], limit=area[2], offset=area[3],
+                                         next_cursor=cursors_at(live.revision_id)))
         except HTTPException:  # a 404: the route explains it
             return None
         return _settle(access, verdict) or (body, live.revision_id)

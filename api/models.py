@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from atlas.features import FEATURE_EXAMPLE, GeoJSONFeature
 from shared.bins import ID_FORMAT
+from shared.vocabulary import REVISION_HEADER
 
 Responses = dict[int | str, dict[str, Any]]
 """The type of a route's ``responses=`` (extra OpenAPI responses)."""
@@ -48,13 +49,15 @@ COMMON_ERRORS: Responses = {
                                                                     "refused the request as asked."},
     status.HTTP_401_UNAUTHORIZED: {"model": ErrorOut, "description": "No API key where one is needed, or a bad one."},
     status.HTTP_403_FORBIDDEN: {"model": ErrorOut, "description": "The API key's role is too low for this request."},
+    status.HTTP_413_CONTENT_TOO_LARGE: {"model": ErrorOut, "description": "The request body is over the API's "
+                                        "limit (`AISLE_API_MAX_BODY_BYTES`, 32 MiB by default)."},
     status.HTTP_429_TOO_MANY_REQUESTS: {"model": ErrorOut,
                                         "description": "Rate limit spent; retry after `Retry-After` seconds."},
     status.HTTP_503_SERVICE_UNAVAILABLE: {"model": ErrorOut,
                                           "description": "Database unreachable; retry after `Retry-After` seconds."},
 }
-"""Errors any route can answer: the app-wide key check and rate limit, a malformed body, the store's refusal and
-an unreachable database."""
+"""Errors any route can answer: the app-wide key check and rate limit, a malformed or too large body, the store's
+refusal and an unreachable database."""
 
 UNPROCESSABLE: Responses = {
     status.HTTP_422_UNPROCESSABLE_CONTENT: {
@@ -65,6 +68,20 @@ UNPROCESSABLE: Responses = {
 def not_found(description: str) -> Responses:
     """A documented 404 saying what may be missing, e.g. ``"No such map or revision."``."""
     return {status.HTTP_404_NOT_FOUND: {"model": ErrorOut, "description": description}}
+
+
+REVISION_HEADER_DOC: dict[str, Any] = {
+    "description": "The revision the answer covers: `?revision=` (or the cursor's) when given, else the newest "
+                   "revision of the map when the request was served.",
+    "schema": {"type": "integer"}}
+
+
+def naming_revision(responses: Responses) -> Responses:
+    """``responses`` with the success documented to carry the ``X-Aisle-Revision-Id`` header."""
+    success = dict(responses.get(status.HTTP_200_OK, {}))
+    success["headers"] = {**success.get("headers", {}), REVISION_HEADER: REVISION_HEADER_DOC}
+    success.setdefault("description", "Successful Response")
+    return {**responses, status.HTTP_200_OK: success}
 
 
 def as_json(responses: Responses) -> Responses:
@@ -205,14 +222,18 @@ class LayerValuesOut(LayerOut):
 class FeatureCollection(BaseModel):
     type: Literal["FeatureCollection"] = "FeatureCollection"
     features: list[GeoJSONFeature]
-    revision: int | None = Field(description="The revision read at, or null for the live map.")
+    revision: int | None = Field(description="The revision read at (also in the `X-Aisle-Revision-Id` header): "
+                                             "`?revision=` or the cursor's if given, else the newest; null only "
+                                             "for a map without revisions.")
     limit: int = Field(description="Page size asked for, count of features.")
     offset: int = Field(description="Features skipped, count.")
     next_offset: int | None = Field(description="Pass as `?offset=` for the next page (a count of features); null "
                                                 "on the last.")
+    next_cursor: str | None = Field(None, description="Pass as `?cursor=` for the next page, read at the same "
+                                                      "revision as this one; null on the last.")
 
-    model_config = example_config(type="FeatureCollection", features=[FEATURE_EXAMPLE], revision=None, limit=1000,
-                            offset=0, next_offset=None)
+    model_config = example_config(type="FeatureCollection", features=[FEATURE_EXAMPLE], revision=1207, limit=1000,
+                                  offset=0, next_offset=None, next_cursor=None)
 
 
 # -- bins ---------------------------------------------------------------------------------

@@ -3,12 +3,15 @@ paging limits, each parsed once with the 422 that says what is wrong."""
 
 from __future__ import annotations
 
+import base64
 import math
 import re
-from typing import Annotated
+from collections.abc import Callable
+from typing import Annotated, NamedTuple
 
 from fastapi import Depends, HTTPException, Query, status
 
+from api.deps import MAX_ID
 from atlas.features import BBox
 from shared.store import FEATURE_KINDS
 
@@ -88,3 +91,70 @@ def bbox_of(text: str) -> BBox:
 
 KindsQuery = Annotated[list[str] | None, Depends(get_kinds)]
 BBoxQuery = Annotated[BBox | None, Depends(parse_bbox)]
+
+
+class Cursor(NamedTuple):
+    """Where the next page of a list starts: the revision the first page was read at, and the items to skip."""
+
+    revision: int
+    offset: int
+
+    def encode(self) -> str:
+        """The cursor as the opaque text a client passes back as ``?cursor=``."""
+        return base64.urlsafe_b64encode(f"{_CURSOR_VERSION}:{self.revision}:{self.offset}".encode()).decode()
+
+
+_CURSOR_VERSION = "c1"
+_CURSOR_TEXT = 64
+
+
+def cursors_at(revision: int) -> Callable[[int], str]:
+    """The cursor of the page that starts at a given offset, read at ``revision``."""
+    return lambda offset: Cursor(revision, offset).encode()
+
+
+def next_cursor(revision: int | None, offset: int, *, more: bool) -> str | None:
+    """The cursor of the page after one ending at ``offset`` read at ``revision``; None on the last page (or when
+    there is no revision to page at: the map has none)."""
+    return Cursor(revision, offset).encode() if more and revision is not None else None
+
+
+def cursor_of(text: str) -> Cursor:
+    """The cursor ``text`` (a ``next_cursor`` of an earlier page), or 422 saying it is not one."""
+    try:
+        version, revision, offset = base64.urlsafe_b64decode(text.encode("ascii")).decode("ascii").split(":")
+        cursor = Cursor(int(revision), int(offset))
+    except (ValueError, UnicodeError):  # base64's errors are ValueErrors
+        version, cursor = "", None
+    if cursor is None or version != _CURSOR_VERSION or not (1 <= cursor.revision <= MAX_ID
+                                                             and 0 <= cursor.offset <= MAX_OFFSET):
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
+                            f"cursor {text[:_CURSOR_TEXT]!r} is not one this API gave; pass a page's `next_cursor` "
+                            "as it is, or leave it out for the first page")
+    return cursor
+
+
+async def get_cursor(
+    cursor: Annotated[str | None, Query(
+        max_length=_CURSOR_TEXT, examples=["YzE6MTIwNzoyMDA="],
+        description="The `next_cursor` of the previous page: the next page, read at the same revision as the first "
+                    "(pages stay consistent while new revisions arrive). Leave out `revision` and `offset` with it."),
+    ] = None,
+) -> Cursor | None:
+    return None if cursor is None else cursor_of(cursor)
+
+
+CursorQuery = Annotated[Cursor | None, Depends(get_cursor)]
+
+
+def page_start(cursor: Cursor | None, revision: int | None, offset: int) -> tuple[int | None, int]:
+    """The revision and offset to read a page at: the cursor's, or else ``?revision=`` and ``?offset=``.
+
+    A cursor with a ``revision`` or a non-zero ``offset`` is a 422: the cursor already says both.
+    """
+    if cursor is None:
+        return revision, offset
+    if revision is not None or offset:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
+                            "pass either cursor (for the next page) or revision and offset, not both")
+    return cursor.revision, cursor.offset

@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 import itertools
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import cv2
@@ -20,9 +20,9 @@ import numpy.typing as npt
 from atlas.cache import RevisionCache
 from atlas.errors import NotInMapError
 from atlas.grids import cached_layer, nearest_drivable_region
-from atlas.reconcile import WmsMatching, wms_matching
+from atlas.reconcile import WMS_STAGE, MatchBy, WmsMatching, detected_bin, reconcile, wms_matching
 from shared.bins import Bin
-from shared.store import GridLayer, MapInfo, MapStore, StoredFeature
+from shared.store import GridLayer, MapInfo, MapStore, Revision, StoredFeature, WmsBin
 from shared.store.records import bounds
 from shared.vocabulary import FeatureKind, LayerName
 
@@ -199,6 +199,53 @@ def bin_index(store: MapStore, cache: RevisionCache, map_id: int, revision: int 
         )
 
     return cache.get(("bins", store.url, map_id, at), build)
+
+
+def import_wms_list(store: MapStore, cache: RevisionCache, map_id: int, items: Sequence[WmsBin], *,
+                    tolerance_m: float, match_by: MatchBy = MatchBy.ID) -> tuple[Revision, WmsMatching]:
+    """Store ``items`` as the map's WMS bin list (one new revision) and match them to the detected bins, once.
+
+    The matching is made before the revision is written, from the bins live then, and put in ``cache`` as part of
+    the new revision's bin index before the revision can be seen, so the live state that follows the revision
+    (which live reads wait for) does not read the list back and match it again: for a list of 200 000 bins that
+    takes seconds. If another revision was written meanwhile, the matching is made as of the new revision.
+
+    Returns
+    -------
+    (Revision, WmsMatching)
+        The revision written, and the list matched to the bins live at it.
+    """
+    basis = store.latest_revision(map_id)
+    basis_index = None if basis is None else bin_index(store, cache, map_id, basis.id)
+    detected = [detected_bin(Bin.from_feature(item.feature))
+                for item in store.features(map_id, kinds=[FeatureKind.BIN],
+                                           revision=None if basis is None else basis.id)]
+    result = reconcile(items, detected, tolerance_m=tolerance_m, match_by=match_by)
+    prepared: list[WmsMatching] = []
+
+    def prepare(revision_id: int) -> None:
+        """Runs while the map is locked: the newest revision others can see is the one just before this."""
+        latest = store.latest_revision(map_id)
+        if basis is not None and basis_index is not None and latest is not None and latest.id == basis.id:
+            matching = WmsMatching(result, tolerance_m, match_by, revision_id)
+            # a WMS revision changes nothing else a bin answer reads
+            keys.append(("bins", store.url, map_id, revision_id))
+            cache.get(keys[0], lambda: replace(basis_index, matching=matching))
+            prepared.append(matching)
+
+    keys: list[tuple[str, str, int, int]] = []
+    try:
+        summary = {"tolerance_m": tolerance_m, "match_by": match_by.value}
+        written = store.replace_wms_bins(map_id, items, stage=WMS_STAGE, summary=summary, before_commit=prepare)
+    except Exception:
+        for key in keys:  # the revision was not stored after all (and its id may be given to another)
+            cache.discard(key)
+        raise
+    if prepared:
+        return written, prepared[0]
+    fresh = wms_matching(store, map_id, written.id)
+    assert fresh is not None  # the list was just written
+    return written, fresh
 
 
 def select_bins(store: MapStore, cache: RevisionCache, map_id: int, *, revision: int | None, bbox: BBox | None,

@@ -53,3 +53,8 @@ class RevisionCache:
             done.set()
         return value
 
+
+    def discard(self, key: Hashable) -> None:
+        """Forget the entry of ``key``, if there is one (e.g. built for a revision whose write failed)."""
+        with self._lock:
+            self._entries.pop(key, None)

@@ -11,7 +11,7 @@ those that changed (see :meth:`shared.store.MapStore.write_revision`), so most r
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -71,16 +71,19 @@ def geojson_feature(stored: StoredFeature) -> GeoJSONFeature:
 
 
 def live_collection(index: FeatureIndex, *, kinds: Sequence[str] | None, bbox: BBox | None, limit: int,
-                    offset: int) -> bytes:
-    """A page of the live map's FeatureCollection from its index as JSON (the same document as the store's).
+                    offset: int, next_cursor: Callable[[int], str]) -> bytes:
+    """A page of the live map's FeatureCollection from its index as JSON (the same document as the store's at
+    the index's revision).
 
-    Features of ``kinds`` whose bounds touch ``bbox``, ``limit`` of them after skipping ``offset``.
+    Features of ``kinds`` whose bounds touch ``bbox``, ``limit`` of them after skipping ``offset``;
+    ``next_cursor(offset)`` is the cursor of the page that starts at ``offset`` at the index's revision.
     """
     page = index.select(kinds=kinds, bbox=bbox)[offset:offset + limit]
     next_offset = offset + len(page) if len(page) == limit else None
+    cursor = None if next_offset is None else next_cursor(next_offset)
     return b"".join((b'{"type":"FeatureCollection","features":[', b",".join(index.geojson[p] for p in page),
-                     f'],"revision":null,"limit":{limit},"offset":{offset},"next_offset":'
-                     f'{json.dumps(next_offset)}}}'.encode()))
+                     f'],"revision":{index.revision_id},"limit":{limit},"offset":{offset},"next_offset":'
+                     f'{json.dumps(next_offset)},"next_cursor":{json.dumps(cursor)}}}'.encode()))
 
 
 def geojson_bytes(row: FeatureRow) -> bytes:

@@ -243,6 +243,10 @@ class Settings(BaseSettings):
         0.2, ge=0, le=60, description="How far behind the store live feature and bin reads may be, seconds.")
     api_key_recheck_s: float = Field(
         1.0, ge=0, le=3600, description="How long a verified API key is trusted for reads before it is read again.")
+    api_max_body_bytes: int = Field(
+        32 * 2**20, ge=1024, le=2**31,
+        description="Largest request body the API reads, bytes (32 MiB: a WMS list of about 800k bins); larger is a "
+                    "413, refused before the body is read whole.")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     occupancy: OccupancySettings = Field(default_factory=OccupancySettings)

@@ -9,9 +9,9 @@ from fastapi import APIRouter, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
 from api.answers import bin_out, live_bin
-from api.deps import CacheDep, ContextDep, MapDep, RevisionQuery, StoreDep
-from api.models import COMMON_ERRORS, BinOut, BinStatus, ErrorOut, Responses, example_config
-from api.queries import BIN_ID_PATTERN, BBoxQuery
+from api.deps import CacheDep, ContextDep, MapDep, RevisionQuery, StoreDep, check_revision
+from api.models import COMMON_ERRORS, BinOut, BinStatus, ErrorOut, Responses, example_config, naming_revision
+from api.queries import BIN_ID_PATTERN, BBoxQuery, CursorQuery, next_cursor, page_start
 from api.translate import http_error
 from atlas.bins import BinNotFoundError, no_bin, select_bins, stored_bin
 from atlas.bins import BinStatus as MapBinStatus
@@ -29,23 +29,30 @@ _ERRORS: Responses = {
 
 
 class BinPage(BaseModel):
-    model_config = example_config(bins=[], total=240, revision=None, limit=100, offset=200, next_offset=None)
+    model_config = example_config(bins=[], total=240, revision=1207, limit=100, offset=200, next_offset=None,
+                                  next_cursor=None)
 
     bins: list[BinOut]
     total: int = Field(description="Bins matching the filters over all pages, count.")
-    revision: int | None = Field(description="The revision read at, or null for the live map.")
+    revision: int | None = Field(description="The revision read at (also in the `X-Aisle-Revision-Id` header): "
+                                             "`?revision=` or the cursor's if given, else the newest; null only "
+                                             "for a map without revisions.")
     limit: int = Field(description="Page size asked for, count of bins.")
     offset: int = Field(description="Bins skipped, count.")
     next_offset: int | None = Field(description="Pass as `?offset=` for the next page (a count of bins); null on "
                                                 "the last.")
+    next_cursor: str | None = Field(description="Pass as `?cursor=` (with the same filters) for the next page, read "
+                                                "at the same revision as this one; null on the last.")
 
 
-@router.get("", summary="List and search bins", responses=_ERRORS)
+@router.get("", summary="List and search bins", responses=naming_revision(_ERRORS))
 def list_bins(
+    response: Response,
     map_info: MapDep,
     store: StoreDep,
     cache: CacheDep,
     revision: RevisionQuery,
+    cursor: CursorQuery,
     bbox: BBoxQuery,
     aisle: Annotated[int | None, Query(ge=0, le=1_000_000, description="Only bins of this aisle number.", examples=[3])
                      ] = None,
@@ -65,13 +72,25 @@ def list_bins(
 
     Filters combine with AND; ``bbox`` keeps bins whose footprint touches the box. Corridor and
     nearest junction come from the grid decomposition's place layers and junctions of the same revision.
+    The answer names the revision it was read at (`revision`, and the header `X-Aisle-Revision-Id`); page on
+    with `?cursor=<next_cursor>` and every page is read at that same revision, however many revisions arrive
+    meanwhile.
     """
-    selection = select_bins(store, cache, map_info.id, revision=revision, bbox=bbox, aisle=aisle, row=row,
+    at, offset = page_start(cursor, revision, offset)
+    if at is None:
+        latest = store.latest_revision(map_info.id)
+        at = None if latest is None else latest.id
+    elif cursor is not None:
+        check_revision(store, map_info, at)
+    selection = select_bins(store, cache, map_info.id, revision=at, bbox=bbox, aisle=aisle, row=row,
                             level=level, id_prefix=id_prefix,
                             status=None if bin_status is None else MapBinStatus(bin_status), limit=limit, offset=offset)
-    return BinPage(bins=[bin_out(answer) for answer in selection.bins], total=selection.total, revision=revision,
-                   limit=limit, offset=offset,
-                   next_offset=offset + limit if offset + limit < selection.total else None)
+    if at is not None:
+        response.headers[REVISION_HEADER] = str(at)
+    more = offset + limit < selection.total
+    return BinPage(bins=[bin_out(answer) for answer in selection.bins], total=selection.total, revision=at,
+                   limit=limit, offset=offset, next_offset=offset + limit if more else None,
+                   next_cursor=next_cursor(at, offset + limit, more=more))
 
 
 @router.get("/{bin_id}", summary="One bin", responses=_ERRORS, response_model=BinOut)

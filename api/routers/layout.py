@@ -8,7 +8,7 @@ from fastapi import APIRouter, HTTPException, Query, Response, status
 
 from api.answers import MetricJSONResponse
 from api.deps import MapDep, RevisionQuery, SettingsDep, StoreDep
-from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, as_json, not_found
+from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, as_json, naming_revision, not_found
 from api.queries import BBoxQuery, KindsQuery
 from api.translate import http_error
 from atlas.features import BBox
@@ -46,7 +46,7 @@ class GeoJSONResponse(MetricJSONResponse):
     summary="The whole map as GeoJSON",
     response_model=LayoutCollection,
     response_class=GeoJSONResponse,
-    responses=as_json(_ERRORS),
+    responses=naming_revision(as_json(_ERRORS)),
 )
 def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds: KindsQuery,
                bbox: BBoxQuery) -> Response:
@@ -55,7 +55,8 @@ def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds
 
     Filter with `?kind=` (repeatable) and `?bbox=minx,miny,maxx,maxy` (features whose bounds touch
     it). The collection also gives the features' `bbox`, the `frame` the coordinates are in, the
-    `revision_id` read at (the newest when `?revision=` is not given) and a count per kind. It is
+    `revision_id` read at (the newest when `?revision=` is not given; also the header `X-Aisle-Revision-Id`)
+    and a count per kind. It is
     not paged: more than 20 000 matching features is a 413; narrow the bbox or the kinds, or page
     through `/features`.
     """
@@ -64,7 +65,8 @@ def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds
                                        max_features=MAX_LAYOUT_FEATURES)
     except LayoutTooLargeError as err:
         raise http_error(err) from err
-    return Response(collection.to_json(), media_type=GEOJSON_MEDIA_TYPE)
+    headers = {} if collection.revision_id is None else {REVISION_HEADER: str(collection.revision_id)}
+    return Response(collection.to_json(), media_type=GEOJSON_MEDIA_TYPE, headers=headers)
 
 
 WidthQuery = Annotated[int, Query(ge=MIN_WIDTH_PX, le=MAX_SIDE_PX, examples=[1024],

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Query, status
+from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
 from api.deps import CacheDep, MapDep, RevisionQuery, StoreDep
-from api.models import COMMON_ERRORS, UNPROCESSABLE, Responses, example_config, not_found
+from api.models import COMMON_ERRORS, UNPROCESSABLE, Responses, example_config, naming_revision, not_found
 from atlas.navigation import NavigationUnavailableError, load_navmap
 from atlas.navigation.topology import topology_features, topology_node_link
+from shared.vocabulary import REVISION_HEADER
 
 router = APIRouter(prefix="/v1/maps/{map_name}", responses=COMMON_ERRORS)
 
@@ -39,7 +40,8 @@ class TopologyEdgeOut(BaseModel):
 
 class TopologyGraphOut(BaseModel):
     map: str
-    revision: int | None = Field(description="The revision read at; null when the map has no revisions.")
+    revision: int | None = Field(description="The revision read at (also the header `X-Aisle-Revision-Id`); null "
+                                             "when the map has no revisions.")
     segments_revision_id: int | None = Field(description="Revision of the place_segments layer the graph is of.")
 
 
@@ -87,11 +89,12 @@ class TopologyGeoJSONOut(BaseModel):
     model_config = example_config(**_TOPOLOGY_GEOJSON_EXAMPLE)
 
 
-@router.get("/topology", summary="The region graph", tags=["topology"], responses={
+@router.get("/topology", summary="The region graph", tags=["topology"], responses=naming_revision({
     **_READ_ERRORS, status.HTTP_200_OK: {"content": {"application/json": {"examples": {
         "node-link": {"summary": "?format=node-link", "value": _TOPOLOGY_EXAMPLE},
-        "geojson": {"summary": "?format=geojson", "value": _TOPOLOGY_GEOJSON_EXAMPLE}}}}}})
+        "geojson": {"summary": "?format=geojson", "value": _TOPOLOGY_GEOJSON_EXAMPLE}}}}}}))
 def get_topology(
+    response: Response,
     map_info: MapDep,
     store: StoreDep,
     revision: RevisionQuery,
@@ -101,14 +104,21 @@ def get_topology(
         examples=["node-link"])] = "node-link",
 ) -> TopologyOut | TopologyGeoJSONOut:
     """Regions of the grid decomposition and their connections (as of ``?revision=``), with portals and the
-    operator's blocks. A map not decomposed yet has an empty graph."""
+    operator's blocks. A map not decomposed yet has an empty graph. The revision read at (the newest without
+    ``?revision=``) is in the answer and in the header ``X-Aisle-Revision-Id``."""
     try:
         nav = load_navmap(store, map_info.id, revision=revision, cache=cache)
     except NavigationUnavailableError:
+        latest = store.latest_revision(map_info.id) if revision is None else None
+        at = revision if latest is None else latest.id
+        if at is not None:
+            response.headers[REVISION_HEADER] = str(at)
         if format == "geojson":
-            return TopologyGeoJSONOut(features=[], revision=revision)
+            return TopologyGeoJSONOut(features=[], revision=at)
         return TopologyOut(directed=False, multigraph=False, nodes=[], edges=[],
-                           graph=TopologyGraphOut(map=map_info.name, revision=revision, segments_revision_id=None))
+                           graph=TopologyGraphOut(map=map_info.name, revision=at, segments_revision_id=None))
+    if nav.revision is not None:
+        response.headers[REVISION_HEADER] = str(nav.revision)
     if format == "geojson":
         return TopologyGeoJSONOut(features=[TopologyFeatureOut.model_validate(item) for item in topology_features(nav)],
                                   revision=nav.revision)

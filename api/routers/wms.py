@@ -3,16 +3,23 @@
 from __future__ import annotations
 
 from collections import Counter
-from typing import Annotated, Literal
+from typing import Any, Literal
 
-from fastapi import APIRouter, Body, HTTPException, status
-from pydantic import BaseModel, Field, model_validator
+import anyio
+from fastapi import APIRouter, HTTPException, Request, Response, status
+from fastapi.exceptions import RequestValidationError
+from pydantic import BaseModel, Field, ValidationError, model_validator
 
-from api.deps import AnnouncerDep, MapDep, RevisionQuery, StoreDep
+from api.announce import Announcer
+from api.deps import AnnouncerDep, CacheDep, MapDep, RevisionQuery, StoreDep
+from api.memory import return_freed_memory
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.queries import BIN_ID_PATTERN
-from atlas.reconcile import WMS_STAGE, Verdict, wms_matching
-from shared.store import WmsBin
+from atlas.bins import import_wms_list
+from atlas.cache import RevisionCache
+from atlas.precision import json_bytes
+from atlas.reconcile import MatchBy, Verdict, WmsMatching, wms_matching
+from shared.store import MapInfo, MapStore, WmsBin
 
 router = APIRouter(prefix="/v1/maps/{map_name}/wms-bins", tags=["bins"], responses=COMMON_ERRORS)
 
@@ -136,6 +143,10 @@ def _reconciliation(store: StoreDep, map_id: int, map_name: str, revision: int |
     if matching is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             f"map {map_name!r} has no WMS bin list; import one with PUT /v1/maps/{map_name}/wms-bins")
+    return _reconciliation_out(matching)
+
+
+def _reconciliation_out(matching: WmsMatching) -> ReconciliationOut:
     result = matching.reconciliation
     check = result.numbering
     shift = check.id_shift
@@ -161,26 +172,55 @@ def _reconciliation(store: StoreDep, map_id: int, map_name: str, revision: int |
     )
 
 
-@router.put("", summary="Import the WMS's bin list", responses=_ERRORS)
-def import_wms_bins(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
-                    body: Annotated[WmsImport, Body()]) -> ReconciliationOut:
+def _import_body() -> dict[str, Any]:
+    """The import's body as OpenAPI documents it (the route reads and validates it itself, off the event loop).
+
+    :class:`WmsBinIn` is referred to in the components, where the list route's answer puts it.
+    """
+    schema = WmsImport.model_json_schema(ref_template="#/components/schemas/{model}")
+    schema.pop("$defs", None)
+    return {"requestBody": {"required": True, "content": {"application/json": {"schema": schema}}}}
+
+
+@router.put("", summary="Import the WMS's bin list", responses=_ERRORS, response_model=ReconciliationOut,
+            openapi_extra=_import_body())
+async def import_wms_bins(request: Request, map_info: MapDep, store: StoreDep, cache: CacheDep,
+                          announcer: AnnouncerDep) -> Response:
     """Replace the map's WMS bin list with ``bins`` (one new revision) and return how it matches the detected bins.
 
     Bins are matched by equal id first, then by position (nearest detected bin within ``tolerance_m``, same
     level when both know it); ``match_by=position`` matches by position wherever the WMS gives one. Matched bins
     are then served under the WMS's id, so a site keeps its numbering. A bin matched by id whose WMS position is
     further than ``tolerance_m`` from the detected bin is listed under ``discrepancies``, and ``numbering`` says
-    when most are so (the site numbers bins differently, or surveyed in another frame). Needs a `write` key.
+    when most are so (the site numbers bins differently, or surveyed in another frame). Needs a `write` key. A
+    large list (up to 200 000 bins) is parsed, checked and stored in a worker thread, so reads go on being
+    answered meanwhile.
     """
-    repeated = sorted(i for i, n in Counter(item.id for item in body.bins).items() if n > 1)
+    body = await request.body()
+    answer = await anyio.to_thread.run_sync(_import, body, store, cache, map_info, announcer)
+    return Response(answer, media_type="application/json")
+
+
+def _import(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInfo, announcer: Announcer) -> bytes:
+    """Parse, check and store the WMS list in ``body``; the reconciliation as JSON (in a worker thread)."""
+    try:
+        parsed = WmsImport.model_validate_json(body)
+    except ValidationError as err:
+        raise RequestValidationError([{**error, "loc": ("body", *error["loc"])}
+                                      for error in err.errors(include_url=False)]) from err
+    repeated = sorted(i for i, n in Counter(item.id for item in parsed.bins).items() if n > 1)
     if repeated:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
                             f"WMS bin ids must be unique; repeated: {repeated[:10]}")
-    items = [WmsBin(b.id, b.x_m, b.y_m, b.aisle, b.bay, b.level) for b in body.bins]
-    written = store.replace_wms_bins(map_info.id, items, stage=WMS_STAGE,
-                                     summary={"tolerance_m": body.tolerance_m, "match_by": body.match_by})
+    items = [WmsBin(b.id, b.x_m, b.y_m, b.aisle, b.bay, b.level) for b in parsed.bins]
+    tolerance_m, match_by = parsed.tolerance_m, MatchBy(parsed.match_by)
+    del parsed
+    written, matching = import_wms_list(store, cache, map_info.id, items, tolerance_m=tolerance_m, match_by=match_by)
+    del items
     announcer.announce(map_info, written)
-    return _reconciliation(store, map_info.id, map_info.name, written.id)
+    answer = json_bytes(_reconciliation_out(matching).model_dump(mode="json"))
+    return_freed_memory()
+    return answer
 
 
 @router.get("/reconciliation", summary="WMS bins against detected bins", responses=_ERRORS)

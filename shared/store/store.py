@@ -13,7 +13,7 @@ import logging
 import os
 import socket
 import zlib
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -490,10 +490,13 @@ class MapStore:
 
     # -- the WMS's bin list ---------------------------------------------------------------
     def replace_wms_bins(self, map_id: int, items: Sequence[WmsBin], *, stage: str = "wms",
-                         summary: Mapping[str, Any] | None = None) -> Revision:
+                         summary: Mapping[str, Any] | None = None,
+                         before_commit: Callable[[int], None] | None = None) -> Revision:
         """Store ``items`` as the WMS's complete bin list, one new revision; the previous list is retired.
 
         ``summary`` is added to the revision's summary (e.g. the matching tolerance the import asked for).
+        ``before_commit`` is called with the new revision's id once everything is written, before anyone can see
+        the revision (while the map is locked), e.g. to prepare what readers of it will need.
         """
         ids = [item.wms_id for item in items]
         if len(set(ids)) != len(ids):
@@ -518,6 +521,8 @@ class MapStore:
                     {"map_id": map_id, "revision_id": revision_id, "wms_id": item.wms_id, "x_m": item.x_m,
                      "y_m": item.y_m, "aisle": item.aisle, "bay": item.bay, "level": item.level,
                      "properties": dict(item.properties)} for item in items])
+            if before_commit is not None:
+                before_commit(revision_id)
         return Revision(revision_id, map_id, stage, created_at, None, None, summary)
 
     def wms_bins(self, map_id: int, *, revision: int | None = None) -> list[WmsBin]:

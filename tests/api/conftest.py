@@ -6,12 +6,15 @@ PostgreSQL schema too.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import uvicorn
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
@@ -19,6 +22,7 @@ from api import create_app
 from shared.bus import Bus
 from shared.settings import Settings
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
+from tests.helpers import free_port, wait_for
 
 ClientFactory = Callable[..., TestClient]
 
@@ -102,3 +106,21 @@ def site(store: MapStore) -> dict[str, int]:
     )).id
     return {"occupancy_1": first_occupancy, "semantics_1": first_semantics, "occupancy_2": second_occupancy,
             "semantics_2": second_semantics, "other": other_map}
+
+
+@contextmanager
+def served(app: FastAPI) -> Iterator[int]:
+    """``app`` served by uvicorn on a free loopback port (in a thread of this process), as ``aisle serve`` serves
+    it; yields the port once it listens, and stops the server (and the app's live state) afterwards."""
+    port = free_port()
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", access_log=False))
+    thread = threading.Thread(target=server.run, name="api-under-test")
+    thread.start()
+    try:
+        wait_for(lambda: server.started or not thread.is_alive(), timeout_s=30.0, what="uvicorn to start")
+        assert server.started, f"uvicorn did not start on port {port}"
+        yield port
+    finally:
+        server.should_exit = True
+        thread.join(timeout=30.0)
+        app.state.context.live.close()

@@ -2,18 +2,29 @@
 
 from __future__ import annotations
 
+import http.client
+import json
+import sqlite3
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import sqlalchemy as sa
 from fastapi.testclient import TestClient
 
+from api import create_app
 from atlas.reconcile import DetectedBin, reconcile
 from services.pillar_mapping import fit_layout
 from services.pillar_mapping.layout import layout_features
 from services.pillar_mapping.synthetic import noisy_landmarks, rack_region
-from shared.store import Feature, MapStore, RevisionWrite, WmsBin
+from shared.settings import Settings
+from shared.store import Feature, MapStore, RevisionWrite, WmsBin, schema
 from shared.store.keys import Role, create_key
+from tests.api.conftest import served
 
 URL = "/v1/maps/hall"
 
@@ -199,3 +210,62 @@ def test_matching_by_position_first_follows_the_site_numbering(
     moved = {m["wms_id"]: m["detected_id"] for m in body["matched"]}
     aisle, bay = (int(part) for part in wms[0]["id"].split("-"))
     assert moved[wms[0]["id"]] == f"{aisle:02d}-{bay + 2:03d}"
+
+
+@contextmanager
+def _map_write_locked(store: MapStore, map_id: int) -> Iterator[None]:
+    """Hold the database's lock that a revision of map ``map_id`` needs (SQLite: the write lock; PostgreSQL: the
+    map's row), so an import waits in the middle until the block ends."""
+    if store.url.startswith("sqlite"):
+        lite = sqlite3.connect(str(sa.make_url(store.url).database), isolation_level=None)
+        try:
+            lite.execute("BEGIN IMMEDIATE")
+            yield
+            lite.execute("ROLLBACK")
+        finally:
+            lite.close()
+        return
+    with store.engine.connect() as connection, connection.begin():
+        connection.execute(sa.select(schema.maps.c.id).where(schema.maps.c.id == map_id).with_for_update())
+        yield
+
+
+def test_bins_are_read_while_an_import_is_under_way(store: MapStore, tmp_path: Path, hall: int,
+                                                    detected: list[Feature], writer: dict[str, str]) -> None:
+    """Through a real server: an import held at the database's lock does not hold up reads, and once it is in,
+    reads serve the WMS ids at once."""
+    map_id = store.ensure_map("hall").id
+    listed = _site_numbering(detected, np.random.default_rng(3))
+    body = json.dumps({"bins": listed, "tolerance_m": 0.5}).encode()
+    app = create_app(store=store, settings=Settings(data_dir=tmp_path, database_url=store.url))
+    with served(app) as port:
+        reader = http.client.HTTPConnection("127.0.0.1", port, timeout=60)
+
+        def read(bin_id: str) -> tuple[int, dict[str, Any]]:
+            reader.request("GET", f"{URL}/bins/{bin_id}")
+            response = reader.getresponse()
+            return response.status, json.loads(response.read())
+
+        before = read(detected[5].key)
+        with ThreadPoolExecutor(1) as pool, _map_write_locked(store, map_id):
+            def put() -> tuple[int, bytes]:
+                importer = http.client.HTTPConnection("127.0.0.1", port, timeout=120)
+                try:
+                    importer.request("PUT", f"{URL}/wms-bins", body=body,
+                                     headers={**writer, "Content-Type": "application/json"})
+                    response = importer.getresponse()
+                    return response.status, response.read()
+                finally:
+                    importer.close()
+
+            imported = pool.submit(put)
+            during = [read(item.key) for item in detected[3:13]]
+            assert not imported.done()  # the import is still waiting for the lock
+        status, answer = imported.result(timeout=120)
+        after = read(f"A-{detected[5].key}")
+        reader.close()
+
+    assert before == (200, before[1]) and before[1]["status"] == "unreconciled"
+    assert [code for code, _ in during] == [200] * 10
+    assert status == 200 and json.loads(answer)["counts"]["matched"] == len(detected) - 3
+    assert after[0] == 200 and after[1]["detected_id"] == detected[5].key and after[1]["status"] == "matched"
