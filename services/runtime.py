@@ -11,7 +11,7 @@ from types import FrameType
 
 from shared.bus import Bus
 from shared.settings import STAGES, Settings
-from shared.store import MapStore
+from shared.store import MapStore, StoreError
 from shared.worker import StageFactory, run_stage
 
 log = logging.getLogger(__name__)
@@ -62,6 +62,18 @@ def open_store(settings: Settings) -> MapStore:
     return store
 
 
+def compact_periodically(store: MapStore, settings: Settings, stop: threading.Event) -> None:
+    """Thin every map's revisions by ``settings.retention`` every ``compact_period_s`` until ``stop`` (no VACUUM:
+    the database reuses the space freed)."""
+    period = settings.retention.compact_period_s
+    while period is not None and not stop.wait(period):
+        try:
+            for map_info in store.maps():
+                log.info("%s", store.compact(map_info.id, settings.retention.policy()).describe())
+        except StoreError as err:
+            log.warning("compaction failed, will try again in %.0f s: %s", period, err)
+
+
 def run(
     settings: Settings,
     *,
@@ -69,10 +81,12 @@ def run(
     api: bool,
     stop: threading.Event,
     extra: Sequence[Callable[[Bus, threading.Event], None]] = (),
+    compact: bool = False,
 ) -> None:
     """Run ``stages`` (and the API if ``api``) until ``stop`` is set; then shut down cleanly.
 
-    ``extra`` callables run in their own threads with the bus (e.g. a bag replay).
+    ``extra`` callables run in their own threads with the bus (e.g. a bag replay); ``compact`` also thins old
+    revisions now and then (:func:`compact_periodically`).
     """
     factories = stage_factories()
     unknown = set(stages) - set(factories)
@@ -87,6 +101,9 @@ def run(
         ]
         threads += [threading.Thread(target=job, args=(bus, stop), name=getattr(job, "__name__", "job"))
                     for job in extra]
+        if compact:
+            threads.append(threading.Thread(target=compact_periodically, args=(store, settings, stop),
+                                            name="compaction"))
         server = None
         if api:
             import uvicorn
