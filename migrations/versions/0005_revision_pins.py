@@ -23,8 +23,9 @@ VERSIONED_TABLES = ("layers", "features", "topology_nodes", "topology_edges", "w
 
 
 def upgrade() -> None:
-    with op.batch_alter_table("revisions") as batch:
-        batch.add_column(sa.Column("pinned", sa.Boolean(), nullable=False, server_default=sa.false()))
+    # A plain ADD COLUMN: batch mode would copy and drop the table on SQLite, and dropping it cascades to every
+    # row of the map that references a revision.
+    op.add_column("revisions", sa.Column("pinned", sa.Boolean(), nullable=False, server_default=sa.false()))
     for table in VERSIONED_TABLES:
         op.create_index(f"ix_{table}_revision_id", table, ["revision_id"])
 
@@ -32,5 +33,4 @@ def upgrade() -> None:
 def downgrade() -> None:
     for table in VERSIONED_TABLES:
         op.drop_index(f"ix_{table}_revision_id", table_name=table)
-    with op.batch_alter_table("revisions") as batch:
-        batch.drop_column("pinned")
+    op.drop_column("revisions", "pinned")  # SQLite >= 3.35

@@ -267,6 +267,7 @@ class MapStore:
             return False
         with self.engine.connect().execution_options(isolation_level="AUTOCOMMIT") as connection:
             connection.execute(sa.text("VACUUM"))
+            connection.execute(sa.text("PRAGMA wal_checkpoint(TRUNCATE)"))  # in WAL mode the file shrinks only now
         return True
 
     # -- writing --------------------------------------------------------------------------
