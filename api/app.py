@@ -10,10 +10,12 @@ from importlib.metadata import version
 from fastapi import Depends, FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.middleware.gzip import GZipMiddleware
 from fastapi.responses import JSONResponse
 
 from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
+from api.conditional import ConditionalReads
 from api.deps import ApiContext, enforce_policy
 from api.errors import ApiConfigError
 from api.fastpath import LiveReads
@@ -89,6 +91,7 @@ def create_app(
     event_heartbeat_s: float = 15.0,
     live_staleness_s: float = STALENESS_S,
     key_recheck_s: float = 1.0,
+    gzip_min_bytes: int = 4096,
 ) -> FastAPI:
     """The Aisle REST API over ``store``.
 
@@ -119,6 +122,9 @@ def create_app(
     key_recheck_s : float
         How long a verified API key is trusted for reads before its row is read again (a revoked key stops
         reading within this time; writes always read it), seconds.
+    gzip_min_bytes : int
+        Answers at least this long go gzip-compressed to clients that accept it (event streams, PNGs and zips
+        never); every successful GET answer carries an ETag (:mod:`api.conditional`).
     """
     _check_origins(cors_origins)
     cache = RevisionCache()
@@ -149,13 +155,15 @@ def create_app(
                    places, history, events, keys):
         app.include_router(module.router)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too
+    app.add_middleware(ConditionalReads)  # inside gzip: the tag is of the answer, whatever the encoding
+    app.add_middleware(GZipMiddleware, minimum_size=gzip_min_bytes, compresslevel=5)  # not event streams
     if cors_origins:
         app.add_middleware(
             CORSMiddleware,
             allow_origins=list(cors_origins),
             allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
-            allow_headers=[API_KEY_HEADER, "Authorization", "Content-Type", "Last-Event-ID"],
-            expose_headers=["Retry-After", REVISION_HEADER],
+            allow_headers=[API_KEY_HEADER, "Authorization", "Content-Type", "Last-Event-ID", "If-None-Match"],
+            expose_headers=["Retry-After", "ETag", REVISION_HEADER],
             max_age=600,
         )
     return app

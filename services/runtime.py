@@ -120,7 +120,8 @@ def run(
                              rate_limit_per_s=settings.api_rate_limit_per_s,
                              rate_limit_burst=settings.api_rate_limit_burst, cors_origins=settings.api_cors_origins,
                              event_poll_s=settings.api_event_poll_s, event_heartbeat_s=settings.api_event_heartbeat_s,
-                             live_staleness_s=settings.api_live_staleness_s, key_recheck_s=settings.api_key_recheck_s)
+                             live_staleness_s=settings.api_live_staleness_s, key_recheck_s=settings.api_key_recheck_s,
+                             gzip_min_bytes=settings.api_gzip_min_bytes)
             server = uvicorn.Server(uvicorn.Config(app, host=settings.api_host, port=settings.api_port,
                                                    log_level=settings.log_level.lower(), access_log=False))
             threads.append(threading.Thread(target=server.run, name="api"))

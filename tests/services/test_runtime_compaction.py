@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import threading
-import time
 from pathlib import Path
 
 from services.runtime import compact_periodically
 from shared.settings import RetentionSettings, Settings
 from shared.store import MapStore, RevisionWrite
+from tests.helpers import wait_for
 
 
 def test_periodic_compaction_thins_old_revisions_until_stopped(tmp_path: Path) -> None:
@@ -22,9 +22,7 @@ def test_periodic_compaction_thins_old_revisions_until_stopped(tmp_path: Path) -
     worker = threading.Thread(target=compact_periodically, args=(store, settings, stop))
     worker.start()
     try:
-        deadline = time.monotonic() + 10
-        while len(store.revisions(site.id)) > 1 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_for(lambda: len(store.revisions(site.id)) == 1, what="the old revisions thinned")
         assert [r.id for r in store.revisions(site.id)] == ids[-1:]
     finally:
         stop.set()
