@@ -10,7 +10,6 @@ from importlib.metadata import version
 from fastapi import Depends, FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
-from fastapi.middleware.gzip import GZipMiddleware
 from fastapi.responses import JSONResponse
 
 from api.access import API_KEY_HEADER, AccessPolicy
@@ -91,7 +90,7 @@ def create_app(
     event_heartbeat_s: float = 15.0,
     live_staleness_s: float = STALENESS_S,
     key_recheck_s: float = 1.0,
-    gzip_min_bytes: int = 4096,
+    gzip_min_bytes: int = 65536,
 ) -> FastAPI:
     """The Aisle REST API over ``store``.
 
@@ -123,8 +122,8 @@ def create_app(
         How long a verified API key is trusted for reads before its row is read again (a revoked key stops
         reading within this time; writes always read it), seconds.
     gzip_min_bytes : int
-        Answers at least this long go gzip-compressed to clients that accept it (event streams, PNGs and zips
-        never); every successful GET answer carries an ETag (:mod:`api.conditional`).
+        Successful GET answers at least this long go gzip-compressed to clients that accept it (event streams,
+        PNGs and zips never); every successful GET answer carries an ETag (:mod:`api.conditional`).
     """
     _check_origins(cors_origins)
     cache = RevisionCache()
@@ -155,8 +154,7 @@ def create_app(
                    places, history, events, keys):
         app.include_router(module.router)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too
-    app.add_middleware(ConditionalReads)  # inside gzip: the tag is of the answer, whatever the encoding
-    app.add_middleware(GZipMiddleware, minimum_size=gzip_min_bytes, compresslevel=5)  # not event streams
+    app.add_middleware(ConditionalReads, gzip_min_bytes=gzip_min_bytes)
     if cors_origins:
         app.add_middleware(
             CORSMiddleware,

@@ -5,7 +5,8 @@ Run: ``PYTHONPATH=. .venv/bin/python bench/bench_idle.py [--seconds 30] [--warmu
 ``--warmup-s``, then reads each thread's CPU time from ``/proc/self/task`` over ``--seconds``. Prints
 ``<mode>.cpu.<thread> value %`` lines (percent of one core; Python threads by name, a stage's heartbeat under its
 stage, the zenoh runtime's threads by their name) and ``<mode>.cpu.total``. ``--mapping`` adds the demo robot
-(its own thread, ``demo.cpu.sim``) and reports the stages while they map. Linux only.
+(its own thread, ``mapping.cpu.job``) and reports the stages while they map; ``--streams N`` holds N event streams
+(SSE) open on the API meanwhile. Linux only.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import socket
 import tempfile
 import threading
 import time
@@ -27,8 +29,6 @@ _CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
 
 def _free_port() -> int:
-    import socket
-
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
@@ -56,7 +56,17 @@ def _groups(threads: dict[int, tuple[str, float]]) -> dict[int, str]:
     return {tid: python.get(tid) or re.sub(r"[-_:]?\d+$", "", name) or name for tid, (name, _) in threads.items()}
 
 
-def measure(*, seconds: float, warmup_s: float, mapping: bool) -> dict[str, float]:
+def _open_streams(port: int, count: int) -> list[socket.socket]:
+    """``count`` event streams of map ``site`` held open (their heartbeats left unread in the socket buffers)."""
+    streams = []
+    for _ in range(count):
+        stream = socket.create_connection(("127.0.0.1", port))
+        stream.sendall(b"GET /v1/maps/site/events HTTP/1.1\r\nHost: bench\r\nAccept: text/event-stream\r\n\r\n")
+        streams.append(stream)
+    return streams
+
+
+def measure(*, seconds: float, warmup_s: float, mapping: bool, streams: int = 0) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as folder:
         settings = Settings(data_dir=Path(folder), api_port=_free_port(), log_level="WARNING",
                             zenoh=ZenohSettings(listen=[f"tcp/127.0.0.1:{_free_port()}"]))
@@ -71,10 +81,14 @@ def measure(*, seconds: float, warmup_s: float, mapping: bool) -> dict[str, floa
         worker.start()
         try:
             time.sleep(warmup_s)
+            clients = _open_streams(settings.api_port, streams)
+            time.sleep(1.0)
             before, wall = _thread_cpu_s(), time.monotonic()
             time.sleep(seconds)
             after, wall = _thread_cpu_s(), time.monotonic() - wall
             groups = _groups(after)
+            for client in clients:
+                client.close()
         finally:
             stop.set()
             worker.join(timeout=60)
@@ -91,9 +105,11 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--warmup-s", type=float, default=25.0)
     parser.add_argument("--mapping", action="store_true", help="with the demo robot driving and mapping")
+    parser.add_argument("--streams", type=int, default=0, help="event streams (SSE) held open meanwhile")
     args = parser.parse_args()
-    mode = "mapping" if args.mapping else "idle"
-    for name, percent in measure(seconds=args.seconds, warmup_s=args.warmup_s, mapping=args.mapping).items():
+    mode = ("mapping" if args.mapping else "idle") + (f"_{args.streams}_streams" if args.streams else "")
+    for name, percent in measure(seconds=args.seconds, warmup_s=args.warmup_s, mapping=args.mapping,
+                                 streams=args.streams).items():
         print(f"{mode}.cpu.{name} {percent:.2f} %")
     print(f"load {os.getloadavg()[0]:.2f}")
 

@@ -271,7 +271,8 @@ class Settings(BaseSettings):
     api_key_recheck_s: float = Field(
         1.0, ge=0, le=3600, description="How long a verified API key is trusted for reads before it is read again.")
     api_gzip_min_bytes: int = Field(
-        4096, ge=0, description="Answers at least this long are gzip-compressed for clients that accept it.")
+        65536, ge=0, description="GET answers at least this long (bytes) are gzip-compressed for clients that accept "
+        "it; smaller ones cost more CPU to compress than they save on a site network.")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     retention: RetentionSettings = Field(default_factory=RetentionSettings)

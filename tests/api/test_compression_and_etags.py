@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.conditional import matches
+from api.conditional import accepts_gzip, matches
 from shared.store import GridLayer, MapInfo, MapStore, RevisionWrite
 from tests.api.conftest import ClientFactory
 from tests.api.warehouse_map import write_warehouse
@@ -24,7 +24,7 @@ def hall(store: MapStore) -> MapInfo:
 
 @pytest.fixture
 def reader(store: MapStore, make_client: ClientFactory, hall: MapInfo) -> TestClient:
-    return make_client(store, rate_limit_per_s=None, live_staleness_s=0)
+    return make_client(store, rate_limit_per_s=None, live_staleness_s=0, gzip_min_bytes=4096)
 
 
 def test_a_large_json_answer_is_gzipped_for_a_client_that_accepts_it(reader: TestClient) -> None:
@@ -94,3 +94,9 @@ def test_a_live_read_is_304_until_the_map_changes(reader: TestClient, store: Map
 def test_if_none_match_compares_weakly_and_takes_lists_and_star() -> None:
     assert matches('"abc"', 'W/"abc"') and matches('W/"x", W/"abc"', 'W/"abc"') and matches("*", 'W/"abc"')
     assert not matches('W/"abcd"', 'W/"abc"')
+
+
+def test_gzip_is_used_only_where_accept_encoding_allows_it() -> None:
+    assert accepts_gzip("gzip") and accepts_gzip("br, gzip;q=0.5") and accepts_gzip("*") and accepts_gzip("GZIP")
+    assert not accepts_gzip(None) and not accepts_gzip("identity") and not accepts_gzip("gzip;q=0")
+    assert not accepts_gzip("br, gzip; q=0.0")
