@@ -67,7 +67,7 @@ def run_mode(mode: str, *, minutes: float, keep_all_min: float, compact_period_s
             env |= {"AISLE_RETENTION__KEEP_ALL_HOURS": str(keep_all_min / 60),
                     "AISLE_RETENTION__COMPACT_PERIOD_S": str(compact_period_s)}
         else:
-            env |= {"AISLE_RETENTION__COMPACT_PERIOD_S": "1e9"}
+            env |= {"AISLE_RETENTION__COMPACT_PERIOD_S": "0"}
         process = subprocess.Popen([sys.executable, "-c", "import sys; from services.cli import main; "
                                     "sys.exit(main(sys.argv[1:]))", "run", "--demo"], env=env)
         samples: list[tuple[float, int, int]] = []

@@ -63,10 +63,10 @@ def open_store(settings: Settings) -> MapStore:
 
 
 def compact_periodically(store: MapStore, settings: Settings, stop: threading.Event) -> None:
-    """Thin every map's revisions by ``settings.retention`` every ``compact_period_s`` until ``stop`` (no VACUUM:
-    the database reuses the space freed)."""
+    """Thin every map's revisions by ``settings.retention`` every ``compact_period_s`` (0: never) until ``stop`` (no
+    VACUUM: the database reuses the space freed)."""
     period = settings.retention.compact_period_s
-    while period is not None and not stop.wait(period):
+    while period > 0 and not stop.wait(period):
         try:
             for map_info in store.maps():
                 log.info("%s", store.compact(map_info.id, settings.retention.policy()).describe())

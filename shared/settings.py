@@ -226,8 +226,8 @@ class RetentionSettings(BaseModel):
         default_factory=lambda: ["operator", "label_table", "wms"],
         description="Stages whose revisions are never thinned: what people and the WMS wrote.",
     )
-    compact_period_s: float | None = Field(
-        3600.0, gt=0, description="How often `aisle run` compacts the map; None: only `aisle db compact` does.")
+    compact_period_s: float = Field(
+        3600.0, ge=0, description="How often `aisle run` compacts the map, seconds; 0: only `aisle db compact` does.")
 
     def policy(self) -> RetentionPolicy:
         """These settings as the store's :class:`~shared.store.RetentionPolicy`."""
