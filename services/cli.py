@@ -298,7 +298,7 @@ def _db(args: argparse.Namespace, settings: Settings) -> int:
             for map_info in maps:
                 print(store.compact(map_info.id, settings.retention.policy(), dry_run=args.dry_run).describe())
             if not args.dry_run and store.vacuum():
-                print("gave the space free to the file system (VACUUM)")
+                print("returned the freed space to the file system (VACUUM)")
             return 0
         if store.pin_revision(maps[0].id, args.revision, pinned=args.db_command == "pin") is None:
             print(f"aisle db: map {maps[0].name!r} has no revision {args.revision}", file=sys.stderr)

@@ -15,14 +15,14 @@ from shared.store import MapStore
 from shared.worker import run_stage
 from tests.helpers import wait_for
 
-WINDOW_S = 2.0
+WINDOW_S = 1.5
 """How long an idle stage is watched."""
 LEAST_WAIT_S = 0.25
 """An idle stage must wait at least this long, on average, between two looks at its inputs (it polled every
 0.05 s: twenty wake-ups a second, per stage, with nothing to do)."""
 
 
-@pytest.mark.parametrize("stage", ["occupancy_mapping", "pillar_mapping", "semantic_fusion", "grid_decomposition"])
+@pytest.mark.parametrize("stage", ["occupancy_mapping", "pillar_mapping", "semantic_fusion"])
 def test_a_stage_without_traffic_waits_for_input_instead_of_polling(
         stage: str, zenoh_listen: ZenohSettings, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     idle_waits: list[float] = []  # when each wait of the stage's thread that found nothing ended
