@@ -16,6 +16,7 @@ from api.access import API_KEY_HEADER, AccessPolicy
 from api.announce import Announcer
 from api.answers import MetricJSONResponse
 from api.bodylimit import BodyLimit
+from api.conditional import ConditionalReads
 from api.deps import ApiContext, enforce_policy
 from api.docpages import add_docs
 from api.errors import ApiConfigError
@@ -96,6 +97,7 @@ def create_app(
     event_heartbeat_s: float = 15.0,
     live_staleness_s: float = STALENESS_S,
     key_recheck_s: float = 1.0,
+    gzip_min_bytes: int = 65536,
 ) -> FastAPI:
     """The Aisle REST API over ``store``.
 
@@ -127,6 +129,9 @@ def create_app(
     key_recheck_s : float
         How long a verified API key is trusted for reads before its row is read again (a revoked key stops
         reading within this time; writes always read it), seconds.
+    gzip_min_bytes : int
+        Successful GET answers at least this long go gzip-compressed to clients that accept it (event streams,
+        PNGs and zips never); every successful GET answer carries an ETag (:mod:`api.conditional`).
     """
     _check_origins(cors_origins)
     cache = RevisionCache()
@@ -159,13 +164,14 @@ def create_app(
         app.include_router(module.router)
     app.add_middleware(BodyLimit, max_bytes=settings.api_max_body_bytes)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too
+    app.add_middleware(ConditionalReads, gzip_min_bytes=gzip_min_bytes)
     if cors_origins:
         app.add_middleware(
             CORSMiddleware,
             allow_origins=list(cors_origins),
             allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
-            allow_headers=[API_KEY_HEADER, "Authorization", "Content-Type", "Last-Event-ID"],
-            expose_headers=["Retry-After", REVISION_HEADER],
+            allow_headers=[API_KEY_HEADER, "Authorization", "Content-Type", "Last-Event-ID", "If-None-Match"],
+            expose_headers=["Retry-After", "ETag", REVISION_HEADER],
             max_age=600,
         )
     return app

@@ -174,7 +174,8 @@ def check_revision(store: MapStore, map_info: MapInfo, revision: int) -> None:
         newest = "it has no revisions yet" if latest is None else f"its newest is {latest.id}"
         raise HTTPException(
             status.HTTP_404_NOT_FOUND,
-            f"revision {revision} is not a revision of map {map_info.name!r}; {newest}",
+            f"revision {revision} is not a revision of map {map_info.name!r}; {newest} (old revisions are thinned "
+            "by the retention settings unless pinned)",
         )
 
 

@@ -144,6 +144,7 @@ _REVISION_EXAMPLE = {
     "input_start_ns": 1741083240000000000, "input_end_ns": 1741083300000000000,
     "summary": {"layers_updated": [], "topology_changed": False,
                 "features": {"bin": {"added": 2, "removed": 0, "moved": 1, "total": 8910}}},
+    "pinned": False,
 }
 
 
@@ -154,6 +155,8 @@ class RevisionOut(BaseModel):
     input_start_ns: int | None = Field(description="Earliest sensor stamp the stage used, ns since epoch.")
     input_end_ns: int | None = Field(description="Latest sensor stamp the stage used, ns since epoch.")
     summary: dict[str, Any]
+    pinned: bool = Field(description="Kept whatever the retention settings say (`PUT …/revisions/{id}/pin`); "
+                         "revisions of stages `operator`, `label_table` and `wms` are kept anyway.")
 
     model_config = example_config(**_REVISION_EXAMPLE)
 

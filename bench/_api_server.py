@@ -21,4 +21,4 @@ def app() -> FastAPI:
                       rate_limit_per_s=settings.api_rate_limit_per_s, rate_limit_burst=settings.api_rate_limit_burst,
                       cors_origins=settings.api_cors_origins, event_poll_s=settings.api_event_poll_s,
                       event_heartbeat_s=settings.api_event_heartbeat_s, live_staleness_s=settings.api_live_staleness_s,
-                      key_recheck_s=settings.api_key_recheck_s)
+                      key_recheck_s=settings.api_key_recheck_s, gzip_min_bytes=settings.api_gzip_min_bytes)

@@ -47,8 +47,16 @@ def _parser() -> argparse.ArgumentParser:
     worker.add_argument("stage", choices=STAGES)
 
     commands.add_parser("serve", help="the API only")
-    db = commands.add_parser("db", help="database schema")
-    db.add_argument("action", choices=["upgrade"])
+    db = commands.add_parser("db", help="database schema and retention").add_subparsers(
+        dest="db_command", required=True, metavar="DB_COMMAND")
+    db.add_parser("upgrade", help="bring the schema up to date")
+    compact = db.add_parser("compact", help="thin old revisions by the retention settings, then VACUUM (SQLite)")
+    compact.add_argument("--dry-run", action="store_true", help="only print what would go")
+    compact.add_argument("--map", default=None, help="map name (default: every map)")
+    for name, what in (("pin", "keep a revision whatever the retention settings say"), ("unpin", "undo a pin")):
+        pin = db.add_parser(name, help=what)
+        pin.add_argument("revision", type=int)
+        pin.add_argument("--map", default=None, help="map name (default: the configured map_name)")
     commands.add_parser("settings", help="print the effective settings as JSON")
 
     replay = commands.add_parser("replay", help="publish a rosbag2 file onto the bus with its timing")
@@ -199,7 +207,7 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
                     settings = _demo_camera_mount(settings)
             _check_stages(settings, stages)
             with runtime.stop_on_signals(stop):
-                runtime.run(settings, stages=stages, api=True, stop=stop, extra=extra)
+                runtime.run(settings, stages=stages, api=True, stop=stop, extra=extra, compact=True)
         case "worker":
             _check_stages(settings, [args.stage])
             with runtime.stop_on_signals(stop):
@@ -208,8 +216,7 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             with runtime.stop_on_signals(stop):
                 runtime.run(settings, stages=[], api=True, stop=stop)
         case "db":
-            runtime.open_store(settings).close()
-            log.info("database schema is up to date (%s)", settings.database_url)
+            return _db(args, settings)
         case "settings":
             print(json.dumps(settings.model_dump(mode="json"), indent=2))
         case "replay":
@@ -267,6 +274,40 @@ def _keys(args: argparse.Namespace, settings: Settings) -> int:
     finally:
         store.close()
     return 0
+
+
+def _db(args: argparse.Namespace, settings: Settings) -> int:
+    """``aisle db``: exit code 2, with the reason on stderr, for an unknown map or revision."""
+    from services import runtime
+
+    store = runtime.open_store(settings)
+    try:
+        if args.db_command == "upgrade":
+            log.info("database schema is up to date (%s)", settings.database_url)
+            return 0
+        if args.db_command == "compact" and args.map is None:
+            maps = store.maps()
+        else:
+            name = args.map or settings.map_name
+            found = store.get_map(name)
+            if found is None:
+                print(f"aisle db: no map named {name!r}; known maps: {[m.name for m in store.maps()]}",
+                      file=sys.stderr)
+                return 2
+            maps = [found]
+        if args.db_command == "compact":
+            for map_info in maps:
+                print(store.compact(map_info.id, settings.retention.policy(), dry_run=args.dry_run).describe())
+            if not args.dry_run and store.vacuum():
+                print("returned the freed space to the file system (VACUUM)")
+            return 0
+        if store.pin_revision(maps[0].id, args.revision, pinned=args.db_command == "pin") is None:
+            print(f"aisle db: map {maps[0].name!r} has no revision {args.revision}", file=sys.stderr)
+            return 2
+        print(f"revision {args.revision} of map {maps[0].name!r} {args.db_command}ned")
+        return 0
+    finally:
+        store.close()
 
 
 def _export(args: argparse.Namespace, settings: Settings) -> int:

@@ -11,7 +11,7 @@ from types import FrameType
 
 from shared.bus import Bus
 from shared.settings import STAGES, Settings
-from shared.store import MapStore
+from shared.store import MapStore, StoreError
 from shared.worker import StageFactory, run_stage
 
 log = logging.getLogger(__name__)
@@ -83,6 +83,18 @@ def announce_first_admin_key(store: MapStore) -> str | None:
     return secret
 
 
+def compact_periodically(store: MapStore, settings: Settings, stop: threading.Event) -> None:
+    """Thin every map's revisions by ``settings.retention`` every ``compact_period_s`` (0: never) until ``stop`` (no
+    VACUUM: the database reuses the space freed)."""
+    period = settings.retention.compact_period_s
+    while period > 0 and not stop.wait(period):
+        try:
+            for map_info in store.maps():
+                log.info("%s", store.compact(map_info.id, settings.retention.policy()).describe())
+        except StoreError as err:
+            log.warning("compaction failed, will try again in %.0f s: %s", period, err)
+
+
 def run(
     settings: Settings,
     *,
@@ -90,10 +102,12 @@ def run(
     api: bool,
     stop: threading.Event,
     extra: Sequence[Callable[[Bus, threading.Event], None]] = (),
+    compact: bool = False,
 ) -> None:
     """Run ``stages`` (and the API if ``api``) until ``stop`` is set; then shut down cleanly.
 
-    ``extra`` callables run in their own threads with the bus (e.g. a bag replay).
+    ``extra`` callables run in their own threads with the bus (e.g. a bag replay); ``compact`` also thins old
+    revisions now and then (:func:`compact_periodically`).
     """
     factories = stage_factories()
     unknown = set(stages) - set(factories)
@@ -108,6 +122,9 @@ def run(
         ]
         threads += [threading.Thread(target=job, args=(bus, stop), name=getattr(job, "__name__", "job"))
                     for job in extra]
+        if compact:
+            threads.append(threading.Thread(target=compact_periodically, args=(store, settings, stop),
+                                            name="compaction"))
         server = None
         if api:
             import uvicorn
@@ -120,7 +137,8 @@ def run(
                              rate_limit_per_s=settings.api_rate_limit_per_s,
                              rate_limit_burst=settings.api_rate_limit_burst, cors_origins=settings.api_cors_origins,
                              event_poll_s=settings.api_event_poll_s, event_heartbeat_s=settings.api_event_heartbeat_s,
-                             live_staleness_s=settings.api_live_staleness_s, key_recheck_s=settings.api_key_recheck_s)
+                             live_staleness_s=settings.api_live_staleness_s, key_recheck_s=settings.api_key_recheck_s,
+                             gzip_min_bytes=settings.api_gzip_min_bytes)
             server = uvicorn.Server(uvicorn.Config(app, host=settings.api_host, port=settings.api_port,
                                                    log_level=settings.log_level.lower(), access_log=False))
             threads.append(threading.Thread(target=server.run, name="api"))

@@ -10,7 +10,7 @@ import itertools
 import os
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from pydantic import BaseModel, Field, field_validator, model_validator
 from pydantic_settings import (
@@ -21,6 +21,9 @@ from pydantic_settings import (
 )
 
 from shared.vocabulary import LayerName
+
+if TYPE_CHECKING:
+    from shared.store.retention import RetentionPolicy
 
 STAGES = ("occupancy_mapping", "grid_decomposition", "pillar_mapping", "object_labelling", "semantic_fusion")
 """Every stage worker Aisle has (``aisle worker STAGE``)."""
@@ -209,6 +212,30 @@ class DecompositionSettings(BaseModel):
         return self
 
 
+class RetentionSettings(BaseModel):
+    """How long the store keeps every revision, how it thins older ones (``aisle db compact``), and how often
+    ``aisle run`` compacts by itself."""
+
+    keep_all_hours: float = Field(6.0, ge=0, le=24 * 3660, description="Every revision younger than this is kept.")
+    hourly_hours: float = Field(
+        24.0 * 7, ge=0, le=24 * 3660,
+        description="Beyond keep_all_hours, the newest revision of each hour is kept for this many hours more; "
+        "older ones are thinned to the newest of each day.",
+    )
+    keep_stages: list[str] = Field(
+        default_factory=lambda: ["operator", "label_table", "wms"],
+        description="Stages whose revisions are never thinned: what people and the WMS wrote.",
+    )
+    compact_period_s: float = Field(
+        3600.0, ge=0, description="How often `aisle run` compacts the map, seconds; 0: only `aisle db compact` does.")
+
+    def policy(self) -> RetentionPolicy:
+        """These settings as the store's :class:`~shared.store.RetentionPolicy`."""
+        from shared.store.retention import RetentionPolicy
+
+        return RetentionPolicy(self.keep_all_hours * 3600.0, self.hourly_hours * 3600.0, frozenset(self.keep_stages))
+
+
 class Settings(BaseSettings):
     """All Aisle settings; build once with :func:`get_settings` and pass it in."""
 
@@ -247,8 +274,12 @@ class Settings(BaseSettings):
         32 * 2**20, ge=1024, le=2**31,
         description="Largest request body the API reads, bytes (32 MiB: a WMS list of about 800k bins); larger is a "
                     "413, refused before the body is read whole.")
+    api_gzip_min_bytes: int = Field(
+        65536, ge=0, description="GET answers at least this long (bytes) are gzip-compressed for clients that accept "
+        "it; smaller ones cost more CPU to compress than they save on a site network.")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
+    retention: RetentionSettings = Field(default_factory=RetentionSettings)
     occupancy: OccupancySettings = Field(default_factory=OccupancySettings)
     pillars: PillarSettings = Field(default_factory=PillarSettings)
     fusion: SemanticFusionSettings = Field(default_factory=SemanticFusionSettings)

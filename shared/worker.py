@@ -27,6 +27,9 @@ from shared.transforms import TransformBuffer, add_tf_message
 log = logging.getLogger(__name__)
 
 HEARTBEAT_PERIOD_S = 5.0
+IDLE_WAIT_S = 0.5
+"""Longest a stage waits for its next input before it looks at its stop flag and its periods again, seconds: a
+stage with no traffic wakes twice a second (it woke twenty times: 0.2 % of a core per stage, idle)."""
 MAP_EVENTS_TOPIC = "map_events"
 """Map events go to ROS topic ``/aisle/map_events`` (aisle_msgs/msg/MapEvent)."""
 LATEST_ONLY = frozenset({messages.IMAGE, messages.CAMERA_INFO})

@@ -1,11 +1,13 @@
-"""Helpers for tests: free ports, real-data paths, waiting on conditions."""
+"""Helpers for tests: free ports, real-data paths, waiting on conditions, non-finite numbers in JSON text."""
 
 from __future__ import annotations
 
+import json
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -34,3 +36,35 @@ def wait_for(condition: Callable[[], object], *, timeout_s: float = 10.0, what: 
         if time.monotonic() > deadline:
             pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
         time.sleep(0.02)
+
+
+NON_FINITE_JSON = ["NaN", "Infinity", "-Infinity", "1e400"]
+"""Numbers Python's JSON parser reads as non-finite floats (schemathesis never sends them)."""
+
+
+def number_paths(value: Any, path: tuple[Any, ...] = ()) -> Iterator[tuple[Any, ...]]:
+    """Paths to every number (not a bool) in a JSON document."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield from number_paths(item, (*path, key))
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            yield from number_paths(item, (*path, index))
+    elif isinstance(value, int | float) and not isinstance(value, bool):
+        yield path
+
+
+def with_literal(document: Any, path: tuple[Any, ...], literal: str) -> bytes:
+    """``document`` as JSON text with the number at ``path`` written as ``literal`` (``NaN``, ``1e400``...); the
+    empty path stands for the whole document."""
+    if not path:
+        return literal.encode()
+    marker = "\u0000hostile\u0000"
+    parent = document
+    for step in path[:-1]:
+        parent = parent[step]
+    saved, parent[path[-1]] = parent[path[-1]], marker
+    try:
+        return json.dumps(document).replace(json.dumps(marker), literal).encode()
+    finally:
+        parent[path[-1]] = saved

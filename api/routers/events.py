@@ -111,7 +111,8 @@ async def map_events(
     The event id is the revision id: an EventSource reconnecting with ``Last-Event-ID`` (or a client
     passing ``?after=``) gets every later revision, in order, none twice. Without either, the
     stream starts at the newest revision. Idle streams send a ``: heartbeat`` comment now and then.
-    The stream polls the store, so it sees revisions written by any process.
+    The stream polls the store, so it sees revisions written by any process (all streams of a process share one
+    look at the map's newest revision per poll).
     """
     streams, store = context.events, context.store
     streams.opened()
@@ -120,7 +121,8 @@ async def map_events(
         yield ServerSentEvent(comment=f"map {map_info.name}: revisions after {cursor}", retry=RECONNECT_MS)
         last_sent = time.monotonic()
         while not await request.is_disconnected():
-            revisions = await anyio.to_thread.run_sync(_page, store, map_info.id, cursor)
+            newest = await anyio.to_thread.run_sync(streams.newest, store, map_info.id)
+            revisions = await anyio.to_thread.run_sync(_page, store, map_info.id, cursor) if newest > cursor else []
             for revision in revisions:
                 yield ServerSentEvent(data=revision_event(map_info, revision), event=EVENT_NAME, id=str(revision.id))
                 cursor = revision.id

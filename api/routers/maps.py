@@ -23,6 +23,7 @@ def revision_out(revision: Revision) -> RevisionOut:
         input_start_ns=revision.input_start_ns,
         input_end_ns=revision.input_end_ns,
         summary=dict(revision.summary),
+        pinned=revision.pinned,
     )
 
 
@@ -79,3 +80,27 @@ def get_revision(
             status.HTTP_404_NOT_FOUND, f"revision {revision_id} is not a revision of map {map_info.name!r}"
         )
     return revision_out(found)
+
+
+RevisionPath = Annotated[int, Path(ge=1, le=MAX_ID, description="The revision's id.", examples=[1207])]
+
+
+def _pin(map_info: MapInfo, store: MapStore, revision_id: int, *, pinned: bool) -> RevisionOut:
+    found = store.pin_revision(map_info.id, revision_id, pinned=pinned)
+    if found is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"revision {revision_id} is not a revision of map "
+                            f"{map_info.name!r} (old revisions are thinned by the retention settings)")
+    return revision_out(found)
+
+
+@router.put("/{map_name}/revisions/{revision_id}/pin", summary="Pin a revision", responses=_NOT_FOUND)
+def pin_revision(map_info: MapDep, store: StoreDep, revision_id: RevisionPath) -> RevisionOut:
+    """Keep this revision whatever the retention settings say, so the map can be read as it was then for as
+    long as it stays pinned. Needs a write key."""
+    return _pin(map_info, store, revision_id, pinned=True)
+
+
+@router.delete("/{map_name}/revisions/{revision_id}/pin", summary="Unpin a revision", responses=_NOT_FOUND)
+def unpin_revision(map_info: MapDep, store: StoreDep, revision_id: RevisionPath) -> RevisionOut:
+    """Let the retention settings thin this revision again once it is old. Needs a write key."""
+    return _pin(map_info, store, revision_id, pinned=False)

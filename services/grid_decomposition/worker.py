@@ -29,12 +29,11 @@ from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from shared.settings import DecompositionSettings
 from shared.store import GridLayer, Revision, RevisionWrite, StoredLayer, StoreUnavailableError
 from shared.vocabulary import PlaceLabel
-from shared.worker import StageContext, checked
+from shared.worker import IDLE_WAIT_S, StageContext, checked
 
 log = logging.getLogger(__name__)
 
 _PAGE = 100
-_WAKE_S = 0.25  # longest wait for a map event before the stop flag is looked at again, seconds
 _RETRY_S = 2.0  # how soon the store is looked at again after it was unavailable, seconds
 
 
@@ -69,7 +68,7 @@ class DecompositionStage:
                     self.context.count("store_unavailable")
                     log.warning("store unavailable, will retry: %s", err)
                     look_at = time.monotonic() + _RETRY_S
-            if self._announced(timeout_s=min(_WAKE_S, max(0.0, look_at - time.monotonic()))):
+            if self._announced(timeout_s=min(IDLE_WAIT_S, max(0.0, look_at - time.monotonic()))):
                 look_at = 0.0
 
     def _announced(self, *, timeout_s: float) -> bool:

@@ -21,7 +21,7 @@ from shared.bus import WORKER_NAMESPACE
 from shared.grids import occupancy_grid_message
 from shared.settings import OccupancySettings
 from shared.store import RevisionWrite, StoreUnavailableError
-from shared.worker import StageContext, drain
+from shared.worker import IDLE_WAIT_S, StageContext, drain
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +72,7 @@ class OccupancyStage:
         try:
             while not stop.is_set():
                 self._take_poses()
-                self._take_scans(timeout_s=0.05)
+                self._take_scans(timeout_s=IDLE_WAIT_S)
                 self._take_poses()
                 integrated = self.mapper.drain()
                 self._integrated_since_store += integrated

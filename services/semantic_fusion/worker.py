@@ -38,7 +38,7 @@ from services.semantic_fusion.tracks import Fleet, RobotTrack, range_scan
 from shared import messages
 from shared.settings import SemanticFusionSettings
 from shared.store import RevisionWrite, StoreUnavailableError
-from shared.worker import StageContext, checked, drain, take_transforms
+from shared.worker import IDLE_WAIT_S, StageContext, checked, drain, take_transforms
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +81,7 @@ class FusionStage:
             try:
                 while not stop.is_set():
                     self._take_range_scans()
-                    self._take_scans(timeout_s=0.05)
+                    self._take_scans(timeout_s=IDLE_WAIT_S)
                     self._take_poses()
                     for namespace, robot in self.fleet.tracks.items():
                         if (due := robot.due_correction(time.monotonic(), self.settings.pose_correction_period_s)):

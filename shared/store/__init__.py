@@ -1,5 +1,6 @@
 """The layered map store."""
 
+from shared.store.compaction import CompactionReport
 from shared.store.records import (
     FEATURE_KINDS,
     Feature,
@@ -15,14 +16,17 @@ from shared.store.records import (
     WmsBin,
     WorkerInfo,
 )
+from shared.store.retention import RetentionPolicy
 from shared.store.store import MapStore, StoreUnavailableError
 
 __all__ = [
     "FEATURE_KINDS",
+    "CompactionReport",
     "Feature",
     "GridLayer",
     "MapInfo",
     "MapStore",
+    "RetentionPolicy",
     "Revision",
     "RevisionWrite",
     "StoreError",

@@ -161,6 +161,8 @@ class Revision:
     input_start_ns: int | None
     input_end_ns: int | None
     summary: Mapping[str, Any]
+    pinned: bool = False
+    """A client asked to keep it: compaction never thins it."""
 
 
 @dataclass(frozen=True, slots=True)

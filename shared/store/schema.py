@@ -32,7 +32,9 @@ revisions = sa.Table(
     sa.Column("input_start_ns", sa.BigInteger, nullable=True),
     sa.Column("input_end_ns", sa.BigInteger, nullable=True),
     sa.Column("summary", sa.JSON, nullable=False),
+    sa.Column("pinned", sa.Boolean, nullable=False, server_default=sa.false()),
 )
+"""``pinned``: a client asked to keep this revision; compaction never thins it."""
 
 layers = sa.Table(
     "layers",
@@ -50,6 +52,7 @@ layers = sa.Table(
     sa.Column("data", sa.LargeBinary, nullable=False),
     sa.Column("meta", sa.JSON, nullable=False),
     sa.Index("ix_layers_map_name_revision", "map_id", "name", "revision_id"),
+    sa.Index("ix_layers_revision_id", "revision_id"),
 )
 
 features = sa.Table(
@@ -73,6 +76,7 @@ features = sa.Table(
     sa.Index("ix_features_key", "map_id", "kind", "key"),
     sa.Index("ix_features_bbox", "map_id", "min_x", "min_y"),
     sa.Index("ix_features_revision", "map_id", "revision_id"),
+    sa.Index("ix_features_revision_id", "revision_id"),
 )
 
 topology_nodes = sa.Table(
@@ -89,6 +93,7 @@ topology_nodes = sa.Table(
     sa.Column("y_m", sa.Float, nullable=True),
     sa.Column("attributes", sa.JSON, nullable=False),
     sa.Index("ix_topology_nodes_live", "map_id", "retired_revision_id"),
+    sa.Index("ix_topology_nodes_revision_id", "revision_id"),
 )
 
 topology_edges = sa.Table(
@@ -103,6 +108,7 @@ topology_edges = sa.Table(
     sa.Column("target", sa.String(128), nullable=False),
     sa.Column("attributes", sa.JSON, nullable=False),
     sa.Index("ix_topology_edges_live", "map_id", "retired_revision_id"),
+    sa.Index("ix_topology_edges_revision_id", "revision_id"),
 )
 
 wms_bins = sa.Table(
@@ -121,6 +127,7 @@ wms_bins = sa.Table(
     sa.Column("properties", sa.JSON, nullable=False),
     sa.Index("ix_wms_bins_live", "map_id", "retired_revision_id"),
     sa.Index("ix_wms_bins_id", "map_id", "wms_id"),
+    sa.Index("ix_wms_bins_revision_id", "revision_id"),
 )
 """The WMS's own bin list as last imported (versioned by revision like features); positions optional."""
 

@@ -24,6 +24,7 @@ from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine
 
 from shared.store import schema
+from shared.store.compaction import CompactionReport, compact_gap, gaps
 from shared.store.records import (
     FEATURE_KINDS,
     Feature,
@@ -40,6 +41,7 @@ from shared.store.records import (
     WorkerInfo,
     bounds,
 )
+from shared.store.retention import RetentionPolicy, RevisionAge, revisions_to_keep
 
 MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
 
@@ -243,7 +245,53 @@ class MapStore:
     @staticmethod
     def _revision(row: Any) -> Revision:
         return Revision(row.id, row.map_id, row.stage, _aware(row.created_at), row.input_start_ns,
-                        row.input_end_ns, row.summary)
+                        row.input_end_ns, row.summary, bool(row.pinned))
+
+    def pin_revision(self, map_id: int, revision_id: int, *, pinned: bool = True) -> Revision | None:
+        """Pin revision ``revision_id`` of the map (or unpin it): compaction never thins a pinned revision.
+
+        None if the map has no such revision (it may have been thinned already).
+        """
+        table = schema.revisions
+        with self._begin() as connection:
+            self._lock_map(connection, map_id)
+            row = connection.execute(table.update().where(table.c.map_id == map_id, table.c.id == revision_id)
+                                     .values(pinned=pinned).returning(*table.c)).first()
+        return None if row is None else self._revision(row)
+
+    # -- retention ------------------------------------------------------------------------
+    def compact(self, map_id: int, policy: RetentionPolicy, *, now: dt.datetime | None = None,
+                dry_run: bool = False) -> CompactionReport:
+        """Thin the map's revisions by ``policy`` (as of ``now``, default: now); every kept revision still reads
+        exactly as before. ``dry_run``: only count what would go.
+
+        Thinned revisions are gone for good: reading the map at one is a 404 like any unknown revision.
+        """
+        table = schema.revisions
+        map_info = self.get_map(map_id)
+        if map_info is None:
+            raise StoreError(f"no map with id {map_id}")
+        with self._read() as connection:
+            ages = [RevisionAge(r.id, r.stage, _aware(r.created_at), bool(r.pinned)) for r in connection.execute(
+                sa.select(table.c.id, table.c.stage, table.c.created_at, table.c.pinned)
+                .where(table.c.map_id == map_id).order_by(table.c.id))]
+        keep = revisions_to_keep(ages, policy, now=now or _now())
+        report = CompactionReport(map_info.name, dry_run, len(ages), len(keep))
+        for a, b in gaps([r.id for r in ages], keep):
+            with self._read() if dry_run else self._begin() as connection:
+                compact_gap(connection, map_id, a, b, report)
+        report.revisions_kept = report.revisions_before - sum(report.dropped_by_stage.values())
+        return report
+
+    def vacuum(self) -> bool:
+        """Give the space of deleted rows back to the file system (SQLite ``VACUUM``); False on PostgreSQL, whose
+        autovacuum reuses it. Needs the database to itself for a while."""
+        if not self.url.startswith("sqlite"):
+            return False
+        with self.engine.connect().execution_options(isolation_level="AUTOCOMMIT") as connection:
+            connection.execute(sa.text("VACUUM"))
+            connection.execute(sa.text("PRAGMA wal_checkpoint(TRUNCATE)"))  # in WAL mode the file shrinks only now
+        return True
 
     # -- writing --------------------------------------------------------------------------
     @staticmethod

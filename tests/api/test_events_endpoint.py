@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -159,3 +159,41 @@ def test_events_need_a_key_when_reads_do(store: MapStore, make_client: ClientFac
     response = make_client(store, require_keys_for_reads=True, **FAST).get(URL)
 
     assert response.status_code == 401
+
+
+def test_idle_streams_share_one_look_at_the_store_per_poll(store: MapStore, make_client: ClientFactory,
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    poll_s = 0.05
+    client = make_client(store, event_poll_s=poll_s, event_heartbeat_s=0.1)
+    _write(store, "site", 2)
+    calls: list[str] = []
+    for name in ("latest_revision", "revisions"):
+        monkeypatch.setattr(MapStore, name, _counted(getattr(MapStore, name), name, calls))
+    with (client.stream("GET", URL) as first, client.stream("GET", URL) as second,
+          client.stream("GET", URL) as third):
+        streams = [response.iter_lines() for response in (first, second, third)]
+        for lines in streams:
+            next(lines)  # the opening comment: every stream is polling now
+        calls.clear()
+        start = time.monotonic()
+        for lines in streams:
+            _read_heartbeats(lines, 3)
+        window_s = time.monotonic() - start
+        looked = list(calls)
+
+    assert "revisions" not in looked  # nothing new: no stream reads a page
+    assert looked.count("latest_revision") <= window_s / poll_s + 2  # one look a poll, not one per stream
+
+
+def _counted(method: Callable[..., Any], name: str, calls: list[str]) -> Callable[..., Any]:
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        calls.append(name)
+        return method(*args, **kwargs)
+
+    return counted
+
+
+def _read_heartbeats(lines: Iterator[str], count: int) -> None:
+    seen = 0
+    while seen < count:
+        seen += next(lines) == ": heartbeat"

@@ -108,7 +108,8 @@ def test_unknown_revision_is_404(client: TestClient, site: dict[str, int], which
 
     assert response.status_code == 404
     assert response.json()["detail"] == (
-        f"revision {revision} is not a revision of map 'site'; its newest is {site['semantics_2']}")
+        f"revision {revision} is not a revision of map 'site'; its newest is {site['semantics_2']} (old revisions "
+        "are thinned by the retention settings unless pinned)")
 
 
 def test_revision_must_be_a_positive_integer(client: TestClient, site: dict[str, int]) -> None:

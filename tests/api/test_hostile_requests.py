@@ -29,6 +29,7 @@ from fastapi.testclient import TestClient
 from shared.store import MapStore
 from shared.store.keys import Role, create_key, list_keys
 from tests.api.conftest import ClientFactory
+from tests.helpers import NON_FINITE_JSON, number_paths, with_literal
 
 READ_METHODS = {"get", "head", "options"}
 METHODS = READ_METHODS | {"put", "post", "delete", "patch"}
@@ -258,35 +259,6 @@ def test_hostile_parameters_get_a_clear_4xx_and_change_nothing(
     assert _snapshot(store) == before
 
 
-NON_FINITE_JSON = ["NaN", "Infinity", "-Infinity", "1e400"]
-"""Numbers Python's JSON parser reads as non-finite floats (schemathesis never sends them)."""
-
-
-def _number_paths(value: Any, path: tuple[Any, ...] = ()) -> Iterator[tuple[Any, ...]]:
-    """Paths to every number (not a bool) in a JSON document."""
-    if isinstance(value, dict):
-        for key, item in value.items():
-            yield from _number_paths(item, (*path, key))
-    elif isinstance(value, list):
-        for index, item in enumerate(value):
-            yield from _number_paths(item, (*path, index))
-    elif isinstance(value, int | float) and not isinstance(value, bool):
-        yield path
-
-
-def _with_literal(document: Any, path: tuple[Any, ...], literal: str) -> bytes:
-    """``document`` as JSON text with the number at ``path`` written as ``literal`` (``NaN``, ``1e400``...)."""
-    marker = "\u0000hostile\u0000"
-    parent = document
-    for step in path[:-1]:
-        parent = parent[step]
-    saved, parent[path[-1]] = parent[path[-1]], marker
-    try:
-        return json.dumps(document).replace(json.dumps(marker), literal).encode()
-    finally:
-        parent[path[-1]] = saved
-
-
 def test_non_finite_numbers_in_a_json_body_get_a_clear_422_and_change_nothing(
     store: MapStore, hostile_client: TestClient, secrets: dict[Role, str]
 ) -> None:
@@ -298,11 +270,11 @@ def test_non_finite_numbers_in_a_json_body_get_a_clear_422_and_change_nothing(
 
     for operation in _operations(spec):
         body = _body(spec, operation)
-        for path in _number_paths(body) if body is not None else ():
+        for path in number_paths(body) if body is not None else ():
             for literal in NON_FINITE_JSON:
                 probed += 1
                 response = hostile_client.request(operation.method.upper(), _url(operation), headers=admin,
-                                                  content=_with_literal(body, path, literal))
+                                                  content=with_literal(body, path, literal))
                 what = f"{operation.label} with {'.'.join(map(str, path))} = {literal}"
                 detail = response.json().get("detail") if response.status_code == 422 else None
                 if response.status_code != 422 or not detail:

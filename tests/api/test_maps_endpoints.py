@@ -5,7 +5,9 @@ from __future__ import annotations
 import pytest
 from fastapi.testclient import TestClient
 
-from shared.store import MapStore
+from shared.store import MapStore, RetentionPolicy
+from shared.store.keys import Role, create_key
+from tests.api.conftest import ClientFactory
 
 
 def test_list_maps_gives_latest_revision_and_layer_names(client: TestClient, site: dict[str, int]) -> None:
@@ -86,3 +88,32 @@ def test_revision_of_another_map_is_404(client: TestClient, site: dict[str, int]
 
 def test_revision_id_must_be_positive(client: TestClient, site: dict[str, int]) -> None:
     assert client.get("/v1/maps/site/revisions/0").status_code == 422
+
+
+def test_a_pinned_revision_survives_compaction_and_unpinning_lets_it_go(
+        store: MapStore, make_client: ClientFactory, site: dict[str, int]) -> None:
+    writer = make_client(store)
+    writer.headers["X-API-Key"] = create_key(store, role=Role.WRITE, name="wms")[1]
+    pinned = writer.put(f"/v1/maps/site/revisions/{site['occupancy_1']}/pin")
+    assert pinned.status_code == 200 and pinned.json()["pinned"] is True
+    assert writer.get(f"/v1/maps/site/revisions/{site['occupancy_1']}").json()["pinned"] is True
+    thin_all = RetentionPolicy(keep_all_s=0, hourly_s=0)
+    site_id = store.ensure_map("site").id
+
+    store.compact(site_id, thin_all)
+    assert writer.get(f"/v1/maps/site/revisions/{site['occupancy_1']}").status_code == 200
+
+    assert writer.delete(f"/v1/maps/site/revisions/{site['occupancy_1']}/pin").json()["pinned"] is False
+    store.compact(site_id, thin_all)
+    gone = writer.get("/v1/maps/site/layers/occupancy", params={"revision": site["occupancy_1"]})
+    assert gone.status_code == 404 and "thinned by the retention settings" in gone.json()["detail"]
+
+
+def test_pinning_needs_a_write_key_and_a_revision_of_the_map(
+        store: MapStore, make_client: ClientFactory, site: dict[str, int]) -> None:
+    reader = make_client(store)
+    reader.headers["X-API-Key"] = create_key(store, role=Role.READ, name="viewer")[1]
+    assert reader.put(f"/v1/maps/site/revisions/{site['occupancy_1']}/pin").status_code == 403
+    reader.headers["X-API-Key"] = create_key(store, role=Role.WRITE, name="wms")[1]
+    missing = reader.put(f"/v1/maps/site/revisions/{site['other']}/pin")
+    assert missing.status_code == 404 and "not a revision of map 'site'" in missing.json()["detail"]

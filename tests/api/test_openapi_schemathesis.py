@@ -5,7 +5,9 @@ covered with nothing to list here. Every request carries an admin key, so write 
 exercised too, over the real store (SQLite, and PostgreSQL when configured) holding the sample map
 of ``site`` plus features named like the schema's examples. Each operation gets its documented
 examples, then schema-valid (positive) and schema-breaking (negative) requests, a bounded number
-of each, derandomized so every run sends the same requests.
+of each, derandomized so every run sends the same requests. Schemathesis never writes a non-finite number into
+JSON, so operations with a JSON body also get schema-valid bodies with one number (or, without numbers, the whole
+body) written as ``NaN``, ``Infinity``, ``-Infinity`` or ``1e400`` (:func:`_non_finite`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from schemathesis.specs.openapi.checks import (
 from shared.store import Feature, MapStore, RevisionWrite
 from shared.store.keys import Role, create_key
 from tests.api.conftest import ClientFactory
+from tests.helpers import NON_FINITE_JSON, number_paths, with_literal
 
 MAX_EXAMPLES = 10
 """Generated requests per operation and generation mode: bounded so the run stays around a minute."""
@@ -73,6 +76,23 @@ def _is_stream(operation: Operation) -> bool:
                for response in operation.definition.raw.get("responses", {}).values())
 
 
+def _non_finite(operation: Operation) -> st.SearchStrategy[schemathesis.Case[Any]]:
+    """Schema-valid requests of ``operation`` whose JSON body has one number, or is itself, non-finite."""
+
+    @st.composite
+    def cases(draw: st.DrawFn) -> schemathesis.Case[Any]:
+        case = draw(operation.as_strategy(schemathesis.GenerationMode.POSITIVE))
+        path = draw(st.sampled_from([*number_paths(case.body), ()]))
+        case.body = with_literal(case.body, path, draw(st.sampled_from(NON_FINITE_JSON)))
+        return case
+
+    return cases()
+
+
+def _has_json_body(operation: Operation) -> bool:
+    return any(body.media_type == "application/json" for body in operation.body)
+
+
 def _run(strategy: st.SearchStrategy[schemathesis.Case[Any]], secret: str, *, max_examples: int,
          stream: bool) -> None:
     timeout_s = STREAM_READ_S if stream else READ_S
@@ -92,6 +112,8 @@ def _failure(operation: Operation, secret: str) -> str | None:
     strategies = [(example, 1) for example in operation.get_strategies_from_examples()]
     strategies += [(operation.as_strategy(mode), MAX_EXAMPLES)
                    for mode in (schemathesis.GenerationMode.POSITIVE, schemathesis.GenerationMode.NEGATIVE)]
+    if _has_json_body(operation):
+        strategies.append((_non_finite(operation), MAX_EXAMPLES))
     for strategy, max_examples in strategies:
         try:
             _run(strategy, secret, max_examples=max_examples, stream=stream)

@@ -38,6 +38,31 @@ def test_db_upgrade_creates_the_schema(tmp_path: Path) -> None:
     assert (tmp_path / "var" / "aisle.db").is_file()
 
 
+def test_db_compact_prints_what_would_go_then_thins_and_pins_hold(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    from shared.store import MapStore, RevisionWrite
+
+    monkeypatch.setenv("AISLE_RETENTION__KEEP_ALL_HOURS", "0")
+    monkeypatch.setenv("AISLE_RETENTION__HOURLY_HOURS", "0")
+    assert main(["db", "upgrade"]) == 0
+    store = MapStore(f"sqlite:///{tmp_path / 'var' / 'aisle.db'}")
+    site = store.ensure_map("site")
+    ids = [store.write_revision(site.id, RevisionWrite("occupancy_mapping")).id for _ in range(5)]
+    capsys.readouterr()
+
+    assert main(["db", "pin", str(ids[1])]) == 0
+    assert main(["db", "compact", "--dry-run"]) == 0
+    assert "would drop 3 of 5 revisions (by stage: occupancy_mapping 3)" in capsys.readouterr().out
+    assert [r.id for r in store.revisions(site.id)] == ids
+    assert main(["db", "compact"]) == 0
+    assert "dropped 3 of 5 revisions" in capsys.readouterr().out
+    assert [r.id for r in store.revisions(site.id)] == [ids[1], ids[4]]
+    assert main(["db", "pin", "999"]) == 2
+    assert main(["db", "compact", "--map", "nowhere"]) == 2
+    assert "no map named 'nowhere'" in capsys.readouterr().err
+    store.close()
+
+
 def test_sim_world_writes_ground_truth(tmp_path: Path) -> None:
     assert main(["sim", "world", "demo", "--out", str(tmp_path / "demo")]) == 0
     geojson = json.loads((tmp_path / "demo" / "world.geojson").read_text())
