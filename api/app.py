@@ -34,6 +34,7 @@ from api.routers import (
     routes,
     semantics,
     topology,
+    viewer,
     wms,
 )
 from api.streams import EventStreams
@@ -146,7 +147,7 @@ def create_app(
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
     for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, blocks, routes,
-                   places, history, events, keys):
+                   places, history, events, keys, viewer):
         app.include_router(module.router)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too
     if cors_origins:

@@ -16,6 +16,7 @@ from api.routers import (
     routes,
     semantics,
     topology,
+    viewer,
     wms,
 )
 
@@ -35,5 +36,6 @@ __all__ = [
     "routes",
     "semantics",
     "topology",
+    "viewer",
     "wms",
 ]
