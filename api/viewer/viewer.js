@@ -43,6 +43,7 @@ const state = {
 
 const leaflet = L.map("map", { crs: L.CRS.Simple, preferCanvas: true, minZoom: -4, maxZoom: 8, zoomSnap: 0.25,
   attributionControl: false, zoomControl: true });
+leaflet.createPane("grids").style.zIndex = 350;  // grid layers under the features (overlay pane: 400)
 leaflet.setView([0, 0], 2);
 L.control.scale({ metric: true, imperial: false, maxWidth: 150, position: "bottomleft" }).addTo(leaflet);
 const groups = {};
@@ -152,7 +153,7 @@ async function drawOverlay(id, layerName, entropyName, layerInfo) {
   if (!response.ok) throw new Error(`layer ${layerName}: ${response.status} ${await errorText(response)}`);
   const url = URL.createObjectURL(await response.blob());
   const [minX, minY, maxX, maxY] = info.extent;
-  const image = L.imageOverlay(url, [[minY, minX], [maxY, maxX]], { className: `aisle-layer-${id}` });
+  const image = L.imageOverlay(url, [[minY, minX], [maxY, maxX]], { className: `aisle-layer-${id}`, pane: "grids" });
   const previous = state.overlays[id];
   state.overlays[id] = { image, url, revision: info.revision_id };
   image.once("load", () => {  // the old picture stays until the new one is drawn, so nothing flickers
@@ -300,7 +301,7 @@ async function start() {
     const collection = await loadAll();
     if (!state.fitted && collection.bbox) {
       const [minX, minY, maxX, maxY] = collection.bbox;
-      leaflet.fitBounds([[minY, minX], [maxY, maxX]], { padding: [10, 10] });
+      leaflet.fitBounds([[minY, minX], [maxY, maxX]], { padding: [10, 10], animate: false });
       state.fitted = true;
     }
     showRevision(detail.latest_revision);
@@ -635,7 +636,10 @@ function viewCanvas() {
   const ctx = out.getContext("2d");
   ctx.fillStyle = "#e8e8e8"; ctx.fillRect(0, 0, out.width, out.height);
   ctx.imageSmoothingEnabled = false;
-  for (const element of leaflet.getContainer().querySelectorAll(".leaflet-pane img, .leaflet-pane canvas")) {
+  const depth = (element) => Number(getComputedStyle(element.closest(".leaflet-pane")).zIndex) || 0;
+  const drawn = [...leaflet.getContainer().querySelectorAll(".leaflet-pane img, .leaflet-pane canvas")];
+  drawn.sort((a, b) => depth(a) - depth(b));  // as the page stacks them: by pane, then in document order
+  for (const element of drawn) {
     const r = element.getBoundingClientRect();
     if (r.width && r.height) ctx.drawImage(element, r.left - box.left, r.top - box.top, r.width, r.height);
   }
