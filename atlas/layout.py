@@ -73,13 +73,19 @@ class LayoutCollection(BaseModel):
     )
     kinds: dict[str, int] = Field(description="How many of the features are of each kind.")
     features: list[GeoJSONFeature]
+    since_revision_id: int | None = Field(
+        None, description="With `?since=`: the revision the changes are counted from; `features` then holds only "
+                          "the features added or changed after it, and `removed` the keys of those gone since.")
+    removed: dict[str, list[str]] | None = Field(
+        None, description="With `?since=`: per kind, the keys of features live at `since_revision_id` and not now.")
 
     model_config = ConfigDict(json_schema_extra={"examples": [LAYOUT_EXAMPLE]})
 
     def to_json(self) -> bytes:
         """The collection as GeoJSON text; ``bbox`` is left out when there are no features (RFC 7946 wants
         an array or nothing)."""
-        return self.model_dump_json(exclude={"bbox"} if self.bbox is None else None).encode()
+        leave_out = {name for name in ("bbox", "since_revision_id", "removed") if getattr(self, name) is None}
+        return self.model_dump_json(exclude=leave_out or None).encode()
 
 
 def read_revision(store: MapStore, map_info: MapInfo, revision: int | None) -> int | None:
@@ -120,7 +126,7 @@ def layout_features(store: MapStore, map_info: MapInfo, *, revision: int | None,
 
 def layout_collection(store: MapStore, map_info: MapInfo, *, revision: int | None,
                       kinds: Sequence[str] | None = None, bbox: BBox | None = None,
-                      max_features: int | None = None) -> LayoutCollection:
+                      max_features: int | None = None, since: int | None = None) -> LayoutCollection:
     """The map's layout as of ``revision`` (default: the newest), optionally of ``kinds`` and touching ``bbox``.
 
     Parameters
@@ -135,15 +141,33 @@ def layout_collection(store: MapStore, map_info: MapInfo, *, revision: int | Non
         Only features whose bounds touch this box, metres.
     max_features : int, optional
         Refuse (:class:`LayoutTooLargeError`) when more features match.
+    since : int, optional
+        Only what changed after this revision (a client's copy): the features written after it, and the keys of
+        those removed since (``removed``). ``max_features`` then bounds the changed features.
     """
     at = read_revision(store, map_info, revision)
-    found = layout_features(store, map_info, revision=at, kinds=kinds, bbox=bbox, max_features=max_features)
+    removed: dict[str, list[str]] | None = None
+    if since is None:
+        found = layout_features(store, map_info, revision=at, kinds=kinds, bbox=bbox, max_features=max_features)
+    else:
+        live = store.features(map_info.id, kinds=kinds, bbox=bbox, revision=at)
+        now = {(item.feature.kind, item.feature.key) for item in live}
+        removed = {}
+        for item in store.features(map_info.id, kinds=kinds, bbox=bbox, revision=since):
+            if (item.feature.kind, item.feature.key) not in now:
+                removed.setdefault(item.feature.kind, []).append(item.feature.key)
+        found = [item for item in live if item.revision_id > since]
+        if max_features is not None and len(found) > max_features:
+            raise LayoutTooLargeError(f"more than {max_features} features changed since revision {since}; "
+                                      "read the layout without ?since=")
     return LayoutCollection(
         bbox=features_bbox(found),
         frame=LayoutFrame(map=map_info.name, frame_id=map_info.frame_id),
         revision_id=at,
         kinds=dict(sorted(Counter(item.feature.kind for item in found).items())),
         features=[geojson_feature(item) for item in found],
+        since_revision_id=since,
+        removed=removed,
     )
 
 

@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query, Response, status
 from fastapi.responses import JSONResponse
 
-from api.deps import MapDep, RevisionQuery, SettingsDep, StoreDep
+from api.deps import MAX_ID, MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, as_json, not_found
 from api.queries import BBoxQuery, KindsQuery
 from api.translate import http_error
@@ -49,7 +49,9 @@ class GeoJSONResponse(JSONResponse):
     responses=as_json(_ERRORS),
 )
 def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds: KindsQuery,
-               bbox: BBoxQuery) -> Response:
+               bbox: BBoxQuery, since: Annotated[int | None, Query(ge=0, le=MAX_ID, examples=[1200], description=(
+                   "Only what changed after this revision: the features added or changed since, and in `removed` "
+                   "the keys of those gone (a viewer keeping its copy up to date)."))] = None) -> Response:
     """Every feature of the map (walls, corridors, junctions, rooms, open areas, rack rows, pillars, bins,
     docks, gates, chargers, objects, ...) as one GeoJSON FeatureCollection, in map-frame metres.
 
@@ -57,11 +59,12 @@ def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds
     it). The collection also gives the features' `bbox`, the `frame` the coordinates are in, the
     `revision_id` read at (the newest when `?revision=` is not given) and a count per kind. It is
     not paged: more than 20 000 matching features is a 413; narrow the bbox or the kinds, or page
-    through `/features`.
+    through `/features`. With `?since=<revision>` it holds only what changed after that revision: the
+    features added or changed, and `removed`, the keys per kind of the features gone.
     """
     try:
         collection = layout_collection(store, map_info, revision=revision, kinds=kinds, bbox=bbox,
-                                       max_features=MAX_LAYOUT_FEATURES)
+                                       max_features=MAX_LAYOUT_FEATURES, since=since)
     except LayoutTooLargeError as err:
         raise http_error(err) from err
     return Response(collection.to_json(), media_type=GEOJSON_MEDIA_TYPE)

@@ -172,15 +172,23 @@ async function drawOverlays(names) {
   return layerInfo;
 }
 
-async function loadFeatures(kinds) {
-  let path = mapPath("/layout");
-  if (kinds) path += "?" + [...kinds].map((k) => "kind=" + encodeURIComponent(k)).join("&");
-  const response = await api(atRevision(path));
+// All features (kinds null), or only what changed in `kinds` since revision `since` (merged into our copy).
+async function loadFeatures(kinds, since = null) {
+  const query = [...(kinds || [])].map((k) => "kind=" + encodeURIComponent(k));
+  if (kinds && since !== null) query.push("since=" + since);
+  const response = await api(atRevision(mapPath("/layout" + (query.length ? "?" + query.join("&") : ""))));
   if (response.status === 422 && kinds) return loadFeatures(null);  // a kind this server does not know yet
   if (!response.ok) throw new Error(`layout: ${response.status} ${await errorText(response)}`);
   const collection = await response.json();
-  if (kinds) for (const kind of kinds) state.features[kind] = [];
-  else state.features = {};
+  if (!kinds) state.features = {};
+  else if (collection.removed === undefined) for (const kind of kinds) state.features[kind] = [];
+  else {
+    for (const kind of kinds) {
+      const gone = new Set(collection.removed[kind] || []);
+      for (const f of collection.features) if (f.properties.kind === kind) gone.add(f.properties.key);
+      state.features[kind] = (state.features[kind] || []).filter((f) => !gone.has(f.properties.key));
+    }
+  }
   for (const feature of collection.features) (state.features[feature.properties.kind] ||= []).push(feature);
   drawFeatures(kinds ? new Set([...kinds]) : null);
   return collection;
@@ -376,25 +384,32 @@ function revisionArrived(event) {
   for (const kind of Object.keys(event.features)) state.pendingKinds.add(kind);
   state.pendingTopology ||= event.topology_changed;
   state.pendingEvent = event;
-  if (state.history === null && !state.refreshTimer) state.refreshTimer = setTimeout(refresh, 150);
+  if (state.history === null && !state.refreshTimer && !state.refreshing) state.refreshTimer = setTimeout(refresh, 100);
 }
 
 // Redraw only what the new revisions changed: their layers, their feature kinds, the graph if it changed.
 async function refresh() {
   state.refreshTimer = null;
+  state.refreshing = true;  // one refresh at a time, so an older answer never lands after a newer one
   const layers = state.pendingLayers, kinds = state.pendingKinds, topology = state.pendingTopology;
   const event = state.pendingEvent;
   state.pendingLayers = new Set(); state.pendingKinds = new Set(); state.pendingTopology = false;
   try {
     const work = [];
     if (OVERLAYS.some(([, name, entropy]) => layers.has(name) || layers.has(entropy))) work.push(drawOverlays(layers));
-    if (kinds.size) work.push(loadFeatures(kinds));
-    if (topology || kinds.size) work.push(drawTopology());
+    if (kinds.size) work.push(loadFeatures(kinds, state.shown));
+    if (topology) work.push(drawTopology());
     await Promise.all(work);
     state.shown = event.revision_id;
     showRevision({ id: event.revision_id, created_at: event.created_at });
   } catch (error) {
     if (!(error instanceof AuthNeeded)) report(error);
+    kinds.forEach((kind) => state.pendingKinds.add(kind));  // asked again with the next refresh
+    layers.forEach((name) => state.pendingLayers.add(name));
+    state.pendingTopology ||= topology;
+  } finally {
+    state.refreshing = false;
+    if (state.pendingEvent !== event && state.history === null) state.refreshTimer = setTimeout(refresh, 0);
   }
 }
 

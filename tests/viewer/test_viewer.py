@@ -202,6 +202,9 @@ def test_a_new_revision_appears_without_a_reload(page: Any, site: Site) -> None:
     wait_until(page, "return document.querySelector('#layers li[data-layer=places] .count').textContent === '(4)'",
                timeout_s=2, what="the new dock drawn")
     assert page.execute_script("return window.notReloaded") is True
+    asked = page.execute_script("return performance.getEntriesByType('resource').map(e => e.name)"
+                                ".filter(n => n.includes('/layout?'))")
+    assert asked and all("since=" in url and "kind=dock" in url and "kind=bin" not in url for url in asked)
 
 
 def test_the_history_slider_shows_the_map_as_it_was_and_what_changed_since(page: Any, site: Site) -> None:
