@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
 
-from api.deps import MapDep, RevisionQuery, StoreDep
+from api.deps import CacheDep, MapDep, RevisionQuery, StoreDep
 from api.models import (
     COMMON_ERRORS,
     UNPROCESSABLE,
@@ -126,6 +126,7 @@ def layer_png(stored: LayerDep) -> Response:
 def layer_overlay_png(
     map_info: MapDep,
     store: StoreDep,
+    cache: CacheDep,
     revision: RevisionQuery,
     stored: LayerDep,
     entropy: Annotated[str | None, Query(max_length=64, examples=["semantic_entropy"], description=(
@@ -137,13 +138,19 @@ def layer_overlay_png(
     cells transparent, other layers as greys. With ``?entropy=``, a label's opacity is its certainty
     (1 - entropy), as the viewer shows the semantic labels. The image covers the layer's `extent`
     (`GET …/layers/{layer}`)."""
-    certainty = None
-    if entropy is not None:
-        found = get_layer(map_info, store, revision, entropy).layer.data
-        certainty = 1.0 - found.astype(np.float64)
-        certainty[found < 0] = -1.0
+    uncertainty = None if entropy is None else get_layer(map_info, store, revision, entropy)
+
+    def draw() -> bytes:
+        certainty = None
+        if uncertainty is not None:
+            values = uncertainty.layer.data
+            certainty = np.where(values < 0, -1.0, 1.0 - values.astype(np.float64))
+        return encode_png(overlay_image(stored.layer.data, stored.layer.meta, certainty=certainty))
+
+    key = ("overlay", map_info.id, stored.layer.name, stored.revision_id,
+           None if uncertainty is None else (uncertainty.layer.name, uncertainty.revision_id))
     try:
-        png = encode_png(overlay_image(stored.layer.data, stored.layer.meta, certainty=certainty))
+        png = cache.get(key, draw)  # every viewer asks for the same picture of a layer version
     except RenderError as err:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
     return Response(png, media_type="image/png", headers={REVISION_HEADER: str(stored.revision_id)})

@@ -3,6 +3,7 @@
 "use strict";
 
 const KEY_STORAGE = "aisle.apiKey";
+const FEATURE_PAGE = 10000;  // the API's largest page of /features
 const OVERLAYS = [  // grid layers drawn as images: [viewer layer, store layer, entropy layer for transparency]
   ["occupancy", "occupancy", null],
   ["semantic", "semantic_label", "semantic_entropy"],
@@ -156,10 +157,14 @@ async function drawOverlay(id, layerName, entropyName, layerInfo) {
   const image = L.imageOverlay(url, [[minY, minX], [maxY, maxX]], { className: `aisle-layer-${id}`, pane: "grids" });
   const previous = state.overlays[id];
   state.overlays[id] = { image, url, revision: info.revision_id };
-  image.once("load", () => {  // the old picture stays until the new one is drawn, so nothing flickers
-    if (previous) { group.removeLayer(previous.image); URL.revokeObjectURL(previous.url); }
+  const loaded = new Promise((resolve) => {
+    image.once("load error", () => {  // the old picture stays until the new one is drawn, so nothing flickers
+      if (previous) { group.removeLayer(previous.image); URL.revokeObjectURL(previous.url); }
+      resolve();
+    });
   });
   image.addTo(group);
+  if (leaflet.hasLayer(group)) await loaded;
   const classes = info.meta.classes, colours = info.meta.colours;
   setLegend(id, null, classes && colours ? classes.map((name, i) => [name, rgb(colours[i])]).slice(1) : []);
 }
@@ -172,16 +177,29 @@ async function drawOverlays(names) {
   return layerInfo;
 }
 
-// All features (kinds null), or only what changed in `kinds` since revision `since` (merged into our copy).
+// Every feature, a page at a time from /features (live reads are answered from the server's memory).
+async function loadAllFeatures() {
+  const features = [];
+  for (let offset = 0; offset !== null;) {
+    const page = await json(atRevision(mapPath(`/features?limit=${FEATURE_PAGE}&offset=${offset}`)));
+    features.push(...page.features);
+    offset = page.next_offset;
+  }
+  state.features = {};
+  for (const feature of features) (state.features[feature.properties.kind] ||= []).push(feature);
+  drawFeatures(null);
+  return features;
+}
+
+// Only what changed in `kinds` since revision `since`, merged into our copy (or all of those kinds).
 async function loadFeatures(kinds, since = null) {
   const query = [...(kinds || [])].map((k) => "kind=" + encodeURIComponent(k));
   if (kinds && since !== null) query.push("since=" + since);
-  const response = await api(atRevision(mapPath("/layout" + (query.length ? "?" + query.join("&") : ""))));
-  if (response.status === 422 && kinds) return loadFeatures(null);  // a kind this server does not know yet
+  const response = await api(atRevision(mapPath("/layout?" + query.join("&"))));
+  if (response.status === 422) return loadAllFeatures();  // a kind this server does not know yet
   if (!response.ok) throw new Error(`layout: ${response.status} ${await errorText(response)}`);
   const collection = await response.json();
-  if (!kinds) state.features = {};
-  else if (collection.removed === undefined) for (const kind of kinds) state.features[kind] = [];
+  if (collection.removed === undefined) for (const kind of kinds) state.features[kind] = [];
   else {
     for (const kind of kinds) {
       const gone = new Set(collection.removed[kind] || []);
@@ -190,8 +208,7 @@ async function loadFeatures(kinds, since = null) {
     }
   }
   for (const feature of collection.features) (state.features[feature.properties.kind] ||= []).push(feature);
-  drawFeatures(kinds ? new Set([...kinds]) : null);
-  return collection;
+  drawFeatures(new Set([...kinds]));
 }
 
 function layerOfKind(kind) {
@@ -289,9 +306,21 @@ function showRevision(revision) {
 // ---- loading and following -------------------------------------------------------------------------------------
 
 async function loadAll() {
-  const [, collection] = await Promise.all([drawOverlays(null), loadFeatures(null), drawTopology(),
+  const [layerInfo, features] = await Promise.all([drawOverlays(null), loadAllFeatures(), drawTopology(),
     drawRobots().catch(() => setLegend("robots", 0))]);
-  return collection;
+  return extentOf(layerInfo, features);
+}
+
+/** [min x, min y, max x, max y] of the grid layers and features, metres; null for an empty map. */
+function extentOf(layerInfo, features) {
+  const box = [Infinity, Infinity, -Infinity, -Infinity];
+  const add = (x, y) => {
+    box[0] = Math.min(box[0], x); box[1] = Math.min(box[1], y); box[2] = Math.max(box[2], x); box[3] = Math.max(box[3], y);
+  };
+  for (const info of Object.values(layerInfo)) { add(info.extent[0], info.extent[1]); add(info.extent[2], info.extent[3]); }
+  const walk = (c) => (typeof c[0] === "number" ? add(c[0], c[1]) : c.forEach(walk));
+  if (!Object.keys(layerInfo).length) for (const f of features) if (f.geometry) walk(f.geometry.coordinates);
+  return box[0] <= box[2] ? box : null;
 }
 
 async function start() {
@@ -306,15 +335,16 @@ async function start() {
     const detail = await json(mapPath(""));
     state.latest = detail.latest_revision_id;
     state.shown = state.latest;
-    const collection = await loadAll();
-    if (!state.fitted && collection.bbox) {
-      const [minX, minY, maxX, maxY] = collection.bbox;
+    const extent = await loadAll();
+    if (!state.fitted && extent) {
+      const [minX, minY, maxX, maxY] = extent;
       leaflet.fitBounds([[minY, minX], [maxY, maxX]], { padding: [10, 10], animate: false });
       state.fitted = true;
     }
     showRevision(detail.latest_revision);
     await setupHistory();
     follow();
+    requestAnimationFrame(() => { window.aisleViewer.readyAt = performance.now(); });  // drawn on the next frame
     window.aisleViewer.ready = true;
   } catch (error) {
     if (!(error instanceof AuthNeeded)) report(error);
