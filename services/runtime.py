@@ -16,7 +16,7 @@ from shared.worker import StageFactory, run_stage
 
 log = logging.getLogger(__name__)
 
-STREAMS_CUT_AFTER_S = 3.0
+STREAMS_CUT_AFTER_S = 3
 """On shutdown, how long the API waits for open requests (event streams never end by themselves), seconds."""
 
 
