@@ -14,7 +14,7 @@ const LAYERS = [  // [id, title, swatch colour, feature kinds]
   ["regions", "Place regions", "#78c878", ["corridor", "junction", "room", "open_area", "region"]],
   ["floorplan", "Floor-plan units and doors", "#8c564b", ["unit", "door"]],
   ["walls", "Walls", "#000000", ["wall"]],
-  ["racks", "Rack rows", "#1f77b4", ["rack_row", "pillar"]],
+  ["racks", "Rack rows and uprights", "#1f77b4", ["rack_row", "pillar"]],
   ["bins", "Bins", "#e68c28", ["bin"]],
   ["places", "Docks, gates, chargers", "#2ca02c", ["dock", "gate", "charger"]],
   ["objects", "Objects", "#dc006e", ["object"]],
