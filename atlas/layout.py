@@ -11,7 +11,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from atlas.errors import TooLargeError
-from atlas.features import BBox, GeoJSONFeature, geojson_feature
+from atlas.features import BBox, GeoJSONFeature, geojson_feature, stored_feature
 from atlas.render.png import render_png
 from atlas.render.scene import layout_scene
 from atlas.render.svg import MEDIA_TYPE as SVG_MEDIA_TYPE
@@ -150,13 +150,7 @@ def layout_collection(store: MapStore, map_info: MapInfo, *, revision: int | Non
     if since is None:
         found = layout_features(store, map_info, revision=at, kinds=kinds, bbox=bbox, max_features=max_features)
     else:
-        live = store.features(map_info.id, kinds=kinds, bbox=bbox, revision=at)
-        now = {(item.feature.kind, item.feature.key) for item in live}
-        removed = {}
-        for item in store.features(map_info.id, kinds=kinds, bbox=bbox, revision=since):
-            if (item.feature.kind, item.feature.key) not in now:
-                removed.setdefault(item.feature.kind, []).append(item.feature.key)
-        found = [item for item in live if item.revision_id > since]
+        found, removed = _changes(store, map_info, since=since, at=at, kinds=kinds, bbox=bbox)
         if max_features is not None and len(found) > max_features:
             raise LayoutTooLargeError(f"more than {max_features} features changed since revision {since}; "
                                       "read the layout without ?since=")
@@ -171,6 +165,28 @@ def layout_collection(store: MapStore, map_info: MapInfo, *, revision: int | Non
     )
 
 
+
+
+def _changes(store: MapStore, map_info: MapInfo, *, since: int, at: int | None, kinds: Sequence[str] | None,
+             bbox: BBox | None) -> tuple[list[StoredFeature], dict[str, list[str]]]:
+    """The features live at ``at`` that revisions after ``since`` wrote, and per kind the keys live at ``since``
+    and not at ``at``; read from the rows those revisions wrote or retired, not from the whole map."""
+    if at is None or at <= since:
+        return [], {}
+    rows = [row for row in store.feature_rows_changed(map_info.id, after=since, upto=at)
+            if (not kinds or row.kind in kinds) and (bbox is None or _touches(row.bounds, bbox))]
+    live = [row for row in rows if row.revision_id > since
+            and (row.retired_revision_id is None or row.retired_revision_id > at)]
+    live_keys = {(row.kind, row.key) for row in live}
+    gone: dict[str, set[str]] = {}
+    for row in rows:
+        if row.revision_id <= since and (row.kind, row.key) not in live_keys:
+            gone.setdefault(row.kind, set()).add(row.key)
+    return [stored_feature(row) for row in live], {kind: sorted(keys) for kind, keys in sorted(gone.items())}
+
+
+def _touches(bounds: BBox, bbox: BBox) -> bool:
+    return bounds[2] >= bbox[0] and bounds[0] <= bbox[2] and bounds[3] >= bbox[1] and bounds[1] <= bbox[3]
 
 
 @dataclass(frozen=True, slots=True)
