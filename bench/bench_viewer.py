@@ -8,7 +8,7 @@ own clock), with the bytes it fetched; the first after the server starts (its li
 yet built) is reported apart. Then one bin moves in a new revision: the time until the page shows it,
 and the bytes that update fetched. Then the bins canvas redraw (what a pan or zoom costs) at two zooms.
 With ``--screenshots DIR`` it also writes pictures of the viewer there: on ``aisle run --demo`` (its simulated
-robot mapping the demo warehouse) and on the hall.
+robot mapping the demo warehouse), on a replayed log with ``--replay BAG``, and on the hall.
 CPU time is this process's (the API, the store and the driver), the browser's is not counted.
 """
 
@@ -27,7 +27,7 @@ import tempfile
 import threading
 import time
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -150,13 +150,15 @@ def redraw_ms(driver: Any) -> float:
 
 
 @contextmanager
-def demo_stack(folder: Path) -> Iterator[str]:
-    """``aisle run --demo`` (every stage, the API, the simulated robot) in its own process; yields the API's URL."""
+def aisle_run(folder: Path, *args: str) -> Iterator[str]:
+    """``aisle run ARGS`` (every stage and the API) in its own process with its own data folder; yields the API's
+    URL."""
     port = free_port()
-    env = {**os.environ, "AISLE_DATA_DIR": str(folder / "demo"), "AISLE_API_PORT": str(port),
+    env = {**os.environ, "AISLE_DATA_DIR": str(folder / "run"), "AISLE_API_PORT": str(port),
            "AISLE_ZENOH__LISTEN": f'["tcp/127.0.0.1:{free_port()}"]', "AISLE_OCCUPANCY__STORE_PERIOD_S": "1"}
-    with (folder / "demo.log").open("w") as log:
-        process = subprocess.Popen([sys.executable, "-m", "services.cli", "run", "--demo", "--demo-rate", "3"],
+    shutil.rmtree(folder / "run", ignore_errors=True)
+    with (folder / "run.log").open("w") as log:
+        process = subprocess.Popen([sys.executable, "-m", "services.cli", "run", *args],
                                    env=env, stdout=log, stderr=subprocess.STDOUT)
         try:
             yield f"http://127.0.0.1:{port}"
@@ -173,25 +175,39 @@ def get_json(url: str) -> Any:
         return None
 
 
-def screenshots(folder: Path, out: Path) -> None:
-    """Pictures of the viewer into ``out``: on ``aisle run --demo`` once its robot has mapped some racks, and on
-    the hall."""
+def screenshots(folder: Path, out: Path, bag: Path | None) -> None:
+    """Pictures of the viewer into ``out``: on ``aisle run --demo`` once its robot has mapped some racks, on
+    ``aisle run --replay BAG`` once the log is through (with ``bag``), and on the hall."""
     out.mkdir(parents=True, exist_ok=True)
-    with demo_stack(folder) as url:
+    demo = ("--demo", "--demo-rate", "3")
+    run_screenshot(folder, out / "viewer_demo.png", demo, lambda url: len(
+        (get_json(url + "/v1/maps/site/layout?kind=bin") or {"features": []})["features"]) >= 40)
+    if bag is not None:
+        run_screenshot(folder, out / "viewer_replay.png", ("--replay", str(bag), "--rate", "4"),
+                       lambda url: _scans(url) >= 340)
+    hall_screenshot(folder, out)
+
+
+def _scans(url: str) -> int:
+    health = get_json(url + "/v1/health") or {"workers": []}
+    workers = {w["name"]: w for w in health["workers"]}
+    counters = workers.get("occupancy_mapping", {}).get("counters", {})
+    return int(counters.get("occupancy_mapping.scans_integrated", 0))
+
+
+def run_screenshot(folder: Path, out: Path, args: tuple[str, ...], done: Callable[[str], bool]) -> None:
+    """A picture of the viewer on ``aisle run ARGS`` once ``done(url)`` (or after 5 minutes)."""
+    with aisle_run(folder, *args) as url:
         deadline = time.monotonic() + 300
-        while time.monotonic() < deadline:
-            layout = get_json(url + "/v1/maps/site/layout?kind=bin")
-            if layout and len(layout["features"]) >= 40:
-                break
+        while time.monotonic() < deadline and not done(url):
             time.sleep(2)
         with chromium() as driver:
             driver.get(url + "/")
             wait(driver, "return window.aisleViewer && window.aisleViewer.readyAt")
             time.sleep(1.0)
-            driver.save_screenshot(str(out / "viewer_demo.png"))
+            driver.save_screenshot(str(out))
             driver.get("about:blank")
-    print(f"screenshot {out / 'viewer_demo.png'}")
-    hall_screenshot(folder, out)
+    print(f"screenshot {out}")
 
 
 def hall_screenshot(folder: Path, out: Path) -> None:
@@ -214,6 +230,7 @@ def hall_screenshot(folder: Path, out: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--screenshots", type=Path, help="write pictures of the viewer into this folder")
+    parser.add_argument("--replay", type=Path, help="with --screenshots: a rosbag2 to replay for a picture too")
     args = parser.parse_args()
     if shutil.which(CHROMIUM) is None or shutil.which(CHROMEDRIVER) is None:
         print(f"skipped: no {CHROMIUM} or {CHROMEDRIVER} (apt-get install chromium chromium-driver)")
@@ -247,7 +264,7 @@ def main() -> None:
             print(f"bins_redraw_zoomed_in_with_ids {redraw_ms(driver):.1f} ms")
         store.close()
         if args.screenshots:
-            screenshots(folder, args.screenshots)
+            screenshots(folder, args.screenshots, args.replay)
     print(f"load_average_1min {os.getloadavg()[0]:.1f}")
 
 

@@ -427,6 +427,7 @@ async function refresh() {
   try {
     const work = [];
     if (OVERLAYS.some(([, name, entropy]) => layers.has(name) || layers.has(entropy))) work.push(drawOverlays(layers));
+    if (kinds.delete("robot")) work.push(drawRobots());  // the occupancy stage stored where the robots are
     if (kinds.size) work.push(loadFeatures(kinds, state.shown));
     if (topology) work.push(drawTopology());
     await Promise.all(work);
@@ -442,10 +443,6 @@ async function refresh() {
     if (state.pendingEvent !== event && state.history === null) state.refreshTimer = setTimeout(refresh, 0);
   }
 }
-
-setInterval(() => {
-  if (visible.has("robots") && state.map && window.aisleViewer.ready) drawRobots().catch(() => {});
-}, 1000);
 
 // ---- history -----------------------------------------------------------------------------------------------
 

@@ -195,12 +195,15 @@ def test_a_new_revision_appears_without_a_reload(page: Any, site: Site) -> None:
         "dock": [Feature("dock", "G1", {"type": "LineString", "coordinates": [[4.0, 0.0], [7.0, 0.0]]}),
                  Feature("dock", "G2", {"type": "LineString", "coordinates": [[23.0, 0.0], [26.0, 0.0]]}),
                  Feature("dock", "G3", {"type": "LineString", "coordinates": [[14.0, 0.0], [16.0, 0.0]]})],
-        "charger": [Feature("charger", "C1", {"type": "Point", "coordinates": [1.0, 8.0]})]}))
+        "charger": [Feature("charger", "C1", {"type": "Point", "coordinates": [1.0, 8.0]})],
+        "robot": [Robot("robot2", TrackPoint(20.0, 1.5, 0.0, 5), (TrackPoint(20.0, 1.5, 0.0, 5),)).feature()]}))
     assert revision.id > shown
     wait_until(page, f"return document.getElementById('revision-id').textContent === '{revision.id}'",
                timeout_s=5, what="the new revision on the page")
     wait_until(page, "return document.querySelector('#layers li[data-layer=places] .count').textContent === '(4)'",
                timeout_s=2, what="the new dock drawn")
+    wait_until(page, "return document.querySelector('#layers li[data-layer=robots] .count').textContent === '(2)'",
+               timeout_s=2, what="the new robot drawn")
     assert page.execute_script("return window.notReloaded") is True
     asked = page.execute_script("return performance.getEntriesByType('resource').map(e => e.name)"
                                 ".filter(n => n.includes('/layout?'))")
