@@ -50,12 +50,12 @@ def chromium() -> Iterator[Any]:
 
 
 @contextmanager
-def serving(app: FastAPI) -> Iterator[str]:
-    """``app`` served by uvicorn on a free loopback port in a thread; yields its base URL.
+def serving(app: FastAPI, *, port: int | None = None) -> Iterator[str]:
+    """``app`` served by uvicorn on loopback (on ``port``, default a free one) in a thread; yields its base URL.
 
     Open event streams are cut a second after the server is told to stop.
     """
-    port = free_port()
+    port = free_port() if port is None else port
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", lifespan="on",
                                            timeout_graceful_shutdown=1))
     thread = threading.Thread(target=server.run, daemon=True)

@@ -24,6 +24,7 @@ from shared.settings import Settings
 from shared.store import Feature, MapInfo, MapStore, RevisionWrite
 from shared.store.keys import Role, create_key
 from tests.api.warehouse_map import warehouse, write_warehouse
+from tests.helpers import free_port
 from tests.viewer.browser import chromium, console_problems, open_viewer, serving, wait_until
 
 BIN_ID = "02-005-02"
@@ -252,3 +253,45 @@ def test_the_page_asks_for_a_key_when_the_api_needs_one(browser: Any, site: Site
         assert console_problems(browser, allowed=("401 (Unauthorized)",)) == []
         browser.execute_script("sessionStorage.clear()")
         browser.get("about:blank")
+
+
+def test_after_a_server_restart_the_page_reconnects_and_catches_up(browser: Any, site: Site, tmp_path: Path) -> None:
+    port = free_port()
+
+    def app() -> Any:
+        return create_app(store=site.store, settings=Settings(data_dir=tmp_path, database_url=site.store.url),
+                          event_poll_s=0.1)
+
+    with serving(app(), port=port) as url:
+        open_viewer(browser, url + "/")
+        browser.execute_script("window.notReloaded = true")
+    wait_until(browser, "return document.getElementById('live-state').textContent === 'reconnecting'",
+               what="the page to notice the server went away")
+    missed = site.store.write_revision(site.info.id, RevisionWrite("ground_truth", features={
+        "charger": [Feature("charger", "C1", {"type": "Point", "coordinates": [1.0, 8.0]}),
+                    Feature("charger", "C2", {"type": "Point", "coordinates": [1.0, 12.0]})]})).id
+    with serving(app(), port=port):
+        wait_until(browser, f"return document.getElementById('revision-id').textContent === '{missed}'",
+                   timeout_s=10, what="the revision written while the server was down")
+        assert browser.execute_script("return document.getElementById('live-state').textContent") == "live"
+        assert browser.execute_script("return window.notReloaded") is True
+        browser.get("about:blank")
+    assert console_problems(browser, allowed=("Failed to load resource", "ERR_CONNECTION_REFUSED",
+                                              "ERR_INCOMPLETE_CHUNKED_ENCODING")) == []
+
+
+def test_a_change_from_the_page_asks_for_a_write_key(browser: Any, site: Site) -> None:
+    open_viewer(browser, site.url + "/")
+    latest = site.store.latest_revision(site.info.id)
+    stored = site.store.feature(site.info.id, "bin", BIN_ID)
+    assert stored is not None
+    access = Bin.from_feature(stored.feature).access_pose
+    assert access is not None
+    click_at(browser, access.x_m, access.y_m)
+    wait_until(browser, "return document.querySelector('#card-actions button')", what="the block button")
+    browser.find_element("css selector", "#card-actions button").click()
+    wait_until(browser, "return !document.getElementById('key-dialog').hidden", what="the key prompt")
+    assert "write key" in browser.find_element("id", "key-reason").text
+    browser.find_element("id", "key-cancel").click()
+    assert site.store.latest_revision(site.info.id) == latest  # nothing was written
+    assert console_problems(browser, allowed=("401 (Unauthorized)",)) == []
