@@ -134,6 +134,10 @@ def create_app(
         if bus is not None:
             live.follow(bus)
         try:
+            live.warm(store.maps())  # a viewer's or WMS's first read after a restart then finds the map in memory
+        except StoreUnavailableError as err:
+            log.warning("live state not built ahead: %s", err)
+        try:
             yield
         finally:
             live.close()
