@@ -57,11 +57,10 @@ window.aisleViewer = { state, leaflet, groups, ready: false, errors: [] };
 
 class AuthNeeded extends Error {}
 
-async function api(path, { method = "GET", body, accept } = {}) {
+async function api(path, { method = "GET", body } = {}) {
   const headers = {};
   if (state.key) headers["X-API-Key"] = state.key;
   if (body !== undefined) headers["Content-Type"] = "application/json";
-  if (accept) headers.Accept = accept;
   const response = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
   if (response.status === 401 || (response.status === 403 && method !== "GET")) {
     const detail = await errorText(response);
@@ -522,7 +521,7 @@ function showCard(title, rows, actions) {
 }
 
 const fmt = (v, digits = 2) => (typeof v === "number" ? v.toFixed(digits) : v ?? "–");
-const pose = (p) => (p ? `(${fmt(p.x_m)}, ${fmt(p.y_m)}) ${fmt(p.yaw_rad ?? p.yaw, 2)} rad` : "–");
+const pose = (p) => (p ? `(${fmt(p.x_m)}, ${fmt(p.y_m)}) ${fmt(p.yaw_rad, 2)} rad` : "–");
 
 async function showBin(id) {
   const response = await api(atRevision(mapPath(`/bins/${encodeURIComponent(id)}`)));
@@ -533,7 +532,7 @@ async function showBin(id) {
   const opening = bin.opening ? `${fmt(bin.opening.width_m)} m, (${bin.opening.left.map((v) => fmt(v)).join(", ")})`
     + ` to (${bin.opening.right.map((v) => fmt(v)).join(", ")})` : "–";
   const place = (ref) => (ref ? ref.key + (ref.distance_m ? ` (${fmt(ref.distance_m, 1)} m)` : "") : "–");
-  const others_ = others.map((key) => {
+  const levels = others.map((key) => {  // the bins at other levels of the same footprint
     const button = document.createElement("button");
     button.textContent = key;
     button.addEventListener("click", () => showBin(key));
@@ -542,7 +541,7 @@ async function showBin(id) {
   showCard(`Bin ${bin.id}`, [["id", bin.id], ["aisle", bin.aisle ?? "–"], ["bay", bin.bay ?? "–"],
     ["level", bin.level ?? "–"], ["opening", opening], ["access pose", pose(bin.access_pose)],
     ["confidence", fmt(bin.confidence)], ["corridor", place(bin.corridor)],
-    ["nearest junction", place(bin.nearest_junction)], ["revision", bin.revision_id ?? "–"]], others_);
+    ["nearest junction", place(bin.nearest_junction)], ["revision", bin.revision_id ?? "–"]], levels);
   return bin;
 }
 
