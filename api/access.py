@@ -28,8 +28,9 @@ from shared.store import MapStore
 from shared.store.keys import ApiKey, Role, get_key, parse_key_id, verify_key
 
 READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
-OPEN_READ_PATHS = frozenset({"/v1/health"})
-"""Route paths read without a key even when keys are required for reads (load balancer probes)."""
+OPEN_READ_PATHS = frozenset({"/v1/health", "/", "/viewer", "/viewer/{asset:path}"})
+"""Route paths read without a key even when keys are required for reads: load balancer probes, and the map viewer's
+page and files (they hold no map data; the page asks for a key when the map's reads need one)."""
 API_KEY_HEADER = "X-API-Key"
 _LOCK_STRIPES = 64
 """Locks that make one request per key verify it (keys share them by hash), bounded whatever ids callers send."""

@@ -35,9 +35,11 @@ from api.routers import (
     layout,
     maps,
     places,
+    robots,
     routes,
     semantics,
     topology,
+    viewer,
     wms,
 )
 from api.streams import EventStreams
@@ -62,11 +64,14 @@ A live semantic map of the warehouse for a Warehouse Management System.
 * **topology** and **routes**: the region graph, blocked regions and connections, drivable routes between bins,
   places and points;
 * **places**: docks, gates and chargers set by operators;
+* **robots**: each robot's latest pose and its track over the last minute;
 * **semantics**: what is at a point, and the human label table of the place categories;
 * **exports**: GeoJSON, ROS map_server, VDMA LIF 1.0, Open-RMF nav graph;
 * **events**: each new revision as a Server-Sent Event, resumable with `Last-Event-ID`;
 * **keys**: API keys (admin only);
 * **health**: database, bus and stage workers.
+
+The map viewer, a web page over these same reads, is at `/` (and `/viewer`).
 
 Every read accepts `?revision=<id>` to see the map as it was then, and names the revision it covers in the
 `X-Aisle-Revision-Id` header (lists, layout and topology in their body too). Lists page with
@@ -142,6 +147,10 @@ def create_app(
         if bus is not None:
             live.follow(bus)
         try:
+            live.warm(store.maps())  # a viewer's or WMS's first read after a restart then finds the map in memory
+        except StoreUnavailableError as err:
+            log.warning("live state not built ahead: %s", err)
+        try:
             yield
         finally:
             live.close()
@@ -160,7 +169,7 @@ def create_app(
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
     for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, blocks, routes,
-                   places, history, events, keys):
+                   places, robots, history, events, keys, viewer):
         app.include_router(module.router)
     app.add_middleware(BodyLimit, max_bytes=settings.api_max_body_bytes)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too

@@ -11,7 +11,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from atlas.errors import TooLargeError
-from atlas.features import BBox, GeoJSONFeature, geojson_feature
+from atlas.features import BBox, GeoJSONFeature, geojson_feature, stored_feature
 from atlas.precision import json_bytes
 from atlas.render.png import render_png
 from atlas.render.scene import layout_scene
@@ -75,13 +75,19 @@ class LayoutCollection(BaseModel):
     )
     kinds: dict[str, int] = Field(description="How many of the features are of each kind.")
     features: list[GeoJSONFeature]
+    since_revision_id: int | None = Field(
+        None, description="With `?since=`: the revision the changes are counted from; `features` then holds only "
+                          "the features added or changed after it, and `removed` the keys of those gone since.")
+    removed: dict[str, list[str]] | None = Field(
+        None, description="With `?since=`: per kind, the keys of features live at `since_revision_id` and not now.")
 
     model_config = ConfigDict(json_schema_extra={"examples": [LAYOUT_EXAMPLE]})
 
     def to_json(self) -> bytes:
         """The collection as GeoJSON text; ``bbox`` is left out when there are no features (RFC 7946 wants
         an array or nothing)."""
-        return json_bytes(self.model_dump(mode="json", exclude={"bbox"} if self.bbox is None else None))
+        leave_out = {name for name in ("bbox", "since_revision_id", "removed") if getattr(self, name) is None}
+        return json_bytes(self.model_dump(mode="json", exclude=leave_out or None))
 
 
 def read_revision(store: MapStore, map_info: MapInfo, revision: int | None) -> int | None:
@@ -122,7 +128,7 @@ def layout_features(store: MapStore, map_info: MapInfo, *, revision: int | None,
 
 def layout_collection(store: MapStore, map_info: MapInfo, *, revision: int | None,
                       kinds: Sequence[str] | None = None, bbox: BBox | None = None,
-                      max_features: int | None = None) -> LayoutCollection:
+                      max_features: int | None = None, since: int | None = None) -> LayoutCollection:
     """The map's layout as of ``revision`` (default: the newest), optionally of ``kinds`` and touching ``bbox``.
 
     Parameters
@@ -137,18 +143,52 @@ def layout_collection(store: MapStore, map_info: MapInfo, *, revision: int | Non
         Only features whose bounds touch this box, metres.
     max_features : int, optional
         Refuse (:class:`LayoutTooLargeError`) when more features match.
+    since : int, optional
+        Only what changed after this revision (a client's copy): the features written after it, and the keys of
+        those removed since (``removed``). ``max_features`` then bounds the changed features.
     """
     at = read_revision(store, map_info, revision)
-    found = layout_features(store, map_info, revision=at, kinds=kinds, bbox=bbox, max_features=max_features)
+    removed: dict[str, list[str]] | None = None
+    if since is None:
+        found = layout_features(store, map_info, revision=at, kinds=kinds, bbox=bbox, max_features=max_features)
+    else:
+        found, removed = _changes(store, map_info, since=since, at=at, kinds=kinds, bbox=bbox)
+        if max_features is not None and len(found) > max_features:
+            raise LayoutTooLargeError(f"more than {max_features} features changed since revision {since}; "
+                                      "read the layout without ?since=")
     return LayoutCollection(
         bbox=features_bbox(found),
         frame=LayoutFrame(map=map_info.name, frame_id=map_info.frame_id),
         revision_id=at,
         kinds=dict(sorted(Counter(item.feature.kind for item in found).items())),
         features=[geojson_feature(item) for item in found],
+        since_revision_id=since,
+        removed=removed,
     )
 
 
+
+
+def _changes(store: MapStore, map_info: MapInfo, *, since: int, at: int | None, kinds: Sequence[str] | None,
+             bbox: BBox | None) -> tuple[list[StoredFeature], dict[str, list[str]]]:
+    """The features live at ``at`` that revisions after ``since`` wrote, and per kind the keys live at ``since``
+    and not at ``at``; read from the rows those revisions wrote or retired, not from the whole map."""
+    if at is None or at <= since:
+        return [], {}
+    rows = [row for row in store.feature_rows_changed(map_info.id, after=since, upto=at)
+            if (not kinds or row.kind in kinds) and (bbox is None or _touches(row.bounds, bbox))]
+    live = [row for row in rows if row.revision_id > since
+            and (row.retired_revision_id is None or row.retired_revision_id > at)]
+    live_keys = {(row.kind, row.key) for row in live}
+    gone: dict[str, set[str]] = {}
+    for row in rows:
+        if row.revision_id <= since and (row.kind, row.key) not in live_keys:
+            gone.setdefault(row.kind, set()).add(row.key)
+    return [stored_feature(row) for row in live], {kind: sorted(keys) for kind, keys in sorted(gone.items())}
+
+
+def _touches(bounds: BBox, bbox: BBox) -> bool:
+    return bounds[2] >= bbox[0] and bounds[0] <= bbox[2] and bounds[3] >= bbox[1] and bounds[1] <= bbox[3]
 
 
 @dataclass(frozen=True, slots=True)

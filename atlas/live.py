@@ -23,7 +23,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from typing import Any
@@ -151,6 +151,11 @@ class LiveMaps:
             states = [state for state in self._states.values() if state.info.name == map_name]
         for state in states:
             self._refresh_soon(state)
+
+    def warm(self, maps: Sequence[MapInfo]) -> None:
+        """Start building the live state of ``maps`` in the background, so their first reads need not wait."""
+        for map_info in maps:
+            self._refresh_soon(self._state(map_info))
 
     def follow(self, bus: Bus) -> None:
         """Refresh maps as the revisions announced on ``bus`` come, until :meth:`close`."""

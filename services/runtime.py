@@ -16,6 +16,9 @@ from shared.worker import StageFactory, run_stage
 
 log = logging.getLogger(__name__)
 
+STREAMS_CUT_AFTER_S = 3
+"""On shutdown, how long the API waits for open requests (event streams never end by themselves), seconds."""
+
 
 def stage_factories() -> dict[str, StageFactory]:
     """Every stage Aisle can run, by name (imported lazily: stages pull in heavy libraries).
@@ -139,8 +142,10 @@ def run(
                              event_poll_s=settings.api_event_poll_s, event_heartbeat_s=settings.api_event_heartbeat_s,
                              live_staleness_s=settings.api_live_staleness_s, key_recheck_s=settings.api_key_recheck_s,
                              gzip_min_bytes=settings.api_gzip_min_bytes)
+            # an open event stream (a viewer in a browser tab) would hold a graceful shutdown for ever
             server = uvicorn.Server(uvicorn.Config(app, host=settings.api_host, port=settings.api_port,
-                                                   log_level=settings.log_level.lower(), access_log=False))
+                                                   log_level=settings.log_level.lower(), access_log=False,
+                                                   timeout_graceful_shutdown=STREAMS_CUT_AFTER_S))
             threads.append(threading.Thread(target=server.run, name="api"))
         for thread in threads:
             thread.start()

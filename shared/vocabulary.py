@@ -34,6 +34,8 @@ class FeatureKind(enum.StrEnum):
     DOCK = "dock"
     GATE = "gate"
     CHARGER = "charger"
+    ROBOT = "robot"
+    """A robot heard on the bus: its latest pose and its track over the last minute (``shared.robots``)."""
 
 
 REGION_KINDS: Final = (FeatureKind.CORRIDOR, FeatureKind.JUNCTION, FeatureKind.ROOM, FeatureKind.OPEN_AREA,

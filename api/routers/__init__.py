@@ -13,9 +13,11 @@ from api.routers import (
     layout,
     maps,
     places,
+    robots,
     routes,
     semantics,
     topology,
+    viewer,
     wms,
 )
 
@@ -32,8 +34,10 @@ __all__ = [
     "layout",
     "maps",
     "places",
+    "robots",
     "routes",
     "semantics",
     "topology",
+    "viewer",
     "wms",
 ]

@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
 
-from api.deps import MapDep, RevisionQuery, StoreDep
+from api.deps import CacheDep, MapDep, RevisionQuery, StoreDep
 from api.models import (
     COMMON_ERRORS,
     UNPROCESSABLE,
@@ -20,6 +20,7 @@ from api.models import (
     not_found,
 )
 from atlas.render.layers import RenderError, encode_npy, encode_png, render_layer
+from atlas.render.overlay import overlay_image
 from shared.store import StoredLayer
 from shared.vocabulary import REVISION_HEADER
 
@@ -105,6 +106,51 @@ def layer_png(stored: LayerDep) -> Response:
     """
     try:
         png = encode_png(render_layer(stored.layer.data, stored.layer.meta))
+    except RenderError as err:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
+    return Response(png, media_type="image/png", headers={REVISION_HEADER: str(stored.revision_id)})
+
+
+@router.get(
+    "/{layer}/overlay.png",
+    summary="Layer as a transparent overlay",
+    response_class=Response,
+    responses={
+        status.HTTP_200_OK: {"content": {"image/png": {}},
+                             "description": "RGBA PNG, top row = highest y, one pixel a cell, no legend."},
+        status.HTTP_422_UNPROCESSABLE_CONTENT: {"model": ErrorOut,
+                                                "description": "Layer cannot be drawn, or a bad parameter."},
+        **_NOT_FOUND,
+    },
+)
+def layer_overlay_png(
+    map_info: MapDep,
+    store: StoreDep,
+    cache: CacheDep,
+    revision: RevisionQuery,
+    stored: LayerDep,
+    entropy: Annotated[str | None, Query(max_length=64, examples=["semantic_entropy"], description=(
+        "An entropy layer (values 0..1, negative where there is no data) of the same shape: each cell is drawn "
+        "the more transparent the less certain it is."))] = None,
+) -> Response:
+    """The layer as an RGBA PNG to lay over other layers in a map viewer, north up, one pixel a cell: label
+    layers in their classes' colours with unlabelled cells transparent, occupancy as map_saver greys with unknown
+    cells transparent, other layers as greys. With ``?entropy=``, a label's opacity is its certainty
+    (1 - entropy), as the viewer shows the semantic labels. The image covers the layer's `extent`
+    (`GET …/layers/{layer}`)."""
+    uncertainty = None if entropy is None else get_layer(map_info, store, revision, entropy)
+
+    def draw() -> bytes:
+        certainty = None
+        if uncertainty is not None:
+            values = uncertainty.layer.data
+            certainty = np.where(values < 0, -1.0, 1.0 - values.astype(np.float64))
+        return encode_png(overlay_image(stored.layer.data, stored.layer.meta, certainty=certainty))
+
+    key = ("overlay", map_info.id, stored.layer.name, stored.revision_id,
+           None if uncertainty is None else (uncertainty.layer.name, uncertainty.revision_id))
+    try:
+        png = cache.get(key, draw)  # every viewer asks for the same picture of a layer version
     except RenderError as err:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(err)) from err
     return Response(png, media_type="image/png", headers={REVISION_HEADER: str(stored.revision_id)})

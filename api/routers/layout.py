@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query, Response, status
 
 from api.answers import MetricJSONResponse
-from api.deps import MapDep, RevisionQuery, SettingsDep, StoreDep
+from api.deps import MAX_ID, MapDep, RevisionQuery, SettingsDep, StoreDep
 from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, as_json, naming_revision, not_found
 from api.queries import BBoxQuery, KindsQuery
 from api.translate import http_error
@@ -49,7 +49,9 @@ class GeoJSONResponse(MetricJSONResponse):
     responses=naming_revision(as_json(_ERRORS)),
 )
 def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds: KindsQuery,
-               bbox: BBoxQuery) -> Response:
+               bbox: BBoxQuery, since: Annotated[int | None, Query(ge=0, le=MAX_ID, examples=[1200], description=(
+                   "Only what changed after this revision: the features added or changed since, and in `removed` "
+                   "the keys of those gone (a viewer keeping its copy up to date)."))] = None) -> Response:
     """Every feature of the map (walls, corridors, junctions, rooms, open areas, rack rows, pillars, bins,
     docks, gates, chargers, objects, ...) as one GeoJSON FeatureCollection, in map-frame metres.
 
@@ -58,11 +60,12 @@ def get_layout(map_info: MapDep, store: StoreDep, revision: RevisionQuery, kinds
     `revision_id` read at (the newest when `?revision=` is not given; also the header `X-Aisle-Revision-Id`)
     and a count per kind. It is
     not paged: more than 20 000 matching features is a 413; narrow the bbox or the kinds, or page
-    through `/features`.
+    through `/features`. With `?since=<revision>` it holds only what changed after that revision: the
+    features added or changed, and `removed`, the keys per kind of the features gone.
     """
     try:
         collection = layout_collection(store, map_info, revision=revision, kinds=kinds, bbox=bbox,
-                                       max_features=MAX_LAYOUT_FEATURES)
+                                       max_features=MAX_LAYOUT_FEATURES, since=since)
     except LayoutTooLargeError as err:
         raise http_error(err) from err
     headers = {} if collection.revision_id is None else {REVISION_HEADER: str(collection.revision_id)}

@@ -126,8 +126,8 @@ def label_image(data: npt.NDArray[Any], *, class_names: Sequence[str], colours: 
     if data.min() < 0 or data.max() >= len(class_names):
         raise RenderError(f"label codes {data.min()}..{data.max()} are not all named by the "
                           f"{len(class_names)} classes in the layer's meta")
-    palette = _palette(len(class_names), colours)
-    image = palette[data[::-1].astype(np.intp)]
+    colour_of = palette(len(class_names), colours)
+    image = colour_of[data[::-1].astype(np.intp)]
     present = [int(code) for code in np.unique(data) if code != 0]
     width = max((cv2.getTextSize(class_names[c], cv2.FONT_HERSHEY_SIMPLEX, _LEGEND_FONT_SCALE, 1)[0][0]
                  for c in present), default=0) + 28
@@ -137,14 +137,16 @@ def label_image(data: npt.NDArray[Any], *, class_names: Sequence[str], colours: 
     left = image.shape[1]
     for i, code in enumerate(present):
         top = 2 + i * _LEGEND_ROW_PX
-        colour = tuple(int(v) for v in palette[code])
+        colour = tuple(int(v) for v in colour_of[code])
         cv2.rectangle(canvas, (left + 4, top + 2), (left + 16, top + 14), colour, thickness=-1)
         cv2.putText(canvas, class_names[code], (left + 22, top + 13), cv2.FONT_HERSHEY_SIMPLEX, _LEGEND_FONT_SCALE,
                     (0, 0, 0), 1, cv2.LINE_AA)
     return canvas
 
 
-def _palette(n: int, colours: object) -> npt.NDArray[np.uint8]:
+def palette(n: int, colours: object) -> npt.NDArray[np.uint8]:
+    """The (n, 3) uint8 RGB colour of each of ``n`` label codes: ``colours`` (a layer's ``meta["colours"]``), or
+    white for 0 and :data:`DEFAULT_LABEL_COLOURS` for the rest when it is None."""
     if colours is None:
         default = [(255, 255, 255)] + [DEFAULT_LABEL_COLOURS[i % len(DEFAULT_LABEL_COLOURS)] for i in range(n - 1)]
         return np.array(default[:n], dtype=np.uint8).reshape(n, 3)
@@ -155,8 +157,11 @@ def _palette(n: int, colours: object) -> npt.NDArray[np.uint8]:
 
 
 def encode_png(image: npt.NDArray[np.uint8]) -> bytes:
-    """PNG file bytes of a greyscale (rows, cols) or RGB (rows, cols, 3) uint8 image."""
-    ok, buffer = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR) if image.ndim == 3 else image)
+    """PNG file bytes of a greyscale (rows, cols), RGB (rows, cols, 3) or RGBA (rows, cols, 4) uint8 image."""
+    bgr: npt.NDArray[Any] = image
+    if image.ndim == 3:
+        bgr = cv2.cvtColor(image, cv2.COLOR_RGBA2BGRA if image.shape[2] == 4 else cv2.COLOR_RGB2BGR)
+    ok, buffer = cv2.imencode(".png", bgr)
     if not ok:
         raise RenderError(f"PNG encoding failed for an image of shape {image.shape}")
     return bytes(buffer.tobytes())

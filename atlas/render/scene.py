@@ -111,6 +111,7 @@ KIND_STYLES: Mapping[str, KindStyle] = {
     FeatureKind.GATE: KindStyle((150, 0, 170), 3, 0.3, Marker.TRIANGLE, 13, True, Swatch.MARKER),
     FeatureKind.CHARGER: KindStyle((20, 150, 40), 2, 0.3, Marker.DIAMOND, 13, True, Swatch.MARKER),
     FeatureKind.OBJECT: KindStyle((220, 0, 110), 2, 0.3, Marker.CROSS, 12, True, Swatch.MARKER),
+    FeatureKind.ROBOT: KindStyle((214, 39, 40), 2, 0.3, Marker.DOT, 12, True, Swatch.MARKER),
 }
 """Style of every feature kind, in drawing order (first drawn first, so places lie under the rest)."""
 OUTLINE: RGB = (20, 20, 20)

@@ -22,6 +22,7 @@ from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMess
 from services.occupancy_mapping.errors import OccupancyMappingError
 from services.occupancy_mapping.grid import OccupancyGrid
 from services.occupancy_mapping.scan import ScanArrays, scan_arrays
+from services.occupancy_mapping.tracks import TrackRecorder
 from shared import messages
 from shared.transforms import (
     Pose2D,
@@ -84,6 +85,8 @@ class ScanMapper:
         self.counts: Counter[str] = Counter()
         self.first_stamp_ns: int | None = None
         self.last_stamp_ns: int | None = None
+        self.tracks = TrackRecorder()
+        """Where each robot's lidar was at its integrated scans, in the grid's frame (the last minute)."""
 
     def _robot(self, namespace: str) -> _Robot:
         if namespace not in self._robots:
@@ -188,6 +191,7 @@ class ScanMapper:
             log.warning("scan at %d ns rejected: %s", scan.stamp_ns, err)
             return 0
         self.counts["scans_integrated"] += 1
+        self.tracks.add(namespace, pose, stamp_ns=scan.stamp_ns)
         self.counts["beams_used"] += beams
         self.counts["beams_skipped"] += scan.ranges.size - beams
         self.first_stamp_ns = scan.stamp_ns if self.first_stamp_ns is None else self.first_stamp_ns

@@ -1,9 +1,10 @@
-"""The occupancy-mapping worker: scans and poses from the bus in, the occupancy layer out.
+"""The occupancy-mapping worker: scans and poses from the bus in, the occupancy layer and the robots out.
 
 It integrates scans from every robot it listens to, stores the grid as a revision every
 ``store_period_s`` and publishes it as nav_msgs/OccupancyGrid on ``/aisle/map`` every
-``publish_period_s``. On start it resumes from the stored layer, so a restart loses nothing
-that was committed.
+``publish_period_s``. Each stored revision also holds a ``robot`` feature per robot heard: where its lidar
+was at its newest integrated scan and its track over the last minute. On start it resumes from the stored
+layer, so a restart loses nothing that was committed.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from shared.bus import WORKER_NAMESPACE
 from shared.grids import occupancy_grid_message
 from shared.settings import OccupancySettings
 from shared.store import RevisionWrite, StoreUnavailableError
+from shared.vocabulary import FeatureKind
 from shared.worker import IDLE_WAIT_S, StageContext, drain
 
 log = logging.getLogger(__name__)
@@ -123,7 +125,9 @@ class OccupancyStage:
             return
         grid = self.mapper.grid
         layer = grid.to_layer(self.settings.layer)
-        write = RevisionWrite(self.context.name, layers=[layer], input_start_ns=self.mapper.first_stamp_ns,
+        robots = [robot.feature() for robot in self.mapper.tracks.robots()]
+        write = RevisionWrite(self.context.name, layers=[layer], features={FeatureKind.ROBOT: robots},
+                              input_start_ns=self.mapper.first_stamp_ns,
                               input_end_ns=self.mapper.last_stamp_ns,
                               summary={"scans": self._integrated_since_store})
         revision = self.context.commit(write)

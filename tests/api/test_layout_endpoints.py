@@ -181,3 +181,15 @@ def test_picture_of_a_map_with_nothing_yet_needs_a_bbox(client: TestClient, stor
     assert without.status_code == 404 and "bbox" in without.json()["detail"]
     assert with_area.status_code == 200
     ET.fromstring(with_area.content)
+
+
+def test_layout_since_a_revision_holds_only_what_changed_and_what_went(
+        client: TestClient, site: dict[str, int]) -> None:
+    # semantics_2 moved B1 and dropped B2; R1 and D1 were not written again
+    body = client.get("/v1/maps/site/layout", params={"since": site["semantics_1"], "kind": ["bin", "dock"]}).json()
+
+    assert _ids(body) == {"bin/B1"} and body["features"][0]["geometry"]["coordinates"] == [2.0, 1.0]
+    assert body["removed"] == {"bin": ["B2"]} and body["since_revision_id"] == site["semantics_1"]
+    unchanged = client.get("/v1/maps/site/layout", params={"since": site["semantics_2"]}).json()
+    assert unchanged["features"] == [] and unchanged["removed"] == {}
+    assert "removed" not in client.get("/v1/maps/site/layout").json()

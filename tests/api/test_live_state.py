@@ -19,6 +19,7 @@ from shared.store import Feature, GridLayer, MapStore, RevisionWrite
 from shared.store.keys import Role, create_key
 from shared.worker import MAP_EVENTS_TOPIC, map_event
 from tests.api.conftest import ClientFactory
+from tests.helpers import wait_for
 
 FEATURES = "/v1/maps/site/features"
 
@@ -164,3 +165,14 @@ def test_a_revision_announced_on_the_bus_is_read_at_once(store: MapStore, site: 
         live.close()
 
     assert refreshed.is_set()
+
+
+def test_a_served_map_is_in_memory_before_its_first_read(store: MapStore, make_client: ClientFactory,
+                                                         site: dict[str, int]) -> None:
+    client = make_client(store, live_staleness_s=60.0)
+    info = store.get_map("site")
+    assert info is not None
+    with client:  # the app starts (its lifespan runs) and nobody reads the map
+        live = client.app.state.context.live  # type: ignore[attr-defined]
+        wait_for(lambda: live.peek(info) is not None, what="the live state built ahead of any read")
+        assert live.peek(info).revision_id == site["semantics_2"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from functools import partial
@@ -13,6 +14,7 @@ import pytest
 from services.occupancy_mapping.worker import occupancy_stage
 from shared import messages
 from shared.keyexpr import Attachment, topic_key
+from shared.robots import Robot
 from shared.settings import Settings, ZenohSettings
 from shared.store import MapStore
 from tests import stages
@@ -38,7 +40,8 @@ def _cell(layer_data: np.ndarray, x: float, y: float, origin: tuple[float, float
     return int(layer_data[int((y - origin[1]) / res), int((x - origin[0]) / res)])
 
 
-def test_scans_from_a_separate_rmw_zenoh_process_build_the_map(zenoh_listen: ZenohSettings, store: MapStore) -> None:
+def test_scans_from_a_separate_rmw_zenoh_process_build_the_map_and_track_the_robot(
+        zenoh_listen: ZenohSettings, store: MapStore) -> None:
     settings = _settings(zenoh_listen, store.url)
     with running_stage(settings, store):
         _talk(zenoh_listen)
@@ -57,6 +60,15 @@ def test_scans_from_a_separate_rmw_zenoh_process_build_the_map(zenoh_listen: Zen
     assert _cell(grid.data, 5.5, 5.5, origin, res) == -1  # behind the walls nothing is known
     worker = {w.name: w for w in store.workers()}["occupancy_mapping"]
     assert worker.counters["occupancy_mapping.scans_integrated"] >= 35
+    stored_robot = store.feature(site.id, "robot", "robot1")
+    assert stored_robot is not None and stored_robot.revision_id == stored.revision_id
+    robot = Robot.from_feature(stored_robot.feature)
+    assert robot.robot == "robot1" and robot.track[-1] == robot.pose
+    assert len(robot.track) >= 5  # several seconds of driving, thinned
+    # the lidar (0.2 m ahead of the base) went round the 1.5 m circle the robot drove
+    assert all(1.1 < math.hypot(p.x_m, p.y_m) < 2.1 for p in robot.track)
+    stamps = [p.stamp_ns for p in robot.track]
+    assert stamps == sorted(stamps)
 
 
 def test_bad_input_is_counted_and_the_worker_keeps_mapping(zenoh_listen: ZenohSettings, tmp_path: Path) -> None:
