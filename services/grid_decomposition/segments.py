@@ -13,27 +13,49 @@ from scipy.sparse.csgraph import connected_components
 def fill_from_neighbours(
     segments: npt.NDArray[np.int32], target: npt.NDArray[np.bool_], *, max_iterations: int = 200
 ) -> npt.NDArray[np.int32]:
-    """Give unlabelled (0) ``target`` pixels the id of a labelled 8-neighbour, growing outwards."""
-    out = segments.copy()
+    """Give unlabelled (0) ``target`` pixels the id of a labelled 8-neighbour, growing outwards.
+
+    Each step, every hole next to a labelled pixel takes the largest id among its labelled
+    8-neighbours (a grey dilation restricted to the holes). Only the front moves: the work is
+    proportional to the pixels filled, not to the image (a few streak pixels on a 9 Mpx hall).
+    """
+    out = np.array(segments, dtype=np.int32, copy=True)
     hole = target & (out == 0)
     rows = np.flatnonzero(hole.any(axis=1))
     if rows.size == 0:
         return out
     cols = np.flatnonzero(hole.any(axis=0))
-    r0, r1 = max(int(rows[0]) - 1, 0), int(rows[-1]) + 2
-    c0, c1 = max(int(cols[0]) - 1, 0), int(cols[-1]) + 2
+    # the holes' bounding box and one pixel around it: every labelled pixel next to a hole
+    r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, out.shape[0])
+    c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, out.shape[1])
     crop = out[r0:r1, c0:c1]
-    inside = target[r0:r1, c0:c1]
-    kernel = np.ones((3, 3), np.uint8)
+    h, w = crop.shape
+    lab = np.zeros((h + 2, w + 2), dtype=np.int32)
+    lab[1:-1, 1:-1] = crop
+    open_ = np.zeros((h + 2, w + 2), dtype=bool)
+    open_[1:-1, 1:-1] = hole[r0:r1, c0:c1]
+    lab_flat, open_flat = lab.ravel(), open_.ravel()
+    stride = w + 2
+    offsets = np.array([-stride - 1, -stride, -stride + 1, -1, 1, stride - 1, stride, stride + 1], dtype=np.int64)
+    near_hole = cv2.dilate(open_.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+    front = np.flatnonzero(near_hole.ravel() & (lab_flat > 0))
+    stamp = np.empty(lab_flat.size, dtype=np.int64)
     for _ in range(max_iterations):
-        h = inside & (crop == 0)
-        if not h.any():
+        if front.size == 0:
             break
-        grown = cv2.dilate(crop.astype(np.float32), kernel)
-        fill = h & (grown > 0)
-        if not fill.any():
+        cand = (front[:, None] + offsets[None, :]).ravel()
+        ok = open_flat[cand]
+        cand = cand[ok]
+        if cand.size == 0:
             break
-        crop[fill] = grown[fill].astype(np.int32)
+        value = np.repeat(lab_flat[front], len(offsets))[ok]
+        np.maximum.at(lab_flat, cand, value)
+        # each filled pixel once (the last of its writes wins the stamp), without a sort
+        order = np.arange(cand.size, dtype=np.int64)
+        stamp[cand] = order
+        front = cand[stamp[cand] == order]
+        open_flat[front] = False
+    crop[:] = lab[1:-1, 1:-1]
     return out
 
 
