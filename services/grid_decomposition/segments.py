@@ -88,32 +88,52 @@ def segment_image(
     """
     seg = np.where(free, face_segment[face_image], 0).astype(np.int32)
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
-    out = np.zeros_like(seg)
-    next_id = 1
-    small = np.zeros(seg.shape, dtype=bool)
-    for sid, box in enumerate(ndimage.find_objects(seg), start=1):
-        if box is None:
-            continue
-        mask = seg[box] == sid
-        n, pieces, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=4)
-        view = out[box]
-        for k in range(1, n):
-            piece = pieces == k
-            if stats[k, cv2.CC_STAT_AREA] < min_area_px:
-                small[box] |= piece
-                continue
-            view[piece] = next_id
-            next_id += 1
+    pieces, n_pieces = same_value_pieces(seg)
+    area = np.bincount(pieces.ravel(), minlength=n_pieces + 1)
+    owner = np.zeros(n_pieces + 1, dtype=np.int64)
+    owner[pieces.ravel()] = seg.ravel()
+    # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
+    order = np.lexsort((np.arange(n_pieces + 1), owner))
+    big = (area >= min_area_px) & (owner > 0)
+    lut = np.zeros(n_pieces + 1, dtype=np.int32)
+    kept = order[big[order]]
+    lut[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
+    next_id = kept.size + 1
+    out = lut[pieces]
+    small = (owner[pieces] > 0) & ~big[pieces]
     if small.any():
         out = fill_from_neighbours(out, small)
         alone = small & (out == 0)
         if alone.any():
-            n, pieces, stats, _ = cv2.connectedComponentsWithStats(alone.astype(np.uint8), connectivity=4)
+            _n, pieces, stats, _ = cv2.connectedComponentsWithStats(alone.astype(np.uint8), connectivity=4)
             keep = stats[:, cv2.CC_STAT_AREA] >= min_area_px // 2
             keep[0] = False
             ids = np.where(keep, np.cumsum(keep) + next_id - 1, 0)
             out = np.where(alone, ids[pieces], out).astype(np.int32)
     return out
+
+
+def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32], int]:
+    """The 4-connected pieces of equal non-zero value of ``seg``, numbered 1..N in scan order, 0 elsewhere.
+
+    One labelling of a twice-enlarged mask instead of one per value: every pixel becomes a 2 x 2
+    block whose left column is cut where its left neighbour differs and whose top row is cut where
+    its upper neighbour differs; the block's lower-right pixel always stays, so equal neighbours
+    stay joined and different ones never touch.
+    """
+    h, w = seg.shape
+    on = seg > 0
+    left = np.ones((h, w), dtype=bool)
+    left[:, 1:] = seg[:, 1:] == seg[:, :-1]
+    up = np.ones((h, w), dtype=bool)
+    up[1:, :] = seg[1:, :] == seg[:-1, :]
+    big = np.zeros((2 * h, 2 * w), dtype=np.uint8)
+    big[1::2, 1::2] = on
+    big[1::2, 0::2] = on & left
+    big[0::2, 1::2] = on & up
+    big[0::2, 0::2] = on & left & up
+    n, labels = cv2.connectedComponents(big, connectivity=4, ltype=cv2.CV_32S)
+    return np.ascontiguousarray(labels[1::2, 1::2]), n - 1
 
 
 def merge_small_segments(
