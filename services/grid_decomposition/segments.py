@@ -43,13 +43,17 @@ def fill_from_neighbours(
     for _ in range(max_iterations):
         if front.size == 0:
             break
-        cand = (front[:, None] + offsets[None, :]).ravel()
-        ok = open_flat[cand]
-        cand = cand[ok]
+        value = lab_flat[front]
+        filled = []
+        for offset in offsets:  # one offset's targets are distinct: a plain max-assignment each
+            cand = front + offset
+            ok = open_flat[cand]
+            cand = cand[ok]
+            lab_flat[cand] = np.maximum(lab_flat[cand], value[ok])
+            filled.append(cand)
+        cand = np.concatenate(filled)
         if cand.size == 0:
             break
-        value = np.repeat(lab_flat[front], len(offsets))[ok]
-        np.maximum.at(lab_flat, cand, value)
         # each filled pixel once (the last of its writes wins the stamp), without a sort
         order = np.arange(cand.size, dtype=np.int64)
         stamp[cand] = order
