@@ -83,7 +83,8 @@ def face_geometry(
     ) & (inner > 0)
     faces = face_image.ravel()
     count = np.bincount(faces, minlength=n).astype(np.float64)
-    ys, xs = np.divmod(np.arange(faces.size, dtype=np.int64), w)
+    xs = np.tile(np.arange(w, dtype=np.float64), h)
+    ys = np.repeat(np.arange(h, dtype=np.float64), w)
     safe = np.maximum(count, 1.0)
     centroid = np.stack([np.bincount(faces, xs, n) / safe, np.bincount(faces, ys, n) / safe], axis=1)
     centroid[0] = 0.0

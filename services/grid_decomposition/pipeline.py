@@ -430,7 +430,8 @@ def decompose(
         segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2)
     )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
     pairs = _pairs(segments, sub)
-    regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+    racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
+    regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
     # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
     structured_segments = set(np.unique(segments[(places > 0) | floor_px]).tolist())
     rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
@@ -444,7 +445,7 @@ def decompose(
         lut[list(merges)] = list(merges.values())
         segments = lut[lut[segments]]
         pairs = _pairs(segments, sub)
-        regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
+        regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
     if label_overrides:  # a region of a renamed category is a place of that name (a rack place mixes categories)
         regions = {
             k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
@@ -537,18 +538,29 @@ def _region_records(
     sub: Subdivision,
     pairs: _Pairs,
     face_labels: FaceLabels,
+    racked: npt.NDArray[np.bool_],
     resolution_m: float,
     origin_xy_m: tuple[float, float],
 ) -> tuple[dict[int, RegionInfo], npt.NDArray[np.uint8]]:
-    """Region records (label: its faces' majority) and the label image (each face's own label)."""
+    """Region records (label: its faces' majority) and the label image (each face's own label).
+
+    Open floor is never storage: a region mostly off ``racked`` (racks, rack places, warehouse
+    floors, shelf banks) takes the majority of its other faces' labels, open area when all its
+    faces are bay-shaped (a few rectangles between furniture in a home look like pallet cells).
+    """
     n_seg = int(segments.max()) + 1
     n_lab = len(PlaceLabel)
     lab_votes = np.bincount(
         pairs.segment * n_lab + face_labels.label[pairs.face], weights=pairs.pixels, minlength=n_seg * n_lab
     ).reshape(n_seg, n_lab)
     lab_votes[:, 0] = 0
+    storage = PlaceLabel.STORAGE.value
+    off_racks = _share_in(segments, racked, n_seg) < 0.5
+    only_storage = off_racks & (lab_votes[:, storage] > 0) & (lab_votes.sum(axis=1) == lab_votes[:, storage])
+    lab_votes[off_racks, storage] = 0
     seg_label = np.argmax(lab_votes, axis=1)
     seg_label[lab_votes.sum(axis=1) == 0] = PlaceLabel.UNIDENTIFIED.value
+    seg_label[only_storage] = PlaceLabel.OPEN_AREA.value
     n_cat = int(max(face_labels.category.max(), 0)) + 2
     cat_votes = np.bincount(
         pairs.segment * n_cat + face_labels.category[pairs.face] + 1, weights=pairs.pixels, minlength=n_seg * n_cat
@@ -572,3 +584,11 @@ def _region_records(
     hole = inside & (labels == 0)
     labels[hole] = seg_label[segments[hole]]
     return regions, labels.astype(np.uint8)
+
+
+def _share_in(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_], n_seg: int) -> npt.NDArray[np.float64]:
+    """(n_seg,) share of each segment's pixels inside ``mask``."""
+    area = np.bincount(segments.ravel(), minlength=n_seg)
+    inside = np.bincount(segments[mask], minlength=n_seg)
+    share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
+    return share

@@ -180,3 +180,21 @@ def test_a_grid_of_roads_is_split_into_corridors_and_junctions_linked_in_the_top
         assert all(d.topology.edges[r, n]["connection"] == Connection.CONNECTED.value for n in corridors)
     # road pieces are linked through the crossings, not to each other
     assert not [(a, b) for a, b in d.topology.edges if d.regions[a].label is d.regions[b].label is PlaceLabel.CORRIDOR]
+
+
+def test_open_floor_of_a_real_home_map_is_never_storage() -> None:
+    """ROSE\u00b2 ``no_gt/EX2`` (a real map at an odd angle, no racks): a few rectangles between its
+    walls look like pallet cells, yet no region or pixel is storage."""
+    from pathlib import Path
+
+    from services.grid_decomposition.mapfile import read_map_file
+
+    path = Path(__file__).resolve().parents[4] / "shared" / "data" / "maps" / "rose2" / "no_gt" / "EX2.png"
+    if not path.exists():
+        pytest.skip(f"{path} is absent: the ROSE2 maps are not on this machine")
+    occ, _, _ = read_map_file(path, resolution_m=0.05)
+    d = decompose(occ, resolution_m=0.05)
+    assert len(d.rack_rows_px) == 0
+    assert not (d.labels == PlaceLabel.STORAGE.value).any()
+    assert all(r.label is not PlaceLabel.STORAGE for r in d.regions.values())
+    assert len(d.regions) > 3  # and it is not one region

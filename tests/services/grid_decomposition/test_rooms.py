@@ -53,6 +53,24 @@ def test_furniture_is_small_free_standing_obstacles_not_walls() -> None:
     assert not furniture(dash, resolution_m=RES)[61, 25]
 
 
+def test_a_desk_block_is_furniture_a_bent_or_long_piece_of_wall_is_not() -> None:
+    canvas = np.zeros((120, 200), dtype=bool)
+    desk = canvas.copy()
+    desk[40:56, 40:72] = True  # 1.6 x 0.8 m, solid (a desk seen at its top's height)
+    assert furniture(desk, resolution_m=RES)[48, 56]
+    tee = canvas.copy()
+    tee[40:43, 40:84] = True  # a T of 0.15 m walls, 2.2 x 1.9 m
+    tee[43:78, 61:64] = True
+    assert not furniture(tee, resolution_m=RES)[41, 50]
+    pillar = canvas.copy()
+    pillar[40:43, 40:84] = True  # a 2.2 m wall, a 0.5 m pillar on it
+    cv2.circle(pillar.view(np.uint8), (62, 46), 5, 1, -1)
+    assert not furniture(pillar, resolution_m=RES)[41, 45]
+    slab = canvas.copy()
+    slab[40:50, 40:100] = True  # 3 x 0.5 m: a thick piece of wall, not a desk
+    assert not furniture(slab, resolution_m=RES)[45, 70]
+
+
 def test_a_corridor_and_its_offices_are_one_region_each_linked_by_doors() -> None:
     d = decompose(_office_row(), resolution_m=RES)
     corridor = d.segments[25, 120]
@@ -113,3 +131,35 @@ def test_a_cupboard_against_a_wall_is_in_its_rooms_segment_and_the_wall_is_not()
     left = np.bincount(segments[20:80, 20:50].ravel()).argmax()
     assert left > 0 and (segments[cupboard] == left).mean() > 0.9
     assert not segments[10:13, :].any()  # the outer wall is in no segment
+
+
+def _two_furnished_rooms() -> np.ndarray:
+    """12 x 6 m at 5 cm: two 6 x 5.6 m rooms side by side joined by a 0.9 m door, each with two
+    1.6 x 0.8 m desks (solid blocks, as a lidar at desk height sees them), a cabinet against the
+    back wall and chairs; 0.15 m walls, unknown outside."""
+    occ = np.full((130, 250), -1, dtype=np.int8)
+    occ[2:128, 2:248] = 100
+    occ[5:125, 5:245] = 0
+    occ[5:125, 124:127] = 100  # the wall between the rooms
+    occ[56:74, 124:127] = 0  # the door
+    for x0 in (5, 127):
+        for dx, dy in ((25, 30), (70, 75)):  # desks
+            occ[dy : dy + 16, x0 + dx : x0 + dx + 32] = 100
+        occ[105:125, x0 + 40 : x0 + 80] = 100  # a 2 x 1 m cabinet against the back wall
+        for dx, dy in ((30, 50), (45, 50), (75, 95), (90, 95), (20, 10)):  # chairs, 0.3 m
+            occ[dy : dy + 6, x0 + dx : x0 + dx + 6] = 100
+    return occ
+
+
+def test_two_furnished_rooms_joined_by_a_door_stay_two_rooms_each_in_one_piece() -> None:
+    occ = _two_furnished_rooms()
+    d = decompose(occ, resolution_m=RES)
+    free = occ == 0
+    left, right = free.copy(), free.copy()
+    left[:, 124:] = False
+    right[:, :127] = False
+    ids_left = np.unique(d.segments[left])
+    ids_right = np.unique(d.segments[right])
+    assert ids_left.size == 1 and ids_right.size == 1  # each room one region, furniture or not
+    assert ids_left[0] != ids_right[0]  # kept apart at their door
+    assert len(d.regions) == 2
