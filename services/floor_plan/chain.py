@@ -52,8 +52,8 @@ class ChainSettings:
     iterations: int = 8000
     max_seconds: float = 60.0
     schedule: tuple[Phase, ...] = SEED_SCHEDULE
-    fsu_from: int = 4000
-    fsu_every: int = 1000
+    fsu_from: int = 1
+    fsu_every: int = 200
     seed: int = 0
     kernels: tuple[Kernel, ...] = field(default_factory=lambda: tuple(Kernel))
 

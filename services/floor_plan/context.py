@@ -72,8 +72,10 @@ def _unit_log_weights(e: UnitEvidence, s: ContextSettings) -> npt.NDArray[np.flo
         implies(ro and not mul, room), implies(ro and not mul, ~corr), implies(ro and mul, other),
         implies(co and not mul, other), implies(co and mul, corr), implies(co and mul, ~room),
     ]
-    total: npt.NDArray[np.float64] = w * np.sum(clauses, axis=0, dtype=np.float64)
-    return total + s.one_type_weight * (_ASSIGNMENTS.sum(axis=1) == 1)
+    satisfied = np.asarray(np.sum(clauses, axis=0), dtype=np.float64)
+    one_type = np.asarray(_ASSIGNMENTS.sum(axis=1) == 1, dtype=np.float64)
+    out: npt.NDArray[np.float64] = w * satisfied + s.one_type_weight * one_type
+    return out
 
 
 @functools.lru_cache(maxsize=256)

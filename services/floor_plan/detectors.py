@@ -146,28 +146,67 @@ def wbu_candidates(
 
 def fsu_candidates(
     classes_map: npt.NDArray[np.uint8], classes_world: npt.NDArray[np.uint8], evidence: Evidence, *,
-    wall_cells: int, min_inner_cells: int, floor_weight: float = 0.05,
+    wall_cells: int, min_inner_cells: int, max_candidates: int = 24, min_free_share: float = 0.3,
+    max_wall_share: float = 0.15, floor_weight: float = 0.05,
 ) -> list[Candidate]:
-    """Free-space unit candidates (fig. 3.13): bounding boxes of free map cells the world leaves unexplained.
+    """Free-space unit candidates (fig. 3.13): rectangles grown over free map cells the world leaves unexplained.
 
-    Components are cleaned by a morphological opening of ``min_inner_cells``; each box grows by one wall.
-    Weights follow eq. 3.10, floored at ``floor_weight`` (such units often lack a seen wall).
+    The unexplained free cells are cleaned by an opening of ``min_inner_cells``; seeds are the cells
+    deepest inside them (distance transform), each grown side by side while the next row or column of the
+    map holds at least ``min_free_share`` free and at most ``max_wall_share`` wall cells; the grown free
+    space gets a wall around it. Weights follow eq. 3.10, floored at ``floor_weight`` (such units often
+    lack a seen wall).
     """
     t = wall_cells
     h, w = classes_map.shape
     loose = (classes_map == CellClass.FREE) & (classes_world != CellClass.FREE)
     opened = ndimage.binary_opening(loose, structure=np.ones((min_inner_cells, min_inner_cells), bool))
-    labels, _ = ndimage.label(opened)
+    if not opened.any():
+        return []
+    depth = ndimage.distance_transform_cdt(opened)
     out: list[Candidate] = []
-    for box in ndimage.find_objects(labels):
-        if box is None:
+    order = np.argsort(depth, axis=None)[::-1]
+    taken = np.zeros_like(opened)
+    for flat in order[: 50 * max_candidates]:
+        r, c = divmod(int(flat), w)
+        if depth[r, c] * 2 < min_inner_cells or len(out) >= max_candidates:
+            break
+        if taken[r, c]:
             continue
-        rect = Rect(max(box[0].start - t, 0), min(box[0].stop - 1 + t, h - 1),
-                    max(box[1].start - t, 0), min(box[1].stop - 1 + t, w - 1))
-        if rect.rows < 2 * t + min_inner_cells or rect.cols < 2 * t + min_inner_cells:
+        inner = _grow(evidence, Rect(r, r, c, c), (t, h - 1 - t, t, w - 1 - t), min_free_share, max_wall_share)
+        taken[inner.r0 : inner.r1 + 1, inner.c0 : inner.c1 + 1] = True
+        rect = Rect(inner.r0 - t, inner.r1 + t, inner.c0 - t, inner.c1 + t)
+        if inner.rows < min_inner_cells or inner.cols < min_inner_cells:
             continue
         out.append(Candidate(rect, max(evidence.unit_weight(rect, t), floor_weight)))
     return out
+
+
+def _grow(evidence: Evidence, rect: Rect, bounds: tuple[int, int, int, int], min_free: float,
+          max_wall: float) -> Rect:
+    """Grow ``rect`` one row or column at a time on every side while the new line is open enough."""
+    r0, r1, c0, c1 = rect
+    lo_r, hi_r, lo_c, hi_c = bounds
+    active = [True, True, True, True]
+    while any(active):
+        for side in range(4):
+            if not active[side]:
+                continue
+            if side == 0:
+                line = Rect(r0 - 1, r0 - 1, c0, c1)
+            elif side == 1:
+                line = Rect(r1 + 1, r1 + 1, c0, c1)
+            elif side == 2:
+                line = Rect(r0, r1, c0 - 1, c0 - 1)
+            else:
+                line = Rect(r0, r1, c1 + 1, c1 + 1)
+            n = line.rows * line.cols
+            if (line.r0 < lo_r or line.r1 > hi_r or line.c0 < lo_c or line.c1 > hi_c
+                    or evidence.free(line) < min_free * n or evidence.walls(line) > max_wall * n):
+                active[side] = False
+                continue
+            r0, r1, c0, c1 = min(r0, line.r0), max(r1, line.r1), min(c0, line.c0), max(c1, line.c1)
+    return Rect(r0, r1, c0, c1)
 
 
 def split_options(
