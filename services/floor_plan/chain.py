@@ -103,6 +103,8 @@ class Chain:
         """Score ``move``; None if it leads outside the worlds the model allows or cannot be reversed."""
         world = self.world
         after, new_ids = apply_move(world, move)
+        if len(set(after.units.values())) < len(after.units):
+            return None  # two units on the same rectangle: not a world the model allows
         if after.doors and move.removed and not after.doors_valid(self.wall_cells):
             return None
         back = reverse_move(move, world, new_ids)
