@@ -34,6 +34,10 @@ class FeatureKind(enum.StrEnum):
     DOCK = "dock"
     GATE = "gate"
     CHARGER = "charger"
+    UNIT = "unit"
+    """A space unit of the floor plan: a rectangle with walls, typed room, corridor, hall or other."""
+    DOOR = "door"
+    """A door of the floor plan: an opening in the wall two units share."""
 
 
 REGION_KINDS: Final = (FeatureKind.CORRIDOR, FeatureKind.JUNCTION, FeatureKind.ROOM, FeatureKind.OPEN_AREA,
@@ -52,6 +56,7 @@ class LayerName(enum.StrEnum):
     PLACE_SEGMENTS = "place_segments"
     SEMANTIC_LABEL = "semantic_label"
     SEMANTIC_ENTROPY = "semantic_entropy"
+    FLOOR_PLAN = "floor_plan"
 
 
 class PlaceLabel(enum.IntEnum):

@@ -157,7 +157,7 @@ def run_chain(chain: Chain, classes_map: npt.NDArray[np.uint8], settings: ChainS
             extra = fsu_candidates(classes_map, chain.canvas.classes(), chain.proposer.evidence,
                                    wall_cells=chain.wall_cells,
                                    min_inner_cells=chain.proposer.settings.min_inner_cells)
-            chain.proposer.set_candidates(base_candidates + extra)
+            chain.proposer.set_candidates(base_candidates, extra)
         probs = {k: p for k, p in phase_at(settings.schedule, it).probabilities.items() if k in allowed and p > 0}
         kernels = list(probs)
         kernel = kernels[chooser.pick(np.array([probs[k] for k in kernels]))]

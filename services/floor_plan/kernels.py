@@ -92,6 +92,14 @@ class KernelSettings:
     h_v: float = 10.0  # eq. 3.22
     h_g: float = 10.0  # eq. 3.28
     min_door_cells: int = 10
+    free_space_share: float = 0.5  # ADD: chance of drawing from the FSU candidates when there are any
+
+
+def _dedup(candidates: list[Candidate]) -> list[Candidate]:
+    best: dict[Rect, float] = {}
+    for c in candidates:
+        best[c.rect] = max(best.get(c.rect, 0.0), c.weight)
+    return [Candidate(r, w) for r, w in best.items() if w > 0]
 
 
 def _inverse_weight(w: float, cap: float) -> float:
@@ -107,9 +115,10 @@ class Proposer:
     lines: WallLines
     settings: KernelSettings
     candidates: list[Candidate] = field(default_factory=list)
+    free_space: list[Candidate] = field(default_factory=list)
     _cand_prob: dict[Rect, float] = field(default_factory=dict)
-    _cand_rects: list[Rect] = field(default_factory=list)
-    _cand_weights: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    _sets: list[tuple[list[Rect], npt.NDArray[np.float64]]] = field(default_factory=list)
+    _set_shares: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     _b: dict[Rect, float] = field(default_factory=dict)
     _v: dict[Rect, npt.NDArray[np.float64]] = field(default_factory=dict)
     _splits: dict[Rect, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.float64]]] = field(
@@ -117,20 +126,26 @@ class Proposer:
     _doors: dict[frozenset[Rect], tuple[list[Rect], npt.NDArray[np.float64]]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.set_candidates(self.candidates)
+        self.set_candidates(self.candidates, self.free_space)
         g = np.exp(-np.arange(1, self.settings.max_shift_cells + 1) ** 2 / (2 * self.settings.shift_sigma_cells**2))
         self._shift = g / g.sum()
 
-    def set_candidates(self, candidates: list[Candidate]) -> None:
-        """Replace the ADD candidates (duplicates keep their best weight)."""
-        best: dict[Rect, float] = {}
-        for c in candidates:
-            best[c.rect] = max(best.get(c.rect, 0.0), c.weight)
-        self.candidates = [Candidate(r, w) for r, w in best.items() if w > 0]
-        self._cand_rects = [c.rect for c in self.candidates]
-        self._cand_weights = np.array([c.weight for c in self.candidates], np.float64)
-        total = float(self._cand_weights.sum())
-        self._cand_prob = {c.rect: c.weight / total for c in self.candidates}
+    def set_candidates(self, candidates: list[Candidate], free_space: list[Candidate] | None = None) -> None:
+        """Replace the ADD candidates: wall-based ones and (optionally) free-space ones.
+
+        ADD draws from each set with probability ``free_space_share`` / its complement when both are
+        non-empty (eqs. 3.15-3.17 within a set); duplicates within a set keep their best weight.
+        """
+        self.candidates = _dedup(candidates)
+        self.free_space = _dedup(free_space or [])
+        sets = [c for c in (self.candidates, self.free_space) if c]
+        share = self.settings.free_space_share if len(sets) == 2 else 1.0
+        self._sets = [([c.rect for c in cs], np.array([c.weight for c in cs], np.float64)) for cs in sets]
+        self._set_shares = np.array([1.0 - share, share][: len(sets)] if len(sets) == 2 else [1.0] * len(sets))
+        self._cand_prob = {}
+        for (rects, w), set_share in zip(self._sets, self._set_shares, strict=True):
+            for r, p in zip(rects, w / w.sum(), strict=True):
+                self._cand_prob[r] = self._cand_prob.get(r, 0.0) + float(set_share * p)
 
     # --- weights --------------------------------------------------------------------------------------
     def unit_b(self, rect: Rect) -> float:
@@ -203,9 +218,10 @@ class Proposer:
         return _PROBABILITY[move.kernel](self, world, move)
 
     def _draw_add(self, world: World, chooser: Chooser) -> Move | None:
-        if not len(self._cand_weights):
+        if not self._sets:
             return None
-        rect = self._cand_rects[chooser.pick(self._cand_weights)]
+        rects, weights = self._sets[chooser.pick(self._set_shares) if len(self._sets) > 1 else 0]
+        rect = rects[chooser.pick(weights)]
         if rect in world.units.values():
             return None
         return Move(Kernel.ADD, added=(rect,), window=(rect,))
