@@ -112,7 +112,8 @@ def test_every_kernel_pair_keeps_detailed_balance_on_a_tiny_world() -> None:
             cache[world.key()] = _transitions(world, classes, proposer, prior, used)
         return cache[world.key()]
 
-    queue, seen, checked = [World()], {World().key()}, 0
+    queue, checked = [World()], 0
+    seen: set[object] = {World().key()}
     while queue and checked < 40:
         world = queue.pop(0)
         checked += 1
