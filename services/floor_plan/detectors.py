@@ -11,7 +11,6 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from services.floor_plan.likelihood import CellClass
 from services.floor_plan.world import Rect, Side, World, shared_band, wall_band
@@ -159,17 +158,18 @@ def fsu_candidates(
     """
     t = wall_cells
     h, w = classes_map.shape
-    loose = (classes_map == CellClass.FREE) & (classes_world != CellClass.FREE)
-    opened = ndimage.binary_opening(loose, structure=np.ones((min_inner_cells, min_inner_cells), bool))
-    if not opened.any():
+    loose = ((classes_map == CellClass.FREE) & (classes_world != CellClass.FREE)).astype(np.uint8)
+    opened = cv2.morphologyEx(loose, cv2.MORPH_OPEN, np.ones((min_inner_cells, min_inner_cells), np.uint8))
+    depth = cv2.distanceTransform(opened, cv2.DIST_L1, 3)
+    deep = np.flatnonzero(depth.ravel() * 2 >= min_inner_cells)
+    if not len(deep):
         return []
-    depth = ndimage.distance_transform_cdt(opened)
+    order = deep[np.argsort(-depth.ravel()[deep], kind="stable")]
     out: list[Candidate] = []
-    order = np.argsort(depth, axis=None)[::-1]
-    taken = np.zeros_like(opened)
+    taken = np.zeros(opened.shape, bool)
     for flat in order[: 50 * max_candidates]:
         r, c = divmod(int(flat), w)
-        if depth[r, c] * 2 < min_inner_cells or len(out) >= max_candidates:
+        if len(out) >= max_candidates:
             break
         if taken[r, c]:
             continue
@@ -183,8 +183,8 @@ def fsu_candidates(
 
 
 def _grow(evidence: Evidence, rect: Rect, bounds: tuple[int, int, int, int], min_free: float,
-          max_wall: float) -> Rect:
-    """Grow ``rect`` one row or column at a time on every side while the new line is open enough."""
+          max_wall: float, step: int = 8) -> Rect:
+    """Grow ``rect`` side by side, up to ``step`` lines a round, while each new line is open enough."""
     r0, r1, c0, c1 = rect
     lo_r, hi_r, lo_c, hi_c = bounds
     active = [True, True, True, True]
@@ -193,19 +193,36 @@ def _grow(evidence: Evidence, rect: Rect, bounds: tuple[int, int, int, int], min
             if not active[side]:
                 continue
             if side == 0:
-                line = Rect(r0 - 1, r0 - 1, c0, c1)
+                idx = np.arange(r0 - 1, max(r0 - 1 - step, lo_r - 1), -1)
+                box = (idx, idx, np.full(len(idx), c0), np.full(len(idx), c1))
+                n = c1 - c0 + 1
             elif side == 1:
-                line = Rect(r1 + 1, r1 + 1, c0, c1)
+                idx = np.arange(r1 + 1, min(r1 + 1 + step, hi_r + 1))
+                box = (idx, idx, np.full(len(idx), c0), np.full(len(idx), c1))
+                n = c1 - c0 + 1
             elif side == 2:
-                line = Rect(r0, r1, c0 - 1, c0 - 1)
+                idx = np.arange(c0 - 1, max(c0 - 1 - step, lo_c - 1), -1)
+                box = (np.full(len(idx), r0), np.full(len(idx), r1), idx, idx)
+                n = r1 - r0 + 1
             else:
-                line = Rect(r0, r1, c1 + 1, c1 + 1)
-            n = line.rows * line.cols
-            if (line.r0 < lo_r or line.r1 > hi_r or line.c0 < lo_c or line.c1 > hi_c
-                    or evidence.free(line) < min_free * n or evidence.walls(line) > max_wall * n):
+                idx = np.arange(c1 + 1, min(c1 + 1 + step, hi_c + 1))
+                box = (np.full(len(idx), r0), np.full(len(idx), r1), idx, idx)
+                n = r1 - r0 + 1
+            ok = (_boxes(evidence._free, *box) >= min_free * n) & (_boxes(evidence._wall, *box) <= max_wall * n)
+            k = len(ok) if ok.all() else int(np.argmin(ok))
+            if k < len(ok) or k == 0:
                 active[side] = False
+            if k == 0:
                 continue
-            r0, r1, c0, c1 = min(r0, line.r0), max(r1, line.r1), min(c0, line.c0), max(c1, line.c1)
+            far = int(idx[k - 1])
+            if side == 0:
+                r0 = far
+            elif side == 1:
+                r1 = far
+            elif side == 2:
+                c0 = far
+            else:
+                c1 = far
     return Rect(r0, r1, c0, c1)
 
 

@@ -151,11 +151,15 @@ class Canvas:
         self.shape: tuple[int, int] = (int(classes_map.shape[0]), int(classes_map.shape[1]))
         self.wall_cells = wall_cells
         self.log_overlap = log_overlap
-        # per-cell log-likelihood of each world class, stacked (3, H, W)
-        self._ll = np.ascontiguousarray(log_table[:, classes_map].astype(np.float64))
+        # per-cell log-likelihood of unknown, and the gain of rendering free / wall instead
+        ll = log_table[:, classes_map].astype(np.float64)
+        self._unknown = np.zeros((self.shape[0] + 1, self.shape[1] + 1))
+        self._unknown[1:, 1:] = ll[CellClass.UNKNOWN].cumsum(0).cumsum(1)
+        self._gain_free = np.ascontiguousarray(ll[CellClass.FREE] - ll[CellClass.UNKNOWN])
+        self._gain_wall = np.ascontiguousarray(ll[CellClass.WALL] - ll[CellClass.UNKNOWN])
         self._counts = (np.zeros(self.shape, np.int16), np.zeros(self.shape, np.int16), np.zeros(self.shape, np.int16))
         self.full = Rect(0, self.shape[0] - 1, 0, self.shape[1] - 1)
-        self.score = float(self._ll[CellClass.UNKNOWN].sum())
+        self.score = float(self._unknown[-1, -1])
 
     def classes(self) -> npt.NDArray[np.uint8]:
         """C_W of the current counts."""
@@ -165,11 +169,20 @@ class Canvas:
         self, counts: tuple[npt.NDArray[np.int16], npt.NDArray[np.int16], npt.NDArray[np.int16]], window: Rect
     ) -> float:
         n_int, n_wall, n_door = counts
-        ll = self._ll[:, window.r0 : window.r1 + 1, window.c0 : window.c1 + 1]
-        cls = _classes(n_int, n_wall, n_door)
-        total = float(np.take_along_axis(ll, cls[None].astype(np.intp), axis=0).sum())
-        gamma = n_int.astype(np.int32) + (n_wall > 0) - 1
-        return total + self.log_overlap * float(np.maximum(gamma, 0).sum())
+        sl = (slice(window.r0, window.r1 + 1), slice(window.c0, window.c1 + 1))
+        u = self._unknown
+        total = u[window.r1 + 1, window.c1 + 1] - u[window.r0, window.c1 + 1] - u[window.r1 + 1, window.c0] + u[
+            window.r0, window.c0]
+        has_wall = n_wall > 0
+        door = n_door > 0
+        wall = has_wall & ~door
+        free = ~wall & ((n_int > 0) | door)
+        total += float(np.sum(self._gain_free[sl], where=free)) + float(np.sum(self._gain_wall[sl], where=wall))
+        overlap = int(np.count_nonzero(n_int > 1)) + int(np.count_nonzero(has_wall & (n_int > 0)))
+        if overlap:
+            gamma = n_int.astype(np.int32) + has_wall - 1
+            return float(total) + self.log_overlap * float(np.maximum(gamma, 0).sum())
+        return float(total)
 
     def _view(self, window: Rect) -> tuple[npt.NDArray[np.int16], npt.NDArray[np.int16], npt.NDArray[np.int16]]:
         sl = (slice(window.r0, window.r1 + 1), slice(window.c0, window.c1 + 1))
