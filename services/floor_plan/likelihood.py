@@ -11,6 +11,7 @@ import enum
 from collections.abc import Iterable, Sequence
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -64,10 +65,24 @@ def log_sensor_table(model: Sequence[Sequence[float]] = SEED_SENSOR_MODEL) -> np
     return out
 
 
-def render(world: World, shape: tuple[int, int], *, wall_cells: int) -> npt.NDArray[np.uint8]:
-    """C_W (eq. 3.8): walls where a unit's wall is not opened by a door, free inside units, else unknown."""
+def render(world: World, shape: tuple[int, int], *, wall_cells: int,
+           obstacles: npt.NDArray[np.bool_] | None = None) -> npt.NDArray[np.uint8]:
+    """C_W (eq. 3.8): walls where a unit's wall is not opened by a door, free inside units, else unknown.
+
+    ``obstacles`` (solid blocks of the map, :func:`solid_obstacles`) render as walls too.
+    """
     n_int, n_wall, n_door = _counts(world, shape, wall_cells)
+    if obstacles is not None:
+        n_wall += obstacles
     return _classes(n_int, n_wall, n_door)
+
+
+def solid_obstacles(classes_map: npt.NDArray[np.uint8], *, min_cells: int) -> npt.NDArray[np.bool_]:
+    """Solid blocks of the map: occupied cells inside an occupied square of ``min_cells`` (a morphological
+    opening), e.g. rack blocks drawn solid or the filled outside of a building. Thin walls are not."""
+    walls = (classes_map == CellClass.WALL).astype(np.uint8)
+    opened = cv2.morphologyEx(walls, cv2.MORPH_OPEN, np.ones((min_cells, min_cells), np.uint8))
+    return opened.astype(bool)
 
 
 def cell_prediction_rate(classes_map: npt.NDArray[np.uint8], classes_world: npt.NDArray[np.uint8]) -> float:
@@ -146,7 +161,7 @@ class Canvas:
 
     def __init__(
         self, classes_map: npt.NDArray[np.uint8], log_table: npt.NDArray[np.float64], *, wall_cells: int,
-        log_overlap: float,
+        log_overlap: float, obstacles: npt.NDArray[np.bool_] | None = None,
     ) -> None:
         self.shape: tuple[int, int] = (int(classes_map.shape[0]), int(classes_map.shape[1]))
         self.wall_cells = wall_cells
@@ -160,6 +175,9 @@ class Canvas:
         self._counts = (np.zeros(self.shape, np.int16), np.zeros(self.shape, np.int16), np.zeros(self.shape, np.int16))
         self.full = Rect(0, self.shape[0] - 1, 0, self.shape[1] - 1)
         self.score = float(self._unknown[-1, -1])
+        if obstacles is not None:  # fixed walls of the world: counted once, never moved
+            self._counts[1][obstacles] = 1
+            self.score = self._window_score(self._counts, self.full)
 
     def classes(self) -> npt.NDArray[np.uint8]:
         """C_W of the current counts."""
@@ -218,14 +236,3 @@ def unit_op(sign: int, rect: Rect) -> CellOp:
 
 def door_op(sign: int, rect: Rect) -> CellOp:
     return CellOp(sign, rect, True)
-
-
-def world_score(
-    world: World, classes_map: npt.NDArray[np.uint8], log_table: npt.NDArray[np.float64], *, wall_cells: int,
-    log_overlap: float,
-) -> float:
-    """Log likelihood + overlap prior of ``world`` computed from scratch."""
-    canvas = Canvas(classes_map, log_table, wall_cells=wall_cells, log_overlap=log_overlap)
-    ops = [unit_op(1, r) for r in world.units.values()] + [door_op(1, d) for d in world.doors]
-    canvas.commit(ops, 0.0)
-    return canvas.rescore()

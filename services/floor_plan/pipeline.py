@@ -22,6 +22,7 @@ from services.floor_plan.likelihood import (
     classify_map,
     log_sensor_table,
     render,
+    solid_obstacles,
 )
 from services.floor_plan.world import Rect, UnitType, World, shared_band
 
@@ -38,12 +39,15 @@ class FloorPlanSettings:
     free_percent: int = 25
     sensor_model: tuple[tuple[float, ...], ...] = SEED_SENSOR_MODEL
     overlap_psi: float = 0.2
+    obstacle_min_m: float = 0.3
+    """Occupied blocks at least this thick everywhere are solid obstacles (racks drawn solid, a filled outside):
+    the world renders them as walls and keeps units off them; thinner occupied cells are walls to explain."""
     shift_sigma_m: float = 0.15
     max_shift_m: float = 0.5
     chain: ChainSettings = field(default_factory=ChainSettings)
     context: ContextSettings = field(default_factory=ContextSettings)
-    warm_start_iteration: int = 1001
-    """Where a warm-started chain enters the schedule (after the initial ADD phase)."""
+    warm_start_iteration: int = 4001
+    """Where a warm-started chain enters the schedule: the last phase of table 3.2, every kernel on."""
 
 
 class Unit(NamedTuple):
@@ -99,6 +103,11 @@ def kernel_settings(settings: FloorPlanSettings, resolution_m: float) -> KernelS
     )
 
 
+def _obstacles(classes: npt.NDArray[np.uint8], settings: FloorPlanSettings,
+               resolution_m: float) -> npt.NDArray[np.bool_]:
+    return solid_obstacles(classes, min_cells=max(_cells(settings.obstacle_min_m, resolution_m), 3))
+
+
 def floor_plan(
     occupancy: npt.NDArray[np.integer], *, resolution_m: float, origin_xy_m: tuple[float, float] = (0.0, 0.0),
     settings: FloorPlanSettings | None = None, start: World | None = None,
@@ -132,7 +141,7 @@ def floor_plan(
     candidates = wbu_candidates(lines, evidence, wall_cells=ks.wall_cells, min_inner_cells=ks.min_inner_cells)
     proposer = Proposer(evidence, lines, ks, candidates)
     canvas = Canvas(classes, log_sensor_table(s.sensor_model), wall_cells=ks.wall_cells,
-                    log_overlap=math.log(s.overlap_psi))
+                    log_overlap=math.log(s.overlap_psi), obstacles=_obstacles(classes, s, resolution_m))
     prior = ContextPrior(resolution_m=resolution_m, wall_cells=ks.wall_cells, settings=s.context)
     first = 1
     world = World()
@@ -186,7 +195,8 @@ def describe(
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
-    cw = render(world, (classes_map.shape[0], classes_map.shape[1]), wall_cells=t)
+    cw = render(world, (classes_map.shape[0], classes_map.shape[1]), wall_cells=t,
+                obstacles=_obstacles(classes_map, settings, resolution_m))
     return FloorPlan(world, units, doors, adjacency, classes_map, cw, cell_prediction_rate(classes_map, cw),
                      log_posterior, iterations, accepted, seconds, cpu_seconds, resolution_m, origin_xy_m)
 

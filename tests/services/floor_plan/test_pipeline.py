@@ -47,7 +47,7 @@ SHORT = tuple(Phase(None if p.until is None else p.until // 4, p.probabilities) 
 
 def _settings(iterations: int = 2000, seed: int = 1) -> FloorPlanSettings:
     return FloorPlanSettings(chain=ChainSettings(iterations=iterations, seed=seed, schedule=SHORT),
-                             warm_start_iteration=251)
+                             warm_start_iteration=1001)
 
 
 def test_two_rooms_joined_by_a_door_give_two_units_and_one_door() -> None:
@@ -71,6 +71,16 @@ def test_a_long_unit_with_several_doors_is_a_corridor() -> None:
     corridor = max(plan.units, key=lambda u: u.rect.cols / u.rect.rows)
     assert corridor.unit_type is UnitType.CORRIDOR
     assert len([d for d in plan.doors if corridor.id in d.units]) >= 2
+
+
+def test_solid_blocks_are_obstacles_the_world_draws_as_walls() -> None:
+    occ = np.full((80, 120), 100, np.int8)  # the outside filled, as some maps draw it
+    _box(occ, 10, 69, 10, 109)
+    occ[30:50, 40:80] = 100  # a solid block (a rack drawn solid) in the middle of the room
+    plan = floor_plan(occ, resolution_m=RES, settings=_settings())
+    assert np.all(plan.classes_world[:5] == CellClass.WALL)
+    assert np.all(plan.classes_world[33:47, 43:77] == CellClass.WALL)
+    assert plan.k > float(np.mean(plan.classes_map == CellClass.WALL))
 
 
 def test_units_png_labels_only_free_cells_one_id_per_unit() -> None:
