@@ -38,6 +38,8 @@ class FeatureKind(enum.StrEnum):
     """A space unit of the floor plan: a rectangle with walls, typed room, corridor, hall or other."""
     DOOR = "door"
     """A door of the floor plan: an opening in the wall two units share."""
+    OBSTACLE = "obstacle"
+    """A solid block of the map (a rack drawn solid, a filled outside) the floor plan keeps out of its units."""
 
 
 REGION_KINDS: Final = (FeatureKind.CORRIDOR, FeatureKind.JUNCTION, FeatureKind.ROOM, FeatureKind.OPEN_AREA,

@@ -98,6 +98,7 @@ class KindStyle:
 KIND_STYLES: Mapping[str, KindStyle] = {
     # places: outlines in darker shades of their place-label colours (the tint fills them)
     FeatureKind.UNIT: KindStyle((30, 60, 230), 2, 0.1, Marker.SQUARE, 6, False, Swatch.FILL),
+    FeatureKind.OBSTACLE: KindStyle((90, 60, 40), 1, 0.4, Marker.SQUARE, 6, False, Swatch.FILL),
     FeatureKind.REGION: KindStyle((200, 130, 30), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
     FeatureKind.OPEN_AREA: KindStyle((60, 160, 180), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
     FeatureKind.ROOM: KindStyle((140, 100, 200), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),

@@ -64,7 +64,8 @@ def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.
 
 
 def geojson(plan: FloorPlan) -> dict[str, Any]:
-    """GeoJSON FeatureCollection: unit polygons (type, probability, neighbours) and door segments."""
+    """GeoJSON FeatureCollection: unit polygons (type, probability, neighbours), door segments and the
+    solid obstacles (polygons)."""
     neighbours: dict[int, list[int]] = {u.id: [] for u in plan.units}
     for a, b in plan.adjacency:
         neighbours[a].append(b)
@@ -86,6 +87,14 @@ def geojson(plan: FloorPlan) -> dict[str, Any]:
             "properties": {"kind": FeatureKind.DOOR, "id": i, "units": list(d.units), "width_m": round(d.width_m, 3)},
         }
         for i, d in enumerate(plan.doors)
+    ]
+    features += [
+        {
+            "type": "Feature",
+            "geometry": {"type": "Polygon", "coordinates": [[list(p) for p in ring] for ring in polygon]},
+            "properties": {"kind": FeatureKind.OBSTACLE, "id": i},
+        }
+        for i, polygon in enumerate(plan.obstacles)
     ]
     return {"type": "FeatureCollection", "features": features,
             "properties": {"k": round(plan.k, 6), "iterations": plan.iterations}}

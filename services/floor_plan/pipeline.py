@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -77,6 +78,8 @@ class FloorPlan(NamedTuple):
     units: list[Unit]
     doors: list[Door]
     adjacency: list[tuple[int, int]]
+    obstacles: list[tuple[tuple[tuple[float, float], ...], ...]]
+    """The solid blocks as polygons (outer ring, then holes; closed rings in map metres)."""
     classes_map: npt.NDArray[np.uint8]
     classes_world: npt.NDArray[np.uint8]
     k: float
@@ -195,9 +198,24 @@ def describe(
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
-    cw = render(world, (classes_map.shape[0], classes_map.shape[1]), wall_cells=t,
-                obstacles=_obstacles(classes_map, settings, resolution_m))
-    return FloorPlan(world, units, doors, adjacency, classes_map, cw, cell_prediction_rate(classes_map, cw),
+    solid = _obstacles(classes_map, settings, resolution_m)
+    cw = render(world, (classes_map.shape[0], classes_map.shape[1]), wall_cells=t, obstacles=solid)
+    contours, hierarchy = cv2.findContours(solid.astype(np.uint8), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
+
+    def ring_of(contour: npt.NDArray[np.integer[Any]] | cv2.typing.MatLike) -> tuple[tuple[float, float], ...]:
+        pts = cv2.approxPolyDP(contour, 1.0, True).reshape(-1, 2)
+        ring = [xy(float(y) + 0.5, float(x) + 0.5) for x, y in pts]
+        return (*ring, ring[0]) if len(ring) >= 3 else ()
+
+    rings: list[tuple[tuple[tuple[float, float], ...], ...]] = []
+    for i, contour in enumerate(contours):
+        if hierarchy[0][i][3] != -1:
+            continue  # a hole: it goes with its outer boundary
+        outer = ring_of(contour)
+        holes = [ring_of(contours[j]) for j in range(len(contours)) if hierarchy[0][j][3] == i]
+        if outer:
+            rings.append((outer, *(h for h in holes if h)))
+    return FloorPlan(world, units, doors, adjacency, rings, classes_map, cw, cell_prediction_rate(classes_map, cw),
                      log_posterior, iterations, accepted, seconds, cpu_seconds, resolution_m, origin_xy_m)
 
 

@@ -31,9 +31,10 @@ def plan_layer(plan: FloorPlan, *, name: str, meta: Mapping[str, Any] | None = N
 
 
 def plan_features(plan: FloorPlan) -> dict[str, list[Feature]]:
-    """``unit`` features (polygon, ``label`` = type, ``probability``, ``area_m2``, ``adjacent`` keys) and
-    ``door`` features (segment, the two unit keys, ``width_m``); both kinds always present."""
-    out: dict[str, list[Feature]] = {FeatureKind.UNIT: [], FeatureKind.DOOR: []}
+    """``unit`` features (polygon, ``label`` = type, ``probability``, ``area_m2``, ``adjacent`` keys), ``door``
+    features (segment, the two unit keys, ``width_m``) and ``obstacle`` features (the solid blocks' polygons,
+    for the grid decomposition and planners); every kind always present."""
+    out: dict[str, list[Feature]] = {FeatureKind.UNIT: [], FeatureKind.DOOR: [], FeatureKind.OBSTACLE: []}
     for item in geojson(plan)["features"]:
         props = item["properties"]
         if props["kind"] == FeatureKind.UNIT:
@@ -41,6 +42,8 @@ def plan_features(plan: FloorPlan) -> dict[str, list[Feature]]:
                 "label": props["label"], "area_m2": props["area_m2"],
                 "adjacent": [unit_key(u) for u in props["adjacent"]],
             }, confidence=props["probability"]))
+        elif props["kind"] == FeatureKind.OBSTACLE:
+            out[FeatureKind.OBSTACLE].append(Feature(FeatureKind.OBSTACLE, f"o{props['id']}", item["geometry"]))
         else:
             a, b = props["units"]
             start = item["geometry"]["coordinates"][0]

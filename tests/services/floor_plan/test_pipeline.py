@@ -81,6 +81,11 @@ def test_solid_blocks_are_obstacles_the_world_draws_as_walls() -> None:
     assert np.all(plan.classes_world[:5] == CellClass.WALL)
     assert np.all(plan.classes_world[33:47, 43:77] == CellClass.WALL)
     assert plan.k > float(np.mean(plan.classes_map == CellClass.WALL))
+    # reported as obstacles in map metres: the block (2 m x 1 m at x 2..4 m, y 1.5..2.5 m) is one of them
+    block = [poly for poly in plan.obstacles if all(1.9 <= x <= 4.1 and 1.4 <= y <= 2.6 for x, y in poly[0])]
+    assert len(block) == 1
+    outside = [poly for poly in plan.obstacles if len(poly) == 2]  # the filled outside, the room its hole
+    assert len(outside) == 1
 
 
 def test_units_png_labels_only_free_cells_one_id_per_unit() -> None:
