@@ -87,6 +87,14 @@ def _parser() -> argparse.ArgumentParser:
     decompose.add_argument("--resolution", type=_positive, default=None, help="metres per pixel of a bare image")
     decompose.add_argument("--labels", default="", help="category overrides, e.g. 0=corridor,3=storage")
 
+    plan = commands.add_parser("floor-plan", help="units, doors and unit types of an occupancy map (MCMC)")
+    plan.add_argument("map", type=Path, help="map_server YAML, or a bare PNG/PGM with --resolution")
+    plan.add_argument("--out", type=Path, required=True, help="folder for floor_plan.geojson, units.png, overview.png")
+    plan.add_argument("--resolution", type=_positive, default=None, help="metres per pixel of a bare image")
+    plan.add_argument("--iterations", type=int, default=8000, help="Metropolis-Hastings iterations")
+    plan.add_argument("--max-seconds", type=_positive, default=60.0, help="wall-time bound of the chain")
+    plan.add_argument("--seed", type=int, default=0, help="random seed of the chain")
+
     pillars = commands.add_parser("pillars", help="rack uprights from a downward fisheye camera").add_subparsers(
         dest="pillars_command", required=True, metavar="PILLARS_COMMAND")
     detect = pillars.add_parser("detect", help="print bearings to the uprights in one image")
@@ -245,6 +253,8 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             overrides = parse_label_overrides(args.labels) if args.labels else None
             decompose_map_file(args.map, args.out, resolution_m=args.resolution, label_overrides=overrides)
             log.info("wrote the decomposition of %s to %s", args.map, args.out)
+        case "floor-plan":
+            _floor_plan(args)
         case "train-classifier" | "eval-classifier":
             _classifier(args, settings)
         case "keys":
@@ -252,6 +262,20 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
         case "export":
             return _export(args, settings)
     return 0
+
+
+def _floor_plan(args: argparse.Namespace) -> None:
+    from services.floor_plan import ChainSettings, FloorPlanError, FloorPlanSettings
+    from services.floor_plan.mapfile import floor_plan_map_file
+
+    if args.iterations < 1:
+        raise FloorPlanError(f"--iterations must be at least 1, got {args.iterations}")
+    chain = ChainSettings(iterations=args.iterations, max_seconds=args.max_seconds, seed=args.seed)
+    plan = floor_plan_map_file(args.map, args.out, resolution_m=args.resolution,
+                               settings=FloorPlanSettings(chain=chain))
+    rate = plan.iterations / plan.seconds if plan.seconds > 0 else float("inf")
+    print(f"K(W,M) {100 * plan.k:.2f} %  units {len(plan.units)}  doors {len(plan.doors)}  "
+          f"iterations {plan.iterations}  {rate:.0f} iterations/s  (CPU {plan.cpu_seconds:.2f} s)")
 
 
 def _keys(args: argparse.Namespace, settings: Settings) -> int:

@@ -25,6 +25,7 @@ def stage_factories() -> dict[str, StageFactory]:
 
     Each factory builds its stage from the stage's own settings section (``context.settings.<section>``).
     """
+    from services.floor_plan.worker import floor_plan_stage
     from services.grid_decomposition.worker import decomposition_stage
     from services.object_labelling.worker import labelling_stage
     from services.occupancy_mapping.worker import occupancy_stage
@@ -37,6 +38,7 @@ def stage_factories() -> dict[str, StageFactory]:
         "pillar_mapping": pillar_stage,
         "object_labelling": labelling_stage,
         "semantic_fusion": fusion_stage,
+        "floor_plan": floor_plan_stage,
     }
     assert set(factories) == set(STAGES)
     return factories

@@ -25,7 +25,8 @@ from shared.vocabulary import LayerName
 if TYPE_CHECKING:
     from shared.store.retention import RetentionPolicy
 
-STAGES = ("occupancy_mapping", "grid_decomposition", "pillar_mapping", "object_labelling", "semantic_fusion")
+STAGES = ("occupancy_mapping", "grid_decomposition", "pillar_mapping", "object_labelling", "semantic_fusion",
+          "floor_plan")
 """Every stage worker Aisle has (``aisle worker STAGE``)."""
 
 
@@ -236,6 +237,30 @@ class RetentionSettings(BaseModel):
         return RetentionPolicy(self.keep_all_hours * 3600.0, self.hourly_hours * 3600.0, frozenset(self.keep_stages))
 
 
+class FloorPlanStageSettings(BaseModel):
+    """The floor-plan stage: the occupancy layer into units, doors and unit types (seed 003, chapter 3)."""
+
+    source_layer: str = Field(LayerName.OCCUPANCY, min_length=1, description="The occupancy layer explained.")
+    layer: str = Field(LayerName.FLOOR_PLAN, min_length=1, description="C_W as a grid: 0 free, 1 unknown, 2 wall.")
+    min_period_s: float = Field(10.0, ge=0.0, description="Least time between two floor plans.")
+    safety_poll_period_s: float = Field(30.0, gt=0.0, description="How often the store is checked without events.")
+    iterations: int = Field(8000, ge=1, description="Metropolis-Hastings iterations of a fresh chain.")
+    warm_iterations: int = Field(2000, ge=1, description="Iterations of a chain warm-started from the last world.")
+    max_seconds: float = Field(30.0, gt=0.0, description="Wall-time bound of one chain.")
+    wall_m: float = Field(0.1, gt=0.0, description="Wall thickness of a unit.")
+    hall_area_m2: float = Field(120.0, gt=0.0, description="Units at least this large are hall-like (table 3.6).")
+    corridor_ratio: float = Field(3.0, gt=1.0, description="Length/width from which a unit is corridor-like.")
+    type_rule_weight: float = Field(2.0, ge=0.0, description="Weight of each type rule of table 3.5.")
+    same_length_rule_weight: float = Field(1.5, ge=0.0, description="Weight of each SaLe rule of table 3.5.")
+    same_length_sigma_m: float = Field(0.5, gt=0.0, description="sigma of the same-length prior (eq. 3.34).")
+
+    @model_validator(mode="after")
+    def _distinct_layers(self) -> FloorPlanStageSettings:
+        if self.source_layer == self.layer:
+            raise ValueError(f"source_layer and layer must differ, got {self.layer!r} for both")
+        return self
+
+
 class Settings(BaseSettings):
     """All Aisle settings; build once with :func:`get_settings` and pass it in."""
 
@@ -285,6 +310,7 @@ class Settings(BaseSettings):
     fusion: SemanticFusionSettings = Field(default_factory=SemanticFusionSettings)
     labelling: LabellingSettings = Field(default_factory=LabellingSettings)
     decomposition: DecompositionSettings = Field(default_factory=DecompositionSettings)
+    floor_plan: FloorPlanStageSettings = Field(default_factory=FloorPlanStageSettings)
     stages: list[str] = Field(
         default_factory=lambda: ["occupancy_mapping", "grid_decomposition", "pillar_mapping", "semantic_fusion"],
         description="Stages `aisle run` starts; object_labelling needs a model from `aisle train-classifier` first.",

@@ -36,6 +36,12 @@ class FeatureKind(enum.StrEnum):
     CHARGER = "charger"
     ROBOT = "robot"
     """A robot heard on the bus: its latest pose and its track over the last minute (``shared.robots``)."""
+    UNIT = "unit"
+    """A space unit of the floor plan: a rectangle with walls, typed room, corridor, hall or other."""
+    DOOR = "door"
+    """A door of the floor plan: an opening in the wall two units share."""
+    OBSTACLE = "obstacle"
+    """A solid block of the map (a rack drawn solid, a filled outside) the floor plan keeps out of its units."""
 
 
 REGION_KINDS: Final = (FeatureKind.CORRIDOR, FeatureKind.JUNCTION, FeatureKind.ROOM, FeatureKind.OPEN_AREA,
@@ -54,6 +60,7 @@ class LayerName(enum.StrEnum):
     PLACE_SEGMENTS = "place_segments"
     SEMANTIC_LABEL = "semantic_label"
     SEMANTIC_ENTROPY = "semantic_entropy"
+    FLOOR_PLAN = "floor_plan"
 
 
 class PlaceLabel(enum.IntEnum):

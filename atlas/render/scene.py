@@ -97,6 +97,8 @@ class KindStyle:
 
 KIND_STYLES: Mapping[str, KindStyle] = {
     # places: outlines in darker shades of their place-label colours (the tint fills them)
+    FeatureKind.UNIT: KindStyle((30, 60, 230), 2, 0.1, Marker.SQUARE, 6, False, Swatch.FILL),
+    FeatureKind.OBSTACLE: KindStyle((90, 60, 40), 1, 0.4, Marker.SQUARE, 6, False, Swatch.FILL),
     FeatureKind.REGION: KindStyle((200, 130, 30), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
     FeatureKind.OPEN_AREA: KindStyle((60, 160, 180), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
     FeatureKind.ROOM: KindStyle((140, 100, 200), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
@@ -104,6 +106,7 @@ KIND_STYLES: Mapping[str, KindStyle] = {
     FeatureKind.JUNCTION: KindStyle((40, 70, 200), 1, 0.0, Marker.SQUARE, 6, False, Swatch.FILL),
     FeatureKind.LINE: KindStyle((150, 150, 150), 1, 0.0, Marker.DOT, 4, False, Swatch.LINE),
     FeatureKind.WALL: KindStyle((200, 30, 30), 2, 0.0, Marker.SQUARE, 6, False, Swatch.LINE),
+    FeatureKind.DOOR: KindStyle((0, 200, 210), 3, 0.0, Marker.SQUARE, 6, False, Swatch.LINE),
     FeatureKind.RACK_ROW: KindStyle((139, 69, 19), 2, 0.25, Marker.SQUARE, 6, False, Swatch.LINE),
     FeatureKind.BIN: KindStyle((255, 140, 0), 1, 0.35, Marker.SQUARE, 6, False, Swatch.FILL),
     FeatureKind.PILLAR: KindStyle((30, 30, 30), 1, 0.0, Marker.DOT, 4, False, Swatch.MARKER),

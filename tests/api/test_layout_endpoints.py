@@ -10,6 +10,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from api.routers import layout
+from services.floor_plan import SEED_SCHEDULE, ChainSettings, FloorPlanSettings, Phase, floor_plan
+from services.floor_plan.records import plan_features, plan_layer, plan_topology
 from shared.store import Feature, MapStore, RevisionWrite
 from shared.vocabulary import REVISION_HEADER
 
@@ -193,3 +195,23 @@ def test_layout_since_a_revision_holds_only_what_changed_and_what_went(
     unchanged = client.get("/v1/maps/site/layout", params={"since": site["semantics_2"]}).json()
     assert unchanged["features"] == [] and unchanged["removed"] == {}
     assert "removed" not in client.get("/v1/maps/site/layout").json()
+
+
+def test_layout_serves_the_floor_plans_units_and_doors(client: TestClient, store: MapStore) -> None:
+    occ = np.full((80, 120), -1, np.int8)
+    for c0, c1 in ((10, 60), (59, 109)):
+        occ[10:70, c0 : c1 + 1] = 100
+        occ[12:68, c0 + 2 : c1 - 1] = 0
+    occ[35:48, 59:61] = 0
+    short = tuple(Phase(None if p.until is None else p.until // 4, p.probabilities) for p in SEED_SCHEDULE)
+    plan = floor_plan(occ, resolution_m=0.05, settings=FloorPlanSettings(
+        chain=ChainSettings(iterations=2000, seed=1, schedule=short)))
+    map_id = store.ensure_map("plan").id
+    store.write_revision(map_id, RevisionWrite("floor_plan", layers=[plan_layer(plan, name="floor_plan")],
+                                               features=plan_features(plan), topology=plan_topology(plan)))
+
+    body = client.get("/v1/maps/plan/layout", params=[("kind", "unit"), ("kind", "door")]).json()
+
+    assert body["kinds"] == {"unit": 2, "door": 1}
+    doors = [f for f in body["features"] if f["properties"].get("units")]
+    assert len(doors) == 1 and len(doors[0]["properties"]["units"]) == 2

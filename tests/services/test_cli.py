@@ -104,6 +104,17 @@ def test_decompose_writes_every_output(tmp_path: Path) -> None:
     assert main(["decompose", str(tmp_path / "demo" / "world.geojson"), "--out", str(tmp_path / "bad")]) == 1
 
 
+def test_floor_plan_writes_every_output_and_prints_k(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["sim", "world", "demo", "--out", str(tmp_path / "demo")]) == 0
+    capsys.readouterr()
+    yaml_path = str(tmp_path / "demo" / "occupancy.yaml")
+    assert main(["floor-plan", yaml_path, "--out", str(tmp_path / "fp"), "--iterations", "300"]) == 0
+    assert "K(W,M)" in capsys.readouterr().out
+    for name in ("floor_plan.geojson", "units.png", "overview.png"):
+        assert (tmp_path / "fp" / name).is_file()
+    assert main(["floor-plan", str(tmp_path / "demo" / "world.geojson"), "--out", str(tmp_path / "bad")]) == 1
+
+
 def test_keys_are_created_listed_and_revoked(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["keys", "create", "--role", "read", "--name", "wms"]) == 0
     key_id, _, secret = capsys.readouterr().out.strip().partition(": ")

@@ -1,0 +1,225 @@
+"""Floor plan (seed 003, chapter 3) on real maps: K(W,M), iterations/s and rooms as the ipa protocol scores them.
+
+Prints a Markdown table per set and ``name value unit`` lines, one BLAS thread, seconds as wall time and
+CPU time (``time.process_time``) with the load average, since the machine may be shared.
+
+* ``rose2``: the ROSE\u00b2 full maps (``../shared/data/maps/rose2/full``, free = grey >= 250, occupied <= 89, the
+  rest unknown, 0.05 m/px): K(W,M) (eq. 3.39, every cell of the map), K over known cells, and
+  ``units.png`` scored as ``bench/eval_ipa.py`` scores segmentations of these maps (free pixels only,
+  each ground-truth colour one room), beside ROSE\u00b2's own ``rose2_rooms.png``.
+* ``ipa``: the plain ipa maps read as ``aisle floor-plan MAP.png --resolution 0.05`` reads them; K(W,M)
+  and the ipa scores (every labelled pixel counts).
+* ``partial``: the 15 growing ubremen maps in order, each warm-started from the previous world; the share
+  of units of map k that keep their id in map k+1 (same rectangle after the map's shift, or the unit
+  with the most overlap), and the seconds of each warm update.
+
+Run: ``PYTHONPATH=. .venv/bin/python bench/bench_floor_plan.py [--sets rose2 ipa partial] [--iterations N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+from PIL import Image
+from threadpoolctl import threadpool_limits
+
+from services.floor_plan import ChainSettings, FloorPlan, FloorPlanSettings, World, floor_plan, unit_labels
+from services.floor_plan.mapfile import read_map
+from services.floor_plan.world import Rect
+from services.grid_decomposition.evaluation import (
+    FREE_GREY,
+    align_offset,
+    colour_rooms,
+    ground_truth_rooms,
+    ipa_scores,
+    on_free,
+)
+
+MAPS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
+IPA = MAPS / "ipa_room_segmentation"
+ROSE2 = MAPS / "rose2"
+RES = 0.05
+OCCUPIED_GREY = 89
+WHITE = ((0, 0, 0), (255, 255, 255))
+
+
+class Row(NamedTuple):
+    k: float
+    k_known: float
+    recall: float
+    precision: float
+    seconds: float
+    cpu: float
+    rate: float  # iterations per wall second
+    cpu_rate: float  # iterations per CPU second of the chain
+
+
+def _grey(path: Path) -> npt.NDArray[np.uint8]:
+    with Image.open(path) as image:
+        return np.asarray(image.convert("L"))
+
+
+def _rgb(path: Path) -> npt.NDArray[np.uint8]:
+    with Image.open(path) as image:
+        return np.asarray(image.convert("RGB"))
+
+
+def rose2_occupancy(grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int8]:
+    occ = np.full(grey.shape, -1, dtype=np.int8)
+    occ[grey >= FREE_GREY] = 0
+    occ[grey <= OCCUPIED_GREY] = 100
+    return occ[::-1].copy()
+
+
+def _plan(occ: npt.NDArray[np.int8], iterations: int, start: World | None = None) -> tuple[FloorPlan, float, float]:
+    settings = FloorPlanSettings(chain=ChainSettings(iterations=iterations, max_seconds=600.0, seed=0))
+    t0, c0 = time.perf_counter(), time.process_time()
+    plan = floor_plan(occ, resolution_m=RES, settings=settings, start=start)
+    return plan, time.perf_counter() - t0, time.process_time() - c0
+
+
+def _k_known(plan: FloorPlan) -> float:
+    known = plan.classes_map != 1
+    return float(np.mean(plan.classes_map[known] == plan.classes_world[known]))
+
+
+def _common(*images: npt.NDArray[np.generic]) -> list[npt.NDArray[np.generic]]:
+    h = min(i.shape[0] for i in images)
+    w = min(i.shape[1] for i in images)
+    return [i[:h, :w] for i in images]
+
+
+def _header() -> None:
+    print("\n| set | map | K(W,M) % | K known % | recall % | precision % | units | doors | it/s | it/CPU s | s "
+          "| CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def _row(tag: str, name: str, plan: FloorPlan, r: Row) -> None:
+    print(f"| {tag} | {name} | {100 * r.k:.1f} | {100 * r.k_known:.1f} | {100 * r.recall:.1f} | "
+          f"{100 * r.precision:.1f} | {len(plan.units)} | {len(plan.doors)} | {r.rate:.0f} | {r.cpu_rate:.0f} | "
+          f"{r.seconds:.1f} | {r.cpu:.1f} |")
+
+
+def _summary(tag: str, rows: list[Row]) -> None:
+    if not rows:
+        return
+    for field, unit in (("k", "%"), ("k_known", "%"), ("recall", "%"), ("precision", "%")):
+        values = [getattr(r, field) for r in rows]
+        print(f"{tag}_{field}_mean {100 * statistics.fmean(values):.2f} {unit}")
+        print(f"{tag}_{field}_min {100 * min(values):.2f} {unit}")
+    print(f"{tag}_iterations_per_second_median {statistics.median(r.rate for r in rows):.0f} 1/s")
+    print(f"{tag}_iterations_per_cpu_second_median {statistics.median(r.cpu_rate for r in rows):.0f} 1/s")
+    print(f"{tag}_cpu_seconds_median {statistics.median(r.cpu for r in rows):.2f} s")
+
+
+def _rose2(iterations: int, only: list[str] | None) -> None:
+    _header()
+    rows: list[Row] = []
+    peers = []
+    for folder in sorted(p for p in (ROSE2 / "full").iterdir() if p.is_dir()):
+        if only and folder.name not in only:
+            continue
+        grey = _grey(folder / "map.png")
+        plan, seconds, cpu = _plan(rose2_occupancy(grey), iterations)
+        labels = np.ascontiguousarray(unit_labels(plan)[::-1])
+        cut, gt, theirs, ours = _common(grey, _rgb(folder / "gt.png"), _rgb(folder / "rose2_rooms.png"), labels)
+        free = np.asarray(cut) >= FREE_GREY
+        rooms = on_free(colour_rooms(np.asarray(gt)), free)
+        s = ipa_scores(on_free(np.asarray(ours), free), rooms)
+        peer = ipa_scores(on_free(colour_rooms(np.asarray(theirs), background=WHITE), free), rooms)
+        peers.append(peer)
+        r = Row(plan.k, _k_known(plan), s.recall, s.precision, seconds, cpu, plan.iterations / max(seconds, 1e-9),
+                plan.iterations / max(plan.cpu_seconds, 1e-9))
+        rows.append(r)
+        _row("rose2", folder.name, plan, r)
+        print(f"| rose2_peer | {folder.name} | | | {100 * peer.recall:.1f} | {100 * peer.precision:.1f} | | | | | | |")
+    _summary("rose2", rows)
+    if peers:
+        print(f"rose2_peer_recall_mean {100 * statistics.fmean(p.recall for p in peers):.2f} %")
+        print(f"rose2_peer_precision_mean {100 * statistics.fmean(p.precision for p in peers):.2f} %")
+
+
+def _ipa(iterations: int, only: list[str] | None) -> None:
+    names = sorted(p.name[: -len("_gt_segmentation.png")] for p in IPA.glob("*_gt_segmentation.png"))
+    _header()
+    rows: list[Row] = []
+    for name in names:
+        if only and name not in only:
+            continue
+        truth = _grey(IPA / f"{name}_gt_segmentation.png")
+        occ, _, _ = read_map(IPA / f"{name}.png", resolution_m=RES)
+        if occ.shape != truth.shape:
+            continue
+        plan, seconds, cpu = _plan(occ, iterations)
+        s = ipa_scores(np.ascontiguousarray(unit_labels(plan)[::-1]), ground_truth_rooms(truth))
+        r = Row(plan.k, _k_known(plan), s.recall, s.precision, seconds, cpu, plan.iterations / max(seconds, 1e-9),
+                plan.iterations / max(plan.cpu_seconds, 1e-9))
+        rows.append(r)
+        _row("ipa", name, plan, r)
+    _summary("ipa", rows)
+
+
+def _partial(iterations: int) -> None:
+    steps = sorted((p for p in (ROSE2 / "partial_ubremen").iterdir() if p.is_dir()), key=lambda p: int(p.name[3:]))
+    _header()
+    previous: tuple[FloorPlan, npt.NDArray[np.bool_]] | None = None
+    shares, updates = [], []
+    for folder in steps:
+        grey = _grey(folder / "map.png")
+        occ = rose2_occupancy(grey)
+        free = grey >= FREE_GREY
+        start = None
+        if previous is not None:
+            dr, dc = align_offset(previous[1], free)  # image rows/cols of the new map = old + offset
+            h = occ.shape[0]
+            old_h = previous[1].shape[0]
+            # GridLayer rows count from the bottom: an image shift of dr rows is a layer shift of
+            # (h - old_h) - dr rows
+            lr = (h - old_h) - dr
+            start = World({u: Rect(r.r0 + lr, r.r1 + lr, r.c0 + dc, r.c1 + dc)
+                           for u, r in previous[0].world.units.items()}, set(), previous[0].world.next_id)
+        plan, seconds, cpu = _plan(occ, iterations if start is None else max(iterations // 4, 1), start)
+        r = Row(plan.k, _k_known(plan), float("nan"), float("nan"), seconds, cpu,
+                plan.iterations / max(seconds, 1e-9), plan.iterations / max(plan.cpu_seconds, 1e-9))
+        _row("partial", folder.name, plan, r)
+        if start is not None:
+            updates.append(cpu)
+            kept = sum(1 for u in plan.units if u.id in start.units)
+            shares.append(kept / max(len(start.units), 1))
+            print(f"| partial_ids | {folder.name} | kept {kept} of {len(start.units)} | | | | | | | | | |")
+        previous = (plan, free)
+    if shares:
+        print(f"partial_ids_kept_mean {100 * statistics.fmean(shares):.2f} %")
+        print(f"partial_warm_update_cpu_seconds_median {statistics.median(updates):.2f} s")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--sets", nargs="*", default=["rose2", "ipa", "partial"], choices=["rose2", "ipa", "partial"])
+    parser.add_argument("--iterations", type=int, default=8000)
+    parser.add_argument("--maps", nargs="*", default=None, help="only these map names")
+    args = parser.parse_args()
+    if not MAPS.is_dir():
+        print(f"skipped: {MAPS} is absent")
+        return
+    print(f"load average at start {os.getloadavg()[0]:.2f}")
+    with threadpool_limits(1):
+        if "rose2" in args.sets:
+            _rose2(args.iterations, args.maps)
+        if "ipa" in args.sets:
+            _ipa(args.iterations, args.maps)
+        if "partial" in args.sets:
+            _partial(args.iterations)
+    print(f"load average at end {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()

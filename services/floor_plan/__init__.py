@@ -1,0 +1,58 @@
+"""Floor plan: a parametric world of rectangular units, doors and unit types by knowledge-supervised MCMC.
+
+Seed 003, chapter 3: an occupancy grid is explained by units (rectangles with four walls), doors between
+adjacent units and a type per unit (room, corridor, hall, other), found by data-driven Metropolis-Hastings
+under a Markov-logic context prior.
+"""
+
+from services.floor_plan.chain import SEED_SCHEDULE, Chain, ChainResult, ChainSettings, Phase, run_chain
+from services.floor_plan.context import ContextPrior, ContextSettings, UnitEvidence, type_marginals
+from services.floor_plan.errors import FloorPlanError
+from services.floor_plan.kernels import Kernel, KernelSettings, Move, Proposer
+from services.floor_plan.likelihood import (
+    SEED_SENSOR_MODEL,
+    Canvas,
+    CellClass,
+    cell_prediction_rate,
+    classify_map,
+    log_sensor_table,
+    render,
+)
+from services.floor_plan.pipeline import Door, FloorPlan, FloorPlanSettings, Unit, describe, floor_plan, unit_labels
+from services.floor_plan.world import Rect, Side, UnitType, World
+
+__all__ = [
+    "SEED_SCHEDULE",
+    "SEED_SENSOR_MODEL",
+    "Canvas",
+    "CellClass",
+    "Chain",
+    "ChainResult",
+    "ChainSettings",
+    "ContextPrior",
+    "ContextSettings",
+    "Door",
+    "FloorPlan",
+    "FloorPlanError",
+    "FloorPlanSettings",
+    "Kernel",
+    "KernelSettings",
+    "Move",
+    "Phase",
+    "Proposer",
+    "Rect",
+    "Side",
+    "Unit",
+    "UnitEvidence",
+    "UnitType",
+    "World",
+    "cell_prediction_rate",
+    "classify_map",
+    "describe",
+    "floor_plan",
+    "log_sensor_table",
+    "render",
+    "run_chain",
+    "type_marginals",
+    "unit_labels",
+]

@@ -1,0 +1,133 @@
+"""Offline floor plan of a map file (``aisle floor-plan``): read YAML/PNG/PGM, fit, write GeoJSON and images."""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from PIL import Image, UnidentifiedImageError
+
+from services.floor_plan.errors import FloorPlanError
+from services.floor_plan.overview import overview_image
+from services.floor_plan.pipeline import FloorPlan, FloorPlanSettings, floor_plan, unit_labels
+from shared.mapfiles import MapFileError, read_map_yaml
+from shared.vocabulary import FeatureKind
+
+logger = logging.getLogger(__name__)
+
+_IMAGE_SUFFIXES = {".png", ".pgm", ".ppm", ".bmp", ".tif", ".tiff", ".jpg", ".jpeg"}
+
+
+def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.NDArray[np.int8], float,
+                                                                               tuple[float, float]]:
+    """Occupancy (GridLayer order: row 0 = lowest y), resolution and origin of a map_server YAML or bare image.
+
+    A bare image is read with map_server's trinary thresholds (darkness above 0.65 occupied, below 0.196
+    free) and needs ``resolution_m``; its origin is (0, 0).
+
+    Raises
+    ------
+    FloorPlanError
+        Missing or unreadable files, malformed YAML, a bare image without a resolution.
+    """
+    path = Path(map_path)
+    if not path.exists():
+        raise FloorPlanError(f"map file {path} does not exist")
+    if path.suffix.lower() in {".yaml", ".yml"}:
+        try:
+            image = read_map_yaml(path)
+        except MapFileError as err:
+            raise FloorPlanError(str(err)) from err
+        if resolution_m is not None and not math.isclose(resolution_m, image.resolution_m, rel_tol=1e-6):
+            raise FloorPlanError(f"--resolution {resolution_m} m disagrees with {path}'s {image.resolution_m} m")
+        return image.occupancy, image.resolution_m, (image.origin_x_m, image.origin_y_m)
+    if path.suffix.lower() not in _IMAGE_SUFFIXES:
+        raise FloorPlanError(f"map file {path} is neither a map_server YAML nor an image ({sorted(_IMAGE_SUFFIXES)})")
+    if resolution_m is None:
+        raise FloorPlanError(f"map image {path} has no YAML: give its resolution in metres per pixel")
+    try:
+        with Image.open(path) as im:
+            grey = np.asarray(im.convert("L"), dtype=np.float64)
+    except (OSError, UnidentifiedImageError) as err:
+        raise FloorPlanError(f"map image {path} is not a readable image: {err}") from err
+    darkness = (255.0 - grey) / 255.0
+    occ = np.full(grey.shape, -1, dtype=np.int8)
+    occ[darkness > 0.65] = 100
+    occ[darkness < 0.196] = 0
+    return occ[::-1].copy(), float(resolution_m), (0.0, 0.0)
+
+
+def geojson(plan: FloorPlan) -> dict[str, Any]:
+    """GeoJSON FeatureCollection: unit polygons (type, probability, neighbours), door segments and the
+    solid obstacles (polygons)."""
+    neighbours: dict[int, list[int]] = {u.id: [] for u in plan.units}
+    for a, b in plan.adjacency:
+        neighbours[a].append(b)
+        neighbours[b].append(a)
+    features: list[dict[str, Any]] = [
+        {
+            "type": "Feature",
+            "geometry": {"type": "Polygon", "coordinates": [[list(p) for p in u.polygon_xy_m]]},
+            "properties": {"kind": FeatureKind.UNIT, "id": u.id, "label": str(u.unit_type),
+                           "probability": round(u.probability, 4), "area_m2": round(u.area_m2, 3),
+                           "adjacent": sorted(neighbours[u.id])},
+        }
+        for u in plan.units
+    ]
+    features += [
+        {
+            "type": "Feature",
+            "geometry": {"type": "LineString", "coordinates": [list(p) for p in d.segment_xy_m]},
+            "properties": {"kind": FeatureKind.DOOR, "id": i, "units": list(d.units), "width_m": round(d.width_m, 3)},
+        }
+        for i, d in enumerate(plan.doors)
+    ]
+    features += [
+        {
+            "type": "Feature",
+            "geometry": {"type": "Polygon", "coordinates": [[list(p) for p in ring] for ring in polygon]},
+            "properties": {"kind": FeatureKind.OBSTACLE, "id": i},
+        }
+        for i, polygon in enumerate(plan.obstacles)
+    ]
+    return {"type": "FeatureCollection", "features": features,
+            "properties": {"k": round(plan.k, 6), "iterations": plan.iterations}}
+
+
+def write_outputs(plan: FloorPlan, out_dir: Path) -> dict[str, Path]:
+    """Write floor_plan.geojson, units.png (16-bit unit ids on free cells) and overview.png; image rows top = high y."""
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise FloorPlanError(f"cannot create output folder {out}: {err}") from err
+    paths = {"geojson": out / "floor_plan.geojson", "units": out / "units.png", "overview": out / "overview.png"}
+    labels = unit_labels(plan)
+    if labels.max() > np.iinfo(np.uint16).max:
+        raise FloorPlanError(f"unit id {labels.max()} does not fit a 16-bit units.png")
+    paths["geojson"].write_text(json.dumps(geojson(plan)))
+    cv2.imwrite(str(paths["units"]), np.ascontiguousarray(labels[::-1].astype(np.uint16)))
+    Image.fromarray(overview_image(plan)).save(paths["overview"])
+    return paths
+
+
+def floor_plan_map_file(map_path: Path, out_dir: Path, *, resolution_m: float | None = None,
+                        settings: FloorPlanSettings | None = None) -> FloorPlan:
+    """Fit a floor plan to a map file and write its outputs (the ``aisle floor-plan`` command).
+
+    Raises
+    ------
+    FloorPlanError
+        Missing, unreadable or malformed map files; maps too small or without free space.
+    """
+    occ, res, origin = read_map(Path(map_path), resolution_m=resolution_m)
+    plan = floor_plan(occ, resolution_m=res, origin_xy_m=origin, settings=settings)
+    write_outputs(plan, Path(out_dir))
+    logger.info("floor plan of %s: %d units, %d doors into %s", map_path, len(plan.units), len(plan.doors), out_dir)
+    return plan

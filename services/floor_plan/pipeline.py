@@ -1,0 +1,233 @@
+"""Occupancy grid -> parametric floor plan: units, doors, types (the stage's one entry point)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from services.floor_plan.chain import Chain, ChainSettings, run_chain
+from services.floor_plan.context import ContextPrior, ContextSettings
+from services.floor_plan.detectors import Evidence, wall_lines, wbu_candidates
+from services.floor_plan.errors import FloorPlanError
+from services.floor_plan.kernels import KernelSettings, Proposer
+from services.floor_plan.likelihood import (
+    SEED_SENSOR_MODEL,
+    Canvas,
+    CellClass,
+    cell_prediction_rate,
+    classify_map,
+    log_sensor_table,
+    render,
+    solid_obstacles,
+)
+from services.floor_plan.world import Rect, UnitType, World, shared_band
+
+
+@dataclass(frozen=True)
+class FloorPlanSettings:
+    """Everything that tunes the floor plan; lengths in metres."""
+
+    wall_m: float = 0.1
+    min_inner_m: float = 0.5
+    min_door_m: float = 0.5
+    min_line_m: float = 0.8
+    occupied_percent: int = 65
+    free_percent: int = 25
+    sensor_model: tuple[tuple[float, ...], ...] = SEED_SENSOR_MODEL
+    overlap_psi: float = 0.2
+    obstacle_min_m: float = 0.3
+    """Occupied blocks at least this thick everywhere are solid obstacles (racks drawn solid, a filled outside):
+    the world renders them as walls and keeps units off them; thinner occupied cells are walls to explain."""
+    shift_sigma_m: float = 0.15
+    max_shift_m: float = 0.5
+    chain: ChainSettings = field(default_factory=ChainSettings)
+    context: ContextSettings = field(default_factory=ContextSettings)
+    warm_start_iteration: int = 4001
+    """Where a warm-started chain enters the schedule: the last phase of table 3.2, every kernel on."""
+
+
+class Unit(NamedTuple):
+    id: int
+    rect: Rect
+    polygon_xy_m: tuple[tuple[float, float], ...]  # closed ring, 5 points, map frame
+    unit_type: UnitType
+    probability: float
+    area_m2: float
+
+
+class Door(NamedTuple):
+    rect: Rect
+    segment_xy_m: tuple[tuple[float, float], tuple[float, float]]
+    units: tuple[int, int]
+    width_m: float
+
+
+class FloorPlan(NamedTuple):
+    """A floor plan and how well it explains the map.
+
+    ``classes_map``/``classes_world`` are C_M and C_W (uint8 :class:`CellClass`, GridLayer row order);
+    ``k`` is K(W,M) (eq. 3.39).
+    """
+
+    world: World
+    units: list[Unit]
+    doors: list[Door]
+    adjacency: list[tuple[int, int]]
+    obstacles: list[tuple[tuple[tuple[float, float], ...], ...]]
+    """The solid blocks as polygons (outer ring, then holes; closed rings in map metres)."""
+    classes_map: npt.NDArray[np.uint8]
+    classes_world: npt.NDArray[np.uint8]
+    k: float
+    log_posterior: float
+    iterations: int
+    accepted: int
+    seconds: float
+    cpu_seconds: float
+    resolution_m: float
+    origin_xy_m: tuple[float, float]
+
+
+def _cells(metres: float, resolution_m: float) -> int:
+    return max(1, round(metres / resolution_m))
+
+
+def kernel_settings(settings: FloorPlanSettings, resolution_m: float) -> KernelSettings:
+    return KernelSettings(
+        wall_cells=_cells(settings.wall_m, resolution_m),
+        min_inner_cells=_cells(settings.min_inner_m, resolution_m),
+        shift_sigma_cells=max(settings.shift_sigma_m / resolution_m, 0.5),
+        max_shift_cells=_cells(settings.max_shift_m, resolution_m),
+        min_door_cells=_cells(settings.min_door_m, resolution_m),
+    )
+
+
+def _obstacles(classes: npt.NDArray[np.uint8], settings: FloorPlanSettings,
+               resolution_m: float) -> npt.NDArray[np.bool_]:
+    return solid_obstacles(classes, min_cells=max(_cells(settings.obstacle_min_m, resolution_m), 3))
+
+
+def floor_plan(
+    occupancy: npt.NDArray[np.integer], *, resolution_m: float, origin_xy_m: tuple[float, float] = (0.0, 0.0),
+    settings: FloorPlanSettings | None = None, start: World | None = None,
+) -> FloorPlan:
+    """Fit a world of units and doors to an occupancy grid by data-driven MCMC.
+
+    Parameters
+    ----------
+    occupancy : (H, W) int8
+        -1 unknown, 0..100 occupancy percent; row 0 is the lowest y (GridLayer order).
+    resolution_m : float
+        Metres per cell.
+    origin_xy_m : (float, float)
+        Map position of cell (0, 0)'s corner.
+    settings : FloorPlanSettings, optional
+    start : World, optional
+        A previous world to warm-start from (a grown map); units that no longer fit are dropped.
+
+    Raises
+    ------
+    FloorPlanError
+        Maps that are not 2-D, too small, without free cells; nonsensical settings.
+    """
+    s = settings or FloorPlanSettings()
+    if not math.isfinite(resolution_m) or resolution_m <= 0:
+        raise FloorPlanError(f"resolution must be a positive number of metres, got {resolution_m}")
+    classes = classify_map(occupancy, occupied_percent=s.occupied_percent, free_percent=s.free_percent)
+    ks = kernel_settings(s, resolution_m)
+    evidence = Evidence(classes)
+    lines = wall_lines(classes, wall_cells=ks.wall_cells, min_length_cells=_cells(s.min_line_m, resolution_m))
+    candidates = wbu_candidates(lines, evidence, wall_cells=ks.wall_cells, min_inner_cells=ks.min_inner_cells)
+    proposer = Proposer(evidence, lines, ks, candidates)
+    canvas = Canvas(classes, log_sensor_table(s.sensor_model), wall_cells=ks.wall_cells,
+                    log_overlap=math.log(s.overlap_psi), obstacles=_obstacles(classes, s, resolution_m))
+    prior = ContextPrior(resolution_m=resolution_m, wall_cells=ks.wall_cells, settings=s.context)
+    first = 1
+    world = World()
+    if start is not None and start.units:
+        world = World({u: r for u, r in start.units.items() if proposer.valid(r)}, set(), start.next_id)
+        world.doors = {d for d in start.doors if len(world.door_units(d, ks.wall_cells)) == 2}
+        first = s.warm_start_iteration
+    chain = Chain(world, canvas, proposer, prior)
+    result = run_chain(chain, classes, s.chain, first_iteration=first)
+    return describe(result.world, classes, resolution_m=resolution_m, origin_xy_m=origin_xy_m, settings=s,
+                    log_posterior=result.log_posterior, iterations=result.iterations, accepted=result.accepted,
+                    seconds=result.seconds, cpu_seconds=result.cpu_seconds)
+
+
+def describe(
+    world: World, classes_map: npt.NDArray[np.uint8], *, resolution_m: float, origin_xy_m: tuple[float, float],
+    settings: FloorPlanSettings, log_posterior: float = float("nan"), iterations: int = 0, accepted: int = 0,
+    seconds: float = 0.0, cpu_seconds: float = 0.0,
+) -> FloorPlan:
+    """A world's units, doors, types and K(W,M) in map coordinates."""
+    t = kernel_settings(settings, resolution_m).wall_cells
+    ox, oy = origin_xy_m
+
+    def xy(r: float, c: float) -> tuple[float, float]:
+        return round(ox + c * resolution_m, 4), round(oy + r * resolution_m, 4)
+
+    prior = ContextPrior(resolution_m=resolution_m, wall_cells=t, settings=settings.context)
+    sem = prior.semantics(world)
+    units = []
+    for uid, r in sorted(world.units.items()):
+        # the polygon runs along the middle of the walls
+        a0, a1 = r.r0 + t / 2, r.r1 + 1 - t / 2
+        b0, b1 = r.c0 + t / 2, r.c1 + 1 - t / 2
+        ring = (xy(a0, b0), xy(a0, b1), xy(a1, b1), xy(a1, b0), xy(a0, b0))
+        area = (a1 - a0) * (b1 - b0) * resolution_m**2
+        units.append(Unit(uid, r, ring, sem[uid].unit_type, sem[uid].probability, area))
+    doors = []
+    for d in sorted(world.doors):
+        holders = world.door_units(d, t)
+        if len(holders) != 2:
+            continue
+        if d.rows > d.cols:  # along rows: a vertical wall
+            c = d.c0 + d.cols / 2
+            seg = (xy(d.r0, c), xy(d.r1 + 1, c))
+            width = d.rows * resolution_m
+        else:
+            rr = d.r0 + d.rows / 2
+            seg = (xy(rr, d.c0), xy(rr, d.c1 + 1))
+            width = d.cols * resolution_m
+        doors.append(Door(d, seg, (holders[0], holders[1]), width))
+    ids = sorted(world.units)
+    adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
+                 if shared_band(world.units[a], world.units[b], t) is not None]
+    solid = _obstacles(classes_map, settings, resolution_m)
+    cw = render(world, (classes_map.shape[0], classes_map.shape[1]), wall_cells=t, obstacles=solid)
+    contours, hierarchy = cv2.findContours(solid.astype(np.uint8), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
+
+    def ring_of(contour: npt.NDArray[np.integer[Any]] | cv2.typing.MatLike) -> tuple[tuple[float, float], ...]:
+        pts = cv2.approxPolyDP(contour, 1.0, True).reshape(-1, 2)
+        ring = [xy(float(y) + 0.5, float(x) + 0.5) for x, y in pts]
+        return (*ring, ring[0]) if len(ring) >= 3 else ()
+
+    rings: list[tuple[tuple[tuple[float, float], ...], ...]] = []
+    for i, contour in enumerate(contours):
+        if hierarchy[0][i][3] != -1:
+            continue  # a hole: it goes with its outer boundary
+        outer = ring_of(contour)
+        holes = [ring_of(contours[j]) for j in range(len(contours)) if hierarchy[0][j][3] == i]
+        if outer:
+            rings.append((outer, *(h for h in holes if h)))
+    return FloorPlan(world, units, doors, adjacency, rings, classes_map, cw, cell_prediction_rate(classes_map, cw),
+                     log_posterior, iterations, accepted, seconds, cpu_seconds, resolution_m, origin_xy_m)
+
+
+def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
+    """A label image (GridLayer order): each unit's id on the map's free cells inside it, 0 elsewhere.
+
+    Where units overlap the smaller one wins.
+    """
+    out = np.zeros(plan.classes_map.shape, np.int32)
+    free = plan.classes_map == CellClass.FREE
+    for unit in sorted(plan.units, key=lambda u: -u.rect.rows * u.rect.cols):
+        r = unit.rect
+        sl = (slice(r.r0, r.r1 + 1), slice(r.c0, r.c1 + 1))
+        out[sl] = np.where(free[sl], unit.id, out[sl])
+    return out

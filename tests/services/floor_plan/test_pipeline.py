@@ -1,0 +1,161 @@
+"""The floor plan of small drawn maps: units where rooms are, doors where they open, types from shape."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from services.floor_plan import (
+    SEED_SCHEDULE,
+    CellClass,
+    ChainSettings,
+    FloorPlanError,
+    FloorPlanSettings,
+    Phase,
+    UnitType,
+    floor_plan,
+    unit_labels,
+)
+from services.floor_plan.mapfile import floor_plan_map_file, read_map
+from shared.mapfiles import write_map_yaml
+
+RES = 0.05
+
+
+def _box(occ: npt.NDArray[np.int8], r0: int, r1: int, c0: int, c1: int) -> None:
+    """A walled room (walls two cells thick) with free space inside."""
+    occ[r0 : r1 + 1, c0 : c1 + 1] = 100
+    occ[r0 + 2 : r1 - 1, c0 + 2 : c1 - 1] = 0
+
+
+def _two_rooms() -> npt.NDArray[np.int8]:
+    occ = np.full((80, 120), -1, np.int8)
+    _box(occ, 10, 69, 10, 60)
+    _box(occ, 10, 69, 59, 109)
+    occ[35:48, 59:61] = 0  # the door
+    return occ
+
+
+# table 3.2's phases, four times shorter: small maps settle sooner
+SHORT = tuple(Phase(None if p.until is None else p.until // 4, p.probabilities) for p in SEED_SCHEDULE)
+
+
+def _settings(iterations: int = 2000, seed: int = 1) -> FloorPlanSettings:
+    return FloorPlanSettings(chain=ChainSettings(iterations=iterations, seed=seed, schedule=SHORT),
+                             warm_start_iteration=1001)
+
+
+def test_two_rooms_joined_by_a_door_give_two_units_and_one_door() -> None:
+    plan = floor_plan(_two_rooms(), resolution_m=RES, settings=_settings())
+    assert len(plan.units) == 2
+    assert len(plan.doors) == 1
+    assert set(plan.doors[0].units) == {u.id for u in plan.units}
+    assert plan.adjacency == [tuple(sorted(u.id for u in plan.units))]
+    assert all(u.unit_type is UnitType.ROOM for u in plan.units)
+    # the world explains the map better than an empty one does
+    assert plan.k > float(np.mean(plan.classes_map == CellClass.UNKNOWN))
+
+
+def test_a_long_unit_with_several_doors_is_a_corridor() -> None:
+    occ = np.full((90, 200), -1, np.int8)
+    _box(occ, 60, 85, 5, 194)  # corridor 1.3 m x 9.5 m
+    for c0 in (5, 70, 135):
+        _box(occ, 5, 61, c0, c0 + 60)
+        occ[60:62, c0 + 20 : c0 + 35] = 0  # door from the room into the corridor
+    plan = floor_plan(occ, resolution_m=RES, settings=_settings(3000))
+    corridor = max(plan.units, key=lambda u: u.rect.cols / u.rect.rows)
+    assert corridor.unit_type is UnitType.CORRIDOR
+    assert len([d for d in plan.doors if corridor.id in d.units]) >= 2
+
+
+def test_solid_blocks_are_obstacles_the_world_draws_as_walls() -> None:
+    occ = np.full((80, 120), 100, np.int8)  # the outside filled, as some maps draw it
+    _box(occ, 10, 69, 10, 109)
+    occ[30:50, 40:80] = 100  # a solid block (a rack drawn solid) in the middle of the room
+    plan = floor_plan(occ, resolution_m=RES, settings=_settings())
+    assert np.all(plan.classes_world[:5] == CellClass.WALL)
+    assert np.all(plan.classes_world[33:47, 43:77] == CellClass.WALL)
+    assert plan.k > float(np.mean(plan.classes_map == CellClass.WALL))
+    # reported as obstacles in map metres: the block (2 m x 1 m at x 2..4 m, y 1.5..2.5 m) is one of them
+    block = [poly for poly in plan.obstacles if all(1.9 <= x <= 4.1 and 1.4 <= y <= 2.6 for x, y in poly[0])]
+    assert len(block) == 1
+    outside = [poly for poly in plan.obstacles if len(poly) == 2]  # the filled outside, the room its hole
+    assert len(outside) == 1
+
+
+def test_units_png_labels_only_free_cells_one_id_per_unit() -> None:
+    plan = floor_plan(_two_rooms(), resolution_m=RES, settings=_settings())
+    labels = unit_labels(plan)
+    assert set(np.unique(labels)) == {0} | {u.id for u in plan.units}
+    assert not labels[plan.classes_map != CellClass.FREE].any()
+
+
+def test_a_warm_start_keeps_the_ids_of_units_that_still_exist() -> None:
+    occ = _two_rooms()
+    first = floor_plan(occ, resolution_m=RES, settings=_settings())
+    grown = np.full((80, 170), -1, np.int8)
+    grown[:, :120] = occ
+    _box(grown, 10, 69, 108, 160)
+    grown[30:40, 108:110] = 0
+    second = floor_plan(grown, resolution_m=RES, settings=_settings(1000), start=first.world)
+    before = {u.rect: u.id for u in first.units}
+    kept = [u for u in second.units if u.rect in before]
+    assert kept and all(before[u.rect] == u.id for u in kept)
+    assert len(second.units) >= 3
+
+
+def test_the_chain_stops_at_its_iteration_and_time_bounds() -> None:
+    plan = floor_plan(_two_rooms(), resolution_m=RES, settings=_settings(iterations=40))
+    assert plan.iterations == 40
+    timed = FloorPlanSettings(chain=ChainSettings(iterations=10**9, max_seconds=0.2))
+    assert floor_plan(_two_rooms(), resolution_m=RES, settings=timed).iterations < 10**9
+
+
+@pytest.mark.parametrize(
+    ("occ", "match"),
+    [
+        (np.full((50, 50), -1, np.int8), "no free cell"),
+        (np.zeros((1, 1), np.int8), "at least 3x3"),
+        (np.zeros((0, 10), np.int8), "at least 3x3"),
+        (np.zeros((4, 4, 4), np.int8), "2-D"),
+    ],
+)
+def test_maps_without_anything_to_explain_are_refused(occ: npt.NDArray[np.int8], match: str) -> None:
+    with pytest.raises(FloorPlanError, match=match):
+        floor_plan(occ, resolution_m=RES)
+
+
+def test_bad_map_files_give_clear_errors(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("hello")
+    with pytest.raises(FloorPlanError, match="neither a map_server YAML nor an image"):
+        read_map(tmp_path / "notes.txt")
+    (tmp_path / "fake.png").write_text("not a png")
+    with pytest.raises(FloorPlanError, match="not a readable image"):
+        read_map(tmp_path / "fake.png", resolution_m=RES)
+    with pytest.raises(FloorPlanError, match="give its resolution"):
+        read_map(tmp_path / "fake.png")
+    (tmp_path / "bad.yaml").write_text("image: map.pgm\nresolution: fast\norigin: [0, 0, 0]\n")
+    with pytest.raises(FloorPlanError, match="bad resolution"):
+        read_map(tmp_path / "bad.yaml")
+    with pytest.raises(FloorPlanError, match="does not exist"):
+        read_map(tmp_path / "missing.yaml")
+
+
+def test_map_file_outputs_agree_with_the_plan(tmp_path: Path) -> None:
+    yaml_path = tmp_path / "map" / "occupancy.yaml"
+    write_map_yaml(yaml_path, _two_rooms(), resolution_m=RES, origin_x_m=-1.0, origin_y_m=2.0)
+    plan = floor_plan_map_file(yaml_path, tmp_path / "out", settings=_settings())
+    collection = json.loads((tmp_path / "out" / "floor_plan.geojson").read_text())
+    kinds = [f["properties"]["kind"] for f in collection["features"]]
+    assert kinds.count("unit") == len(plan.units) and kinds.count("door") == len(plan.doors)
+    xs = [p[0] for f in collection["features"] if f["properties"]["kind"] == "unit"
+          for p in f["geometry"]["coordinates"][0]]
+    assert min(xs) > -1.0  # in map coordinates: right of the origin
+    units = cv2.imread(str(tmp_path / "out" / "units.png"), cv2.IMREAD_UNCHANGED)
+    assert units is not None and units.shape == plan.classes_map.shape and units.dtype == np.uint16
+    assert (tmp_path / "out" / "overview.png").is_file()
