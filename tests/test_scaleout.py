@@ -194,7 +194,10 @@ def _run(stack: Deployment, tmp_path: Path, ports: list[int]) -> None:
         stages_committed = {r["stage"] for r in _revisions(one) if r["id"] > pillar_revision}
         assert {"occupancy_mapping", KILLED} <= stages_committed, stages_committed
         counters = {w["name"]: w["counters"] for w in health(one)["workers"]}
-        assert counters["occupancy_mapping"].get("occupancy_mapping.store_unavailable", 0) >= 1, counters
+        for stage in STAGES:  # each felt the outage (a heartbeat every 5 s at least), counted it and went on
+            felt = sum(counters[stage].get(f"{stage}.{what}", 0)
+                       for what in ("store_unavailable", "heartbeat_failures"))
+            assert felt >= 1, counters[stage]
 
     for name in (*STAGES, "api0", "api1", "router"):
         assert stack.stop(name) == 0, f"{name} did not stop cleanly:\n{stack.log(name)}"
