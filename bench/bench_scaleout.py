@@ -6,7 +6,8 @@ dropped) and Linux (CPU times come from ``/proc``).
 
 It starts what docker-compose.yml runs, as processes (:mod:`tests.deployment`): a zenoh router, ``aisle worker``
 for ``occupancy_mapping``, ``grid_decomposition`` and ``pillar_mapping``, and ``aisle serve`` twice, all on one
-PostgreSQL database, with the compose file's store periods. A two-robot survey of a small two-aisle hall (per
+PostgreSQL database (connected directly, not through the test's cuttable proxy), with the compose file's store
+periods. A two-robot survey of a small two-aisle hall (per
 robot: lidar 10 Hz, odometry and tf 20 Hz, fisheye 2 Hz) is replayed by ``aisle replay`` at each ``--rates`` R:
 R times real time is the traffic of 2R robots, each rate on a deployment of its own. Meanwhile
 ``--connections`` HTTP connections per API instance ask for bins by id and the first page of the bin list (half
@@ -230,7 +231,8 @@ def _fresh_deployment_step(folder: Path, bag: Path, rate: float, *, postgres_url
     again into running workers would be old news to them)."""
     folder.mkdir()
     ports = [free_port(), free_port()]
-    with dedicated_database(postgres_url) as database, deployment(folder, database, settings=SETTINGS) as stack:
+    with dedicated_database(postgres_url) as database, \
+            deployment(folder, database, settings={**SETTINGS, "AISLE_DATABASE_URL": database}) as stack:
         if stack.start("migrate", "db", "upgrade").wait(timeout=120) != 0:
             raise SystemExit(stack.logs())
         for stage in STAGES:
