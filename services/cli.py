@@ -222,7 +222,7 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
                 runtime.run(settings, stages=[args.stage], api=False, stop=stop)
         case "serve":
             with runtime.stop_on_signals(stop):
-                runtime.run(settings, stages=[], api=True, stop=stop)
+                runtime.run(settings, stages=[], api=True, stop=stop, expected_workers=settings.stages)
         case "db":
             return _db(args, settings)
         case "settings":

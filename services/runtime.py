@@ -108,11 +108,14 @@ def run(
     stop: threading.Event,
     extra: Sequence[Callable[[Bus, threading.Event], None]] = (),
     compact: bool = False,
+    expected_workers: Sequence[str] | None = None,
 ) -> None:
     """Run ``stages`` (and the API if ``api``) until ``stop`` is set; then shut down cleanly.
 
     ``extra`` callables run in their own threads with the bus (e.g. a bag replay); ``compact`` also thins old
-    revisions now and then (:func:`compact_periodically`).
+    revisions now and then (:func:`compact_periodically`). The API's health check is degraded while a worker of
+    ``expected_workers`` is not alive (default: ``stages``; ``aisle serve``, which runs none itself, expects the
+    deployment's ``settings.stages``, each in its own process).
     """
     factories = stage_factories()
     unknown = set(stages) - set(factories)
@@ -137,7 +140,8 @@ def run(
             from api.app import create_app
 
             announce_first_admin_key(store)
-            app = create_app(store=store, settings=settings, bus=bus, expected_workers=stages,
+            app = create_app(store=store, settings=settings, bus=bus,
+                             expected_workers=stages if expected_workers is None else expected_workers,
                              require_keys_for_reads=settings.reads_need_key,
                              rate_limit_per_s=settings.api_rate_limit_per_s,
                              rate_limit_burst=settings.api_rate_limit_burst, cors_origins=settings.api_cors_origins,

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import zenoh
+import zenoh.ext
 
 from shared.keyexpr import Attachment, node_selector, node_token, parse_topic_key, topic_key, topic_selector
 from shared.messages import MessageError, deserialize, serialize
@@ -34,6 +35,15 @@ log = logging.getLogger(__name__)
 
 WORKER_NAMESPACE = "aisle"
 """ROS namespace under which every Aisle worker announces itself as a node."""
+LATCHED_TOPICS = frozenset({"tf_static"})
+"""Topics ROS 2 publishes transient-local ("latched", as tf2's static broadcaster does). As rmw_zenoh does for
+transient-local QoS, their publishers keep their last :data:`LATCHED_CACHE` samples (a zenoh advanced publisher)
+and their subscribers ask every publisher for them when they start or a publisher appears (a zenoh advanced
+subscriber), so a worker started or restarted after a robot sent its static transforms still gets them."""
+LATCHED_CACHE = 10
+"""Samples a latched topic's publisher keeps for subscribers that join later."""
+LATCHED_HISTORY = 100
+"""Samples a latched topic's subscriber asks each publisher for (tf2's static listener keeps 100)."""
 
 
 class DropPolicy(enum.Enum):
@@ -74,6 +84,7 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
     config.insert_json5("listen/endpoints", json.dumps(settings.listen))
     config.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
     config.insert_json5("transport/shared_memory/enabled", "false")
+    config.insert_json5("timestamping/enabled", "true")  # latched topics' publishers need it (rmw_zenoh sets it too)
     return config
 
 
@@ -185,7 +196,7 @@ class Subscription:
 class Publisher:
     """Publishes one topic as a ROS 2 node on rmw_zenoh would: CDR payload plus attachment."""
 
-    def __init__(self, publisher: zenoh.Publisher, msgtype: str, gid: bytes) -> None:
+    def __init__(self, publisher: zenoh.Publisher | zenoh.ext.AdvancedPublisher, msgtype: str, gid: bytes) -> None:
         self._publisher = publisher
         self.msgtype = msgtype
         self._gid = gid
@@ -202,7 +213,7 @@ class Publisher:
             self._publisher.put(payload, attachment=attachment)
 
     def close(self) -> None:
-        self._publisher.undeclare()
+        self._publisher.undeclare()  # type: ignore[no-untyped-call]  # zenoh.ext's stub leaves it untyped
 
 
 class Bus:
@@ -246,10 +257,16 @@ class Bus:
                   ) -> Publisher:
         """A publisher of ``msgtype`` on ``/<namespace>/<topic>``.
 
-        By default it blocks under congestion rather than losing data; cameras may opt to drop.
+        By default it blocks under congestion rather than losing data; cameras may opt to drop. On a
+        :data:`LATCHED_TOPICS` topic it keeps its last samples for subscribers that join later.
         """
         key = topic_key(self.domain_id, namespace, topic, msgtype)
         congestion = zenoh.CongestionControl.DROP if drop_when_congested else zenoh.CongestionControl.BLOCK
+        if topic.strip("/") in LATCHED_TOPICS:
+            latched = zenoh.ext.declare_advanced_publisher(
+                self.session, key, congestion_control=congestion, cache=zenoh.ext.CacheConfig(LATCHED_CACHE),
+                publisher_detection=True)
+            return Publisher(latched, msgtype, self._gid(key))
         return Publisher(self.session.declare_publisher(key, congestion_control=congestion), msgtype,
                          self._gid(key))
 
@@ -263,12 +280,22 @@ class Bus:
         maxsize: int = 1000,
         name: str | None = None,
     ) -> Subscription:
-        """Subscribe to ``topic`` of ``msgtype`` under each of ``namespaces`` ("*": every robot)."""
+        """Subscribe to ``topic`` of ``msgtype`` under each of ``namespaces`` ("*": every robot).
+
+        On a :data:`LATCHED_TOPICS` topic the subscription also receives what each publisher sent before it
+        started (up to :data:`LATCHED_HISTORY` samples a publisher).
+        """
         subscription = Subscription(msgtype, topic, name or topic, policy=policy, maxsize=maxsize,
                                     counters=self.counters)
+        latched = topic.strip("/") in LATCHED_TOPICS
         for namespace in namespaces:
             selector = topic_selector(self.domain_id, namespace, topic, msgtype)
-            subscription._handles.append(self.session.declare_subscriber(selector, subscription._on_sample))
+            if latched:
+                history = zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=LATCHED_HISTORY)
+                subscription._handles.append(zenoh.ext.declare_advanced_subscriber(
+                    self.session, selector, subscription._on_sample, history=history, subscriber_detection=True))
+            else:
+                subscription._handles.append(self.session.declare_subscriber(selector, subscription._on_sample))
         self._subscriptions.append(subscription)
         return subscription
 

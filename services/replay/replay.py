@@ -3,8 +3,8 @@
 Each message goes out with its original timing (scaled by ``rate``) and its CDR payload
 untouched, on the rmw_zenoh key of its namespaced topic: ``/robot1/scan`` in the bag becomes
 topic ``scan`` of robot ``robot1``. Static transforms (``tf_static``, under any namespace) are
-sent first at the start of every pass, so a map worker that joins mid-replay sees them on the
-next loop, as it would with a latched topic.
+sent first at the start of every pass, on a latched topic (:data:`shared.bus.LATCHED_TOPICS`), so a
+map worker that joins or restarts mid-replay is sent them at once, as by a robot's tf2 static broadcaster.
 """
 
 from __future__ import annotations

@@ -31,6 +31,7 @@ _SCRYPT_R = 8
 _SCRYPT_P = 1
 _HASH_BYTES = 32
 MAX_NAME_LENGTH = 64
+_FIRST_ADMIN_LOCK = 0x41_49_53_4C_45  # "AISLE": the advisory lock taken while making the first admin key
 
 
 class Role(enum.StrEnum):
@@ -110,14 +111,18 @@ def create_key(store: MapStore, *, role: Role | str, name: str) -> tuple[str, st
     name = name.strip()
     if not 0 < len(name) <= MAX_NAME_LENGTH:
         raise ApiKeyError(f"key name must be 1 to {MAX_NAME_LENGTH} characters, not {len(name)}")
+    with store._begin() as connection:  # the store's own error translation
+        return _insert_key(connection, role=checked_role, name=name)
+
+
+def _insert_key(connection: sa.Connection, *, role: Role, name: str) -> tuple[str, str]:
     key_id = secrets.token_hex(6)
     secret = f"{SECRET_PREFIX}_{key_id}_{secrets.token_urlsafe(32)}"
     salt = secrets.token_bytes(_SALT_BYTES)
-    with store._begin() as connection:  # the store's own error translation
-        connection.execute(schema.api_keys.insert().values(
-            key_id=key_id, name=name, role=checked_role.value, salt=salt, secret_hash=_hash(secret, salt),
-            created_at=_now(), revoked_at=None,
-        ))
+    connection.execute(schema.api_keys.insert().values(
+        key_id=key_id, name=name, role=role.value, salt=salt, secret_hash=_hash(secret, salt),
+        created_at=_now(), revoked_at=None,
+    ))
     return key_id, secret
 
 
@@ -174,12 +179,16 @@ def revoke_key(store: MapStore, *, key_id: str) -> ApiKey | None:
 def ensure_admin_key(store: MapStore, *, name: str = "first-admin") -> str | None:
     """Create and return the secret of a first admin key when no active admin key exists, else None.
 
-    The embedded stack calls this at start and prints the secret once; a later start prints nothing.
+    The embedded stack calls this at start and prints the secret once; a later start prints nothing. API
+    processes starting together on one PostgreSQL database (a deployment) make one key between them: the check
+    and the insert run in one transaction under an advisory lock.
     """
     table = schema.api_keys
-    with store._read() as connection:
+    with store._begin() as connection:
+        if connection.dialect.name == "postgresql":
+            connection.execute(sa.text("SELECT pg_advisory_xact_lock(:key)"), {"key": _FIRST_ADMIN_LOCK})
         found = connection.execute(sa.select(table.c.id).where(
             table.c.role == Role.ADMIN.value, table.c.revoked_at.is_(None)).limit(1)).first()
-    if found is not None:
-        return None
-    return create_key(store, role=Role.ADMIN, name=name)[1]
+        if found is not None:
+            return None
+        return _insert_key(connection, role=Role.ADMIN, name=name)[1]

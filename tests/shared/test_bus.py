@@ -144,6 +144,38 @@ def test_workers_are_visible_by_liveliness_until_they_stop(bus_pair: tuple[Bus, 
     wait_for(lambda: observer.alive_workers() == [], what="the token to go")
 
 
+def _static_transform(child: str) -> Any:
+    cls = messages.message_class
+    header = cls("std_msgs/msg/Header")(stamp=cls("builtin_interfaces/msg/Time")(sec=1, nanosec=0),
+                                        frame_id="robot1/base_link")
+    transform = cls("geometry_msgs/msg/Transform")(
+        translation=cls("geometry_msgs/msg/Vector3")(x=0.2, y=0.0, z=0.3),
+        rotation=cls("geometry_msgs/msg/Quaternion")(x=0.0, y=0.0, z=0.0, w=1.0))
+    stamped = cls("geometry_msgs/msg/TransformStamped")(header=header, child_frame_id=child, transform=transform)
+    return cls(messages.TF_MESSAGE)(transforms=[stamped])
+
+
+def test_a_subscriber_that_starts_late_still_gets_the_static_transforms(bus_pair: tuple[Bus, Bus]) -> None:
+    worker, robot = bus_pair
+    static = robot.publisher("tf_static", messages.TF_MESSAGE, namespace="robot1")
+    static.publish(_static_transform("robot1/laser"))
+    static.publish(_static_transform("robot1/fisheye_optical_frame"))
+    robot.publisher("tf", messages.TF_MESSAGE, namespace="robot1").publish(_static_transform("robot1/odom"))
+    plain = worker.subscribe("tf", messages.TF_MESSAGE, name="tf")  # an ordinary topic: what is gone is gone
+    late = worker.subscribe("tf_static", messages.TF_MESSAGE, name="tf_static")  # e.g. a restarted worker
+    children: list[str] = []
+
+    def both() -> bool:
+        while (item := late.receive(0.05)) is not None:
+            children.extend(t.child_frame_id for t in item.message.transforms)
+        return len(children) >= 2
+
+    wait_for(both, timeout_s=10, what="the static transforms sent before the subscriber started")
+    assert children == ["robot1/laser", "robot1/fisheye_optical_frame"]
+    assert late.receive(0.2) is None, "each cached sample is delivered once"
+    assert plain.pending() == 0
+
+
 def test_bad_endpoint_gives_a_clear_error() -> None:
     from shared.settings import ZenohSettings
 

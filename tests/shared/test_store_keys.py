@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 import sqlalchemy as sa
@@ -111,6 +113,24 @@ def test_ensure_admin_key_creates_one_only_while_there_is_no_active_admin(store:
     assert ensure_admin_key(store) is None
     revoke_key(store, key_id=key.key_id)
     assert ensure_admin_key(store) is not None
+
+
+@pytest.mark.postgres
+def test_api_processes_starting_together_make_one_first_admin_key(postgres_url: str) -> None:
+    stores = [MapStore(postgres_url) for _ in range(4)]  # one per `aisle serve` of a deployment
+    stores[0].upgrade()
+    start = threading.Barrier(len(stores))
+
+    def first_key(store: MapStore) -> str | None:
+        start.wait()
+        return ensure_admin_key(store)
+
+    with ThreadPoolExecutor(len(stores)) as pool:
+        printed = [secret for secret in pool.map(first_key, stores) if secret is not None]
+    assert len(printed) == 1
+    assert [key.role for key in list_keys(stores[0])] == [Role.ADMIN]
+    for store in stores:
+        store.close()
 
 
 def test_roles_are_ordered_read_write_admin() -> None:
