@@ -17,7 +17,8 @@ from shared.vocabulary import REGION_KINDS, FeatureKind, LayerName, PlaceLabel
 PLACE_LABELS = "place_labels"
 """``meta["encoding"]`` of the label layer: uint8 :class:`PlaceLabel` codes, ``meta["classes"][code]`` names each."""
 PLACE_SEGMENTS = "place_segments"
-"""``meta["encoding"]`` of the segment layer: uint16 region ids, 0 where no region."""
+"""``meta["encoding"]`` of the segment layer: region ids (uint16, or uint32 once an id exceeds 65535: ids are
+stable across revisions and never reused, :mod:`~services.grid_decomposition.keys`), 0 where no region."""
 
 REGION_FEATURE_KINDS: Final[dict[PlaceLabel, FeatureKind]] = {
     PlaceLabel.NONE: FeatureKind.REGION,
@@ -47,7 +48,7 @@ def decomposition_layers(
     segment_layer: str = LayerName.PLACE_SEGMENTS,
     meta: Mapping[str, Any] | None = None,
 ) -> list[GridLayer]:
-    """The label layer (uint8 :class:`PlaceLabel` codes) and the segment layer (uint16 region ids).
+    """The label layer (uint8 :class:`PlaceLabel` codes) and the segment layer (region ids).
 
     Parameters
     ----------
@@ -68,11 +69,12 @@ def decomposition_layers(
     Raises
     ------
     DecompositionError
-        More regions than a uint16 holds.
+        A negative region id.
     """
     segments = decomposition.segments
-    if segments.max(initial=0) > np.iinfo(np.uint16).max:
-        raise DecompositionError(f"{segments.max()} regions do not fit a uint16 segment layer")
+    if segments.min(initial=0) < 0:
+        raise DecompositionError(f"region id {segments.min()} is negative")
+    wide = segments.max(initial=0) > np.iinfo(np.uint16).max
     extra = dict(meta or {})
     res, (ox, oy) = decomposition.resolution_m, decomposition.origin_xy_m
     labels = GridLayer(label_layer, decomposition.labels.astype(np.uint8), res, ox, oy, {
@@ -81,7 +83,7 @@ def decomposition_layers(
         "colours": [list(LABEL_COLOURS[label]) for label in PlaceLabel],
         **extra,
     })
-    segs = GridLayer(segment_layer, segments.astype(np.uint16), res, ox, oy,
+    segs = GridLayer(segment_layer, segments.astype(np.uint32 if wide else np.uint16), res, ox, oy,
                      {"encoding": PLACE_SEGMENTS, "regions": len(decomposition.regions), **extra})
     return [labels, segs]
 

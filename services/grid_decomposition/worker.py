@@ -8,8 +8,9 @@ here, so the store is also looked at every ``safety_poll_period_s``, and once on
 
 When the layer changed and ``min_period_s`` has passed since the last attempt, the newest layer is compared with
 the last decomposed one (:func:`changed_fraction`); at ``min_change_fraction`` or more it is decomposed and ONE
-revision is committed: label layer (meta ``source_layer``, ``source_revision``), segment layer, features and the
-region graph. A new label table (stage ``label_table``) re-decomposes the current grid at once with its overrides.
+revision is committed: label and segment layers (meta ``source_layer``, ``source_revision``), features, region graph,
+regions keyed as the stored ones they overlap (:func:`carry_keys`). A new label table (stage ``label_table``)
+re-decomposes the current grid at once with its overrides.
 A grid the decomposition cannot use is counted as ``decomposition_errors`` and becomes the reference all the same.
 On start the source revision is read back from the stored label layer: a grid is not decomposed twice.
 """
@@ -22,6 +23,7 @@ import time
 
 from services.grid_decomposition.change import changed_fraction
 from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.keys import NEXT_ID_KEY, carry_keys
 from services.grid_decomposition.pipeline import decompose
 from services.grid_decomposition.records import decomposition_features, decomposition_layers, decomposition_topology
 from services.grid_decomposition.semantics import parse_label_table
@@ -75,8 +77,7 @@ class DecompositionStage:
     def _announced(self, *, timeout_s: float) -> bool:
         """Whether map events (waiting up to ``timeout_s`` for the first) announced a new source layer or label
         table of this map."""
-        announced = False
-        item = self.events.receive(timeout_s)
+        announced, item = False, self.events.receive(timeout_s)
         while item is not None:
             event = item.message
             announced |= str(event.map_name) == self.context.map.name and (
@@ -92,6 +93,7 @@ class DecompositionStage:
         if not self._pending or time.monotonic() - self._last_attempt < self.settings.min_period_s:
             return
         stored = self.context.store.layer(self.context.map.id, self.source_layer)
+        previous = self.context.store.layer(self.context.map.id, self.layer_names[1])
         self._pending = False
         relabel, self._relabel = self._relabel, False
         if stored is None or (stored.revision_id == self._checked_revision and not relabel):
@@ -103,7 +105,7 @@ class DecompositionStage:
             log.debug("%s revision %d changed by %.4f, below %.4f: not decomposed", self.source_layer,
                       stored.revision_id, fraction, self.settings.min_change_fraction)
             return
-        self._decompose(stored)
+        self._decompose(stored, None if previous is None else previous.layer)
 
     def _resume(self) -> int:
         """The newest revision id (watched after); the stored decomposition's source becomes the reference."""
@@ -146,25 +148,24 @@ class DecompositionStage:
             self.context.count("bad_label_tables")
             log.warning("label table of revision %d ignored: %s", revision.id, err)
             return False
-        changed = overrides != self._overrides
-        self._overrides = overrides
+        changed, self._overrides = overrides != self._overrides, overrides
         log.info("label table of revision %d: %s", revision.id,
                  {c: label.name.lower() for c, label in sorted(overrides.items())} or "automatic")
         return changed
 
-    def _decompose(self, stored: StoredLayer) -> None:
+    def _decompose(self, stored: StoredLayer, previous: GridLayer | None) -> None:  # previous segment layer
         layer = stored.layer
         self._last_attempt = time.monotonic()
         start = time.perf_counter()
         try:
-            result = decompose(layer.data, resolution_m=layer.resolution_m,
-                               origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
-                               neck_half_width_m=self.settings.neck_half_width_m,
-                               door_max_width_m=self.settings.door_max_width_m,
-                               label_overrides=self._overrides or None)
+            result, ids = carry_keys(decompose(layer.data, resolution_m=layer.resolution_m,
+                                               origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
+                                               neck_half_width_m=self.settings.neck_half_width_m,
+                                               door_max_width_m=self.settings.door_max_width_m,
+                                               label_overrides=self._overrides or None), previous)
             source = {"source_layer": self.source_layer, "source_revision": stored.revision_id}
-            layers = decomposition_layers(result, label_layer=self.layer_names[0],
-                                          segment_layer=self.layer_names[1], meta=source)
+            layers = decomposition_layers(result, label_layer=self.layer_names[0], segment_layer=self.layer_names[1],
+                                          meta={**source, NEXT_ID_KEY: ids.next_id})
         except DecompositionError as err:
             self._reference = layer
             self.context.count("decomposition_errors")
@@ -178,7 +179,8 @@ class DecompositionStage:
             layers=layers,
             features=features,
             topology=decomposition_topology(result),
-            summary={**source, "regions": len(result.regions), "decomposition_s": round(seconds, 3),
+            summary={**source, "regions": len(result.regions), "regions_kept": ids.carried,
+                     "decomposition_s": round(seconds, 3),
                      LABEL_OVERRIDES_KEY: {str(c): label.name.lower() for c, label in sorted(self._overrides.items())}},
         )
         self.context.counters.set(f"{self.context.name}.last_decomposition_ms", round(seconds * 1000))

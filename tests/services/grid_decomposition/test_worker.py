@@ -6,16 +6,19 @@ import math
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
+from atlas.cache import RevisionCache
+from atlas.navigation import blocking, load_navmap
 from services.grid_decomposition import DecompositionError
 from services.grid_decomposition.worker import DecompositionStage, decomposition_stage
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus
 from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from shared.settings import DecompositionSettings, Settings, ZenohSettings
-from shared.store import GridLayer, MapStore, Revision, RevisionWrite
+from shared.store import Feature, GridLayer, MapStore, Revision, RevisionWrite
 from shared.worker import MAP_EVENTS_TOPIC, StageContext, map_event
 from tests import stages
 from tests.helpers import wait_for
@@ -233,3 +236,64 @@ def test_a_label_table_revision_relabels_the_map_as_a_new_revision(
     assert len(after) == len(before)  # the override renames places, it keeps the warehouse's regions
     relabelled = [f.feature for f in after if f.feature.properties["category"] == chosen]
     assert relabelled and all(f.properties["label"] == stored_as for f in relabelled)
+
+
+def _region_at(store: MapStore, map_id: int, x_m: float, y_m: float) -> str:
+    """Key of the region whose cell holds (x, y) in the newest segment layer."""
+    stored = store.layer(map_id, "place_segments")
+    assert stored is not None
+    layer = stored.layer
+    row = math.floor((y_m - layer.origin_y_m) / layer.resolution_m)
+    col = math.floor((x_m - layer.origin_x_m) / layer.resolution_m)
+    return f"r{int(layer.data[row, col])}"
+
+
+def test_region_keys_and_blocks_stay_on_their_places_while_the_map_grows(
+        store: MapStore, settings: Settings) -> None:
+    house = synthetic_warehouse(0, resolution_m=RES_M)
+    width = house.occupancy.shape[1]
+    steps = []
+    for share in (0.6, 0.8, 1.0):  # the robot sees more of the hall at each step; unseen cells are unknown
+        seen = house.occupancy.copy()
+        seen[:, int(share * width):] = -1
+        steps.append(seen)
+    map_id = store.ensure_map(settings.map_name).id
+    cache = RevisionCache(size=4)
+    with stages.running_stage(STAGE, _Stages(), settings, store) as bus:
+        _write_occupancy(store, settings, steps[0], bus)
+        _wait_decompositions(store, settings, 1)
+        first = {f.feature.key: f.feature for f in store.features(map_id, kinds=list(REGION_KINDS))}
+        corridor = next(f for f in first.values() if f.kind == "corridor" and f.properties["area_m2"] > 5.0)
+        blocked = blocking.block_region(store, cache, map_id, corridor.key, reason="spill", by=None).block.block
+        keys_then = {key: _centre_of(feature) for key, feature in first.items()}
+        for n, occupancy in enumerate(steps[1:], start=2):
+            _write_occupancy(store, settings, occupancy, bus)
+            revision = _wait_decompositions(store, settings, n)
+            assert revision.summary["regions_kept"] > 0
+    # every region seen in the first half is still there under the same key, at the same place
+    kept = sum(1 for key, (x, y) in keys_then.items() if _region_at(store, map_id, x, y) == key)
+    assert kept >= 0.8 * len(keys_then)
+    assert _region_at(store, map_id, blocked.x_m, blocked.y_m) == corridor.key
+    nav = load_navmap(store, map_id)
+    [block] = nav.blocks
+    assert block.ids is not None and [nav.key(i) for i in block.ids] == [corridor.key]
+    assert blocking.unblock_region(store, RevisionCache(size=4), map_id, corridor.key).removed
+    segments = store.layer(map_id, "place_segments")
+    assert segments is not None
+    ids = {int(i) for i in np.unique(segments.layer.data) if i > 0}
+    assert segments.layer.meta["next_region_id"] > max(ids), "fresh ids come from above every id handed out"
+
+
+def _centre_of(feature: Feature) -> tuple[float, float]:
+    """A point inside a region feature's largest polygon, well away from its edge (its pole of inaccessibility,
+    approximated on a 0.05 m raster)."""
+    polygons = [np.asarray(poly[0], dtype=np.float64) for poly in feature.geometry["coordinates"]]
+    ring = max(polygons, key=lambda p: float(np.ptp(p[:, 0]) * np.ptp(p[:, 1])))
+    lo = ring.min(axis=0)
+    step = 0.05
+    size = np.ceil((ring.max(axis=0) - lo) / step).astype(int) + 2
+    mask = np.zeros((size[1], size[0]), dtype=np.uint8)
+    cv2.fillPoly(mask, [np.round((ring - lo) / step).astype(np.int32)], 1)
+    dist = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
+    row, col = np.unravel_index(int(np.argmax(dist)), dist.shape)
+    return float(lo[0] + col * step), float(lo[1] + row * step)
