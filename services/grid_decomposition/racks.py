@@ -679,15 +679,21 @@ def face_places(
 
 
 def place_segments(
-    segments: npt.NDArray[np.int32], layout: RackLayout, free: npt.NDArray[np.bool_], *, min_area_px: int
+    segments: npt.NDArray[np.int32],
+    layout: RackLayout,
+    free: npt.NDArray[np.bool_],
+    *,
+    min_area_px: int,
+    n_known: int = 0,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
     """``segments`` with every rack place its own segment, ids renumbered 1..N without gaps.
 
     A rack place keeps the pieces ``segments`` cut it into (the pallet cells of a warehouse floor).
 
     What the places leave of a segment joins the nearest place when it is under ``min_area_px`` or
-    under half of the segment (the slivers of a hall the places cover). Also returns the place of
-    every free pixel now in one (0 elsewhere).
+    under half of the segment (the slivers of a hall the places cover). Places ``1..n_known`` are
+    known (another stage's bins and aisles, first in ``layout``) and a region however little free
+    space they hold (a loaded bay). Also returns the place of every free pixel now in one (0 elsewhere).
     """
     if layout.cell_labels.size <= 1:
         return segments, np.zeros(segments.shape, dtype=np.int32)
@@ -696,7 +702,7 @@ def place_segments(
     # a place with a crumb of free space (a solid rack's edge pixel) is no region of its own
     n_free = np.bincount(layout.cells[free], minlength=layout.cell_labels.size)
     crumb = (n_free > 0) & (n_free < min_area_px)
-    crumb[0] = False
+    crumb[: n_known + 1] = False
     cells = np.where(crumb[layout.cells], 0, layout.cells)
     inside = (cells > 0) & free
     n_old = int(segments.max()) + 1
