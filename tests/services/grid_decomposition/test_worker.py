@@ -10,10 +10,13 @@ import cv2
 import numpy as np
 import pytest
 
+from atlas.bins import select_bins
 from atlas.cache import RevisionCache
 from atlas.navigation import blocking, load_navmap
 from services.grid_decomposition import DecompositionError
+from services.grid_decomposition.known_racks import footprint_mask, footprints
 from services.grid_decomposition.worker import DecompositionStage, decomposition_stage
+from services.simulator import World
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus
 from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
@@ -21,6 +24,7 @@ from shared.settings import DecompositionSettings, Settings, ZenohSettings
 from shared.store import Feature, GridLayer, MapStore, Revision, RevisionWrite
 from shared.worker import MAP_EVENTS_TOPIC, StageContext, map_event
 from tests import stages
+from tests.api.warehouse_map import bin_features, warehouse
 from tests.helpers import wait_for
 from tests.services.grid_decomposition.warehouse import synthetic_warehouse
 
@@ -297,3 +301,56 @@ def _centre_of(feature: Feature) -> tuple[float, float]:
     dist = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
     row, col = np.unravel_index(int(np.argmax(dist)), dist.shape)
     return float(lo[0] + col * step), float(lo[1] + row * step)
+
+
+def test_with_the_pillar_stages_racks_every_aisle_is_a_corridor_and_every_bin_in_a_storage_region(
+        store: MapStore, settings: Settings) -> None:
+    """The demo's case on a small hall: the lidar shows next to nothing of the racks, the pillar stage has them."""
+    world, grids = warehouse().world, warehouse().grids
+    bins = bin_features(world)
+    unseen = footprint_mask(footprints(bins, "bin"), shape=grids.occupancy.shape, resolution_m=grids.resolution_m,
+                            origin_xy_m=(grids.origin_x_m, grids.origin_y_m))
+    occupancy = GridLayer("occupancy", np.where(unseen, 0, grids.occupancy).astype(np.int8), grids.resolution_m,
+                          grids.origin_x_m, grids.origin_y_m)
+    aisles = _aisle_features(world)
+    map_id = store.ensure_map(settings.map_name).id
+    with stages.running_stage(STAGE, _Stages(), settings, store) as bus:
+        _announce(bus, settings, store.write_revision(map_id, RevisionWrite("occupancy_mapping", layers=[occupancy])))
+        first = _wait_decompositions(store, settings, 1)
+        _announce(bus, settings, store.write_revision(map_id, RevisionWrite(
+            "pillar_mapping", features={"bin": bins, "corridor": aisles})))
+        second = _wait_decompositions(store, settings, 2)
+    assert second.summary["source_revision"] == first.summary["source_revision"], "the same grid, decomposed again"
+    regions = {f.feature.key: f.feature for f in store.features(map_id, kinds=list(REGION_KINDS))
+               if f.stage == STAGE}
+    assert not any(f.kind == "room" for f in regions.values())
+    segments = store.layer(map_id, "place_segments")
+    assert segments is not None
+    for aisle in aisles:  # every aisle is (mostly) one corridor region
+        strip = footprint_mask([np.asarray(aisle.geometry["coordinates"][0])], shape=segments.layer.data.shape,
+                               resolution_m=grids.resolution_m, origin_xy_m=(grids.origin_x_m, grids.origin_y_m))
+        ids, counts = np.unique(segments.layer.data[strip & (segments.layer.data > 0)], return_counts=True)
+        assert counts.max() > 0.8 * counts.sum() and regions[f"r{ids[counts.argmax()]}"].kind == "corridor", aisle.key
+    answers = select_bins(store, RevisionCache(size=4), map_id, revision=None, bbox=None, limit=10_000, offset=0)
+    assert answers.total == len(bins)
+    for answer in answers.bins:
+        assert answer.storage_region is not None and answer.storage_region.label == "storage", answer.bin.id
+        assert answer.corridor is not None and answer.corridor.key == f"aisle-{answer.bin.aisle:02d}"
+        assert answer.nearest_junction is not None
+
+
+def _aisle_features(world: World) -> list[Feature]:
+    """An ``aisle-NN`` corridor per aisle of the world, the rectangle over its sections (as the pillar stage
+    spans an aisle from its first bin to its last)."""
+    sections: dict[int, list[np.ndarray]] = {}
+    for area in world.areas:
+        if area.kind.name == "CORRIDOR" and isinstance(area.detail.get("aisle"), int):
+            sections.setdefault(area.detail["aisle"], []).append(np.asarray(area.polygon))
+    out = []
+    for aisle, polygons in sorted(sections.items()):
+        xy = np.vstack(polygons)
+        (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
+        ring = [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+        out.append(Feature("corridor", f"aisle-{aisle:02d}", {"type": "Polygon", "coordinates": [ring]},
+                           {"kind": "corridor", "label": "corridor", "aisle": aisle}))
+    return out
