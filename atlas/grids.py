@@ -68,9 +68,9 @@ def region_holding(segments: GridLayer, labels: GridLayer, ring: Sequence[tuple[
         return None
     values, counts = np.unique(ids, return_counts=True)
     best = int(values[counts.argmax()])
-    window = segments.data[r0:r1, c0:c1] == best
-    code = int(np.bincount(labels.data[r0:r1, c0:c1][window & (inside > 0)].astype(np.int64)).argmax())
-    return best, class_name(labels, code) or "unknown"
+    codes = labels.data[r0:r1, c0:c1][segments.data[r0:r1, c0:c1] == best].astype(np.int64)
+    codes = codes[codes > 0]  # a region's furniture and a rack's pallets carry no label
+    return best, (class_name(labels, int(np.bincount(codes).argmax())) if codes.size else None) or "unknown"
 
 
 def class_name(layer: GridLayer, code: int) -> str | None:

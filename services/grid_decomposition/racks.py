@@ -692,8 +692,9 @@ def place_segments(
 
     What the places leave of a segment joins the nearest place when it is under ``min_area_px`` or
     under half of the segment (the slivers of a hall the places cover). Places ``1..n_known`` are
-    known (another stage's bins and aisles, first in ``layout``) and a region however little free
-    space they hold (a loaded bay). Also returns the place of every free pixel now in one (0 elsewhere).
+    known (another stage's bins and aisles, first in ``layout``): a region however little free
+    space they hold (a loaded bay), and what they leave of a segment stays a segment unless a crumb.
+    Also returns the place of every free pixel now in one (0 elsewhere).
     """
     if layout.cell_labels.size <= 1:
         return segments, np.zeros(segments.shape, dtype=np.int32)
@@ -706,7 +707,9 @@ def place_segments(
     cells = np.where(crumb[layout.cells], 0, layout.cells)
     inside = (cells > 0) & free
     n_old = int(segments.max()) + 1
-    before = np.bincount(segments.ravel(), minlength=n_old)
+    # known places are no reason to give up what is left of a segment (a hall's floor round its racks)
+    known = in_cells & (layout.cells <= n_known)
+    before = np.bincount(segments[~known], minlength=n_old)
     after = np.bincount(segments[~in_cells], minlength=n_old)
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False

@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -65,6 +66,11 @@ def test_known_racks_make_storage_and_aisles_where_the_grid_shows_no_rack() -> N
         assert counts.max() > 0.8 * counts.sum() and result.regions[int(ids[counts.argmax()])].label is (
             PlaceLabel.CORRIDOR)
     assert PlaceLabel.ROOM not in {r.label for r in result.regions.values()}
+    racks = footprint_mask(bins, shape=occupancy.shape, resolution_m=layer.resolution_m, origin_xy_m=origin)
+    near = cv2.dilate(racks.astype(np.uint8), np.ones((21, 21), np.uint8)) > 0  # 0.5 m round the bins
+    assert not np.any((result.labels == PlaceLabel.STORAGE.value) & ~near), "open floor is never storage"
+    floor = (result.labels == PlaceLabel.OPEN_AREA.value).sum() * layer.resolution_m**2
+    assert floor > 100.0, "the hall's floor round the racks stays open area"
 
 
 def test_a_known_layout_refuses_another_grid() -> None:
