@@ -26,11 +26,13 @@ KNOWN_RACKS_STAGE = "pillar_mapping"
 Footprint = npt.NDArray[np.float64]
 """(K, 2) corners of a polygon, map metres."""
 _SHIFT = 4  # fractional bits of the polygon corners given to cv2.fillPoly
+_JITTER_M = 0.05  # footprints that moved less than this (a grid cell) are the same
 
 
 def footprints(features: Sequence[Feature], kind: str) -> list[Footprint]:
     """The outer rings (K, 2) of the Polygon features of ``kind``, each shape once (bins on several levels share
-    one footprint; rounded to a millimetre to tell them apart)."""
+    one footprint; rounded to a millimetre to tell them apart), in order of their centres on a 0.5 m grid (y,
+    then x), so the same places read twice come in the same order."""
     out: dict[bytes, Footprint] = {}
     for item in features:
         geometry = item.geometry
@@ -39,7 +41,7 @@ def footprints(features: Sequence[Feature], kind: str) -> list[Footprint]:
         ring = np.asarray(geometry["coordinates"][0], dtype=np.float64).reshape(-1, 2)
         if len(ring) >= 3:  # the store keeps coordinates finite
             out.setdefault(np.round(ring, 3).tobytes(), ring)
-    return list(out.values())
+    return sorted(out.values(), key=lambda ring: (*np.round(ring.mean(axis=0)[::-1] * 2).tolist(), ring.tobytes()))
 
 
 def _pixels(ring: Footprint, resolution_m: float, origin_xy_m: tuple[float, float]) -> npt.NDArray[np.int32]:
@@ -138,7 +140,8 @@ class KnownRacks:
         return self._stale
 
     def refresh(self, store: MapStore, map_id: int) -> bool:
-        """Re-read the footprints if a change was noted; whether they differ (by a centimetre or more)."""
+        """Re-read the footprints if a change was noted; whether they differ by more than ``_JITTER_M`` (a
+        refit moves every bin a little each time; that is no reason to decompose again)."""
         if not self._stale:
             return False
         read = [s.feature for s in store.features(map_id, kinds=[FeatureKind.BIN, FeatureKind.CORRIDOR])
@@ -146,7 +149,7 @@ class KnownRacks:
         found = (footprints(read, FeatureKind.BIN), footprints(read, FeatureKind.CORRIDOR))
         self._stale = False
         same = all(len(new) == len(old) and all(
-            a.shape == b.shape and np.allclose(a, b, atol=0.01) for a, b in zip(new, old, strict=True))
+            a.shape == b.shape and np.allclose(a, b, atol=_JITTER_M) for a, b in zip(new, old, strict=True))
             for new, old in zip(found, (self.bins, self.aisles), strict=True))
         self.bins, self.aisles = found
         return not same

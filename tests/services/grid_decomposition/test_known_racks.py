@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from pathlib import Path
 
@@ -120,6 +121,9 @@ def test_known_racks_are_read_again_only_when_the_pillar_stage_changes_them(tmp_
     top = max(b.properties["level"] for b in bins)
     lower = [b for b in bins if b.properties["level"] != top]
     assert write("pillar_mapping", lower) and not racks.refresh(store, map_id), "a level less: the same footprints"
+    jittered = [dataclasses.replace(b, geometry={"type": "Polygon", "coordinates": [
+        [[x + 0.01, y - 0.01] for x, y in b.geometry["coordinates"][0]]]}) for b in reversed(lower)]
+    assert write("pillar_mapping", jittered) and not racks.refresh(store, map_id), "a refit's centimetre is no change"
     layout = racks.on_grid(warehouse_layer())
     assert layout is not None and np.count_nonzero(layout.cell_labels == PlaceLabel.STORAGE.value) == len(racks.bins)
     store.close()
