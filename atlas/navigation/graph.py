@@ -79,7 +79,8 @@ def region_grid(segments: GridLayer, occupancy: GridLayer | None, *, segments_re
 
 @dataclass(frozen=True)
 class Region:
-    """A region of the decomposition: id, key (``r<id>``), kind (its label: corridor, storage, ...), centroid."""
+    """A region of the decomposition: id, key (``r<id>``), kind (its label: corridor, storage, ...), centroid, and
+    the aisle it is (``aisle-03``) where the racks are known."""
 
     id: int
     key: str
@@ -87,6 +88,7 @@ class Region:
     x_m: float | None
     y_m: float | None
     area_m2: float | None
+    aisle: str | None = None
 
     @property
     def drivable(self) -> bool:
@@ -238,9 +240,10 @@ def build_navmap(grid: RegionGrid, nodes: Sequence[TopologyNode], edges: Sequenc
         rid = region_id(node.key)
         if rid is None or is_block_node(node):
             continue
-        area = node.attributes.get("area_m2")
+        area, aisle = node.attributes.get("area_m2"), node.attributes.get("aisle")
         regions[rid] = Region(rid, node.key, node.kind, node.x_m, node.y_m,
-                              float(area) if isinstance(area, int | float) else None)
+                              float(area) if isinstance(area, int | float) else None,
+                              aisle if isinstance(aisle, str) else None)
     graph = nx.Graph()
     for rid, region in regions.items():
         graph.add_node(rid, region=region, blocked=False)

@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.pipeline import Decomposition
 from services.grid_decomposition.racks import RackLayout
 from shared.store import Feature, GridLayer, MapStore, Revision
 from shared.vocabulary import FeatureKind, PlaceLabel
@@ -119,6 +120,22 @@ def footprint_mask(
     return mask
 
 
+def aisle_regions(decomposition: Decomposition, aisles: Sequence[tuple[str, Footprint]]) -> dict[int, str]:
+    """Region id -> aisle key: for each aisle (key, outline in map metres), the corridor region holding more than
+    half of the aisle's region cells, if one does (the strip between two facing rows is that aisle)."""
+    segments = decomposition.segments
+    out: dict[int, str] = {}
+    for key, ring in aisles:
+        inside = footprint_mask([ring], shape=segments.shape, resolution_m=decomposition.resolution_m,
+                                origin_xy_m=decomposition.origin_xy_m) & (segments > 0)
+        ids, counts = np.unique(segments[inside], return_counts=True)
+        if counts.size and 2 * counts.max() > counts.sum():
+            rid = int(ids[counts.argmax()])
+            if decomposition.regions[rid].label is PlaceLabel.CORRIDOR and rid not in out:
+                out[rid] = key
+    return out
+
+
 class KnownRacks:
     """The pillar stage's bin and aisle footprints for a worker: read from the store at first and again whenever a
     revision of that stage changed its bins or aisles (:meth:`note`), so a decomposition costs no feature read."""
@@ -126,6 +143,7 @@ class KnownRacks:
     def __init__(self) -> None:
         self.bins: list[Footprint] = []
         self.aisles: list[Footprint] = []
+        self.aisle_keys: list[str] = []
         self._stale = True
 
     def note(self, revisions: Sequence[Revision]) -> bool:
@@ -146,13 +164,19 @@ class KnownRacks:
             return False
         read = [s.feature for s in store.features(map_id, kinds=[FeatureKind.BIN, FeatureKind.CORRIDOR])
                 if s.stage == KNOWN_RACKS_STAGE]
-        found = (footprints(read, FeatureKind.BIN), footprints(read, FeatureKind.CORRIDOR))
+        keyed = sorted((f.key, ring) for f in read for ring in footprints([f], FeatureKind.CORRIDOR))
+        found = (footprints(read, FeatureKind.BIN), [ring for _, ring in keyed])
         self._stale = False
         same = all(len(new) == len(old) and all(
             a.shape == b.shape and np.allclose(a, b, atol=_JITTER_M) for a, b in zip(new, old, strict=True))
             for new, old in zip(found, (self.bins, self.aisles), strict=True))
         self.bins, self.aisles = found
+        self.aisle_keys = [key for key, _ in keyed]
         return not same
+
+    def names(self, decomposition: Decomposition) -> dict[int, str]:
+        """Region id -> key of the aisle it is (:func:`aisle_regions`)."""
+        return aisle_regions(decomposition, list(zip(self.aisle_keys, self.aisles, strict=True)))
 
     def on_grid(self, layer: GridLayer) -> RackLayout | None:
         """The known places on the grid of ``layer`` (:func:`known_layout`); None while there are no bins."""

@@ -127,8 +127,8 @@ def rack_row_features(decomposition: Decomposition, *, known_racks: npt.NDArray[
     return out
 
 
-def decomposition_features(decomposition: Decomposition, *, known_racks: npt.NDArray[np.bool_] | None = None
-                           ) -> dict[str, list[Feature]]:
+def decomposition_features(decomposition: Decomposition, *, known_racks: npt.NDArray[np.bool_] | None = None,
+                           aisles: Mapping[int, str] | None = None) -> dict[str, list[Feature]]:
     """Regions, walls, decomposition lines and rack rows as store features, geometry in map metres.
 
     The geometry is that of ``layout.geojson`` (:func:`layout_features`). Regions become
@@ -137,7 +137,8 @@ def decomposition_features(decomposition: Decomposition, *, known_racks: npt.NDA
     ``category`` and ``area_m2``, and the key of its topology node (:func:`region_key`). Cogent edges
     are ``wall`` features with ``label`` ``wall`` or ``door`` (a closed doorway); the lines that cut
     the map are ``line`` features (``label`` ``coarse`` or ``fine``); the rack rows found are ``rack_row``
-    features (:func:`rack_row_features`, rows in ``known_racks`` left out).
+    features (:func:`rack_row_features`, rows in ``known_racks`` left out). A region that is an aisle
+    (``aisles``: region id -> ``aisle-NN``) has property ``aisle``.
 
     Returns
     -------
@@ -156,6 +157,7 @@ def decomposition_features(decomposition: Decomposition, *, known_racks: npt.NDA
                 "region_id": ident,
                 "category": int(props["category"]),
                 "area_m2": float(props["area_m2"]),
+                **({"aisle": aisles[ident]} if aisles and ident in aisles else {}),
             }))
         elif kind == FeatureKind.WALL:
             wall = Feature(FeatureKind.WALL, f"e{ident}", item["geometry"], {"label": props["label"]})
@@ -170,12 +172,14 @@ def decomposition_features(decomposition: Decomposition, *, known_racks: npt.NDA
     return out
 
 
-def decomposition_topology(decomposition: Decomposition) -> tuple[list[TopologyNode], list[TopologyEdge]]:
+def decomposition_topology(decomposition: Decomposition, *, aisles: Mapping[int, str] | None = None
+                           ) -> tuple[list[TopologyNode], list[TopologyEdge]]:
     """The region graph as store topology.
 
     Nodes are keyed :func:`region_key` (as the region features), kind = the region's label
     (``corridor``, ``storage``...), at the region's centroid (map metres; for a concave region it
-    may lie outside it); attributes ``feature_kind``, ``category`` and ``area_m2``. Edges carry
+    may lie outside it); attributes ``feature_kind``, ``category``, ``area_m2`` and, for a region that is an
+    aisle (``aisles``: region id -> ``aisle-NN``), ``aisle``. Edges carry
     ``connection`` (connected, storage_access, door or disconnected).
     """
     graph = decomposition.topology
@@ -184,6 +188,7 @@ def decomposition_topology(decomposition: Decomposition) -> tuple[list[TopologyN
             "feature_kind": REGION_FEATURE_KINDS[PlaceLabel[data["label"].upper()]],
             "category": int(data["category"]),
             "area_m2": float(data["area_m2"]),
+            **({"aisle": aisles[int(n)]} if aisles and int(n) in aisles else {}),
         })
         for n, data in sorted(graph.nodes(data=True))
     ]

@@ -155,9 +155,7 @@ class DecompositionStage:
         return changed
 
     def _decompose(self, stored: StoredLayer, previous: GridLayer | None) -> None:  # previous segment layer
-        layer = stored.layer
-        self._last_attempt = time.monotonic()
-        start = time.perf_counter()
+        layer, self._last_attempt, start = stored.layer, time.monotonic(), time.perf_counter()
         try:
             racks = self.racks.on_grid(layer)
             result, ids = carry_keys(decompose(layer.data, resolution_m=layer.resolution_m,
@@ -176,9 +174,10 @@ class DecompositionStage:
                         layer.data.shape[1], layer.data.shape[0], err)
             return
         seconds = time.perf_counter() - start
-        features = decomposition_features(result, known_racks=None if racks is None else racks.storage)
+        aisles = self.racks.names(result)
+        features = decomposition_features(result, known_racks=None if racks is None else racks.storage, aisles=aisles)
         write = RevisionWrite(self.context.name, layers=layers, features=features,
-                              topology=decomposition_topology(result), summary={
+                              topology=decomposition_topology(result, aisles=aisles), summary={
                                   **source, "regions": len(result.regions), "regions_kept": ids.carried,
                                   "decomposition_s": round(seconds, 3), LABEL_OVERRIDES_KEY: {
                                       str(c): label.name.lower() for c, label in sorted(self._overrides.items())}})

@@ -330,7 +330,11 @@ def test_with_the_pillar_stages_racks_every_aisle_is_a_corridor_and_every_bin_in
         strip = footprint_mask([np.asarray(aisle.geometry["coordinates"][0])], shape=segments.layer.data.shape,
                                resolution_m=grids.resolution_m, origin_xy_m=(grids.origin_x_m, grids.origin_y_m))
         ids, counts = np.unique(segments.layer.data[strip & (segments.layer.data > 0)], return_counts=True)
-        assert counts.max() > 0.8 * counts.sum() and regions[f"r{ids[counts.argmax()]}"].kind == "corridor", aisle.key
+        region = regions[f"r{ids[counts.argmax()]}"]
+        assert counts.max() > 0.8 * counts.sum() and region.kind == "corridor", aisle.key
+        assert region.properties["aisle"] == aisle.key, "the aisle's corridor region is named after it"
+    nodes, _ = store.topology(map_id)
+    assert sorted(n.attributes["aisle"] for n in nodes if "aisle" in n.attributes) == [a.key for a in aisles]
     answers = select_bins(store, RevisionCache(size=4), map_id, revision=None, bbox=None, limit=10_000, offset=0)
     assert answers.total == len(bins)
     for answer in answers.bins:
