@@ -690,8 +690,9 @@ def place_segments(
 
     A rack place keeps the pieces ``segments`` cut it into (the pallet cells of a warehouse floor).
 
-    What the places leave of a segment joins the nearest place when it is under ``min_area_px`` or
-    under half of the segment (the slivers of a hall the places cover). Places ``1..n_known`` are
+    What the places leave of a segment joins the nearest place that is no rack (floor is never
+    storage) when it is under ``min_area_px`` or under half of the segment (the slivers of a hall
+    the places cover). Places ``1..n_known`` are
     known (another stage's bins and aisles, first in ``layout``): a region however little free
     space they hold (a loaded bay), and what they leave of a segment stays a segment unless a crumb.
     Also returns the place of every free pixel now in one (0 elsewhere).
@@ -713,17 +714,20 @@ def place_segments(
     after = np.bincount(segments[~in_cells], minlength=n_old)
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
-    sliver = (left[segments] & ~in_cells & region) | (crumb[layout.cells] & free)
+    floor = left[segments] & ~in_cells & region
+    crumbs = crumb[layout.cells] & free
     place = cells.copy()
-    if sliver.any():
-        _, nearest = cv2.distanceTransformWithLabels(
-            (cells == 0).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
-        )
-        seeds = cells > 0
-        lut = np.zeros(int(nearest.max()) + 1, dtype=np.int32)
-        lut[nearest[seeds]] = cells[seeds]
-        place[sliver] = lut[nearest[sliver]]
-        inside |= sliver & (place > 0)
+    # a crumb joins the nearest place; a sliver of floor the nearest place that is no rack (floor is no storage)
+    drivable = (cells > 0) & (layout.cell_labels[cells] != PlaceLabel.STORAGE.value)
+    for joining, seeds in ((crumbs, cells > 0), (floor, drivable)):
+        if joining.any() and seeds.any():
+            _, nearest = cv2.distanceTransformWithLabels(
+                (~seeds).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
+            )
+            lut = np.zeros(int(nearest.max()) + 1, dtype=np.int32)
+            lut[nearest[seeds]] = cells[seeds]
+            place[joining] = lut[nearest[joining]]
+            inside |= joining & (place > 0)
     out = segments.astype(np.int64)
     out[in_cells & ~free] = 0  # uprights and pallets in a rack place belong to no region
     out[inside] = n_old + place[inside]
