@@ -310,8 +310,8 @@ def decompose(
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
-        before any the rack finder finds (which fills in the rest); a room touching them is the
-        hall's open area.
+        before any the rack finder finds (which fills in the rest); a room touching a rack place is
+        then the hall's open area.
     seed : int
         Seed of the clusterings.
 
@@ -458,8 +458,13 @@ def decompose(
         segments = lut[lut[segments]]
         pairs = _pairs(segments, sub)
         regions, labels = _region_records(segments, sub, pairs, face_labels, resolution_m, origin_xy_m)
-    if known_places is not None:  # floor that touches the racks another stage knows is the hall's: no room
-        hall = cv2.dilate((known_places.cells > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    for k in [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]:  # a rack place is no room: its label
+        held = places[segments == k]
+        if np.count_nonzero(held) > 0.5 * held.size:
+            label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))
+            regions[k] = regions[k]._replace(label=label)
+    if known_places is not None:  # in a hall another stage knows the racks of, floor touching a rack place is no room
+        hall = cv2.dilate((racks.cells > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
         in_hall = set(np.unique(segments[hall & (places == 0)]).tolist())
         regions = {k: r._replace(label=PlaceLabel.OPEN_AREA) if r.label is PlaceLabel.ROOM and k in in_hall else r
                    for k, r in regions.items()}
