@@ -49,6 +49,7 @@ def bin_out(answer: BinAnswer) -> BinOut:
         back_row=record.back_row,
         corridor=_place(answer.corridor),
         region=_place(answer.region),
+        storage_region=_place(answer.storage_region),
         nearest_junction=_place(answer.nearest_junction),
         confidence=record.confidence,
         stage=answer.stage,

@@ -285,6 +285,9 @@ class BinOut(BaseModel):
                                                   "decomposition corridor.")
     region: PlaceRef | None = Field(description="The drivable region of the grid decomposition the access pose is "
                                                 "in (a topology node); null without place layers.")
+    storage_region: PlaceRef | None = Field(
+        description="The region of the grid decomposition holding most of the bin's footprint (a topology node; "
+                    "`storage` where the racks are known); null for a bin without a footprint or place layers.")
     nearest_junction: PlaceRef | None = Field(description="The junction nearest the access pose, if any.")
     confidence: float | None = Field(
         description="How sure the pillar stage is of the bin, probability 0..1: the expected fraction of its four "
@@ -301,5 +304,6 @@ class BinOut(BaseModel):
         "access_pose": {"x_m": 41.2, "y_m": 15.6, "yaw_rad": 1.5708}, "row": "r0-006", "back_row": "r0-007",
         "corridor": {"key": "aisle-03", "label": "corridor", "distance_m": None},
         "region": {"key": "r12", "label": "corridor", "distance_m": None},
+        "storage_region": {"key": "r40", "label": "storage", "distance_m": None},
         "nearest_junction": {"key": "r3", "label": "junction", "distance_m": 18.4},
         "confidence": 0.92, "stage": "pillar_mapping", "revision_id": 1207}]}}

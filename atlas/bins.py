@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 from atlas.cache import RevisionCache
 from atlas.errors import NotInMapError
-from atlas.grids import cached_layer, nearest_drivable_region
+from atlas.grids import cached_layer, nearest_drivable_region, region_holding
 from atlas.reconcile import WMS_STAGE, MatchBy, WmsMatching, detected_bin, reconcile, wms_matching
 from shared.bins import Bin
 from shared.store import GridLayer, MapInfo, MapStore, Revision, StoredFeature, WmsBin
@@ -108,6 +108,13 @@ class BinIndex:
         found = nearest_drivable_region(self.segments, self.labels, x_m, y_m)
         return None if found is None else (f"r{found[0]}", found[1])
 
+    def storage_of(self, record: Bin) -> tuple[str, str] | None:
+        """(region key, label) of the region holding most of the bin's footprint; None for a point bin."""
+        if self.labels is None or self.segments is None or record.footprint is None:
+            return None
+        found = region_holding(self.segments, self.labels, record.footprint)
+        return None if found is None else (f"r{found[0]}", found[1])
+
     def status_of(self, detected_id: str) -> tuple[BinStatus, str | None]:
         """The WMS status of bin ``detected_id`` and the WMS id it is matched to."""
         if self.matching is None:
@@ -132,6 +139,9 @@ class BinAnswer:
     """The corridor feature the access pose is in: the bin's aisle where there is one, else any."""
     region: PlaceRef | None
     """The drivable region of the grid decomposition the access pose is in."""
+    storage_region: PlaceRef | None
+    """The region of the grid decomposition the bin's footprint lies in (a storage region where the racks are
+    known)."""
     nearest_junction: PlaceRef | None
     stage: str
     """The stage that wrote the bin."""
@@ -158,12 +168,14 @@ def answer_bin(record: Bin, index: BinIndex, *, stage: str, revision_id: int) ->
     status, wms_id = index.status_of(record.id)
     x, y = record.reach
     place = index.place_at(x, y)
+    storage = index.storage_of(record)
     corridor = index.corridor_at(x, y, aisle=record.aisle)
     nearest = index.nearest_junction(x, y)
     return BinAnswer(
         bin=record, status=status, wms_id=wms_id,
         corridor=None if corridor is None else PlaceRef(corridor, FeatureKind.CORRIDOR.value),
         region=None if place is None else PlaceRef(place[0], place[1]),
+        storage_region=None if storage is None else PlaceRef(storage[0], storage[1]),
         nearest_junction=None if nearest is None else PlaceRef(nearest[0], FeatureKind.JUNCTION.value, nearest[1]),
         stage=stage, revision_id=revision_id)
 

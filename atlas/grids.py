@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
+import cv2
 import numpy as np
 
 from atlas.cache import RevisionCache
@@ -42,6 +44,33 @@ def value_at(layer: GridLayer, x_m: float, y_m: float) -> Any:
     """The layer's value at (x, y) as a Python number, or None outside it."""
     cell = cell_of(layer, x_m, y_m)
     return None if cell is None else layer.data[cell].item()
+
+
+def region_holding(segments: GridLayer, labels: GridLayer, ring: Sequence[tuple[float, float]]
+                   ) -> tuple[int, str] | None:
+    """(id, label) of the region holding most cells whose centres lie in polygon ``ring`` (map metres); None
+    where no region does (or the layers are not on one grid)."""
+    if segments.data.shape != labels.data.shape or len(ring) < 3:
+        return None
+    res, origin = segments.resolution_m, np.array([segments.origin_x_m, segments.origin_y_m])
+    corners = (np.asarray(ring, dtype=np.float64) - origin) / res - 0.5  # in cell-centre units
+    rows, cols = segments.data.shape
+    c0, r0 = np.maximum(np.floor(corners.min(axis=0)).astype(int), 0)
+    c1, r1 = np.minimum(np.ceil(corners.max(axis=0)).astype(int) + 1, (cols, rows))
+    if r0 >= r1 or c0 >= c1:
+        return None
+    inside = np.zeros((r1 - r0, c1 - c0), dtype=np.uint8)
+    shift = 4
+    cv2.fillPoly(inside, [np.round((corners - (c0, r0)) * (1 << shift)).astype(np.int32)], 1, cv2.LINE_8, shift)
+    ids = segments.data[r0:r1, c0:c1][inside > 0]
+    ids = ids[ids > 0]
+    if ids.size == 0:
+        return None
+    values, counts = np.unique(ids, return_counts=True)
+    best = int(values[counts.argmax()])
+    codes = labels.data[r0:r1, c0:c1][segments.data[r0:r1, c0:c1] == best].astype(np.int64)
+    codes = codes[codes > 0]  # a region's furniture and a rack's pallets carry no label
+    return best, (class_name(labels, int(np.bincount(codes).argmax())) if codes.size else None) or "unknown"
 
 
 def class_name(layer: GridLayer, code: int) -> str | None:

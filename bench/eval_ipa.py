@@ -10,8 +10,9 @@ Sets (``--sets``, all by default):
   occupied, the rest unknown), each ground-truth colour one room, scored on pixels free in the
   map only (both sides); ROSE\u00b2's own ``rose2_rooms.png`` scored the same way beside ours.
 * ``partial``: the 15 steps of one growing ubremen map, scored like ``rose2``, plus the share of
-  region ids kept from step k to k+1 where the room still exists (ids carried over by overlap,
-  as a live map would; :func:`~services.grid_decomposition.evaluation.carry_ids`).
+  region ids kept from step k to k+1 where the room still exists (ids carried over by overlap
+  exactly as the live decomposition worker carries its keys:
+  :func:`~services.grid_decomposition.keys.stable_ids`).
 
 Prints a Markdown table per set and ``name value unit`` summary lines. Run (one BLAS thread):
 ``PYTHONPATH=. .venv/bin/python bench/eval_ipa.py [--sets ipa rose2 partial] [--variants '' _furnitures]``.
@@ -35,12 +36,12 @@ from services.grid_decomposition import IpaScores, decompose, ground_truth_rooms
 from services.grid_decomposition.evaluation import (
     FREE_GREY,
     align_offset,
-    carry_ids,
     colour_rooms,
     id_stability,
     on_free,
     shift_into,
 )
+from services.grid_decomposition.keys import stable_ids
 from services.grid_decomposition.mapfile import read_map_file
 
 MAPS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
@@ -212,6 +213,7 @@ def _partial() -> None:
     theirs: list[Row] = []
     shares: list[float] = []
     previous: tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]] | None = None
+    next_id = 1
     for folder in steps:
         segments, free, s, peer, row = _rose2_map(folder)
         step = int(folder.name[3:])
@@ -225,7 +227,8 @@ def _partial() -> None:
             before, before_free = previous
             offset = align_offset(before_free, free)
             moved = shift_into(before, offset, segments.shape)
-            carried = carry_ids(moved, segments)
+            ids = stable_ids(moved, segments, next_id=next_id)
+            carried, next_id = ids.lut[segments].astype(np.int32), ids.next_id
             rooms = on_free(colour_rooms(_common(_rgb(folder / "gt.png"), segments)[0]), free)
             kept = id_stability(moved, carried, rooms)
             shares.append(kept.share)

@@ -13,6 +13,7 @@ from api.models import COMMON_ERRORS, UNPROCESSABLE, ErrorOut, Responses, exampl
 from api.translate import http_error
 from atlas.errors import AtlasError
 from atlas.navigation import (
+    BLOCKABLE_KEY_PATTERN,
     REGION_KEY_PATTERN,
     NavigationError,
     NavigationUnavailableError,
@@ -42,9 +43,9 @@ class BlockIn(BaseModel):
 class BlockOut(BaseModel):
     target: Literal["region", "connection"]
     regions: list[str] | None = Field(
-        description="The region (or the two regions of the connection) the block applies to now; null when "
-                    "nothing lies at its point any more (the map changed), so it has no effect.")
-    blocked_keys: list[str] = Field(description="The region keys named when it was blocked.")
+        description="The region (every region of a blocked aisle, or the two regions of the connection) the block "
+                    "applies to now; null when nothing matches it any more (the map changed), so it has no effect.")
+    blocked_keys: list[str] = Field(description="The region or aisle keys named when it was blocked.")
     x_m: float = Field(description="A point inside the region, or the connection's portal, when blocked: x, "
                                    "metres, map frame.")
     y_m: float = Field(description="y, metres, map frame.")
@@ -88,6 +89,10 @@ def _block_out(item: ResolvedBlock, nav: NavMap) -> BlockOut:
 
 RegionPath = Annotated[str, Path(pattern=REGION_KEY_PATTERN, description="Region key, e.g. `r17`.",
                                  examples=["r17"])]
+BlockablePath = Annotated[str, Path(
+    pattern=BLOCKABLE_KEY_PATTERN, examples=["r17", "aisle-03"],
+    description="Region key (`r17`), or an aisle's key (`aisle-03`, its `corridor` feature): every drivable "
+                "region lying in the aisle.")]
 BlockBody = Annotated[BlockIn | None, Body(
     description="Optional: why it is blocked.",
     openapi_examples={"reason": {"summary": "with a reason", "value": {"reason": "spill in aisle 3"}}})]
@@ -113,9 +118,10 @@ def _caller_name(caller: Caller) -> str | None:
                                                                   "description": "Blocked (it was not)."}})
 def block_region(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
                  cache: CacheDep, caller: CallerDep, response: Response,
-                 region: RegionPath, body: BlockBody = None) -> BlockChange:
-    """Close a drivable region to routes (stored as an ``operator`` revision); 201 when newly blocked, 200 when
-    it was blocked already (the reason is replaced). Needs a write key."""
+                 region: BlockablePath, body: BlockBody = None) -> BlockChange:
+    """Close a drivable region, or every drivable region of an aisle, to routes (stored as an ``operator``
+    revision); 201 when newly blocked, 200 when it was blocked already (the reason is replaced). Region keys stay
+    the same while the place is the same, across revisions. Needs a write key."""
     try:
         done = blocking.block_region(store, cache, map_info.id, region, reason=body.reason if body else None,
                                      by=_caller_name(caller))
@@ -129,9 +135,9 @@ def block_region(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
 @router.delete("/topology/blocked/regions/{region}", summary="Unblock a region", tags=["topology"],
                responses=_BLOCK_ERRORS)
 def unblock_region(map_info: MapDep, store: StoreDep, announcer: AnnouncerDep,
-                   cache: CacheDep, region: RegionPath) -> Unblocked:
-    """Open a blocked region again (every block on it, including ones no longer matching anything that were
-    made for this key). 404 when it is not blocked. Needs a write key."""
+                   cache: CacheDep, region: BlockablePath) -> Unblocked:
+    """Open a blocked region or aisle again (every block made for this key, and every region block that applies
+    to this region now). 404 when it is not blocked. Needs a write key."""
     try:
         done = blocking.unblock_region(store, cache, map_info.id, region)
     except (AtlasError, NavigationError) as err:

@@ -24,6 +24,8 @@ class TopologyNodeOut(BaseModel):
     x: float | None = Field(description="Centroid x, metres, map frame (may lie outside a concave region).")
     y: float | None = Field(description="Centroid y, metres, map frame.")
     area_m2: float | None = Field(description="Floor area of the region, m².")
+    aisle: str | None = Field(description="The aisle this corridor region is (`aisle-03`, the rack rows' corridor "
+                                          "feature) where the racks are known; null otherwise.")
     drivable: bool = Field(description="Whether vehicles drive in it (corridor, junction, room, open area).")
     blocked: bool = Field(description="Closed by an operator.")
 
@@ -47,15 +49,15 @@ class TopologyGraphOut(BaseModel):
 
 _TOPOLOGY_EXAMPLE: dict[str, Any] = {
     "directed": False, "multigraph": False, "graph": {"map": "site", "revision": 42, "segments_revision_id": 40},
-    "nodes": [{"id": "r17", "kind": "corridor", "x": 8.4, "y": 5.6, "area_m2": 36.1, "drivable": True,
-               "blocked": False},
-              {"id": "r16", "kind": "junction", "x": 1.5, "y": 5.6, "area_m2": 9.0, "drivable": True,
+    "nodes": [{"id": "r17", "kind": "corridor", "x": 8.4, "y": 5.6, "area_m2": 36.1, "aisle": "aisle-03",
+               "drivable": True, "blocked": False},
+              {"id": "r16", "kind": "junction", "x": 1.5, "y": 5.6, "area_m2": 9.0, "aisle": None, "drivable": True,
                "blocked": False}],
     "edges": [{"source": "r16", "target": "r17", "connection": "connected", "blocked": False,
                "portal": [3.05, 5.62], "width_m": 3.0}]}
 _TOPOLOGY_GEOJSON_EXAMPLE: dict[str, Any] = {"type": "FeatureCollection", "revision": 42, "features": [
     {"type": "Feature", "id": "r17", "geometry": {"type": "Point", "coordinates": [8.4, 5.6]},
-     "properties": {"kind": "corridor", "area_m2": 36.1, "drivable": True, "blocked": False}},
+     "properties": {"kind": "corridor", "area_m2": 36.1, "aisle": "aisle-03", "drivable": True, "blocked": False}},
     {"type": "Feature", "id": "r16-r17",
      "geometry": {"type": "LineString", "coordinates": [[1.5, 5.6], [3.05, 5.62], [8.4, 5.6]]},
      "properties": {"source": "r16", "target": "r17", "connection": "connected", "blocked": False,

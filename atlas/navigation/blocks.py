@@ -2,9 +2,11 @@
 
 A blocked region is a topology node of kind ``blocked``; a blocked connection is a topology edge
 whose attributes have ``kind: blocked``. Each remembers a point (inside the region, or the portal
-of the connection) besides the region keys it was made for, because region ids are the grid
-decomposition's and may change when it runs again: at read time a block applies to whatever
-region (or connection) now lies at its point. Writing replaces the operator stage's whole graph,
+of the connection) besides the region keys it was made for. Region keys are stable while the place is
+the same (the grid decomposition carries them over by overlap), but a place can vanish or merge: at read
+time a block applies to the region with its key, else whatever region (or connection) now lies at its
+point. A block of an aisle (``aisle-03``, the pillar stage's corridor feature) applies to every drivable
+region lying mostly in the aisle's outline at read time. Writing replaces the operator stage's whole graph,
 so callers read the current set, change it and write it back (:func:`write_blocks`).
 """
 
@@ -29,12 +31,22 @@ at the same moment can still race; one operator at a time is the expected use.""
 BLOCKED_KIND = "blocked"
 REGION_KEY_PATTERN = r"^r[0-9]{1,9}$"
 """A region key as the grid decomposition writes it: ``r`` and the region id."""
+AISLE_KEY_PATTERN = r"^aisle-[0-9]{1,9}$"
+"""An aisle's key as the pillar stage writes its ``corridor`` feature: ``aisle-03``."""
+BLOCKABLE_KEY_PATTERN = r"^(r[0-9]{1,9}|aisle-[0-9]{1,9})$"
+"""What a region block may name: a region, or an aisle (every drivable region lying in it)."""
 _REGION_KEY = re.compile(REGION_KEY_PATTERN)
+_AISLE_KEY = re.compile(AISLE_KEY_PATTERN)
 
 
 def region_id(key: str) -> int | None:
     """The region id of key ``r<id>``, or None for any other key."""
     return int(key[1:]) if _REGION_KEY.match(key) else None
+
+
+def is_aisle_key(key: str) -> bool:
+    """Whether ``key`` names an aisle (``aisle-NN``)."""
+    return _AISLE_KEY.match(key) is not None
 
 
 def region_pair(a: str, b: str) -> tuple[str, str]:
@@ -44,7 +56,7 @@ def region_pair(a: str, b: str) -> tuple[str, str]:
 
 @dataclass(frozen=True, slots=True)
 class Block:
-    """A region (one key) or a connection (two keys, :func:`region_pair` order) an operator closed.
+    """A region or an aisle (one key) or a connection (two keys, :func:`region_pair` order) an operator closed.
 
     ``x_m``, ``y_m`` is a point inside the region, or the portal of the connection, when it was
     blocked (map metres); ``blocked_at`` an ISO 8601 UTC time; ``blocked_by`` the name of the API

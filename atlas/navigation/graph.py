@@ -8,20 +8,29 @@ operator's blocks, which is cheap. :func:`load_navmap` reads everything from the
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Sequence
+import re
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
-import cv2
 import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
 from atlas.cache import RevisionCache
 from atlas.grids import DRIVABLE_PLACES, cached_layer
-from atlas.navigation.blocks import Block, blocks_of, is_block_edge, is_block_node, region_id
+from atlas.navigation.blocks import (
+    AISLE_KEY_PATTERN,
+    Block,
+    blocks_of,
+    is_aisle_key,
+    is_block_edge,
+    is_block_node,
+    region_id,
+)
 from atlas.navigation.errors import NavigationUnavailableError
-from atlas.navigation.grid import BoolGrid, Frame, Point, free_cells, nearest_cell, region_slices
+from atlas.navigation.grid import BoolGrid, Frame, Point, free_cells, nearest_cell, polygon_cells, region_slices
 from atlas.navigation.portals import Portal, find_portals
 from shared.store import GridLayer, MapStore, TopologyEdge, TopologyNode
 from shared.vocabulary import FeatureKind, LayerName
@@ -32,6 +41,9 @@ RACK_KIND = FeatureKind.BIN
 """Features whose footprints are racks, never driven through (the pillar stage's pallet cells)."""
 ROUTE_CONNECTIONS = frozenset({"connected", "door"})
 """Connections a vehicle drives through (not ``storage_access`` nor ``disconnected``)."""
+AISLE_SHARE = 0.5
+"""A region lies in an aisle (and a block of the aisle applies to it) when this share of its cells is inside the
+aisle's outline."""
 LOCATE_TOLERANCE_M = 1.0
 """How far a point (a bin's access pose, a dock) may lie off a drivable region and still be placed in it."""
 
@@ -60,20 +72,15 @@ def region_grid(segments: GridLayer, occupancy: GridLayer | None, *, segments_re
     ids = segments.data.astype(np.int32)
     free = free_cells(occupancy, frame) if occupancy is not None else ids > 0
     if racks:
-        shift = 4
-        scale = float(1 << shift) / frame.resolution_m
-        polygons = [np.round((ring - (frame.origin_x_m, frame.origin_y_m)) * scale - 0.5 * (1 << shift)
-                             ).astype(np.int32) for ring in racks]
-        covered = np.zeros(free.shape, dtype=np.uint8)
-        cv2.fillPoly(covered, polygons, 1, cv2.LINE_8, shift)
-        free = free & (covered == 0)
+        free = free & ~polygon_cells(racks, frame)
     return RegionGrid(frame, ids, free, region_slices(ids), find_portals(ids, frame), segments_revision,
                       occupancy_revision)
 
 
 @dataclass(frozen=True)
 class Region:
-    """A region of the decomposition: id, key (``r<id>``), kind (its label: corridor, storage, ...), centroid."""
+    """A region of the decomposition: id, key (``r<id>``), kind (its label: corridor, storage, ...), centroid, and
+    the aisle it is (``aisle-03``) where the racks are known."""
 
     id: int
     key: str
@@ -81,6 +88,7 @@ class Region:
     x_m: float | None
     y_m: float | None
     area_m2: float | None
+    aisle: str | None = None
 
     @property
     def drivable(self) -> bool:
@@ -89,8 +97,9 @@ class Region:
 
 @dataclass(frozen=True)
 class ResolvedBlock:
-    """A stored block and the region ids it applies to now (one, or a connected pair); None when it no
-    longer matches anything (the region or passage at its point is gone)."""
+    """A stored block and the region ids it applies to now (a region block: its region, or every region of its
+    aisle; a connection block: the connected pair); None when it no longer matches anything (the region or
+    passage at its point is gone)."""
 
     block: Block
     ids: tuple[int, ...] | None
@@ -110,6 +119,8 @@ class NavMap:
     graph: nx.Graph
     blocks: list[ResolvedBlock]
     revision: int | None = None
+    aisles: dict[str, list[npt.NDArray[np.float64]]] = field(default_factory=dict)
+    """Outlines (K, 2) in map metres of the aisles (``aisle-NN`` corridor features), by key."""
     _hubs: dict[int, Point | None] = field(default_factory=dict)
 
     @property
@@ -118,11 +129,11 @@ class NavMap:
 
     @cached_property
     def blocked_ids(self) -> frozenset[int]:
-        return frozenset(b.ids[0] for b in self.blocks if b.ids is not None and len(b.ids) == 1)
+        return frozenset(i for b in self.blocks if b.ids is not None and b.block.is_region for i in b.ids)
 
     @cached_property
     def blocked_pairs(self) -> frozenset[tuple[int, int]]:
-        return frozenset((b.ids[0], b.ids[1]) for b in self.blocks if b.ids is not None and len(b.ids) == 2)
+        return frozenset((b.ids[0], b.ids[1]) for b in self.blocks if b.ids is not None and not b.block.is_region)
 
     @cached_property
     def drivable_ids(self) -> frozenset[int]:
@@ -172,6 +183,10 @@ class NavMap:
         best = int(np.argmin(far))
         return self.frame.centre(float(rows[best] + slices[0].start), float(cols[best] + slices[1].start))
 
+    def aisle_regions(self, key: str) -> tuple[int, ...]:
+        """Drivable regions lying in aisle ``key`` (:data:`AISLE_SHARE` of their cells in its outline), by id."""
+        return _in_outline(self.grid, self.aisles.get(key, []), self.drivable_ids)
+
     def key(self, rid: int) -> str:
         region = self.regions.get(rid)
         return region.key if region is not None else f"r{rid}"
@@ -182,8 +197,24 @@ class NavMap:
         return f"r{rid}" if region is None else f"{region.key} ({region.kind})"
 
 
-def _resolve(block: Block, grid: RegionGrid, graph: nx.Graph, *, tolerance_m: float) -> tuple[int, ...] | None:
+def _in_outline(grid: RegionGrid, rings: list[npt.NDArray[np.float64]], ids: Collection[int]) -> tuple[int, ...]:
+    if not rings or not ids:
+        return ()
+    inside = polygon_cells(rings, grid.frame)
+    n = int(grid.segments.max(initial=0)) + 1
+    total = np.bincount(grid.segments.ravel(), minlength=n)
+    held = np.bincount(grid.segments[inside], minlength=n)
+    return tuple(sorted(i for i in ids if 0 < i < n and held[i] >= AISLE_SHARE * total[i] > 0))
+
+
+def _resolve(block: Block, nav: NavMap, *, tolerance_m: float) -> tuple[int, ...] | None:
+    grid, graph = nav.grid, nav.graph
     if block.is_region:
+        own = region_id(block.keys[0])
+        if own is not None and own in nav.regions and own in grid.slices:
+            return (own,)
+        if is_aisle_key(block.keys[0]) and (inside := nav.aisle_regions(block.keys[0])):
+            return inside
         cell = nearest_cell(grid.segments > 0, grid.frame, block.x_m, block.y_m, tolerance_m=tolerance_m)
         return None if cell is None else (int(grid.segments[cell]),)
     same = tuple(sorted(i for i in (region_id(k) for k in block.keys) if i is not None))
@@ -196,9 +227,10 @@ def _resolve(block: Block, grid: RegionGrid, graph: nx.Graph, *, tolerance_m: fl
 
 
 def build_navmap(grid: RegionGrid, nodes: Sequence[TopologyNode], edges: Sequence[TopologyEdge], *,
-                 revision: int | None = None, tolerance_m: float = LOCATE_TOLERANCE_M) -> NavMap:
+                 revision: int | None = None, tolerance_m: float = LOCATE_TOLERANCE_M,
+                 aisles: Mapping[str, list[npt.NDArray[np.float64]]] | None = None) -> NavMap:
     """Join a :class:`RegionGrid` with a map's topology records (the decomposition's regions and
-    connections, the operator's blocks).
+    connections, the operator's blocks) and the aisles' outlines (by key, for blocks of aisles).
 
     Nodes whose key is not ``r<id>`` and blocks' records are not regions; an edge between two
     regions gets the portal of their shared boundary, if any.
@@ -208,9 +240,10 @@ def build_navmap(grid: RegionGrid, nodes: Sequence[TopologyNode], edges: Sequenc
         rid = region_id(node.key)
         if rid is None or is_block_node(node):
             continue
-        area = node.attributes.get("area_m2")
+        area, aisle = node.attributes.get("area_m2"), node.attributes.get("aisle")
         regions[rid] = Region(rid, node.key, node.kind, node.x_m, node.y_m,
-                              float(area) if isinstance(area, int | float) else None)
+                              float(area) if isinstance(area, int | float) else None,
+                              aisle if isinstance(aisle, str) else None)
     graph = nx.Graph()
     for rid, region in regions.items():
         graph.add_node(rid, region=region, blocked=False)
@@ -221,13 +254,16 @@ def build_navmap(grid: RegionGrid, nodes: Sequence[TopologyNode], edges: Sequenc
         pair = (min(a, b), max(a, b))
         graph.add_edge(*pair, connection=str(edge.attributes.get("connection", "")), portal=grid.portals.get(pair),
                        blocked=False)
-    blocks = [ResolvedBlock(b, _resolve(b, grid, graph, tolerance_m=tolerance_m)) for b in blocks_of(nodes, edges)]
-    for item in blocks:
-        if item.ids is not None and len(item.ids) == 1 and item.ids[0] in graph:
-            graph.nodes[item.ids[0]]["blocked"] = True
-        elif item.ids is not None and len(item.ids) == 2:
+    nav = NavMap(grid, regions, graph, [], revision, aisles=dict(aisles or {}))
+    nav.blocks = [ResolvedBlock(b, _resolve(b, nav, tolerance_m=tolerance_m)) for b in blocks_of(nodes, edges)]
+    for item in nav.blocks:
+        if item.ids is not None and item.block.is_region:
+            for rid in item.ids:
+                if rid in graph:
+                    graph.nodes[rid]["blocked"] = True
+        elif item.ids is not None:
             graph.edges[item.ids]["blocked"] = True
-    return NavMap(grid, regions, graph, blocks, revision)
+    return nav
 
 
 def load_navmap(store: MapStore, map_id: int, *, revision: int | None = None,
@@ -267,4 +303,13 @@ def load_navmap(store: MapStore, map_id: int, *, revision: int | None = None,
     grid = cache.get(("region_grid", store.url, map_id, segments_revision, occupancy_revision, racks_revision),
                      build)
     nodes, edges = store.topology(map_id, revision=at)
-    return build_navmap(grid, nodes, edges, revision=at)
+    aisles = {c.feature.key: _outer_rings(c.feature.geometry)
+              for c in store.features(map_id, kinds=[FeatureKind.CORRIDOR], revision=at)
+              if re.match(AISLE_KEY_PATTERN, c.feature.key)}
+    return build_navmap(grid, nodes, edges, revision=at, aisles=aisles)
+
+
+def _outer_rings(geometry: Mapping[str, Any]) -> list[npt.NDArray[np.float64]]:
+    polygons = {"Polygon": [geometry.get("coordinates")], "MultiPolygon": geometry.get("coordinates")}.get(
+        str(geometry.get("type")), [])
+    return [np.asarray(polygon[0], dtype=np.float64).reshape(-1, 2) for polygon in polygons or [] if polygon]

@@ -7,8 +7,10 @@ everything that leaves this module is in map metres.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
@@ -53,6 +55,18 @@ class Frame:
 
     def inside(self, row: int, col: int) -> bool:
         return 0 <= row < self.shape[0] and 0 <= col < self.shape[1]
+
+
+def polygon_cells(rings: Sequence[npt.NDArray[np.float64]], frame: Frame) -> BoolGrid:
+    """Cells of ``frame`` whose centres the polygons (rings (K, 2) in map metres) cover."""
+    shift = 4
+    scale = float(1 << shift) / frame.resolution_m
+    polygons = [np.round((ring - (frame.origin_x_m, frame.origin_y_m)) * scale - 0.5 * (1 << shift)
+                         ).astype(np.int32) for ring in rings]
+    covered = np.zeros(frame.shape, dtype=np.uint8)
+    cv2.fillPoly(covered, polygons, 1, cv2.LINE_8, shift)
+    inside: BoolGrid = covered > 0
+    return inside
 
 
 def free_cells(occupancy: GridLayer, frame: Frame) -> BoolGrid:

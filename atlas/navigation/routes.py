@@ -72,7 +72,8 @@ def usable_graph(nav: NavMap, *, avoid: Collection[int] = ()) -> nx.Graph:
 
 def _why_not(nav: NavMap, rid: int, avoid: Collection[int], end: str) -> str | None:
     if rid in nav.blocked_ids:
-        reasons = [b.block.reason for b in nav.blocks if b.ids == (rid,) and b.block.reason]
+        reasons = [b.block.reason for b in nav.blocks
+                   if b.block.is_region and b.ids is not None and rid in b.ids and b.block.reason]
         why = f" ({reasons[0]})" if reasons else ""
         return f"the {end} lies in {nav.describe(rid)}, which is blocked{why}; unblock it or choose another {end}"
     if rid in avoid:

@@ -10,13 +10,13 @@ from atlas.navigation.graph import NavMap
 
 
 def topology_graph(nav: NavMap, *, map_name: str) -> nx.Graph:
-    """The regions of ``nav`` (nodes keyed ``r<id>``: kind, centroid, area, drivable, blocked) and their
+    """The regions of ``nav`` (nodes keyed ``r<id>``: kind, centroid, area, aisle, drivable, blocked) and their
     connections (connection, blocked, portal (x, y) metres, width), for ``networkx.node_link_data``."""
     graph = nx.Graph(map=map_name, revision=nav.revision, segments_revision_id=nav.grid.segments_revision)
     for _, data in sorted(nav.graph.nodes(data=True)):
         region = data["region"]
         graph.add_node(region.key, kind=region.kind, x=region.x_m, y=region.y_m, area_m2=region.area_m2,
-                       drivable=region.drivable, blocked=data["blocked"])
+                       aisle=region.aisle, drivable=region.drivable, blocked=data["blocked"])
     for a, b, data in sorted(nav.graph.edges(data=True)):
         portal = data["portal"]
         graph.add_edge(nav.key(a), nav.key(b), connection=data["connection"], blocked=data["blocked"],
@@ -42,8 +42,8 @@ def topology_features(nav: NavMap) -> list[dict[str, Any]]:
             continue
         features.append({
             "id": region.key, "geometry": {"type": "Point", "coordinates": [region.x_m, region.y_m]},
-            "properties": {"kind": region.kind, "area_m2": region.area_m2, "drivable": region.drivable,
-                           "blocked": data["blocked"]}})
+            "properties": {"kind": region.kind, "area_m2": region.area_m2, "aisle": region.aisle,
+                           "drivable": region.drivable, "blocked": data["blocked"]}})
     for a, b, data in sorted(nav.graph.edges(data=True)):
         portal, hubs = data["portal"], (nav.hub(a), nav.hub(b))
         if portal is None or hubs[0] is None or hubs[1] is None:

@@ -198,7 +198,7 @@ def id_stability(
     ``before`` whose pixels lie mostly (> ``min_overlap``) in rooms of ``rooms_after`` is counted;
     it is kept when the region of ``after`` it overlaps most carries the same id and holds more
     than ``min_overlap`` of it. Region ids of a decomposition are its own: give ``after`` with ids
-    carried over by :func:`carry_ids` to score what a live map would show.
+    carried over by :func:`~services.grid_decomposition.keys.stable_ids` to score what a live map shows.
     """
     b, a = np.asarray(before), np.asarray(after)
     if b.shape != a.shape or rooms_after.shape != a.shape:
@@ -215,34 +215,3 @@ def id_stability(
         if ids[best] == rid and counts[best] > min_overlap * size:
             kept += 1
     return IdStability(kept, matched, kept / matched if matched else 1.0)
-
-
-def carry_ids(
-    before: npt.NDArray[np.integer], after: npt.NDArray[np.integer], *, min_overlap: float = 0.5
-) -> npt.NDArray[np.int32]:
-    """``after`` renumbered so that each region takes the id of the ``before`` region it continues.
-
-    A region of ``after`` continues a region of ``before`` when more than ``min_overlap`` of the
-    older region lies in it and it is that region's best match (one new region per old id); other
-    regions get fresh ids above every id of ``before``. The same images as :func:`id_stability`.
-    """
-    b, a = np.asarray(before), np.asarray(after)
-    if b.shape != a.shape:
-        raise DecompositionError(f"shapes differ: {b.shape}, {a.shape}")
-    both = (b > 0) & (a > 0)
-    pairs, counts = np.unique(np.stack([b[both], a[both]]).astype(np.int64), axis=1, return_counts=True)
-    size_b = dict(zip(*np.unique(b[b > 0], return_counts=True), strict=True))
-    new_id: dict[int, int] = {}
-    for k in np.argsort(-counts, kind="stable"):
-        old, new = int(pairs[0, k]), int(pairs[1, k])
-        if new in new_id or old in new_id.values() or counts[k] <= min_overlap * size_b[old]:
-            continue
-        new_id[new] = old
-    nxt = int(max(b.max(initial=0), 0)) + 1
-    lut = np.zeros(int(a.max(initial=0)) + 1, dtype=np.int32)
-    for rid in np.unique(a[a > 0]):
-        if int(rid) in new_id:
-            lut[rid] = new_id[int(rid)]
-        else:
-            lut[rid], nxt = nxt, nxt + 1
-    return lut[np.maximum(a, 0)]

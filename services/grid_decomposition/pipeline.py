@@ -22,6 +22,8 @@ from services.grid_decomposition.labelling import FaceLabels, assign_labels, evi
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.racks import (
+    RackLayout,
+    combine,
     face_places,
     find_racks_by_region,
     floor_objects,
@@ -250,6 +252,7 @@ def decompose(
     room_min_area_m2: float = 1.5,
     clean: bool = True,
     streak_reach_m: float = 2.0,
+    known_places: RackLayout | None = None,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -304,6 +307,11 @@ def decompose(
         (a wall fringe is never labelled).
     streak_reach_m : float
         See ``clean``.
+    known_places : RackLayout, optional
+        Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
+        :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
+        before any the rack finder finds (which fills in the rest); a room touching a rack place is
+        then the hall's open area.
     seed : int
         Seed of the clusterings.
 
@@ -354,6 +362,10 @@ def decompose(
         obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
         resolution_m=resolution_m,
     )
+    if known_places is not None:
+        if known_places.cells.shape != occ.shape:
+            raise DecompositionError(f"known places of shape {known_places.cells.shape} on a grid of {occ.shape}")
+        racks = combine([known_places, racks], occ.shape)
     sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
     clutter = furniture(obstacle, resolution_m=resolution_m)
     walls = (occupied | ~known) & ~clutter
@@ -427,7 +439,8 @@ def decompose(
     segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
     # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
     segments, places = place_segments(
-        segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2)
+        segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2),
+        n_known=0 if known_places is None else known_places.cell_labels.size - 1,
     )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
     pairs = _pairs(segments, sub)
     racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
@@ -446,6 +459,16 @@ def decompose(
         segments = lut[lut[segments]]
         pairs = _pairs(segments, sub)
         regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
+    for k in [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]:  # a rack place is no room: its label
+        held = places[segments == k]
+        if np.count_nonzero(held) > 0.5 * held.size:
+            label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))
+            regions[k] = regions[k]._replace(label=label)
+    if known_places is not None:  # in a hall another stage knows the racks of, floor touching a rack place is no room
+        hall = cv2.dilate((racks.cells > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        in_hall = set(np.unique(segments[hall & (places == 0)]).tolist())
+        regions = {k: r._replace(label=PlaceLabel.OPEN_AREA) if r.label is PlaceLabel.ROOM and k in in_hall else r
+                   for k, r in regions.items()}
     if label_overrides:  # a region of a renamed category is a place of that name (a rack place mixes categories)
         regions = {
             k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r

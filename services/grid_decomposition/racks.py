@@ -679,15 +679,23 @@ def face_places(
 
 
 def place_segments(
-    segments: npt.NDArray[np.int32], layout: RackLayout, free: npt.NDArray[np.bool_], *, min_area_px: int
+    segments: npt.NDArray[np.int32],
+    layout: RackLayout,
+    free: npt.NDArray[np.bool_],
+    *,
+    min_area_px: int,
+    n_known: int = 0,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
     """``segments`` with every rack place its own segment, ids renumbered 1..N without gaps.
 
     A rack place keeps the pieces ``segments`` cut it into (the pallet cells of a warehouse floor).
 
-    What the places leave of a segment joins the nearest place when it is under ``min_area_px`` or
-    under half of the segment (the slivers of a hall the places cover). Also returns the place of
-    every free pixel now in one (0 elsewhere).
+    What the places leave of a segment joins the nearest place that is no rack (floor is never
+    storage) when it is under ``min_area_px`` or under half of the segment (the slivers of a hall
+    the places cover). Places ``1..n_known`` are
+    known (another stage's bins and aisles, first in ``layout``): a region however little free
+    space they hold (a loaded bay), and what they leave of a segment stays a segment unless a crumb.
+    Also returns the place of every free pixel now in one (0 elsewhere).
     """
     if layout.cell_labels.size <= 1:
         return segments, np.zeros(segments.shape, dtype=np.int32)
@@ -696,25 +704,30 @@ def place_segments(
     # a place with a crumb of free space (a solid rack's edge pixel) is no region of its own
     n_free = np.bincount(layout.cells[free], minlength=layout.cell_labels.size)
     crumb = (n_free > 0) & (n_free < min_area_px)
-    crumb[0] = False
+    crumb[: n_known + 1] = False
     cells = np.where(crumb[layout.cells], 0, layout.cells)
     inside = (cells > 0) & free
     n_old = int(segments.max()) + 1
-    before = np.bincount(segments.ravel(), minlength=n_old)
+    # known places are no reason to give up what is left of a segment (a hall's floor round its racks)
+    known = in_cells & (layout.cells <= n_known)
+    before = np.bincount(segments[~known], minlength=n_old)
     after = np.bincount(segments[~in_cells], minlength=n_old)
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
-    sliver = (left[segments] & ~in_cells & region) | (crumb[layout.cells] & free)
+    floor = left[segments] & ~in_cells & region
+    crumbs = crumb[layout.cells] & free
     place = cells.copy()
-    if sliver.any():
-        _, nearest = cv2.distanceTransformWithLabels(
-            (cells == 0).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
-        )
-        seeds = cells > 0
-        lut = np.zeros(int(nearest.max()) + 1, dtype=np.int32)
-        lut[nearest[seeds]] = cells[seeds]
-        place[sliver] = lut[nearest[sliver]]
-        inside |= sliver & (place > 0)
+    # a crumb joins the nearest place; a sliver of floor the nearest place that is no rack (floor is no storage)
+    drivable = (cells > 0) & (layout.cell_labels[cells] != PlaceLabel.STORAGE.value)
+    for joining, seeds in ((crumbs, cells > 0), (floor, drivable)):
+        if joining.any() and seeds.any():
+            _, nearest = cv2.distanceTransformWithLabels(
+                (~seeds).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
+            )
+            lut = np.zeros(int(nearest.max()) + 1, dtype=np.int32)
+            lut[nearest[seeds]] = cells[seeds]
+            place[joining] = lut[nearest[joining]]
+            inside |= joining & (place > 0)
     out = segments.astype(np.int64)
     out[in_cells & ~free] = 0  # uprights and pallets in a rack place belong to no region
     out[inside] = n_old + place[inside]

@@ -1,15 +1,15 @@
 """The grid-decomposition worker: occupancy revisions in, place labels, regions and topology out.
 
 It follows the map events (``/aisle/map_events``): an event of this map that updated ``source_layer``, or a new
-label table, makes it look at the store at once, where each occupancy version has a revision id to record as the
-decomposition's source. A look lists the revisions since the last one (no grid is read). The bus is
-fire-and-forget and a writer on another bus (a worker in another process sharing the database) announces nothing
-here, so the store is also looked at every ``safety_poll_period_s``, and once on start.
+label table, makes it look at the store at once (a look lists the revisions since the last one; no grid is read).
+The bus is fire-and-forget and a writer in another process announces nothing here, so the store is also looked at
+every ``safety_poll_period_s``, and once on start.
 
 When the layer changed and ``min_period_s`` has passed since the last attempt, the newest layer is compared with
 the last decomposed one (:func:`changed_fraction`); at ``min_change_fraction`` or more it is decomposed and ONE
-revision is committed: label layer (meta ``source_layer``, ``source_revision``), segment layer, features and the
-region graph. A new label table (stage ``label_table``) re-decomposes the current grid at once with its overrides.
+revision is committed: label and segment layers (meta ``source_layer``, ``source_revision``), features, region graph,
+regions keyed as the stored ones they overlap (:func:`carry_keys`). A new label table (stage ``label_table``), or
+new rack rows of the pillar stage (:class:`KnownRacks`, evidence of racks), re-decompose the current grid at once.
 A grid the decomposition cannot use is counted as ``decomposition_errors`` and becomes the reference all the same.
 On start the source revision is read back from the stored label layer: a grid is not decomposed twice.
 """
@@ -22,6 +22,8 @@ import time
 
 from services.grid_decomposition.change import changed_fraction
 from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.keys import NEXT_ID_KEY, carry_keys
+from services.grid_decomposition.known_racks import KNOWN_RACKS_STAGE, KnownRacks
 from services.grid_decomposition.pipeline import decompose
 from services.grid_decomposition.records import decomposition_features, decomposition_layers, decomposition_topology
 from services.grid_decomposition.semantics import parse_label_table
@@ -47,12 +49,12 @@ class DecompositionStage:
         self.layer_names = (settings.label_layer, settings.segment_layer)
         self.events = context.map_events()
         self._seen_revision: int | None = None
-        self._pending = True
+        self._pending, self._relabel = True, False
         self._checked_revision: int | None = None
         self._reference: GridLayer | None = None
         self._last_attempt = -float("inf")
         self._overrides: dict[int, PlaceLabel] = {}
-        self._relabel = False
+        self.racks = KnownRacks()
 
     def run(self, stop: threading.Event) -> None:
         look_at = 0.0  # monotonic time of the next look at the store: at once on start
@@ -72,14 +74,12 @@ class DecompositionStage:
                 look_at = 0.0
 
     def _announced(self, *, timeout_s: float) -> bool:
-        """Whether map events (waiting up to ``timeout_s`` for the first) announced a new source layer or label
-        table of this map."""
-        announced = False
-        item = self.events.receive(timeout_s)
+        """Whether map events (the first awaited up to ``timeout_s``) announced work for this map."""
+        announced, item = False, self.events.receive(timeout_s)
         while item is not None:
             event = item.message
             announced |= str(event.map_name) == self.context.map.name and (
-                self.source_layer in event.layers_updated or event.stage == LABEL_TABLE_STAGE)
+                self.source_layer in event.layers_updated or event.stage in (LABEL_TABLE_STAGE, KNOWN_RACKS_STAGE))
             item = self.events.receive()
         return announced
 
@@ -91,8 +91,10 @@ class DecompositionStage:
         if not self._pending or time.monotonic() - self._last_attempt < self.settings.min_period_s:
             return
         stored = self.context.store.layer(self.context.map.id, self.source_layer)
+        previous = self.context.store.layer(self.context.map.id, self.layer_names[1])
+        racks_changed = self.racks.refresh(self.context.store, self.context.map.id)
         self._pending = False
-        relabel, self._relabel = self._relabel, False
+        relabel, self._relabel = self._relabel or racks_changed, False
         if stored is None or (stored.revision_id == self._checked_revision and not relabel):
             return
         self._checked_revision = stored.revision_id
@@ -102,7 +104,7 @@ class DecompositionStage:
             log.debug("%s revision %d changed by %.4f, below %.4f: not decomposed", self.source_layer,
                       stored.revision_id, fraction, self.settings.min_change_fraction)
             return
-        self._decompose(stored)
+        self._decompose(stored, None if previous is None else previous.layer)
 
     def _resume(self) -> int:
         """The newest revision id (watched after); the stored decomposition's source becomes the reference."""
@@ -130,6 +132,7 @@ class DecompositionStage:
                 return updated
             seen = self._seen_revision = page[-1].id
             updated |= any(self.source_layer in r.summary.get("layers_updated", ()) for r in page)
+            updated |= self.racks.note(page)
             tables = [r for r in page if r.stage == LABEL_TABLE_STAGE]
             if tables and self._take_label_table(tables[-1]):
                 self._relabel = updated = True
@@ -145,25 +148,24 @@ class DecompositionStage:
             self.context.count("bad_label_tables")
             log.warning("label table of revision %d ignored: %s", revision.id, err)
             return False
-        changed = overrides != self._overrides
-        self._overrides = overrides
+        changed, self._overrides = overrides != self._overrides, overrides
         log.info("label table of revision %d: %s", revision.id,
                  {c: label.name.lower() for c, label in sorted(overrides.items())} or "automatic")
         return changed
 
-    def _decompose(self, stored: StoredLayer) -> None:
-        layer = stored.layer
-        self._last_attempt = time.monotonic()
-        start = time.perf_counter()
+    def _decompose(self, stored: StoredLayer, previous: GridLayer | None) -> None:  # previous segment layer
+        layer, self._last_attempt, start = stored.layer, time.monotonic(), time.perf_counter()
         try:
-            result = decompose(layer.data, resolution_m=layer.resolution_m,
-                               origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
-                               neck_half_width_m=self.settings.neck_half_width_m,
-                               door_max_width_m=self.settings.door_max_width_m,
-                               label_overrides=self._overrides or None)
+            racks = self.racks.on_grid(layer)
+            result, ids = carry_keys(decompose(layer.data, resolution_m=layer.resolution_m,
+                                               origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
+                                               neck_half_width_m=self.settings.neck_half_width_m,
+                                               door_max_width_m=self.settings.door_max_width_m,
+                                               label_overrides=self._overrides or None,
+                                               known_places=racks), previous)
             source = {"source_layer": self.source_layer, "source_revision": stored.revision_id}
-            layers = decomposition_layers(result, label_layer=self.layer_names[0],
-                                          segment_layer=self.layer_names[1], meta=source)
+            layers = decomposition_layers(result, label_layer=self.layer_names[0], segment_layer=self.layer_names[1],
+                                          meta={**source, NEXT_ID_KEY: ids.next_id})
         except DecompositionError as err:
             self._reference = layer
             self.context.count("decomposition_errors")
@@ -171,20 +173,17 @@ class DecompositionStage:
                         layer.data.shape[1], layer.data.shape[0], err)
             return
         seconds = time.perf_counter() - start
-        features = decomposition_features(result)
-        write = RevisionWrite(
-            self.context.name,
-            layers=layers,
-            features=features,
-            topology=decomposition_topology(result),
-            summary={**source, "regions": len(result.regions), "decomposition_s": round(seconds, 3),
-                     LABEL_OVERRIDES_KEY: {str(c): label.name.lower() for c, label in sorted(self._overrides.items())}},
-        )
+        aisles = self.racks.names(result)
+        features = decomposition_features(result, known_racks=None if racks is None else racks.storage, aisles=aisles)
+        write = RevisionWrite(self.context.name, layers=layers, features=features,
+                              topology=decomposition_topology(result, aisles=aisles), summary={
+                                  **source, "regions": len(result.regions), "regions_kept": ids.carried,
+                                  "decomposition_s": round(seconds, 3), LABEL_OVERRIDES_KEY: {
+                                      str(c): label.name.lower() for c, label in sorted(self._overrides.items())}})
         self.context.counters.set(f"{self.context.name}.last_decomposition_ms", round(seconds * 1000))
         revision = self.context.commit(write)
-        if revision is None:
-            self._checked_revision = None  # store down: counted by commit; try this grid again
-            self._pending = True
+        if revision is None:  # store down: counted by commit; try this grid again
+            self._checked_revision, self._pending = None, True
             return
         self._reference = layer
         self.context.count("decompositions")

@@ -104,6 +104,7 @@ def layout_features(layout: RackLayout) -> dict[str, list[Feature]]:
                     "x": row.x_m,
                     "y": row.y_m,
                     "region": row.region,
+                    "source": "pillar_mapping",
                 },
                 float(row.observed.mean()),
             )

@@ -6,12 +6,14 @@ import dataclasses
 import itertools
 from typing import Any
 
+import cv2
 import networkx as nx
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
 from services.grid_decomposition.records import decomposition_layers, decomposition_topology
-from shared.store import MapInfo, MapStore, RevisionWrite, TopologyEdge, TopologyNode
+from shared.store import Feature, MapInfo, MapStore, RevisionWrite, TopologyEdge, TopologyNode
 from shared.store.keys import Role, create_key
 from tests.api.conftest import ClientFactory
 from tests.api.warehouse_map import warehouse, write_warehouse
@@ -125,7 +127,8 @@ def test_bad_blocks_are_refused_and_change_nothing(operator: TestClient, store: 
     revisions = len(store.revisions(warehouse_map.id))
     assert operator.put("/v1/maps/site/topology/blocked/regions/r99999").status_code == 404
     assert operator.put(f"/v1/maps/site/topology/blocked/regions/{storage}").status_code == 422
-    assert operator.put("/v1/maps/site/topology/blocked/regions/aisle-3").status_code == 422
+    assert operator.put("/v1/maps/site/topology/blocked/regions/aisle_3").status_code == 422
+    assert operator.put("/v1/maps/site/topology/blocked/regions/aisle-03").status_code == 404  # no such aisle
     assert operator.put(f"/v1/maps/site/topology/blocked/connections/{apart[0]}/{apart[1]}").status_code == 404
     assert operator.put(f"/v1/maps/site/topology/blocked/regions/{apart[0]}",
                         json={"reason": "x" * 201}).status_code == 422
@@ -163,3 +166,51 @@ def test_a_block_follows_its_region_when_the_decomposition_renumbers_it(operator
     assert block["blocked_keys"] == [corridor] and block["regions"] == [moved]
     assert _graph(operator).nodes[moved]["blocked"] is True
     assert operator.delete(f"/v1/maps/site/topology/blocked/regions/{moved}").status_code == 200
+    assert operator.put(f"/v1/maps/site/topology/blocked/regions/{moved}").status_code == 201
+    _renumber(store, warehouse_map, 2000)
+    gone = operator.delete(f"/v1/maps/site/topology/blocked/regions/{moved}")  # the key it was blocked by
+    assert gone.status_code == 200, gone.text
+
+
+def _write_aisles(store: MapStore, info: MapInfo) -> dict[int, list[str]]:
+    """The world's aisles as the pillar stage writes them (``aisle-NN`` corridors); the region keys in each."""
+    world = warehouse().world
+    sections: dict[int, list[list[list[float]]]] = {}
+    for area in world.areas:
+        if area.kind.name == "CORRIDOR" and isinstance(area.detail.get("aisle"), int):
+            ring = [[float(x), float(y)] for x, y in area.polygon]
+            sections.setdefault(area.detail["aisle"], []).append([*ring, ring[0]])
+    features = [Feature("corridor", f"aisle-{aisle:02d}", {"type": "MultiPolygon", "coordinates": [
+        [ring] for ring in rings]}, {"kind": "corridor", "aisle": aisle}) for aisle, rings in sorted(sections.items())]
+    store.write_revision(info.id, RevisionWrite("pillar_mapping", features={"corridor": features}))
+    return {aisle: [f"r{i}" for i in _regions_in(rings)] for aisle, rings in sections.items()}
+
+
+def _regions_in(rings: list[list[list[float]]]) -> set[int]:
+    """Drivable regions of the stored decomposition with most of their cells in the rings."""
+    decomposition = warehouse().decomposition
+    res, (ox, oy) = decomposition.resolution_m, decomposition.origin_xy_m
+    inside = np.zeros(decomposition.segments.shape, dtype=np.uint8)
+    cv2.fillPoly(inside, [np.round((np.asarray(r) - (ox, oy)) / res - 0.5).astype(np.int32) for r in rings], 1)
+    return {rid for rid, info in decomposition.regions.items()
+            if info.label.name in {"CORRIDOR", "JUNCTION", "ROOM", "OPEN_AREA"}
+            and np.mean(inside[decomposition.segments == rid]) >= 0.5}
+
+
+def test_an_aisle_is_blocked_as_every_drivable_region_in_it(operator: TestClient, store: MapStore,
+                                                            warehouse_map: MapInfo) -> None:
+    in_aisle = _write_aisles(store, warehouse_map)
+    aisle, regions = min(in_aisle.items())
+    assert regions, "the decomposition has corridor regions in the aisle"
+    response = operator.put(f"/v1/maps/site/topology/blocked/regions/aisle-{aisle:02d}", json={"reason": "spill"})
+    assert response.status_code == 201, response.text
+    block = response.json()["block"]
+    assert block["blocked_keys"] == [f"aisle-{aisle:02d}"] and sorted(block["regions"]) == sorted(regions)
+    graph = _graph(operator)
+    assert all(graph.nodes[key]["blocked"] for key in regions)
+    assert sum(data["blocked"] for _, data in graph.nodes(data=True)) == len(regions)
+    refused = operator.delete(f"/v1/maps/site/topology/blocked/regions/{regions[0]}")
+    assert refused.status_code == 404 and f"aisle-{aisle:02d}" in refused.json()["detail"]
+    assert operator.put(f"/v1/maps/site/topology/blocked/regions/aisle-{aisle:02d}").status_code == 200
+    assert operator.delete(f"/v1/maps/site/topology/blocked/regions/aisle-{aisle:02d}").status_code == 200
+    assert not any(data["blocked"] for _, data in _graph(operator).nodes(data=True))

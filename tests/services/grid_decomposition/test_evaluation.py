@@ -8,12 +8,12 @@ import pytest
 from services.grid_decomposition import DecompositionError, ground_truth_rooms, ipa_scores
 from services.grid_decomposition.evaluation import (
     align_offset,
-    carry_ids,
     colour_rooms,
     id_stability,
     on_free,
     shift_into,
 )
+from services.grid_decomposition.keys import stable_ids
 
 
 def _two_rooms() -> np.ndarray:
@@ -98,7 +98,7 @@ def test_carried_ids_survive_and_split_rooms_lose_theirs() -> None:
     after[:, :30] = 1  # room 4 again, under another id
     after[:15, 30:], after[15:, 30:] = 2, 3  # room 7 split in two halves
     rooms = ground_truth_rooms(np.full((30, 60), 255, np.uint8))
-    carried = carry_ids(before, after)
+    carried = stable_ids(before, after, next_id=8).lut[after]
     assert set(np.unique(carried[:, :30])) == {4}
     kept = id_stability(before, carried, rooms)
     assert (kept.kept, kept.matched) == (1, 2)

@@ -111,8 +111,16 @@ def test_layers_carry_labels_and_segments_in_grid_order() -> None:
     np.testing.assert_array_equal(segments.data, result.segments)
 
 
-def test_layers_reject_more_regions_than_uint16_holds() -> None:
+def test_layers_widen_the_segment_layer_for_ids_beyond_uint16() -> None:
     _, result = _warehouse(0)
-    crowded = dataclasses.replace(result, segments=np.full_like(result.segments, 70_000))
-    with pytest.raises(DecompositionError, match="do not fit a uint16"):
-        decomposition_layers(crowded)
+    crowded = dataclasses.replace(result, segments=np.where(result.segments > 0, result.segments + 70_000, 0))
+    _, segments = decomposition_layers(crowded)
+    assert segments.data.dtype == np.uint32
+    np.testing.assert_array_equal(segments.data, crowded.segments)
+
+
+def test_layers_reject_negative_region_ids() -> None:
+    _, result = _warehouse(0)
+    broken = dataclasses.replace(result, segments=np.full_like(result.segments, -1))
+    with pytest.raises(DecompositionError, match="negative"):
+        decomposition_layers(broken)

@@ -6,18 +6,25 @@ import math
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
+from atlas.bins import select_bins
+from atlas.cache import RevisionCache
+from atlas.navigation import blocking, load_navmap
 from services.grid_decomposition import DecompositionError
+from services.grid_decomposition.known_racks import footprint_mask, footprints
 from services.grid_decomposition.worker import DecompositionStage, decomposition_stage
+from services.simulator import World
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus
 from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from shared.settings import DecompositionSettings, Settings, ZenohSettings
-from shared.store import GridLayer, MapStore, Revision, RevisionWrite
+from shared.store import Feature, GridLayer, MapStore, Revision, RevisionWrite
 from shared.worker import MAP_EVENTS_TOPIC, StageContext, map_event
 from tests import stages
+from tests.api.warehouse_map import bin_features, warehouse
 from tests.helpers import wait_for
 from tests.services.grid_decomposition.warehouse import synthetic_warehouse
 
@@ -233,3 +240,121 @@ def test_a_label_table_revision_relabels_the_map_as_a_new_revision(
     assert len(after) == len(before)  # the override renames places, it keeps the warehouse's regions
     relabelled = [f.feature for f in after if f.feature.properties["category"] == chosen]
     assert relabelled and all(f.properties["label"] == stored_as for f in relabelled)
+
+
+def _region_at(store: MapStore, map_id: int, x_m: float, y_m: float) -> str:
+    """Key of the region whose cell holds (x, y) in the newest segment layer."""
+    stored = store.layer(map_id, "place_segments")
+    assert stored is not None
+    layer = stored.layer
+    row = math.floor((y_m - layer.origin_y_m) / layer.resolution_m)
+    col = math.floor((x_m - layer.origin_x_m) / layer.resolution_m)
+    return f"r{int(layer.data[row, col])}"
+
+
+def test_region_keys_and_blocks_stay_on_their_places_while_the_map_grows(
+        store: MapStore, settings: Settings) -> None:
+    house = synthetic_warehouse(0, resolution_m=RES_M)
+    width = house.occupancy.shape[1]
+    steps = []
+    for share in (0.6, 0.8, 1.0):  # the robot sees more of the hall at each step; unseen cells are unknown
+        seen = house.occupancy.copy()
+        seen[:, int(share * width):] = -1
+        steps.append(seen)
+    map_id = store.ensure_map(settings.map_name).id
+    cache = RevisionCache(size=4)
+    with stages.running_stage(STAGE, _Stages(), settings, store) as bus:
+        _write_occupancy(store, settings, steps[0], bus)
+        _wait_decompositions(store, settings, 1)
+        first = {f.feature.key: f.feature for f in store.features(map_id, kinds=list(REGION_KINDS))}
+        corridor = next(f for f in first.values() if f.kind == "corridor" and f.properties["area_m2"] > 5.0)
+        blocked = blocking.block_region(store, cache, map_id, corridor.key, reason="spill", by=None).block.block
+        keys_then = {key: _centre_of(feature) for key, feature in first.items()}
+        for n, occupancy in enumerate(steps[1:], start=2):
+            _write_occupancy(store, settings, occupancy, bus)
+            revision = _wait_decompositions(store, settings, n)
+            assert revision.summary["regions_kept"] > 0
+    # every region seen in the first half is still there under the same key, at the same place
+    kept = sum(1 for key, (x, y) in keys_then.items() if _region_at(store, map_id, x, y) == key)
+    assert kept >= 0.8 * len(keys_then)
+    assert _region_at(store, map_id, blocked.x_m, blocked.y_m) == corridor.key
+    nav = load_navmap(store, map_id)
+    [block] = nav.blocks
+    assert block.ids is not None and [nav.key(i) for i in block.ids] == [corridor.key]
+    assert blocking.unblock_region(store, RevisionCache(size=4), map_id, corridor.key).removed
+    segments = store.layer(map_id, "place_segments")
+    assert segments is not None
+    ids = {int(i) for i in np.unique(segments.layer.data) if i > 0}
+    assert segments.layer.meta["next_region_id"] > max(ids), "fresh ids come from above every id handed out"
+
+
+def _centre_of(feature: Feature) -> tuple[float, float]:
+    """A point inside a region feature's largest polygon, well away from its edge (its pole of inaccessibility,
+    approximated on a 0.05 m raster)."""
+    polygons = [np.asarray(poly[0], dtype=np.float64) for poly in feature.geometry["coordinates"]]
+    ring = max(polygons, key=lambda p: float(np.ptp(p[:, 0]) * np.ptp(p[:, 1])))
+    lo = ring.min(axis=0)
+    step = 0.05
+    size = np.ceil((ring.max(axis=0) - lo) / step).astype(int) + 2
+    mask = np.zeros((size[1], size[0]), dtype=np.uint8)
+    cv2.fillPoly(mask, [np.round((ring - lo) / step).astype(np.int32)], 1)
+    dist = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
+    row, col = np.unravel_index(int(np.argmax(dist)), dist.shape)
+    return float(lo[0] + col * step), float(lo[1] + row * step)
+
+
+def test_with_the_pillar_stages_racks_every_aisle_is_a_corridor_and_every_bin_in_a_storage_region(
+        store: MapStore, settings: Settings) -> None:
+    """The demo's case on a small hall: the lidar shows next to nothing of the racks, the pillar stage has them."""
+    world, grids = warehouse().world, warehouse().grids
+    bins = bin_features(world)
+    unseen = footprint_mask(footprints(bins, "bin"), shape=grids.occupancy.shape, resolution_m=grids.resolution_m,
+                            origin_xy_m=(grids.origin_x_m, grids.origin_y_m))
+    occupancy = GridLayer("occupancy", np.where(unseen, 0, grids.occupancy).astype(np.int8), grids.resolution_m,
+                          grids.origin_x_m, grids.origin_y_m)
+    aisles = _aisle_features(world)
+    map_id = store.ensure_map(settings.map_name).id
+    with stages.running_stage(STAGE, _Stages(), settings, store) as bus:
+        _announce(bus, settings, store.write_revision(map_id, RevisionWrite("occupancy_mapping", layers=[occupancy])))
+        first = _wait_decompositions(store, settings, 1)
+        _announce(bus, settings, store.write_revision(map_id, RevisionWrite(
+            "pillar_mapping", features={"bin": bins, "corridor": aisles})))
+        second = _wait_decompositions(store, settings, 2)
+    assert second.summary["source_revision"] == first.summary["source_revision"], "the same grid, decomposed again"
+    regions = {f.feature.key: f.feature for f in store.features(map_id, kinds=list(REGION_KINDS))
+               if f.stage == STAGE}
+    assert not any(f.kind == "room" for f in regions.values())
+    segments = store.layer(map_id, "place_segments")
+    assert segments is not None
+    for aisle in aisles:  # every aisle is (mostly) one corridor region
+        strip = footprint_mask([np.asarray(aisle.geometry["coordinates"][0])], shape=segments.layer.data.shape,
+                               resolution_m=grids.resolution_m, origin_xy_m=(grids.origin_x_m, grids.origin_y_m))
+        ids, counts = np.unique(segments.layer.data[strip & (segments.layer.data > 0)], return_counts=True)
+        region = regions[f"r{ids[counts.argmax()]}"]
+        assert counts.max() > 0.8 * counts.sum() and region.kind == "corridor", aisle.key
+        assert region.properties["aisle"] == aisle.key, "the aisle's corridor region is named after it"
+    nodes, _ = store.topology(map_id)
+    assert sorted(n.attributes["aisle"] for n in nodes if "aisle" in n.attributes) == [a.key for a in aisles]
+    answers = select_bins(store, RevisionCache(size=4), map_id, revision=None, bbox=None, limit=10_000, offset=0)
+    assert answers.total == len(bins)
+    for answer in answers.bins:
+        assert answer.storage_region is not None and answer.storage_region.label == "storage", answer.bin.id
+        assert answer.corridor is not None and answer.corridor.key == f"aisle-{answer.bin.aisle:02d}"
+        assert answer.nearest_junction is not None
+
+
+def _aisle_features(world: World) -> list[Feature]:
+    """An ``aisle-NN`` corridor per aisle of the world, the rectangle over its sections (as the pillar stage
+    spans an aisle from its first bin to its last)."""
+    sections: dict[int, list[np.ndarray]] = {}
+    for area in world.areas:
+        if area.kind.name == "CORRIDOR" and isinstance(area.detail.get("aisle"), int):
+            sections.setdefault(area.detail["aisle"], []).append(np.asarray(area.polygon))
+    out = []
+    for aisle, polygons in sorted(sections.items()):
+        xy = np.vstack(polygons)
+        (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
+        ring = [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+        out.append(Feature("corridor", f"aisle-{aisle:02d}", {"type": "Polygon", "coordinates": [ring]},
+                           {"kind": "corridor", "label": "corridor", "aisle": aisle}))
+    return out

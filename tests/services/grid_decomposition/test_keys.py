@@ -1,0 +1,112 @@
+"""Stable region ids: matching a new decomposition's regions to the previous one's by overlap."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.grid_decomposition import DecompositionError, decompose
+from services.grid_decomposition.keys import (
+    NEXT_ID_KEY,
+    carry_keys,
+    ids_on_grid,
+    match_regions,
+    renumber,
+    stable_ids,
+)
+from services.grid_decomposition.records import decomposition_layers
+from tests.services.grid_decomposition.warehouse import synthetic_warehouse
+
+RES_M = 0.1
+
+
+def _grid(*blocks: tuple[int, slice, slice], shape: tuple[int, int] = (10, 20)) -> np.ndarray:
+    out = np.zeros(shape, dtype=np.int32)
+    for rid, rows, cols in blocks:
+        out[rows, cols] = rid
+    return out
+
+
+def test_a_region_that_grows_keeps_its_id_and_a_new_one_gets_a_fresh_id() -> None:
+    before = _grid((7, slice(0, 10), slice(0, 5)), (9, slice(0, 10), slice(5, 8)))
+    after = _grid((1, slice(0, 10), slice(0, 6)), (2, slice(0, 10), slice(6, 12)), (3, slice(0, 10), slice(12, 20)))
+    ids = stable_ids(before, after, next_id=12)
+    assert ids.lut[1] == 7 and ids.lut[2] == 9
+    assert ids.lut[3] == 12 and ids.next_id == 13 and ids.carried == 2
+
+
+def test_fresh_ids_never_reuse_one_handed_out_before() -> None:
+    before = _grid((4, slice(0, 10), slice(0, 5)))
+    after = _grid((1, slice(0, 10), slice(10, 20)))
+    ids = stable_ids(before, after, next_id=30)
+    assert ids.lut[1] == 30, "id 4 vanished but 5..29 were handed out earlier"
+    assert stable_ids(before, after, next_id=2).lut[1] == 5, "never below an id on the previous grid"
+
+
+def test_a_split_region_keeps_its_id_on_the_piece_most_like_it() -> None:
+    before = _grid((5, slice(0, 10), slice(0, 20)))
+    after = _grid((1, slice(0, 10), slice(0, 6)), (2, slice(0, 10), slice(6, 20)))
+    assert match_regions(before, after) == {2: 5}
+
+
+def test_merged_regions_give_the_merged_one_the_id_of_the_bigger_part() -> None:
+    before = _grid((3, slice(0, 10), slice(0, 14)), (8, slice(0, 10), slice(14, 20)))
+    after = _grid((1, slice(0, 10), slice(0, 20)))
+    assert match_regions(before, after) == {1: 3}
+
+
+def test_assignment_maximises_overlap_not_first_come() -> None:
+    # old 1 is best matched by new 1; old 2 can only go to new 1 or new 2: one to one, most IoU overall.
+    before = _grid((1, slice(0, 10), slice(0, 10)), (2, slice(0, 10), slice(10, 20)))
+    after = _grid((1, slice(0, 10), slice(0, 11)), (2, slice(0, 10), slice(11, 20)))
+    assert match_regions(before, after) == {1: 1, 2: 2}
+
+
+def test_a_region_overlapping_little_is_not_the_same_place() -> None:
+    before = _grid((6, slice(0, 10), slice(0, 10)))
+    after = _grid((1, slice(0, 10), slice(8, 20)))
+    assert match_regions(before, after) == {}
+
+
+def test_ids_are_read_across_grids_of_different_origins() -> None:
+    before = _grid((5, slice(0, 2), slice(0, 3)), shape=(2, 3))
+    on_new = ids_on_grid(before, resolution_m=1.0, origin_xy_m=(1.0, 2.0), shape=(5, 6), to_resolution_m=1.0,
+                         to_origin_xy_m=(0.0, 0.0))
+    assert on_new.shape == (5, 6)
+    assert set(np.unique(on_new[2:4, 1:4])) == {5}
+    assert np.count_nonzero(on_new) == 6
+
+
+def test_mismatched_grids_are_refused() -> None:
+    with pytest.raises(DecompositionError, match="shape"):
+        match_regions(np.zeros((3, 3), np.int32), np.zeros((3, 4), np.int32))
+    with pytest.raises(DecompositionError, match="positive"):
+        ids_on_grid(np.zeros((3, 3), np.int32), resolution_m=0.0, origin_xy_m=(0, 0), shape=(3, 3), to_resolution_m=1.0,
+                    to_origin_xy_m=(0, 0))
+
+
+def test_a_redecomposed_grown_warehouse_keeps_the_keys_of_its_old_part() -> None:
+    house = synthetic_warehouse(0, resolution_m=RES_M)
+    occupancy = house.occupancy
+    half = occupancy.copy()
+    half[:, occupancy.shape[1] * 3 // 5:] = -1  # the robot has seen the left part only
+    first, ids = carry_keys(decompose(half, resolution_m=RES_M), None)
+    assert ids.carried == 0 and set(first.regions) == set(range(1, ids.next_id))
+    _, previous = decomposition_layers(first, meta={NEXT_ID_KEY: ids.next_id})
+    second, again = carry_keys(decompose(occupancy, resolution_m=RES_M), previous)
+    assert again.next_id > ids.next_id
+    # a region wholly inside the part seen first is the same place: most keep their id
+    left = occupancy.shape[1] // 2
+    inside = [rid for rid in first.regions if rid in np.unique(first.segments[:, :left])
+              and not np.any(first.segments[:, left:] == rid)]
+    same = sum(1 for rid in inside if np.mean(second.segments[first.segments == rid] == rid) > 0.5)
+    assert same >= 0.8 * len(inside)
+    assert set(second.regions) == set(np.unique(second.segments[second.segments > 0]))
+    assert set(second.topology.nodes) == set(second.regions)
+    assert all(info.region_id == rid for rid, info in second.regions.items())
+
+
+def test_renumber_refuses_a_short_table() -> None:
+    result = decompose(synthetic_warehouse(1, resolution_m=RES_M).occupancy, resolution_m=RES_M)
+    with pytest.raises(DecompositionError, match="id table"):
+        renumber(result, np.zeros(1, dtype=np.int64))
