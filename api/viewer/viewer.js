@@ -40,6 +40,9 @@ const state = {
   stream: null,
   pendingKinds: new Set(), pendingLayers: new Set(), pendingTopology: false, refreshTimer: null,
   routePick: null,
+  placePick: false,     // the next click on the map puts the place of the place form there
+  blocks: [],           // the blocks shown (GET /topology/blocked)
+  retry: null,          // the write that waits for a write key
 };
 
 const leaflet = L.map("map", { crs: L.CRS.Simple, preferCanvas: true, minZoom: -4, maxZoom: 8, zoomSnap: 0.25,
@@ -64,6 +67,7 @@ async function api(path, { method = "GET", body } = {}) {
   const response = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
   if (response.status === 401 || (response.status === 403 && method !== "GET")) {
     const detail = await errorText(response);
+    if (method === "GET") state.retry = null;  // the prompt is for reading: the page starts again with the key
     askForKey(response.status === 403 || method !== "GET" ? `Changing the map needs a write key: ${detail}`
       : `This server needs an API key to read the map: ${detail}`);
     throw new AuthNeeded(detail);
@@ -102,9 +106,12 @@ document.getElementById("key-form").addEventListener("submit", (event) => {
   if (key) sessionStorage.setItem(KEY_STORAGE, key); else sessionStorage.removeItem(KEY_STORAGE);
   state.key = key || null;
   document.getElementById("key-dialog").hidden = true;
-  start();
+  const retry = state.retry;
+  state.retry = null;
+  if (retry) retry().catch(report); else start();  // a write that asked for the key is tried again with it
 });
 document.getElementById("key-cancel").addEventListener("click", () => {
+  state.retry = null;
   document.getElementById("key-dialog").hidden = true;
 });
 document.getElementById("change-key").addEventListener("click", () => askForKey("Enter an API key (or none)."));
@@ -257,7 +264,12 @@ function pointOf(feature, at) {
   }
   const style = KIND_STYLE[kind] || {};
   return L.circleMarker(at, { radius: kind === "pillar" ? 2 : 7, color: style.color || "#2ca02c", weight: 2,
-    fillOpacity: 0.7 }).bindTooltip(`${kind} ${feature.properties.key}`);
+    fillOpacity: 0.7 }).bindTooltip(`${kind} ${feature.properties.key}${approachText(feature)}`);
+}
+
+function approachText(feature) {
+  const pose = feature.properties.approach_pose;
+  return Array.isArray(pose) ? `, approached at ${Math.round(pose[2] * 180 / Math.PI)}°` : "";
 }
 
 function objectAge(feature) {
@@ -306,7 +318,7 @@ function showRevision(revision) {
 
 async function loadAll() {
   const [layerInfo, features] = await Promise.all([drawOverlays(null), loadAllFeatures(), drawTopology(),
-    drawRobots().catch(() => setLegend("robots", 0))]);
+    drawRobots().catch(() => setLegend("robots", 0)), drawBlocks()]);
   return extentOf(layerInfo, features);
 }
 
@@ -428,7 +440,7 @@ async function refresh() {
     if (OVERLAYS.some(([, name, entropy]) => layers.has(name) || layers.has(entropy))) work.push(drawOverlays(layers));
     if (kinds.delete("robot")) work.push(drawRobots());  // the occupancy stage stored where the robots are
     if (kinds.size) work.push(loadFeatures(kinds, state.shown));
-    if (topology) work.push(drawTopology());
+    if (topology) work.push(drawTopology(), drawBlocks());
     await Promise.all(work);
     state.shown = event.revision_id;
     showRevision({ id: event.revision_id, created_at: event.created_at });
@@ -571,7 +583,11 @@ async function showSemantics(x, y) {
   if (answer.place) rows.push(["place", `${answer.place.label} ${answer.place.region ?? ""}`]);
   for (const f of answer.features || []) rows.push([f.kind, `${f.key}${f.label ? " " + f.label : ""}`]);
   const actions = [];
-  if (answer.place && answer.place.region) actions.push(blockButton(answer.place.region));
+  const region = answer.place && answer.place.region;
+  if (region && state.history === null) {
+    const block = state.blocks.find((b) => b.target === "region" && b.blocked_keys[0] === region);
+    actions.push(block ? unblockButton(block, `Unblock region ${region}`) : blockButton(region));
+  }
   showCard("At this point", rows, actions);
 }
 
@@ -579,11 +595,10 @@ function blockButton(region) {
   const button = document.createElement("button");
   button.textContent = `Block region ${region}`;
   button.title = "Routes avoid a blocked region (needs a write key)";
-  button.addEventListener("click", async () => {
-    const response = await api(mapPath(`/topology/blocked/regions/${encodeURIComponent(region)}`),
-      { method: "PUT", body: { reason: "blocked from the viewer" } }).catch(() => null);
-    if (response) button.textContent = response.ok ? `Region ${region} blocked` : await errorText(response);
-  });
+  button.addEventListener("click", () => write(mapPath(`/topology/blocked/regions/${encodeURIComponent(region)}`),
+    "PUT", { reason: "blocked from the viewer" }, async (response) => {
+      button.textContent = response.ok ? `Region ${region} blocked` : await errorText(response);
+    }).catch(report));
   return button;
 }
 
@@ -615,6 +630,7 @@ function distanceToLine(points, x, y) {
 leaflet.on("click", async (event) => {
   const x = event.latlng.lng, y = event.latlng.lat;
   try {
+    if (state.placePick) { state.placePick = false; await putPlace(x, y); return; }
     if (state.routePick !== null) {
       const spec = placeUnder(x, y);
       const field = document.getElementById(state.routePick === 0 ? "route-from" : "route-to");
@@ -655,11 +671,153 @@ document.getElementById("route-form").addEventListener("submit", (event) => {
 });
 document.getElementById("route-pick").addEventListener("click", () => {
   state.routePick = 0;
+  state.placePick = false;
   document.getElementById("route-info").textContent = "Click where the route starts (a bin, a dock, any point).";
 });
 document.getElementById("route-clear").addEventListener("click", () => {
   routeLayer.clearLayers(); state.routePick = null;
   document.getElementById("route-info").textContent = "";
+});
+
+// ---- changing the map (each needs a write key) ----------------------------------------------------------------
+
+/** ``method`` ``body`` to ``path``, then ``done(response)``; without a (write) key the page asks for one and then
+ * tries again. The map redraws from the revision event the write causes. */
+async function write(path, method, body, done) {
+  let response;
+  try {
+    response = await api(path, { method, body });
+  } catch (error) {
+    if (error instanceof AuthNeeded) { state.retry = () => write(path, method, body, done); return; }
+    throw error;
+  }
+  await done(response);
+}
+
+function say(id, text, error = false) {
+  const element = document.getElementById(id);
+  element.textContent = text;
+  element.className = error ? "message error" : "message";
+}
+
+function placeForm() {
+  const kind = document.getElementById("place-kind").value, key = document.getElementById("place-key").value.trim();
+  return { kind, key, path: mapPath(`/places/${kind}/${encodeURIComponent(key)}`) };
+}
+
+document.getElementById("place-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  const { kind, key } = placeForm();
+  state.placePick = true;
+  state.routePick = null;
+  say("place-info", `Click where ${kind} ${key} goes.`);
+});
+
+async function putPlace(x, y) {
+  const { kind, key, path } = placeForm();
+  const turn = Number(document.getElementById("place-heading").value || 0) * Math.PI / 180;
+  const yaw = Math.atan2(Math.sin(turn), Math.cos(turn));
+  const at = [Number(x.toFixed(3)), Number(y.toFixed(3))];
+  const body = { geometry: { type: "Point", coordinates: at }, approach_pose: { x_m: at[0], y_m: at[1], yaw_rad: yaw } };
+  const name = document.getElementById("place-name").value.trim();
+  if (name) body.name = name;
+  await write(path, "PUT", body, async (response) => {
+    if (!response.ok) { say("place-info", await errorText(response), true); return; }
+    const place = await response.json();
+    say("place-info", `${kind} ${key} ${response.status === 201 ? "set" : "moved"} at (${fmt(at[0])}, `
+      + `${fmt(at[1])}), revision ${place.revision_id}`);
+  });
+}
+
+document.getElementById("place-remove").addEventListener("click", () => {
+  const { kind, key, path } = placeForm();
+  if (!key) { say("place-info", "Give the key of the place to remove.", true); return; }
+  write(path, "DELETE", undefined, async (response) => {
+    say("place-info", response.ok ? `${kind} ${key} removed` : await errorText(response), !response.ok);
+  }).catch(report);
+});
+
+async function drawBlocks() {
+  const response = await api(atRevision(mapPath("/topology/blocked")));
+  state.blocks = response.ok ? (await response.json()).blocks : [];
+  const list = document.getElementById("blocks");
+  list.replaceChildren(...state.blocks.map((block) => {
+    const item = document.createElement("li");
+    item.dataset.block = block.blocked_keys.join("/");
+    const [a, b] = block.blocked_keys;
+    item.textContent = (block.target === "region" ? `region ${a}` : `connection ${a}–${b}`)
+      + (block.reason ? ` (${block.reason})` : "") + " ";
+    if (state.history === null) item.appendChild(unblockButton(block, "Unblock"));
+    return item;
+  }));
+  if (!state.blocks.length) list.innerHTML = "<li class=\"count\">none</li>";
+}
+
+function unblockButton(block, text) {
+  const button = document.createElement("button");
+  button.type = "button";
+  button.textContent = text;
+  button.title = "Routes may pass again (needs a write key)";
+  const keys = block.blocked_keys.map(encodeURIComponent);
+  const path = block.target === "region" ? `/topology/blocked/regions/${keys[0]}`
+    : `/topology/blocked/connections/${keys[0]}/${keys[1]}`;
+  button.addEventListener("click", () => write(mapPath(path), "DELETE", undefined, async (response) => {
+    const what = block.blocked_keys.join("–");
+    say("blocks-info", response.ok ? `${what} unblocked` : await errorText(response), !response.ok);
+  }).catch(report));
+  return button;
+}
+
+async function showLabelTable() {
+  const table = await json(atRevision(mapPath("/label-table")));
+  const rows = table.categories.map((category) => {
+    const row = document.createElement("tr");
+    row.dataset.category = category.category;
+    row.insertCell().textContent = `category ${category.category}`;
+    row.insertCell().textContent = `${category.regions} regions, ${fmt(category.area_m2, 0)} m²`;
+    const choice = document.createElement("select");
+    choice.dataset.category = category.category;
+    const automatic = new Option(`automatic${category.overridden ? "" : ` (${category.label})`}`, "");
+    choice.add(automatic);
+    for (const label of table.labels) {
+      const option = new Option(label.label, label.label);
+      option.title = `${label.functionality}; opens onto ${label.connectable.join(", ") || "nothing"}`;
+      choice.add(option);
+    }
+    choice.value = table.overrides[String(category.category)] || "";
+    row.insertCell().appendChild(choice);
+    return row;
+  });
+  document.getElementById("labels-table").replaceChildren(...rows);
+  const form = document.getElementById("labels-form");
+  form.hidden = false;
+  form.querySelector("button").disabled = state.history !== null;
+  if (!rows.length) say("labels-info", "No place categories yet (the map is not decomposed).");
+  document.getElementById("labels-toggle").textContent = "Hide";
+}
+
+document.getElementById("labels-toggle").addEventListener("click", () => {
+  const form = document.getElementById("labels-form");
+  if (!form.hidden) {
+    form.hidden = true;
+    document.getElementById("labels-toggle").textContent = "Show";
+    return;
+  }
+  showLabelTable().catch((error) => { if (!(error instanceof AuthNeeded)) report(error); });
+});
+
+document.getElementById("labels-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  const overrides = {};
+  for (const choice of document.querySelectorAll("#labels-table select")) {
+    if (choice.value) overrides[choice.dataset.category] = choice.value;
+  }
+  write(mapPath("/label-table"), "PUT", { overrides }, async (response) => {
+    if (!response.ok) { say("labels-info", await errorText(response), true); return; }
+    const accepted = await response.json();
+    say("labels-info", `Saved as revision ${accepted.revision_id}; the map is re-labelled from it.`);
+    await showLabelTable();
+  }).catch(report);
 });
 
 // ---- measuring and exporting ------------------------------------------------------------------------------

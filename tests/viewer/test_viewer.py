@@ -65,6 +65,20 @@ def page(browser: Any, site: Site) -> Iterator[Any]:
     assert console_problems(browser) == []
 
 
+@pytest.fixture(scope="module")
+def write_key(site: Site) -> str:
+    return create_key(site.store, role=Role.WRITE, name="viewer-writer")[1]
+
+
+@pytest.fixture
+def writer(page: Any, site: Site, write_key: str) -> Iterator[Any]:
+    """The viewer loaded afresh with a write key in the tab's session storage (cleared afterwards)."""
+    page.execute_script("sessionStorage.setItem('aisle.apiKey', arguments[0])", write_key)
+    open_viewer(page, site.url + "/")
+    yield page
+    page.execute_script("sessionStorage.clear()")
+
+
 def legend_count(driver: Any, layer: str) -> str:
     return str(driver.execute_script(
         f"return document.querySelector('#layers li[data-layer=\"{layer}\"] .count').textContent"))
@@ -295,3 +309,72 @@ def test_a_change_from_the_page_asks_for_a_write_key(browser: Any, site: Site) -
     browser.find_element("id", "key-cancel").click()
     assert site.store.latest_revision(site.info.id) == latest  # nothing was written
     assert console_problems(browser, allowed=("401 (Unauthorized)",)) == []
+
+
+def test_a_place_put_at_a_click_is_stored_drawn_and_removed_from_the_page(writer: Any, site: Site) -> None:
+    page = writer
+    before = legend_count(page, "places")
+    page.find_element("id", "place-kind").send_keys("charger")
+    page.find_element("id", "place-key").send_keys("C9")
+    heading = page.find_element("id", "place-heading")
+    heading.clear()
+    heading.send_keys("90")
+    page.find_element("id", "place-name").send_keys("Charger 9")
+    page.find_element("css selector", "#place-form button[type=submit]").click()
+    click_at(page, 12.0, 6.0)
+    wait_until(page, "return (window.aisleViewer.state.features.charger || []).some(f => f.properties.key === 'C9')",
+               what="the new charger drawn")
+    assert legend_count(page, "places") == f"({int(before.strip('()')) + 1})"
+    place = httpx.get(f"{site.url}/v1/maps/site/places/charger/C9").json()
+    assert place["stage"] == "operator" and place["name"] == "Charger 9"
+    x, y = place["geometry"]["coordinates"]
+    assert abs(x - 12.0) < 0.2 and abs(y - 6.0) < 0.2  # where it was clicked
+    assert abs(place["approach_pose"]["yaw_rad"] - np.pi / 2) < 1e-3  # the heading given, as radians
+    assert "revision" in page.find_element("id", "place-info").text
+
+    page.find_element("id", "place-remove").click()
+    wait_until(page, "return !(window.aisleViewer.state.features.charger || []).some(f => f.properties.key === 'C9')",
+               what="the charger gone from the map")
+    assert legend_count(page, "places") == before
+    assert httpx.get(f"{site.url}/v1/maps/site/places/charger/C9").status_code == 404
+
+
+def test_a_blocked_region_is_unblocked_from_the_page(writer: Any, site: Site, write_key: str) -> None:
+    page = writer
+    region = site.store.features(site.info.id, kinds=["corridor"])[0].feature.key
+    blocked = httpx.put(f"{site.url}/v1/maps/site/topology/blocked/regions/{region}", json={"reason": "spill"},
+                        headers={"X-API-Key": write_key})
+    assert blocked.status_code == 201
+    button = f"document.querySelector('#blocks li[data-block=\"{region}\"] button')"
+    wait_until(page, f"return {button}", what="the block listed")
+    assert "spill" in page.find_element("css selector", "#blocks li").text
+    page.execute_script(f"{button}.click()")
+    wait_until(page, "return !document.querySelector('#blocks li[data-block]')", what="the block gone from the list")
+    assert httpx.get(f"{site.url}/v1/maps/site/topology/blocked").json()["blocks"] == []
+    graph = httpx.get(f"{site.url}/v1/maps/site/topology", params={"format": "geojson"}).json()
+    assert not any(f["properties"].get("blocked") for f in graph["features"])
+
+
+def test_a_label_table_edit_without_a_key_asks_for_one_and_is_stored(page: Any, site: Site, write_key: str) -> None:
+    from selenium.webdriver.support.ui import Select
+
+    page.find_element("id", "labels-toggle").click()
+    wait_until(page, "return document.querySelectorAll('#labels-table select').length", what="the label table")
+    table = httpx.get(f"{site.url}/v1/maps/site/label-table").json()
+    shown = page.execute_script("return [...document.querySelectorAll('#labels-table tr')]"
+                                ".map(r => r.dataset.category)")
+    assert shown == [str(row["category"]) for row in table["categories"]]
+    category = table["categories"][0]
+    label = "storage" if category["label"] != "storage" else "corridor"
+    Select(page.find_element("css selector", f"#labels-table select[data-category='{category['category']}']")
+           ).select_by_value(label)
+    page.find_element("css selector", "#labels-form button[type=submit]").click()
+    wait_until(page, "return !document.getElementById('key-dialog').hidden", what="the key prompt")
+    assert "write key" in page.find_element("id", "key-reason").text
+    page.find_element("id", "key-input").send_keys(write_key + "\n")
+    wait_until(page, "return document.getElementById('labels-info').textContent.startsWith('Saved')",
+               what="the label table saved")
+    assert httpx.get(f"{site.url}/v1/maps/site/label-table").json()["overrides"] == {str(category["category"]): label}
+    assert page.execute_script("return sessionStorage.getItem('aisle.apiKey')") == write_key
+    assert console_problems(page, allowed=("401 (Unauthorized)",)) == []
+    page.execute_script("sessionStorage.clear()")
