@@ -584,20 +584,34 @@ async function showSemantics(x, y) {
   for (const f of answer.features || []) rows.push([f.kind, `${f.key}${f.label ? " " + f.label : ""}`]);
   const actions = [];
   const region = answer.place && answer.place.region;
-  if (region && state.history === null) {
-    const block = state.blocks.find((b) => b.target === "region" && b.blocked_keys[0] === region);
-    actions.push(block ? unblockButton(block, `Unblock region ${region}`) : blockButton(region));
+  if (region && state.history === null) {  // the region here, and the aisle it lies in, to block or open again
+    const aisles = (answer.features || []).filter((f) => f.kind === "corridor" && AISLE_KEY.test(f.key));
+    const offered = new Set();
+    for (const key of [region, ...aisles.map((f) => f.key)]) {
+      const block = state.blocks.find((b) => b.target === "region" && (b.blocked_keys[0] === key
+        || (key === region && (b.regions || []).includes(region))));
+      if (offered.has(block)) continue;  // the region is closed by its aisle's block: one button for it
+      offered.add(block);
+      actions.push(block ? unblockButton(block, `Unblock ${blockName(block)}`) : blockButton(key));
+    }
   }
   showCard("At this point", rows, actions);
 }
 
+const AISLE_KEY = /^aisle-[0-9]+$/;
+const blockName = (block) => {
+  const [a, b] = block.blocked_keys;
+  return block.target === "connection" ? `connection ${a}–${b}` : AISLE_KEY.test(a) ? a : `region ${a}`;
+};
+
 function blockButton(region) {
   const button = document.createElement("button");
-  button.textContent = `Block region ${region}`;
-  button.title = "Routes avoid a blocked region (needs a write key)";
+  const name = AISLE_KEY.test(region) ? region : `region ${region}`;
+  button.textContent = `Block ${name}`;
+  button.title = `Routes avoid a blocked ${AISLE_KEY.test(region) ? "aisle" : "region"} (needs a write key)`;
   button.addEventListener("click", () => write(mapPath(`/topology/blocked/regions/${encodeURIComponent(region)}`),
     "PUT", { reason: "blocked from the viewer" }, async (response) => {
-      button.textContent = response.ok ? `Region ${region} blocked` : await errorText(response);
+      button.textContent = response.ok ? `${name} blocked` : await errorText(response);
     }).catch(report));
   return button;
 }
@@ -744,9 +758,7 @@ async function drawBlocks() {
   list.replaceChildren(...state.blocks.map((block) => {
     const item = document.createElement("li");
     item.dataset.block = block.blocked_keys.join("/");
-    const [a, b] = block.blocked_keys;
-    item.textContent = (block.target === "region" ? `region ${a}` : `connection ${a}–${b}`)
-      + (block.reason ? ` (${block.reason})` : "") + " ";
+    item.textContent = blockName(block) + (block.reason ? ` (${block.reason})` : "") + " ";
     if (state.history === null) item.appendChild(unblockButton(block, "Unblock"));
     return item;
   }));
@@ -762,8 +774,7 @@ function unblockButton(block, text) {
   const path = block.target === "region" ? `/topology/blocked/regions/${keys[0]}`
     : `/topology/blocked/connections/${keys[0]}/${keys[1]}`;
   button.addEventListener("click", () => write(mapPath(path), "DELETE", undefined, async (response) => {
-    const what = block.blocked_keys.join("–");
-    say("blocks-info", response.ok ? `${what} unblocked` : await errorText(response), !response.ok);
+    say("blocks-info", response.ok ? `${blockName(block)} unblocked` : await errorText(response), !response.ok);
   }).catch(report));
   return button;
 }
@@ -773,8 +784,10 @@ async function showLabelTable() {
   const rows = table.categories.map((category) => {
     const row = document.createElement("tr");
     row.dataset.category = category.category;
-    row.insertCell().textContent = `category ${category.category}`;
-    row.insertCell().textContent = `${category.regions} regions, ${fmt(category.area_m2, 0)} m²`;
+    row.insertCell().textContent = `#${category.category}`;
+    row.insertCell().textContent = `${fmt(category.area_m2, 0)} m²`;
+    row.title = `Place category ${category.category}: ${category.regions} region${category.regions === 1 ? "" : "s"}`
+      + `, ${fmt(category.area_m2, 1)} m², labelled ${category.label} now`;
     const choice = document.createElement("select");
     choice.dataset.category = category.category;
     const automatic = new Option(`automatic${category.overridden ? "" : ` (${category.label})`}`, "");

@@ -339,20 +339,38 @@ def test_a_place_put_at_a_click_is_stored_drawn_and_removed_from_the_page(writer
     assert httpx.get(f"{site.url}/v1/maps/site/places/charger/C9").status_code == 404
 
 
-def test_a_blocked_region_is_unblocked_from_the_page(writer: Any, site: Site, write_key: str) -> None:
-    page = writer
+def test_a_blocked_region_and_aisle_are_unblocked_from_the_page(writer: Any, site: Site, write_key: str) -> None:
+    page, blocked = writer, f"{site.url}/v1/maps/site/topology/blocked"
+    headers = {"X-API-Key": write_key}
     region = site.store.features(site.info.id, kinds=["corridor"])[0].feature.key
-    blocked = httpx.put(f"{site.url}/v1/maps/site/topology/blocked/regions/{region}", json={"reason": "spill"},
-                        headers={"X-API-Key": write_key})
-    assert blocked.status_code == 201
+    assert httpx.put(f"{blocked}/regions/{region}", json={"reason": "spill"}, headers=headers).status_code == 201
     button = f"document.querySelector('#blocks li[data-block=\"{region}\"] button')"
     wait_until(page, f"return {button}", what="the block listed")
     assert "spill" in page.find_element("css selector", "#blocks li").text
-    page.execute_script(f"{button}.click()")
+    page.execute_script(f"{button}.click()")  # unblocked from the list of blocks
     wait_until(page, "return !document.querySelector('#blocks li[data-block]')", what="the block gone from the list")
-    assert httpx.get(f"{site.url}/v1/maps/site/topology/blocked").json()["blocks"] == []
+    assert httpx.get(blocked).json()["blocks"] == []
+
+    stored = site.store.feature(site.info.id, "bin", BIN_ID)
+    assert stored is not None
+    access = Bin.from_feature(stored.feature).access_pose
+    assert access is not None
+    here = httpx.get(f"{site.url}/v1/maps/site/semantics", params={"x": access.x_m, "y": access.y_m}).json()
+    outline = next(s.feature for s in site.store.features(site.info.id) if s.feature.key == here["place"]["region"])
+    site.store.write_revision(site.info.id, RevisionWrite("pillar_mapping", features={  # an aisle, as the stage
+        "corridor": [Feature("corridor", "aisle-01", outline.geometry, {"kind": "corridor", "aisle": 1})]}))
+    assert httpx.put(f"{blocked}/regions/aisle-01", headers=headers).status_code == 201
+    wait_until(page, "return document.querySelector('#blocks li[data-block=\"aisle-01\"]')", what="the aisle block")
+    click_at(page, access.x_m, access.y_m)  # unblocked from the card of a point in the aisle
+    wait_until(page, "return [...document.querySelectorAll('#card-actions button')]"
+                     ".some(b => b.textContent === 'Unblock aisle-01')", what="the card's unblock button")
+    page.execute_script("[...document.querySelectorAll('#card-actions button')]"
+                        ".find(b => b.textContent === 'Unblock aisle-01').click()")
+    wait_until(page, "return !document.querySelector('#blocks li[data-block]')", what="the aisle block gone")
+    assert httpx.get(blocked).json()["blocks"] == []
     graph = httpx.get(f"{site.url}/v1/maps/site/topology", params={"format": "geojson"}).json()
     assert not any(f["properties"].get("blocked") for f in graph["features"])
+    site.store.write_revision(site.info.id, RevisionWrite("pillar_mapping", features={"corridor": []}))
 
 
 def test_a_label_table_edit_without_a_key_asks_for_one_and_is_stored(page: Any, site: Site, write_key: str) -> None:
