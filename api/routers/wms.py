@@ -11,8 +11,9 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import BaseModel, Field, ValidationError, model_validator
 
 from api.announce import Announcer
+from api.background import background_work
 from api.deps import AnnouncerDep, CacheDep, MapDep, RevisionQuery, StoreDep
-from api.memory import cyclic_gc_paused, return_freed_memory
+from api.memory import return_freed_memory
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.queries import BIN_ID_PATTERN
 from atlas.bins import import_wms_list
@@ -203,7 +204,7 @@ async def import_wms_bins(request: Request, map_info: MapDep, store: StoreDep, c
 
 def _import(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInfo, announcer: Announcer) -> bytes:
     """Parse, check and store the WMS list in ``body``; the reconciliation as JSON (in a worker thread)."""
-    with cyclic_gc_paused():
+    with background_work():
         answer = _import_list(body, store, cache, map_info, announcer)
     return_freed_memory()
     return answer

@@ -1,14 +1,15 @@
-"""The API's memory handling around large requests."""
+"""Heavy work in a worker thread of the API: the interpreter settings it runs with."""
 
 from __future__ import annotations
 
 import gc
+import sys
 import threading
 from collections.abc import Iterator
 
 import pytest
 
-from api.memory import cyclic_gc_paused
+from api.background import background_work
 
 
 @pytest.fixture
@@ -25,7 +26,7 @@ def test_the_collector_is_held_off_until_the_last_of_overlapping_pauses_ends(col
     seen: dict[str, bool] = {}
 
     def first() -> None:
-        with cyclic_gc_paused():
+        with background_work():
             first_in.set()
             second_in.wait(10)
         first_out.set()
@@ -33,7 +34,7 @@ def test_the_collector_is_held_off_until_the_last_of_overlapping_pauses_ends(col
     thread = threading.Thread(target=first)
     thread.start()
     first_in.wait(10)
-    with cyclic_gc_paused():
+    with background_work():
         second_in.set()
         first_out.wait(10)
         seen["after the first ended"] = gc.isenabled()
@@ -42,15 +43,18 @@ def test_the_collector_is_held_off_until_the_last_of_overlapping_pauses_ends(col
     assert gc.isenabled()
 
 
-def test_the_collector_runs_again_after_a_pause_that_failed(collector_on: None) -> None:
-    with pytest.raises(RuntimeError), cyclic_gc_paused():
+def test_the_collector_and_the_switch_interval_are_back_after_work_that_failed(collector_on: None) -> None:
+    switch_interval_s = sys.getswitchinterval()
+    with pytest.raises(RuntimeError), background_work():
         assert not gc.isenabled()
+        assert sys.getswitchinterval() < switch_interval_s
         raise RuntimeError("the import failed")
     assert gc.isenabled()
+    assert sys.getswitchinterval() == switch_interval_s
 
 
 def test_a_collector_switched_off_before_stays_off(collector_on: None) -> None:
     gc.disable()
-    with cyclic_gc_paused():
+    with background_work():
         pass
     assert not gc.isenabled()
