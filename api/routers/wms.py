@@ -11,6 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import BaseModel, Field, ValidationError, model_validator
 
 from api.announce import Announcer
+from api.background import background_work
 from api.deps import AnnouncerDep, CacheDep, MapDep, RevisionQuery, StoreDep
 from api.memory import return_freed_memory
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
@@ -203,6 +204,15 @@ async def import_wms_bins(request: Request, map_info: MapDep, store: StoreDep, c
 
 def _import(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInfo, announcer: Announcer) -> bytes:
     """Parse, check and store the WMS list in ``body``; the reconciliation as JSON (in a worker thread)."""
+    with background_work():
+        answer = _import_list(body, store, cache, map_info, announcer)
+    return_freed_memory()
+    return answer
+
+
+def _import_list(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInfo, announcer: Announcer
+                 ) -> bytes:
+    """:func:`_import` without its memory handling."""
     try:
         parsed = WmsImport.model_validate_json(body)
     except ValidationError as err:
@@ -218,9 +228,7 @@ def _import(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInf
     written, matching = import_wms_list(store, cache, map_info.id, items, tolerance_m=tolerance_m, match_by=match_by)
     del items
     announcer.announce(map_info, written)
-    answer = json_bytes(_reconciliation_out(matching).model_dump(mode="json"))
-    return_freed_memory()
-    return answer
+    return json_bytes(_reconciliation_out(matching).model_dump(mode="json"))
 
 
 @router.get("/reconciliation", summary="WMS bins against detected bins", responses=_ERRORS)

@@ -48,6 +48,8 @@ MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
 log = logging.getLogger(__name__)
 _IDS_PER_STATEMENT = 5000
 """Row ids named in one ``IN (...)``, well below SQLite's and PostgreSQL's limits on bound parameters."""
+_WMS_BATCH = 10_000
+"""WMS bins written by one statement (an import of 200 000 is written in 20)."""
 
 
 class FeatureRow(NamedTuple):
@@ -564,11 +566,12 @@ class MapStore:
             ).scalar_one()
             connection.execute(table.update().where(table.c.map_id == map_id, table.c.retired_revision_id.is_(None))
                                .values(retired_revision_id=revision_id))
-            if items:
+            # in batches, so no single call (building, sending or freeing the rows) holds the GIL for long
+            for start in range(0, len(items), _WMS_BATCH):
                 connection.execute(table.insert(), [
                     {"map_id": map_id, "revision_id": revision_id, "wms_id": item.wms_id, "x_m": item.x_m,
                      "y_m": item.y_m, "aisle": item.aisle, "bay": item.bay, "level": item.level,
-                     "properties": dict(item.properties)} for item in items])
+                     "properties": dict(item.properties)} for item in items[start:start + _WMS_BATCH]])
             if before_commit is not None:
                 before_commit(revision_id)
         return Revision(revision_id, map_id, stage, created_at, None, None, summary)

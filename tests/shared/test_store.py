@@ -18,6 +18,7 @@ from shared.store import (
     StoreUnavailableError,
     TopologyEdge,
     TopologyNode,
+    WmsBin,
 )
 
 
@@ -104,6 +105,16 @@ def test_a_failing_revision_leaves_nothing_behind(store: MapStore, monkeypatch: 
     assert [f.feature.key for f in store.features(site.id)] == ["A"]
     assert store.layer(site.id, "occupancy") is None
     assert len(store.revisions(site.id)) == 1
+
+
+def test_a_large_wms_list_is_stored_whole_and_in_order(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    old = store.replace_wms_bins(site.id, [WmsBin("OLD-1")])
+    items = [WmsBin(f"W-{i:05d}", float(i), 2.0, level=i % 4) for i in range(25_001, 0, -1)]
+    written = store.replace_wms_bins(site.id, items)
+    assert store.wms_bins(site.id) == items
+    assert written.summary["wms_bins"] == {"total": 25_001, "previous": 1}
+    assert [b.wms_id for b in store.wms_bins(site.id, revision=old.id)] == ["OLD-1"]
 
 
 def test_topology_is_versioned(store: MapStore) -> None:

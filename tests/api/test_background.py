@@ -1,0 +1,60 @@
+"""Heavy work in a worker thread of the API: the interpreter settings it runs with."""
+
+from __future__ import annotations
+
+import gc
+import sys
+import threading
+from collections.abc import Iterator
+
+import pytest
+
+from api.background import background_work
+
+
+@pytest.fixture
+def collector_on() -> Iterator[None]:
+    was_enabled = gc.isenabled()
+    gc.enable()
+    yield
+    if not was_enabled:
+        gc.disable()
+
+
+def test_the_collector_is_held_off_until_the_last_of_overlapping_pauses_ends(collector_on: None) -> None:
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+    seen: dict[str, bool] = {}
+
+    def first() -> None:
+        with background_work():
+            first_in.set()
+            second_in.wait(10)
+        first_out.set()
+
+    thread = threading.Thread(target=first)
+    thread.start()
+    first_in.wait(10)
+    with background_work():
+        second_in.set()
+        first_out.wait(10)
+        seen["after the first ended"] = gc.isenabled()
+    thread.join()
+    assert seen == {"after the first ended": False}
+    assert gc.isenabled()
+
+
+def test_the_collector_and_the_switch_interval_are_back_after_work_that_failed(collector_on: None) -> None:
+    switch_interval_s = sys.getswitchinterval()
+    with pytest.raises(RuntimeError), background_work():
+        assert not gc.isenabled()
+        assert sys.getswitchinterval() < switch_interval_s
+        raise RuntimeError("the import failed")
+    assert gc.isenabled()
+    assert sys.getswitchinterval() == switch_interval_s
+
+
+def test_a_collector_switched_off_before_stays_off(collector_on: None) -> None:
+    gc.disable()
+    with background_work():
+        pass
+    assert not gc.isenabled()
