@@ -19,8 +19,8 @@ _ERRORS: Responses = {**not_found("No such map or revision."), **UNPROCESSABLE}
 
 
 class PoseOut(BaseModel):
-    x_m: float
-    y_m: float
+    x_m: float = Field(description="x of the lidar, metres, map frame.")
+    y_m: float = Field(description="y of the lidar, metres, map frame.")
     yaw_rad: float = Field(description="Heading, radians from the map x axis.")
     stamp_ns: int = Field(description="Time of the scan the pose is from, ns since the Unix epoch (robot clock).")
 
