@@ -30,6 +30,9 @@ HEARTBEAT_PERIOD_S = 5.0
 IDLE_WAIT_S = 0.5
 """Longest a stage waits for its next input before it looks at its stop flag and its periods again, seconds: a
 stage with no traffic wakes twice a second (it woke twenty times: 0.2 % of a core per stage, idle)."""
+PENDING_WAIT_S = 0.05
+"""Longest a stage with a frame waiting for its pose (its transforms not in yet) waits for its next input, seconds:
+the frame is taken as soon as its pose arrives, not overtaken by the next frame half a second later."""
 MAP_EVENTS_TOPIC = "map_events"
 """Map events go to ROS topic ``/aisle/map_events`` (aisle_msgs/msg/MapEvent)."""
 LATEST_ONLY = frozenset({messages.IMAGE, messages.CAMERA_INFO})

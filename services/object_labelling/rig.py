@@ -112,6 +112,10 @@ class AwaitingPose:
         self.wait_s = wait_s
         self._pairs: dict[str, tuple[FramePair[Image], float]] = {}
 
+    def __bool__(self) -> bool:
+        """Whether a frame waits for its pose."""
+        return bool(self._pairs)
+
     def add(self, pair: FramePair[Image], now_s: float) -> bool:
         """Let ``pair`` wait from ``now_s`` (monotonic seconds); whether it overtook one still waiting."""
         overtook = pair.namespace in self._pairs

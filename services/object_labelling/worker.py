@@ -34,7 +34,7 @@ from shared.settings import LabellingSettings
 from shared.store import RevisionWrite
 from shared.transforms import Transform
 from shared.vocabulary import FeatureKind
-from shared.worker import IDLE_WAIT_S, InputSpan, StageContext, drain, take_transforms
+from shared.worker import IDLE_WAIT_S, PENDING_WAIT_S, InputSpan, StageContext, drain, take_transforms
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +70,7 @@ class LabellingStage:
         with threadpool_limits(limits=1, user_api="blas"):
             try:
                 while not stop.is_set():
-                    self._take_inputs(timeout_s=IDLE_WAIT_S)
+                    self._take_inputs(timeout_s=PENDING_WAIT_S if self._awaiting else IDLE_WAIT_S)
                     self._handle_waiting()
                     self.context.counters.set(f"{self.context.name}.pairs_skipped", self.pairer.skipped)
                     if time.monotonic() - last_commit >= self.settings.commit_period_s:

@@ -39,7 +39,7 @@ from shared import messages
 from shared.settings import PillarSettings
 from shared.store import RevisionWrite, StoreUnavailableError
 from shared.vocabulary import FeatureKind
-from shared.worker import IDLE_WAIT_S, StageContext, drain, take_transforms
+from shared.worker import IDLE_WAIT_S, PENDING_WAIT_S, StageContext, drain, take_transforms
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +81,8 @@ class PillarStage:
         last_store = time.monotonic()
         try:
             while not stop.is_set():
-                self._take_inputs(timeout_s=IDLE_WAIT_S)
+                waiting = any(robot.waiting is not None for robot in self.robots.values())
+                self._take_inputs(timeout_s=PENDING_WAIT_S if waiting else IDLE_WAIT_S)
                 self._process_waiting()
                 if time.monotonic() - last_store >= self.settings.store_period_s:
                     self._store()
