@@ -56,11 +56,14 @@ class RoutedCount:
 
 
 def _answer(response: httpx2.Response) -> tuple[int, Any, list[tuple[str, str]]]:
-    """Status, body and headers, with the seconds a rate-limit refusal names rounded away (time passes)."""
+    """Status, body and headers, with the seconds a rate-limit refusal names (at least one) left out: time passes."""
     body = response.json()
+    headers = sorted((name.lower(), value) for name, value in response.headers.multi_items())
     if response.status_code == 429:
         body = {"detail": re.sub(r"retry in \d+\.\d\d s", "retry in ... s", body["detail"])}
-    return response.status_code, body, sorted((name.lower(), value) for name, value in response.headers.multi_items())
+        assert int(response.headers["retry-after"]) >= 1
+        headers = [(name, "..." if name == "retry-after" else value) for name, value in headers]
+    return response.status_code, body, headers
 
 
 @pytest.mark.parametrize("require_keys", [False, True])
@@ -120,7 +123,7 @@ def test_fast_and_routed_reads_are_rate_limited_alike(
         answers.append([_answer(client.get(BIN if fast else _routed(BIN), headers=headers)) for _ in range(5)])
 
     assert answers[0] == answers[1]
-    assert answers[0][-1][0] == 429 and int(dict(answers[0][-1][2])["retry-after"]) >= 1
+    assert answers[0][-1][0] == 429 and "retry-after" in dict(answers[0][-1][2])
 
 
 @pytest.mark.parametrize("keyed", [False, True])
