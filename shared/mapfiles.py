@@ -24,6 +24,10 @@ class MapFileError(ValueError):
     """A map file that cannot be read or a map that cannot be written: missing, malformed, bad geometry."""
 
 
+IMAGE_SUFFIXES = frozenset({".png", ".pgm", ".ppm", ".bmp", ".tif", ".tiff", ".jpg", ".jpeg"})
+"""Suffixes of the bare map images :func:`read_map_file` reads."""
+
+
 class MapImage(NamedTuple):
     """A map read from disk: occupancy int8 (-1 unknown, 0..100), GridLayer row order (row 0 = lowest y)."""
 
@@ -162,3 +166,42 @@ __all__ = [
     "read_map_yaml",
     "write_map_yaml",
 ]
+
+
+def read_map_file(path: Path, *, resolution_m: float | None = None, free_darkness: bool = False) -> MapImage:
+    """A map_server YAML (:func:`read_map_yaml`) or a bare map image.
+
+    A bare image is read with map_server's trinary thresholds (darkness above 0.65 occupied, below 0.196 free, the
+    rest unknown) and needs ``resolution_m``; its origin is (0, 0). With ``free_darkness`` its free cells keep their
+    darkness in percent (0..19, rounded down) instead of 0, so grey fringes at walls can be told from clear floor.
+    For a YAML, ``resolution_m`` (if given) must match the file's.
+
+    Raises
+    ------
+    MapFileError
+        Missing or unreadable files, malformed YAML, a bare image without a resolution, a resolution that disagrees.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise MapFileError(f"map file {path} does not exist")
+    if path.suffix.lower() in {".yaml", ".yml"}:
+        image = read_map_yaml(path)
+        if resolution_m is not None and not math.isclose(resolution_m, image.resolution_m, rel_tol=1e-6):
+            raise MapFileError(f"--resolution {resolution_m} m disagrees with {path}'s resolution "
+                               f"{image.resolution_m} m")
+        return image
+    if path.suffix.lower() not in IMAGE_SUFFIXES:
+        raise MapFileError(f"map file {path} is neither a map_server YAML nor an image ({sorted(IMAGE_SUFFIXES)})")
+    if resolution_m is None:
+        raise MapFileError(f"map image {path} has no YAML: give its resolution in metres per pixel")
+    try:
+        with Image.open(path) as im:
+            grey = np.asarray(im.convert("L"), dtype=np.float64)
+    except (OSError, UnidentifiedImageError) as err:
+        raise MapFileError(f"map image {path} is not a readable image: {err}") from err
+    darkness = (255.0 - grey) / 255.0
+    occupancy = np.full(grey.shape, -1, dtype=np.int8)
+    occupancy[darkness > 0.65] = 100
+    free = darkness < 0.196
+    occupancy[free] = np.floor(darkness[free] * 100.0).astype(np.int8) if free_darkness else 0
+    return MapImage(occupancy[::-1].copy(), float(resolution_m), 0.0, 0.0)

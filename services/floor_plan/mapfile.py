@@ -4,63 +4,37 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 import numpy.typing as npt
-from PIL import Image, UnidentifiedImageError
+from PIL import Image
 
 from services.floor_plan.errors import FloorPlanError
 from services.floor_plan.overview import overview_image
 from services.floor_plan.pipeline import FloorPlan, FloorPlanSettings, floor_plan, unit_labels
-from shared.mapfiles import MapFileError, read_map_yaml
+from shared.mapfiles import MapFileError, read_map_file
 from shared.vocabulary import FeatureKind
 
 logger = logging.getLogger(__name__)
 
-_IMAGE_SUFFIXES = {".png", ".pgm", ".ppm", ".bmp", ".tif", ".tiff", ".jpg", ".jpeg"}
-
-
 def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.NDArray[np.int8], float,
                                                                                tuple[float, float]]:
-    """Occupancy (GridLayer order: row 0 = lowest y), resolution and origin of a map_server YAML or bare image.
-
-    A bare image is read with map_server's trinary thresholds (darkness above 0.65 occupied, below 0.196
-    free) and needs ``resolution_m``; its origin is (0, 0).
+    """Occupancy (GridLayer order: row 0 = lowest y), resolution and origin of a map_server YAML or bare image
+    (:func:`shared.mapfiles.read_map_file`: a bare image needs ``resolution_m`` and has its origin at (0, 0)).
 
     Raises
     ------
     FloorPlanError
         Missing or unreadable files, malformed YAML, a bare image without a resolution.
     """
-    path = Path(map_path)
-    if not path.exists():
-        raise FloorPlanError(f"map file {path} does not exist")
-    if path.suffix.lower() in {".yaml", ".yml"}:
-        try:
-            image = read_map_yaml(path)
-        except MapFileError as err:
-            raise FloorPlanError(str(err)) from err
-        if resolution_m is not None and not math.isclose(resolution_m, image.resolution_m, rel_tol=1e-6):
-            raise FloorPlanError(f"--resolution {resolution_m} m disagrees with {path}'s {image.resolution_m} m")
-        return image.occupancy, image.resolution_m, (image.origin_x_m, image.origin_y_m)
-    if path.suffix.lower() not in _IMAGE_SUFFIXES:
-        raise FloorPlanError(f"map file {path} is neither a map_server YAML nor an image ({sorted(_IMAGE_SUFFIXES)})")
-    if resolution_m is None:
-        raise FloorPlanError(f"map image {path} has no YAML: give its resolution in metres per pixel")
     try:
-        with Image.open(path) as im:
-            grey = np.asarray(im.convert("L"), dtype=np.float64)
-    except (OSError, UnidentifiedImageError) as err:
-        raise FloorPlanError(f"map image {path} is not a readable image: {err}") from err
-    darkness = (255.0 - grey) / 255.0
-    occ = np.full(grey.shape, -1, dtype=np.int8)
-    occ[darkness > 0.65] = 100
-    occ[darkness < 0.196] = 0
-    return occ[::-1].copy(), float(resolution_m), (0.0, 0.0)
+        image = read_map_file(Path(map_path), resolution_m=resolution_m)
+    except MapFileError as err:
+        raise FloorPlanError(str(err)) from err
+    return image.occupancy, image.resolution_m, (image.origin_x_m, image.origin_y_m)
 
 
 def geojson(plan: FloorPlan) -> dict[str, Any]:

@@ -13,7 +13,7 @@ import cv2
 import networkx as nx
 import numpy as np
 import numpy.typing as npt
-from PIL import Image, UnidentifiedImageError
+from PIL import Image
 from scipy import ndimage
 
 from services.grid_decomposition.errors import DecompositionError
@@ -21,62 +21,34 @@ from services.grid_decomposition.overview import overview_image
 from services.grid_decomposition.pipeline import Decomposition, decompose
 from services.grid_decomposition.semantics import parse_label
 from services.grid_decomposition.subdivision import line_endpoints
-from shared.mapfiles import MapFileError, read_map_yaml
+from shared.mapfiles import IMAGE_SUFFIXES, MapFileError
+from shared.mapfiles import read_map_file as shared_read_map_file
 from shared.vocabulary import FeatureKind, PlaceLabel
 
 logger = logging.getLogger(__name__)
 
-_IMAGE_SUFFIXES = {".png", ".pgm", ".ppm", ".bmp", ".tif", ".tiff", ".jpg", ".jpeg"}
 
 
 def read_map_file(
     map_path: Path, *, resolution_m: float | None = None
 ) -> tuple[npt.NDArray[np.int8], float, tuple[float, float]]:
-    """Occupancy (GridLayer order), resolution and origin of a map_server YAML or a bare image.
-
-    A bare image is read with map_server's thresholds (occupied above 0.65, free below 0.196 of
-    darkness, the rest unknown) and needs ``resolution_m``; its origin is (0, 0). Its free cells
-    keep their darkness in percent (0..19, rounded down): grey fringes at walls are not clearly
-    free (:func:`~services.grid_decomposition.cleaning.clean_occupancy`). For a YAML,
-    ``resolution_m`` (if given) must match the file's.
+    """Occupancy (GridLayer order), resolution and origin of a map_server YAML or a bare image
+    (:func:`shared.mapfiles.read_map_file`). A bare image's free cells keep their darkness in percent (0..19):
+    grey fringes at walls are not clearly free (:func:`~services.grid_decomposition.cleaning.clean_occupancy`).
     """
     path = Path(map_path)
-    if not path.exists():
-        raise DecompositionError(f"map file {path} does not exist")
-    if path.suffix.lower() in {".yaml", ".yml"}:
-        try:
-            image = read_map_yaml(path)
-        except MapFileError as err:
-            raise DecompositionError(f"{err}{_missing_image_hint(path, err)}") from err
-        if resolution_m is not None and not math.isclose(resolution_m, image.resolution_m, rel_tol=1e-6):
-            raise DecompositionError(
-                f"--resolution {resolution_m} m disagrees with {path}'s resolution {image.resolution_m} m"
-            )
-        return image.occupancy, image.resolution_m, (image.origin_x_m, image.origin_y_m)
-    if path.suffix.lower() not in _IMAGE_SUFFIXES:
-        raise DecompositionError(
-            f"map file {path} is neither a map_server YAML nor an image ({sorted(_IMAGE_SUFFIXES)})"
-        )
-    if resolution_m is None:
-        raise DecompositionError(f"map image {path} has no YAML: give its resolution in metres per pixel")
     try:
-        with Image.open(path) as im:
-            grey = np.asarray(im.convert("L"), dtype=np.float64)
-    except (OSError, UnidentifiedImageError) as err:
-        raise DecompositionError(f"map image {path} is not a readable image: {err}") from err
-    p = (255.0 - grey) / 255.0
-    occ = np.full(grey.shape, -1, dtype=np.int8)
-    occ[p > 0.65] = 100
-    free = p < 0.196
-    occ[free] = np.floor(p[free] * 100.0).astype(np.int8)
-    return occ[::-1].copy(), float(resolution_m), (0.0, 0.0)
+        image = shared_read_map_file(path, resolution_m=resolution_m, free_darkness=True)
+    except MapFileError as err:
+        raise DecompositionError(f"{err}{_missing_image_hint(path, err)}") from err
+    return image.occupancy, image.resolution_m, (image.origin_x_m, image.origin_y_m)
 
 
 def _missing_image_hint(yaml_path: Path, err: MapFileError) -> str:
     """For a YAML whose image is missing: the images beside it and how to decompose one of them."""
     if not isinstance(err.__cause__, FileNotFoundError) or not yaml_path.exists():
         return ""
-    beside = sorted(p.name for p in yaml_path.parent.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
+    beside = sorted(p.name for p in yaml_path.parent.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     if not beside:
         return ""
     return (
