@@ -9,6 +9,7 @@ footprint turned by its yaw relative to the bay (``half``); ray casting uses the
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -17,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.load_scenes.errors import SceneError
-from services.load_scenes.model import Bay, BoxEstimate, ObjectKind
+from services.load_scenes.model import Bay, BoxEstimate, ObjectKind, SceneNode
 
 SUPPORT, PALLET, LOAD = 0, 1, 2
 """Kind codes of the arrays: a level's beam pair (or the floor), a pallet, a load."""
@@ -225,6 +226,18 @@ def boxes_from_estimates(bay: Bay, estimates: list[BoxEstimate]) -> Boxes:
                  score=np.array([e.score for e in estimates], float))
 
 
+def boxes_from_nodes(bay: Bay, nodes: list[SceneNode]) -> Boxes:
+    """Bay-frame boxes of scene nodes (sigma 0, score 1), e.g. to cast rays against a graph's objects."""
+    n = len(nodes)
+    centre = to_bay_frame(bay, np.array([nd.centre for nd in nodes], float).reshape(n, 3))
+    size = np.array([nd.size for nd in nodes], float).reshape(n, 3)
+    yaw = yaw_to_bay(bay, np.array([nd.yaw_rad for nd in nodes], float))
+    half = hull_half(size, yaw)
+    return Boxes(centre=centre, half=half, size=size, yaw=yaw, sigma=np.zeros((n, 3)),
+                 kind=np.array([KIND_CODE[nd.kind] for nd in nodes], np.int64),
+                 level=levels_of(bay, centre[:, 2] - half[:, 2]), score=np.ones(n))
+
+
 def levels_of(bay: Bay, bottom_z: npt.NDArray[np.float64], *, tolerance_m: float = 0.1) -> npt.NDArray[np.int64]:
     """Level each box bottom (metres) stands in: the highest level whose support is at most ``tolerance_m`` above."""
     z = np.asarray(bay.levels_z_m, float)
@@ -233,4 +246,4 @@ def levels_of(bay: Bay, bottom_z: npt.NDArray[np.float64], *, tolerance_m: float
 
 def concat(*parts: Boxes) -> Boxes:
     """Boxes of several sets one after the other."""
-    return Boxes(*(np.concatenate([getattr(p, f) for p in parts]) for f in Boxes.__slots__))
+    return Boxes(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in dataclasses.fields(Boxes)))

@@ -10,20 +10,23 @@ depth likelihood (:mod:`likelihood`) times the detector's Gaussian on each detec
 The chain starts where the exact context marginals point (detections with p(false) < 0.5, candidates with
 p(hidden) > 0.5) and runs sweeps; each sweep
 
-1. proposes, in random order, to flip each detection (a removal: a false estimate) and each candidate (an
-   addition: a hidden object), accepted by Metropolis (the flips are symmetric);
-2. for each present detection draws ``pose_proposals`` Gaussian pose corrections, weights them by the sensor
+1. for each present object draws ``pose_proposals`` Gaussian pose corrections, weights them by the sensor
    model (likelihood and detector term), takes the best and accepts it by eq. 4.5 with the proposal
-   probabilities of eqs. 4.6-4.7 (which leaves the prior ratio).
+   probabilities of eqs. 4.6-4.7 (which leaves the prior ratio);
+2. proposes, in random order, to flip each detection (a removal: a false estimate), each candidate (an
+   addition: a hidden object) and each candidate with its detection, accepted by Metropolis (the flips are
+   symmetric).
 
 It stops when a sweep flips nothing and the best posterior improved by less than ``converged_log``, after
-``max_sweeps`` or when ``time_budget_s`` of process time is spent, and returns the best scene seen. Node
+``max_sweeps`` or when ``time_budget_s`` of process time is spent; from the best scene seen at the end of a
+sweep, greedy flips (only gains) climb to the mode, which is returned. Node
 probabilities are the Gibbs conditionals of presence in that scene (the posterior odds of the object being
 there, all else fixed); an edge's is the product of its ends'.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import NamedTuple
@@ -49,7 +52,14 @@ from services.load_scenes.boxes import (
     validate_bay,
     yaw_to_map,
 )
-from services.load_scenes.context import ContextResult, ContextSettings, infer_context, log_prior, object_terms
+from services.load_scenes.context import (
+    ContextResult,
+    ContextSettings,
+    allowed_base,
+    infer_context,
+    log_prior,
+    object_terms,
+)
 from services.load_scenes.errors import SceneError
 from services.load_scenes.likelihood import (
     LikelihoodSettings,
@@ -88,11 +98,16 @@ class InferenceSettings(BaseModel):
     time_budget_s: float = Field(0.05, gt=0.0, description="Process time one bay may take.")
     pose_proposals: int = Field(8, ge=1, description="Gaussian pose corrections drawn per object and sweep.")
     pose_step_sigma: float = Field(1.0, gt=0.0, description="Their spread in the estimate's sigmas.")
-    pose_clip_sigma: float = Field(4.0, gt=0.0, description="How far (in sigmas) a pose may move from its estimate.")
+    pose_clip_sigma: float = Field(4.0, gt=0.0, description="How far (in sigmas) a pose may move from where the "
+                                   "chain starts.")
     detector_weight: float = Field(1.0, ge=0.0, description="Weight of the detector's Gaussian on each pose.")
     pallet_height_m: float = Field(0.144, gt=0.0)
     max_pallet_height_m: float = Field(0.25, gt=0.0)
-    min_hidden_height_m: float = Field(0.05, gt=0.0)
+    min_hidden_height_m: float = Field(0.1, gt=0.0, description="Least height of an added hidden object.")
+    pallet_footprint_m: tuple[float, float] = Field((0.8, 1.2), description="Least footprint of an added "
+                                                    "hidden pallet along the bay's front and depth (EU pallet).")
+    snap_m: float = Field(0.1, ge=0.0, description="How far a detection hovering over its base is lowered onto it "
+                          "before the chain.")
     max_objects: int = Field(40, ge=1, description="Detections per bay beyond which the scene is refused.")
     seed: int = 0
 
@@ -117,6 +132,16 @@ class _Space(NamedTuple):
     origin_centre: npt.NDArray[np.float64]
 
 
+class _Snapshot(NamedTuple):
+    boxes: Boxes
+    present: npt.NDArray[np.bool_]
+    ev: Evidence
+    table: npt.NDArray[np.float64]
+    expected: npt.NDArray[np.float64]
+    ll: npt.NDArray[np.float64]
+    prior_value: float
+
+
 class _Chain:
     """The scene's state and the posterior's terms, updated incrementally.
 
@@ -136,12 +161,13 @@ class _Chain:
         self.detected = (self.boxes.kind != SUPPORT) & ~space.added
         b = self.boxes
         obj = np.flatnonzero(b.kind != SUPPORT)
-        moving = np.flatnonzero(self.detected)
+        moving = np.flatnonzero(b.kind != SUPPORT)
         self.reach = self.s.pose_clip_sigma * np.maximum(b.sigma, 1e-3)
+        self.start = b.centre.copy()
         both = entry_distances(rays, np.concatenate([b.centre[obj], b.centre[moving]]),
                                np.concatenate([b.size[obj], b.size[moving] + 2.0 * self.reach[moving]]),
                                np.concatenate([b.yaw[obj], b.yaw[moving]]))
-        self.table = np.full((len(rays.range_m), len(b)), np.inf)
+        self.table: npt.NDArray[np.float64] = np.full((len(rays.range_m), len(b)), np.inf)
         self.table[:, obj] = both[:, :obj.size]
         self.near = [np.zeros(0, np.int64)] * len(b)
         for k, i in enumerate(moving):
@@ -152,14 +178,13 @@ class _Chain:
         self.ll = ray_log_likelihoods(rays, self.expected, settings.likelihood)
         self.prior_value = self.prior(present)
 
-    def snapshot(self) -> tuple[object, ...]:
+    def snapshot(self) -> _Snapshot:
         """The state, to return to the best scene seen without recomputing."""
-        return (self.boxes, self.present.copy(), self.ev, self.table.copy(), self.expected.copy(), self.ll.copy(),
-                self.prior_value)
+        return _Snapshot(self.boxes, self.present.copy(), self.ev, self.table.copy(), self.expected.copy(),
+                         self.ll.copy(), self.prior_value)
 
-    def restore(self, state: tuple[object, ...]) -> None:
-        (self.boxes, self.present, self.ev, self.table, self.expected, self.ll,  # type: ignore[assignment]
-         self.prior_value) = state
+    def restore(self, state: _Snapshot) -> None:
+        self.boxes, self.present, self.ev, self.table, self.expected, self.ll, self.prior_value = state
         self.prior_cache = {}
 
     def _evidence(self, boxes: Boxes) -> Evidence:
@@ -169,7 +194,8 @@ class _Chain:
 
     def _expected(self, present: npt.NDArray[np.bool_], rows: slice | npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
         t = self.table[rows][:, present]
-        return np.minimum(self.fixed_min[rows], t.min(axis=1, initial=np.inf))
+        expected: npt.NDArray[np.float64] = np.minimum(self.fixed_min[rows], t.min(axis=1, initial=np.inf))
+        return expected
 
     def prior(self, present: npt.NDArray[np.bool_], ev: Evidence | None = None, boxes: Boxes | None = None) -> float:
         if ev is not None:
@@ -189,9 +215,11 @@ class _Chain:
             return -math.inf
         return self.prior_value + self.s.likelihood.ray_weight * float(self.ll.sum()) + self.detector_term()
 
-    def flip(self, unit: npt.NDArray[np.int64], rng: np.random.Generator | None) -> float:
-        """Propose setting ``unit`` to the opposite of its first box; Metropolis-accept with ``rng`` (None: only
-        return the log posterior ratio, changing nothing). Returns the log ratio (new over old)."""
+    def flip(self, unit: npt.NDArray[np.int64], rng: np.random.Generator | None, *, greedy: bool = False) -> float:
+        """Propose setting ``unit`` to the opposite of its first box; Metropolis-accept with ``rng``, or accept only
+        a gain when ``greedy`` (rng None and not greedy: only return the ratio, changing nothing).
+
+        Returns the log posterior ratio, new over old."""
         trial = self.present.copy()
         trial[unit] = ~trial[unit[0]]
         new_prior = self.prior(trial)
@@ -207,7 +235,11 @@ class _Chain:
             ratio = math.inf
         else:
             ratio = new_prior - self.prior_value + d_lik
-        if rng is not None and ratio > -math.inf and (ratio >= 0.0 or rng.random() < math.exp(ratio)):
+        if greedy:
+            accept = ratio > 1e-9
+        else:
+            accept = rng is not None and ratio > -math.inf and (ratio >= 0.0 or rng.random() < math.exp(ratio))
+        if accept:
             self.present, self.prior_value = trial, new_prior
             self.expected[rows], self.ll[rows] = expected, ll
         return ratio
@@ -218,8 +250,8 @@ class _Chain:
         b = self.boxes
         origin = self.space.origin_centre[i]
         steps = rng.normal(0.0, 1.0, (n, 3)) * (self.s.pose_step_sigma * np.maximum(b.sigma[i], 1e-3))
-        cand = np.vstack([b.centre[i:i + 1], np.clip(b.centre[i] + steps, origin - self.reach[i],
-                                                     origin + self.reach[i])])  # row 0: e_{t,0}
+        lo, hi = self.start[i] - self.reach[i], self.start[i] + self.reach[i]
+        cand = np.vstack([b.centre[i:i + 1], np.clip(b.centre[i] + steps, lo, hi)])  # row 0: e_{t,0}
         rows = self.near[i]
         sub = self.rays._replace(origin=self.rays.origin[rows], direction=self.rays.direction[rows],
                                  range_m=self.rays.range_m[rows], background=self.rays.background[rows])
@@ -229,8 +261,9 @@ class _Chain:
         base = self._expected(others, rows)
         expected = np.minimum(base[None, :], cols.T)  # (n + 1, rows)
         weight = self.s.likelihood.ray_weight * ray_log_likelihoods(sub, expected, self.s.likelihood).sum(axis=1)
-        z = (cand - origin) / np.maximum(b.sigma[i], 1e-6)
-        weight = weight - 0.5 * self.s.detector_weight * (z ** 2).sum(axis=1)
+        if self.detected[i]:
+            z = (cand - origin) / np.maximum(b.sigma[i], 1e-6)
+            weight = weight - 0.5 * self.s.detector_weight * (z ** 2).sum(axis=1)
         best = int(np.argmax(weight[1:])) + 1
         centre = b.centre.copy()
         centre[i] = cand[best]
@@ -302,8 +335,11 @@ def infer_bay_scene(
     if len(kept) > s.max_objects:
         raise SceneError(f"bay {bay.key!r} has {len(kept)} estimates, more than max_objects={s.max_objects}")
     base = concat(supports(bay), detections)
+    estimated = base.centre.copy()
+    base = _snap_down(base, s)
     ctx = infer_context(base, s.context)
     space = _hypothesis_space(bay, base, ctx, s)
+    space = space._replace(origin_centre=np.concatenate([estimated, space.origin_centre[len(base):]]))
     rays = prepare_rays(bay, evidence, s.likelihood)
     beam_c, beam_h = beam_boxes(bay)
     fixed = entry_distances(rays, beam_c, 2.0 * beam_h, np.zeros(len(beam_c)))
@@ -323,11 +359,11 @@ def infer_bay_scene(
     while sweeps < s.max_sweeps:
         sweeps += 1
         before = chain.present.copy()
-        for unit in _flip_proposals(space, rng):
-            chain.flip(unit, rng)
-        for i in np.flatnonzero(chain.present & chain.detected):
+        for i in np.flatnonzero(chain.present & (space.boxes.kind != SUPPORT)):
             if chain.near[i].size:
                 chain.pose_move(int(i), rng)
+        for unit in _flip_proposals(space, rng):
+            chain.flip(unit, rng)
         score = chain.score()
         improved = score - best_score
         if score > best_score:
@@ -338,6 +374,10 @@ def infer_bay_scene(
             break
     if score < best_score:
         chain.restore(best)
+    for _ in range(s.max_sweeps):  # finish at the mode: flips that raise the posterior, until none does
+        if sum(chain.flip(unit, None, greedy=True) > 1e-9 for unit in _flip_proposals(space, rng)) == 0:
+            break
+    best_score = chain.score()
     stamp = max([e.stamp_ns for e in kept] + [v.stamp_ns for v in evidence], default=0)
     graph = _graph(bay, kept, chain, n_base, sweeps, stamp)
     return SceneInference(graph=graph, skipped=skipped, log_posterior=best_score)
@@ -349,6 +389,27 @@ def _flip_proposals(space: _Space, rng: np.random.Generator) -> list[npt.NDArray
     flips = list(space.units)
     flips += [np.concatenate([[c], u]) for u, c in zip(space.units, space.carriers, strict=True) if c >= 0]
     return [flips[k] for k in rng.permutation(len(flips))]
+
+
+def _snap_down(base: Boxes, s: InferenceSettings) -> Boxes:
+    """Data-driven pose correction before the chain: a detection a little above the right kind of base (at most
+    ``snap_m``, beyond the contact tolerance) is lowered onto it; the detector term still pulls it back."""
+    c = s.context
+    ev = evidence_predicates(base, k_sigma=c.k_sigma, min_tolerance_m=c.min_tolerance_m)
+    terms = object_terms(base, ev)
+    centre = base.centre.copy()
+    ok = allowed_base(base.kind)
+    lo, hi = base.centre[:, :2] - base.half[:, :2], base.centre[:, :2] + base.half[:, :2]
+    for i in np.flatnonzero(terms.needs_below):
+        under = (lo < hi[i]).all(axis=1) & (hi > lo[i]).all(axis=1) & (base.top <= base.bottom[i] + 0.01)
+        under[i] = False
+        if not under.any():
+            continue
+        j = int(np.flatnonzero(under)[np.argmax(base.top[under])])
+        gap = float(base.bottom[i] - base.top[j])
+        if ok[i, j] and 0.0 < gap <= s.snap_m:
+            centre[i, 2] -= gap
+    return dataclasses.replace(base, centre=centre)
 
 
 def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSettings) -> _Space:
@@ -380,7 +441,7 @@ def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSet
         else:
             parts = [(LOAD, floor_z, gap)]
         first = n + sum(len(b) for b in extra)
-        extra.append(_boxes_under(bay, base, int(i), parts))
+        extra.append(_boxes_under(bay, base, int(i), parts, s.pallet_footprint_m))
         units.append(np.arange(first, first + len(parts), dtype=np.int64))
         carriers.append(int(i))
     boxes = concat(base, *extra) if extra else base
@@ -389,17 +450,23 @@ def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSet
     return _Space(boxes=boxes, added=added, units=units, carriers=carriers, origin_centre=boxes.centre.copy())
 
 
-def _boxes_under(bay: Bay, base: Boxes, i: int, parts: list[tuple[int, float, float]]) -> Boxes:
-    """Boxes of ``parts`` (kind, bottom z, height) with detection i's footprint, stacked below it."""
+def _boxes_under(bay: Bay, base: Boxes, i: int, parts: list[tuple[int, float, float]],
+                 pallet_m: tuple[float, float]) -> Boxes:
+    """Boxes of ``parts`` (kind, bottom z, height) stacked below detection i: its footprint, at least a pallet's
+    for a pallet (then axis-aligned with the bay)."""
     m = len(parts)
+    kind = np.array([k for k, _, _ in parts], np.int64)
     size = np.column_stack([np.repeat(base.size[i:i + 1, :2], m, 0), [h for _, _, h in parts]])
     yaw = np.repeat(base.yaw[i], m)
     half = hull_half(size, yaw)
+    pallet = kind == PALLET
+    half[pallet, :2] = np.maximum(half[pallet, :2], 0.5 * np.array(pallet_m))
+    size[pallet, :2] = 2.0 * half[pallet, :2]
+    yaw[pallet] = 0.0
     centre = np.column_stack([np.repeat(base.centre[i:i + 1, :2], m, 0), [z + 0.5 * h for _, z, h in parts]])
     bottom = np.array([z for _, z, _ in parts])
     return Boxes(centre=centre, half=half, size=size, yaw=yaw, sigma=np.repeat(base.sigma[i:i + 1], m, 0),
-                 kind=np.array([k for k, _, _ in parts], np.int64), level=levels_of(bay, bottom),
-                 score=np.ones(m))
+                 kind=kind, level=levels_of(bay, bottom), score=np.ones(m))
 
 
 def _graph(bay: Bay, kept: list[BoxEstimate], chain: _Chain, n_base: int, sweeps: int, stamp: int) -> SceneGraph:

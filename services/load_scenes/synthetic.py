@@ -221,7 +221,8 @@ def synthetic_bay(seed: int, index: int, noise: NoiseModel | None = None, *, ove
     finite = np.isfinite(ranges)
     noisy = ranges[finite] + rng.normal(0.0, nm.range_sigma_m, int(finite.sum()))
     points = pixels.origin[finite] + pixels.direction[finite] * noisy[:, None]
-    evidence = [DepthEvidence(origin=tuple(to_map_frame(bay, cam[None])[0].tolist()),  # type: ignore[arg-type]
+    cam_map = to_map_frame(bay, cam[None])[0]
+    evidence = [DepthEvidence(origin=(float(cam_map[0]), float(cam_map[1]), float(cam_map[2])),
                               points=to_map_frame(bay, points), stamp_ns=stamp_ns)]
 
     ev = evidence_predicates(truth, k_sigma=3.0, min_tolerance_m=0.005)
@@ -231,8 +232,8 @@ def synthetic_bay(seed: int, index: int, noise: NoiseModel | None = None, *, ove
     for i in range(n_sup, len(truth)):
         detected[i] = pixel_counts[i] >= MIN_VISIBLE_PIXELS and rng.random() >= nm.miss_rate
     sigma = np.array(nm.sigma_m)
-    for i in np.flatnonzero(detected):
-        e = _estimate(bay, rng, nm, truth, int(i), f"{bay.key}/e{len(estimates)}", stamp_ns,
+    for i in np.flatnonzero(detected).tolist():
+        e = _estimate(bay, rng, nm, truth, i, f"{bay.key}/e{len(estimates)}", stamp_ns,
                       rng.uniform(0.6, 1.0), sigma)
         estimates.append(e)
         est_truth[e.id] = ids[i]
@@ -278,9 +279,12 @@ def _ghost(rng: np.random.Generator, bay: Bay, truth: Boxes, pixels: Rays,
         if kind == 2 and len(truth) > n_sup:
             j = int(rng.integers(n_sup, len(truth)))
             c = truth.centre[j] + np.array([rng.choice([-1, 1]) * rng.uniform(0.15, 0.3), 0.0, 0.0])
-            box = _box(tuple(c), tuple(truth.size[j]), int(truth.kind[j]), int(truth.level[j]))  # type: ignore[arg-type]
+            sz = truth.size[j]
+            box = _box((float(c[0]), float(c[1]), float(c[2])), (float(sz[0]), float(sz[1]), float(sz[2])),
+                       int(truth.kind[j]), int(truth.level[j]))
         elif kind == 1:
-            box = _box((rng.choice(SLOTS_U), 0.5 * SLOT_DEPTH_M, z0 + PALLET_SIZE[2] / 2), PALLET_SIZE, PALLET, level)
+            slot = float(rng.choice(SLOTS_U))
+            box = _box((slot, 0.5 * SLOT_DEPTH_M, z0 + PALLET_SIZE[2] / 2), PALLET_SIZE, PALLET, level)
         else:
             size = (rng.uniform(0.3, 0.7), rng.uniform(0.3, 0.8), rng.uniform(0.2, 0.5))
             c = (rng.uniform(-1.0, 1.0), rng.uniform(0.2, 0.6), z0 + rng.uniform(0.3, 0.8) + size[2] / 2)
