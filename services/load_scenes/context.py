@@ -10,7 +10,7 @@ makes them true). Rules, with the seed's numbering:
 * r10 (hard): stable(o1) ∧ stable(o2) ∧ rests_on(o1, o2) → supports(o2, o1).
 * r13 (hard here, 0.9 in the seed): an object that rests on nothing of the right kind is false or has a
   hidden object below: a load must rest on a pallet or a load, a pallet on its level's beam pair or the floor.
-  A pallet resting on loads only cannot be fixed by something hidden: it is false.
+  A pallet not on a beam pair or the floor cannot be fixed by something hidden: it is false.
 * r14 (hard here, 0.9 in the seed): of two intersecting objects at least one is false.
 * hidden(o) → !false(o) (hard, added): a ghost hides nothing.
 * r11 supported → !hidden (0.7), r12 !stable → !supportive (0.9), r15 supportive → !false (0.7),
@@ -65,9 +65,9 @@ class ObjectTerms(NamedTuple):
     supported: Mask
     supportive: Mask
     needs_below: Mask
-    """Rests on nothing of its kind's base (r13 as adapted)."""
+    """A load resting on no pallet or load (r13 as adapted: false, or something hidden below)."""
     must_be_false: Mask
-    """A pallet on loads only: no hidden object fixes it."""
+    """A pallet resting on no beam pair or floor: no hidden object fixes that."""
 
 
 class ContextResult(NamedTuple):
@@ -101,11 +101,10 @@ def object_terms(boxes: Boxes, ev: Evidence, present: Mask | None = None) -> Obj
     supports, _ = support_relations(ev.contact, ev.rests_on, st, keep)
     obj = boxes.kind != SUPPORT
     good = (rests & allowed_base(boxes.kind)).any(axis=1)
-    pallet_on_loads = (boxes.kind == PALLET) & rests.any(axis=1) & ~good
     supported: Mask = supports.sum(axis=0) > 0
     supportive: Mask = supports.sum(axis=1) > 0
     return ObjectTerms(stable=st, supported=supported, supportive=supportive,
-                       needs_below=obj & ~good & ~pallet_on_loads, must_be_false=pallet_on_loads)
+                       needs_below=obj & ~good & (boxes.kind == LOAD), must_be_false=~good & (boxes.kind == PALLET))
 
 
 def _unary_log_weights(boxes: Boxes, terms: ObjectTerms, s: ContextSettings) -> npt.NDArray[np.float64]:
@@ -163,8 +162,9 @@ def infer_context(boxes: Boxes, settings: ContextSettings) -> ContextResult:
             pw /= pw.sum()
             pf = pw @ worlds
             p_false[obj[idx]] = pf
-            ph_alive = np.exp(w[idx, 1] - alive[idx])
-            p_hidden[obj[idx]] = (1.0 - pf) * np.nan_to_num(ph_alive)
+            can_live = np.isfinite(alive[idx])
+            ph_alive = np.exp(w[idx, 1] - np.where(can_live, alive[idx], 0.0))
+            p_hidden[obj[idx]] = np.where(can_live, (1.0 - pf) * ph_alive, 0.0)
     supports, unstable = support_relations(ev.contact, ev.rests_on, ev.stable)
     return ContextResult(evidence=ev, p_false=p_false, p_hidden=p_hidden, supports=supports, unstable=unstable)
 

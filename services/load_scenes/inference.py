@@ -103,7 +103,8 @@ class InferenceSettings(BaseModel):
     detector_weight: float = Field(1.0, ge=0.0, description="Weight of the detector's Gaussian on each pose.")
     pallet_height_m: float = Field(0.144, gt=0.0)
     max_pallet_height_m: float = Field(0.25, gt=0.0)
-    min_hidden_height_m: float = Field(0.1, gt=0.0, description="Least height of an added hidden object.")
+    min_hidden_height_m: float = Field(0.1, gt=0.0, description="Least height of an added hidden load (a hidden "
+                                       "pallet: half of ``pallet_height_m``).")
     pallet_footprint_m: tuple[float, float] = Field((0.8, 1.2), description="Least footprint of an added "
                                                     "hidden pallet along the bay's front and depth (EU pallet).")
     snap_m: float = Field(0.1, ge=0.0, description="How far a detection hovering over its base is lowered onto it "
@@ -350,6 +351,7 @@ def infer_bay_scene(
     for unit, carrier in zip(space.units, space.carriers, strict=True):
         if carrier >= 0:
             present[unit] = ctx.p_hidden[carrier] > 0.5 and bool(present[carrier])
+    present = _feasible(space, present, s)
     chain = _Chain(space, rays, fixed_min, s, present)
     rng = np.random.default_rng(s.seed)
     start = time.process_time()
@@ -381,6 +383,28 @@ def infer_bay_scene(
     stamp = max([e.stamp_ns for e in kept] + [v.stamp_ns for v in evidence], default=0)
     graph = _graph(bay, kept, chain, n_base, sweeps, stamp)
     return SceneInference(graph=graph, skipped=skipped, log_posterior=best_score)
+
+
+def _feasible(space: _Space, present: npt.NDArray[np.bool_], s: InferenceSettings) -> npt.NDArray[np.bool_]:
+    """Leave out, until the hard rules hold, what breaks them: loads and pallets without their kind of base, the
+    weaker of two intersecting objects, added objects that carry nothing (a start the chain can move from)."""
+    c = s.context
+    b = space.boxes
+    ev = evidence_predicates(b, k_sigma=c.k_sigma, min_tolerance_m=c.min_tolerance_m,
+                             stable_margin_m=c.stable_margin_m)
+    present = present.copy()
+    obj = b.kind != SUPPORT
+    for _ in range(len(b)):
+        if log_prior(b, ev, present, space.added, c) > -math.inf:
+            break
+        terms = object_terms(b, ev, present)
+        live = present & obj
+        drop = (terms.needs_below | terms.must_be_false) & live
+        clash = ev.intersect & live[:, None] & live[None, :] & (b.score[:, None] <= b.score[None, :])
+        drop |= clash.any(axis=1)
+        drop |= space.added & present & ~(ev.rests_on & present[:, None]).any(axis=0)
+        present &= ~drop
+    return present
 
 
 def _flip_proposals(space: _Space, rng: np.random.Generator) -> list[npt.NDArray[np.int64]]:
@@ -431,7 +455,7 @@ def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSet
             continue
         j = int(np.flatnonzero(under)[np.argmax(base.top[under])])
         floor_z, gap = float(base.top[j]), float(base.bottom[i] - base.top[j])
-        if gap < s.min_hidden_height_m:
+        if gap < (0.5 * s.pallet_height_m if base.kind[j] == SUPPORT else s.min_hidden_height_m):
             continue
         if base.kind[j] == SUPPORT:
             pallet_h = gap if gap <= s.max_pallet_height_m else s.pallet_height_m

@@ -3,7 +3,8 @@
 A bin (one level of a bay) is *seen* when enough depth rays pass through its front opening. Its probability
 of holding something is that of its objects (1 - prod(1 - p) over the scene's pallets and loads at that
 level, false estimates included with their low probability) raised to ``unexplained_probability`` when
-enough depth points inside the bin meet none of the scene's boxes (an object nobody detected). Seen bins are
+enough depth points inside the bin meet none of the scene's boxes (an object nobody detected), and kept
+``view_error`` away from 0 and 1 (one view is never certain). Seen bins are
 ``occupied`` or ``empty`` when that probability (or its complement) reaches ``decide_probability``, else
 ``unknown`` (the seed's 0.4-0.6 band of no decision); bins not seen are ``unknown``.
 
@@ -42,6 +43,7 @@ class OccupancySettings(BaseModel):
     min_unexplained: int = Field(12, ge=1, description="Unexplained points in a bin that make it occupied.")
     unexplained_probability: float = Field(0.9, gt=0.5, lt=1.0)
     decide_probability: float = Field(0.6, ge=0.5, lt=1.0)
+    view_error: float = Field(0.01, gt=0.0, lt=0.5, description="How sure one view can be at most (1 - this).")
     history_weight: float = Field(0.5, ge=0.0, le=1.0, description="Scale of the older log-odds per new view.")
     max_log_odds: float = Field(9.0, gt=0.0)
 
@@ -136,6 +138,7 @@ def bin_occupancy(
         p = 1.0 - math.prod(1.0 - nd.probability for nd in nodes)
         if evidence.unexplained[level] >= s.min_unexplained:
             p = max(p, s.unexplained_probability)
+        p = min(max(p, s.view_error), 1.0 - s.view_error)
         kept = sorted((nd for nd in nodes if Flag.FALSE_ESTIMATE not in nd.flags),
                       key=lambda nd: (nd.kind != ObjectKind.PALLET, nd.centre[2]))
         seen = bool(evidence.rays[level] >= s.min_rays)
