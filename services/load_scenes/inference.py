@@ -93,10 +93,10 @@ class InferenceSettings(BaseModel):
     context: ContextSettings = Field(default_factory=ContextSettings)
     likelihood: LikelihoodSettings = Field(default_factory=LikelihoodSettings)
     max_sweeps: int = Field(6, ge=1)
-    min_sweeps: int = Field(2, ge=1)
+    min_sweeps: int = Field(1, ge=1)
     converged_log: float = Field(0.05, ge=0.0)
     time_budget_s: float = Field(0.05, gt=0.0, description="Process time one bay may take.")
-    pose_proposals: int = Field(8, ge=1, description="Gaussian pose corrections drawn per object and sweep.")
+    pose_proposals: int = Field(6, ge=1, description="Gaussian pose corrections drawn per object and sweep.")
     pose_step_sigma: float = Field(1.0, gt=0.0, description="Their spread in the estimate's sigmas.")
     pose_clip_sigma: float = Field(4.0, gt=0.0, description="How far (in sigmas) a pose may move from where the "
                                    "chain starts.")

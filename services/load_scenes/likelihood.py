@@ -36,7 +36,7 @@ class LikelihoodSettings(BaseModel):
     max_range_m: float = Field(12.0, gt=0.0)
     ray_weight: float = Field(0.25, gt=0.0, le=1.0, description="Per-ray log-likelihood scale (rays are "
                               "correlated: neighbouring pixels see the same face).")
-    max_rays: int = Field(1000, ge=1)
+    max_rays: int = Field(800, ge=1)
     background_margin_m: float = Field(0.05, ge=0.0, description="Points this close to the bay's back, sides or "
                                        "floor are background, not load.")
     seed: int = 0
