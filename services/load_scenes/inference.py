@@ -437,19 +437,17 @@ def _snap_down(base: Boxes, s: InferenceSettings) -> Boxes:
 
 
 def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSettings) -> _Space:
-    """Add candidate hidden objects under detections that rest on nothing of their kind's base."""
+    """Add candidate hidden objects under loads that rest on no pallet or load."""
     terms = object_terms(base, ctx.evidence)
     n = len(base)
     units = [np.array([i], np.int64) for i in range(n) if base.kind[i] != SUPPORT]
     carriers = [-1] * len(units)
     extra: list[Boxes] = []
-    tol = s.context.min_tolerance_m
-    for i in np.flatnonzero(terms.needs_below | (ctx.p_hidden > 0.05)):
-        if base.kind[i] != LOAD:
-            continue  # a pallet over nothing is false: no hidden object makes it rest on a beam
-        lo_i, hi_i = base.centre[i, :2] - base.half[i, :2], base.centre[i, :2] + base.half[i, :2]
-        lo, hi = base.centre[:, :2] - base.half[:, :2], base.centre[:, :2] + base.half[:, :2]
-        under = (lo < hi_i).all(axis=1) & (hi > lo_i).all(axis=1) & (base.top <= base.bottom[i] + tol)
+    c = s.context
+    lo, hi = base.centre[:, :2] - base.half[:, :2], base.centre[:, :2] + base.half[:, :2]
+    for i in np.flatnonzero(terms.needs_below):
+        tol = np.maximum(c.k_sigma * np.hypot(base.sigma[i, 2], base.sigma[:, 2]), c.min_tolerance_m)
+        under = (lo < hi[i]).all(axis=1) & (hi > lo[i]).all(axis=1) & (base.top <= base.bottom[i] + tol)
         under[i] = False
         if not under.any():
             continue
@@ -462,10 +460,12 @@ def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSet
             parts = [(PALLET, floor_z, pallet_h)]
             if gap > s.max_pallet_height_m:
                 parts.append((LOAD, floor_z + pallet_h, gap - pallet_h))
+            footprint = int(i)
         else:
             parts = [(LOAD, floor_z, gap)]
+            footprint = j  # a carton missed inside a stack has the stack's footprint
         first = n + sum(len(b) for b in extra)
-        extra.append(_boxes_under(bay, base, int(i), parts, s.pallet_footprint_m))
+        extra.append(_boxes_under(bay, base, footprint, parts, s.pallet_footprint_m))
         units.append(np.arange(first, first + len(parts), dtype=np.int64))
         carriers.append(int(i))
     boxes = concat(base, *extra) if extra else base
@@ -476,8 +476,8 @@ def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSet
 
 def _boxes_under(bay: Bay, base: Boxes, i: int, parts: list[tuple[int, float, float]],
                  pallet_m: tuple[float, float]) -> Boxes:
-    """Boxes of ``parts`` (kind, bottom z, height) stacked below detection i: its footprint, at least a pallet's
-    for a pallet (then axis-aligned with the bay)."""
+    """Boxes of ``parts`` (kind, bottom z, height) with box i's footprint (the carrier's over a support, the base's
+    inside a stack), at least a pallet's for a pallet (then axis-aligned with the bay)."""
     m = len(parts)
     kind = np.array([k for k, _, _ in parts], np.int64)
     size = np.column_stack([np.repeat(base.size[i:i + 1, :2], m, 0), [h for _, _, h in parts]])
