@@ -400,7 +400,10 @@ def _feasible(space: _Space, present: npt.NDArray[np.bool_], s: InferenceSetting
         terms = object_terms(b, ev, present)
         live = present & obj
         drop = (terms.needs_below | terms.must_be_false) & live
-        clash = ev.intersect & live[:, None] & live[None, :] & (b.score[:, None] <= b.score[None, :])
+        order = np.lexsort((np.arange(len(b)), b.score))  # weaker first; ties: the earlier box
+        rank = np.empty(len(b), np.int64)
+        rank[order] = np.arange(len(b))
+        clash = ev.intersect & live[:, None] & live[None, :] & (rank[:, None] < rank[None, :])
         drop |= clash.any(axis=1)
         drop |= space.added & present & ~(ev.rests_on & present[:, None]).any(axis=0)
         present &= ~drop
@@ -416,7 +419,7 @@ def _flip_proposals(space: _Space, rng: np.random.Generator) -> list[npt.NDArray
 
 
 def _snap_down(base: Boxes, s: InferenceSettings) -> Boxes:
-    """Data-driven pose correction before the chain: a detection a little above the right kind of base (at most
+    """Data-driven pose correction before the chain: a load or pallet a little above the right kind of base (at most
     ``snap_m``, beyond the contact tolerance) is lowered onto it; the detector term still pulls it back."""
     c = s.context
     ev = evidence_predicates(base, k_sigma=c.k_sigma, min_tolerance_m=c.min_tolerance_m)
@@ -424,7 +427,7 @@ def _snap_down(base: Boxes, s: InferenceSettings) -> Boxes:
     centre = base.centre.copy()
     ok = allowed_base(base.kind)
     lo, hi = base.centre[:, :2] - base.half[:, :2], base.centre[:, :2] + base.half[:, :2]
-    for i in np.flatnonzero(terms.needs_below):
+    for i in np.flatnonzero(terms.needs_below | terms.must_be_false):
         under = (lo < hi[i]).all(axis=1) & (hi > lo[i]).all(axis=1) & (base.top <= base.bottom[i] + 0.01)
         under[i] = False
         if not under.any():
