@@ -466,7 +466,9 @@ def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSet
             footprint = int(i)
         else:
             parts = [(LOAD, floor_z, gap)]
-            footprint = j  # a carton missed inside a stack has the stack's footprint
+            # goods on a pallet are smaller than it: the carrier's footprint; a carton missed inside a stack has
+            # the stack's (the one below), also under an overhanging carton
+            footprint = j if base.kind[j] == LOAD else int(i)
         first = n + sum(len(b) for b in extra)
         extra.append(_boxes_under(bay, base, footprint, parts, s.pallet_footprint_m))
         units.append(np.arange(first, first + len(parts), dtype=np.int64))
@@ -479,8 +481,8 @@ def _hypothesis_space(bay: Bay, base: Boxes, ctx: ContextResult, s: InferenceSet
 
 def _boxes_under(bay: Bay, base: Boxes, i: int, parts: list[tuple[int, float, float]],
                  pallet_m: tuple[float, float]) -> Boxes:
-    """Boxes of ``parts`` (kind, bottom z, height) with box i's footprint (the carrier's over a support, the base's
-    inside a stack), at least a pallet's for a pallet (then axis-aligned with the bay)."""
+    """Boxes of ``parts`` (kind, bottom z, height) with box i's footprint (the carrier's over a support or a pallet,
+    the base's inside a stack), at least a pallet's for a pallet (then axis-aligned with the bay)."""
     m = len(parts)
     kind = np.array([k for k, _, _ in parts], np.int64)
     size = np.column_stack([np.repeat(base.size[i:i + 1, :2], m, 0), [h for _, _, h in parts]])
