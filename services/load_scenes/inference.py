@@ -97,6 +97,7 @@ class InferenceSettings(BaseModel):
     converged_log: float = Field(0.05, ge=0.0)
     time_budget_s: float = Field(0.05, gt=0.0, description="Process time one bay may take.")
     pose_proposals: int = Field(6, ge=1, description="Gaussian pose corrections drawn per object and sweep.")
+    pose_sweeps: int = Field(1, ge=0, description="Sweeps that move poses (later ones only flip).")
     pose_step_sigma: float = Field(1.0, gt=0.0, description="Their spread in the estimate's sigmas.")
     pose_clip_sigma: float = Field(4.0, gt=0.0, description="How far (in sigmas) a pose may move from where the "
                                    "chain starts.")
@@ -361,7 +362,7 @@ def infer_bay_scene(
     while sweeps < s.max_sweeps:
         sweeps += 1
         before = chain.present.copy()
-        for i in np.flatnonzero(chain.present & (space.boxes.kind != SUPPORT)):
+        for i in np.flatnonzero(chain.present & (space.boxes.kind != SUPPORT)) if sweeps <= s.pose_sweeps else ():
             if chain.near[i].size:
                 chain.pose_move(int(i), rng)
         for unit in _flip_proposals(space, rng):
