@@ -10,9 +10,9 @@ depth likelihood (:mod:`likelihood`) times the detector's Gaussian on each detec
 The chain starts where the exact context marginals point (detections with p(false) < 0.5, candidates with
 p(hidden) > 0.5) and runs sweeps; each sweep
 
-1. for each present object draws ``pose_proposals`` Gaussian pose corrections, weights them by the sensor
-   model (likelihood and detector term), takes the best and accepts it by eq. 4.5 with the proposal
-   probabilities of eqs. 4.6-4.7 (which leaves the prior ratio);
+1. (in the first ``pose_sweeps`` sweeps) for each present object draws ``pose_proposals`` Gaussian pose
+   corrections, weights them by the sensor model (likelihood and detector term), takes the best and accepts
+   it by eq. 4.5 with the proposal probabilities of eqs. 4.6-4.7 (which leaves the prior ratio);
 2. proposes, in random order, to flip each detection (a removal: a false estimate), each candidate (an
    addition: a hidden object) and each candidate with its detection, accepted by Metropolis (the flips are
    symmetric).
