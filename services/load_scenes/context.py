@@ -155,10 +155,7 @@ def infer_context(boxes: Boxes, settings: ContextSettings) -> ContextResult:
             sub = inter[np.ix_(idx, idx)]
             both_kept = ~worlds[:, :, None] & ~worlds[:, None, :] & sub[None]
             logw[both_kept.any(axis=(1, 2))] = -np.inf
-            top = logw.max()
-            if not np.isfinite(top):
-                raise SceneError("the context rules admit no world for these boxes")
-            pw = np.exp(logw - top)
+            pw = np.exp(logw - logw.max())  # the world with every atom false is always admitted
             pw /= pw.sum()
             pf = pw @ worlds
             p_false[obj[idx]] = pf

@@ -328,8 +328,8 @@ def infer_bay_scene(
     Raises
     ------
     SceneError
-        When the bay has no usable rack model (no levels, levels out of order), a depth view is malformed or
-        more than ``max_objects`` estimates remain.
+        When the bay has no usable rack model (no levels, levels out of order), a depth view is malformed,
+        more than ``max_objects`` estimates remain or more than 16 of them intersect one another.
     """
     s = settings or InferenceSettings()
     validate_bay(bay)

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from services.load_scenes import SceneError, infer_bay_scene
+from services.load_scenes import InferenceSettings, SceneError, infer_bay_scene
 from services.load_scenes import synthetic as syn
 from services.load_scenes.model import BoxEstimate, DepthEvidence
 
@@ -60,3 +60,14 @@ def test_a_bay_with_no_estimates_has_only_its_supports() -> None:
     sb = syn.synthetic_bay(4, 0)
     graph = infer_bay_scene(sb.bay, [], sb.evidence).graph
     assert len(graph.nodes) == len(sb.bay.levels_z_m) and graph.edges == ()
+
+
+def test_too_many_estimates_or_a_heap_of_duplicates_is_an_error() -> None:
+    sb = syn.synthetic_bay(4, 0)
+    with pytest.raises(SceneError, match="max_objects"):
+        infer_bay_scene(sb.bay, sb.estimates, sb.evidence, InferenceSettings(max_objects=1))
+    e = sb.estimates[0]
+    heap = [dataclasses.replace(e, id=f"dup{k}", centre=(e.centre[0] + 0.01 * k, e.centre[1], e.centre[2]))
+            for k in range(17)]
+    with pytest.raises(SceneError, match="intersect"):
+        infer_bay_scene(sb.bay, heap, sb.evidence)
