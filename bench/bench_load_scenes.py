@@ -16,7 +16,8 @@ Figures per set:
 - process time per bay scene graph (one thread), median and 95th percentile, for bays with <= 12 detections
   and for all.
 
-Run: ``PYTHONPATH=. .venv/bin/python bench/bench_load_scenes.py [--bays 60] [--settings JSON] [--tune-only]``
+Run: ``PYTHONPATH=. .venv/bin/python bench/bench_load_scenes.py [--bays 60] [--settings JSON] [--tune-only]
+[--png docs/load_scenes_bay.png]``
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from threadpoolctl import threadpool_limits
 
 from services.load_scenes import InferenceSettings, bin_evidence, bin_occupancy, infer_bay_scene
 from services.load_scenes import synthetic as syn
-from services.load_scenes.boxes import SUPPORT, Boxes, boxes_from_nodes
+from services.load_scenes.boxes import SUPPORT, Boxes, boxes_from_nodes, to_bay_frame
 from services.load_scenes.model import Flag, ObjectKind, Occupancy, Relation, SceneGraph
 
 HELD_OUT_NOISE = syn.NoiseModel(sigma_m=(0.03, 0.03, 0.02), miss_rate=0.05, ghosts_per_bay=0.45, range_sigma_m=0.015)
@@ -184,13 +185,66 @@ def run_set(name: str, seeds: list[int], bays: int, noise: syn.NoiseModel | None
     print(f"{name}_skipped_estimates {c['skipped']} estimates")
 
 
+def render_bay(path: str, seed: int = 0, index: int = 47, scale_px_per_m: float = 120.0) -> None:
+    """Front view (u across, z up) of one synthetic bay's scene graph: truth outlined grey, kept detections
+    blue, false estimates red, hidden objects cyan, supports black; ``supports`` edges green lines between
+    centres, ``unstable_contact`` orange; depth points as grey dots."""
+    from PIL import Image, ImageDraw
+
+    sb = syn.synthetic_bay(seed, index)
+    graph = infer_bay_scene(sb.bay, sb.estimates, sb.evidence).graph
+    nodes = list(graph.nodes)
+    boxes = boxes_from_nodes(sb.bay, nodes)
+    width, top = sb.bay.width_m + 0.6, float(sb.bay.levels_z_m[-1]) + 1.8
+    img = Image.new("RGB", (int(width * scale_px_per_m), int((top + 0.3) * scale_px_per_m)), "white")
+    draw = ImageDraw.Draw(img)
+
+    def px(u: float, z: float) -> tuple[float, float]:
+        return (u + width / 2) * scale_px_per_m, (top - z) * scale_px_per_m
+
+    for p in to_bay_frame(sb.bay, sb.evidence[0].points)[::3]:
+        if abs(p[0]) < width / 2 and p[2] < top:
+            x, y = px(p[0], p[2])
+            draw.ellipse([x - 1, y - 1, x + 1, y + 1], fill=(170, 170, 170))
+    t = sb.truth
+    for i in range(len(t)):
+        if t.kind[i] != SUPPORT:
+            draw.rectangle([px(t.centre[i, 0] - t.half[i, 0], t.top[i]), px(t.centre[i, 0] + t.half[i, 0],
+                                                                             t.bottom[i])], outline=(150, 150, 150))
+    centre = {}
+    for k, nd in enumerate(nodes):
+        a, b = px(boxes.centre[k, 0] - boxes.half[k, 0], boxes.top[k]), px(boxes.centre[k, 0] + boxes.half[k, 0],
+                                                                           boxes.bottom[k])
+        if nd.kind == ObjectKind.BEAM:
+            draw.rectangle([px(-sb.bay.width_m / 2, boxes.top[k]), px(sb.bay.width_m / 2, boxes.top[k] - 0.04)],
+                           fill="black")
+            centre[nd.id] = px(0.0, boxes.top[k])
+            continue
+        colour = ((220, 40, 40) if Flag.FALSE_ESTIMATE in nd.flags else (0, 170, 190) if Flag.HIDDEN_BELOW in nd.flags
+                  else (40, 90, 200))
+        draw.rectangle([a, b], outline=colour, width=3)
+        centre[nd.id] = px(boxes.centre[k, 0], boxes.centre[k, 2])
+    for e in graph.edges:
+        if e.source in centre and e.target in centre:
+            src = centre[e.source]
+            if e.source.endswith("floor") or "/beams" in e.source:
+                src = (centre[e.target][0], src[1])
+            draw.line([src, centre[e.target]], fill=(30, 160, 60) if e.relation == Relation.SUPPORTS
+                      else (240, 140, 0), width=3)
+    img.save(path)
+    print(f"png {path}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--bays", type=int, default=60, help="bays per seed")
     parser.add_argument("--settings", default="{}", help="InferenceSettings as JSON (defaults: the tuned ones)")
     parser.add_argument("--tune-only", action="store_true", help="skip the held-out seeds")
+    parser.add_argument("--png", help="also draw one bay's scene graph (front view) to this file")
     args = parser.parse_args()
     settings = InferenceSettings.model_validate_json(args.settings)
+    if args.png:
+        render_bay(args.png)
     with threadpool_limits(1):
         wall = time.perf_counter()
         run_set("tune", [0, 1, 2], args.bays, None, settings)
