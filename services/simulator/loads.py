@@ -11,10 +11,11 @@ pallets with one load each::
 Every bin has ``2 x deep`` pallet positions (two across the bay, ``deep`` one behind the other); an occupied bin
 gets a pallet on at least one of them. A pallet carries nothing (``bare``), one carton, two cartons side by side
 (``pair``), or a stack of two (``stacked``: the upper one smaller and set back, so its front face stands apart
-in depth). A few single cartons overhang their pallet towards the aisle (``overhang``) or lean: twisted and
-pushed so their centre is past the pallet's front edge (``leaning``; boxes cannot tilt in the simulator, so
-"leaning" is a load that would tip). Every object is a box of :attr:`World.boxes`; :class:`LoadTruth` records
-what it is, which bin it is in and what holds it up. Bins of blocks without ``loads`` come out exactly as before.
+in depth). A few single cartons in front positions overhang their pallet towards the aisle (``overhang``) or
+lean: twisted and pushed so their centre is past the pallet's front edge (``leaning``; boxes cannot tilt in the
+simulator, so "leaning" is a load that would tip). Every object is a box of :attr:`World.boxes`;
+:class:`LoadTruth` records what it is, which bin it is in and what holds it up. Bins of blocks without
+``loads`` come out exactly as before.
 """
 
 from __future__ import annotations
@@ -182,7 +183,7 @@ def _loads(pallet_id: str, bin_id: str, where: BinFrame, uv: tuple[float, float]
     height = float(rng.uniform(0.45, 0.95)) * room
     size = (length - 0.04, depth - 0.04)
     shift_v, yaw, stable, overhang = 0.0, 0.0, True, False
-    odd = float(rng.random())
+    odd = float(rng.random()) if deep_slot == 0 else 1.0  # a back position's load cannot reach into the front one
     if odd < options.leaning:
         yaw = float(rng.uniform(0.1, 0.2)) * (1 if rng.random() < 0.5 else -1)
         size = (0.6 * length, 0.5 * depth)
@@ -255,7 +256,8 @@ def bin_records(world: World) -> list[Bin]:
         centre = b.polygon.mean(axis=0)
         front = np.argsort(-((b.polygon - centre) @ out_dir))[:2]  # the two corners nearest the aisle
         left, right = b.polygon[front]
-        if float(np.cross(right - left, out_dir)) > 0:  # seen from the aisle (looking along -out_dir), left first
+        along = right - left
+        if float(along[0] * out_dir[1] - along[1] * out_dir[0]) > 0:  # left first, seen from the aisle
             left, right = right, left
         back_right = right - 2 * float((right - centre) @ out_dir) * out_dir
         back_left = left - 2 * float((left - centre) @ out_dir) * out_dir
