@@ -304,9 +304,9 @@ def _bay_boxes(bay: Bay, pts: _BayPoints, grid: _Grid, stamp_ns: int) -> list[Bo
             continue
         level_pts = pts.take(slab)
         for objects in _components(level_pts, -half, z0, grid, whole=False):
-            band = objects.z < z0 + grid.pallet_height_m + 0.01
+            band = objects.z < z0 + grid.pallet_height_m
             pallet = objects.take(band)
-            rest = objects.take(objects.z > z0 + grid.pallet_height_m + 0.02)
+            rest = objects.take(~band)
             if len(pallet.u) >= grid.min_cells and not pallet.border.any() and np.ptp(pallet.u) >= (
                     0.85 * grid.pallet_width_m if _hidden(pallet) else 0.3):
                 out.append(_box(bay, level, ObjectKind.PALLET, pallet, pallet_depth, 0.02, stamp_ns, len(out),
@@ -350,11 +350,26 @@ def _components(pts: _BayPoints, u0: float, z0: float, grid: _Grid, *, whole: bo
         with np.errstate(invalid="ignore"):
             edge |= mean_v - np.roll(mean_v, (dr, dc), axis=(0, 1)) > grid.edge_m
     n, labels = cv2.connectedComponents((filled & ~edge).astype(np.uint8), connectivity=4)
-    point_label = labels.ravel()[flat]
+    point_label = _regrow(labels.ravel()[flat], flat, pts.v, labels, mean_v, grid.edge_m)
     sizes = np.bincount(labels.ravel(), minlength=n)
     cut = np.bincount(point_label, weights=pts.border, minlength=n) > 0
     parts = [pts.take(point_label == k) for k in range(1, n) if sizes[k] >= grid.min_cells and not (whole and cut[k])]
     return [part for part in parts if np.ptp(part.u) >= grid.min_width_m and not (whole and _hidden(part))]
+
+
+def _regrow(point_label: npt.NDArray[np.int32], flat: npt.NDArray[np.int64], v: FloatArray,
+            labels: npt.NDArray[np.int32], mean_v: FloatArray, edge_m: float) -> npt.NDArray[np.int32]:
+    """Give the points of cells cut at a depth jump (an object's outermost cells, mixed with what lies behind) to
+    the neighbouring component whose depth they share, so the object keeps its full extent."""
+    out = point_label.copy()
+    lost = np.nonzero(out == 0)[0]
+    width = labels.shape[1]
+    flat_labels, flat_v = labels.ravel(), mean_v.ravel()
+    for step in (1, -1, width, -width):
+        neighbour = flat[lost] + step
+        take = (out[lost] == 0) & (flat_labels[neighbour] > 0) & (np.abs(v[lost] - flat_v[neighbour]) <= edge_m)
+        out[lost[take]] = flat_labels[neighbour[take]]
+    return out
 
 
 def _hidden(pts: _BayPoints) -> bool:
@@ -378,11 +393,18 @@ def _wrap(angle: float) -> float:
     return math.atan2(math.sin(angle), math.cos(angle))
 
 
+def _extent(values: FloatArray) -> tuple[float, float]:
+    """Ends of the interval the values fill evenly, from their 1st and 99th percentiles (robust to stray points)."""
+    lo, hi = np.percentile(values, [1, 99])
+    pad = (hi - lo) / 98.0
+    return float(lo - pad), float(hi + pad)
+
+
 def _box(bay: Bay, level: int, kind: ObjectKind, pts: _BayPoints, depth_m: float, depth_sigma_m: float,
          stamp_ns: int, serial: int, *, bottom: float | None = None) -> BoxEstimate:
-    """A box whose front face the points are: extent across and up from robust quantiles, depth assumed."""
-    u_lo, u_hi = np.percentile(pts.u, [1, 99])
-    z_lo, z_hi = np.percentile(pts.z, [1, 99])
+    """A box whose front face the points are: extent across and up from the points, depth assumed."""
+    u_lo, u_hi = _extent(pts.u)
+    z_lo, z_hi = _extent(pts.z)
     if bottom is not None:
         z_lo = bottom
     front = float(np.percentile(pts.v, 10))
