@@ -349,7 +349,8 @@ def _components(pts: _BayPoints, u0: float, z0: float, grid: _Grid, *, whole: bo
     for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0)):
         with np.errstate(invalid="ignore"):
             edge |= mean_v - np.roll(mean_v, (dr, dc), axis=(0, 1)) > grid.edge_m
-    n, labels = cv2.connectedComponents((filled & ~edge).astype(np.uint8), connectivity=4)
+    n, found = cv2.connectedComponents((filled & ~edge).astype(np.uint8), connectivity=4)
+    labels = np.asarray(found, dtype=np.int64)
     point_label = _regrow(labels.ravel()[flat], flat, pts.v, labels, mean_v, grid.edge_m)
     sizes = np.bincount(labels.ravel(), minlength=n)
     cut = np.bincount(point_label, weights=pts.border, minlength=n) > 0
@@ -357,8 +358,8 @@ def _components(pts: _BayPoints, u0: float, z0: float, grid: _Grid, *, whole: bo
     return [part for part in parts if np.ptp(part.u) >= grid.min_width_m and not (whole and _hidden(part))]
 
 
-def _regrow(point_label: npt.NDArray[np.int32], flat: npt.NDArray[np.int64], v: FloatArray,
-            labels: npt.NDArray[np.int32], mean_v: FloatArray, edge_m: float) -> npt.NDArray[np.int32]:
+def _regrow(point_label: npt.NDArray[np.int64], flat: npt.NDArray[np.int64], v: FloatArray,
+            labels: npt.NDArray[np.int64], mean_v: FloatArray, edge_m: float) -> npt.NDArray[np.int64]:
     """Give the points of cells cut at a depth jump (an object's outermost cells, mixed with what lies behind) to
     the neighbouring component whose depth they share, so the object keeps its full extent."""
     out = point_label.copy()
