@@ -37,6 +37,8 @@ FRONT_REACH_M = 0.6
 """How far in front of a bay's opening (into the aisle) its objects may reach (overhanging loads)."""
 TOP_HEIGHT_M = 2.0
 """Height above the top level that still belongs to the bay (its loads)."""
+_SEAM_M = 0.015
+"""Height above a pallet's top left out of the loads standing on it (points of both meet there)."""
 _OCCLUDER_M = 0.3
 """A surface this much nearer beside or below an object hides part of it (an object in a position in front)."""
 
@@ -304,9 +306,12 @@ def _bay_boxes(bay: Bay, pts: _BayPoints, grid: _Grid, stamp_ns: int) -> list[Bo
             continue
         level_pts = pts.take(slab)
         for objects in _components(level_pts, -half, z0, grid, whole=False):
-            band = objects.z < z0 + grid.pallet_height_m
+            top = z0 + grid.pallet_height_m
+            band = objects.z < top
             pallet = objects.take(band)
-            rest = objects.take(~band)
+            # a row of cells above the pallet's top holds points of both (depth noise): loads start above it, and
+            # one reaching down to it stands on the pallet's top
+            rest = objects.take(objects.z >= top + _SEAM_M)
             if len(pallet.u) >= grid.min_cells and not pallet.border.any() and np.ptp(pallet.u) >= (
                     0.85 * grid.pallet_width_m if _hidden(pallet) else 0.3):
                 out.append(_box(bay, level, ObjectKind.PALLET, pallet, pallet_depth, 0.02, stamp_ns, len(out),
@@ -315,8 +320,9 @@ def _bay_boxes(bay: Bay, pts: _BayPoints, grid: _Grid, stamp_ns: int) -> list[Bo
             for load in parts:
                 front = float(np.percentile(load.v, 10))
                 centred = 2.0 * (_slot_centre(front, bay) - front)  # centred on its pallet position
+                on_pallet = len(pallet.u) > 0 and float(np.min(load.z)) < top + _SEAM_M + 0.01
                 out.append(_box(bay, level, ObjectKind.LOAD, load, min(max(centred, 0.2), pallet_depth), 0.1,
-                                stamp_ns, len(out)))
+                                stamp_ns, len(out), bottom=top if on_pallet else None))
     return out
 
 
