@@ -38,6 +38,7 @@ from shared.store.records import (
     TopologyEdge,
     TopologyNode,
     WmsBin,
+    WmsStock,
     WorkerInfo,
     bounds,
 )
@@ -366,7 +367,7 @@ class MapStore:
                                                             table.c.confidence).where(live))}
         kept: set[str] = set()
         rows = []
-        moved = 0
+        moved = changed = 0
         for item in items:
             geometry, properties = json.dumps(dict(item.geometry)), json.dumps(dict(item.properties))
             stored = previous.get(item.key)
@@ -375,6 +376,7 @@ class MapStore:
                 kept.add(item.key)
                 continue
             moved += stored is not None and not _same_json(stored[1], geometry)
+            changed += stored is not None and _same_json(stored[1], geometry)
             min_x, min_y, max_x, max_y = bounds(item.geometry)
             rows.append({
                 "map_id": map_id, "revision_id": revision_id, "stage": stage, "kind": kind, "key": item.key,
@@ -389,7 +391,7 @@ class MapStore:
             connection.execute(table.insert(), rows)
         keys = {item.key for item in items}
         return {"added": len(keys - previous.keys()), "removed": len(previous.keys() - keys), "moved": moved,
-                "total": len(keys)}
+                "changed": changed, "total": len(keys)}
 
     @staticmethod
     def _replace_topology(connection: Connection, map_id: int, revision_id: int, stage: str,
@@ -583,6 +585,43 @@ class MapStore:
         with self._read() as connection:
             return [WmsBin(r.wms_id, r.x_m, r.y_m, r.aisle, r.bay, r.level, r.properties)
                     for r in connection.execute(query)]
+
+    # -- the WMS's stock list -------------------------------------------------------------
+    def replace_wms_stock(self, map_id: int, items: Sequence[WmsStock], *, stage: str = "wms_stock",
+                          summary: Mapping[str, Any] | None = None) -> Revision:
+        """Store ``items`` as the WMS's complete stock list, one new revision; the previous list is retired.
+
+        ``summary`` is added to the revision's summary (e.g. whether bins the list leaves out are empty).
+        """
+        ids = [item.bin_id for item in items]
+        if len(set(ids)) != len(ids):
+            duplicates = sorted({i for i in ids if ids.count(i) > 1})[:10]
+            raise StoreError(f"WMS stock bin ids must be unique; repeated: {duplicates}")
+        table = schema.wms_stock
+        with self._begin() as connection:
+            self._lock_map(connection, map_id)
+            created_at = _now()
+            summary = {**(summary or {}), "layers_updated": [], "features": {}, "topology_changed": False,
+                       "wms_stock": {"total": len(items), "holds_stock": sum(item.holds_stock for item in items)}}
+            revision_id = connection.execute(
+                schema.revisions.insert().values(map_id=map_id, stage=stage, created_at=created_at, summary=summary)
+                .returning(schema.revisions.c.id)
+            ).scalar_one()
+            connection.execute(table.update().where(table.c.map_id == map_id, table.c.retired_revision_id.is_(None))
+                               .values(retired_revision_id=revision_id))
+            for start in range(0, len(items), _WMS_BATCH):
+                connection.execute(table.insert(), [
+                    {"map_id": map_id, "revision_id": revision_id, "bin_id": item.bin_id,
+                     "holds_stock": item.holds_stock, "sku": item.sku, "quantity": item.quantity}
+                    for item in items[start:start + _WMS_BATCH]])
+        return Revision(revision_id, map_id, stage, created_at, None, None, summary)
+
+    def wms_stock(self, map_id: int, *, revision: int | None = None) -> list[WmsStock]:
+        """The WMS stock list live at ``revision`` (default: now), in import order."""
+        table = schema.wms_stock
+        query = sa.select(table).where(table.c.map_id == map_id, _live_at(table, revision)).order_by(table.c.id)
+        with self._read() as connection:
+            return [WmsStock(r.bin_id, bool(r.holds_stock), r.sku, r.quantity) for r in connection.execute(query)]
 
     # -- workers --------------------------------------------------------------------------
     def heartbeat(self, name: str, counters: dict[str, int], *, started_at: dt.datetime) -> None:
