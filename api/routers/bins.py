@@ -187,7 +187,7 @@ def get_bin_scene(
     cache: CacheDep,
     revision: RevisionQuery,
     bin_id: Annotated[str, Path(description="The bin's WMS id (when a WMS bin list was imported) or Aisle's id: "
-                                            f"{ID_FORMAT}.", pattern=BIN_ID_PATTERN, examples=["03-014-02"])],
+                                            f"{ID_FORMAT}.", pattern=BIN_ID_PATTERN, examples=["03-014"])],
 ) -> BinSceneOut:
     """What stands in the rack bay of bin ``bin_id`` (as of ``?revision=``): the objects (beams, pallets, loads,
     each with its 3D box in the map frame), which supports which and which touch unstably, detections the

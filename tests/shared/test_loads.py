@@ -1,0 +1,74 @@
+"""Bin states and bay scenes as map features, and the writer the load-scene stage stores them with."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from shared.loads import (
+    LOADS_STAGE,
+    Flag,
+    LoadRecordError,
+    Occupancy,
+    Relation,
+    SceneEdge,
+    occupancy_feature,
+    occupancy_from_feature,
+    scene_feature,
+    scene_from_feature,
+    write_scene_revision,
+)
+from shared.store import MapStore
+from tests.loads_data import BAY_1, bay_1_scene, bay_2_scene, first_survey, seen, write_bins
+
+
+def test_records_read_back_as_written() -> None:
+    for record in first_survey():
+        assert occupancy_from_feature(occupancy_feature(record, at=(1.0, 2.0))) == record
+    scene = bay_1_scene()
+    assert scene_from_feature(scene_feature(scene, at=(1.0, 1.0))) == scene
+
+
+def test_records_that_cannot_be_stored_are_refused_with_the_reason() -> None:
+    record = first_survey()[0]
+    with pytest.raises(LoadRecordError, match="confidence must be a probability"):
+        occupancy_feature(dataclasses.replace(record, confidence=float("nan")), at=(0.0, 0.0))
+    with pytest.raises(LoadRecordError, match="finite"):
+        occupancy_feature(record, at=(float("inf"), 0.0))
+    ghost = SceneEdge("p1", "nobody", Relation.SUPPORTS)
+    with pytest.raises(LoadRecordError, match="names a node it lacks"):
+        scene_feature(dataclasses.replace(bay_1_scene(), edges=(ghost,)), at=(0.0, 0.0))
+    flat = dataclasses.replace(bay_1_scene().nodes[0], size=(1.2, 0.8, 0.0))
+    with pytest.raises(LoadRecordError, match="size must be positive"):
+        scene_feature(dataclasses.replace(bay_1_scene(), nodes=(flat,)), at=(0.0, 0.0))
+
+
+def test_writer_stores_what_changed_keeps_the_rest_and_skips_bad_records(store: MapStore) -> None:
+    write_bins(store)
+    map_id = store.ensure_map("site").id
+    first = write_scene_revision(store, map_id, [bay_1_scene(), bay_2_scene()], first_survey())
+    assert first.revision is not None and not first.skipped
+    assert set(first.bins_changed) == {"01-001-01", "01-001-02", "01-002-01", "01-002-02"}
+    rows = {item.feature.key: item.id for item in store.features(map_id, kinds=["bin_state", "load_scene"])}
+
+    again = write_scene_revision(store, map_id, [bay_1_scene()], first_survey()[:2])
+    assert again.revision is None, "nothing changed, so no revision"
+
+    bad = dataclasses.replace(first_survey()[1], confidence=float("nan"))
+    moved = seen("01-002-02", Occupancy.OCCUPIED, views=2, objects=("p4",), bay="r0-001/2")
+    stranger = seen("09-999-01", Occupancy.EMPTY, views=3)
+    third = write_scene_revision(store, map_id, [], [bad, moved, stranger])
+    assert third.revision is not None
+    assert third.bins_changed == ("01-002-02",)
+    assert {(s.key, s.reason.split(":")[0]) for s in third.skipped} == {
+        ("01-001-02", "bin '01-001-02'"), ("09-999-01", "the map has no bin of this id")}
+    live = {item.feature.key: item for item in store.features(map_id, kinds=["bin_state", "load_scene"])}
+    assert {key: item.id for key, item in live.items() if key != "01-002-02"} == {
+        key: row for key, row in rows.items() if key != "01-002-02"}, "unchanged records stay the rows they were"
+    assert occupancy_from_feature(live["01-001-02"].feature).state == Occupancy.EMPTY, "a bad record loses nothing"
+    assert all(item.stage == LOADS_STAGE for item in live.values())
+    assert third.revision.summary["features"]["bin_state"]["changed"] == 1
+    assert third.revision.summary["occupancy_changed"] == ["01-002-02"]
+    scene = scene_from_feature(live[BAY_1].feature)
+    assert {n.id for n in scene.nodes if Flag.FALSE_ESTIMATE in n.flags} == {"g1"}
