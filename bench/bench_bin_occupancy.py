@@ -2,7 +2,8 @@
 
 Prints ``name value unit`` lines (wall and CPU seconds). A temporary SQLite map store holds a hall of ``BAYS`` rack
 bays of ``LEVELS`` levels (one bin each, as the pillar stage writes them); then the writer stores a first survey
-(every bin and bay), a small update (``CHANGED`` bins of one aisle pass), and a repeat of it (nothing changed); the
+(every bin and bay), a small update (``CHANGED`` bins of one aisle pass) with a fresh writer, a repeat of it (nothing
+changed), and another update with a writer a worker keeps (it has read the stage's records before); the
 queries read the bins by occupancy, one bay's scene and the discrepancies against a WMS stock list of every bin.
 Run from the repository root with ``PYTHONPATH=. .venv/bin/python bench/bench_bin_occupancy.py``.
 """
@@ -28,6 +29,7 @@ from shared.loads import (
     SceneEdge,
     SceneGraph,
     SceneNode,
+    SceneWriter,
     write_scene_revision,
 )
 from shared.store import Feature, MapStore, RevisionWrite, WmsStock
@@ -84,10 +86,15 @@ def main() -> None:
                    for s in states[:CHANGED]]
         touched = sorted({s.bay for s in changed if s.bay is not None})
         bays = [scene for scene in scenes if scene.bay in touched]
-        update = _timed("write_update", lambda: write_scene_revision(store, info.id, bays, changed))
+        update = _timed("write_update_fresh_writer", lambda: write_scene_revision(store, info.id, bays, changed))
         print(f"write_update_bins_changed {len(update.bins_changed)} count")
         repeat = _timed("write_repeat", lambda: write_scene_revision(store, info.id, bays, changed))
         print(f"write_repeat_revision {0 if repeat.revision is None else 1} count")
+        writer = SceneWriter(store, info.id)
+        writer.write([], [])  # a worker's writer has read the stage's records once, at its first write
+        again = [BinOccupancy(s.bin_id, Occupancy.OCCUPIED, 0.9, s.last_seen_ns, ("p0",), 5, bay=s.bay)
+                 for s in changed]
+        _timed("write_update_kept_writer", lambda: writer.write(bays, again))
         cache = RevisionCache()
         _timed("select_occupied", lambda: select_bins(store, cache, info.id, revision=None, bbox=None,
                                                       occupancy=Occupancy.OCCUPIED, limit=100, offset=0))

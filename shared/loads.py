@@ -40,6 +40,8 @@ LOADS_STAGE: Final = "load_scenes"
 """The stage that writes ``bin_state`` and ``load_scene`` features."""
 CHANGED_LISTED: Final = 1000
 """Most bin ids a revision's summary lists under ``occupancy_changed`` (the count is always there)."""
+FEW_BINS: Final = 64
+"""Up to this many bins, a write reads their centres one by one; more, all the map's bins at once."""
 
 
 class ObjectKind(enum.StrEnum):
@@ -350,6 +352,116 @@ class SceneWrite:
     """Records left out (bad values, a bin the map lacks, a bay with no position), each with its reason."""
 
 
+class SceneWriter:
+    """Stores a stage's bin states and bay scenes revision by revision, writing only what changed.
+
+    It reads the stage's stored states and scenes once (the first write) and then keeps what it stored in memory,
+    so a write reads from the store only the bins it places (when few) and the store's own comparison; a worker
+    holds one for its life. :func:`write_scene_revision` is one write with a fresh writer.
+
+    Parameters
+    ----------
+    store, map_id
+        The map store and the map to write to.
+    stage : str
+        The stage named as the writer; only its own earlier records are merged with (default ``load_scenes``).
+    """
+
+    def __init__(self, store: MapStore, map_id: int, *, stage: str = LOADS_STAGE) -> None:
+        self.store = store
+        self.map_id = map_id
+        self.stage = stage
+        self._stored: dict[FeatureKind, dict[str, Feature]] | None = None
+
+    def write(self, scenes: Sequence[SceneGraph], occupancies: Sequence[BinOccupancy], *,
+              commit: Callable[[RevisionWrite], Revision | None] | None = None, input_start_ns: int | None = None,
+              input_end_ns: int | None = None) -> SceneWrite:
+        """Store the bin states and bay scenes that changed as ONE revision; the others stay as they are.
+
+        ``occupancies`` and ``scenes`` need only hold what the stage looked at anew: every bin state and scene the
+        stage stored before and does not give again stays live (unchanged, the row it was), and one given exactly as
+        stored is not written again. A bin state is placed at its bin's centre (the map's ``bin`` feature of that
+        id), a scene at the middle of its bay's bins (or of its objects). Records that cannot be stored are left out
+        with a reason (``skipped``) and the rest is written; nothing stored is lost. When nothing changed, no
+        revision is written.
+
+        Parameters
+        ----------
+        scenes : sequence of SceneGraph
+            Scene graphs of the bays looked at, one per bay (a later one of a bay wins).
+        occupancies : sequence of BinOccupancy
+            States of the bins looked at (a later one of a bin wins).
+        commit : callable, optional
+            Stores a :class:`RevisionWrite` and returns the revision, or None when the store is down; a worker
+            passes ``StageContext.commit`` (which counts and announces). Default: ``store.write_revision``.
+        input_start_ns, input_end_ns : int, optional
+            Stamps of the oldest and newest input the revision rests on.
+
+        Returns
+        -------
+        SceneWrite
+            The revision (or None) and what was written, changed and skipped.
+
+        Raises
+        ------
+        StoreUnavailableError
+            The store could not be read (nothing was written; the writer is as before).
+        """
+        if self._stored is None:
+            self._stored = {kind: _own(self.store, self.map_id, kind, self.stage)
+                            for kind in (FeatureKind.BIN_STATE, FeatureKind.LOAD_SCENE)}
+        stored_states, stored_scenes = self._stored[FeatureKind.BIN_STATE], self._stored[FeatureKind.LOAD_SCENE]
+        skipped: list[Skipped] = []
+        centres = _centres(self.store, self.map_id, {record.bin_id for record in occupancies})
+        new_states: dict[str, Feature] = {}
+        for record in occupancies:
+            where = centres.get(record.bin_id)
+            if where is None:
+                skipped.append(Skipped(FeatureKind.BIN_STATE, record.bin_id, "the map has no bin of this id"))
+                continue
+            try:
+                new_states[record.bin_id] = occupancy_feature(record, at=where)
+            except LoadRecordError as err:
+                skipped.append(Skipped(FeatureKind.BIN_STATE, record.bin_id, str(err)))
+        bay_bins: dict[str, list[XY]] = {}
+        for item in {**stored_states, **new_states}.values():
+            bay = item.properties.get("bay")
+            if isinstance(bay, str):
+                bay_bins.setdefault(bay, []).append(_point(item))
+        new_scenes: dict[str, Feature] = {}
+        for graph in scenes:
+            where_xy = _middle(bay_bins.get(graph.bay) or [(node.centre[0], node.centre[1]) for node in graph.nodes])
+            if where_xy is None:
+                skipped.append(Skipped(FeatureKind.LOAD_SCENE, graph.bay, "no position: the bay has no known bin "
+                                                                          "and the scene no object"))
+                continue
+            try:
+                new_scenes[graph.bay] = scene_feature(graph, at=where_xy)
+            except LoadRecordError as err:
+                skipped.append(Skipped(FeatureKind.LOAD_SCENE, graph.bay, str(err)))
+
+        bins_written = sorted(key for key, item in new_states.items() if not _same(item, stored_states.get(key)))
+        scenes_written = sorted(key for key, item in new_scenes.items() if not _same(item, stored_scenes.get(key)))
+        bins_changed = [key for key in bins_written
+                        if new_states[key].properties["state"] != _state(stored_states.get(key))]
+        if not bins_written and not scenes_written:
+            return SceneWrite(None, (), (), (), tuple(skipped))
+        merged = {FeatureKind.BIN_STATE: {**stored_states, **new_states},
+                  FeatureKind.LOAD_SCENE: {**stored_scenes, **new_scenes}}
+        features = {kind.value: list(merged[kind].values()) for kind, written in
+                    ((FeatureKind.BIN_STATE, bins_written), (FeatureKind.LOAD_SCENE, scenes_written)) if written}
+        summary = {"bin_states_written": len(bins_written), "scenes_written": len(scenes_written),
+                   "occupancy_changed": bins_changed[:CHANGED_LISTED], "occupancy_changed_count": len(bins_changed),
+                   "skipped": len(skipped)}
+        write = RevisionWrite(self.stage, features=features, input_start_ns=input_start_ns,
+                              input_end_ns=input_end_ns, summary=summary)
+        revision = self.store.write_revision(self.map_id, write) if commit is None else commit(write)
+        if revision is None:  # not stored: the next write compares with what the store holds
+            return SceneWrite(None, (), (), (), tuple(skipped))
+        self._stored = merged
+        return SceneWrite(revision, tuple(bins_written), tuple(bins_changed), tuple(scenes_written), tuple(skipped))
+
+
 def write_scene_revision(
     store: MapStore,
     map_id: int,
@@ -361,86 +473,28 @@ def write_scene_revision(
     input_start_ns: int | None = None,
     input_end_ns: int | None = None,
 ) -> SceneWrite:
-    """Store the bin states and bay scenes that changed as ONE revision; the others stay as they are.
+    """Store the bin states and bay scenes that changed as ONE revision (:meth:`SceneWriter.write` with a fresh
+    writer, which reads the stage's stored records first; a worker keeps a :class:`SceneWriter` instead).
 
-    ``occupancies`` and ``scenes`` need only hold what the stage looked at anew: every bin state and scene the stage
-    stored before and does not give again stays live (unchanged, the row it was), and one given exactly as stored
-    is not written again. A bin state is placed at its bin's centre (the map's ``bin`` feature of that id), a scene
-    at the middle of its bay's bins (or of its objects). Records that cannot be stored are left out with a reason
-    (``skipped``) and the rest is written; nothing stored is lost. When nothing changed, no revision is written.
+    Examples
+    --------
+    A worker, once per batch of views::
 
-    Parameters
-    ----------
-    store, map_id
-        The map store and the map to write to.
-    scenes : sequence of SceneGraph
-        Scene graphs of the bays looked at, one per bay (a later one of a bay wins).
-    occupancies : sequence of BinOccupancy
-        States of the bins looked at (a later one of a bin wins).
-    stage : str
-        The stage named as the writer; only its own earlier records are merged with (default ``load_scenes``).
-    commit : callable, optional
-        Stores a :class:`RevisionWrite` and returns the revision, or None when the store is down; a worker passes
-        ``StageContext.commit`` (which counts and announces). Default: ``store.write_revision`` on ``map_id``.
-    input_start_ns, input_end_ns : int, optional
-        Stamps of the oldest and newest input the revision rests on.
-
-    Returns
-    -------
-    SceneWrite
-        The revision (or None) and what was written, changed and skipped.
+        written = writer.write(scenes, occupancies, commit=context.commit, input_start_ns=t0, input_end_ns=t1)
+        for item in written.skipped:
+            context.count("records_skipped")
     """
-    skipped: list[Skipped] = []
-    centres = {record.id: record.centre for record in
-               (Bin.from_feature(item.feature) for item in store.features(map_id, kinds=[FeatureKind.BIN]))}
-    stored_states = _own(store, map_id, FeatureKind.BIN_STATE, stage)
-    stored_scenes = _own(store, map_id, FeatureKind.LOAD_SCENE, stage)
+    return SceneWriter(store, map_id, stage=stage).write(scenes, occupancies, commit=commit,
+                                                         input_start_ns=input_start_ns, input_end_ns=input_end_ns)
 
-    new_states: dict[str, Feature] = {}
-    for record in occupancies:
-        where = centres.get(record.bin_id)
-        if where is None:
-            skipped.append(Skipped(FeatureKind.BIN_STATE, record.bin_id, "the map has no bin of this id"))
-            continue
-        try:
-            new_states[record.bin_id] = occupancy_feature(record, at=where)
-        except LoadRecordError as err:
-            skipped.append(Skipped(FeatureKind.BIN_STATE, record.bin_id, str(err)))
-    bay_bins: dict[str, list[XY]] = {}
-    for item in (*stored_states.values(), *new_states.values()):
-        bay = item.properties.get("bay")
-        if isinstance(bay, str):
-            bay_bins.setdefault(bay, []).append(_point(item))
-    new_scenes: dict[str, Feature] = {}
-    for graph in scenes:
-        where_xy = _middle(bay_bins.get(graph.bay) or [(node.centre[0], node.centre[1]) for node in graph.nodes])
-        if where_xy is None:
-            skipped.append(Skipped(FeatureKind.LOAD_SCENE, graph.bay, "no position: the bay has no known bin and "
-                                                                      "the scene no object"))
-            continue
-        try:
-            new_scenes[graph.bay] = scene_feature(graph, at=where_xy)
-        except LoadRecordError as err:
-            skipped.append(Skipped(FeatureKind.LOAD_SCENE, graph.bay, str(err)))
 
-    bins_written = sorted(key for key, item in new_states.items() if not _same(item, stored_states.get(key)))
-    scenes_written = sorted(key for key, item in new_scenes.items() if not _same(item, stored_scenes.get(key)))
-    bins_changed = [key for key in bins_written
-                    if new_states[key].properties["state"] != _state(stored_states.get(key))]
-    if not bins_written and not scenes_written:
-        return SceneWrite(None, (), (), (), tuple(skipped))
-    features: dict[str, list[Feature]] = {}
-    if bins_written:
-        features[FeatureKind.BIN_STATE] = list({**stored_states, **new_states}.values())
-    if scenes_written:
-        features[FeatureKind.LOAD_SCENE] = list({**stored_scenes, **new_scenes}.values())
-    summary = {"bin_states_written": len(bins_written), "scenes_written": len(scenes_written),
-               "occupancy_changed": bins_changed[:CHANGED_LISTED], "occupancy_changed_count": len(bins_changed),
-               "skipped": len(skipped)}
-    write = RevisionWrite(stage, features=features, input_start_ns=input_start_ns, input_end_ns=input_end_ns,
-                          summary=summary)
-    revision = store.write_revision(map_id, write) if commit is None else commit(write)
-    return SceneWrite(revision, tuple(bins_written), tuple(bins_changed), tuple(scenes_written), tuple(skipped))
+def _centres(store: MapStore, map_id: int, ids: set[str]) -> dict[str, XY]:
+    """Centres (metres) of the map's bins among ``ids``."""
+    if len(ids) <= FEW_BINS:
+        found = (store.feature(map_id, FeatureKind.BIN, bin_id) for bin_id in sorted(ids))
+        return {item.feature.key: Bin.from_feature(item.feature).centre for item in found if item is not None}
+    return {item.feature.key: Bin.from_feature(item.feature).centre
+            for item in store.features(map_id, kinds=[FeatureKind.BIN]) if item.feature.key in ids}
 
 
 def _own(store: MapStore, map_id: int, kind: FeatureKind, stage: str) -> dict[str, Feature]:
@@ -471,6 +525,7 @@ def _middle(points: Sequence[XY]) -> XY | None:
 
 __all__ = [
     "CHANGED_LISTED",
+    "FEW_BINS",
     "LOADS_STAGE",
     "XY",
     "XYZ",
@@ -484,6 +539,7 @@ __all__ = [
     "SceneGraph",
     "SceneNode",
     "SceneWrite",
+    "SceneWriter",
     "Skipped",
     "occupancy_feature",
     "occupancy_from_feature",

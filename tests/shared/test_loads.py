@@ -13,6 +13,7 @@ from shared.loads import (
     Occupancy,
     Relation,
     SceneEdge,
+    SceneWriter,
     occupancy_feature,
     occupancy_from_feature,
     scene_feature,
@@ -72,3 +73,19 @@ def test_writer_stores_what_changed_keeps_the_rest_and_skips_bad_records(store: 
     assert third.revision.summary["occupancy_changed"] == ["01-002-02"]
     scene = scene_from_feature(live[BAY_1].feature)
     assert {n.id for n in scene.nodes if Flag.FALSE_ESTIMATE in n.flags} == {"g1"}
+
+
+def test_a_kept_writer_writes_again_what_a_store_outage_kept_out(store: MapStore) -> None:
+    write_bins(store)
+    map_id = store.ensure_map("site").id
+    writer = SceneWriter(store, map_id)
+    assert writer.write([bay_1_scene()], first_survey()).revision is not None
+    update = [seen("01-002-02", Occupancy.OCCUPIED, views=2, objects=("p4",), bay="r0-001/2")]
+
+    lost = writer.write([], update, commit=lambda write: None)  # as StageContext.commit when the store is down
+    assert lost.revision is None and lost.bins_changed == ()
+    retried = writer.write([], update)
+    assert retried.revision is not None and retried.bins_changed == ("01-002-02",)
+    assert writer.write([], update).revision is None, "written once, then nothing changed"
+    live = {item.feature.key for item in store.features(map_id, kinds=["bin_state"])}
+    assert live == {record.bin_id for record in first_survey()}
