@@ -40,8 +40,6 @@ LOADS_STAGE: Final = "load_scenes"
 """The stage that writes ``bin_state`` and ``load_scene`` features."""
 CHANGED_LISTED: Final = 1000
 """Most bin ids a revision's summary lists under ``occupancy_changed`` (the count is always there)."""
-FEW_BINS: Final = 64
-"""Up to this many bins, a write reads their centres one by one; more, all the map's bins at once."""
 
 
 class ObjectKind(enum.StrEnum):
@@ -355,9 +353,11 @@ class SceneWrite:
 class SceneWriter:
     """Stores a stage's bin states and bay scenes revision by revision, writing only what changed.
 
-    It reads the stage's stored states and scenes once (the first write) and then keeps what it stored in memory,
-    so a write reads from the store only the bins it places (when few) and the store's own comparison; a worker
-    holds one for its life. :func:`write_scene_revision` is one write with a fresh writer.
+    It reads the stage's stored states and scenes and the map's bin centres once (the first write), then keeps what
+    it stored in memory and brings the centres up to date from the feature rows the revisions since changed; so a
+    write reads from the store only what changed, and writes only the records that changed (a partial revision
+    write: the stage's other records stay). A worker holds one for its life; :func:`write_scene_revision` is one
+    write with a fresh writer.
 
     Parameters
     ----------
@@ -372,6 +372,8 @@ class SceneWriter:
         self.map_id = map_id
         self.stage = stage
         self._stored: dict[FeatureKind, dict[str, Feature]] | None = None
+        self._centres: dict[str, XY] = {}
+        self._centres_at: int | None = None  # the revision the bin centres are as of
 
     def write(self, scenes: Sequence[SceneGraph], occupancies: Sequence[BinOccupancy], *,
               commit: Callable[[RevisionWrite], Revision | None] | None = None, input_start_ns: int | None = None,
@@ -412,7 +414,7 @@ class SceneWriter:
                             for kind in (FeatureKind.BIN_STATE, FeatureKind.LOAD_SCENE)}
         stored_states, stored_scenes = self._stored[FeatureKind.BIN_STATE], self._stored[FeatureKind.LOAD_SCENE]
         skipped: list[Skipped] = []
-        centres = _centres(self.store, self.map_id, {record.bin_id for record in occupancies})
+        centres = self._bin_centres()
         new_states: dict[str, Feature] = {}
         for record in occupancies:
             where = centres.get(record.bin_id)
@@ -446,20 +448,42 @@ class SceneWriter:
                         if new_states[key].properties["state"] != _state(stored_states.get(key))]
         if not bins_written and not scenes_written:
             return SceneWrite(None, (), (), (), tuple(skipped))
-        merged = {FeatureKind.BIN_STATE: {**stored_states, **new_states},
-                  FeatureKind.LOAD_SCENE: {**stored_scenes, **new_scenes}}
-        features = {kind.value: list(merged[kind].values()) for kind, written in
-                    ((FeatureKind.BIN_STATE, bins_written), (FeatureKind.LOAD_SCENE, scenes_written)) if written}
+        features = {kind.value: [new[key] for key in written] for kind, new, written in
+                    ((FeatureKind.BIN_STATE, new_states, bins_written),
+                     (FeatureKind.LOAD_SCENE, new_scenes, scenes_written)) if written}
         summary = {"bin_states_written": len(bins_written), "scenes_written": len(scenes_written),
                    "occupancy_changed": bins_changed[:CHANGED_LISTED], "occupancy_changed_count": len(bins_changed),
                    "skipped": len(skipped)}
         write = RevisionWrite(self.stage, features=features, input_start_ns=input_start_ns,
-                              input_end_ns=input_end_ns, summary=summary)
+                              input_end_ns=input_end_ns, summary=summary, partial=frozenset(features))
         revision = self.store.write_revision(self.map_id, write) if commit is None else commit(write)
         if revision is None:  # not stored: the next write compares with what the store holds
             return SceneWrite(None, (), (), (), tuple(skipped))
-        self._stored = merged
+        stored_states.update((key, new_states[key]) for key in bins_written)
+        stored_scenes.update((key, new_scenes[key]) for key in scenes_written)
         return SceneWrite(revision, tuple(bins_written), tuple(bins_changed), tuple(scenes_written), tuple(skipped))
+
+
+    def _bin_centres(self) -> dict[str, XY]:
+        """Centres (metres) of the map's bins by id, as of its newest revision: read whole the first time, then
+        brought up to date with the feature rows the revisions since changed."""
+        latest = self.store.latest_revision(self.map_id)
+        upto = 0 if latest is None else latest.id
+        if self._centres_at is None:
+            self._centres = {item.feature.key: Bin.from_feature(item.feature).centre
+                             for item in self.store.features(self.map_id, kinds=[FeatureKind.BIN], revision=upto)}
+        elif upto > self._centres_at:
+            for row in self.store.feature_rows_changed(self.map_id, after=self._centres_at, upto=upto):
+                if row.kind != FeatureKind.BIN:
+                    continue
+                if row.retired_revision_id is not None and row.retired_revision_id <= upto:
+                    self._centres.pop(row.key, None)  # rows come in id order: a key's newer row comes after
+                else:
+                    feature = Feature(row.kind, row.key, json.loads(row.geometry_json),
+                                      json.loads(row.properties_json), row.confidence)
+                    self._centres[row.key] = Bin.from_feature(feature).centre
+        self._centres_at = upto
+        return self._centres
 
 
 def write_scene_revision(
@@ -486,15 +510,6 @@ def write_scene_revision(
     """
     return SceneWriter(store, map_id, stage=stage).write(scenes, occupancies, commit=commit,
                                                          input_start_ns=input_start_ns, input_end_ns=input_end_ns)
-
-
-def _centres(store: MapStore, map_id: int, ids: set[str]) -> dict[str, XY]:
-    """Centres (metres) of the map's bins among ``ids``."""
-    if len(ids) <= FEW_BINS:
-        found = (store.feature(map_id, FeatureKind.BIN, bin_id) for bin_id in sorted(ids))
-        return {item.feature.key: Bin.from_feature(item.feature).centre for item in found if item is not None}
-    return {item.feature.key: Bin.from_feature(item.feature).centre
-            for item in store.features(map_id, kinds=[FeatureKind.BIN]) if item.feature.key in ids}
 
 
 def _own(store: MapStore, map_id: int, kind: FeatureKind, stage: str) -> dict[str, Feature]:
@@ -525,7 +540,6 @@ def _middle(points: Sequence[XY]) -> XY | None:
 
 __all__ = [
     "CHANGED_LISTED",
-    "FEW_BINS",
     "LOADS_STAGE",
     "XY",
     "XYZ",

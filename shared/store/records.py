@@ -141,8 +141,9 @@ class RevisionWrite:
     """Everything one stage writes at once; it lands whole or not at all.
 
     ``features`` maps each kind the stage now asserts to its complete list: the stage's
-    previous features of those kinds are retired. ``topology``, when given, replaces the
-    stage's graph.
+    previous features of those kinds are retired. For the kinds in ``partial`` the list holds only
+    the features to add or replace (by key): the stage's other features of those kinds stay. ``topology``,
+    when given, replaces the stage's graph.
     """
 
     stage: str
@@ -152,8 +153,11 @@ class RevisionWrite:
     input_start_ns: int | None = None
     input_end_ns: int | None = None
     summary: Mapping[str, Any] = field(default_factory=dict)
+    partial: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
+        if not self.partial <= set(self.features):
+            raise StoreError(f"partial kinds {sorted(self.partial - set(self.features))} have no features listed")
         for kind, items in self.features.items():
             if kind not in FEATURE_KINDS:
                 raise StoreError(f"unknown feature kind {kind!r}")

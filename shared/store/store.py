@@ -309,9 +309,10 @@ class MapStore:
     def write_revision(self, map_id: int, write: RevisionWrite) -> Revision:
         """Store everything in ``write`` as one new revision, atomically.
 
-        Features of a kind are replaced by ``write.features[kind]`` as a whole; a feature written exactly as it
-        is stored (same key, geometry, properties and confidence) stays the row it is, with the revision that
-        first wrote it, so a stage that rewrites all its features changes only the rows of those that changed.
+        Features of a kind are replaced by ``write.features[kind]`` as a whole (for a kind in ``write.partial``,
+        only those of the keys listed); a feature written exactly as it is stored (same key, geometry, properties
+        and confidence) stays the row it is, with the revision that first wrote it, so a stage that rewrites all its
+        features changes only the rows of those that changed.
         """
         with self._begin() as connection:
             self._lock_map(connection, map_id)
@@ -327,7 +328,8 @@ class MapStore:
             for layer in write.layers:
                 self._insert_layer(connection, map_id, revision_id, layer)
             summary["features"] = {
-                kind: self._replace_features(connection, map_id, revision_id, write.stage, kind, items)
+                kind: self._replace_features(connection, map_id, revision_id, write.stage, kind, items,
+                                             partial=kind in write.partial)
                 for kind, items in write.features.items()
             }
             summary["topology_changed"] = write.topology is not None
@@ -355,16 +357,22 @@ class MapStore:
 
     @staticmethod
     def _replace_features(connection: Connection, map_id: int, revision_id: int, stage: str, kind: str,
-                          items: Sequence[Feature]) -> dict[str, int]:
+                          items: Sequence[Feature], *, partial: bool = False) -> dict[str, int]:
+        """Replace the stage's live features of ``kind`` by ``items`` (``partial``: only those of their keys)."""
         table = schema.features
         live = sa.and_(table.c.map_id == map_id, table.c.stage == stage, table.c.kind == kind,
                        table.c.retired_revision_id.is_(None))
+        as_stored = sa.select(table.c.id, table.c.key, sa.cast(table.c.geometry, sa.Text).label("geometry"),
+                              sa.cast(table.c.properties, sa.Text).label("properties"), table.c.confidence)
+        if partial:
+            keys = sorted({item.key for item in items})
+            found = [row for start in range(0, len(keys), _IDS_PER_STATEMENT) for row in connection.execute(
+                as_stored.where(live, table.c.key.in_(keys[start:start + _IDS_PER_STATEMENT])))]
+            before = connection.execute(sa.select(sa.func.count()).select_from(table).where(live)).scalar_one()
+        else:
+            found, before = list(connection.execute(as_stored.where(live))), 0
         # key -> (row id, geometry text, properties text, confidence) of the live rows, as stored
-        previous = {row.key: (row.id, row.geometry, row.properties, row.confidence)
-                    for row in connection.execute(sa.select(table.c.id, table.c.key,
-                                                            sa.cast(table.c.geometry, sa.Text).label("geometry"),
-                                                            sa.cast(table.c.properties, sa.Text).label("properties"),
-                                                            table.c.confidence).where(live))}
+        previous = {row.key: (row.id, row.geometry, row.properties, row.confidence) for row in found}
         kept: set[str] = set()
         rows = []
         moved = changed = 0
@@ -389,9 +397,10 @@ class MapStore:
                                .values(retired_revision_id=revision_id))
         if rows:
             connection.execute(table.insert(), rows)
-        keys = {item.key for item in items}
-        return {"added": len(keys - previous.keys()), "removed": len(previous.keys() - keys), "moved": moved,
-                "changed": changed, "total": len(keys)}
+        listed = {item.key for item in items}
+        added = len(listed - previous.keys())
+        return {"added": added, "removed": len(previous.keys() - listed), "moved": moved, "changed": changed,
+                "total": int(before) + added if partial else len(listed)}
 
     @staticmethod
     def _replace_topology(connection: Connection, map_id: int, revision_id: int, stage: str,

@@ -20,7 +20,7 @@ from shared.loads import (
     scene_from_feature,
     write_scene_revision,
 )
-from shared.store import MapStore
+from shared.store import Feature, MapStore, RevisionWrite
 from tests.loads_data import BAY_1, bay_1_scene, bay_2_scene, first_survey, seen, write_bins
 
 
@@ -89,3 +89,14 @@ def test_a_kept_writer_writes_again_what_a_store_outage_kept_out(store: MapStore
     assert writer.write([], update).revision is None, "written once, then nothing changed"
     live = {item.feature.key for item in store.features(map_id, kinds=["bin_state"])}
     assert live == {record.bin_id for record in first_survey()}
+
+    # the pillar stage moves a bin and adds one: the kept writer places states at the bins as they are now
+    moved = Feature("bin", "01-002-02", {"type": "Point", "coordinates": [3.5, 1.0]}, {"id": "01-002-02"}, 0.9)
+    added = Feature("bin", "01-004-01", {"type": "Point", "coordinates": [7.0, 1.0]}, {"id": "01-004-01"}, 0.9)
+    store.write_revision(map_id, RevisionWrite("pillar_mapping", features={"bin": [moved, added]},
+                                               partial=frozenset({"bin"})))
+    later = writer.write([], [seen("01-002-02", Occupancy.EMPTY, views=3), seen("01-004-01", Occupancy.EMPTY, views=2)])
+    assert not later.skipped
+    states = {item.feature.key: item.feature.geometry["coordinates"]
+              for item in store.features(map_id, kinds=["bin_state"])}
+    assert states["01-002-02"] == [3.5, 1.0] and states["01-004-01"] == [7.0, 1.0]

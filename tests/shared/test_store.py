@@ -83,6 +83,23 @@ def test_a_feature_written_as_stored_keeps_its_row_and_history_stays_exact(store
         ("01-02", first.id, second.id), ("01-02", second.id, None), ("01-03", second.id, None)]
 
 
+def test_a_partial_write_replaces_the_features_listed_and_keeps_the_rest(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    first = store.write_revision(site.id, RevisionWrite("pillars", features={
+        "bin": [_bin("01-01", 1, 1), _bin("01-02", 2, 1), _bin("01-03", 3, 1)]}))
+    relabelled = Feature("bin", "01-02", {"type": "Point", "coordinates": [2, 1]}, {"aisle": "02"}, 0.9)
+    second = store.write_revision(site.id, RevisionWrite("pillars", features={
+        "bin": [_bin("01-01", 1, 1), relabelled, _bin("01-04", 4, 1)]}, partial=frozenset({"bin"})))
+
+    live = {f.feature.key: f for f in store.features(site.id, kinds=["bin"])}
+    assert sorted(live) == ["01-01", "01-02", "01-03", "01-04"]
+    assert live["01-01"].revision_id == live["01-03"].revision_id == first.id
+    assert live["01-02"].feature.properties == {"aisle": "02"} and live["01-02"].revision_id == second.id
+    assert second.summary["features"]["bin"] == {"added": 1, "removed": 0, "moved": 0, "changed": 1, "total": 4}
+    with pytest.raises(StoreError, match="partial kinds"):
+        RevisionWrite("pillars", features={"bin": []}, partial=frozenset({"wall"}))
+
+
 def test_other_stages_features_are_untouched(store: MapStore) -> None:
     site = store.ensure_map("site")
     store.write_revision(site.id, RevisionWrite("pillars", features={"bin": [_bin("A", 0, 0)]}))
