@@ -10,7 +10,7 @@ not see well (state ``unknown``, or fewer views than asked).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from atlas.bins import BinIndex, BinNotFoundError, bin_index, bin_states, no_bin
 from atlas.cache import RevisionCache
@@ -23,6 +23,8 @@ WMS_STOCK_STAGE = "wms_stock"
 """The stage named by revisions that import a WMS stock list."""
 MIN_VIEWS = 2
 """Default: a bin seen fewer times than this is not reported as a discrepancy (nor as agreeing)."""
+FEW_BAYS = 16
+"""Up to this many bays, :func:`with_evidence` reads their scenes one by one; more, every scene at once."""
 
 
 class SceneNotFoundError(NotInMapError):
@@ -98,9 +100,10 @@ class StockDiscrepancy:
     """What the WMS says (for a bin a complete list leaves out: holds no stock)."""
     seen: BinOccupancy
     """What the robots saw: the state, its confidence, the views, when last seen, the objects."""
-    evidence: tuple[SceneNode, ...]
-    """The scene nodes of the objects the robots saw in the bin (none when they saw it empty)."""
     state_revision_id: int
+    evidence: tuple[SceneNode, ...] = ()
+    """The scene nodes of the objects the robots saw in the bin (none when they saw it empty); filled in by
+    :func:`with_evidence`."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,7 +152,6 @@ def stock_discrepancies(store: MapStore, cache: RevisionCache, map_info: MapInfo
         named = {detected for _, detected in checks}
         checks += [(WmsStock(_wms_id(index, key), holds_stock=False), key) for key, (seen, _) in states.items()
                    if key not in named and seen.state == Occupancy.OCCUPIED]
-    scenes: dict[str, SceneGraph] = {}
     found: list[StockDiscrepancy] = []
     agreeing = unseen = 0
     for wms, detected in checks:
@@ -161,8 +163,7 @@ def stock_discrepancies(store: MapStore, cache: RevisionCache, map_info: MapInfo
         if (seen.state == Occupancy.OCCUPIED) == wms.holds_stock:
             agreeing += 1
             continue
-        found.append(StockDiscrepancy(wms.bin_id, detected, wms, seen, _evidence(store, map_info, seen, scenes,
-                                                                                 revision), state_revision))
+        found.append(StockDiscrepancy(wms.bin_id, detected, wms, seen, state_revision))
     found.sort(key=lambda item: item.bin_id)
     return StockCheck(imported.id, complete, min_views, found, len(listed), agreeing, unseen)
 
@@ -173,22 +174,26 @@ def _wms_id(index: BinIndex, detected: str) -> str:
     return wms_id or detected
 
 
-def _evidence(store: MapStore, map_info: MapInfo, seen: BinOccupancy, scenes: dict[str, SceneGraph],
-              revision: int | None) -> tuple[SceneNode, ...]:
-    """The scene nodes of the objects ``seen`` names, from its bay's scene (read once per bay)."""
-    if not seen.objects or seen.bay is None:
-        return ()
-    scene = scenes.get(seen.bay)
-    if scene is None:
-        stored = store.feature(map_info.id, FeatureKind.LOAD_SCENE, seen.bay, revision=revision)
-        if stored is None:
-            return ()
-        scene = scenes[seen.bay] = scene_from_feature(stored.feature)
-    nodes = {node.id: node for node in scene.nodes}
-    return tuple(nodes[item] for item in seen.objects if item in nodes)
+def with_evidence(store: MapStore, map_info: MapInfo, items: Sequence[StockDiscrepancy], *, revision: int | None
+                  ) -> list[StockDiscrepancy]:
+    """``items`` with their evidence: the scene nodes of the objects each bin's state names, from its bay's scene
+    as of ``revision`` (a few bays are read one by one, more all at once)."""
+    bays = {item.seen.bay for item in items if item.seen.objects and item.seen.bay is not None}
+    if len(bays) <= FEW_BAYS:
+        stored = [found for bay in sorted(bays)
+                  if (found := store.feature(map_info.id, FeatureKind.LOAD_SCENE, bay, revision=revision)) is not None]
+    else:
+        stored = [found for found in store.features(map_info.id, kinds=[FeatureKind.LOAD_SCENE], revision=revision)
+                  if found.feature.key in bays]
+    nodes = {found.feature.key: {node.id: node for node in scene_from_feature(found.feature).nodes}
+             for found in stored}
+    return [replace(item, evidence=tuple(nodes[item.seen.bay][name] for name in item.seen.objects
+                                         if item.seen.bay in nodes and name in nodes[item.seen.bay]))
+            for item in items]
 
 
 __all__ = [
+    "FEW_BAYS",
     "MIN_VIEWS",
     "WMS_STOCK_STAGE",
     "BinNotFoundError",
@@ -200,4 +205,5 @@ __all__ = [
     "bin_scene",
     "import_wms_stock",
     "stock_discrepancies",
+    "with_evidence",
 ]

@@ -20,7 +20,7 @@ import numpy as np
 
 from atlas.bins import select_bins
 from atlas.cache import RevisionCache
-from atlas.stock import bin_scene, import_wms_stock, stock_discrepancies
+from atlas.stock import bin_scene, import_wms_stock, stock_discrepancies, with_evidence
 from shared.loads import (
     BinOccupancy,
     ObjectKind,
@@ -103,6 +103,7 @@ def main() -> None:
         _timed("import_stock", lambda: import_wms_stock(store, info.id, stock, complete=False))
         check = _timed("discrepancies", lambda: stock_discrepancies(store, cache, info, revision=None))
         print(f"discrepancies {len(check.discrepancies)} count")
+        _timed("evidence_page_1000", lambda: with_evidence(store, info, check.discrepancies[:1000], revision=None))
         store.close()
 
 

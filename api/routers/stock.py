@@ -20,7 +20,14 @@ from api.queries import BIN_ID_PATTERN, CursorQuery, next_cursor, page_start
 from api.translate import http_error
 from atlas.cache import RevisionCache
 from atlas.precision import json_bytes
-from atlas.stock import NoStockListError, StockCheck, StockDiscrepancy, import_wms_stock, stock_discrepancies
+from atlas.stock import (
+    NoStockListError,
+    StockCheck,
+    StockDiscrepancy,
+    import_wms_stock,
+    stock_discrepancies,
+    with_evidence,
+)
 from shared.store import MapInfo, MapStore, WmsStock
 from shared.vocabulary import REVISION_HEADER
 
@@ -114,8 +121,9 @@ def _discrepancy_out(item: StockDiscrepancy) -> StockDiscrepancyOut:
         evidence=[node_out(node) for node in item.evidence])
 
 
-def _check_out(check: StockCheck, *, revision: int | None, offset: int, limit: int) -> StockCheckOut:
-    page = check.discrepancies[offset:offset + limit]
+def _check_out(store: MapStore, map_info: MapInfo, check: StockCheck, *, revision: int | None, offset: int,
+               limit: int) -> StockCheckOut:
+    page = with_evidence(store, map_info, check.discrepancies[offset:offset + limit], revision=revision)
     more = offset + limit < len(check.discrepancies)
     return StockCheckOut(
         stock_revision_id=check.stock_revision_id, complete=check.complete, min_views=check.min_views,
@@ -167,7 +175,7 @@ def _import(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInf
         written = import_wms_stock(store, map_info.id, items, complete=parsed.complete)
         announcer.announce(map_info, written)
         check = stock_discrepancies(store, cache, map_info, revision=written.id, min_views=min_views)
-        return json_bytes(_check_out(check, revision=written.id, offset=0, limit=DEFAULT_LIMIT)
+        return json_bytes(_check_out(store, map_info, check, revision=written.id, offset=0, limit=DEFAULT_LIMIT)
                           .model_dump(mode="json"))
 
 
@@ -207,7 +215,7 @@ def get_discrepancies(
         raise http_error(err) from err
     if at is not None:
         response.headers[REVISION_HEADER] = str(at)
-    return _check_out(check, revision=at, offset=offset, limit=limit)
+    return _check_out(store, map_info, check, revision=at, offset=offset, limit=limit)
 
 
 @router.get("", summary="The imported WMS stock list", responses=_ERRORS)
