@@ -463,7 +463,6 @@ class SceneWriter:
         stored_scenes.update((key, new_scenes[key]) for key in scenes_written)
         return SceneWrite(revision, tuple(bins_written), tuple(bins_changed), tuple(scenes_written), tuple(skipped))
 
-
     def _bin_centres(self) -> dict[str, XY]:
         """Centres (metres) of the map's bins by id, as of its newest revision: read whole the first time, then
         brought up to date with the feature rows the revisions since changed."""
