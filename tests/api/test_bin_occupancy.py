@@ -173,3 +173,13 @@ def test_occupancy_changes_are_announced(store: MapStore, make_client: ClientFac
     assert change.data["stage"] == "load_scenes"
     assert change.data["features"] == {"bin_state": {"added": 0, "removed": 0, "moved": 0, "changed": 2, "total": 4}}
     assert change.data["occupancy_changed"] == ["01-002-02"], "a new sighting of an occupied bin is no change"
+
+
+def test_layout_and_its_pictures_take_the_new_kinds(client: TestClient, surveyed: dict[str, int]) -> None:
+    layout = client.get(f"{URL}/layout", params={"kind": ["bin_state", "load_scene"]})
+    assert layout.status_code == 200, layout.text
+    kinds = sorted({feature["properties"]["kind"] for feature in layout.json()["features"]})
+    assert kinds == ["bin_state", "load_scene"] and len(layout.json()["features"]) == 4 + 2
+    for picture in ("layout.png", "layout.svg"):
+        assert client.get(f"{URL}/{picture}", params={"kind": ["bin", "bin_state", "load_scene"]}).status_code == 200
+        assert client.get(f"{URL}/{picture}").status_code == 200
