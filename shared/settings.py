@@ -224,7 +224,7 @@ class RetentionSettings(BaseModel):
         "older ones are thinned to the newest of each day.",
     )
     keep_stages: list[str] = Field(
-        default_factory=lambda: ["operator", "label_table", "wms"],
+        default_factory=lambda: ["operator", "label_table", "wms", "wms_stock"],
         description="Stages whose revisions are never thinned: what people and the WMS wrote.",
     )
     compact_period_s: float = Field(
@@ -302,6 +302,9 @@ class Settings(BaseSettings):
     api_gzip_min_bytes: int = Field(
         65536, ge=0, description="GET answers at least this long (bytes) are gzip-compressed for clients that accept "
         "it; smaller ones cost more CPU to compress than they save on a site network.")
+    api_stock_min_views: int = Field(
+        2, ge=1, le=1000, description="Views a bin needs before `GET …/wms-stock/discrepancies` reports it (agreeing "
+        "or not): a bin the robots saw fewer times is left unchecked.")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     retention: RetentionSettings = Field(default_factory=RetentionSettings)
