@@ -34,8 +34,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from services.load_scenes.estimation import bays_from_bins, estimate_boxes
+from services.load_scenes.frames import Intrinsics
 from services.load_scenes.model import Bay, BoxEstimate, ObjectKind
-from services.object_labelling.camera import make_intrinsics
 from services.simulator import RgbdModel, depth_image_mm, render_boxes, world_from_layout
 from services.simulator.loads import RACK_CAMERAS, bin_records, loaded_layout, rack_view, seen_whole
 from services.simulator.world import LoadTruth, ObjectClass, World
@@ -76,7 +76,7 @@ def main() -> None:
     args = parser.parse_args()
     model = RgbdModel()
     camera = model.camera()
-    intrinsics = make_intrinsics(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+    intrinsics = Intrinsics(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
     seen: dict[ObjectKind, int] = defaultdict(int)
     found: dict[ObjectKind, int] = defaultdict(int)
     estimated: dict[ObjectKind, int] = defaultdict(int)

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from shared.store.retention import RetentionPolicy
 
 STAGES = ("occupancy_mapping", "grid_decomposition", "pillar_mapping", "object_labelling", "semantic_fusion",
-          "floor_plan")
+          "floor_plan", "load_scenes")
 """Every stage worker Aisle has (``aisle worker STAGE``)."""
 
 
@@ -185,6 +185,23 @@ class LabellingSettings(BaseModel):
     frame_queue_size: int = Field(4, ge=1)
 
 
+class LoadScenesStageSettings(BaseModel):
+    """The load-scene stage: rack faces in RGB-D depth into bay scene graphs and bin occupancy (seed 003, ch. 4)."""
+
+    depth_topic: str = "rgbd/depth/image_raw"
+    camera_info_topic: str = "rgbd/camera_info"
+    map_frame: str = "map"
+    pose_wait_s: float = Field(0.5, ge=0.0, description="How long a frame waits for TF at its stamp.")
+    frame_queue_size: int = Field(4, ge=1)
+    stride: int = Field(2, ge=1, le=8, description="Every stride-th depth row and column is used.")
+    max_range_m: float = Field(5.0, gt=0.0, description="Depths beyond this are ignored.")
+    commit_period_s: float = Field(5.0, gt=0.0, description="How often the bays seen since are explained and stored.")
+    views_per_bay: int = Field(8, ge=1, le=100, description="Newest views of a bay one scene is inferred from.")
+    merge_distance_m: float = Field(0.25, gt=0.0, description="Estimates of one kind closer than this across views "
+                                    "are one object.")
+    beam_height_m: float = Field(0.12, gt=0.0, description="Vertical size of the racks' beams.")
+
+
 class DecompositionSettings(BaseModel):
     """The grid-decomposition stage: the occupancy layer into place labels, regions and topology."""
 
@@ -314,6 +331,7 @@ class Settings(BaseSettings):
     labelling: LabellingSettings = Field(default_factory=LabellingSettings)
     decomposition: DecompositionSettings = Field(default_factory=DecompositionSettings)
     floor_plan: FloorPlanStageSettings = Field(default_factory=FloorPlanStageSettings)
+    load_scenes: LoadScenesStageSettings = Field(default_factory=LoadScenesStageSettings)
     stages: list[str] = Field(
         default_factory=lambda: ["occupancy_mapping", "grid_decomposition", "pillar_mapping", "semantic_fusion"],
         description="Stages `aisle run` starts; object_labelling needs a model from `aisle train-classifier` first.",

@@ -26,10 +26,10 @@ import numpy as np
 import numpy.typing as npt
 
 from services.load_scenes.errors import LoadScenesError
+from services.load_scenes.frames import Intrinsics
 from services.load_scenes.model import Bay, BoxEstimate, DepthEvidence, ObjectKind
-from services.object_labelling.camera import CameraIntrinsics
-from services.pillar_mapping.levels import RackProfile, profile_at
 from shared.bins import Bin
+from shared.settings import RackProfileSettings
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -50,7 +50,7 @@ class RackView(NamedTuple):
     evidence: dict[str, DepthEvidence]
 
 
-def bays_from_bins(bins: Sequence[Bin], *, profiles: Sequence[RackProfile] = (), beam_height_m: float = 0.12,
+def bays_from_bins(bins: Sequence[Bin], *, profiles: Sequence[RackProfileSettings] = (), beam_height_m: float = 0.12,
                    double_deep_min_m: float = 1.8) -> list[Bay]:
     """The rack bays the pillar stage's bins make: one per (row, bay), its levels from the bins' levels.
 
@@ -63,8 +63,9 @@ def bays_from_bins(bins: Sequence[Bin], *, profiles: Sequence[RackProfile] = (),
     ----------
     bins : sequence of Bin
         The map's bins.
-    profiles : sequence of RackProfile, optional
-        The site's rack profiles (:func:`services.pillar_mapping.levels.rack_profile`).
+    profiles : sequence of RackProfileSettings, optional
+        The site's rack profiles (``settings.pillars.rack_profiles``): the first whose area holds a bin's centre,
+        else the first without an area, as the pillar stage picks them.
     beam_height_m : float
         Vertical size of a beam, metres.
     double_deep_min_m : float
@@ -89,16 +90,26 @@ def bays_from_bins(bins: Sequence[Bin], *, profiles: Sequence[RackProfile] = (),
         if record.level is not None and record.z_m is not None:
             groups[key].append((record.level, record.z_m, record.id))
         else:
-            profile = profile_at(profiles, np.asarray(record.centre, dtype=np.float64))
-            if profile is None:
+            levels_m = _levels_at(profiles, record.centre)
+            if levels_m is None:
                 continue
-            groups[key].extend((level, z, f"{record.id}-{level + 1:02d}") for level, z in enumerate(profile.levels_m))
+            groups[key].extend((level, z, f"{record.id}-{level + 1:02d}") for level, z in enumerate(levels_m))
         shape.setdefault(key, record)
     bays = []
     for key in sorted(groups):
         levels = sorted(set(groups[key]))
         bays.append(_bay(shape[key], f"{key[0]}/{key[1]:03d}", levels, beam_height_m, double_deep_min_m))
     return bays
+
+
+def _levels_at(profiles: Sequence[RackProfileSettings], xy: tuple[float, float]) -> list[float] | None:
+    """Level heights of the profile for a point: the first whose area holds it, else the first without an area."""
+    for profile in profiles:
+        if profile.area is not None:
+            contour = np.asarray(profile.area, dtype=np.float32).reshape(-1, 1, 2)
+            if cv2.pointPolygonTest(contour, (float(xy[0]), float(xy[1])), False) >= 0:
+                return profile.levels_m
+    return next((p.levels_m for p in profiles if p.area is None), None)
 
 
 def _bay(record: Bin, key: str, levels: list[tuple[int, float, str]], beam_height_m: float,
@@ -122,7 +133,45 @@ def _bay(record: Bin, key: str, levels: list[tuple[int, float, str]], beam_heigh
                beam_height_m=beam_height_m, deep=2 if depth >= double_deep_min_m else 1)
 
 
-def _check(depth: npt.NDArray[Any], intrinsics: CameraIntrinsics, world_from_optical: npt.NDArray[Any],
+def merge_views(estimates: Sequence[BoxEstimate], *, distance_m: float = 0.25) -> list[BoxEstimate]:
+    """One estimate per object of estimates from several views: those of one kind, bay and level whose centres
+    lie within ``distance_m`` of each other (map metres) are one object, seen again.
+
+    The merged box averages centre and size weighted by score; its sigmas shrink with the square root of the
+    views (independent depth noise), its score is the chance that at least one view was right, its stamp the
+    newest, its id the first view's. Estimates without a bay or level are left out.
+    """
+    groups: list[list[BoxEstimate]] = []
+    for est in sorted((e for e in estimates if e.bay is not None and e.level is not None), key=lambda e: -e.score):
+        at = np.asarray(est.centre)
+        home = next((g for g in groups if g[0].kind is est.kind and g[0].bay == est.bay and g[0].level == est.level
+                     and float(np.linalg.norm(np.asarray(g[0].centre) - at)) <= distance_m), None)
+        if home is None:
+            groups.append([est])
+        else:
+            home.append(est)
+    out = []
+    for group in groups:
+        if len(group) == 1:
+            out.append(group[0])
+            continue
+        weight = np.array([e.score for e in group])
+        weight = weight / weight.sum()
+        first = min(group, key=lambda e: e.stamp_ns)
+        root = math.sqrt(len(group))
+        centre = tuple(float(x) for x in weight @ np.array([e.centre for e in group]))
+        size = tuple(float(x) for x in weight @ np.array([e.size for e in group]))
+        sigma = tuple(float(x) / root for x in np.min([e.sigma for e in group], axis=0))
+        out.append(BoxEstimate(id=first.id, kind=first.kind, centre=(centre[0], centre[1], centre[2]),
+                               size=(size[0], size[1], size[2]), yaw_rad=first.yaw_rad,
+                               sigma=(sigma[0], sigma[1], sigma[2]),
+                               sigma_yaw_rad=min(e.sigma_yaw_rad for e in group) / root,
+                               score=1.0 - math.prod(1.0 - e.score for e in group),
+                               stamp_ns=max(e.stamp_ns for e in group), bay=first.bay, level=first.level))
+    return out
+
+
+def _check(depth: npt.NDArray[Any], intrinsics: Intrinsics, world_from_optical: npt.NDArray[Any],
            bays: Sequence[Bay], stride: int) -> tuple[npt.NDArray[np.float32], FloatArray]:
     """The depth image in metres (0 where none) and the pose, or a :class:`LoadScenesError` saying what is wrong."""
     if not bays:
@@ -153,20 +202,22 @@ def _check(depth: npt.NDArray[Any], intrinsics: CameraIntrinsics, world_from_opt
     return metres, pose
 
 
-def estimate_boxes(depth: npt.NDArray[Any], intrinsics: CameraIntrinsics, world_from_optical: npt.NDArray[Any],
+def estimate_boxes(depth: npt.NDArray[Any], intrinsics: Intrinsics, world_from_optical: npt.NDArray[Any],
                    bays: Sequence[Bay], *, stamp_ns: int, stride: int = 2, max_range_m: float = 5.0,
                    cell_m: float = 0.04, edge_m: float = 0.04, pallet_height_m: float = 0.15,
                    pallet_width_m: float = 1.2, pallet_depth_m: float | None = None,
                    min_area_m2: float = 0.02, min_width_m: float = 0.15,
-                   depth_sigma_m: tuple[float, float] = (0.0012, 0.0019), max_evidence_points: int = 4000) -> RackView:
+                   depth_sigma_m: tuple[float, float] = (0.0012, 0.0019), max_evidence_points: int = 4000,
+                   upright_margin_m: float = 0.15) -> RackView:
     """Pallets, loads and beams in the bays a depth image sees, in the map frame, and each bay's depth evidence.
 
     Parameters
     ----------
     depth : (height, width) uint16 millimetres or float metres
         The registered depth image; 0 (or inf) where there is no measurement, NaN is refused.
-    intrinsics : CameraIntrinsics
-        The depth camera's model (:func:`services.object_labelling.camera.intrinsics_from_camera_info`).
+    intrinsics : Intrinsics
+        The depth camera's model (:func:`services.load_scenes.frames.intrinsics_from_camera_info`; any pinhole
+        model with ``fx, fy, cx, cy, width, height`` does).
     world_from_optical : (4, 4) float
         Pose of the optical frame (x right, y down, z forward) in the map, metres.
     bays : sequence of Bay
@@ -197,12 +248,15 @@ def estimate_boxes(depth: npt.NDArray[Any], intrinsics: CameraIntrinsics, world_
         Axial depth noise ``a + b * (z - 0.4 m)^2`` (a in metres, b per metre), for the sigmas.
     max_evidence_points : int
         Each bay's evidence keeps at most this many points (evenly thinned).
+    upright_margin_m : float
+        The evidence leaves out this much of each side of a bay (its uprights, which the scene does not model),
+        metres.
 
     Returns
     -------
     RackView
         Estimates tied to bay and level (objects cut by the image border are left out: another view sees them
-        whole), and a :class:`DepthEvidence` per bay with points in its volume.
+        whole), and a :class:`DepthEvidence` per bay with points in its volume (uprights left out).
 
     Raises
     ------
@@ -243,7 +297,8 @@ def estimate_boxes(depth: npt.NDArray[Any], intrinsics: CameraIntrinsics, world_
         index = np.nonzero(inside)[0]
         if len(index) < settings.min_cells:
             continue
-        keep = index[:: max(1, -(-len(index) // max_evidence_points))]
+        clear = index[np.abs(u[index]) <= 0.5 * bay.width_m - upright_margin_m]  # uprights are not modelled
+        keep = clear[:: max(1, -(-len(clear) // max_evidence_points))]
         evidence[bay.key] = DepthEvidence((float(centre[0]), float(centre[1]), float(centre[2])),
                                           points[keep].copy(), stamp_ns)
         view = _BayPoints(u[index], v[index], z[index], border[index], noise[index], hidden[index])

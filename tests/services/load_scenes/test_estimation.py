@@ -11,19 +11,19 @@ import numpy.typing as npt
 import pytest
 
 from services.load_scenes.errors import LoadScenesError
-from services.load_scenes.estimation import RackView, bays_from_bins, estimate_boxes
+from services.load_scenes.estimation import RackView, bays_from_bins, estimate_boxes, merge_views
+from services.load_scenes.frames import Intrinsics, decode_depth, intrinsics_from_camera_info
 from services.load_scenes.model import Bay, BoxEstimate, ObjectKind
-from services.object_labelling.camera import CameraIntrinsics, make_intrinsics
-from services.pillar_mapping.levels import rack_profile
 from services.simulator import RgbdModel, depth_image_mm, loaded_layout, rack_view, render_boxes, world_from_layout
 from services.simulator.loads import RACK_CAMERAS, bin_records, seen_whole
 from services.simulator.render import Rendered
 from services.simulator.world import LoadTruth, ObjectClass, World
 from shared.bins import Bin
+from shared.settings import RackProfileSettings
 
 MODEL = RgbdModel()
 CAMERA = MODEL.camera()
-INTRINSICS = make_intrinsics(CAMERA.fx, CAMERA.fy, CAMERA.cx, CAMERA.cy, CAMERA.width, CAMERA.height)
+INTRINSICS = Intrinsics(CAMERA.fx, CAMERA.fy, CAMERA.cx, CAMERA.cy, CAMERA.width, CAMERA.height)
 KINDS = {ObjectClass.PALLET: ObjectKind.PALLET, ObjectClass.LOAD: ObjectKind.LOAD}
 
 
@@ -46,9 +46,9 @@ def _scene(seed: int, deep: int) -> Scene:
     return Scene(world, bays, {b: bay for bay in bays for b in bay.bin_ids})
 
 
-def _frame(scene: Scene, bin_id: str, camera: int, seed: int = 0) -> Frame:
+def _frame(scene: Scene, bin_id: str, camera: int, seed: int = 0, *, along_m: float = 0.0) -> Frame:
     height, pitch = RACK_CAMERAS[camera]
-    pose = rack_view(scene.world, bin_id, standoff_m=2.8, height_m=height, pitch_up_rad=pitch)
+    pose = rack_view(scene.world, bin_id, standoff_m=2.8, height_m=height, pitch_up_rad=pitch, along_m=along_m)
     rendered = render_boxes(scene.world.boxes, pose, CAMERA, far_m=8.0)
     depth = depth_image_mm(rendered.depth_m, MODEL, np.random.default_rng(seed))
     return Frame(pose, rendered, depth, estimate_boxes(depth, INTRINSICS, pose, scene.bays, stamp_ns=7))
@@ -180,7 +180,7 @@ def test_bad_input_is_refused_with_a_clear_error(single: Scene, single_frames: l
     depth: npt.NDArray[np.generic] = frame.depth.astype(np.float32) / 1000.0
     pose: npt.NDArray[np.float64] = frame.pose.copy()
     bays: list[Bay] = single.bays
-    intrinsics: CameraIntrinsics = INTRINSICS
+    intrinsics = INTRINSICS
     stride = 2
     if change == "nan":
         depth[10, 10] = np.nan
@@ -223,11 +223,47 @@ def test_bays_from_bins_takes_levels_from_profiles_and_skips_what_it_cannot_plac
     cells = [Bin(id="01-001", centre=(1.35, 0.55), aisle=1, bay=1, footprint=footprint, row="R01L"),
              Bin(id="01-003", centre=(4.0, 0.55), aisle=1, bay=3),  # no footprint
              Bin(id="01-005", centre=(9.0, 0.55), aisle=1, bay=5, footprint=footprint, row="R01L")]
-    profiles = [rack_profile([0.0, 1.5], area=[[-1.0, -1.0], [5.0, -1.0], [5.0, 5.0], [-1.0, 5.0]])]
+    profiles = [RackProfileSettings(levels_m=[0.0, 1.5], area=[(-1.0, -1.0), (5.0, -1.0), (5.0, 5.0), (-1.0, 5.0)]),
+                RackProfileSettings(levels_m=[0.0, 1.2, 2.4])]  # elsewhere: bin 01-005
     bays = bays_from_bins(cells, profiles=profiles)
-    assert [(b.key, b.bin_ids, b.levels_z_m) for b in bays] == [("R01L/001", ("01-001-01", "01-001-02"), (0.0, 1.5))]
+    assert [(b.key, b.bin_ids, b.levels_z_m) for b in bays] == [
+        ("R01L/001", ("01-001-01", "01-001-02"), (0.0, 1.5)),
+        ("R01L/005", ("01-005-01", "01-005-02", "01-005-03"), (0.0, 1.2, 2.4))]
     assert bays[0].yaw_rad == pytest.approx(math.pi / 2)
     flat = Bin(id="01-007-01", centre=(0.0, 0.0), aisle=1, bay=7, level=0, z_m=0.0,
                footprint=((0.0, 0.0), (0.0, 0.0), (0.0, 1.0), (0.0, 0.0)))
     with pytest.raises(LoadScenesError, match="front edge"):
         bays_from_bins([flat])
+
+
+def test_views_of_one_object_merge_into_one_estimate_and_others_stay_apart(single: Scene,
+                                                                           single_frames: list[Frame]) -> None:
+    frames = [single_frames[0], _frame(single, single.bays[0].bin_ids[0], 0, along_m=0.2)]  # a step further
+    boxes = [e for f in frames for e in f.view.boxes if e.kind is not ObjectKind.BEAM]
+    merged = merge_views(boxes)
+    assert len(merged) < len(boxes)
+    for a in merged:
+        for b in merged:
+            if a is not b and a.kind is b.kind and a.bay == b.bay and a.level == b.level:
+                assert math.dist(a.centre, b.centre) > 0.25
+    again = [m for m in merged if sum(math.dist(m.centre, e.centre) <= 0.25 and e.kind is m.kind for e in boxes) > 1]
+    assert again and all(m.sigma[0] < 0.2 for m in again)
+    for m in again:
+        views = [e for e in boxes if e.kind is m.kind and e.bay == m.bay and math.dist(m.centre, e.centre) <= 0.25]
+        assert m.score >= max(e.score for e in views)
+
+
+def test_camera_info_and_depth_messages_are_read_and_bad_ones_refused() -> None:
+    from services.simulator import rosmsgs
+
+    _, info = rosmsgs.camera_info(5, "cam", width=CAMERA.width, height=CAMERA.height, k=CAMERA.k())
+    assert intrinsics_from_camera_info(info) == INTRINSICS
+    depth = np.arange(12, dtype=np.uint16).reshape(3, 4)
+    _, image = rosmsgs.image(5, "cam", depth)
+    assert np.array_equal(decode_depth(image), depth)
+    _, flat = rosmsgs.camera_info(5, "cam", width=4, height=3, k=np.zeros((3, 3)))
+    with pytest.raises(LoadScenesError, match="not usable"):
+        intrinsics_from_camera_info(flat)
+    _, colour = rosmsgs.image(5, "cam", np.zeros((3, 4, 3), np.uint8))
+    with pytest.raises(LoadScenesError, match="16UC1"):
+        decode_depth(colour)
