@@ -277,6 +277,7 @@ def estimate_boxes(depth: npt.NDArray[Any], intrinsics: Intrinsics, world_from_o
     noise = depth_sigma_m[0] + depth_sigma_m[1] * (z_opt - 0.4) ** 2
     hidden = _occluded(sub)[rows, cols]
     centre = pose[:3, 3]
+    sparse = points[::16]
     boxes: list[BoxEstimate] = []
     evidence: dict[str, DepthEvidence] = {}
     settings = _Grid(cell_m, edge_m, pallet_height_m, max(2, round(min_area_m2 / cell_m**2)), min_width_m,
@@ -290,11 +291,14 @@ def estimate_boxes(depth: npt.NDArray[Any], intrinsics: Intrinsics, world_from_o
         if float((centre[:2] - bay.origin) @ inward) >= 0:
             continue  # the camera is not in front of the bay (it would see the backs of its loads)
         across = np.array([math.sin(yaw), -math.cos(yaw)])
-        rel = points[:, :2] - bay.origin
-        u, v, z = rel @ across, rel @ inward, points[:, 2]
+        axes = np.column_stack((across, inward))
         top = bay.levels_z_m[-1] + TOP_HEIGHT_M
-        inside = (np.abs(u) <= 0.5 * bay.width_m) & (v >= -FRONT_REACH_M) & (v <= bay.depth_m) & (z >= 0.0) & (z < top)
-        index = np.nonzero(inside)[0]
+        coarse = (sparse[:, :2] - bay.origin) @ axes  # a sixteenth of the points first: is the bay in view at all?
+        if not _inside(coarse[:, 0], coarse[:, 1], sparse[:, 2], bay, top).any():
+            continue
+        uv = (points[:, :2] - bay.origin) @ axes
+        u, v, z = uv[:, 0], uv[:, 1], points[:, 2]
+        index = np.nonzero(_inside(u, v, z, bay, top))[0]
         if len(index) < settings.min_cells:
             continue
         clear = index[np.abs(u[index]) <= 0.5 * bay.width_m - upright_margin_m]  # uprights are not modelled
@@ -315,6 +319,12 @@ def _occluded(depth_m: npt.NDArray[np.float32]) -> npt.NDArray[np.bool_]:
     nearest = cv2.erode(far, kernel, anchor=(1, 0), borderType=cv2.BORDER_REPLICATE)
     with np.errstate(invalid="ignore"):
         return np.asarray(far - nearest > _OCCLUDER_M, dtype=np.bool_)
+
+
+def _inside(u: FloatArray, v: FloatArray, z: FloatArray, bay: Bay, top: float) -> npt.NDArray[np.bool_]:
+    """Points (bay frame) in the bay's volume: its width, from ``FRONT_REACH_M`` before its front to its back,
+    from the floor to ``top``."""
+    return (np.abs(u) <= 0.5 * bay.width_m) & (v >= -FRONT_REACH_M) & (v <= bay.depth_m) & (z >= 0.0) & (z < top)
 
 
 class _Grid(NamedTuple):
