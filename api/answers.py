@@ -4,16 +4,27 @@ answer is encoded (numbers rounded as :mod:`atlas.precision` says)."""
 
 from __future__ import annotations
 
+import datetime as dt
 from typing import Any
 
 from fastapi.responses import JSONResponse
 
-from api.models import AccessPose, BinOut, Opening, PlaceRef
+from api.models import (
+    UNKNOWN_OCCUPANCY,
+    AccessPose,
+    BinOut,
+    OccupancyOut,
+    Opening,
+    PlaceRef,
+    SceneEdgeOut,
+    SceneNodeOut,
+)
 from api.translate import http_error
 from atlas.bins import BinAnswer, no_bin
 from atlas.bins import PlaceRef as MapPlaceRef
 from atlas.live import LiveMap
 from atlas.precision import json_bytes
+from shared.loads import BinOccupancy, SceneEdge, SceneNode
 from shared.store import MapInfo
 
 
@@ -54,7 +65,31 @@ def bin_out(answer: BinAnswer) -> BinOut:
         confidence=record.confidence,
         stage=answer.stage,
         revision_id=answer.revision_id,
+        occupancy=(UNKNOWN_OCCUPANCY if answer.occupancy is None
+                   else occupancy_out(answer.occupancy, answer.occupancy_revision_id)),
     )
+
+
+def stamp(ns: int | None) -> dt.datetime | None:
+    """A stamp in nanoseconds since the epoch as a UTC time (None stays None)."""
+    return None if ns is None else dt.datetime.fromtimestamp(ns / 1e9, tz=dt.UTC)
+
+
+def occupancy_out(occupancy: BinOccupancy, revision_id: int | None) -> OccupancyOut:
+    """A stored bin state in WMS form."""
+    return OccupancyOut(state=occupancy.state.value, confidence=occupancy.confidence,
+                        last_seen=stamp(occupancy.last_seen_ns), views=occupancy.views, objects=list(occupancy.objects),
+                        stable=occupancy.stable, hidden=occupancy.hidden, bay=occupancy.bay, revision_id=revision_id)
+
+
+def node_out(node: SceneNode) -> SceneNodeOut:
+    return SceneNodeOut(id=node.id, kind=node.kind.value, centre=node.centre, size=node.size, yaw_rad=node.yaw_rad,
+                        level=node.level, flags=sorted(flag.value for flag in node.flags), probability=node.probability)
+
+
+def edge_out(edge: SceneEdge) -> SceneEdgeOut:
+    return SceneEdgeOut(source=edge.source, target=edge.target, relation=edge.relation.value,
+                        probability=edge.probability)
 
 
 def live_bin(live: LiveMap, map_info: MapInfo, bin_id: str) -> bytes:
@@ -63,7 +98,9 @@ def live_bin(live: LiveMap, map_info: MapInfo, bin_id: str) -> bytes:
     row = live.bin_row(bin_id)
     if row is None:
         raise http_error(no_bin(map_info, bin_id, None))
-    body = live.bin_json.get(row.id)
+    state = live.state_row(row)
+    rows = (row.id, 0 if state is None else state.id)
+    body = live.bin_json.get(rows)
     if body is None:
-        body = live.bin_json[row.id] = json_bytes(bin_out(live.bin_answer(row)).model_dump(mode="json"))
+        body = live.bin_json[rows] = json_bytes(bin_out(live.bin_answer(row, state)).model_dump(mode="json"))
     return body

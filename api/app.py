@@ -38,6 +38,7 @@ from api.routers import (
     robots,
     routes,
     semantics,
+    stock,
     topology,
     viewer,
     wms,
@@ -168,8 +169,8 @@ def create_app(
     app.add_exception_handler(StoreUnavailableError, _store_unavailable)
     app.add_exception_handler(StoreError, _store_error)
     app.add_exception_handler(Exception, _unexpected)
-    for module in (health, maps, layers, features, layout, exports, bins, wms, semantics, topology, blocks, routes,
-                   places, robots, history, events, keys, viewer):
+    for module in (health, maps, layers, features, layout, exports, bins, wms, stock, semantics, topology, blocks,
+                   routes, places, robots, history, events, keys, viewer):
         app.include_router(module.router)
     app.add_middleware(BodyLimit, max_bytes=settings.api_max_body_bytes)
     app.add_middleware(LiveReads, context=context)  # inside CORS, so its answers get CORS headers too

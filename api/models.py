@@ -259,6 +259,30 @@ class PlaceRef(BaseModel):
 
 
 BinStatus = Literal["matched", "unknown_to_wms", "unreconciled"]
+OccupancyState = Literal["empty", "occupied", "unknown"]
+
+
+class OccupancyOut(BaseModel):
+    """What the robots saw in a bin (the load-scene stage's ``bin_state``)."""
+
+    state: OccupancyState = Field(description="`empty`, `occupied` or `unknown` (never seen well enough, or no "
+                                              "stage looks at loads).")
+    confidence: float | None = Field(description="Probability 0..1 of `state`; null when nothing was stored.")
+    last_seen: dt.datetime | None = Field(description="When a robot last saw the bin (UTC); null if never.")
+    views: int = Field(description="Separate views the state rests on, count.")
+    objects: list[str] = Field(description="Ids of the objects in the bin (pallet first), nodes of the bay's scene "
+                                           "(`GET …/bins/{id}/scene`).")
+    stable: bool | None = Field(description="False when a load in the bin touches another unstably (leaning, "
+                                            "overhanging); null when empty or unknown.")
+    hidden: bool = Field(description="True when an object in the bin was inferred, not seen (e.g. a second-deep "
+                                     "pallet behind the front one).")
+    bay: str | None = Field(description="Key of the rack bay (`load_scene` feature) the bin is in.")
+    revision_id: int | None = Field(description="Revision that wrote this state; null when nothing was stored.")
+
+
+UNKNOWN_OCCUPANCY = OccupancyOut(state="unknown", confidence=None, last_seen=None, views=0, objects=[], stable=None,
+                                 hidden=False, bay=None, revision_id=None)
+"""The occupancy of a bin nothing was stored for."""
 
 
 class BinOut(BaseModel):
@@ -295,6 +319,8 @@ class BinOut(BaseModel):
                     "upright no landmark supports counts 0); null for bins written without one.")
     stage: str = Field(description="The stage that wrote the bin.")
     revision_id: int = Field(description="Revision that wrote this version of the bin.")
+    occupancy: OccupancyOut = Field(UNKNOWN_OCCUPANCY, description="What the robots saw in the bin: `unknown` "
+                                                                   "until a stage stores a state for it.")
 
     model_config = {"json_schema_extra": {"examples": [{
         "id": "A-03-014", "detected_id": "03-014", "wms_id": "A-03-014", "status": "matched", "aisle": 3, "bay": 14,
@@ -306,4 +332,39 @@ class BinOut(BaseModel):
         "region": {"key": "r12", "label": "corridor", "distance_m": None},
         "storage_region": {"key": "r40", "label": "storage", "distance_m": None},
         "nearest_junction": {"key": "r3", "label": "junction", "distance_m": 18.4},
-        "confidence": 0.92, "stage": "pillar_mapping", "revision_id": 1207}]}}
+        "confidence": 0.92, "stage": "pillar_mapping", "revision_id": 1207,
+        "occupancy": {"state": "occupied", "confidence": 0.97, "last_seen": "2026-11-26T03:10:04Z", "views": 3,
+                      "objects": ["p1", "l1"], "stable": True, "hidden": False, "bay": "r0-006/14",
+                      "revision_id": 1210}}]}}
+
+
+class SceneNodeOut(BaseModel):
+    """One object of a bay's scene graph."""
+
+    model_config = example_config(id="l1", kind="load", centre=[41.2, 17.9, 1.05], size=[1.2, 0.8, 0.9],
+                                  yaw_rad=1.5708, level=1, flags=[], probability=0.98)
+
+    id: str = Field(description="The object's id in the scene.")
+    kind: Literal["pallet", "load", "beam"] = Field(description="`pallet`, `load` (goods on a pallet) or `beam` "
+                                                                "(the beam pair of a level).")
+    centre: tuple[float, float, float] = Field(description="(x, y, z) of the box's centre, metres, map frame, z up "
+                                                           "from the floor.")
+    size: tuple[float, float, float] = Field(description="Extent along the box's own x, y and z axes, metres, in the "
+                                                         "box's frame (the map frame turned by `yaw_rad`).")
+    yaw_rad: float = Field(description="Turn of the box's x axis from the map x axis, radians.")
+    level: int | None = Field(description="Rack level number the object is on (0 = floor); null if none.")
+    flags: list[Literal["false_estimate", "hidden_below"]] = Field(
+        description="`false_estimate`: a detection the evidence rejects (a ghost); `hidden_below`: an object nobody "
+                    "saw, inferred because something would hover without it.")
+    probability: float = Field(description="Posterior probability 0..1 that the object is there as described.")
+
+
+class SceneEdgeOut(BaseModel):
+    model_config = example_config(source="p1", target="l1", relation="supports", probability=0.99)
+
+    source: str = Field(description="Id of the supporting (or touching) object.")
+    target: str = Field(description="Id of the supported (or touched) object.")
+    relation: Literal["supports", "unstable_contact"] = Field(
+        description="`supports`: the source stably holds the target up; `unstable_contact`: they touch but neither "
+                    "stably holds the other (a leaning or overhanging load).")
+    probability: float = Field(description="Posterior probability 0..1 of the relation.")

@@ -22,6 +22,7 @@ from atlas.errors import NotInMapError
 from atlas.grids import cached_layer, nearest_drivable_region, region_holding
 from atlas.reconcile import WMS_STAGE, MatchBy, WmsMatching, detected_bin, reconcile, wms_matching
 from shared.bins import Bin
+from shared.loads import BinOccupancy, Occupancy, occupancy_from_feature
 from shared.store import GridLayer, MapInfo, MapStore, Revision, StoredFeature, WmsBin
 from shared.store.records import bounds
 from shared.vocabulary import FeatureKind, LayerName
@@ -147,11 +148,20 @@ class BinAnswer:
     """The stage that wrote the bin."""
     revision_id: int
     """The revision that wrote this version of the bin."""
+    occupancy: BinOccupancy | None = None
+    """What the robots saw in the bin (``bin_state``); None when nothing was stored for it."""
+    occupancy_revision_id: int | None = None
+    """The revision that wrote ``occupancy``."""
 
     @property
     def id(self) -> str:
         """The id to use: the WMS's when matched, else Aisle's."""
         return self.wms_id or self.bin.id
+
+    @property
+    def state(self) -> Occupancy:
+        """The bin's occupancy state; ``unknown`` when nothing was stored for it."""
+        return Occupancy.UNKNOWN if self.occupancy is None else self.occupancy.state
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,9 +172,11 @@ class BinSelection:
     total: int
 
 
-def answer_bin(record: Bin, index: BinIndex, *, stage: str, revision_id: int) -> BinAnswer:
+def answer_bin(record: Bin, index: BinIndex, *, stage: str, revision_id: int, state: StoredFeature | None = None
+               ) -> BinAnswer:
     """``record`` (written by ``stage`` in revision ``revision_id``) with its WMS id and status, its corridor,
-    region and nearest junction, from ``index`` (of the same revision)."""
+    region and nearest junction, from ``index`` (of the same revision), and what the robots saw in it (``state``,
+    its stored ``bin_state`` feature of that revision, if any)."""
     status, wms_id = index.status_of(record.id)
     x, y = record.reach
     place = index.place_at(x, y)
@@ -177,12 +189,26 @@ def answer_bin(record: Bin, index: BinIndex, *, stage: str, revision_id: int) ->
         region=None if place is None else PlaceRef(place[0], place[1]),
         storage_region=None if storage is None else PlaceRef(storage[0], storage[1]),
         nearest_junction=None if nearest is None else PlaceRef(nearest[0], FeatureKind.JUNCTION.value, nearest[1]),
-        stage=stage, revision_id=revision_id)
+        stage=stage, revision_id=revision_id,
+        occupancy=None if state is None else occupancy_from_feature(state.feature),
+        occupancy_revision_id=None if state is None else state.revision_id)
 
 
-def answer_stored(stored: StoredFeature, index: BinIndex) -> BinAnswer:
-    """:func:`answer_bin` of a stored ``bin`` feature."""
-    return answer_bin(Bin.from_feature(stored.feature), index, stage=stored.stage, revision_id=stored.revision_id)
+def answer_stored(stored: StoredFeature, index: BinIndex, state: StoredFeature | None = None) -> BinAnswer:
+    """:func:`answer_bin` of a stored ``bin`` feature (and its stored ``bin_state``, if any)."""
+    return answer_bin(Bin.from_feature(stored.feature), index, stage=stored.stage, revision_id=stored.revision_id,
+                      state=state)
+
+
+def bin_states(store: MapStore, map_id: int, revision: int | None) -> dict[str, StoredFeature]:
+    """The stored ``bin_state`` features live at ``revision`` (default: now) by bin id (Aisle's); where several
+    stages wrote one for a bin, the newest."""
+    states: dict[str, StoredFeature] = {}
+    for stored in store.features(map_id, kinds=[FeatureKind.BIN_STATE], revision=revision):
+        known = states.get(stored.feature.key)
+        if known is None or known.revision_id <= stored.revision_id:
+            states[stored.feature.key] = stored
+    return states
 
 
 def bin_index(store: MapStore, cache: RevisionCache, map_id: int, revision: int | None) -> BinIndex:
@@ -262,14 +288,16 @@ def import_wms_list(store: MapStore, cache: RevisionCache, map_id: int, items: S
 
 def select_bins(store: MapStore, cache: RevisionCache, map_id: int, *, revision: int | None, bbox: BBox | None,
                 aisle: int | None = None, row: str | None = None, level: int | None = None,
-                id_prefix: str | None = None, status: BinStatus | None = None, limit: int, offset: int
-                ) -> BinSelection:
+                id_prefix: str | None = None, status: BinStatus | None = None, occupancy: Occupancy | None = None,
+                limit: int, offset: int) -> BinSelection:
     """Bins of the map (as of ``revision``) passing every filter given, sorted by the id to use, a page of them.
 
     ``bbox`` keeps bins whose bounds touch it (metres), ``id_prefix`` those whose id to use or Aisle's id
-    starts so. Each bin is read once; only the page gets its corridor, region and nearest junction.
+    starts so, ``occupancy`` those the robots saw so (``unknown`` includes bins with no state stored). Each bin is
+    read once; only the page gets its corridor, region and nearest junction.
     """
     index = bin_index(store, cache, map_id, revision)
+    states = bin_states(store, map_id, revision)
     chosen: list[tuple[str, int, Bin, StoredFeature]] = []
     for stored in store.features(map_id, kinds=[FeatureKind.BIN], bbox=bbox, revision=revision):
         record = Bin.from_feature(stored.feature)
@@ -277,10 +305,12 @@ def select_bins(store: MapStore, cache: RevisionCache, map_id: int, *, revision:
         shown = wms_id or record.id
         if ((aisle is None or record.aisle == aisle) and (row is None or record.row == row)
                 and (level is None or record.level == level) and (status is None or status_now == status)
-                and (id_prefix is None or shown.startswith(id_prefix) or record.id.startswith(id_prefix))):
+                and (id_prefix is None or shown.startswith(id_prefix) or record.id.startswith(id_prefix))
+                and (occupancy is None or _state_of(states.get(record.id)) == occupancy)):
             chosen.append((shown, stored.revision_id, record, stored))
     chosen.sort(key=lambda entry: (entry[0], entry[1]))
-    page = [answer_bin(record, index, stage=stored.stage, revision_id=stored.revision_id)
+    page = [answer_bin(record, index, stage=stored.stage, revision_id=stored.revision_id,
+                       state=states.get(record.id))
             for _, _, record, stored in chosen[offset:offset + limit]]
     return BinSelection(page, len(chosen))
 
@@ -295,10 +325,15 @@ def stored_bin(store: MapStore, cache: RevisionCache, map_info: MapInfo, bin_id:
         The map has no such bin then.
     """
     index = bin_index(store, cache, map_info.id, revision)
-    found = store.feature(map_info.id, FeatureKind.BIN, index.detected_id(bin_id), revision=revision)
+    detected = index.detected_id(bin_id)
+    found = store.feature(map_info.id, FeatureKind.BIN, detected, revision=revision)
     if found is None:
         raise no_bin(map_info, bin_id, revision)
-    return answer_stored(found, index)
+    return answer_stored(found, index, store.feature(map_info.id, FeatureKind.BIN_STATE, detected, revision=revision))
+
+
+def _state_of(stored: StoredFeature | None) -> Occupancy:
+    return Occupancy.UNKNOWN if stored is None else occupancy_from_feature(stored.feature).state
 
 
 def no_bin(map_info: MapInfo, bin_id: str, revision: int | None) -> BinNotFoundError:

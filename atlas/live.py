@@ -42,6 +42,7 @@ from shared.worker import MAP_EVENTS_TOPIC
 
 _BIN = FeatureKind.BIN.value
 """The bin kind as a plain string: live look-ups hash it, and a plain string hashes without a Python call."""
+_BIN_STATE = FeatureKind.BIN_STATE.value
 
 log = logging.getLogger(__name__)
 
@@ -60,16 +61,21 @@ class LiveMap:
     revision_id: int
     features: FeatureIndex
     bins: BinIndex
-    bin_json: dict[int, bytes] = field(default_factory=dict, repr=False)
-    """Bin answers (JSON) made with ``bins`` so far, by the bin's feature row id; the API fills it."""
+    bin_json: dict[tuple[int, int], bytes] = field(default_factory=dict, repr=False)
+    """Bin answers (JSON) made with ``bins`` so far, by the feature row ids of the bin and of its state (0 without
+    one); the API fills it."""
 
     def bin_row(self, bin_id: str) -> FeatureRow | None:
         """The live row of the bin a client names ``bin_id`` (its WMS id or Aisle's), or None."""
         return self.features.feature(_BIN, self.bins.detected_id(bin_id))
 
-    def bin_answer(self, row: FeatureRow) -> BinAnswer:
-        """The answer about the bin of live row ``row``."""
-        return answer_stored(stored_feature(row), self.bins)
+    def state_row(self, row: FeatureRow) -> FeatureRow | None:
+        """The live ``bin_state`` row of the bin of live row ``row``, or None."""
+        return self.features.feature(_BIN_STATE, row.key)
+
+    def bin_answer(self, row: FeatureRow, state: FeatureRow | None = None) -> BinAnswer:
+        """The answer about the bin of live row ``row`` (with its live state row ``state``)."""
+        return answer_stored(stored_feature(row), self.bins, None if state is None else stored_feature(state))
 
 
 @dataclass(slots=True)
@@ -237,7 +243,7 @@ class LiveMaps:
         if any(_changes_bins(revision, matched=current.bins.matching is not None) for revision in since):
             return LiveMap(upto, features, bin_index(self.store, self.cache, map_id, upto))
         # list() copies at once: the bins route adds answers meanwhile
-        kept = {row_id: answer for row_id, answer in list(current.bin_json.items()) if row_id not in retired}
+        kept = {rows: answer for rows, answer in list(current.bin_json.items()) if retired.isdisjoint(rows)}
         return LiveMap(upto, features, current.bins, kept)
 
 

@@ -27,6 +27,7 @@ def stage_factories() -> dict[str, StageFactory]:
     """
     from services.floor_plan.worker import floor_plan_stage
     from services.grid_decomposition.worker import decomposition_stage
+    from services.load_scenes.worker import load_scenes_stage
     from services.object_labelling.worker import labelling_stage
     from services.occupancy_mapping.worker import occupancy_stage
     from services.pillar_mapping.worker import pillar_stage
@@ -39,6 +40,7 @@ def stage_factories() -> dict[str, StageFactory]:
         "object_labelling": labelling_stage,
         "semantic_fusion": fusion_stage,
         "floor_plan": floor_plan_stage,
+        "load_scenes": load_scenes_stage,
     }
     assert set(factories) == set(STAGES)
     return factories

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from shared.store.retention import RetentionPolicy
 
 STAGES = ("occupancy_mapping", "grid_decomposition", "pillar_mapping", "object_labelling", "semantic_fusion",
-          "floor_plan")
+          "floor_plan", "load_scenes")
 """Every stage worker Aisle has (``aisle worker STAGE``)."""
 
 
@@ -185,6 +185,23 @@ class LabellingSettings(BaseModel):
     frame_queue_size: int = Field(4, ge=1)
 
 
+class LoadScenesStageSettings(BaseModel):
+    """The load-scene stage: rack faces in RGB-D depth into bay scene graphs and bin occupancy (seed 003, ch. 4)."""
+
+    depth_topic: str = "rgbd/depth/image_raw"
+    camera_info_topic: str = "rgbd/camera_info"
+    map_frame: str = "map"
+    pose_wait_s: float = Field(0.5, ge=0.0, description="How long a frame waits for TF at its stamp.")
+    frame_queue_size: int = Field(4, ge=1)
+    stride: int = Field(2, ge=1, le=8, description="Every stride-th depth row and column is used.")
+    max_range_m: float = Field(5.0, gt=0.0, description="Depths beyond this are ignored.")
+    commit_period_s: float = Field(5.0, gt=0.0, description="How often the bays seen since are explained and stored.")
+    views_per_bay: int = Field(8, ge=1, le=100, description="Newest views of a bay one scene is inferred from.")
+    merge_distance_m: float = Field(0.25, gt=0.0, description="Estimates of one kind closer than this across views "
+                                    "are one object.")
+    beam_height_m: float = Field(0.12, gt=0.0, description="Vertical size of the racks' beams.")
+
+
 class DecompositionSettings(BaseModel):
     """The grid-decomposition stage: the occupancy layer into place labels, regions and topology."""
 
@@ -224,7 +241,7 @@ class RetentionSettings(BaseModel):
         "older ones are thinned to the newest of each day.",
     )
     keep_stages: list[str] = Field(
-        default_factory=lambda: ["operator", "label_table", "wms"],
+        default_factory=lambda: ["operator", "label_table", "wms", "wms_stock"],
         description="Stages whose revisions are never thinned: what people and the WMS wrote.",
     )
     compact_period_s: float = Field(
@@ -302,6 +319,9 @@ class Settings(BaseSettings):
     api_gzip_min_bytes: int = Field(
         65536, ge=0, description="GET answers at least this long (bytes) are gzip-compressed for clients that accept "
         "it; smaller ones cost more CPU to compress than they save on a site network.")
+    api_stock_min_views: int = Field(
+        2, ge=1, le=1000, description="Views a bin needs before `GET …/wms-stock/discrepancies` reports it (agreeing "
+        "or not): a bin the robots saw fewer times is left unchecked.")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     retention: RetentionSettings = Field(default_factory=RetentionSettings)
@@ -311,6 +331,7 @@ class Settings(BaseSettings):
     labelling: LabellingSettings = Field(default_factory=LabellingSettings)
     decomposition: DecompositionSettings = Field(default_factory=DecompositionSettings)
     floor_plan: FloorPlanStageSettings = Field(default_factory=FloorPlanStageSettings)
+    load_scenes: LoadScenesStageSettings = Field(default_factory=LoadScenesStageSettings)
     stages: list[str] = Field(
         default_factory=lambda: ["occupancy_mapping", "grid_decomposition", "pillar_mapping", "semantic_fusion"],
         description="Stages `aisle run` starts; object_labelling needs a model from `aisle train-classifier` first.",

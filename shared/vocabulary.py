@@ -42,6 +42,12 @@ class FeatureKind(enum.StrEnum):
     """A door of the floor plan: an opening in the wall two units share."""
     OBSTACLE = "obstacle"
     """A solid block of the map (a rack drawn solid, a filled outside) the floor plan keeps out of its units."""
+    BIN_STATE = "bin_state"
+    """What the robots saw in a bin (empty, occupied by which objects, unknown), keyed by the bin's id
+    (``shared.loads``)."""
+    LOAD_SCENE = "load_scene"
+    """The scene graph of a rack bay (objects, supports, unstable contacts, false and hidden objects), keyed by the
+    bay (``shared.loads``)."""
 
 
 REGION_KINDS: Final = (FeatureKind.CORRIDOR, FeatureKind.JUNCTION, FeatureKind.ROOM, FeatureKind.OPEN_AREA,

@@ -21,7 +21,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 OURS = ("shared", "services", "api", "atlas", "migrations")
 STAGES = ("occupancy_mapping", "pillar_mapping", "grid_decomposition", "object_labelling", "semantic_fusion",
-          "floor_plan", "simulator", "replay")
+          "floor_plan", "load_scenes", "simulator", "replay")
 COMPOSITION_ROOT = ("services.cli", "services.runtime")
 
 

@@ -32,6 +32,8 @@ class FeatureChanges(BaseModel):
     added: int
     removed: int
     moved: int
+    changed: int = Field(0, description="Features whose properties changed in place (same key and geometry), "
+                                        "count: e.g. bin states whose occupancy or last sighting changed.")
     total: int = Field(description="Features of the kind the stage asserts after the revision.")
 
 
@@ -43,6 +45,10 @@ class RevisionEvent(BaseModel):
     layers_updated: list[str]
     features: dict[str, FeatureChanges] = Field(description="Per feature kind the stage wrote, what changed.")
     topology_changed: bool
+    occupancy_changed: list[str] = Field(
+        default_factory=list, description="Aisle's ids of the bins whose occupancy (empty, occupied, unknown) the "
+                                          "revision changed (the first 1000; `features.bin_state` counts every bin "
+                                          "state written); read them with `GET …/bins/{id}`.")
 
 
 def revision_event(map_info: MapInfo, revision: Revision) -> RevisionEvent:
@@ -56,9 +62,10 @@ def revision_event(map_info: MapInfo, revision: Revision) -> RevisionEvent:
         created_at=revision.created_at,
         layers_updated=list(summary.get("layers_updated", [])),
         features={kind: FeatureChanges(**{name: int(counts.get(name, 0))
-                                          for name in ("added", "removed", "moved", "total")})
+                                          for name in ("added", "removed", "moved", "changed", "total")})
                   for kind, counts in changes.items()},
         topology_changed=bool(summary.get("topology_changed", False)),
+        occupancy_changed=[str(bin_id) for bin_id in summary.get("occupancy_changed", [])],
     )
 
 

@@ -85,8 +85,8 @@ polygons, pillars as dots, docks, gates, chargers and objects as markers. The le
 names the revision, every kind drawn with its count, the place labels shown, and a scale bar.
 
 `kind` (repeatable) picks the kinds drawn (default: all but `line`, the decomposition's cut
-lines); `bbox` the area shown (default: the whole map); `width` the map's width in pixels
-(64..4096; the height follows the map's aspect, at most 4096).
+lines, and `bin_state` and `load_scene`, a dot on every bin and bay); `bbox` the area shown (default: the whole
+map); `width` the map's width in pixels (64..4096; the height follows the map's aspect, at most 4096).
 """
 
 

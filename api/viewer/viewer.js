@@ -21,6 +21,7 @@ const LAYERS = [  // [id, title, swatch colour, feature kinds]
   ["topology", "Topology graph", "#444444", []],
   ["robots", "Robots", "#d62728", []],
 ];
+const NOT_DRAWN = new Set(["bin_state", "load_scene"]);  // feature kinds a revision event need not refetch
 const REGION_COLOURS = { corridor: "#78c878", junction: "#466ee6", storage: "#f0aa3c", room: "#bea0e6",
   open_area: "#96dce6", unidentified: "#c8c8c8" };
 const KIND_STYLE = {
@@ -422,7 +423,8 @@ function revisionArrived(event) {
   slider.max = state.latest;
   if (state.history === null) slider.value = state.latest;
   for (const name of event.layers_updated) state.pendingLayers.add(name);
-  for (const kind of Object.keys(event.features)) state.pendingKinds.add(kind);
+  // bin states and bay scenes change often and are not drawn (the bin card reads a bin's state)
+  for (const kind of Object.keys(event.features)) if (!NOT_DRAWN.has(kind)) state.pendingKinds.add(kind);
   state.pendingTopology ||= event.topology_changed;
   state.pendingEvent = event;
   if (state.history === null && !state.refreshTimer && !state.refreshing) state.refreshTimer = setTimeout(refresh, 100);
@@ -550,9 +552,14 @@ async function showBin(id) {
     button.addEventListener("click", () => showBin(key));
     return button;
   });
+  const seen = bin.occupancy;  // what the robots saw in it, when a load-scene stage runs
+  const occupancy = !seen || seen.state === "unknown" ? "unknown"
+    : `${seen.state} (${fmt(seen.confidence)}, ${seen.views} views`
+      + `${seen.last_seen ? ", seen " + new Date(seen.last_seen).toLocaleString() : ""})`
+      + (seen.objects.length ? ": " + seen.objects.join(", ") : "");
   showCard(`Bin ${bin.id}`, [["id", bin.id], ["aisle", bin.aisle ?? "–"], ["bay", bin.bay ?? "–"],
     ["level", bin.level ?? "–"], ["opening", opening], ["access pose", pose(bin.access_pose)],
-    ["confidence", fmt(bin.confidence)], ["corridor", place(bin.corridor)],
+    ["confidence", fmt(bin.confidence)], ["occupancy", occupancy], ["corridor", place(bin.corridor)],
     ["nearest junction", place(bin.nearest_junction)], ["revision", bin.revision_id ?? "–"]], levels);
   return bin;
 }

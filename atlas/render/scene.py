@@ -113,14 +113,18 @@ KIND_STYLES: Mapping[str, KindStyle] = {
     FeatureKind.DOCK: KindStyle((0, 150, 170), 3, 0.3, Marker.SQUARE, 12, True, Swatch.MARKER),
     FeatureKind.GATE: KindStyle((150, 0, 170), 3, 0.3, Marker.TRIANGLE, 13, True, Swatch.MARKER),
     FeatureKind.CHARGER: KindStyle((20, 150, 40), 2, 0.3, Marker.DIAMOND, 13, True, Swatch.MARKER),
+    FeatureKind.LOAD_SCENE: KindStyle((120, 80, 40), 1, 0.3, Marker.SQUARE, 8, False, Swatch.MARKER),
+    FeatureKind.BIN_STATE: KindStyle((255, 200, 0), 1, 0.6, Marker.DOT, 6, False, Swatch.MARKER),
     FeatureKind.OBJECT: KindStyle((220, 0, 110), 2, 0.3, Marker.CROSS, 12, True, Swatch.MARKER),
     FeatureKind.ROBOT: KindStyle((214, 39, 40), 2, 0.3, Marker.DOT, 12, True, Swatch.MARKER),
 }
 """Style of every feature kind, in drawing order (first drawn first, so places lie under the rest)."""
 OUTLINE: RGB = (20, 20, 20)
 """Outline of the larger markers."""
-DEFAULT_KINDS = tuple(kind for kind in KIND_STYLES if kind != FeatureKind.LINE)
-"""Kinds drawn when none are asked for: all but ``line`` (the decomposition's cut lines, which clutter)."""
+DEFAULT_KINDS = tuple(kind for kind in KIND_STYLES
+                      if kind not in (FeatureKind.LINE, FeatureKind.BIN_STATE, FeatureKind.LOAD_SCENE))
+"""Kinds drawn when none are asked for: all but ``line`` (the decomposition's cut lines, which clutter) and the bin
+states and bay scenes (a dot on every bin)."""
 
 
 class NothingToDrawError(RenderError):

@@ -1,7 +1,11 @@
-"""The load-scene service's error type."""
+"""The load-scene stage's error types."""
 
 from __future__ import annotations
 
 
-class SceneError(ValueError):
+class LoadScenesError(ValueError):
+    """Input the load-scene stage cannot use: malformed depth images, camera poses, bins or rack models."""
+
+
+class SceneError(LoadScenesError):
     """Input a bay's scene cannot be built from: a bay without levels, malformed settings or evidence."""

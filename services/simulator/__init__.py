@@ -9,6 +9,7 @@ from services.simulator.cameras import (
     depth_image_mm,
     fisheye_sensor,
     photo_textures,
+    rack_rgbd_mount,
     render_fisheye,
     rgbd_sensor,
 )
@@ -19,18 +20,21 @@ from services.simulator.groundtruth import GroundTruthGrids, ground_truth_featur
 from services.simulator.layout import world_from_layout
 from services.simulator.lidar import LidarModel, Segments, cast_rays
 from services.simulator.live import publish_live, run_demo
+from services.simulator.loads import LoadOptions, loaded_layout, rack_view
 from services.simulator.motion import Trajectory, drifting_odometry, drive
 from services.simulator.presets import demo_layout, hall_layout, random_layout
 from services.simulator.render import PinholeCamera, Rendered, render_boxes
 from services.simulator.route import survey_route, waypoint_route
 from services.simulator.stream import CameraSensor, Output, RobotSpec, simulate
-from services.simulator.world import ObjectClass, World
+from services.simulator.world import LoadTruth, ObjectClass, World
 
 __all__ = [
     "CameraSensor",
     "FisheyeModel",
     "GroundTruthGrids",
     "LidarModel",
+    "LoadOptions",
+    "LoadTruth",
     "ObjectClass",
     "Output",
     "PinholeCamera",
@@ -53,8 +57,11 @@ __all__ = [
     "ground_truth_grids",
     "hall_layout",
     "load_world",
+    "loaded_layout",
     "photo_textures",
     "publish_live",
+    "rack_rgbd_mount",
+    "rack_view",
     "random_layout",
     "read_layout",
     "render_boxes",

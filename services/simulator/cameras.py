@@ -196,6 +196,14 @@ RGBD_MOUNT = _mount(((1.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)), (0.0, 
 """base_link -> RGB-D optical frame: 1 m up on the left side, looking left, level."""
 
 
+def rack_rgbd_mount(*, height_m: float = 1.0, pitch_up_rad: float = 0.0) -> FloatArray:
+    """base_link -> optical frame of a rack-facing RGB-D camera on a mast: on the left side, looking left at
+    the rack face across the aisle, ``height_m`` up and pitched up by ``pitch_up_rad`` (a pair, low and high,
+    sees the levels of a rack; :data:`RGBD_MOUNT` is the level one at 1 m)."""
+    c, s = math.cos(pitch_up_rad), math.sin(pitch_up_rad)
+    return _mount(((1.0, 0.0, 0.0), (0.0, s, -c), (0.0, c, s)), (0.0, 0.35, height_m))
+
+
 def fisheye_sensor(*, rate_hz: float = 5.0, model: FisheyeModel | None = None, photos: bool = True) -> CameraSensor:
     """The downward fisheye as a :class:`CameraSensor` on ``fisheye/image_raw`` and ``fisheye/camera_info``."""
     model = model or FisheyeModel()
@@ -213,9 +221,10 @@ def fisheye_sensor(*, rate_hz: float = 5.0, model: FisheyeModel | None = None, p
 
 
 def rgbd_sensor(*, rate_hz: float = 5.0, model: RgbdModel | None = None, photos: bool = True,
-                seed: int = 0) -> CameraSensor:
+                seed: int = 0, mount: FloatArray | None = None) -> CameraSensor:
     """The sideways RGB-D camera on ``rgbd/color/image_raw`` (rgb8), ``rgbd/depth/image_raw``
-    (16UC1, mm) and ``rgbd/camera_info``."""
+    (16UC1, mm) and ``rgbd/camera_info``, mounted at ``mount`` (base_link -> optical, default
+    :data:`RGBD_MOUNT`; :func:`rack_rgbd_mount` for a rack-facing mast camera)."""
     model = model or RgbdModel()
     camera = model.camera()
     textures = photo_textures() if photos else None
@@ -230,4 +239,4 @@ def rgbd_sensor(*, rate_hz: float = 5.0, model: RgbdModel | None = None, photos:
                 ("rgbd/camera_info", *rosmsgs.camera_info(stamp_ns, frame, width=model.width, height=model.height,
                                                           k=camera.k()))]
 
-    return CameraSensor("rgbd", rate_hz, RGBD_MOUNT, RGBD_FRAME, render)
+    return CameraSensor("rgbd", rate_hz, RGBD_MOUNT if mount is None else mount, RGBD_FRAME, render)

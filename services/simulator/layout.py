@@ -19,7 +19,8 @@ A block's rows run along its own u axis (rotated by ``yaw_rad`` about ``origin_m
 the back of the first row): a single row, then aisle, back-to-back double row, aisle, ..., and a
 single row; every aisle is flanked by two rows facing it. Bays are numbered odd on the left
 (lower-v) row of an aisle and even on the right, bins ``AA-BBB-LL`` (aisle, bay, level; level 01
-is the floor).
+is the floor). A block with a ``loads`` mapping fills its bins with random pallets and cartons and records their
+ground truth (:mod:`services.simulator.loads`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import cv2
 import numpy as np
 
 from services.simulator.errors import SimulatorError
+from services.simulator.loads import BinFrame, LoadOptions, fill_bin
 from services.simulator.world import (
     Actor,
     ActorKind,
@@ -43,6 +45,7 @@ from services.simulator.world import (
     Charger,
     FloatArray,
     Gate,
+    LoadTruth,
     ObjectClass,
     RackRow,
     Uprights,
@@ -155,6 +158,7 @@ class _Built(NamedTuple):
     areas: list[Area]
     bins: list[Bin]
     uprights: list[tuple[float, float, str, int]]
+    loads: list[LoadTruth]
 
 
 def _transverse(frame: _Frame, u0: float, u1: float, bands: list[tuple[float, float]], v_total: float,
@@ -196,7 +200,9 @@ def _block(spec: Mapping[str, Any], *, first_aisle: int, row_offset: int, rng: n
     segments = [(s * (every * pitch + cross), min(every, bays - s * every)) for s in range(-(-bays // every))]
     length = segments[-1][0] + segments[-1][1] * pitch
     kind = "vna" if width < _VNA_WIDTH_M else "aisle"
-    built = _Built([], [], [], [])
+    built = _Built([], [], [], [], [])
+    loads = None if spec.get("loads") is None else LoadOptions.from_spec(spec["loads"], where=where)
+    load_rng = np.random.default_rng(0 if loads is None else loads.seed)
     # v bands: (v0, v1, aisle index, facing +1 up / -1 down) per row; aisle bands
     rows: list[tuple[float, float, int, int]] = []
     aisle_bands: list[tuple[float, float]] = []
@@ -248,7 +254,11 @@ def _block(spec: Mapping[str, Any], *, first_aisle: int, row_offset: int, rng: n
                                           (float(access[0]), float(access[1]),
                                            math.atan2(math.sin(front_yaw + math.pi), math.cos(front_yaw + math.pi))),
                                           occupied))
-                    if occupied:
+                    if occupied and loads is not None:
+                        where_bin = BinFrame(frame.point, frame.yaw, u0, pitch, front_v, -float(facing), v1 - v0, z,
+                                             level_pitch - _BEAM_HEIGHT_M)
+                        built.loads.extend(fill_bin(built.bins[-1].id, where_bin, loads, load_rng, boxes))
+                    elif occupied:
                         _pallets(frame, u0, pitch, v0, v1, z, level_pitch, rng, boxes)
                 bay_no += 2
     u_ends = [(-end, 0.0), (length, length + end)] if end > 0 else []
@@ -353,6 +363,7 @@ def world_from_layout(layout: Mapping[str, Any]) -> World:
     rows: list[RackRow] = []
     bins: list[Bin] = []
     uprights: list[tuple[float, float, str, int]] = []
+    loads: list[LoadTruth] = []
     first_aisle = 1
     inside = outline.astype(np.float32).reshape(-1, 1, 2)
     for spec in layout.get("blocks", []) or []:
@@ -367,6 +378,7 @@ def world_from_layout(layout: Mapping[str, Any]) -> World:
         bins += built.bins
         areas += built.areas
         uprights += built.uprights
+        loads += built.loads
     chargers = []
     for k, spec in enumerate(layout.get("chargers", []) or []):
         cid = str(spec.get("id", f"C{k + 1}"))
@@ -398,6 +410,7 @@ def world_from_layout(layout: Mapping[str, Any]) -> World:
         chargers=tuple(chargers),
         actors=tuple(actors),
         layout=dict(layout),
+        loads=tuple(loads),
     )
 
 

@@ -134,6 +134,28 @@ class Bin(NamedTuple):
     occupied: bool
 
 
+class LoadTruth(NamedTuple):
+    """Ground truth of one object in a loaded rack bin (see :mod:`services.simulator.loads`).
+
+    ``box`` indexes :attr:`World.boxes`; ``support`` is what holds it up: ``"floor"``, ``"beam"`` (the bin's
+    beam pair) or the id of the object below; ``slot`` counts pallet positions across the bay (0 first) and
+    ``deep_slot`` into the rack (0 at the aisle); ``behind`` marks a back pallet (and its loads) with a pallet in
+    front of it; ``stable`` is False where the load's centre does not stand over its support (a leaning load);
+    ``overhang`` where the load reaches past its pallet's edge.
+    """
+
+    id: str
+    bin_id: str
+    kind: ObjectClass
+    box: int
+    support: str
+    slot: int
+    deep_slot: int
+    behind: bool
+    stable: bool
+    overhang: bool
+
+
 class Gate(NamedTuple):
     """A dock gate or door: an opening in a wall from ``a`` to ``b`` (each (x, y))."""
 
@@ -189,6 +211,8 @@ class World:
     chargers: tuple[Charger, ...]
     actors: tuple[Actor, ...]
     layout: Mapping[str, Any] = field(default_factory=dict)
+    loads: tuple[LoadTruth, ...] = ()
+    """Ground truth of the objects in the bins of blocks with a ``loads`` option (empty otherwise)."""
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:

@@ -14,6 +14,7 @@ from shared.store.records import (
     TopologyEdge,
     TopologyNode,
     WmsBin,
+    WmsStock,
     WorkerInfo,
 )
 from shared.store.retention import RetentionPolicy
@@ -36,5 +37,6 @@ __all__ = [
     "TopologyEdge",
     "TopologyNode",
     "WmsBin",
+    "WmsStock",
     "WorkerInfo",
 ]

@@ -21,7 +21,7 @@ from sqlalchemy.engine import Connection
 from shared.store import schema
 from shared.store.records import FEATURE_KINDS
 
-VERSIONED = (schema.features, schema.topology_nodes, schema.topology_edges, schema.wms_bins)
+VERSIONED = (schema.features, schema.topology_nodes, schema.topology_edges, schema.wms_bins, schema.wms_stock)
 """Tables whose rows carry ``revision_id`` and ``retired_revision_id``."""
 
 

@@ -117,12 +117,33 @@ class WmsBin:
 
 
 @dataclass(frozen=True, slots=True)
+class WmsStock:
+    """Whether the Warehouse Management System says a bin holds stock, and what, by the bin's id (the WMS's own
+    where a WMS bin list was imported, else Aisle's)."""
+
+    bin_id: str
+    holds_stock: bool
+    sku: str | None = None
+    quantity: float | None = None
+    """How much the WMS books in the bin, in its own unit (pieces, cartons)."""
+
+    def __post_init__(self) -> None:
+        if not self.bin_id or len(self.bin_id) > 128:
+            raise StoreError(f"WMS stock bin id {self.bin_id!r} must be 1 to 128 characters")
+        if self.sku is not None and len(self.sku) > 128:
+            raise StoreError(f"WMS stock of bin {self.bin_id!r}: an SKU must be at most 128 characters")
+        if self.quantity is not None and not (np.isfinite(self.quantity) and self.quantity >= 0):
+            raise StoreError(f"WMS stock of bin {self.bin_id!r}: quantity must be finite and >= 0")
+
+
+@dataclass(frozen=True, slots=True)
 class RevisionWrite:
     """Everything one stage writes at once; it lands whole or not at all.
 
     ``features`` maps each kind the stage now asserts to its complete list: the stage's
-    previous features of those kinds are retired. ``topology``, when given, replaces the
-    stage's graph.
+    previous features of those kinds are retired. For the kinds in ``partial`` the list holds only
+    the features to add or replace (by key): the stage's other features of those kinds stay. ``topology``,
+    when given, replaces the stage's graph.
     """
 
     stage: str
@@ -132,8 +153,11 @@ class RevisionWrite:
     input_start_ns: int | None = None
     input_end_ns: int | None = None
     summary: Mapping[str, Any] = field(default_factory=dict)
+    partial: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
+        if not self.partial <= set(self.features):
+            raise StoreError(f"partial kinds {sorted(self.partial - set(self.features))} have no features listed")
         for kind, items in self.features.items():
             if kind not in FEATURE_KINDS:
                 raise StoreError(f"unknown feature kind {kind!r}")

@@ -131,6 +131,22 @@ wms_bins = sa.Table(
 )
 """The WMS's own bin list as last imported (versioned by revision like features); positions optional."""
 
+wms_stock = sa.Table(
+    "wms_stock",
+    metadata,
+    sa.Column("id", sa.Integer, primary_key=True),
+    sa.Column("map_id", sa.Integer, sa.ForeignKey("maps.id", ondelete="CASCADE"), nullable=False),
+    sa.Column("revision_id", sa.Integer, sa.ForeignKey("revisions.id", ondelete="CASCADE"), nullable=False),
+    sa.Column("retired_revision_id", sa.Integer, nullable=True),
+    sa.Column("bin_id", sa.String(128), nullable=False),
+    sa.Column("holds_stock", sa.Boolean, nullable=False),
+    sa.Column("sku", sa.String(128), nullable=True),
+    sa.Column("quantity", sa.Float, nullable=True),
+    sa.Index("ix_wms_stock_live", "map_id", "retired_revision_id"),
+    sa.Index("ix_wms_stock_revision_id", "revision_id"),
+)
+"""The WMS's stock list as last imported: which bins it says hold stock (versioned by revision like features)."""
+
 workers = sa.Table(
     "workers",
     metadata,

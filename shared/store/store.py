@@ -38,6 +38,7 @@ from shared.store.records import (
     TopologyEdge,
     TopologyNode,
     WmsBin,
+    WmsStock,
     WorkerInfo,
     bounds,
 )
@@ -308,9 +309,10 @@ class MapStore:
     def write_revision(self, map_id: int, write: RevisionWrite) -> Revision:
         """Store everything in ``write`` as one new revision, atomically.
 
-        Features of a kind are replaced by ``write.features[kind]`` as a whole; a feature written exactly as it
-        is stored (same key, geometry, properties and confidence) stays the row it is, with the revision that
-        first wrote it, so a stage that rewrites all its features changes only the rows of those that changed.
+        Features of a kind are replaced by ``write.features[kind]`` as a whole (for a kind in ``write.partial``,
+        only those of the keys listed); a feature written exactly as it is stored (same key, geometry, properties
+        and confidence) stays the row it is, with the revision that first wrote it, so a stage that rewrites all its
+        features changes only the rows of those that changed.
         """
         with self._begin() as connection:
             self._lock_map(connection, map_id)
@@ -326,7 +328,8 @@ class MapStore:
             for layer in write.layers:
                 self._insert_layer(connection, map_id, revision_id, layer)
             summary["features"] = {
-                kind: self._replace_features(connection, map_id, revision_id, write.stage, kind, items)
+                kind: self._replace_features(connection, map_id, revision_id, write.stage, kind, items,
+                                             partial=kind in write.partial)
                 for kind, items in write.features.items()
             }
             summary["topology_changed"] = write.topology is not None
@@ -354,19 +357,25 @@ class MapStore:
 
     @staticmethod
     def _replace_features(connection: Connection, map_id: int, revision_id: int, stage: str, kind: str,
-                          items: Sequence[Feature]) -> dict[str, int]:
+                          items: Sequence[Feature], *, partial: bool = False) -> dict[str, int]:
+        """Replace the stage's live features of ``kind`` by ``items`` (``partial``: only those of their keys)."""
         table = schema.features
         live = sa.and_(table.c.map_id == map_id, table.c.stage == stage, table.c.kind == kind,
                        table.c.retired_revision_id.is_(None))
+        as_stored = sa.select(table.c.id, table.c.key, sa.cast(table.c.geometry, sa.Text).label("geometry"),
+                              sa.cast(table.c.properties, sa.Text).label("properties"), table.c.confidence)
+        if partial:
+            keys = sorted({item.key for item in items})
+            found = [row for start in range(0, len(keys), _IDS_PER_STATEMENT) for row in connection.execute(
+                as_stored.where(live, table.c.key.in_(keys[start:start + _IDS_PER_STATEMENT])))]
+            before = connection.execute(sa.select(sa.func.count()).select_from(table).where(live)).scalar_one()
+        else:
+            found, before = list(connection.execute(as_stored.where(live))), 0
         # key -> (row id, geometry text, properties text, confidence) of the live rows, as stored
-        previous = {row.key: (row.id, row.geometry, row.properties, row.confidence)
-                    for row in connection.execute(sa.select(table.c.id, table.c.key,
-                                                            sa.cast(table.c.geometry, sa.Text).label("geometry"),
-                                                            sa.cast(table.c.properties, sa.Text).label("properties"),
-                                                            table.c.confidence).where(live))}
+        previous = {row.key: (row.id, row.geometry, row.properties, row.confidence) for row in found}
         kept: set[str] = set()
         rows = []
-        moved = 0
+        moved = changed = 0
         for item in items:
             geometry, properties = json.dumps(dict(item.geometry)), json.dumps(dict(item.properties))
             stored = previous.get(item.key)
@@ -375,6 +384,7 @@ class MapStore:
                 kept.add(item.key)
                 continue
             moved += stored is not None and not _same_json(stored[1], geometry)
+            changed += stored is not None and _same_json(stored[1], geometry)
             min_x, min_y, max_x, max_y = bounds(item.geometry)
             rows.append({
                 "map_id": map_id, "revision_id": revision_id, "stage": stage, "kind": kind, "key": item.key,
@@ -387,9 +397,10 @@ class MapStore:
                                .values(retired_revision_id=revision_id))
         if rows:
             connection.execute(table.insert(), rows)
-        keys = {item.key for item in items}
-        return {"added": len(keys - previous.keys()), "removed": len(previous.keys() - keys), "moved": moved,
-                "total": len(keys)}
+        listed = {item.key for item in items}
+        added = len(listed - previous.keys())
+        return {"added": added, "removed": len(previous.keys() - listed), "moved": moved, "changed": changed,
+                "total": int(before) + added if partial else len(listed)}
 
     @staticmethod
     def _replace_topology(connection: Connection, map_id: int, revision_id: int, stage: str,
@@ -583,6 +594,43 @@ class MapStore:
         with self._read() as connection:
             return [WmsBin(r.wms_id, r.x_m, r.y_m, r.aisle, r.bay, r.level, r.properties)
                     for r in connection.execute(query)]
+
+    # -- the WMS's stock list -------------------------------------------------------------
+    def replace_wms_stock(self, map_id: int, items: Sequence[WmsStock], *, stage: str = "wms_stock",
+                          summary: Mapping[str, Any] | None = None) -> Revision:
+        """Store ``items`` as the WMS's complete stock list, one new revision; the previous list is retired.
+
+        ``summary`` is added to the revision's summary (e.g. whether bins the list leaves out are empty).
+        """
+        ids = [item.bin_id for item in items]
+        if len(set(ids)) != len(ids):
+            duplicates = sorted({i for i in ids if ids.count(i) > 1})[:10]
+            raise StoreError(f"WMS stock bin ids must be unique; repeated: {duplicates}")
+        table = schema.wms_stock
+        with self._begin() as connection:
+            self._lock_map(connection, map_id)
+            created_at = _now()
+            summary = {**(summary or {}), "layers_updated": [], "features": {}, "topology_changed": False,
+                       "wms_stock": {"total": len(items), "holds_stock": sum(item.holds_stock for item in items)}}
+            revision_id = connection.execute(
+                schema.revisions.insert().values(map_id=map_id, stage=stage, created_at=created_at, summary=summary)
+                .returning(schema.revisions.c.id)
+            ).scalar_one()
+            connection.execute(table.update().where(table.c.map_id == map_id, table.c.retired_revision_id.is_(None))
+                               .values(retired_revision_id=revision_id))
+            for start in range(0, len(items), _WMS_BATCH):
+                connection.execute(table.insert(), [
+                    {"map_id": map_id, "revision_id": revision_id, "bin_id": item.bin_id,
+                     "holds_stock": item.holds_stock, "sku": item.sku, "quantity": item.quantity}
+                    for item in items[start:start + _WMS_BATCH]])
+        return Revision(revision_id, map_id, stage, created_at, None, None, summary)
+
+    def wms_stock(self, map_id: int, *, revision: int | None = None) -> list[WmsStock]:
+        """The WMS stock list live at ``revision`` (default: now), in import order."""
+        table = schema.wms_stock
+        query = sa.select(table).where(table.c.map_id == map_id, _live_at(table, revision)).order_by(table.c.id)
+        with self._read() as connection:
+            return [WmsStock(r.bin_id, bool(r.holds_stock), r.sku, r.quantity) for r in connection.execute(query)]
 
     # -- workers --------------------------------------------------------------------------
     def heartbeat(self, name: str, counters: dict[str, int], *, started_at: dt.datetime) -> None:

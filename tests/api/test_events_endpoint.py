@@ -94,9 +94,9 @@ def test_event_data_summarises_the_revision(store: MapStore, make_client: Client
     first = events[0].data
     assert first["revision_id"] == site["semantics_1"] and first["map"] == "site" and first["stage"] == "semantics"
     assert first["layers_updated"] == ["traversability"]
-    assert first["features"]["bin"] == {"added": 2, "removed": 0, "moved": 0, "total": 2}
+    assert first["features"]["bin"] == {"added": 2, "removed": 0, "moved": 0, "changed": 0, "total": 2}
     assert first["topology_changed"] is False and first["created_at"]
-    assert events[2].data["features"] == {"bin": {"added": 0, "removed": 1, "moved": 1, "total": 1}}
+    assert events[2].data["features"] == {"bin": {"added": 0, "removed": 1, "moved": 1, "changed": 0, "total": 1}}
     assert any(f"revisions after {site['occupancy_1']}" in comment for comment in comments)
 
 

@@ -28,7 +28,7 @@ def test_get_map_includes_its_latest_revision(client: TestClient, site: dict[str
     assert body["latest_revision"]["id"] == site["semantics_2"]
     assert body["latest_revision"]["stage"] == "semantics"
     assert body["latest_revision"]["summary"]["features"]["bin"] == {
-        "added": 0, "removed": 1, "moved": 1, "total": 1}
+        "added": 0, "removed": 1, "moved": 1, "changed": 0, "total": 1}
 
 
 def test_map_without_revisions_has_no_latest(client: TestClient, store: MapStore) -> None:

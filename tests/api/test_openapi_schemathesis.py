@@ -28,10 +28,12 @@ from schemathesis.specs.openapi.checks import (
     status_code_conformance,
 )
 
+from shared.loads import Occupancy, write_scene_revision
 from shared.store import Feature, MapStore, RevisionWrite
 from shared.store.keys import Role, create_key
 from tests.api.conftest import ClientFactory
 from tests.helpers import NON_FINITE_JSON, number_paths, with_literal
+from tests.loads_data import BAY_1, bay_1_scene, seen
 
 MAX_EXAMPLES = 10
 """Generated requests per operation and generation mode: bounded so the run stays around a minute."""
@@ -52,13 +54,18 @@ def admin_secret(store: MapStore) -> str:
 
 @pytest.fixture
 def example_features(store: MapStore, site: dict[str, int]) -> int:
-    """A revision of ``site`` with a bin keyed as the schema's examples are, so examples find something."""
+    """A revision of ``site`` with a bin keyed as the schema's examples are, so examples find something, and what
+    the robots saw in it (its state and its bay's scene)."""
     ring = [[40.6, 17.1], [41.8, 17.1], [41.8, 18.1], [40.6, 18.1], [40.6, 17.1]]
     bin_03_014 = Feature("bin", "03-014", {"type": "Polygon", "coordinates": [ring]},
                          {"id": "03-014", "aisle": 3, "bay": 14, "level": None, "access_pose": [41.2, 15.6, 1.5708],
                           "row": "r0-006", "back_row": "r0-007", "centre": [41.2, 17.6]}, 0.92)
-    return store.write_revision(store.ensure_map("site").id,
-                                RevisionWrite("pillar_mapping", features={"bin": [bin_03_014]})).id
+    map_id = store.ensure_map("site").id
+    store.write_revision(map_id, RevisionWrite("pillar_mapping", features={"bin": [bin_03_014]}))
+    written = write_scene_revision(store, map_id, [bay_1_scene()],
+                                   [seen("03-014", Occupancy.OCCUPIED, views=3, objects=("p1", "l1"), bay=BAY_1)])
+    assert written.revision is not None
+    return written.revision.id
 
 
 @pytest.fixture

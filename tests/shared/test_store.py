@@ -57,7 +57,7 @@ def test_features_are_replaced_per_stage_and_kind_with_history(store: MapStore) 
         "bin": [_bin("01-01", 1, 1), _bin("01-02", 2, 1)]}))
     second = store.write_revision(site.id, RevisionWrite("pillars", features={
         "bin": [_bin("01-02", 2.5, 1), _bin("01-03", 3, 1)]}))
-    assert second.summary["features"]["bin"] == {"added": 1, "removed": 1, "moved": 1, "total": 2}
+    assert second.summary["features"]["bin"] == {"added": 1, "removed": 1, "moved": 1, "changed": 0, "total": 2}
     assert sorted(f.feature.key for f in store.features(site.id, kinds=["bin"])) == ["01-02", "01-03"]
     assert sorted(f.feature.key for f in store.features(site.id, revision=first.id)) == ["01-01", "01-02"]
     inside = store.features(site.id, bbox=(2.2, 0.0, 2.8, 2.0))
@@ -76,11 +76,28 @@ def test_a_feature_written_as_stored_keeps_its_row_and_history_stays_exact(store
 
     assert live["01-01"].revision_id == first.id  # unchanged: the row first written
     assert live["01-02"].revision_id == live["01-03"].revision_id == second.id
-    assert second.summary["features"]["bin"] == {"added": 1, "removed": 0, "moved": 1, "total": 3}
+    assert second.summary["features"]["bin"] == {"added": 1, "removed": 0, "moved": 1, "changed": 0, "total": 3}
     assert [(f.feature.key, f.feature.geometry["coordinates"]) for f in store.features(site.id, revision=first.id)
             ] == [("01-01", [1, 1]), ("01-02", [2, 1])]
     assert [(row.key, row.revision_id, row.retired_revision_id) for row in changed] == [
         ("01-02", first.id, second.id), ("01-02", second.id, None), ("01-03", second.id, None)]
+
+
+def test_a_partial_write_replaces_the_features_listed_and_keeps_the_rest(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    first = store.write_revision(site.id, RevisionWrite("pillars", features={
+        "bin": [_bin("01-01", 1, 1), _bin("01-02", 2, 1), _bin("01-03", 3, 1)]}))
+    relabelled = Feature("bin", "01-02", {"type": "Point", "coordinates": [2, 1]}, {"aisle": "02"}, 0.9)
+    second = store.write_revision(site.id, RevisionWrite("pillars", features={
+        "bin": [_bin("01-01", 1, 1), relabelled, _bin("01-04", 4, 1)]}, partial=frozenset({"bin"})))
+
+    live = {f.feature.key: f for f in store.features(site.id, kinds=["bin"])}
+    assert sorted(live) == ["01-01", "01-02", "01-03", "01-04"]
+    assert live["01-01"].revision_id == live["01-03"].revision_id == first.id
+    assert live["01-02"].feature.properties == {"aisle": "02"} and live["01-02"].revision_id == second.id
+    assert second.summary["features"]["bin"] == {"added": 1, "removed": 0, "moved": 0, "changed": 1, "total": 4}
+    with pytest.raises(StoreError, match="partial kinds"):
+        RevisionWrite("pillars", features={"bin": []}, partial=frozenset({"wall"}))
 
 
 def test_other_stages_features_are_untouched(store: MapStore) -> None:

@@ -8,6 +8,7 @@ occupancy stage stores it. One browser and one server serve the whole module.
 from __future__ import annotations
 
 import base64
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -19,6 +20,7 @@ import pytest
 
 from api import create_app
 from shared.bins import Bin
+from shared.loads import BinOccupancy, Occupancy, write_scene_revision
 from shared.robots import Robot, TrackPoint
 from shared.settings import Settings
 from shared.store import Feature, MapInfo, MapStore, RevisionWrite
@@ -144,6 +146,8 @@ def test_every_layer_is_listed_with_its_count_and_toggles(page: Any, site: Site)
 
 
 def test_a_bin_found_by_id_is_flown_to_and_its_card_matches_the_store(page: Any, site: Site) -> None:
+    state = BinOccupancy(BIN_ID, Occupancy.OCCUPIED, 0.97, time.time_ns(), ("p1", "l1"), views=3, bay="r0/1")
+    assert write_scene_revision(site.store, site.info.id, [], [state]).bins_changed == (BIN_ID,)
     page.find_element("id", "bin-query").send_keys(BIN_ID + "\n")
     wait_until(page, f"return document.getElementById('card-title').textContent === 'Bin {BIN_ID}'",
                what="the bin's card")
@@ -158,6 +162,7 @@ def test_a_bin_found_by_id_is_flown_to_and_its_card_matches_the_store(page: Any,
     assert card["access pose"].startswith(f"({record.access_pose.x_m:.2f}, {record.access_pose.y_m:.2f})")
     assert card["opening"].startswith(f"{record.opening.width_m:.2f} m")
     assert card["confidence"] == f"{stored.feature.confidence:.2f}"
+    assert card["occupancy"].startswith("occupied (0.97, 3 views, seen ") and card["occupancy"].endswith(": p1, l1")
     # the view flies to the bin
     x, y = record.centre
     wait_until(page, f"const c = window.aisleViewer.leaflet.getCenter(); return Math.hypot(c.lng - {x}, c.lat - {y})"
