@@ -124,7 +124,8 @@ async def get_bin(
                                             f"{ID_FORMAT}.", pattern=BIN_ID_PATTERN, examples=["03-014-02"])],
 ) -> Response | BinOut:
     """One bin by its WMS id or Aisle's id (as of ``?revision=``), with where it is, its opening, where to stand,
-    the corridor that leads to it and the nearest junction; 404 if there is none.
+    the corridor that leads to it, the nearest junction and what the robots saw in it (``occupancy``); 404 if there
+    is none.
 
     The live map (no ``?revision=``) is served from memory, and may be up to 0.2 s behind the newest
     revision (revisions a client wrote through the API are always in); the header ``X-Aisle-Revision-Id``
