@@ -105,7 +105,9 @@ class Chain:
         after, new_ids = apply_move(world, move)
         if len(set(after.units.values())) < len(after.units):
             return None  # two units on the same rectangle: not a world the model allows
-        if after.doors and move.removed and not after.doors_valid(self.wall_cells):
+        near = [world.units[u] for u in move.removed] + list(move.added) + (
+            [move.door_added] if move.door_added is not None else [])
+        if after.doors and not after.doors_valid(self.wall_cells, near):
             return None
         back = reverse_move(move, world, new_ids)
         q_back = probabilities.get(REVERSE[move.kernel], 0.0) * self.proposer.probability(after, back)
