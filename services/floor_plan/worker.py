@@ -5,7 +5,8 @@ on start). When the source layer has a revision it has not explained and ``min_p
 floor plan, starting from the last world it found (moved to the new grid's origin: a growing map does not
 restart the chain) with ``warm_iterations``, and commits ONE revision: the ``floor_plan`` layer (C_W), ``unit``
 and ``door`` features and the unit graph. A grid it cannot use is counted as ``floor_plan_errors``. On start the
-source revision is read back from the stored layer, so a grid is not explained twice.
+source revision and the last world (kept in the layer's meta) are read back from the stored layer, so a grid is
+not explained twice and the first plan after a restart is warm-started too.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from services.floor_plan.chain import ChainSettings
 from services.floor_plan.context import ContextSettings
 from services.floor_plan.errors import FloorPlanError
 from services.floor_plan.pipeline import FloorPlanSettings, floor_plan
-from services.floor_plan.records import plan_features, plan_layer, plan_topology
+from services.floor_plan.records import plan_features, plan_layer, plan_topology, world_from_meta, world_meta
 from services.floor_plan.world import Rect, World
 from shared.settings import FloorPlanStageSettings
 from shared.store import RevisionWrite, StoredLayer, StoreUnavailableError
@@ -74,8 +75,11 @@ class FloorPlanStage:
         store, map_id = self.context.store, self.context.map.id
         if not self._started:
             mine = store.layer(map_id, self.settings.layer)
-            source = mine.layer.meta.get("source_revision") if mine is not None else None
-            self._done = source if isinstance(source, int) else None
+            if mine is not None:
+                source = mine.layer.meta.get("source_revision")
+                self._done = source if isinstance(source, int) else None
+                self._world = world_from_meta(mine.layer.meta)
+                self._origin = (mine.layer.origin_x_m, mine.layer.origin_y_m)
             self._started = True
         stored = store.layer(map_id, self.settings.source_layer)
         if stored is None or stored.revision_id == self._done:
@@ -117,7 +121,8 @@ class FloorPlanStage:
                         layer.data.shape[1], layer.data.shape[0], err)
             return
         source = {"source_layer": s.source_layer, "source_revision": stored.revision_id}
-        write = RevisionWrite(self.context.name, layers=[plan_layer(plan, name=s.layer, meta=source)],
+        meta = {**source, "world": world_meta(plan.world)}
+        write = RevisionWrite(self.context.name, layers=[plan_layer(plan, name=s.layer, meta=meta)],
                               features=plan_features(plan), topology=plan_topology(plan),
                               summary={**source, "units": len(plan.units), "doors": len(plan.doors),
                                        "k": round(plan.k, 4), "iterations": plan.iterations,

@@ -97,3 +97,26 @@ def test_worker_writes_units_doors_and_graph_and_keeps_ids_as_the_map_grows(
     nodes, edges = store.topology(map_id)
     assert {n.key for n in nodes} == set(now)
     assert {e.attributes["connection"] for e in edges} <= {"door", "wall"}
+
+
+def test_a_restarted_worker_warm_starts_from_the_last_stored_world(store: MapStore, settings: Settings) -> None:
+    occ = np.full((80, 120), -1, np.int8)
+    _box(occ, 10, 69, 10, 60)
+    _box(occ, 10, 69, 59, 109)
+    occ[35:48, 59:61] = 0
+    grown = np.full((80, 180), -1, np.int8)
+    grown[:, 60:] = occ
+    _box(grown, 10, 69, 19, 70)
+    grown[30:42, 69:71] = 0
+    map_id = store.ensure_map(settings.map_name).id
+    with stages.running_stage(STAGE, _stage, settings, store) as bus:
+        _write(store, settings, bus, occ, (-1.0, 2.0))
+        wait_for(lambda: len(_plans(store, settings)) >= 1, timeout_s=TIMEOUT_S, what="the first floor plan")
+    before = {s.feature.key for s in store.features(map_id) if s.stage == STAGE and s.feature.kind == "unit"}
+    with stages.running_stage(STAGE, _stage, settings, store) as bus:  # a new worker: nothing in memory
+        _write(store, settings, bus, grown, (-4.0, 2.0))
+        wait_for(lambda: len(_plans(store, settings)) >= 2, timeout_s=TIMEOUT_S, what="the plan after the restart")
+    after = _plans(store, settings)[1]
+    assert after.summary["warm_start"] is True
+    now = {s.feature.key for s in store.features(map_id) if s.stage == STAGE and s.feature.kind == "unit"}
+    assert len(before) == 2 and before <= now, "units of the world before the restart keep their ids"
