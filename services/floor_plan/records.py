@@ -39,7 +39,7 @@ def world_meta(world: World) -> dict[str, Any]:
 
 def world_from_meta(meta: Mapping[str, Any]) -> World | None:
     """The world :func:`world_meta` stored in a layer's meta; None when it is absent or not one."""
-    data = meta.get("world")
+    data: Any = meta.get("world", {})
     try:
         units = {int(u): Rect(*(int(v) for v in rest)) for u, *rest in data["units"]}
         doors = {Rect(*(int(v) for v in d)) for d in data["doors"]}
