@@ -18,11 +18,12 @@ import time
 from services.floor_plan.chain import ChainSettings
 from services.floor_plan.context import ContextSettings
 from services.floor_plan.errors import FloorPlanError
+from services.floor_plan.frame import Frame, carry, make_frame
 from services.floor_plan.pipeline import FloorPlanSettings, floor_plan
 from services.floor_plan.records import plan_features, plan_layer, plan_topology, world_from_meta, world_meta
-from services.floor_plan.world import Rect, World
+from services.floor_plan.world import World
 from shared.settings import FloorPlanStageSettings
-from shared.store import RevisionWrite, StoredLayer, StoreUnavailableError
+from shared.store import GridLayer, RevisionWrite, StoredLayer, StoreUnavailableError
 from shared.worker import StageContext, checked
 
 log = logging.getLogger(__name__)
@@ -40,7 +41,7 @@ class FloorPlanStage:
         self.events = context.map_events()
         self._done: int | None = None  # source revision explained last
         self._world: World | None = None
-        self._origin = (0.0, 0.0)
+        self._frame: Frame | None = None  # the frame of the last world
         self._last_attempt = -float("inf")
         self._started = False
 
@@ -79,7 +80,10 @@ class FloorPlanStage:
                 source = mine.layer.meta.get("source_revision")
                 self._done = source if isinstance(source, int) else None
                 self._world = world_from_meta(mine.layer.meta)
-                self._origin = (mine.layer.origin_x_m, mine.layer.origin_y_m)
+                angle = mine.layer.meta.get("angle_rad", 0.0)
+                self._frame = make_frame(mine.layer.data.shape, angle_rad=float(angle) if isinstance(
+                    angle, int | float) else 0.0, origin_xy_m=(mine.layer.origin_x_m, mine.layer.origin_y_m),
+                    resolution_m=mine.layer.resolution_m)
             self._started = True
         stored = store.layer(map_id, self.settings.source_layer)
         if stored is None or stored.revision_id == self._done:
@@ -89,21 +93,19 @@ class FloorPlanStage:
         self._plan(stored)
         return False
 
-    def _start_world(self, ox: float, oy: float, res: float) -> World | None:
-        """The last world moved into a grid whose origin is (ox, oy)."""
-        if self._world is None:
-            return None
-        dr = round((self._origin[1] - oy) / res)
-        dc = round((self._origin[0] - ox) / res)
-        units = {u: Rect(r.r0 + dr, r.r1 + dr, r.c0 + dc, r.c1 + dc) for u, r in self._world.units.items()}
-        doors = {Rect(d.r0 + dr, d.r1 + dr, d.c0 + dc, d.c1 + dc) for d in self._world.doors}
-        return World(units, doors, self._world.next_id)
+    def _start_world(self, layer: GridLayer) -> tuple[World | None, float | None]:
+        """The last world moved into the frame of ``layer`` (same angle: a growing map keeps its axes)."""
+        if self._world is None or self._frame is None:
+            return None, None
+        frame = make_frame(layer.data.shape, angle_rad=self._frame.angle_rad,
+                           origin_xy_m=(layer.origin_x_m, layer.origin_y_m), resolution_m=layer.resolution_m)
+        return carry(self._world, self._frame, frame), frame.angle_rad
 
     def _plan(self, stored: StoredLayer) -> None:
         s, layer = self.settings, stored.layer
         self._last_attempt = time.monotonic()
         self._done = stored.revision_id
-        start = self._start_world(layer.origin_x_m, layer.origin_y_m, layer.resolution_m)
+        start, angle = self._start_world(layer)
         settings = FloorPlanSettings(
             wall_m=s.wall_m,
             chain=ChainSettings(iterations=s.warm_iterations if start else s.iterations, max_seconds=s.max_seconds),
@@ -114,14 +116,15 @@ class FloorPlanStage:
         )
         try:
             plan = floor_plan(layer.data, resolution_m=layer.resolution_m,
-                              origin_xy_m=(layer.origin_x_m, layer.origin_y_m), settings=settings, start=start)
+                              origin_xy_m=(layer.origin_x_m, layer.origin_y_m), settings=settings, start=start,
+                              angle_rad=angle)
         except FloorPlanError as err:
             self.context.count("floor_plan_errors")
             log.warning("%s revision %d (%d x %d cells) not explained: %s", s.source_layer, stored.revision_id,
                         layer.data.shape[1], layer.data.shape[0], err)
             return
         source = {"source_layer": s.source_layer, "source_revision": stored.revision_id}
-        meta = {**source, "world": world_meta(plan.world)}
+        meta = {**source, "world": world_meta(plan.world), "angle_rad": plan.frame.angle_rad}
         write = RevisionWrite(self.context.name, layers=[plan_layer(plan, name=s.layer, meta=meta)],
                               features=plan_features(plan), topology=plan_topology(plan),
                               summary={**source, "units": len(plan.units), "doors": len(plan.doors),
@@ -130,7 +133,7 @@ class FloorPlanStage:
         if self.context.commit(write) is None:
             self._done = None  # store down: counted by commit; try this grid again
             return
-        self._world, self._origin = plan.world, (layer.origin_x_m, layer.origin_y_m)
+        self._world, self._frame = plan.world, plan.frame
         self.context.count("floor_plans")
         log.info("%s revision %d: %d units, %d doors, K(W,M) %.3f, %d iterations in %.2f s", s.source_layer,
                  stored.revision_id, len(plan.units), len(plan.doors), plan.k, plan.iterations, plan.seconds)
