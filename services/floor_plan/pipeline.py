@@ -22,6 +22,7 @@ from services.floor_plan.likelihood import (
     CellClass,
     cell_prediction_rate,
     classify_map,
+    enclosed_blocks,
     log_sensor_table,
     render,
     solid_obstacles,
@@ -157,10 +158,11 @@ def floor_plan(
     lines = wall_lines(classes, wall_cells=ks.wall_cells, min_length_cells=_cells(s.min_line_m, resolution_m))
     candidates = wbu_candidates(lines, evidence, wall_cells=ks.wall_cells, min_inner_cells=ks.min_inner_cells)
     proposer = Proposer(evidence, lines, ks, candidates)
+    solid = _obstacles(classes_map, s, resolution_m)
     canvas = Canvas(classes, log_sensor_table(s.sensor_model), wall_cells=ks.wall_cells,
                     log_overlap=math.log(s.overlap_psi),
-                    obstacles=to_work(frame, _obstacles(classes_map, s, resolution_m).astype(np.uint8),
-                                      fill=0).astype(bool))
+                    obstacles=to_work(frame, solid.astype(np.uint8), fill=0).astype(bool),
+                    blocks=to_work(frame, enclosed_blocks(solid).astype(np.uint8), fill=0).astype(bool))
     prior = ContextPrior(resolution_m=resolution_m, wall_cells=ks.wall_cells, settings=s.context)
     first = 1
     world = World()

@@ -88,6 +88,23 @@ def test_solid_blocks_are_obstacles_the_world_draws_as_walls() -> None:
     assert len(outside) == 1
 
 
+def test_a_hall_with_racks_drawn_solid_is_one_unit_around_them_and_the_racks_are_obstacles() -> None:
+    occ = np.full((160, 260), -1, np.int8)
+    _box(occ, 10, 149, 10, 249)  # a 12 m x 7 m hall
+    racks = ((40, 55), (75, 90), (110, 125))
+    for r0, r1 in racks:
+        occ[r0 : r1 + 1, 40:220] = 100  # rack rows drawn solid, 0.8 m deep
+    plan = floor_plan(occ, resolution_m=RES, settings=_settings(3000))
+    assert len(plan.units) == 1, "the racks stand in one unit; they do not cut the hall into aisles"
+    for r0, r1 in racks:
+        assert np.all(plan.classes_world[r0 : r1 + 1, 40:220] == CellClass.WALL)
+        assert not unit_labels(plan)[r0 : r1 + 1, 40:220].any(), "no rack cell is a unit's free space"
+        y0, y1 = r0 * RES, (r1 + 1) * RES
+        found = [poly for poly in plan.obstacles
+                 if all(1.9 <= x <= 11.1 and y0 - 0.1 <= y <= y1 + 0.1 for x, y in poly[0])]
+        assert len(found) == 1, "each rack row is reported as an obstacle"
+
+
 def test_units_png_labels_only_free_cells_one_id_per_unit() -> None:
     plan = floor_plan(_two_rooms(), resolution_m=RES, settings=_settings())
     labels = unit_labels(plan)
