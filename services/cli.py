@@ -91,7 +91,7 @@ def _parser() -> argparse.ArgumentParser:
     plan.add_argument("map", type=Path, help="map_server YAML, or a bare PNG/PGM with --resolution")
     plan.add_argument("--out", type=Path, required=True, help="folder for floor_plan.geojson, units.png, overview.png")
     plan.add_argument("--resolution", type=_positive, default=None, help="metres per pixel of a bare image")
-    plan.add_argument("--iterations", type=int, default=8000, help="Metropolis-Hastings iterations")
+    plan.add_argument("--iterations", type=int, default=20000, help="Metropolis-Hastings iterations")
     plan.add_argument("--max-seconds", type=_positive, default=60.0, help="wall-time bound of the chain")
     plan.add_argument("--seed", type=int, default=0, help="random seed of the chain")
 

@@ -49,7 +49,7 @@ SEED_SCHEDULE: tuple[Phase, ...] = (
 class ChainSettings:
     """Length, schedule and seed of a chain. Iterations and wall time are both bounded."""
 
-    iterations: int = 8000
+    iterations: int = 20000
     max_seconds: float = 60.0
     schedule: tuple[Phase, ...] = SEED_SCHEDULE
     fsu_from: int = 1
