@@ -138,10 +138,11 @@ class ChainResult(NamedTuple):
 
 
 def run_chain(chain: Chain, classes_map: npt.NDArray[np.uint8], settings: ChainSettings, *,
-              first_iteration: int = 1) -> ChainResult:
+              first_iteration: int = 1, positions_rc: npt.NDArray[np.int64] | None = None) -> ChainResult:
     """Run Metropolis-Hastings from ``chain``'s world; stop after ``settings.iterations`` or ``max_seconds``.
 
     ``first_iteration`` > 1 starts inside the schedule (a warm start skips the initial ADD phase).
+    ``positions_rc`` ((N, 2) cells) are where robots were: seeds of the free-space detector.
     """
     rng = np.random.default_rng(settings.seed)
     chooser = RandomChooser(rng)
@@ -158,7 +159,8 @@ def run_chain(chain: Chain, classes_map: npt.NDArray[np.uint8], settings: ChainS
         if it >= settings.fsu_from and (it - settings.fsu_from) % settings.fsu_every == 0:
             extra = fsu_candidates(classes_map, chain.canvas.classes(), chain.proposer.evidence,
                                    wall_cells=chain.wall_cells,
-                                   min_inner_cells=chain.proposer.settings.min_inner_cells)
+                                   min_inner_cells=chain.proposer.settings.min_inner_cells,
+                                   positions_rc=positions_rc)
             chain.proposer.set_candidates(base_candidates, extra)
         probs = {k: p for k, p in phase_at(settings.schedule, it).probabilities.items() if k in allowed and p > 0}
         kernels = list(probs)

@@ -146,7 +146,7 @@ def wbu_candidates(
 def fsu_candidates(
     classes_map: npt.NDArray[np.uint8], classes_world: npt.NDArray[np.uint8], evidence: Evidence, *,
     wall_cells: int, min_inner_cells: int, max_candidates: int = 24, min_free_share: float = 0.3,
-    max_wall_share: float = 0.15, floor_weight: float = 0.05,
+    max_wall_share: float = 0.15, floor_weight: float = 0.05, positions_rc: npt.NDArray[np.int64] | None = None,
 ) -> list[Candidate]:
     """Free-space unit candidates (fig. 3.13): rectangles grown over free map cells the world leaves unexplained.
 
@@ -157,6 +157,10 @@ def fsu_candidates(
     replace units that explain the place badly) and one that also stops at the cells the world's units
     already claim, so that it fills a gap between them and its walls fall on theirs (shared walls, where
     doors can open). Weights follow eq. 3.10, floored at ``floor_weight`` (such units often lack a seen wall).
+
+    ``positions_rc`` ((N, 2) cells, row and column), where a robot is known to have been (its trajectory),
+    are seeds too, ahead of the deepest cells (the robot-position detector): a robot stood in a unit, so
+    every place it passed that the world leaves unexplained gets up to ``max_candidates`` more candidates.
     """
     t = wall_cells
     h, w = classes_map.shape
@@ -164,17 +168,24 @@ def fsu_candidates(
     opened = cv2.morphologyEx(loose, cv2.MORPH_OPEN, np.ones((min_inner_cells, min_inner_cells), np.uint8))
     depth = cv2.distanceTransform(opened, cv2.DIST_L1, 3)
     deep = np.flatnonzero(depth.ravel() * 2 >= min_inner_cells)
-    if not len(deep):
-        return []
     order = deep[np.argsort(-depth.ravel()[deep], kind="stable")]
+    robot: npt.NDArray[np.int64] = np.zeros(0, np.int64)
+    if positions_rc is not None and len(positions_rc):
+        rc = np.asarray(positions_rc, np.int64).reshape(-1, 2)
+        inside = (rc[:, 0] >= t) & (rc[:, 0] < h - t) & (rc[:, 1] >= t) & (rc[:, 1] < w - t)
+        flat = rc[inside, 0] * w + rc[inside, 1]
+        robot = flat[loose.ravel()[flat] > 0]
+    if not len(order) and not len(robot):
+        return []
     claimed = _integral(classes_world != CellClass.UNKNOWN)
     bounds = (t, h - 1 - t, t, w - 1 - t)
     out: list[Candidate] = []
     taken = np.zeros(opened.shape, bool)
     seeds = 0
-    for flat in order[: 50 * max_candidates]:
+    limit = max_candidates + min(len(robot), max_candidates)
+    for flat in np.r_[robot, order[: 50 * max_candidates]]:
         r, c = divmod(int(flat), w)
-        if seeds >= max_candidates:
+        if seeds >= limit:
             break
         if taken[r, c]:
             continue

@@ -117,6 +117,16 @@ def points_to_map(frame: Frame, rc: npt.NDArray[np.float64]) -> npt.NDArray[np.f
     return out
 
 
+def points_to_work(frame: Frame, rc: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """(N, 2) map cell-corner coordinates (row, column) -> working-frame cell-corner coordinates."""
+    if not frame.turned:
+        return rc
+    xy = np.stack([rc[:, 1] - 0.5, rc[:, 0] - 0.5])
+    work = frame.matrix[:, :2] @ xy + frame.matrix[:, 2:]
+    out: npt.NDArray[np.float64] = np.stack([work[1] + 0.5, work[0] + 0.5], axis=1)
+    return out
+
+
 def _point_to_work(frame: Frame, row: float, col: float) -> tuple[float, float]:
     x, y = frame.matrix[:, :2] @ np.array([col - 0.5, row - 0.5]) + frame.matrix[:, 2]
     return float(y + 0.5), float(x + 0.5)

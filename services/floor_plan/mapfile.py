@@ -91,8 +91,26 @@ def write_outputs(plan: FloorPlan, out_dir: Path) -> dict[str, Path]:
     return paths
 
 
+def read_trajectory(path: Path) -> npt.NDArray[np.float64]:
+    """Robot positions from a CSV file: x, y in map metres, one position a line (more columns are ignored).
+
+    Raises
+    ------
+    FloorPlanError
+        A missing or unreadable file, fewer than two columns, or positions that are not finite numbers.
+    """
+    try:
+        xy = np.loadtxt(path, delimiter=",", usecols=(0, 1), ndmin=2, dtype=np.float64)
+    except (OSError, ValueError) as err:
+        raise FloorPlanError(f"cannot read robot positions (x,y per line, metres) from {path}: {err}") from err
+    if not np.isfinite(xy).all():
+        raise FloorPlanError(f"robot positions in {path} must be finite numbers")
+    return xy
+
+
 def floor_plan_map_file(map_path: Path, out_dir: Path, *, resolution_m: float | None = None,
-                        settings: FloorPlanSettings | None = None) -> FloorPlan:
+                        settings: FloorPlanSettings | None = None,
+                        trajectory_xy_m: npt.NDArray[np.float64] | None = None) -> FloorPlan:
     """Fit a floor plan to a map file and write its outputs (the ``aisle floor-plan`` command).
 
     Raises
@@ -101,7 +119,7 @@ def floor_plan_map_file(map_path: Path, out_dir: Path, *, resolution_m: float | 
         Missing, unreadable or malformed map files; maps too small or without free space.
     """
     occ, res, origin = read_map(Path(map_path), resolution_m=resolution_m)
-    plan = floor_plan(occ, resolution_m=res, origin_xy_m=origin, settings=settings)
+    plan = floor_plan(occ, resolution_m=res, origin_xy_m=origin, settings=settings, trajectory_xy_m=trajectory_xy_m)
     write_outputs(plan, Path(out_dir))
     logger.info("floor plan of %s: %d units, %d doors into %s", map_path, len(plan.units), len(plan.doors), out_dir)
     return plan

@@ -14,7 +14,15 @@ from services.floor_plan.chain import Chain, ChainSettings, run_chain
 from services.floor_plan.context import ContextPrior, ContextSettings
 from services.floor_plan.detectors import Evidence, wall_lines, wbu_candidates
 from services.floor_plan.errors import FloorPlanError
-from services.floor_plan.frame import Frame, dominant_angle, make_frame, points_to_map, to_map, to_work
+from services.floor_plan.frame import (
+    Frame,
+    dominant_angle,
+    make_frame,
+    points_to_map,
+    points_to_work,
+    to_map,
+    to_work,
+)
 from services.floor_plan.kernels import KernelSettings, Proposer
 from services.floor_plan.likelihood import (
     SEED_SENSOR_MODEL,
@@ -120,6 +128,7 @@ def _obstacles(classes: npt.NDArray[np.uint8], settings: FloorPlanSettings,
 def floor_plan(
     occupancy: npt.NDArray[np.integer], *, resolution_m: float, origin_xy_m: tuple[float, float] = (0.0, 0.0),
     settings: FloorPlanSettings | None = None, start: World | None = None, angle_rad: float | None = None,
+    trajectory_xy_m: npt.NDArray[np.float64] | None = None,
 ) -> FloorPlan:
     """Fit a world of units and doors to an occupancy grid by data-driven MCMC.
 
@@ -139,6 +148,9 @@ def floor_plan(
     angle_rad : float, optional
         The direction of the walls to explain along (radians, x = column, y = row); by default the map's
         dominant orientation, or 0 when that is within ``settings.min_turn_rad`` of the axes.
+    trajectory_xy_m : (N, 2) float, optional
+        Robot positions (map metres) where a trajectory is known (a bag, live traffic): the places a robot
+        passed that the world leaves unexplained seed unit candidates (the robot-position detector).
 
     Raises
     ------
@@ -171,7 +183,12 @@ def floor_plan(
         world.doors = {d for d in start.doors if len(world.door_units(d, ks.wall_cells)) == 2}
         first = s.warm_start_iteration
     chain = Chain(world, canvas, proposer, prior)
-    result = run_chain(chain, classes, s.chain, first_iteration=first)
+    positions = None
+    if trajectory_xy_m is not None and len(trajectory_xy_m):
+        xy = np.asarray(trajectory_xy_m, np.float64).reshape(-1, 2)
+        rc = np.stack([(xy[:, 1] - origin_xy_m[1]) / resolution_m, (xy[:, 0] - origin_xy_m[0]) / resolution_m], axis=1)
+        positions = np.unique(np.floor(points_to_work(frame, rc)).astype(np.int64), axis=0)
+    result = run_chain(chain, classes, s.chain, first_iteration=first, positions_rc=positions)
     return describe(result.world, classes_map, frame=frame, settings=s,
                     log_posterior=result.log_posterior, iterations=result.iterations, accepted=result.accepted,
                     seconds=result.seconds, cpu_seconds=result.cpu_seconds)

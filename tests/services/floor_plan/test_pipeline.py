@@ -17,10 +17,13 @@ from services.floor_plan import (
     FloorPlanError,
     FloorPlanSettings,
     Phase,
+    Rect,
     UnitType,
     floor_plan,
     unit_labels,
 )
+from services.floor_plan.detectors import Evidence, fsu_candidates
+from services.floor_plan.likelihood import classify_map
 from services.floor_plan.mapfile import floor_plan_map_file, read_map
 from shared.mapfiles import write_map_yaml
 
@@ -176,3 +179,23 @@ def test_map_file_outputs_agree_with_the_plan(tmp_path: Path) -> None:
     units = cv2.imread(str(tmp_path / "out" / "units.png"), cv2.IMREAD_UNCHANGED)
     assert units is not None and units.shape == plan.classes_map.shape and units.dtype == np.uint16
     assert (tmp_path / "out" / "overview.png").is_file()
+
+
+def test_robot_positions_seed_candidates_where_the_robot_passed() -> None:
+    occ = np.full((80, 160), -1, np.int8)
+    _box(occ, 5, 74, 5, 94)  # a big room: the deepest free space
+    _box(occ, 20, 59, 93, 140)  # a smaller one beside it
+    classes = classify_map(occ)
+    unexplained = np.full(classes.shape, CellClass.UNKNOWN, np.uint8)
+    evidence = Evidence(classes)
+    only_deepest = fsu_candidates(classes, unexplained, evidence, wall_cells=2, min_inner_cells=10, max_candidates=1)
+    assert all(c.rect.c1 <= 96 for c in only_deepest), "without positions the one candidate is the big room"
+    passed = fsu_candidates(classes, unexplained, evidence, wall_cells=2, min_inner_cells=10, max_candidates=1,
+                            positions_rc=np.array([[40, 120]]))
+
+    def small_room(rect: Rect) -> bool:
+        return rect.c0 >= 93 and rect.r0 <= 22 and rect.r1 >= 57
+
+    assert any(small_room(c.rect) for c in passed), "the room the robot passed gets its own candidate"
+    plan = floor_plan(occ, resolution_m=RES, settings=_settings(1500), trajectory_xy_m=np.array([[6.0, 2.0]]))
+    assert any(small_room(u.rect) for u in plan.units)
