@@ -39,7 +39,7 @@ def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.
 
 def geojson(plan: FloorPlan) -> dict[str, Any]:
     """GeoJSON FeatureCollection: unit polygons (type, probability, neighbours), door segments and the
-    solid obstacles (polygons)."""
+    solid obstacles (polygons; ``standing``: a block in the building rather than a filled outside)."""
     neighbours: dict[int, list[int]] = {u.id: [] for u in plan.units}
     for a, b in plan.adjacency:
         neighbours[a].append(b)
@@ -66,9 +66,9 @@ def geojson(plan: FloorPlan) -> dict[str, Any]:
         {
             "type": "Feature",
             "geometry": {"type": "Polygon", "coordinates": [[list(p) for p in ring] for ring in polygon]},
-            "properties": {"kind": FeatureKind.OBSTACLE, "id": i},
+            "properties": {"kind": FeatureKind.OBSTACLE, "id": i, "standing": standing},
         }
-        for i, polygon in enumerate(plan.obstacles)
+        for i, (polygon, standing) in enumerate(zip(plan.obstacles, plan.standing, strict=True))
     ]
     return {"type": "FeatureCollection", "features": features,
             "properties": {"k": round(plan.k, 6), "iterations": plan.iterations}}

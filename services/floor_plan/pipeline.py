@@ -93,6 +93,9 @@ class FloorPlan(NamedTuple):
     adjacency: list[tuple[int, int]]
     obstacles: list[tuple[tuple[tuple[float, float], ...], ...]]
     """The solid blocks as polygons (outer ring, then holes; closed rings in map metres)."""
+    standing: list[bool]
+    """Per obstacle: True for a block standing in the building (racks, solid furniture: it does not touch the
+    map's border), False for a filled outside."""
     classes_map: npt.NDArray[np.uint8]
     classes_world: npt.NDArray[np.uint8]
     k: float
@@ -252,6 +255,8 @@ def describe(
         return (*ring, ring[0]) if len(ring) >= 3 else ()
 
     rings: list[tuple[tuple[tuple[float, float], ...], ...]] = []
+    standing: list[bool] = []
+    blocks = enclosed_blocks(solid)
     for i, contour in enumerate(contours):
         if hierarchy[0][i][3] != -1:
             continue  # a hole: it goes with its outer boundary
@@ -259,8 +264,11 @@ def describe(
         holes = [ring_of(contours[j]) for j in range(len(contours)) if hierarchy[0][j][3] == i]
         if outer:
             rings.append((outer, *(h for h in holes if h)))
-    return FloorPlan(world, units, doors, adjacency, rings, classes_map, cw, cell_prediction_rate(classes_map, cw),
-                     log_posterior, iterations, accepted, seconds, cpu_seconds, resolution_m, origin_xy_m, frame)
+            x, y = contour.reshape(-1, 2)[0]
+            standing.append(bool(blocks[y, x]))
+    return FloorPlan(world, units, doors, adjacency, rings, standing, classes_map, cw,
+                     cell_prediction_rate(classes_map, cw), log_posterior, iterations, accepted, seconds, cpu_seconds,
+                     resolution_m, origin_xy_m, frame)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:

@@ -64,7 +64,8 @@ def plan_features(plan: FloorPlan) -> dict[str, list[Feature]]:
                 "adjacent": [unit_key(u) for u in props["adjacent"]],
             }, confidence=props["probability"]))
         elif props["kind"] == FeatureKind.OBSTACLE:
-            out[FeatureKind.OBSTACLE].append(Feature(FeatureKind.OBSTACLE, f"o{props['id']}", item["geometry"]))
+            out[FeatureKind.OBSTACLE].append(Feature(FeatureKind.OBSTACLE, f"o{props['id']}", item["geometry"],
+                                                     {"standing": props["standing"]}))
         else:
             a, b = props["units"]
             start = item["geometry"]["coordinates"][0]

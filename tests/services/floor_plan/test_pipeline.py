@@ -89,6 +89,8 @@ def test_solid_blocks_are_obstacles_the_world_draws_as_walls() -> None:
     assert len(block) == 1
     outside = [poly for poly in plan.obstacles if len(poly) == 2]  # the filled outside, the room its hole
     assert len(outside) == 1
+    assert not plan.standing[plan.obstacles.index(outside[0])], "the filled outside is no block in the building"
+    assert plan.standing[plan.obstacles.index(block[0])]
 
 
 def test_a_hall_with_racks_drawn_solid_is_one_unit_around_them_and_the_racks_are_obstacles() -> None:
@@ -106,6 +108,7 @@ def test_a_hall_with_racks_drawn_solid_is_one_unit_around_them_and_the_racks_are
         found = [poly for poly in plan.obstacles
                  if all(1.9 <= x <= 11.1 and y0 - 0.1 <= y <= y1 + 0.1 for x, y in poly[0])]
         assert len(found) == 1, "each rack row is reported as an obstacle"
+        assert plan.standing[plan.obstacles.index(found[0])], "a rack stands in the hall"
 
 
 def test_units_png_labels_only_free_cells_one_id_per_unit() -> None:
