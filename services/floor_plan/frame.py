@@ -1,8 +1,8 @@
 """The working grid: the map turned so that its dominant walls run along rows and columns.
 
 Units are axis-aligned rectangles of cells (:mod:`~services.floor_plan.world`); a map whose walls run at
-an angle is explained in a grid turned by that angle (its dominant orientation, as the grid decomposition
-finds it) and the units are turned back into the map. Points use OpenCV's convention inside this module
+an angle is explained in a grid turned by that angle (its dominant wall direction, :func:`dominant_angle`)
+and the units are turned back into the map. Points use OpenCV's convention inside this module
 (x = column, y = row, cell centres at integers); the public helpers take cell-corner coordinates (row,
 column) as the rest of the stage does.
 """
