@@ -6,7 +6,9 @@ CPU time (``time.process_time``) with the load average, since the machine may be
 * ``rose2``: the ROSE\u00b2 full maps (``../shared/data/maps/rose2/full``, free = grey >= 250, occupied <= 89, the
   rest unknown, 0.05 m/px): K(W,M) (eq. 3.39, every cell of the map), K over known cells, and
   ``units.png`` scored as ``bench/eval_ipa.py`` scores segmentations of these maps (free pixels only,
-  each ground-truth colour one room), beside ROSE\u00b2's own ``rose2_rooms.png``.
+  each ground-truth colour one room), beside ROSE\u00b2's own ``rose2_rooms.png``; and where K is lost (shares of
+  all cells): free cells not drawn free, unknown cells drawn free, occupied cells not drawn as wall, and the
+  cells inside the ground truth's rooms that are not free in the map (no room-shaped unit draws them right).
 * ``ipa``: the plain ipa maps read as ``aisle floor-plan MAP.png --resolution 0.05`` reads them; K(W,M)
   and the ipa scores (every labelled pixel counts).
 * ``partial``: the 15 growing ubremen maps in order, each warm-started from the previous world; the share
@@ -30,9 +32,17 @@ import numpy.typing as npt
 from PIL import Image
 from threadpoolctl import threadpool_limits
 
-from services.floor_plan import ChainSettings, FloorPlan, FloorPlanSettings, World, floor_plan, unit_labels
+from services.floor_plan import (
+    ChainSettings,
+    FloorPlan,
+    FloorPlanSettings,
+    World,
+    carry,
+    floor_plan,
+    make_frame,
+    unit_labels,
+)
 from services.floor_plan.mapfile import read_map
-from services.floor_plan.world import Rect
 from services.grid_decomposition.evaluation import (
     FREE_GREY,
     align_offset,
@@ -78,16 +88,25 @@ def rose2_occupancy(grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int8]:
     return occ[::-1].copy()
 
 
-def _plan(occ: npt.NDArray[np.int8], iterations: int, start: World | None = None) -> tuple[FloorPlan, float, float]:
+def _plan(occ: npt.NDArray[np.int8], iterations: int, start: World | None = None,
+          angle_rad: float | None = None) -> tuple[FloorPlan, float, float]:
     settings = FloorPlanSettings(chain=ChainSettings(iterations=iterations, max_seconds=600.0, seed=0))
     t0, c0 = time.perf_counter(), time.process_time()
-    plan = floor_plan(occ, resolution_m=RES, settings=settings, start=start)
+    plan = floor_plan(occ, resolution_m=RES, settings=settings, start=start, angle_rad=angle_rad)
     return plan, time.perf_counter() - t0, time.process_time() - c0
 
 
 def _k_known(plan: FloorPlan) -> float:
     known = plan.classes_map != 1
     return float(np.mean(plan.classes_map[known] == plan.classes_world[known]))
+
+
+def _lost(plan: FloorPlan) -> tuple[float, float, float]:
+    """Where K(W,M) is lost, as shares of all cells: free cells the world does not draw free, unknown
+    cells it draws free, occupied cells it does not draw as wall."""
+    cm, cw = plan.classes_map, plan.classes_world
+    return (float(np.mean((cm == 0) & (cw != 0))), float(np.mean((cm == 1) & (cw == 0))),
+            float(np.mean((cm == 2) & (cw != 2))))
 
 
 def _common(*images: npt.NDArray[np.generic]) -> list[npt.NDArray[np.generic]]:
@@ -136,6 +155,11 @@ def _rose2(iterations: int, only: list[str] | None) -> None:
         s = ipa_scores(on_free(np.asarray(ours), free), rooms)
         peer = ipa_scores(on_free(colour_rooms(np.asarray(theirs), background=WHITE), free), rooms)
         peers.append(peer)
+        in_rooms = np.count_nonzero((colour_rooms(np.asarray(gt)) > 0) & ~free) / grey.size
+        free_lost, unknown_free, wall_lost = _lost(plan)
+        print(f"| rose2_lost | {folder.name} | free not drawn free {100 * free_lost:.1f} % | unknown drawn free "
+              f"{100 * unknown_free:.1f} % | occupied not drawn as wall {100 * wall_lost:.1f} % | not free inside the "
+              f"truth's rooms {100 * in_rooms:.1f} % | | | | | |")
         r = Row(plan.k, _k_known(plan), s.recall, s.precision, seconds, cpu, plan.iterations / max(seconds, 1e-9),
                 plan.iterations / max(plan.cpu_seconds, 1e-9))
         rows.append(r)
@@ -167,7 +191,7 @@ def _ipa(iterations: int, only: list[str] | None) -> None:
     _summary("ipa", rows)
 
 
-def _partial(iterations: int) -> None:
+def _partial(iterations: int, warm_iterations: int) -> None:
     steps = sorted((p for p in (ROSE2 / "partial_ubremen").iterdir() if p.is_dir()), key=lambda p: int(p.name[3:]))
     _header()
     previous: tuple[FloorPlan, npt.NDArray[np.bool_]] | None = None
@@ -176,17 +200,20 @@ def _partial(iterations: int) -> None:
         grey = _grey(folder / "map.png")
         occ = rose2_occupancy(grey)
         free = grey >= FREE_GREY
-        start = None
+        start, angle = None, None
         if previous is not None:
             dr, dc = align_offset(previous[1], free)  # image rows/cols of the new map = old + offset
             h = occ.shape[0]
             old_h = previous[1].shape[0]
             # GridLayer rows count from the bottom: an image shift of dr rows is a layer shift of
-            # (h - old_h) - dr rows
+            # (h - old_h) - dr rows; the new map's origin lies that many cells below and left of the old one's
             lr = (h - old_h) - dr
-            start = World({u: Rect(r.r0 + lr, r.r1 + lr, r.c0 + dc, r.c1 + dc)
-                           for u, r in previous[0].world.units.items()}, set(), previous[0].world.next_id)
-        plan, seconds, cpu = _plan(occ, iterations if start is None else max(iterations // 4, 1), start)
+            old = previous[0].frame
+            angle = old.angle_rad
+            new = make_frame(occ.shape, angle_rad=angle, origin_xy_m=(-dc * RES, -lr * RES), resolution_m=RES)
+            carried = carry(previous[0].world, old, new)
+            start = World(carried.units, set(), carried.next_id)
+        plan, seconds, cpu = _plan(occ, iterations if start is None else warm_iterations, start, angle)
         r = Row(plan.k, _k_known(plan), float("nan"), float("nan"), seconds, cpu,
                 plan.iterations / max(seconds, 1e-9), plan.iterations / max(plan.cpu_seconds, 1e-9))
         _row("partial", folder.name, plan, r)
@@ -204,7 +231,8 @@ def _partial(iterations: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sets", nargs="*", default=["rose2", "ipa", "partial"], choices=["rose2", "ipa", "partial"])
-    parser.add_argument("--iterations", type=int, default=8000)
+    parser.add_argument("--iterations", type=int, default=20000)
+    parser.add_argument("--warm-iterations", type=int, default=2000, help="iterations of each warm update (partial)")
     parser.add_argument("--maps", nargs="*", default=None, help="only these map names")
     args = parser.parse_args()
     if not MAPS.is_dir():
@@ -217,7 +245,7 @@ def main() -> None:
         if "ipa" in args.sets:
             _ipa(args.iterations, args.maps)
         if "partial" in args.sets:
-            _partial(args.iterations)
+            _partial(args.iterations, args.warm_iterations)
     print(f"load average at end {os.getloadavg()[0]:.2f}")
 
 

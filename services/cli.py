@@ -91,9 +91,11 @@ def _parser() -> argparse.ArgumentParser:
     plan.add_argument("map", type=Path, help="map_server YAML, or a bare PNG/PGM with --resolution")
     plan.add_argument("--out", type=Path, required=True, help="folder for floor_plan.geojson, units.png, overview.png")
     plan.add_argument("--resolution", type=_positive, default=None, help="metres per pixel of a bare image")
-    plan.add_argument("--iterations", type=int, default=8000, help="Metropolis-Hastings iterations")
+    plan.add_argument("--iterations", type=int, default=20000, help="Metropolis-Hastings iterations")
     plan.add_argument("--max-seconds", type=_positive, default=60.0, help="wall-time bound of the chain")
     plan.add_argument("--seed", type=int, default=0, help="random seed of the chain")
+    plan.add_argument("--trajectory", type=Path, default=None,
+                      help="CSV of robot positions (x,y in map metres per line): seeds of unit candidates")
 
     pillars = commands.add_parser("pillars", help="rack uprights from a downward fisheye camera").add_subparsers(
         dest="pillars_command", required=True, metavar="PILLARS_COMMAND")
@@ -266,13 +268,14 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
 
 def _floor_plan(args: argparse.Namespace) -> None:
     from services.floor_plan import ChainSettings, FloorPlanError, FloorPlanSettings
-    from services.floor_plan.mapfile import floor_plan_map_file
+    from services.floor_plan.mapfile import floor_plan_map_file, read_trajectory
 
     if args.iterations < 1:
         raise FloorPlanError(f"--iterations must be at least 1, got {args.iterations}")
     chain = ChainSettings(iterations=args.iterations, max_seconds=args.max_seconds, seed=args.seed)
+    trajectory = read_trajectory(args.trajectory) if args.trajectory is not None else None
     plan = floor_plan_map_file(args.map, args.out, resolution_m=args.resolution,
-                               settings=FloorPlanSettings(chain=chain))
+                               settings=FloorPlanSettings(chain=chain), trajectory_xy_m=trajectory)
     rate = plan.iterations / plan.seconds if plan.seconds > 0 else float("inf")
     print(f"K(W,M) {100 * plan.k:.2f} %  units {len(plan.units)}  doors {len(plan.doors)}  "
           f"iterations {plan.iterations}  {rate:.0f} iterations/s  (CPU {plan.cpu_seconds:.2f} s)")

@@ -261,7 +261,7 @@ class FloorPlanStageSettings(BaseModel):
     layer: str = Field(LayerName.FLOOR_PLAN, min_length=1, description="C_W as a grid: 0 free, 1 unknown, 2 wall.")
     min_period_s: float = Field(10.0, ge=0.0, description="Least time between two floor plans.")
     safety_poll_period_s: float = Field(30.0, gt=0.0, description="How often the store is checked without events.")
-    iterations: int = Field(8000, ge=1, description="Metropolis-Hastings iterations of a fresh chain.")
+    iterations: int = Field(20000, ge=1, description="Metropolis-Hastings iterations of a fresh chain.")
     warm_iterations: int = Field(2000, ge=1, description="Iterations of a chain warm-started from the last world.")
     max_seconds: float = Field(30.0, gt=0.0, description="Wall-time bound of one chain.")
     wall_m: float = Field(0.1, gt=0.0, description="Wall thickness of a unit.")

@@ -8,6 +8,7 @@ under a Markov-logic context prior.
 from services.floor_plan.chain import SEED_SCHEDULE, Chain, ChainResult, ChainSettings, Phase, run_chain
 from services.floor_plan.context import ContextPrior, ContextSettings, UnitEvidence, type_marginals
 from services.floor_plan.errors import FloorPlanError
+from services.floor_plan.frame import Frame, carry, dominant_angle, make_frame
 from services.floor_plan.kernels import Kernel, KernelSettings, Move, Proposer
 from services.floor_plan.likelihood import (
     SEED_SENSOR_MODEL,
@@ -35,6 +36,7 @@ __all__ = [
     "FloorPlan",
     "FloorPlanError",
     "FloorPlanSettings",
+    "Frame",
     "Kernel",
     "KernelSettings",
     "Move",
@@ -46,11 +48,14 @@ __all__ = [
     "UnitEvidence",
     "UnitType",
     "World",
+    "carry",
     "cell_prediction_rate",
     "classify_map",
     "describe",
+    "dominant_angle",
     "floor_plan",
     "log_sensor_table",
+    "make_frame",
     "render",
     "run_chain",
     "type_marginals",

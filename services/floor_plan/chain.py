@@ -49,7 +49,7 @@ SEED_SCHEDULE: tuple[Phase, ...] = (
 class ChainSettings:
     """Length, schedule and seed of a chain. Iterations and wall time are both bounded."""
 
-    iterations: int = 8000
+    iterations: int = 20000
     max_seconds: float = 60.0
     schedule: tuple[Phase, ...] = SEED_SCHEDULE
     fsu_from: int = 1
@@ -105,7 +105,9 @@ class Chain:
         after, new_ids = apply_move(world, move)
         if len(set(after.units.values())) < len(after.units):
             return None  # two units on the same rectangle: not a world the model allows
-        if after.doors and move.removed and not after.doors_valid(self.wall_cells):
+        near = [world.units[u] for u in move.removed] + list(move.added) + (
+            [move.door_added] if move.door_added is not None else [])
+        if after.doors and not after.doors_valid(self.wall_cells, near):
             return None
         back = reverse_move(move, world, new_ids)
         q_back = probabilities.get(REVERSE[move.kernel], 0.0) * self.proposer.probability(after, back)
@@ -136,10 +138,11 @@ class ChainResult(NamedTuple):
 
 
 def run_chain(chain: Chain, classes_map: npt.NDArray[np.uint8], settings: ChainSettings, *,
-              first_iteration: int = 1) -> ChainResult:
+              first_iteration: int = 1, positions_rc: npt.NDArray[np.int64] | None = None) -> ChainResult:
     """Run Metropolis-Hastings from ``chain``'s world; stop after ``settings.iterations`` or ``max_seconds``.
 
     ``first_iteration`` > 1 starts inside the schedule (a warm start skips the initial ADD phase).
+    ``positions_rc`` ((N, 2) cells) are where robots were: seeds of the free-space detector.
     """
     rng = np.random.default_rng(settings.seed)
     chooser = RandomChooser(rng)
@@ -156,7 +159,8 @@ def run_chain(chain: Chain, classes_map: npt.NDArray[np.uint8], settings: ChainS
         if it >= settings.fsu_from and (it - settings.fsu_from) % settings.fsu_every == 0:
             extra = fsu_candidates(classes_map, chain.canvas.classes(), chain.proposer.evidence,
                                    wall_cells=chain.wall_cells,
-                                   min_inner_cells=chain.proposer.settings.min_inner_cells)
+                                   min_inner_cells=chain.proposer.settings.min_inner_cells,
+                                   positions_rc=positions_rc)
             chain.proposer.set_candidates(base_candidates, extra)
         probs = {k: p for k, p in phase_at(settings.schedule, it).probabilities.items() if k in allowed and p > 0}
         kernels = list(probs)

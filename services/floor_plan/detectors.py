@@ -146,15 +146,21 @@ def wbu_candidates(
 def fsu_candidates(
     classes_map: npt.NDArray[np.uint8], classes_world: npt.NDArray[np.uint8], evidence: Evidence, *,
     wall_cells: int, min_inner_cells: int, max_candidates: int = 24, min_free_share: float = 0.3,
-    max_wall_share: float = 0.15, floor_weight: float = 0.05,
+    max_wall_share: float = 0.15, floor_weight: float = 0.05, positions_rc: npt.NDArray[np.int64] | None = None,
 ) -> list[Candidate]:
     """Free-space unit candidates (fig. 3.13): rectangles grown over free map cells the world leaves unexplained.
 
     The unexplained free cells are cleaned by an opening of ``min_inner_cells``; seeds are the cells
     deepest inside them (distance transform), each grown side by side while the next row or column of the
     map holds at least ``min_free_share`` free and at most ``max_wall_share`` wall cells; the grown free
-    space gets a wall around it. Weights follow eq. 3.10, floored at ``floor_weight`` (such units often
-    lack a seen wall).
+    space gets a wall around it. Each seed gives two candidates: one grown over the map alone (it may
+    replace units that explain the place badly) and one that also stops at the cells the world's units
+    already claim, so that it fills a gap between them and its walls fall on theirs (shared walls, where
+    doors can open). Weights follow eq. 3.10, floored at ``floor_weight`` (such units often lack a seen wall).
+
+    ``positions_rc`` ((N, 2) cells, row and column), where a robot is known to have been (its trajectory),
+    are seeds too, ahead of the deepest cells (the robot-position detector): a robot stood in a unit, so
+    every place it passed that the world leaves unexplained gets up to ``max_candidates`` more candidates.
     """
     t = wall_cells
     h, w = classes_map.shape
@@ -162,29 +168,44 @@ def fsu_candidates(
     opened = cv2.morphologyEx(loose, cv2.MORPH_OPEN, np.ones((min_inner_cells, min_inner_cells), np.uint8))
     depth = cv2.distanceTransform(opened, cv2.DIST_L1, 3)
     deep = np.flatnonzero(depth.ravel() * 2 >= min_inner_cells)
-    if not len(deep):
-        return []
     order = deep[np.argsort(-depth.ravel()[deep], kind="stable")]
+    robot: npt.NDArray[np.int64] = np.zeros(0, np.int64)
+    if positions_rc is not None and len(positions_rc):
+        rc = np.asarray(positions_rc, np.int64).reshape(-1, 2)
+        inside = (rc[:, 0] >= t) & (rc[:, 0] < h - t) & (rc[:, 1] >= t) & (rc[:, 1] < w - t)
+        flat = rc[inside, 0] * w + rc[inside, 1]
+        robot = flat[loose.ravel()[flat] > 0]
+    if not len(order) and not len(robot):
+        return []
+    claimed = _integral(classes_world != CellClass.UNKNOWN)
+    bounds = (t, h - 1 - t, t, w - 1 - t)
     out: list[Candidate] = []
     taken = np.zeros(opened.shape, bool)
-    for flat in order[: 50 * max_candidates]:
+    seeds = 0
+    limit = max_candidates + min(len(robot), max_candidates)
+    for flat in np.r_[robot, order[: 50 * max_candidates]]:
         r, c = divmod(int(flat), w)
-        if len(out) >= max_candidates:
+        if seeds >= limit:
             break
         if taken[r, c]:
             continue
-        inner = _grow(evidence, Rect(r, r, c, c), (t, h - 1 - t, t, w - 1 - t), min_free_share, max_wall_share)
-        taken[inner.r0 : inner.r1 + 1, inner.c0 : inner.c1 + 1] = True
-        rect = Rect(inner.r0 - t, inner.r1 + t, inner.c0 - t, inner.c1 + t)
-        if inner.rows < min_inner_cells or inner.cols < min_inner_cells:
-            continue
-        out.append(Candidate(rect, max(evidence.unit_weight(rect, t), floor_weight)))
+        seeds += 1
+        seed = Rect(r, r, c, c)
+        plain = _grow(evidence, seed, bounds, min_free_share, max_wall_share)
+        gap = _grow(evidence, seed, bounds, min_free_share, max_wall_share, claimed=claimed)
+        taken[plain.r0 : plain.r1 + 1, plain.c0 : plain.c1 + 1] = True
+        for inner in {plain, gap}:
+            if inner.rows < min_inner_cells or inner.cols < min_inner_cells:
+                continue
+            rect = Rect(inner.r0 - t, inner.r1 + t, inner.c0 - t, inner.c1 + t)
+            out.append(Candidate(rect, max(evidence.unit_weight(rect, t), floor_weight)))
     return out
 
 
 def _grow(evidence: Evidence, rect: Rect, bounds: tuple[int, int, int, int], min_free: float,
-          max_wall: float, step: int = 8) -> Rect:
-    """Grow ``rect`` side by side, up to ``step`` lines a round, while each new line is open enough."""
+          max_wall: float, step: int = 8, claimed: npt.NDArray[np.int64] | None = None) -> Rect:
+    """Grow ``rect`` side by side, up to ``step`` lines a round, while each new line is open enough
+    (and, with ``claimed``, an integral image of the cells units claim, holds none of them)."""
     r0, r1, c0, c1 = rect
     lo_r, hi_r, lo_c, hi_c = bounds
     active = [True, True, True, True]
@@ -209,6 +230,8 @@ def _grow(evidence: Evidence, rect: Rect, bounds: tuple[int, int, int, int], min
                 box = (np.full(len(idx), r0), np.full(len(idx), r1), idx, idx)
                 n = r1 - r0 + 1
             ok = (_boxes(evidence._free, *box) >= min_free * n) & (_boxes(evidence._wall, *box) <= max_wall * n)
+            if claimed is not None:
+                ok &= _boxes(claimed, *box) == 0
             k = len(ok) if ok.all() else int(np.argmin(ok))
             if k < len(ok) or k == 0:
                 active[side] = False

@@ -78,11 +78,24 @@ def render(world: World, shape: tuple[int, int], *, wall_cells: int,
 
 
 def solid_obstacles(classes_map: npt.NDArray[np.uint8], *, min_cells: int) -> npt.NDArray[np.bool_]:
-    """Solid blocks of the map: occupied cells inside an occupied square of ``min_cells`` (a morphological
-    opening), e.g. rack blocks drawn solid or the filled outside of a building. Thin walls are not."""
+    """Solid blocks of the map: occupied cells inside an occupied square of ``min_cells`` (rounded up to odd;
+    a morphological opening), e.g. rack blocks drawn solid or the filled outside of a building. Thin walls are not."""
     walls = (classes_map == CellClass.WALL).astype(np.uint8)
-    opened = cv2.morphologyEx(walls, cv2.MORPH_OPEN, np.ones((min_cells, min_cells), np.uint8))
+    side = min_cells | 1  # an odd square: OpenCV's opening by an even one comes back shifted by a cell
+    opened = cv2.morphologyEx(walls, cv2.MORPH_OPEN, np.ones((side, side), np.uint8))
     return opened.astype(bool)
+
+
+def enclosed_blocks(obstacles: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """The solid obstacles that do not touch the map's border: blocks standing in the building (racks drawn
+    solid, solid furniture), as opposed to a filled outside."""
+    count, labels = cv2.connectedComponents(obstacles.astype(np.uint8), connectivity=8)
+    border = np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    inside = np.ones(count, bool)
+    inside[border] = False
+    inside[0] = False
+    out: npt.NDArray[np.bool_] = inside[labels]
+    return out
 
 
 def cell_prediction_rate(classes_map: npt.NDArray[np.uint8], classes_world: npt.NDArray[np.uint8]) -> float:
@@ -157,11 +170,17 @@ class Canvas:
         Wall thickness in cells.
     log_overlap : float
         log psi2 (< 0): the prior's penalty per cell claimed by one unit more than one (eq. 3.5).
+    obstacles : (H, W) bool, optional
+        Solid obstacles: fixed walls of the world; a unit's free space on them pays the overlap penalty.
+    blocks : (H, W) bool, optional
+        The obstacles standing in the building (:func:`enclosed_blocks`): fixed walls a unit may stand
+        around without penalty (a hall around its racks); they are never part of a unit's free space.
     """
 
     def __init__(
         self, classes_map: npt.NDArray[np.uint8], log_table: npt.NDArray[np.float64], *, wall_cells: int,
         log_overlap: float, obstacles: npt.NDArray[np.bool_] | None = None,
+        blocks: npt.NDArray[np.bool_] | None = None,
     ) -> None:
         self.shape: tuple[int, int] = (int(classes_map.shape[0]), int(classes_map.shape[1]))
         self.wall_cells = wall_cells
@@ -175,13 +194,18 @@ class Canvas:
         self._counts = (np.zeros(self.shape, np.int16), np.zeros(self.shape, np.int16), np.zeros(self.shape, np.int16))
         self.full = Rect(0, self.shape[0] - 1, 0, self.shape[1] - 1)
         self.score = float(self._unknown[-1, -1])
+        # blocks standing in the building: fixed walls a unit may stand around (a hall around its racks)
+        self._blocks = np.zeros(self.shape, bool) if blocks is None else blocks.astype(bool)
         if obstacles is not None:  # fixed walls of the world: counted once, never moved
-            self._counts[1][obstacles] = 1
+            self._counts[1][obstacles & ~self._blocks] = 1
+        if obstacles is not None or blocks is not None:
             self.score = self._window_score(self._counts, self.full)
 
     def classes(self) -> npt.NDArray[np.uint8]:
         """C_W of the current counts."""
-        return _classes(*self._counts)
+        out = _classes(*self._counts)
+        out[self._blocks] = CellClass.WALL
+        return out
 
     def _window_score(
         self, counts: tuple[npt.NDArray[np.int16], npt.NDArray[np.int16], npt.NDArray[np.int16]], window: Rect
@@ -193,7 +217,7 @@ class Canvas:
             window.r0, window.c0]
         has_wall = n_wall > 0
         door = n_door > 0
-        wall = has_wall & ~door
+        wall = (has_wall & ~door) | self._blocks[sl]
         free = ~wall & ((n_int > 0) | door)
         total += float(np.sum(self._gain_free[sl], where=free)) + float(np.sum(self._gain_wall[sl], where=wall))
         overlap = int(np.count_nonzero(n_int > 1)) + int(np.count_nonzero(has_wall & (n_int > 0)))

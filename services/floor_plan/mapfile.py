@@ -39,7 +39,7 @@ def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.
 
 def geojson(plan: FloorPlan) -> dict[str, Any]:
     """GeoJSON FeatureCollection: unit polygons (type, probability, neighbours), door segments and the
-    solid obstacles (polygons)."""
+    solid obstacles (polygons; ``standing``: a block in the building rather than a filled outside)."""
     neighbours: dict[int, list[int]] = {u.id: [] for u in plan.units}
     for a, b in plan.adjacency:
         neighbours[a].append(b)
@@ -66,9 +66,9 @@ def geojson(plan: FloorPlan) -> dict[str, Any]:
         {
             "type": "Feature",
             "geometry": {"type": "Polygon", "coordinates": [[list(p) for p in ring] for ring in polygon]},
-            "properties": {"kind": FeatureKind.OBSTACLE, "id": i},
+            "properties": {"kind": FeatureKind.OBSTACLE, "id": i, "standing": standing},
         }
-        for i, polygon in enumerate(plan.obstacles)
+        for i, (polygon, standing) in enumerate(zip(plan.obstacles, plan.standing, strict=True))
     ]
     return {"type": "FeatureCollection", "features": features,
             "properties": {"k": round(plan.k, 6), "iterations": plan.iterations}}
@@ -91,8 +91,26 @@ def write_outputs(plan: FloorPlan, out_dir: Path) -> dict[str, Path]:
     return paths
 
 
+def read_trajectory(path: Path) -> npt.NDArray[np.float64]:
+    """Robot positions from a CSV file: x, y in map metres, one position a line (more columns are ignored).
+
+    Raises
+    ------
+    FloorPlanError
+        A missing or unreadable file, fewer than two columns, or positions that are not finite numbers.
+    """
+    try:
+        xy = np.loadtxt(path, delimiter=",", usecols=(0, 1), ndmin=2, dtype=np.float64)
+    except (OSError, ValueError) as err:
+        raise FloorPlanError(f"cannot read robot positions (x,y per line, metres) from {path}: {err}") from err
+    if not np.isfinite(xy).all():
+        raise FloorPlanError(f"robot positions in {path} must be finite numbers")
+    return xy
+
+
 def floor_plan_map_file(map_path: Path, out_dir: Path, *, resolution_m: float | None = None,
-                        settings: FloorPlanSettings | None = None) -> FloorPlan:
+                        settings: FloorPlanSettings | None = None,
+                        trajectory_xy_m: npt.NDArray[np.float64] | None = None) -> FloorPlan:
     """Fit a floor plan to a map file and write its outputs (the ``aisle floor-plan`` command).
 
     Raises
@@ -101,7 +119,7 @@ def floor_plan_map_file(map_path: Path, out_dir: Path, *, resolution_m: float | 
         Missing, unreadable or malformed map files; maps too small or without free space.
     """
     occ, res, origin = read_map(Path(map_path), resolution_m=resolution_m)
-    plan = floor_plan(occ, resolution_m=res, origin_xy_m=origin, settings=settings)
+    plan = floor_plan(occ, resolution_m=res, origin_xy_m=origin, settings=settings, trajectory_xy_m=trajectory_xy_m)
     write_outputs(plan, Path(out_dir))
     logger.info("floor plan of %s: %d units, %d doors into %s", map_path, len(plan.units), len(plan.doors), out_dir)
     return plan

@@ -30,18 +30,25 @@ def overview_image(plan: FloorPlan, *, scale: int | None = None) -> npt.NDArray[
     k = scale or max(1, 1500 // max(h, w))
     grey = np.array([255, 160, 0], np.uint8)[plan.classes_map]
     rgb = np.repeat(grey[..., None], 3, axis=2).astype(np.float64)
+    ox, oy = plan.origin_xy_m
+
+    def pixels(points: tuple[tuple[float, float], ...], scale: int) -> npt.NDArray[np.int32]:
+        """Map metres -> (x, y) pixels of an image ``scale`` times the map."""
+        xy = np.array(points, np.float64)
+        return np.rint(np.stack([(xy[:, 0] - ox) / plan.resolution_m * scale,
+                                 (xy[:, 1] - oy) / plan.resolution_m * scale], axis=1)).astype(np.int32)
+
     for unit in plan.units:
-        r = unit.rect
-        sl = (slice(r.r0, r.r1 + 1), slice(r.c0, r.c1 + 1))
-        rgb[sl] = 0.5 * rgb[sl] + 0.5 * np.array(TYPE_COLOURS[unit.unit_type])
+        mask = np.zeros((h, w), np.uint8)
+        cv2.fillPoly(mask, [pixels(unit.polygon_xy_m[:4], 1)], 1)
+        inside = mask.astype(bool)
+        rgb[inside] = 0.5 * rgb[inside] + 0.5 * np.array(TYPE_COLOURS[unit.unit_type])
     out = np.ascontiguousarray(np.kron(rgb, np.ones((k, k, 1))).astype(np.uint8))
     for unit in plan.units:
-        r = unit.rect
-        cv2.rectangle(out, (r.c0 * k, r.r0 * k), ((r.c1 + 1) * k - 1, (r.r1 + 1) * k - 1), WALL_COLOUR,
-                      max(1, k // 2))
+        cv2.polylines(out, [pixels(unit.polygon_xy_m[:4], k)], True, WALL_COLOUR, max(1, k // 2))
     for door in plan.doors:
-        d = door.rect
-        cv2.rectangle(out, (d.c0 * k, d.r0 * k), ((d.c1 + 1) * k - 1, (d.r1 + 1) * k - 1), DOOR_COLOUR, -1)
+        a, b = pixels(door.segment_xy_m, k)
+        cv2.line(out, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), DOOR_COLOUR, max(2, k))
     out = np.ascontiguousarray(out[::-1])
     y = 20
     for t, colour in TYPE_COLOURS.items():

@@ -14,6 +14,15 @@ from services.floor_plan.chain import Chain, ChainSettings, run_chain
 from services.floor_plan.context import ContextPrior, ContextSettings
 from services.floor_plan.detectors import Evidence, wall_lines, wbu_candidates
 from services.floor_plan.errors import FloorPlanError
+from services.floor_plan.frame import (
+    Frame,
+    dominant_angle,
+    make_frame,
+    points_to_map,
+    points_to_work,
+    to_map,
+    to_work,
+)
 from services.floor_plan.kernels import KernelSettings, Proposer
 from services.floor_plan.likelihood import (
     SEED_SENSOR_MODEL,
@@ -21,6 +30,7 @@ from services.floor_plan.likelihood import (
     CellClass,
     cell_prediction_rate,
     classify_map,
+    enclosed_blocks,
     log_sensor_table,
     render,
     solid_obstacles,
@@ -49,11 +59,13 @@ class FloorPlanSettings:
     context: ContextSettings = field(default_factory=ContextSettings)
     warm_start_iteration: int = 4001
     """Where a warm-started chain enters the schedule: the last phase of table 3.2, every kernel on."""
+    min_turn_rad: float = math.radians(1.0)
+    """A map whose dominant walls are further than this from the grid's axes is explained turned to them."""
 
 
 class Unit(NamedTuple):
     id: int
-    rect: Rect
+    rect: Rect  # cells of the plan's working frame
     polygon_xy_m: tuple[tuple[float, float], ...]  # closed ring, 5 points, map frame
     unit_type: UnitType
     probability: float
@@ -61,7 +73,7 @@ class Unit(NamedTuple):
 
 
 class Door(NamedTuple):
-    rect: Rect
+    rect: Rect  # cells of the plan's working frame
     segment_xy_m: tuple[tuple[float, float], tuple[float, float]]
     units: tuple[int, int]
     width_m: float
@@ -70,8 +82,9 @@ class Door(NamedTuple):
 class FloorPlan(NamedTuple):
     """A floor plan and how well it explains the map.
 
-    ``classes_map``/``classes_world`` are C_M and C_W (uint8 :class:`CellClass`, GridLayer row order);
-    ``k`` is K(W,M) (eq. 3.39).
+    ``classes_map``/``classes_world`` are C_M and C_W (uint8 :class:`CellClass`, GridLayer row order, map
+    cells); ``k`` is K(W,M) (eq. 3.39). ``world`` and the units' and doors' ``rect`` are cells of ``frame``
+    (the map itself unless its walls run at an angle); polygons and segments are map metres.
     """
 
     world: World
@@ -80,6 +93,9 @@ class FloorPlan(NamedTuple):
     adjacency: list[tuple[int, int]]
     obstacles: list[tuple[tuple[tuple[float, float], ...], ...]]
     """The solid blocks as polygons (outer ring, then holes; closed rings in map metres)."""
+    standing: list[bool]
+    """Per obstacle: True for a block standing in the building (racks, solid furniture: it does not touch the
+    map's border), False for a filled outside."""
     classes_map: npt.NDArray[np.uint8]
     classes_world: npt.NDArray[np.uint8]
     k: float
@@ -90,6 +106,7 @@ class FloorPlan(NamedTuple):
     cpu_seconds: float
     resolution_m: float
     origin_xy_m: tuple[float, float]
+    frame: Frame
 
 
 def _cells(metres: float, resolution_m: float) -> int:
@@ -113,7 +130,8 @@ def _obstacles(classes: npt.NDArray[np.uint8], settings: FloorPlanSettings,
 
 def floor_plan(
     occupancy: npt.NDArray[np.integer], *, resolution_m: float, origin_xy_m: tuple[float, float] = (0.0, 0.0),
-    settings: FloorPlanSettings | None = None, start: World | None = None,
+    settings: FloorPlanSettings | None = None, start: World | None = None, angle_rad: float | None = None,
+    trajectory_xy_m: npt.NDArray[np.float64] | None = None,
 ) -> FloorPlan:
     """Fit a world of units and doors to an occupancy grid by data-driven MCMC.
 
@@ -127,7 +145,15 @@ def floor_plan(
         Map position of cell (0, 0)'s corner.
     settings : FloorPlanSettings, optional
     start : World, optional
-        A previous world to warm-start from (a grown map); units that no longer fit are dropped.
+        A previous world to warm-start from (a grown map), in cells of this map's frame (:func:`make_frame`
+        with ``angle_rad``; :func:`~services.floor_plan.frame.carry` moves a world there); units that no
+        longer fit are dropped.
+    angle_rad : float, optional
+        The direction of the walls to explain along (radians, x = column, y = row); by default the map's
+        dominant orientation, or 0 when that is within ``settings.min_turn_rad`` of the axes.
+    trajectory_xy_m : (N, 2) float, optional
+        Robot positions (map metres) where a trajectory is known (a bag, live traffic): the places a robot
+        passed that the world leaves unexplained seed unit candidates (the robot-position detector).
 
     Raises
     ------
@@ -137,14 +163,21 @@ def floor_plan(
     s = settings or FloorPlanSettings()
     if not math.isfinite(resolution_m) or resolution_m <= 0:
         raise FloorPlanError(f"resolution must be a positive number of metres, got {resolution_m}")
-    classes = classify_map(occupancy, occupied_percent=s.occupied_percent, free_percent=s.free_percent)
+    classes_map = classify_map(occupancy, occupied_percent=s.occupied_percent, free_percent=s.free_percent)
+    if angle_rad is None:
+        angle_rad = dominant_angle(classes_map, min_angle_rad=s.min_turn_rad)
+    frame = make_frame(classes_map.shape, angle_rad=angle_rad, origin_xy_m=origin_xy_m, resolution_m=resolution_m)
+    classes = to_work(frame, classes_map, fill=CellClass.UNKNOWN)
     ks = kernel_settings(s, resolution_m)
     evidence = Evidence(classes)
     lines = wall_lines(classes, wall_cells=ks.wall_cells, min_length_cells=_cells(s.min_line_m, resolution_m))
     candidates = wbu_candidates(lines, evidence, wall_cells=ks.wall_cells, min_inner_cells=ks.min_inner_cells)
     proposer = Proposer(evidence, lines, ks, candidates)
+    solid = _obstacles(classes_map, s, resolution_m)
     canvas = Canvas(classes, log_sensor_table(s.sensor_model), wall_cells=ks.wall_cells,
-                    log_overlap=math.log(s.overlap_psi), obstacles=_obstacles(classes, s, resolution_m))
+                    log_overlap=math.log(s.overlap_psi),
+                    obstacles=to_work(frame, solid.astype(np.uint8), fill=0).astype(bool),
+                    blocks=to_work(frame, enclosed_blocks(solid).astype(np.uint8), fill=0).astype(bool))
     prior = ContextPrior(resolution_m=resolution_m, wall_cells=ks.wall_cells, settings=s.context)
     first = 1
     world = World()
@@ -153,23 +186,33 @@ def floor_plan(
         world.doors = {d for d in start.doors if len(world.door_units(d, ks.wall_cells)) == 2}
         first = s.warm_start_iteration
     chain = Chain(world, canvas, proposer, prior)
-    result = run_chain(chain, classes, s.chain, first_iteration=first)
-    return describe(result.world, classes, resolution_m=resolution_m, origin_xy_m=origin_xy_m, settings=s,
+    positions = None
+    if trajectory_xy_m is not None and len(trajectory_xy_m):
+        xy = np.asarray(trajectory_xy_m, np.float64).reshape(-1, 2)
+        rc = np.stack([(xy[:, 1] - origin_xy_m[1]) / resolution_m, (xy[:, 0] - origin_xy_m[0]) / resolution_m], axis=1)
+        positions = np.unique(np.floor(points_to_work(frame, rc)).astype(np.int64), axis=0)
+    result = run_chain(chain, classes, s.chain, first_iteration=first, positions_rc=positions)
+    return describe(result.world, classes_map, frame=frame, settings=s,
                     log_posterior=result.log_posterior, iterations=result.iterations, accepted=result.accepted,
                     seconds=result.seconds, cpu_seconds=result.cpu_seconds)
 
 
 def describe(
-    world: World, classes_map: npt.NDArray[np.uint8], *, resolution_m: float, origin_xy_m: tuple[float, float],
-    settings: FloorPlanSettings, log_posterior: float = float("nan"), iterations: int = 0, accepted: int = 0,
-    seconds: float = 0.0, cpu_seconds: float = 0.0,
+    world: World, classes_map: npt.NDArray[np.uint8], *, frame: Frame, settings: FloorPlanSettings,
+    log_posterior: float = float("nan"), iterations: int = 0, accepted: int = 0, seconds: float = 0.0,
+    cpu_seconds: float = 0.0,
 ) -> FloorPlan:
-    """A world's units, doors, types and K(W,M) in map coordinates."""
+    """A world (cells of ``frame``) as units, doors, types and K(W,M) in map coordinates."""
+    resolution_m, origin_xy_m = frame.resolution_m, frame.origin_xy_m
     t = kernel_settings(settings, resolution_m).wall_cells
     ox, oy = origin_xy_m
 
     def xy(r: float, c: float) -> tuple[float, float]:
         return round(ox + c * resolution_m, 4), round(oy + r * resolution_m, 4)
+
+    def work_xy(*rc: tuple[float, float]) -> list[tuple[float, float]]:
+        back = points_to_map(frame, np.array(rc, np.float64))
+        return [xy(float(r), float(c)) for r, c in back]
 
     prior = ContextPrior(resolution_m=resolution_m, wall_cells=t, settings=settings.context)
     sem = prior.semantics(world)
@@ -178,7 +221,8 @@ def describe(
         # the polygon runs along the middle of the walls
         a0, a1 = r.r0 + t / 2, r.r1 + 1 - t / 2
         b0, b1 = r.c0 + t / 2, r.c1 + 1 - t / 2
-        ring = (xy(a0, b0), xy(a0, b1), xy(a1, b1), xy(a1, b0), xy(a0, b0))
+        corners = work_xy((a0, b0), (a0, b1), (a1, b1), (a1, b0))
+        ring = (*corners, corners[0])
         area = (a1 - a0) * (b1 - b0) * resolution_m**2
         units.append(Unit(uid, r, ring, sem[uid].unit_type, sem[uid].probability, area))
     doors = []
@@ -188,18 +232,21 @@ def describe(
             continue
         if d.rows > d.cols:  # along rows: a vertical wall
             c = d.c0 + d.cols / 2
-            seg = (xy(d.r0, c), xy(d.r1 + 1, c))
+            p, q = work_xy((d.r0, c), (d.r1 + 1, c))
+            seg = (p, q)
             width = d.rows * resolution_m
         else:
             rr = d.r0 + d.rows / 2
-            seg = (xy(rr, d.c0), xy(rr, d.c1 + 1))
+            p, q = work_xy((rr, d.c0), (rr, d.c1 + 1))
+            seg = (p, q)
             width = d.cols * resolution_m
         doors.append(Door(d, seg, (holders[0], holders[1]), width))
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
     solid = _obstacles(classes_map, settings, resolution_m)
-    cw = render(world, (classes_map.shape[0], classes_map.shape[1]), wall_cells=t, obstacles=solid)
+    cw = to_map(frame, render(world, frame.shape, wall_cells=t), fill=CellClass.UNKNOWN)
+    cw = np.where(solid, np.uint8(CellClass.WALL), cw).astype(np.uint8)
     contours, hierarchy = cv2.findContours(solid.astype(np.uint8), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
 
     def ring_of(contour: npt.NDArray[np.integer[Any]] | cv2.typing.MatLike) -> tuple[tuple[float, float], ...]:
@@ -208,6 +255,8 @@ def describe(
         return (*ring, ring[0]) if len(ring) >= 3 else ()
 
     rings: list[tuple[tuple[tuple[float, float], ...], ...]] = []
+    standing: list[bool] = []
+    blocks = enclosed_blocks(solid)
     for i, contour in enumerate(contours):
         if hierarchy[0][i][3] != -1:
             continue  # a hole: it goes with its outer boundary
@@ -215,19 +264,22 @@ def describe(
         holes = [ring_of(contours[j]) for j in range(len(contours)) if hierarchy[0][j][3] == i]
         if outer:
             rings.append((outer, *(h for h in holes if h)))
-    return FloorPlan(world, units, doors, adjacency, rings, classes_map, cw, cell_prediction_rate(classes_map, cw),
-                     log_posterior, iterations, accepted, seconds, cpu_seconds, resolution_m, origin_xy_m)
+            x, y = contour.reshape(-1, 2)[0]
+            standing.append(bool(blocks[y, x]))
+    return FloorPlan(world, units, doors, adjacency, rings, standing, classes_map, cw,
+                     cell_prediction_rate(classes_map, cw), log_posterior, iterations, accepted, seconds, cpu_seconds,
+                     resolution_m, origin_xy_m, frame)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
-    """A label image (GridLayer order): each unit's id on the map's free cells inside it, 0 elsewhere.
+    """A label image (GridLayer order, map cells): each unit's id on the map's free cells inside it, 0 elsewhere.
 
     Where units overlap the smaller one wins.
     """
-    out = np.zeros(plan.classes_map.shape, np.int32)
-    free = plan.classes_map == CellClass.FREE
+    work = np.zeros(plan.frame.shape, np.float32)  # ids as float32 (exact below 2**24) so OpenCV can turn them
     for unit in sorted(plan.units, key=lambda u: -u.rect.rows * u.rect.cols):
         r = unit.rect
-        sl = (slice(r.r0, r.r1 + 1), slice(r.c0, r.c1 + 1))
-        out[sl] = np.where(free[sl], unit.id, out[sl])
+        work[r.r0 : r.r1 + 1, r.c0 : r.c1 + 1] = unit.id
+    labels = to_map(plan.frame, work, fill=0.0)
+    out: npt.NDArray[np.int32] = np.where(plan.classes_map == CellClass.FREE, labels, 0).astype(np.int32)
     return out

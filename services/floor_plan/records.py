@@ -10,6 +10,7 @@ import numpy as np
 from services.floor_plan.likelihood import CellClass
 from services.floor_plan.mapfile import geojson
 from services.floor_plan.pipeline import FloorPlan
+from services.floor_plan.world import Rect, World
 from shared.store import Feature, GridLayer, TopologyEdge, TopologyNode
 from shared.vocabulary import FeatureKind
 
@@ -30,6 +31,26 @@ def plan_layer(plan: FloorPlan, *, name: str, meta: Mapping[str, Any] | None = N
     })
 
 
+def world_meta(world: World) -> dict[str, Any]:
+    """The world as JSON for the layer's meta (``world``), so a restarted worker carries on from it."""
+    return {"units": [[u, *r] for u, r in sorted(world.units.items())], "doors": [list(d) for d in sorted(world.doors)],
+            "next_id": world.next_id}
+
+
+def world_from_meta(meta: Mapping[str, Any]) -> World | None:
+    """The world :func:`world_meta` stored in a layer's meta; None when it is absent or not one."""
+    data: Any = meta.get("world", {})
+    try:
+        units = {int(u): Rect(*(int(v) for v in rest)) for u, *rest in data["units"]}
+        doors = {Rect(*(int(v) for v in d)) for d in data["doors"]}
+        next_id = int(data["next_id"])
+    except (TypeError, KeyError, ValueError):
+        return None
+    if next_id <= max(units, default=0):
+        return None
+    return World(units, doors, next_id)
+
+
 def plan_features(plan: FloorPlan) -> dict[str, list[Feature]]:
     """``unit`` features (polygon, ``label`` = type, ``probability``, ``area_m2``, ``adjacent`` keys), ``door``
     features (segment, the two unit keys, ``width_m``) and ``obstacle`` features (the solid blocks' polygons,
@@ -43,7 +64,8 @@ def plan_features(plan: FloorPlan) -> dict[str, list[Feature]]:
                 "adjacent": [unit_key(u) for u in props["adjacent"]],
             }, confidence=props["probability"]))
         elif props["kind"] == FeatureKind.OBSTACLE:
-            out[FeatureKind.OBSTACLE].append(Feature(FeatureKind.OBSTACLE, f"o{props['id']}", item["geometry"]))
+            out[FeatureKind.OBSTACLE].append(Feature(FeatureKind.OBSTACLE, f"o{props['id']}", item["geometry"],
+                                                     {"standing": props["standing"]}))
         else:
             a, b = props["units"]
             start = item["geometry"]["coordinates"][0]

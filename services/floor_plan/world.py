@@ -10,6 +10,7 @@ wall band of the other (they share that wall); a door is a run of cells of such 
 from __future__ import annotations
 
 import enum
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -140,6 +141,11 @@ class World:
         """Ids of the units whose walls hold ``door``."""
         return [uid for uid, r in self.units.items() if in_wall(r, door, wall_cells)]
 
-    def doors_valid(self, wall_cells: int) -> bool:
-        """Every door lies in the walls of exactly two units."""
-        return all(len(self.door_units(d, wall_cells)) == 2 for d in self.doors)
+    def doors_valid(self, wall_cells: int, near: Sequence[Rect] | None = None) -> bool:
+        """Every door lies in the walls of exactly two units.
+
+        With ``near`` (the rectangles a move removed or added) only the doors touching them are looked
+        at: the holders of any other door did not change.
+        """
+        doors = self.doors if near is None else [d for d in self.doors if any(r.intersects(d) for r in near)]
+        return all(len(self.door_units(d, wall_cells)) == 2 for d in doors)

@@ -113,6 +113,13 @@ def test_floor_plan_writes_every_output_and_prints_k(tmp_path: Path, capsys: pyt
     for name in ("floor_plan.geojson", "units.png", "overview.png"):
         assert (tmp_path / "fp" / name).is_file()
     assert main(["floor-plan", str(tmp_path / "demo" / "world.geojson"), "--out", str(tmp_path / "bad")]) == 1
+    track = tmp_path / "track.csv"
+    track.write_text("5.0,5.0\n6.0,5.5\n")
+    assert main(["floor-plan", yaml_path, "--out", str(tmp_path / "fp2"), "--iterations", "300",
+                 "--trajectory", str(track)]) == 0
+    track.write_text("5.0\n")
+    assert main(["floor-plan", yaml_path, "--out", str(tmp_path / "fp3"), "--iterations", "300",
+                 "--trajectory", str(track)]) == 1, "a trajectory without x and y is a clear error"
 
 
 def test_keys_are_created_listed_and_revoked(capsys: pytest.CaptureFixture[str]) -> None:

@@ -17,10 +17,13 @@ from services.floor_plan import (
     FloorPlanError,
     FloorPlanSettings,
     Phase,
+    Rect,
     UnitType,
     floor_plan,
     unit_labels,
 )
+from services.floor_plan.detectors import Evidence, fsu_candidates
+from services.floor_plan.likelihood import classify_map
 from services.floor_plan.mapfile import floor_plan_map_file, read_map
 from shared.mapfiles import write_map_yaml
 
@@ -86,6 +89,26 @@ def test_solid_blocks_are_obstacles_the_world_draws_as_walls() -> None:
     assert len(block) == 1
     outside = [poly for poly in plan.obstacles if len(poly) == 2]  # the filled outside, the room its hole
     assert len(outside) == 1
+    assert not plan.standing[plan.obstacles.index(outside[0])], "the filled outside is no block in the building"
+    assert plan.standing[plan.obstacles.index(block[0])]
+
+
+def test_a_hall_with_racks_drawn_solid_is_one_unit_around_them_and_the_racks_are_obstacles() -> None:
+    occ = np.full((160, 260), -1, np.int8)
+    _box(occ, 10, 149, 10, 249)  # a 12 m x 7 m hall
+    racks = ((40, 55), (75, 90), (110, 125))
+    for r0, r1 in racks:
+        occ[r0 : r1 + 1, 40:220] = 100  # rack rows drawn solid, 0.8 m deep
+    plan = floor_plan(occ, resolution_m=RES, settings=_settings(3000))
+    assert len(plan.units) == 1, "the racks stand in one unit; they do not cut the hall into aisles"
+    for r0, r1 in racks:
+        assert np.all(plan.classes_world[r0 : r1 + 1, 40:220] == CellClass.WALL)
+        assert not unit_labels(plan)[r0 : r1 + 1, 40:220].any(), "no rack cell is a unit's free space"
+        y0, y1 = r0 * RES, (r1 + 1) * RES
+        found = [poly for poly in plan.obstacles
+                 if all(1.9 <= x <= 11.1 and y0 - 0.1 <= y <= y1 + 0.1 for x, y in poly[0])]
+        assert len(found) == 1, "each rack row is reported as an obstacle"
+        assert plan.standing[plan.obstacles.index(found[0])], "a rack stands in the hall"
 
 
 def test_units_png_labels_only_free_cells_one_id_per_unit() -> None:
@@ -159,3 +182,23 @@ def test_map_file_outputs_agree_with_the_plan(tmp_path: Path) -> None:
     units = cv2.imread(str(tmp_path / "out" / "units.png"), cv2.IMREAD_UNCHANGED)
     assert units is not None and units.shape == plan.classes_map.shape and units.dtype == np.uint16
     assert (tmp_path / "out" / "overview.png").is_file()
+
+
+def test_robot_positions_seed_candidates_where_the_robot_passed() -> None:
+    occ = np.full((80, 160), -1, np.int8)
+    _box(occ, 5, 74, 5, 94)  # a big room: the deepest free space
+    _box(occ, 20, 59, 93, 140)  # a smaller one beside it
+    classes = classify_map(occ)
+    unexplained = np.full(classes.shape, CellClass.UNKNOWN, np.uint8)
+    evidence = Evidence(classes)
+    only_deepest = fsu_candidates(classes, unexplained, evidence, wall_cells=2, min_inner_cells=10, max_candidates=1)
+    assert all(c.rect.c1 <= 96 for c in only_deepest), "without positions the one candidate is the big room"
+    passed = fsu_candidates(classes, unexplained, evidence, wall_cells=2, min_inner_cells=10, max_candidates=1,
+                            positions_rc=np.array([[40, 120]]))
+
+    def small_room(rect: Rect) -> bool:
+        return rect.c0 >= 93 and rect.r0 <= 22 and rect.r1 >= 57
+
+    assert any(small_room(c.rect) for c in passed), "the room the robot passed gets its own candidate"
+    plan = floor_plan(occ, resolution_m=RES, settings=_settings(1500), trajectory_xy_m=np.array([[6.0, 2.0]]))
+    assert any(small_room(u.rect) for u in plan.units)

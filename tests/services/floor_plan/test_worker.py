@@ -12,8 +12,10 @@ import pytest
 from services.floor_plan.worker import FloorPlanStage
 from shared import messages
 from shared.bus import WORKER_NAMESPACE, Bus
+from shared.robots import Robot, TrackPoint
 from shared.settings import FloorPlanStageSettings, Settings, ZenohSettings
 from shared.store import GridLayer, MapStore, Revision, RevisionWrite
+from shared.vocabulary import FeatureKind
 from shared.worker import MAP_EVENTS_TOPIC, StageContext, map_event
 from tests import stages
 from tests.helpers import wait_for
@@ -46,10 +48,11 @@ def _box(occ: npt.NDArray[np.int8], r0: int, r1: int, c0: int, c1: int) -> None:
 
 
 def _write(store: MapStore, settings: Settings, bus: Bus, occ: npt.NDArray[np.int8],
-           origin: tuple[float, float]) -> Revision:
+           origin: tuple[float, float], robots: tuple[Robot, ...] = ()) -> Revision:
     map_id = store.ensure_map(settings.map_name).id
     revision = store.write_revision(map_id, RevisionWrite(
-        "occupancy_mapping", layers=[GridLayer("occupancy", occ, RES_M, *origin)]))
+        "occupancy_mapping", layers=[GridLayer("occupancy", occ, RES_M, *origin)],
+        features={FeatureKind.ROBOT: [r.feature() for r in robots]} if robots else {}))
     publisher = bus.publisher(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespace=WORKER_NAMESPACE)
     publisher.publish(map_event(settings.map_name, revision))
     publisher.close()
@@ -97,3 +100,43 @@ def test_worker_writes_units_doors_and_graph_and_keeps_ids_as_the_map_grows(
     nodes, edges = store.topology(map_id)
     assert {n.key for n in nodes} == set(now)
     assert {e.attributes["connection"] for e in edges} <= {"door", "wall"}
+
+
+def test_a_restarted_worker_warm_starts_from_the_last_stored_world(store: MapStore, settings: Settings) -> None:
+    occ = np.full((80, 120), -1, np.int8)
+    _box(occ, 10, 69, 10, 60)
+    _box(occ, 10, 69, 59, 109)
+    occ[35:48, 59:61] = 0
+    grown = np.full((80, 180), -1, np.int8)
+    grown[:, 60:] = occ
+    _box(grown, 10, 69, 19, 70)
+    grown[30:42, 69:71] = 0
+    map_id = store.ensure_map(settings.map_name).id
+    with stages.running_stage(STAGE, _stage, settings, store) as bus:
+        _write(store, settings, bus, occ, (-1.0, 2.0))
+        wait_for(lambda: len(_plans(store, settings)) >= 1, timeout_s=TIMEOUT_S, what="the first floor plan")
+    before = {s.feature.key for s in store.features(map_id) if s.stage == STAGE and s.feature.kind == "unit"}
+    with stages.running_stage(STAGE, _stage, settings, store) as bus:  # a new worker: nothing in memory
+        _write(store, settings, bus, grown, (-4.0, 2.0))
+        wait_for(lambda: len(_plans(store, settings)) >= 2, timeout_s=TIMEOUT_S, what="the plan after the restart")
+    after = _plans(store, settings)[1]
+    assert after.summary["warm_start"] is True
+    now = {s.feature.key for s in store.features(map_id) if s.stage == STAGE and s.feature.kind == "unit"}
+    assert len(before) == 2 and before <= now, "units of the world before the restart keep their ids"
+
+
+def test_the_positions_robots_passed_are_kept_with_the_plan(store: MapStore, settings: Settings) -> None:
+    occ = np.full((80, 120), -1, np.int8)
+    _box(occ, 10, 69, 10, 60)
+    _box(occ, 10, 69, 59, 109)
+    occ[35:48, 59:61] = 0
+    track = tuple(TrackPoint(x, 3.5, 0.0, int(1e9 * i)) for i, x in enumerate((1.0, 2.0, 3.0, 4.0)))
+    robot = Robot("robot1", track[-1], track)
+    map_id = store.ensure_map(settings.map_name).id
+    with stages.running_stage(STAGE, _stage, settings, store) as bus:
+        _write(store, settings, bus, occ, (0.0, 0.0), robots=(robot,))
+        wait_for(lambda: len(_plans(store, settings)) >= 1, timeout_s=TIMEOUT_S, what="the floor plan")
+    layer = store.layer(map_id, "floor_plan")
+    assert layer is not None
+    kept = {tuple(p) for p in layer.layer.meta["robot_positions"]}
+    assert {(p.x_m, p.y_m) for p in track} <= kept, "every place the robot passed is kept for the next plan"
