@@ -430,7 +430,6 @@ def decompose(
         door_max_depth_m=door_max_depth_m,
         room_min_area_m2=room_min_area_m2,
         neck_half_width_m=neck_half_width_m,
-        unknown=~known,
     )
     # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
     against_walls = wall_furniture(obstacle, resolution_m=resolution_m) & (segments == 0)

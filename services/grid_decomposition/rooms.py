@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import cv2
 import numpy as np
 import numpy.typing as npt
@@ -13,7 +11,6 @@ from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.segments import (
     fill_from_neighbours,
-    join_pairs,
     merge_open_segments,
     merge_small_segments,
     split_along,
@@ -139,11 +136,6 @@ def segment_rooms(
     room_min_area_m2: float = 1.5,
     room_min_half_width_m: float = 0.4,
     neck_half_width_m: float = 0.0,
-    through_border_ratio: float = 1.1,
-    through_reach_m: float = 1.5,
-    unknown: npt.NDArray[np.bool_] | None = None,
-    frontier_max_area_m2: float = 6.0,
-    frontier_share: float = 0.4,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
     """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
 
@@ -156,12 +148,8 @@ def segment_rooms(
        ``neck_half_width_m`` > 0), and doorways found from the free space itself
        (:func:`find_doorways`) cut rooms apart.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
-       everywhere (aisles between shelves, strips along a wall), or pieces under
-       ``frontier_max_area_m2`` bordering the ``unknown`` on more than ``frontier_share`` of their
-       outline (the first glimpse of a room a growing map has not explored; :func:`frontier_pieces`)
-       join the neighbour they share the longest border with (:func:`merge_small_segments`).
-    5. Two rooms whose border spans at least ``through_border_ratio`` times the width of both
-       near it are one room cut across (:func:`merge_through`; ``through_border_ratio`` 0: never).
+       everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
+       longest border with (:func:`merge_small_segments`).
 
     Parameters
     ----------
@@ -171,8 +159,6 @@ def segment_rooms(
         Furniture (:func:`furniture`); pixels of warehouse floors; closed line pixels.
     resolution_m : float
         Metres per pixel.
-    unknown : (H, W) bool, optional
-        Unknown cells (the frontier of a growing map); ``None``: no frontier rule.
 
     Returns
     -------
@@ -201,128 +187,13 @@ def segment_rooms(
         seg = split_along(seg, cut)
     clearance = cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5)
     widest = np.asarray(ndimage.maximum(clearance, labels=seg, index=np.arange(int(seg.max()) + 1)))
-    absorb = widest * resolution_m < room_min_half_width_m
-    if unknown is not None and frontier_max_area_m2 > 0:
-        absorb |= frontier_pieces(
-            seg, unknown, max_area_px=frontier_max_area_m2 / resolution_m**2, min_share=frontier_share
-        )
     rooms = merge_small_segments(
         seg,
         min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),
         fixed=_share(seg, floor) > 0.5,
-        absorb=absorb,
+        absorb=widest * resolution_m < room_min_half_width_m,
     )
-    if through_border_ratio > 0:
-        rooms = merge_through(
-            rooms,
-            space | (rooms > 0),
-            fixed=_share(rooms, floor) > 0.5,
-            min_ratio=through_border_ratio,
-            reach_px=through_reach_m / resolution_m,
-        )
     return rooms, cut
-
-
-def frontier_pieces(
-    segments: npt.NDArray[np.int32], unknown: npt.NDArray[np.bool_], *, max_area_px: float, min_share: float
-) -> npt.NDArray[np.bool_]:
-    """(N + 1,) bool: segments under ``max_area_px`` whose outline borders unknown cells for more than ``min_share``.
-
-    A growing map shows a room first as a small piece at its frontier (through a door, a few rays
-    in); as its own region it would be merged into its neighbour or renamed as soon as more of it
-    is seen, so it is taken by its neighbour until the room is there.
-
-    Parameters
-    ----------
-    segments : (H, W) int32
-        Segment ids 1..N per pixel, 0 = none.
-    unknown : (H, W) bool
-    """
-    seg = np.asarray(segments)
-    n = int(seg.max()) + 1
-    h, w = seg.shape
-    outline = np.zeros(n)
-    frontier = np.zeros(n)
-    for dy, dx in ((0, 1), (1, 0)):
-        a, b = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        ua, ub = unknown[: h - dy, : w - dx], unknown[dy:, dx:]
-        differ = a != b
-        for own, other, other_unknown in ((a, b, ub), (b, a, ua)):
-            edge = differ & (own > 0)
-            outline += np.bincount(own[edge], minlength=n)
-            frontier += np.bincount(own[edge & other_unknown & (other == 0)], minlength=n)
-    area = np.bincount(seg.ravel(), minlength=n)
-    out: npt.NDArray[np.bool_] = (area < max_area_px) & (frontier > min_share * np.maximum(outline, 1))
-    out[0] = False
-    return out
-
-
-def merge_through(
-    segments: npt.NDArray[np.int32],
-    space: npt.NDArray[np.bool_],
-    *,
-    fixed: npt.NDArray[np.bool_],
-    min_ratio: float,
-    reach_px: float,
-) -> npt.NDArray[np.int32]:
-    """Join two touching segments whose border is as wide as both of them near it: one room cut across.
-
-    A doorway is narrower than the room on at least one side of it (a door into an office, the
-    mouth of a corridor into a hall); a cut through a furnished room between desks, or across a
-    corridor at a recess, spans the whole width on both sides. The width of a side is twice its
-    largest clearance within ``reach_px`` of the border; the two segments join when the border
-    (its pixels on the side where it is longer) is at least ``min_ratio`` times the wider side.
-
-    Parameters
-    ----------
-    segments : (H, W) int32
-        Segment ids 1..N (consecutive) per pixel, 0 = none.
-    space : (H, W) bool
-        The free space the rooms stand on (furniture counted free), for the clearance.
-    fixed : (N + 1,) bool
-        Per segment id: never joined (warehouse floors, road networks).
-    min_ratio, reach_px : float
-
-    Returns
-    -------
-    (H, W) int32
-        Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
-    """
-    seg = np.asarray(segments, dtype=np.int32)
-    n = int(seg.max()) + 1
-    h, w = seg.shape
-    sides: list[npt.NDArray[np.int64]] = []
-    for dy, dx in ((0, 1), (1, 0)):
-        a, b = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        rows, cols = np.nonzero((a != b) & (a > 0) & (b > 0))
-        sides.append(np.stack([rows, cols, a[rows, cols], b[rows, cols]], axis=1))
-        sides.append(np.stack([rows + dy, cols + dx, b[rows, cols], a[rows, cols]], axis=1))
-    px = np.unique(np.concatenate(sides).astype(np.int64), axis=0)  # (row, col, own, other), each pixel once
-    if len(px) == 0:
-        return seg
-    codes = np.minimum(px[:, 2], px[:, 3]) * n + np.maximum(px[:, 2], px[:, 3])
-    order = np.argsort(codes, kind="stable")
-    px, codes = px[order], codes[order]
-    starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
-    clearance = cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5)
-    r = math.ceil(reach_px)
-    join: list[tuple[int, int]] = []
-    for sel in np.split(px, starts[1:]):
-        p, q = int(min(sel[0, 2], sel[0, 3])), int(max(sel[0, 2], sel[0, 3]))
-        if fixed[p] or fixed[q]:
-            continue
-        own_p = sel[:, 2] == p
-        border = max(int(own_p.sum()), int((~own_p).sum()))
-        r0, c0 = max(int(sel[:, 0].min()) - r, 0), max(int(sel[:, 1].min()) - r, 0)
-        r1, c1 = min(int(sel[:, 0].max()) + r + 1, h), min(int(sel[:, 1].max()) + r + 1, w)
-        mark = np.ones((r1 - r0, c1 - c0), np.uint8)
-        mark[sel[:, 0] - r0, sel[:, 1] - c0] = 0
-        near = cv2.distanceTransform(mark, cv2.DIST_L2, 3) <= reach_px
-        crop, clear = seg[r0:r1, c0:c1], clearance[r0:r1, c0:c1]
-        width = 2 * max(float(clear[near & (crop == k)].max(initial=0.0)) for k in (p, q))
-        if border >= min_ratio * width:
-            join.append((p, q))
-    return join_pairs(seg, np.array(join, dtype=np.int64).reshape(-1, 2))
 
 
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:

@@ -329,17 +329,12 @@ def merge_open_segments(
         Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
     """
     seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max()) + 1
     pairs, total, shut = border_closure(seg, closed)
     join = shut <= max_closed_share * total
     if fixed is not None:
         join &= ~fixed[pairs[:, 0]] & ~fixed[pairs[:, 1]]
-    return join_pairs(seg, pairs[join])
-
-
-def join_pairs(segments: npt.NDArray[np.int32], pairs: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
-    """Segments joined along ``pairs`` ((K, 2) ids, transitively), numbered 1..M in order; 0 kept."""
-    seg = np.asarray(segments, dtype=np.int32)
-    n = int(seg.max()) + 1
+    pairs = pairs[join]
     m = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = connected_components(m, directed=False)
     return _relabel(seg, comp, np.bincount(seg.ravel(), minlength=n) > 0)
