@@ -124,7 +124,14 @@ def _racks(
 
     Kernel lengths are odd: an even one shifts OpenCV's closing by a pixel.
     """
-    obstacle = (code != 0).astype(np.uint8)
+    # unknown space reaching the image border is the unexplored outside, not a rack: closed with the
+    # obstacles it would join every rack row ending within a bay of it (a map explored only up to the
+    # racks' ends) into one body with it, too large to be a rack
+    _, unknown, stats, _ = cv2.connectedComponentsWithStats((code == _UNKNOWN).astype(np.uint8), connectivity=4)
+    x, y, w, h = (stats[:, i] for i in range(4))
+    outside = (x == 0) | (y == 0) | (x + w == code.shape[1]) | (y + h == code.shape[0])
+    outside[0] = False
+    obstacle = ((code != 0) & ~outside[unknown]).astype(np.uint8)
     # a free pixel stays free only inside a free bay-by-depth rectangle: every such rectangle over a
     # bay holds an upright, an aisle or a cross aisle is wider
     body = cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8))

@@ -90,3 +90,25 @@ def test_an_office_has_no_racks() -> None:
     occ = _furnish(_office_row())
     layout = find_racks(occ == 100, occ >= 0, resolution_m=RES, angles_rad=[0.0])
     assert not layout.cells.any() and len(layout.rows_px) == 0
+
+
+@pytest.mark.parametrize("style", [RackStyle.PALLET_HEIGHT, RackStyle.MIXED])
+def test_a_hall_explored_up_to_its_racks_ends_keeps_its_racks(style: RackStyle) -> None:
+    # the robot has seen the first section only: everything right of the middle cross aisle is unknown
+    hall = _small(style)
+    boxes = [_box(hall.junctions == k) for k in range(1, int(hall.junctions.max()) + 1)]
+    columns = sorted({(b[2] + b[3]) // 2 for b in boxes})
+    cut = columns[len(columns) // 2]
+    occ = hall.occupancy.copy()
+    occ[:, cut:] = -1
+    d = decompose(occ, resolution_m=hall.resolution_m)
+    free = occ == 0
+    storage = free & (hall.truth == PlaceLabel.STORAGE.value)
+    assert len(d.rack_rows_px) > 0
+    assert (d.labels[storage] == PlaceLabel.STORAGE.value).mean() > 0.9
+    assert (d.labels[storage] == PlaceLabel.CORRIDOR.value).mean() < 0.05
+    seen = [k for k, b in enumerate(boxes, start=1) if b[3] < cut]
+    for k in seen:  # every cross aisle seen whole is a junction region of its own
+        seg = d.segments[(hall.junctions == k) & free]
+        assert d.regions[int(np.bincount(seg).argmax())].label is PlaceLabel.JUNCTION
+    assert len(d.regions) > len(seen)
