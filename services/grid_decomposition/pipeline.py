@@ -14,6 +14,7 @@ import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import label_sums
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.errors import DecompositionError
@@ -590,10 +591,7 @@ def _region_records(
     ).reshape(n_seg, n_cat)
     seg_cat = np.argmax(cat_votes, axis=1) - 1
     area = np.bincount(pairs.segment, weights=pairs.pixels, minlength=n_seg)
-    h, w = segments.shape
-    flat = segments.ravel()
-    sx = np.bincount(flat, np.tile(np.arange(w, dtype=np.float64), h), n_seg)
-    sy = np.bincount(flat, np.repeat(np.arange(h, dtype=np.float64), w), n_seg)
+    _, sx, sy = label_sums(segments, n_seg)
     regions: dict[int, RegionInfo] = {}
     for sid in np.flatnonzero(area[1:] > 0) + 1:
         cx = origin_xy_m[0] + (sx[sid] / area[sid] + 0.5) * resolution_m

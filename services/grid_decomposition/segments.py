@@ -9,6 +9,8 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from services.grid_decomposition.arrays import distinct
+
 
 def fill_from_neighbours(
     segments: npt.NDArray[np.int32], target: npt.NDArray[np.bool_], *, max_iterations: int = 200
@@ -38,8 +40,9 @@ def fill_from_neighbours(
     stride = w + 2
     offsets = np.array([-stride - 1, -stride, -stride + 1, -1, 1, stride - 1, stride, stride + 1], dtype=np.int64)
     near_hole = cv2.dilate(open_.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
-    front = np.flatnonzero(near_hole.ravel() & (lab_flat > 0))
-    stamp = np.empty(lab_flat.size, dtype=np.int64)
+    near_hole &= lab > 0
+    front = np.flatnonzero(near_hole)
+    seen = np.zeros(lab_flat.size, dtype=bool)
     for _ in range(max_iterations):
         if front.size == 0:
             break
@@ -51,13 +54,8 @@ def fill_from_neighbours(
             cand = cand[ok]
             lab_flat[cand] = np.maximum(lab_flat[cand], value[ok])
             filled.append(cand)
-        cand = np.concatenate(filled)
-        if cand.size == 0:
-            break
-        # each filled pixel once (the last of its writes wins the stamp), without a sort
-        order = np.arange(cand.size, dtype=np.int64)
-        stamp[cand] = order
-        front = cand[stamp[cand] == order]
+        # the next front: each filled pixel once (the order of a front does not matter)
+        front = distinct(np.concatenate(filled), seen)
         open_flat[front] = False
     crop[:] = lab[1:-1, 1:-1]
     return out
