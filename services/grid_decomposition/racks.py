@@ -27,6 +27,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -875,11 +876,16 @@ def pocket_merges(
     merges: dict[int, int] = {}
     kernel = np.ones((3, 3), np.uint8)
     h, w = segments.shape
+    if not rooms:
+        return merges
+    area = np.bincount(segments.ravel(), minlength=max(rooms) + 1)
+    boxes = ndimage.find_objects(segments, max_label=max(rooms))
     for sid in rooms:
-        rr, cc = np.nonzero(segments == sid)
-        if rr.size == 0 or (max_area_px is not None and rr.size > max_area_px):
+        if area[sid] == 0 or (max_area_px is not None and area[sid] > max_area_px):
             continue
-        r0, r1, c0, c1 = max(rr.min() - 2, 0), min(rr.max() + 3, h), max(cc.min() - 2, 0), min(cc.max() + 3, w)
+        rows, cols = boxes[sid - 1]
+        r0, r1 = max(rows.start - 2, 0), min(rows.stop + 2, h)
+        c0, c1 = max(cols.start - 2, 0), min(cols.stop + 2, w)
         mask = segments[r0:r1, c0:c1] == sid
         ring = (cv2.dilate(mask.astype(np.uint8), kernel) > 0) & ~mask
         wall = ring & ~free[r0:r1, c0:c1]
