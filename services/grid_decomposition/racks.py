@@ -814,8 +814,8 @@ def place_segments(
         out[cell] = n_old + layout.cell_labels.size + target[pieces]
     present = np.bincount(out.ravel(), minlength=int(out.max()) + 1) > 0
     present[0] = True
-    lut64 = np.cumsum(present) - 1
-    return lut64[out].astype(np.int32), np.where(inside, place, 0).astype(np.int32)
+    lut = (np.cumsum(present) - 1).astype(np.int32)
+    return lut[out], np.where(inside, place, 0).astype(np.int32)
 
 
 def floor_objects(

@@ -88,7 +88,8 @@ def segment_image(
     (H, W) int32
         Segment ids 1..N (consecutive), 0 off free space.
     """
-    seg = np.where(free, face_segment[face_image], 0).astype(np.int32)
+    seg = face_segment.astype(np.int32)[face_image]  # ids are far below 2**31
+    seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
     pieces, n_pieces = same_value_pieces(seg)
     area = np.bincount(pieces.ravel(), minlength=n_pieces + 1)
@@ -102,7 +103,7 @@ def segment_image(
     lut[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
     next_id = kept.size + 1
     out = lut[pieces]
-    small = (owner[pieces] > 0) & ~big[pieces]
+    small = ((owner > 0) & ~big)[pieces]
     if small.any():
         out = fill_from_neighbours(out, small)
         alone = small & (out == 0)
@@ -212,6 +213,13 @@ def _relabel(
     _, dense = np.unique(group[ids], return_inverse=True)
     lut = np.zeros(n, dtype=np.int32)
     lut[ids] = dense + 1
+    return _apply(lut, seg)
+
+
+def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """``lut[seg]``; a copy of ``seg`` when ``lut`` changes no id (most calls on a warehouse)."""
+    if np.array_equal(lut, np.arange(lut.size)):
+        return np.array(seg, dtype=np.int32, copy=True)
     out: npt.NDArray[np.int32] = lut[seg]
     return out
 
@@ -221,8 +229,7 @@ def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     present = np.bincount(seg.ravel(), minlength=1) > 0
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
-    out: npt.NDArray[np.int32] = lut[seg]
-    return out
+    return _apply(lut, seg)
 
 
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
