@@ -201,12 +201,15 @@ def _elongation(
 ) -> npt.NDArray[np.float64]:
     """Area / clearance^2 of each component (clearance = twice the largest distance to an obstacle)."""
     dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3)
-    comp_px = component[face_image]
     n = int(component.max()) + 1
+    # per face first, then per component (a face's pixels all lie in its component)
+    face_width = np.zeros(component.size, dtype=np.float32)
+    np.maximum.at(face_width, face_image.ravel(), dist.ravel())
     width = np.zeros(n, dtype=np.float32)
-    np.maximum.at(width, comp_px.ravel(), dist.ravel())
+    np.maximum.at(width, component, face_width)
     width[0] = 0.0
-    area = np.bincount(comp_px.ravel(), minlength=n).astype(np.float64)
+    face_area = np.bincount(face_image.ravel(), minlength=component.size)
+    area = np.bincount(component, weights=face_area, minlength=n).astype(np.float64)
     elongation: npt.NDArray[np.float64] = area / np.maximum(2.0 * width.astype(np.float64), 1.0) ** 2
     return elongation
 
