@@ -129,24 +129,39 @@ def segment_image(
 def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32], int]:
     """The 4-connected pieces of equal non-zero value of ``seg``, numbered 1..N in scan order, 0 elsewhere.
 
-    One labelling of a twice-enlarged mask instead of one per value: every pixel becomes a 2 x 2
-    block whose left column is cut where its left neighbour differs and whose top row is cut where
-    its upper neighbour differs; the block's lower-right pixel always stays, so equal neighbours
-    stay joined and different ones never touch.
+    From the runs of equal values along the rows (a label image of large regions has far fewer
+    runs than pixels): a run joins the runs of the same value above it that share a column, the
+    joined runs are labelled as a graph, and pieces are numbered by their first pixel in raster
+    order, as OpenCV numbers the components of an image.
     """
     h, w = seg.shape
-    on = seg > 0
-    left = np.ones((h, w), dtype=bool)
-    left[:, 1:] = seg[:, 1:] == seg[:, :-1]
-    up = np.ones((h, w), dtype=bool)
-    up[1:, :] = seg[1:, :] == seg[:-1, :]
-    big = np.zeros((2 * h, 2 * w), dtype=np.uint8)
-    big[1::2, 1::2] = on
-    big[1::2, 0::2] = on & left
-    big[0::2, 1::2] = on & up
-    big[0::2, 0::2] = on & left & up
-    n, labels = cv2.connectedComponents(big, connectivity=4, ltype=cv2.CV_32S)
-    return np.ascontiguousarray(labels[1::2, 1::2]), n - 1
+    flat = np.ascontiguousarray(seg, dtype=np.int32).ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    start[::w] = True
+    first = np.flatnonzero(start)  # run starts in raster order; a run never crosses a row end
+    n_runs = first.size
+    length = np.diff(np.append(first, flat.size))
+    value = flat[first]
+    on = np.flatnonzero(value > 0)
+    below = on[first[on] >= w]
+    # the runs of the row above over the first and the last column of each run
+    lo = np.searchsorted(first, first[below] - w, side="right") - 1
+    hi = np.searchsorted(first, first[below] + length[below] - 1 - w, side="right") - 1
+    span = hi - lo + 1
+    src = np.repeat(below, span)
+    dst = np.repeat(lo, span) + np.arange(int(span.sum())) - np.repeat(np.cumsum(span) - span, span)
+    same = value[dst] == value[src]
+    graph = coo_matrix((np.ones(int(same.sum()), dtype=np.int8), (src[same], dst[same])), shape=(n_runs, n_runs))
+    _, comp = connected_components(graph, directed=False)
+    # pieces numbered by their first run
+    ids, first_run = np.unique(comp[on], return_index=True)
+    rank = np.zeros(int(comp.max()) + 1, dtype=np.int32)
+    rank[ids[np.argsort(first_run)]] = np.arange(1, ids.size + 1, dtype=np.int32)
+    piece_of_run = np.zeros(n_runs, dtype=np.int32)
+    piece_of_run[on] = rank[comp[on]]
+    return np.repeat(piece_of_run, length).reshape(h, w), int(ids.size)
 
 
 def merge_small_segments(
