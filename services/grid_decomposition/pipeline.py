@@ -450,7 +450,7 @@ def decompose(
     racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
     regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
     # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
-    structured_segments = set(np.unique(segments[(places > 0) | floor_px]).tolist())
+    structured_segments = set(np.flatnonzero(np.bincount(segments[(places > 0) | floor_px])).tolist())
     rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
     open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
     objects = floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
@@ -486,8 +486,10 @@ def decompose(
     loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
     labels = np.where(loose & (own > 0), own, labels)
     # a rack place's label, unless a person renamed the category of the face there
-    renamed = np.isin(face_labels.category[sub.face_image], list(label_overrides or {}))
-    labels = np.where((places > 0) & ~renamed, racks.cell_labels[places], labels)
+    kept_place = places > 0
+    if label_overrides:
+        kept_place &= ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
+    labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
     labels = np.where(free | streaks, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(
