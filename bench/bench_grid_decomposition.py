@@ -28,7 +28,10 @@ Prints ``name value unit`` lines, one BLAS thread, seconds as wall time and CPU 
   reading it and decomposing it (start-up and imports included) and its figures.
 
 ``--overview docs/solid_rack_hall_overview.png`` writes the overview picture of a turned solid-rack
-hall instead.
+hall instead. ``--stages MAP [MAP ...]`` prints instead the CPU seconds of every step of the pipeline
+(each function ``pipeline.decompose`` calls, best of three runs) for ``big_rack_hall``,
+``large_warehouse``, ``rose2:<name>`` (a ROSE\u00b2 full map, read as ``eval_ipa.py`` reads it) or a
+map file (0.05 m a pixel unless its YAML says otherwise).
 
 Run from the repository root: ``PYTHONPATH=. .venv/bin/python bench/bench_grid_decomposition.py``.
 """
@@ -36,6 +39,8 @@ Run from the repository root: ``PYTHONPATH=. .venv/bin/python bench/bench_grid_d
 from __future__ import annotations
 
 import argparse
+import functools
+import inspect
 import os
 import resource
 import statistics
@@ -43,6 +48,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -50,7 +56,8 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits
 
-from services.grid_decomposition import Decomposition, decompose, overview_image, read_map_file
+from bench.eval_ipa import ROSE2, rose2_occupancy
+from services.grid_decomposition import Decomposition, decompose, overview_image, pipeline, read_map_file
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
 from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse, tuw_truth
@@ -269,12 +276,82 @@ def _big_rack_hall() -> None:
     print(f"big_rack_hall_storage_as_corridor {100 * (labels[storage] == PlaceLabel.CORRIDOR.value).mean():.2f} %")
 
 
+def _stage_map(name: str) -> tuple[npt.NDArray[np.int8], float]:
+    if name == "big_rack_hall":
+        hall = big_rack_hall()
+        return hall.occupancy, hall.resolution_m
+    if name == "large_warehouse":
+        wh = large_warehouse()
+        return wh.occupancy, wh.resolution_m
+    if name.startswith("rose2:"):
+        from PIL import Image
+
+        with Image.open(ROSE2 / "full" / name.removeprefix("rose2:") / "map.png") as image:
+            return rose2_occupancy(np.asarray(image.convert("L"))), 0.05
+    occ, res, _ = read_map_file(Path(name), resolution_m=0.05)
+    return occ, res
+
+
+def stage_seconds(occupancy: npt.NDArray[np.int8], resolution_m: float) -> dict[str, float]:
+    """CPU seconds of one decomposition (``total``) and of each function ``decompose`` calls, by name."""
+    seconds: dict[str, float] = {}
+    depth = [0]
+
+    def timed(name: str, fn: Callable[..., object]) -> Callable[..., object]:
+        @functools.wraps(fn)
+        def run(*args: object, **kwargs: object) -> object:
+            depth[0] += 1
+            start = time.process_time()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                depth[0] -= 1
+                if depth[0] == 0:  # a step, not a step inside another
+                    seconds[name] = seconds.get(name, 0.0) + time.process_time() - start
+        return run
+
+    steps = {
+        name: fn
+        for name, fn in vars(pipeline).items()
+        if inspect.isfunction(fn) and name != "decompose" and fn.__module__.startswith("services.")
+    }
+    try:
+        for name, fn in steps.items():
+            setattr(pipeline, name, timed(name, fn))
+        start = time.process_time()
+        pipeline.decompose(occupancy, resolution_m=resolution_m)
+        seconds["total"] = time.process_time() - start
+    finally:
+        for name, fn in steps.items():
+            setattr(pipeline, name, fn)
+    return seconds
+
+
+def _stages(names: list[str]) -> None:
+    for name in names:
+        occ, res = _stage_map(name)
+        runs = [stage_seconds(occ, res) for _ in range(3)]
+        best = min(runs, key=lambda r: r["total"])
+        tag = name.replace("rose2:", "rose2_").replace("/", "_").replace(".", "_")
+        print(f"stages_{tag}_total_cpu_seconds {best['total']:.3f} s")
+        rest = best["total"] - sum(v for k, v in best.items() if k != "total")
+        for step, value in sorted(best.items(), key=lambda kv: -kv[1]):
+            if step != "total":
+                print(f"stages_{tag}_{step}_cpu_seconds {value:.3f} s")
+        print(f"stages_{tag}_inline_cpu_seconds {rest:.3f} s")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--no-ipa", action="store_true", help="skip the ipa timings")
     parser.add_argument("--racks-only", action="store_true", help="only the rack-hall sets and the big rack hall")
     parser.add_argument("--overview", type=Path, help="write the overview picture of a solid-rack hall here and stop")
+    parser.add_argument("--stages", nargs="+", metavar="MAP", help="print CPU seconds per pipeline step and stop")
     args = parser.parse_args()
+    if args.stages:
+        with threadpool_limits(1):
+            _stages(args.stages)
+        return
     if args.overview:
         hall = rack_hall_map(1, style=RackStyle.SOLID, rotation_rad=0.35, n_double_rows=5, n_sections=3)
         picture = overview_image(decompose(hall.occupancy, resolution_m=hall.resolution_m))

@@ -182,7 +182,7 @@ def edge_cogency(
     area = np.bincount(faces, minlength=n).astype(np.float64)
     occ_sum = np.bincount(faces, weights=occupancy01.ravel(), minlength=n)
     face_occ = np.divide(occ_sum, area, out=np.ones(n), where=area > 0)
-    free_px = np.bincount(faces, weights=free.ravel(), minlength=n).astype(np.int64)
+    free_px = np.bincount(faces[free.ravel()], minlength=n).astype(np.int64)
     free_px[0] = 0
     face_occ[0] = 1.0
     e_n = np.diff(sub.edge_starts)

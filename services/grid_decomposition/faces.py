@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import label_sums
 from services.grid_decomposition.errors import DecompositionError
 
 
@@ -81,12 +82,9 @@ def face_geometry(
         | (inner != padded[1:-1, :-2])
         | (inner != padded[1:-1, 2:])
     ) & (inner > 0)
-    faces = face_image.ravel()
-    count = np.bincount(faces, minlength=n).astype(np.float64)
-    xs = np.tile(np.arange(w, dtype=np.float64), h)
-    ys = np.repeat(np.arange(h, dtype=np.float64), w)
-    safe = np.maximum(count, 1.0)
-    centroid = np.stack([np.bincount(faces, xs, n) / safe, np.bincount(faces, ys, n) / safe], axis=1)
+    count, sum_x, sum_y = label_sums(face_image, n)
+    safe = np.maximum(count.astype(np.float64), 1.0)
+    centroid = np.stack([sum_x / safe, sum_y / safe], axis=1)
     centroid[0] = 0.0
     oy, ox = np.nonzero(edge)
     of = face_image[oy, ox].astype(np.int64)

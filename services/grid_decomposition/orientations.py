@@ -8,7 +8,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
-from sklearn.mixture import GaussianMixture
+from sklearn.cluster._kmeans import _kmeans_plusplus
+from sklearn.utils.extmath import row_norms
 
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.wavelets import find_peaks_ricker
@@ -60,17 +61,110 @@ def _gmm_smooth(hist: npt.NDArray[np.float64], max_components: int) -> npt.NDArr
     samples = np.repeat(np.arange(_BINS, dtype=np.float64), counts)
     samples = samples + np.tile(np.linspace(-0.45, 0.45, 7), samples.size // 7 + 1)[: samples.size]
     x = samples.reshape(-1, 1)
-    best: GaussianMixture | None = None
+    best: _Mixture | None = None
     best_bic = math.inf
     for k in range(1, max_components + 1):
-        gmm = GaussianMixture(k, random_state=0, reg_covar=0.5, init_params="k-means++", n_init=1).fit(x)
-        bic = float(gmm.bic(x))
+        gmm = _fit_mixture(x, k)
+        bic = -2 * float(np.mean(_score_samples(gmm, x))) * x.shape[0] + (3 * k - 1) * math.log(x.shape[0])
         if bic < best_bic:
             best, best_bic = gmm, bic
     assert best is not None
     grid = np.arange(_BINS, dtype=np.float64).reshape(-1, 1)
-    density = np.exp(best.score_samples(grid))
+    density = np.exp(_score_samples(best, grid))
     return np.roll(density, shift)
+
+
+class _Mixture(NamedTuple):
+    """A fitted 1-D Gaussian mixture: (K,) weights, (K, 1) means, (K, 1, 1) Cholesky factors of the precisions."""
+
+    weights: npt.NDArray[np.float64]
+    means: npt.NDArray[np.float64]
+    precisions_chol: npt.NDArray[np.float64]
+
+
+_REG_COVAR = 0.5
+_TOL = 1e-3
+_MAX_ITER = 100
+
+
+def _fit_mixture(x: npt.NDArray[np.float64], k: int) -> _Mixture:
+    """``GaussianMixture(k, random_state=0, reg_covar=0.5, init_params="k-means++", n_init=1).fit(x)``.
+
+    scikit-learn's EM for one feature and full covariances, step for step and with the same
+    numpy expressions (so the same floating-point results), without its validation and array-API
+    dispatch, which cost many times the arithmetic on 1,500 samples; the start is scikit-learn's
+    own k-means++ seeding.
+    """
+    n = x.shape[0]
+    resp = np.zeros((n, k), dtype=x.dtype)
+    # sklearn.cluster.kmeans_plusplus less its input checks (a pandas/narwhals probe per call)
+    _, indices = _kmeans_plusplus(x, k, row_norms(x, squared=True), np.ones(n, dtype=x.dtype), np.random.RandomState(0))
+    resp[indices, np.arange(k)] = 1
+    weights, means, prec_chol = _m_step(x, resp)
+    weights /= n
+    lower_bound = -np.inf
+    for _ in range(_MAX_ITER):
+        previous = lower_bound
+        log_norm, log_resp = _e_step(_Mixture(weights, means, prec_chol), x)
+        lower_bound = float(np.mean(log_norm))
+        weights, means, prec_chol = _m_step(x, np.exp(log_resp))
+        weights /= np.sum(weights)
+        if abs(lower_bound - previous) < _TOL:
+            break
+    return _Mixture(weights, means, prec_chol)
+
+
+def _m_step(
+    x: npt.NDArray[np.float64], resp: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Weights (unnormalised), means and precision Cholesky factors from responsibilities."""
+    nk = np.sum(resp, axis=0) + 10 * np.finfo(resp.dtype).eps
+    means = (resp.T @ x) / nk[:, np.newaxis]
+    prec_chol = np.empty((means.shape[0], 1, 1), dtype=x.dtype)
+    for c in range(means.shape[0]):
+        diff = x - means[c, :]
+        covariance = ((resp[:, c] * diff.T) @ diff) / nk[c]
+        covariance.flat[::2] += _REG_COVAR
+        # Cholesky factor and its inverse of a 1 x 1 matrix: a square root and a division
+        prec_chol[c, :, :] = (1.0 / np.sqrt(covariance)).T
+    return nk, means, prec_chol
+
+
+def _weighted_log_prob(gmm: _Mixture, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    log_det = np.sum(np.log(np.reshape(gmm.precisions_chol, (gmm.means.shape[0], -1))[:, ::2]), axis=1)
+    log_prob = np.empty((x.shape[0], gmm.means.shape[0]), dtype=x.dtype)
+    for c in range(gmm.means.shape[0]):
+        y = (x @ gmm.precisions_chol[c, :, :]) - (gmm.means[c, :] @ gmm.precisions_chol[c, :, :])
+        log_prob[:, c] = np.sum(np.square(y), axis=1)
+    out: npt.NDArray[np.float64] = -0.5 * (math.log(2 * math.pi) + log_prob) + log_det + np.log(gmm.weights)
+    return out
+
+
+def _e_step(gmm: _Mixture, x: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    weighted = _weighted_log_prob(gmm, x)
+    log_norm = _logsumexp(weighted)
+    with np.errstate(under="ignore"):
+        log_resp = weighted - log_norm[:, np.newaxis]
+    return log_norm, log_resp
+
+
+def _score_samples(gmm: _Mixture, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return _logsumexp(_weighted_log_prob(gmm, x))
+
+
+def _logsumexp(array: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Log of the sum of exponentials along axis 1, as scikit-learn computes it."""
+    array_max = np.max(array, axis=1, keepdims=True)
+    index_max = array == array_max
+    array = np.array(array, copy=True)
+    array[index_max] = -np.inf
+    m = np.sum(index_max.astype(array.dtype), axis=1, keepdims=True, dtype=array.dtype)
+    shift = np.where(np.isfinite(array_max), array_max, 0)
+    exp = np.exp(array - shift)
+    s = np.sum(exp, axis=1, keepdims=True, dtype=exp.dtype)
+    s = np.where(s == 0, s, s / m)
+    out: npt.NDArray[np.float64] = np.squeeze(np.log1p(s) + np.log(m) + array_max, axis=1)
+    return out
 
 
 def _refine(

@@ -14,6 +14,7 @@ import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import label_sums
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.errors import DecompositionError
@@ -200,12 +201,15 @@ def _elongation(
 ) -> npt.NDArray[np.float64]:
     """Area / clearance^2 of each component (clearance = twice the largest distance to an obstacle)."""
     dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3)
-    comp_px = component[face_image]
     n = int(component.max()) + 1
+    # per face first, then per component (a face's pixels all lie in its component)
+    face_width = np.zeros(component.size, dtype=np.float32)
+    np.maximum.at(face_width, face_image.ravel(), dist.ravel())
     width = np.zeros(n, dtype=np.float32)
-    np.maximum.at(width, comp_px.ravel(), dist.ravel())
+    np.maximum.at(width, component, face_width)
     width[0] = 0.0
-    area = np.bincount(comp_px.ravel(), minlength=n).astype(np.float64)
+    face_area = np.bincount(face_image.ravel(), minlength=component.size)
+    area = np.bincount(component, weights=face_area, minlength=n).astype(np.float64)
     elongation: npt.NDArray[np.float64] = area / np.maximum(2.0 * width.astype(np.float64), 1.0) ** 2
     return elongation
 
@@ -446,7 +450,7 @@ def decompose(
     racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
     regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
     # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
-    structured_segments = set(np.unique(segments[(places > 0) | floor_px]).tolist())
+    structured_segments = set(np.flatnonzero(np.bincount(segments[(places > 0) | floor_px])).tolist())
     rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
     open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
     objects = floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
@@ -482,8 +486,10 @@ def decompose(
     loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
     labels = np.where(loose & (own > 0), own, labels)
     # a rack place's label, unless a person renamed the category of the face there
-    renamed = np.isin(face_labels.category[sub.face_image], list(label_overrides or {}))
-    labels = np.where((places > 0) & ~renamed, racks.cell_labels[places], labels)
+    kept_place = places > 0
+    if label_overrides:
+        kept_place &= ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
+    labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
     labels = np.where(free | streaks, labels, 0).astype(np.uint8)
     face_region_final = _final_face_regions(pairs, sub.n_faces)
     topology = region_topology(
@@ -590,10 +596,7 @@ def _region_records(
     ).reshape(n_seg, n_cat)
     seg_cat = np.argmax(cat_votes, axis=1) - 1
     area = np.bincount(pairs.segment, weights=pairs.pixels, minlength=n_seg)
-    h, w = segments.shape
-    flat = segments.ravel()
-    sx = np.bincount(flat, np.tile(np.arange(w, dtype=np.float64), h), n_seg)
-    sy = np.bincount(flat, np.repeat(np.arange(h, dtype=np.float64), w), n_seg)
+    _, sx, sy = label_sums(segments, n_seg)
     regions: dict[int, RegionInfo] = {}
     for sid in np.flatnonzero(area[1:] > 0) + 1:
         cx = origin_xy_m[0] + (sx[sid] / area[sid] + 0.5) * resolution_m

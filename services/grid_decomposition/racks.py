@@ -27,9 +27,11 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from services.grid_decomposition.arrays import unique_inverse
 from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
@@ -412,6 +414,70 @@ def _turn(shape: tuple[int, int], angle_rad: float) -> tuple[npt.NDArray[np.floa
     return matrix, (math.ceil(hi[0] - lo[0]) + 1, math.ceil(hi[1] - lo[1]) + 1)
 
 
+def _below(edges: npt.NDArray[np.float64], along: npt.NDArray[np.float64], base: npt.NDArray[np.float64]) -> (
+    npt.NDArray[np.int64] | None
+):
+    """(R, E) number of columns ``j`` with ``along[j] + base[r] < edges[i]``, for ``along`` rising.
+
+    Rounding keeps the order of a sum, so these columns are the first ones of the row: a binary
+    search of ``edges - base`` in ``along`` lands on or next to the count, and comparing the exact
+    sums on either side settles it. ``None`` when that does not settle within a few steps
+    (``along`` nearly flat).
+    """
+    target = edges[None, :] - base[:, None]
+    count = np.searchsorted(along, target.ravel(), side="left").reshape(target.shape)
+    last = along.size
+    for _ in range(8):
+        lower = (count > 0) & (along[np.maximum(count - 1, 0)] + base[:, None] >= edges[None, :])
+        higher = (count < last) & (along[np.minimum(count, last - 1)] + base[:, None] < edges[None, :])
+        if not (lower.any() or higher.any()):
+            return count
+        count = count - lower + higher
+    return None
+
+
+def _interval_image(
+    xs: npt.NDArray[np.float64],
+    ys: npt.NDArray[np.float64],
+    u: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    v: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    ids: npt.NDArray[np.int32],
+) -> npt.NDArray[np.int32]:
+    """``ids[kv, ku]`` per pixel, ``ku = np.searchsorted(xs, u, side="right")`` and ``kv`` likewise.
+
+    ``u = (along, base)`` gives ``u[r, j] = along[j] + base[r]`` (an affine function of the
+    column, so it rises or falls along every row; ``v`` the same). Along a row ``ku`` and ``kv``
+    step at a few columns: the row is a few runs of one id, found from a search per row and edge
+    instead of one per pixel.
+    """
+    (along_u, base_u), (along_v, base_v) = u, v
+    h, w = base_u.size, along_u.size
+    steps: list[npt.NDArray[np.int64]] = []
+    rises: list[bool] = []
+    for edges, along, base in ((xs, along_u, base_u), (ys, along_v, base_v)):
+        rising = bool(along[-1] >= along[0])
+        rises.append(rising)
+        below = None
+        if np.all(np.isfinite(edges)) and not np.any(edges[1:] < edges[:-1]):
+            below = _below(edges, along if rising else along[::-1], base)
+        if below is None:  # a search per pixel
+            ku = np.searchsorted(xs, along_u[None, :] + base_u[:, None], side="right")
+            kv = np.searchsorted(ys, along_v[None, :] + base_v[:, None], side="right")
+            out: npt.NDArray[np.int32] = ids[kv, ku]
+            return out
+        steps.append(below if rising else w - below)
+    # runs start at column 0 and at every step; a value is past edge i from its step on (rising)
+    # or before it (falling)
+    starts = np.sort(np.concatenate([np.zeros((h, 1), np.int64), *steps], axis=1), axis=1)
+    length = np.diff(np.concatenate([starts, np.full((h, 1), w)], axis=1), axis=1)
+    k = []
+    for step, rising in zip(steps, rises, strict=True):
+        past = starts[:, :, None] >= step[:, None, :] if rising else starts[:, :, None] < step[:, None, :]
+        k.append(past.sum(axis=2))
+    run_ids = ids[k[1], k[0]]
+    return np.repeat(run_ids.ravel(), length.ravel()).reshape(h, w)
+
+
 def _rasterise(
     grid: _Grid, matrix: npt.NDArray[np.float64], transpose: bool, shape: tuple[int, int], first_id: int
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64], list[npt.NDArray[np.float64]]]:
@@ -438,18 +504,17 @@ def _rasterise(
     if c1 <= c0 or r1 <= r0:
         return out, np.zeros(0, np.int64), rows_px
     cols = np.arange(c0, c1, dtype=np.float64)
-    rows = np.arange(r0, r1, dtype=np.float64)[:, None]
-    u = matrix[0, 0] * cols + (matrix[0, 1] * rows + matrix[0, 2])
-    v = matrix[1, 0] * cols + (matrix[1, 1] * rows + matrix[1, 2])
+    rows = np.arange(r0, r1, dtype=np.float64)
+    # turned coordinates: u[r, j] = along[j] + base[r]
+    u = (matrix[0, 0] * cols, matrix[0, 1] * rows + matrix[0, 2])
+    v = (matrix[1, 0] * cols, matrix[1, 1] * rows + matrix[1, 2])
     if transpose:
         u, v = v, u
     # interval k of each pixel along both axes; 0 and the last are outside the grid
-    ku = np.searchsorted(grid.xs, u, side="right").astype(np.int32)
-    kv = np.searchsorted(grid.ys, v, side="right").astype(np.int32)
     n_y, n_x = grid.labels.shape
     padded = np.zeros((n_y + 2, n_x + 2), dtype=np.int32)
     padded[1:-1, 1:-1] = ids
-    out[r0:r1, c0:c1] = padded.ravel()[kv * np.int32(n_x + 2) + ku]
+    out[r0:r1, c0:c1] = _interval_image(grid.xs, grid.ys, u, v, padded)
     for ky, kx in zip(*np.nonzero(grid.rack), strict=True):
         box = np.array(
             [[grid.xs[kx], grid.ys[ky]], [grid.xs[kx + 1], grid.ys[ky]], [grid.xs[kx + 1], grid.ys[ky + 1]],
@@ -513,7 +578,7 @@ def find_racks(
         Empty (no places) where no rack is found.
     """
     shape = occupied.shape
-    code = np.where(known, np.where(occupied, _OCCUPIED, 0), _UNKNOWN).astype(np.uint8)
+    code = np.where(known, np.where(occupied, np.uint8(_OCCUPIED), np.uint8(0)), np.uint8(_UNKNOWN))
     if domain is not None:
         code[~domain] = _UNKNOWN
     free = code == 0
@@ -716,8 +781,8 @@ def place_segments(
     inside = (cells > 0) & free
     n_old = int(segments.max()) + 1
     # known places are no reason to give up what is left of a segment (a hall's floor round its racks)
-    known = in_cells & (layout.cells <= n_known)
-    before = np.bincount(segments[~known], minlength=n_old)
+    known = in_cells & (layout.cells <= n_known) if n_known else None
+    before = np.bincount(segments.ravel() if known is None else segments[~known], minlength=n_old)
     after = np.bincount(segments[~in_cells], minlength=n_old)
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
@@ -725,9 +790,12 @@ def place_segments(
     crumbs = crumb[layout.cells] & free
     place = cells.copy()
     # a crumb joins the nearest place; a sliver of floor the nearest place that is no rack (floor is no storage)
-    drivable = (cells > 0) & (layout.cell_labels[cells] != PlaceLabel.STORAGE.value)
-    for joining, seeds in ((crumbs, cells > 0), (floor, drivable)):
-        if joining.any() and seeds.any():
+    rack = layout.cell_labels == PlaceLabel.STORAGE.value
+    for joining, off_racks in ((crumbs, False), (floor, True)):
+        if not joining.any():
+            continue
+        seeds = (cells > 0) & ~rack[cells] if off_racks else cells > 0
+        if seeds.any():
             _, nearest = cv2.distanceTransformWithLabels(
                 (~seeds).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
             )
@@ -739,10 +807,9 @@ def place_segments(
     out[in_cells & ~free] = 0  # uprights and pallets in a rack place belong to no region
     out[inside] = n_old + place[inside]
     # a rack keeps the pallet cells the warehouse floor cut it into (a region per bay and side)
-    cell = inside & (layout.cell_labels[place] == PlaceLabel.STORAGE.value) & (segments > 0)
+    cell = inside & rack[place] & (segments > 0)
     if cell.any():
-        keys, pieces = np.unique(place[cell].astype(np.int64) * n_old + segments[cell], return_inverse=True)
-        pieces = pieces.ravel()
+        keys, pieces = unique_inverse(place[cell].astype(np.int64) * n_old + segments[cell])
         size = np.bincount(pieces)
         # a crumb joins the largest piece of its rack
         owner = keys // n_old
@@ -754,8 +821,8 @@ def place_segments(
         out[cell] = n_old + layout.cell_labels.size + target[pieces]
     present = np.bincount(out.ravel(), minlength=int(out.max()) + 1) > 0
     present[0] = True
-    lut64 = np.cumsum(present) - 1
-    return lut64[out].astype(np.int32), np.where(inside, place, 0).astype(np.int32)
+    lut = (np.cumsum(present) - 1).astype(np.int32)
+    return lut[out], np.where(inside, place, 0).astype(np.int32)
 
 
 def floor_objects(
@@ -816,11 +883,16 @@ def pocket_merges(
     merges: dict[int, int] = {}
     kernel = np.ones((3, 3), np.uint8)
     h, w = segments.shape
+    if not rooms:
+        return merges
+    area = np.bincount(segments.ravel(), minlength=max(rooms) + 1)
+    boxes = ndimage.find_objects(segments, max_label=max(rooms))
     for sid in rooms:
-        rr, cc = np.nonzero(segments == sid)
-        if rr.size == 0 or (max_area_px is not None and rr.size > max_area_px):
+        if area[sid] == 0 or (max_area_px is not None and area[sid] > max_area_px):
             continue
-        r0, r1, c0, c1 = max(rr.min() - 2, 0), min(rr.max() + 3, h), max(cc.min() - 2, 0), min(cc.max() + 3, w)
+        rows, cols = boxes[sid - 1]
+        r0, r1 = max(rows.start - 2, 0), min(rows.stop + 2, h)
+        c0, c1 = max(cols.start - 2, 0), min(cols.stop + 2, w)
         mask = segments[r0:r1, c0:c1] == sid
         ring = (cv2.dilate(mask.astype(np.uint8), kernel) > 0) & ~mask
         wall = ring & ~free[r0:r1, c0:c1]

@@ -5,7 +5,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -186,7 +185,8 @@ def segment_rooms(
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
     clearance = cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5)
-    widest = np.asarray(ndimage.maximum(clearance, labels=seg, index=np.arange(int(seg.max()) + 1)))
+    widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)  # clearance >= 0: a max per segment
+    np.maximum.at(widest, seg.ravel(), clearance.ravel())
     rooms = merge_small_segments(
         seg,
         min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),

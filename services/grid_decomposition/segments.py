@@ -9,6 +9,8 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from services.grid_decomposition.arrays import distinct
+
 
 def fill_from_neighbours(
     segments: npt.NDArray[np.int32], target: npt.NDArray[np.bool_], *, max_iterations: int = 200
@@ -37,10 +39,21 @@ def fill_from_neighbours(
     lab_flat, open_flat = lab.ravel(), open_.ravel()
     stride = w + 2
     offsets = np.array([-stride - 1, -stride, -stride + 1, -1, 1, stride - 1, stride, stride + 1], dtype=np.int64)
-    near_hole = cv2.dilate(open_.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
-    front = np.flatnonzero(near_hole.ravel() & (lab_flat > 0))
-    stamp = np.empty(lab_flat.size, dtype=np.int64)
-    for _ in range(max_iterations):
+    steps = max_iterations
+    if steps > 0 and np.count_nonzero(open_) * 32 >= open_.size and int(lab.max()) < 2**24:
+        # many holes (the lines through a map): the first step at once, as a grey dilation of the
+        # box (ids below 2**24 are exact in float32)
+        grown = cv2.dilate(lab.astype(np.float32), np.ones((3, 3), np.uint8))
+        front = np.flatnonzero(open_ & (grown > 0))
+        lab_flat[front] = grown.ravel()[front].astype(np.int32)
+        open_flat[front] = False
+        steps -= 1
+    else:
+        near_hole = cv2.dilate(open_.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+        near_hole &= lab > 0
+        front = np.flatnonzero(near_hole)
+    seen = np.zeros(lab_flat.size, dtype=bool)
+    for _ in range(steps):
         if front.size == 0:
             break
         value = lab_flat[front]
@@ -51,13 +64,8 @@ def fill_from_neighbours(
             cand = cand[ok]
             lab_flat[cand] = np.maximum(lab_flat[cand], value[ok])
             filled.append(cand)
-        cand = np.concatenate(filled)
-        if cand.size == 0:
-            break
-        # each filled pixel once (the last of its writes wins the stamp), without a sort
-        order = np.arange(cand.size, dtype=np.int64)
-        stamp[cand] = order
-        front = cand[stamp[cand] == order]
+        # the next front: each filled pixel once (the order of a front does not matter)
+        front = distinct(np.concatenate(filled), seen)
         open_flat[front] = False
     crop[:] = lab[1:-1, 1:-1]
     return out
@@ -90,7 +98,8 @@ def segment_image(
     (H, W) int32
         Segment ids 1..N (consecutive), 0 off free space.
     """
-    seg = np.where(free, face_segment[face_image], 0).astype(np.int32)
+    seg = face_segment.astype(np.int32)[face_image]  # ids are far below 2**31
+    seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
     pieces, n_pieces = same_value_pieces(seg)
     area = np.bincount(pieces.ravel(), minlength=n_pieces + 1)
@@ -104,7 +113,7 @@ def segment_image(
     lut[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
     next_id = kept.size + 1
     out = lut[pieces]
-    small = (owner[pieces] > 0) & ~big[pieces]
+    small = ((owner > 0) & ~big)[pieces]
     if small.any():
         out = fill_from_neighbours(out, small)
         alone = small & (out == 0)
@@ -120,24 +129,39 @@ def segment_image(
 def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32], int]:
     """The 4-connected pieces of equal non-zero value of ``seg``, numbered 1..N in scan order, 0 elsewhere.
 
-    One labelling of a twice-enlarged mask instead of one per value: every pixel becomes a 2 x 2
-    block whose left column is cut where its left neighbour differs and whose top row is cut where
-    its upper neighbour differs; the block's lower-right pixel always stays, so equal neighbours
-    stay joined and different ones never touch.
+    From the runs of equal values along the rows (a label image of large regions has far fewer
+    runs than pixels): a run joins the runs of the same value above it that share a column, the
+    joined runs are labelled as a graph, and pieces are numbered by their first pixel in raster
+    order, as OpenCV numbers the components of an image.
     """
     h, w = seg.shape
-    on = seg > 0
-    left = np.ones((h, w), dtype=bool)
-    left[:, 1:] = seg[:, 1:] == seg[:, :-1]
-    up = np.ones((h, w), dtype=bool)
-    up[1:, :] = seg[1:, :] == seg[:-1, :]
-    big = np.zeros((2 * h, 2 * w), dtype=np.uint8)
-    big[1::2, 1::2] = on
-    big[1::2, 0::2] = on & left
-    big[0::2, 1::2] = on & up
-    big[0::2, 0::2] = on & left & up
-    n, labels = cv2.connectedComponents(big, connectivity=4, ltype=cv2.CV_32S)
-    return np.ascontiguousarray(labels[1::2, 1::2]), n - 1
+    flat = np.ascontiguousarray(seg, dtype=np.int32).ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    start[::w] = True
+    first = np.flatnonzero(start)  # run starts in raster order; a run never crosses a row end
+    n_runs = first.size
+    length = np.diff(np.append(first, flat.size))
+    value = flat[first]
+    on = np.flatnonzero(value > 0)
+    below = on[first[on] >= w]
+    # the runs of the row above over the first and the last column of each run
+    lo = np.searchsorted(first, first[below] - w, side="right") - 1
+    hi = np.searchsorted(first, first[below] + length[below] - 1 - w, side="right") - 1
+    span = hi - lo + 1
+    src = np.repeat(below, span)
+    dst = np.repeat(lo, span) + np.arange(int(span.sum())) - np.repeat(np.cumsum(span) - span, span)
+    same = value[dst] == value[src]
+    graph = coo_matrix((np.ones(int(same.sum()), dtype=np.int8), (src[same], dst[same])), shape=(n_runs, n_runs))
+    _, comp = connected_components(graph, directed=False)
+    # pieces numbered by their first run
+    ids, first_run = np.unique(comp[on], return_index=True)
+    rank = np.zeros(int(comp.max()) + 1, dtype=np.int32)
+    rank[ids[np.argsort(first_run)]] = np.arange(1, ids.size + 1, dtype=np.int32)
+    piece_of_run = np.zeros(n_runs, dtype=np.int32)
+    piece_of_run[on] = rank[comp[on]]
+    return np.repeat(piece_of_run, length).reshape(h, w), int(ids.size)
 
 
 def merge_small_segments(
@@ -214,6 +238,13 @@ def _relabel(
     _, dense = np.unique(group[ids], return_inverse=True)
     lut = np.zeros(n, dtype=np.int32)
     lut[ids] = dense + 1
+    return _apply(lut, seg)
+
+
+def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """``lut[seg]``; a copy of ``seg`` when ``lut`` changes no id (most calls on a warehouse)."""
+    if np.array_equal(lut, np.arange(lut.size)):
+        return np.array(seg, dtype=np.int32, copy=True)
     out: npt.NDArray[np.int32] = lut[seg]
     return out
 
@@ -223,8 +254,7 @@ def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     present = np.bincount(seg.ravel(), minlength=1) > 0
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
-    out: npt.NDArray[np.int32] = lut[seg]
-    return out
+    return _apply(lut, seg)
 
 
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:

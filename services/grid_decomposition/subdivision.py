@@ -162,8 +162,13 @@ def subdivide(
             pix.append(idx[ok])
     key = np.concatenate(keys) if keys else np.zeros(0, np.int64)
     pixel = np.concatenate(pix) if pix else np.zeros(0, np.int64)
-    both = np.unique(np.stack([key, pixel], axis=1), axis=0) if key.size else np.zeros((0, 2), np.int64)
-    ukeys, inverse, counts = np.unique(both[:, 0], return_inverse=True, return_counts=True)
+    both = _distinct_pairs(key, pixel, n_labels64 * n_labels64, np.int64(line_image.size))
+    # both is sorted by face pair: each pair's run of pixels is one edge candidate
+    new_key = np.ones(both.shape[0], dtype=bool)
+    new_key[1:] = both[1:, 0] != both[:-1, 0]
+    ukeys = both[new_key, 0]
+    inverse = np.cumsum(new_key) - 1
+    counts = np.diff(np.append(np.flatnonzero(new_key), both.shape[0]))
     keep_edge = counts >= 2
     remap = np.cumsum(keep_edge) - 1
     sel = keep_edge[inverse]
@@ -187,6 +192,25 @@ def subdivide(
         edge_ends_px=ends,
         line_image=line_image,
     )
+
+
+def _distinct_pairs(
+    key: npt.NDArray[np.int64], pixel: npt.NDArray[np.int64], n_keys: np.int64, n_pixels: np.int64
+) -> npt.NDArray[np.int64]:
+    """(K, 2) distinct (key, pixel) rows in lexicographic order, as ``np.unique(..., axis=0)`` gives them.
+
+    Keys below ``n_keys`` and pixels below ``n_pixels`` are sorted as one number when it fits in 64 bits.
+    """
+    if key.size == 0:
+        return np.zeros((0, 2), np.int64)
+    if int(n_keys) * int(n_pixels) >= 2**63:
+        out: npt.NDArray[np.int64] = np.unique(np.stack([key, pixel], axis=1), axis=0)
+        return out
+    code = np.sort(key * n_pixels + pixel)
+    keep = np.ones(code.size, dtype=bool)
+    keep[1:] = code[1:] != code[:-1]
+    code = code[keep]
+    return np.stack([code // n_pixels, code % n_pixels], axis=1)
 
 
 def _edge_ends(

@@ -6,8 +6,10 @@ import math
 
 import cv2
 import numpy as np
+import pytest
 
 from services.grid_decomposition import dominant_orientations, oriented_gradients
+from services.grid_decomposition.orientations import _gmm_smooth
 
 
 def _angle_error(a: float, b: float) -> float:
@@ -36,3 +38,31 @@ def test_dominant_orientations_follow_a_rotated_building() -> None:
 
 def test_dominant_orientations_of_a_map_without_edges_is_empty() -> None:
     assert dominant_orientations(oriented_gradients(np.zeros((20, 20), dtype=bool))).size == 0
+
+
+def _sklearn_smooth(hist: np.ndarray, max_components: int) -> np.ndarray:
+    """The histogram's mixture density as scikit-learn's GaussianMixture fits it (the reference)."""
+    from sklearn.mixture import GaussianMixture
+
+    shift = int(np.argmin(np.convolve(np.r_[hist, hist[:4]], np.ones(5), "valid")[:180]))
+    rolled = np.roll(hist, -shift)
+    counts = np.rint(rolled / rolled.sum() * 1500).astype(np.int64)
+    samples = np.repeat(np.arange(180, dtype=np.float64), counts)
+    samples = samples + np.tile(np.linspace(-0.45, 0.45, 7), samples.size // 7 + 1)[: samples.size]
+    x = samples.reshape(-1, 1)
+    fits = [
+        GaussianMixture(k, random_state=0, reg_covar=0.5, init_params="k-means++", n_init=1).fit(x)
+        for k in range(1, max_components + 1)
+    ]
+    best = min(fits, key=lambda g: float(g.bic(x)))
+    return np.roll(np.exp(best.score_samples(np.arange(180, dtype=np.float64).reshape(-1, 1))), shift)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_orientation_histogram_mixture_is_scikit_learns(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    bins = np.arange(180)
+    hist = rng.uniform(0.0, 2.0, 180)
+    for centre in rng.integers(0, 180, 1 + seed):
+        hist += rng.uniform(10, 100) * np.exp(-0.5 * ((bins - centre) / rng.uniform(0.5, 5.0)) ** 2)
+    assert np.array_equal(_gmm_smooth(hist, 4), _sklearn_smooth(hist, 4))

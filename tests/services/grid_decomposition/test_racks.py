@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import decompose
-from services.grid_decomposition.racks import find_racks
+from services.grid_decomposition.racks import _interval_image, _turn, find_racks
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
 from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.test_rooms import RES, _furnish, _office_row
@@ -112,3 +112,19 @@ def test_a_hall_explored_up_to_its_racks_ends_keeps_its_racks(style: RackStyle) 
         seg = d.segments[(hall.junctions == k) & free]
         assert d.regions[int(np.bincount(seg).argmax())].label is PlaceLabel.JUNCTION
     assert len(d.regions) > len(seen)
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-12, 0.3, -0.3, math.pi / 4, -math.pi / 4])
+def test_rack_places_rasterise_as_a_search_per_pixel_would(angle: float) -> None:
+    rng = np.random.default_rng(7)
+    matrix, _ = _turn((37, 53), angle)
+    cols, rows = np.arange(53, dtype=np.float64), np.arange(37, dtype=np.float64)
+    u = (matrix[0, 0] * cols, matrix[0, 1] * rows + matrix[0, 2])
+    v = (matrix[1, 0] * cols, matrix[1, 1] * rows + matrix[1, 2])
+    u_px, v_px = u[0][None, :] + u[1][:, None], v[0][None, :] + v[1][:, None]
+    # edges between pixels and exactly on some
+    xs = np.sort(np.r_[rng.uniform(u_px.min() - 2, u_px.max() + 2, 6), u_px[5, 7], u_px[20, 40]])
+    ys = np.sort(np.r_[rng.uniform(v_px.min() - 2, v_px.max() + 2, 6), v_px[3, 3]])
+    ids = rng.integers(0, 50, (ys.size + 1, xs.size + 1)).astype(np.int32)
+    expected = ids[np.searchsorted(ys, v_px, side="right"), np.searchsorted(xs, u_px, side="right")]
+    assert np.array_equal(_interval_image(xs, ys, u, v, ids), expected)

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
+import pytest
 
 from services.grid_decomposition.regions import warehouse_floors
 from services.grid_decomposition.segments import (
     border_closure,
     merge_open_segments,
     merge_small_segments,
+    same_value_pieces,
     segment_image,
     split_along,
 )
@@ -94,3 +97,29 @@ def test_warehouse_floor_needs_many_storage_faces() -> None:
     label[41:45] = 3  # a few storage-like faces between furniture in component 2
     floors = warehouse_floors(component, free_px, label)
     assert floors.tolist() == [False, True, False]
+
+
+def _pieces_one_value_at_a_time(seg: np.ndarray) -> np.ndarray:
+    """4-connected pieces of each value, numbered by their first pixel in raster order."""
+    out = np.zeros(seg.shape, dtype=np.int64)
+    offset = 0
+    for v in np.unique(seg[seg > 0]):
+        n, parts = cv2.connectedComponents((seg == v).astype(np.uint8), connectivity=4)
+        out[parts > 0] = parts[parts > 0] + offset
+        offset += n - 1
+    first = np.full(offset + 1, out.size)
+    np.minimum.at(first, out.ravel(), np.arange(out.size))
+    rank = np.zeros(offset + 1, dtype=np.int64)
+    rank[np.argsort(first[1:]) + 1] = np.arange(1, offset + 1)
+    return rank[out]
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_same_value_pieces_are_the_pieces_of_each_value_in_scan_order(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(1, 30, 2))
+    seg = np.repeat(np.repeat(rng.integers(0, 4, (h, w)), 2, axis=0), 2, axis=1).astype(np.int32)
+    pieces, n = same_value_pieces(seg)
+    expected = _pieces_one_value_at_a_time(seg)
+    assert n == int(expected.max())
+    assert np.array_equal(pieces, expected)

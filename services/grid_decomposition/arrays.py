@@ -1,0 +1,89 @@
+"""Exact array primitives the decomposition calls on whole grids, faster than their numpy forms.
+
+numpy's ``unique`` hashes when asked for the values alone, which is many times slower than a sort
+on millions of distinct integers; with an inverse it sorts. Ids of pixels are small non-negative
+integers: a count per id finds them in one pass.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+_DENSE_PER_VALUE = 4  # a count per id while the ids' range is at most this many times the values
+
+
+def distinct(values: npt.NDArray[np.int64], scratch: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
+    """The sorted distinct values of ``values`` (indices into ``scratch``), as ``np.unique`` gives them.
+
+    Many values (a front of millions of pixels) are marked in ``scratch`` (all False, and left so)
+    and read back in one pass; a few are sorted.
+    """
+    if values.size * 16 >= scratch.size:
+        scratch[values] = True
+        out = np.flatnonzero(scratch)
+        scratch[out] = False
+        return out
+    return _sorted_distinct(np.sort(values))
+
+
+def _sorted_distinct(ordered: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    keep = np.ones(ordered.size, dtype=bool)
+    keep[1:] = ordered[1:] != ordered[:-1]
+    return ordered[keep]
+
+
+def unique_inverse(keys: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """``np.unique(keys, return_inverse=True)`` of non-negative integer ``keys`` (1-D), values as int64.
+
+    Keys in a range not much larger than their number are counted, not sorted.
+    """
+    flat = np.asarray(keys).ravel()
+    if flat.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    top = int(flat.max())
+    if top >= _DENSE_PER_VALUE * flat.size + 1024:
+        values, inverse = np.unique(flat, return_inverse=True)
+        return values.astype(np.int64), inverse.ravel().astype(np.int64)
+    present = np.bincount(flat, minlength=top + 1) > 0
+    rank = np.cumsum(present) - 1
+    return np.flatnonzero(present), rank[flat]
+
+
+def label_sums(
+    labels: npt.NDArray[np.integer], n: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Pixel count, sum of columns and sum of rows of every label ``0..n - 1`` of a label image.
+
+    The same as ``np.bincount(labels.ravel(), weights, n)`` with a column or row index per pixel,
+    from the runs of equal labels along the rows: a label image of large regions has far fewer
+    runs than pixels. The sums are whole numbers, exact in float64 in any order.
+
+    Parameters
+    ----------
+    labels : (H, W) non-negative integer
+    n : int
+        At least ``labels.max() + 1``.
+
+    Returns
+    -------
+    count : (n,) int64
+    sum_col, sum_row : (n,) float64
+    """
+    w = labels.shape[1]
+    flat = np.ascontiguousarray(labels).ravel()
+    if flat.size == 0:
+        return np.zeros(n, dtype=np.int64), np.zeros(n), np.zeros(n)
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    start[::w] = True
+    first = np.flatnonzero(start)
+    length = np.diff(np.append(first, flat.size))
+    label = flat[first]
+    row = first // w
+    col = first - row * w
+    count = np.bincount(label, weights=length, minlength=n).astype(np.int64)
+    sum_col = np.bincount(label, weights=length * col + length * (length - 1) // 2, minlength=n)
+    sum_row = np.bincount(label, weights=length * row, minlength=n)
+    return count, sum_col.astype(np.float64), sum_row.astype(np.float64)

@@ -1,0 +1,40 @@
+"""Array primitives: the same answers as the numpy forms they replace."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.grid_decomposition.arrays import distinct, label_sums, unique_inverse
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_distinct_gives_numpys_unique(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    size = int(rng.integers(1, 5000))
+    values = rng.integers(0, size, int(rng.integers(0, 3 * size))).astype(np.int64)
+    scratch = np.zeros(size, dtype=bool)
+    assert np.array_equal(distinct(values, scratch), np.unique(values))
+    assert not scratch.any()
+
+
+@pytest.mark.parametrize("spread", [3, 1000, 10**9])
+def test_unique_inverse_gives_numpys_unique_with_inverse(spread: int) -> None:
+    keys = np.random.default_rng(spread).integers(0, spread, 2000)
+    values, inverse = unique_inverse(keys)
+    expected, expected_inverse = np.unique(keys, return_inverse=True)
+    assert np.array_equal(values, expected)
+    assert np.array_equal(inverse, expected_inverse)
+    assert np.array_equal(values[inverse], keys)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (7, 1), (40, 33)])
+def test_label_sums_are_the_weighted_counts_per_label(shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(shape[1])
+    labels = np.repeat(rng.integers(0, 6, (shape[0], shape[1] // 3 + 1)), 3, axis=1)[:, : shape[1]].astype(np.int32)
+    h, w = shape
+    count, sum_col, sum_row = label_sums(labels, 8)
+    flat = labels.ravel()
+    assert np.array_equal(count, np.bincount(flat, minlength=8))
+    assert np.array_equal(sum_col, np.bincount(flat, np.tile(np.arange(w, dtype=np.float64), h), 8))
+    assert np.array_equal(sum_row, np.bincount(flat, np.repeat(np.arange(h, dtype=np.float64), w), 8))
