@@ -9,7 +9,9 @@ gives the pallets, loads and beams of the bays in view and their depth evidence;
 (:func:`~services.load_scenes.occupancy.bin_occupancy`) and fused with what the bins showed before
 (:func:`~services.load_scenes.occupancy.fuse_occupancy`); the changed states and scenes go into ONE revision
 (:class:`shared.loads.SceneWriter`). The rack model (bays) is rebuilt from the map's ``bin`` features and the
-site's rack profiles at each commit. Frames that cannot be used are counted and skipped with the reason.
+site's rack profiles at each commit. At its first commit the stage reads the bin states stored before (by an
+earlier run), so fusion continues across restarts. Frames that cannot be used are counted and skipped with the
+reason.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from services.load_scenes.model import Bay, BinOccupancy, SceneGraph
 from services.load_scenes.occupancy import bin_evidence, bin_occupancy, fuse_occupancy
 from shared import messages
 from shared.bins import Bin
-from shared.loads import SceneWriter
+from shared.loads import SceneWriter, occupancy_from_feature
 from shared.settings import LoadScenesStageSettings
 from shared.store import StoreUnavailableError
 from shared.transforms import TransformBuffer, to_matrix
@@ -60,7 +62,8 @@ class LoadScenesStage:
         self.writer = SceneWriter(context.store, context.map.id)
         self.bays: dict[str, Bay] = {}
         self.views: dict[str, collections.deque[RackView]] = {}
-        self.states: dict[str, BinOccupancy] = {}
+        self.states: dict[str, BinOccupancy] | None = None
+        """Fused state per bin id; None until read back from the store (first commit)."""
         self._robots: dict[str, _Robot] = {}
         self._waiting: dict[str, tuple[Image, float]] = {}
         self._seen: set[str] = set()
@@ -157,12 +160,21 @@ class LoadScenesStage:
             return
         self.bays = {bay.key: bay for bay in bays}
 
+    def _load_states(self) -> dict[str, BinOccupancy]:
+        """The bin states stored before, read once: fusion goes on from them after a restart."""
+        if self.states is None:
+            stored = self.context.store.features(self.context.map.id, kinds=[FeatureKind.BIN_STATE])
+            self.states = {s.bin_id: s for s in (occupancy_from_feature(item.feature) for item in stored)}
+            log.info("%d stored bin states read back", len(self.states))
+        return self.states
+
     def _commit(self) -> None:
         try:
             self._load_bays()
+            known = self._load_states()
         except StoreUnavailableError as err:
             self.context.count("store_unavailable")
-            log.warning("bins not read, will retry: %s", err)
+            log.warning("bins or bin states not read, will retry: %s", err)
             return
         scenes: list[SceneGraph] = []
         states: list[BinOccupancy] = []
@@ -184,8 +196,8 @@ class LoadScenesStage:
                 continue
             scenes.append(graph)
             for state in occupancy:
-                fused = fuse_occupancy(self.states.get(state.bin_id), state)
-                self.states[state.bin_id] = fused
+                fused = fuse_occupancy(known.get(state.bin_id), state)
+                known[state.bin_id] = fused
                 states.append(fused)
         if not scenes:
             return
