@@ -503,3 +503,13 @@ def _beam(bay: Bay, level: int, pts: _BayPoints, stamp_ns: int) -> BoxEstimate:
                        size=(bay.width_m, bay.depth_m, bay.beam_height_m),
                        yaw_rad=_wrap(bay.yaw_rad - math.pi / 2), sigma=(sx, sy, 0.01), sigma_yaw_rad=0.01,
                        score=1.0, stamp_ns=stamp_ns, bay=bay.key, level=level)
+
+
+def camera_moved(before: npt.NDArray[Any], after: npt.NDArray[Any], *, min_move_m: float, min_turn_rad: float) -> bool:
+    """Whether a camera's pose (4x4, map from optical) moved at least ``min_move_m`` or turned at least
+    ``min_turn_rad`` from ``before`` to ``after``: a frame from where the last one was taken shows nothing new."""
+    shift = float(np.linalg.norm(np.asarray(after, float)[:3, 3] - np.asarray(before, float)[:3, 3]))
+    rotation = np.asarray(before, float)[:3, :3].T @ np.asarray(after, float)[:3, :3]
+    turn = math.acos(max(-1.0, min(1.0, 0.5 * (float(np.trace(rotation)) - 1.0))))
+    return shift >= min_move_m or turn >= min_turn_rad
+

@@ -1,7 +1,9 @@
 """The load-scene worker: RGB-D depth frames in, bay scene graphs and bin occupancy out.
 
 Per robot namespace it keeps the camera model (from camera info) and tf. Each depth frame waits (at most
-``pose_wait_s``) for its camera pose in the map, then :func:`~services.load_scenes.estimation.estimate_boxes`
+``pose_wait_s``) for its camera pose in the map; a frame taken where the robot's last estimated one was (camera
+moved less than ``min_move_m``, turned less than ``min_turn_rad``, within ``still_period_s``) is skipped, as it
+shows the same; then :func:`~services.load_scenes.estimation.estimate_boxes`
 gives the pallets, loads and beams of the bays in view and their depth evidence; a bay keeps its newest
 ``views_per_bay`` views. Every ``commit_period_s`` each bay seen since is explained: its views' estimates merged
 (:func:`~services.load_scenes.estimation.merge_views`), the scene graph inferred
@@ -28,7 +30,7 @@ from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
 from threadpoolctl import threadpool_limits
 
 from services.load_scenes.errors import LoadScenesError
-from services.load_scenes.estimation import RackView, bays_from_bins, estimate_boxes, merge_views
+from services.load_scenes.estimation import RackView, bays_from_bins, camera_moved, estimate_boxes, merge_views
 from services.load_scenes.frames import Intrinsics, decode_depth, intrinsics_from_camera_info
 from services.load_scenes.inference import infer_scene
 from services.load_scenes.model import Bay, BinOccupancy, SceneGraph
@@ -50,6 +52,8 @@ class _Robot:
     transforms: TransformBuffer = field(default_factory=TransformBuffer)
     intrinsics: Intrinsics | None = None
     last_stamp_ns: int = -1
+    last_pose: npt.NDArray[np.float64] | None = None
+    """Camera pose of the last frame estimated."""
 
 
 class LoadScenesStage:
@@ -136,10 +140,15 @@ class LoadScenesStage:
 
     def _handle(self, robot: _Robot, image: Image, pose: npt.NDArray[np.float64], stamp_ns: int) -> None:
         assert robot.intrinsics is not None
+        s = self.settings
+        if (robot.last_pose is not None and stamp_ns - robot.last_stamp_ns < s.still_period_s * 1e9
+                and not camera_moved(robot.last_pose, pose, min_move_m=s.min_move_m, min_turn_rad=s.min_turn_rad)):
+            self.context.count("frames_still")  # the same view again: nothing new to estimate
+            return
         depth = decode_depth(image)
         view = estimate_boxes(depth, robot.intrinsics, pose, list(self.bays.values()), stamp_ns=stamp_ns,
                               stride=self.settings.stride, max_range_m=self.settings.max_range_m)
-        robot.last_stamp_ns = stamp_ns
+        robot.last_stamp_ns, robot.last_pose = stamp_ns, pose
         self.context.count("frames_estimated")
         self.context.count("boxes_estimated", len(view.boxes))
         for key in view.evidence:
