@@ -45,7 +45,7 @@ from services.load_scenes.estimation import RackView, bays_from_bins, estimate_b
 from services.load_scenes.frames import Intrinsics
 from services.load_scenes.inference import infer_scene
 from services.load_scenes.model import Bay, BinOccupancy, Occupancy, SceneGraph
-from services.load_scenes.occupancy import bin_evidence, bin_occupancy, fuse_occupancy
+from services.load_scenes.occupancy import OccupancySettings, bin_evidence, bin_occupancy, fuse_occupancy
 from services.simulator import RgbdModel, depth_image_mm, render_boxes, world_from_layout
 from services.simulator.loads import RACK_CAMERAS, bin_records, loaded_layout, rack_view
 from shared.loads import SceneWriter
@@ -88,6 +88,21 @@ def _commit(views: dict[str, list[RackView]], bays: dict[str, Bay], states: dict
         writer.write(scenes, changed)
 
 
+def _why_unknown(state: BinOccupancy | None, bays: dict[str, Bay], bin_id: str) -> str:
+    """Why a bin is unknown: its level (``level<i>``) and no rays through it / seen in part only / undecided."""
+    bay = next(bay for bay in bays.values() if bin_id in bay.bin_ids)
+    level = bay.bin_ids.index(bin_id)
+    rays = 0 if state is None else state.detail.get("rays", 0)
+    covered = 0.0 if state is None else state.detail.get("covered", 1.0)
+    if not isinstance(rays, int) or rays < 15:
+        reason = "no_rays"
+    elif isinstance(covered, float) and (1.0 - covered) * bay.width_m > OccupancySettings().max_uncovered_m:
+        reason = "seen_in_part"
+    else:
+        reason = "undecided"
+    return f"level{level}_{reason}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
@@ -104,6 +119,7 @@ def main() -> None:
     decided = right = unknown = total_bins = 0
     planted = found = false = well_seen = 0
     wrong: list[str] = []
+    why_unknown: dict[str, int] = defaultdict(int)
     for seed in args.seeds:
         for deep in (1, 2):
             world = world_from_layout(loaded_layout(seed, deep=deep))
@@ -141,6 +157,7 @@ def main() -> None:
                     state = states.get(bin_id)
                     if state is None or state.state is Occupancy.UNKNOWN:
                         unknown += 1
+                        why_unknown[_why_unknown(state, bays, bin_id)] += 1
                         continue
                     decided += 1
                     if (state.state is Occupancy.OCCUPIED) == occupied:
@@ -166,6 +183,8 @@ def main() -> None:
     print(f"bins {total_bins} count")
     print(f"bins_decided {decided} count")
     print(f"bins_unknown {unknown} count")
+    for why, count in sorted(why_unknown.items()):
+        print(f"bins_unknown_{why} {count} count")
     print(f"occupancy_right_of_decided {100.0 * right / max(decided, 1):.2f} %")
     for line in wrong:
         print(f"# wrong {line}")
