@@ -383,9 +383,10 @@ class SceneWriter:
         ``occupancies`` and ``scenes`` need only hold what the stage looked at anew: every bin state and scene the
         stage stored before and does not give again stays live (unchanged, the row it was), and one given exactly as
         stored is not written again. A bin state is placed at its bin's centre (the map's ``bin`` feature of that
-        id), a scene at the middle of its bay's bins (or of its objects). Records that cannot be stored are left out
-        with a reason (``skipped``) and the rest is written; nothing stored is lost. When nothing changed, no
-        revision is written.
+        id), a scene at the middle of its bay's bins (or of its objects); the states of bins the map no longer has
+        (the pillar stage removed them) are retired (``bin_states_retired`` in the summary). Records that cannot be
+        stored are left out with a reason (``skipped``) and the rest is written; nothing stored is lost. When nothing
+        changed, no revision is written.
 
         Parameters
         ----------
@@ -446,20 +447,29 @@ class SceneWriter:
         scenes_written = sorted(key for key, item in new_scenes.items() if not _same(item, stored_scenes.get(key)))
         bins_changed = [key for key in bins_written
                         if new_states[key].properties["state"] != _state(stored_states.get(key))]
-        if not bins_written and not scenes_written:
+        retired = sorted(key for key in stored_states if key not in centres)  # bins the map no longer has
+        if not bins_written and not scenes_written and not retired:
             return SceneWrite(None, (), (), (), tuple(skipped))
         features = {kind.value: [new[key] for key in written] for kind, new, written in
                     ((FeatureKind.BIN_STATE, new_states, bins_written),
                      (FeatureKind.LOAD_SCENE, new_scenes, scenes_written)) if written}
+        partial = frozenset(features)
+        if retired:  # the states of the bins kept, all of them: the kind's other states are retired
+            features[FeatureKind.BIN_STATE.value] = [new_states.get(key, item) for key, item in stored_states.items()
+                                                     if key in centres] + [new_states[key] for key in bins_written
+                                                                          if key not in stored_states]
+            partial -= {FeatureKind.BIN_STATE.value}
         summary = {"bin_states_written": len(bins_written), "scenes_written": len(scenes_written),
                    "occupancy_changed": bins_changed[:CHANGED_LISTED], "occupancy_changed_count": len(bins_changed),
-                   "skipped": len(skipped)}
+                   "bin_states_retired": len(retired), "skipped": len(skipped)}
         write = RevisionWrite(self.stage, features=features, input_start_ns=input_start_ns,
-                              input_end_ns=input_end_ns, summary=summary, partial=frozenset(features))
+                              input_end_ns=input_end_ns, summary=summary, partial=partial)
         revision = self.store.write_revision(self.map_id, write) if commit is None else commit(write)
         if revision is None:  # not stored: the next write compares with what the store holds
             return SceneWrite(None, (), (), (), tuple(skipped))
         stored_states.update((key, new_states[key]) for key in bins_written)
+        for key in retired:
+            del stored_states[key]
         stored_scenes.update((key, new_scenes[key]) for key in scenes_written)
         return SceneWrite(revision, tuple(bins_written), tuple(bins_changed), tuple(scenes_written), tuple(skipped))
 

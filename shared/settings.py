@@ -200,6 +200,12 @@ class LoadScenesStageSettings(BaseModel):
     merge_distance_m: float = Field(0.25, gt=0.0, description="Estimates of one kind closer than this across views "
                                     "are one object.")
     beam_height_m: float = Field(0.12, gt=0.0, description="Vertical size of the racks' beams.")
+    min_move_m: float = Field(0.2, ge=0.0, description="A frame whose camera moved less than this (and turned less "
+                              "than min_turn_rad) since the robot's last estimated frame is skipped (it shows the "
+                              "same).")
+    min_turn_rad: float = Field(0.1, ge=0.0)
+    still_period_s: float = Field(5.0, gt=0.0, description="A standing camera's frame is estimated at most this "
+                                  "often (something may have changed in front of it).")
 
 
 class DecompositionSettings(BaseModel):

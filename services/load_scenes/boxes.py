@@ -172,7 +172,7 @@ def beam_boxes(bay: Bay) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float6
     return centre, half
 
 
-def estimate_boxes(
+def usable_estimates(
     bay: Bay, estimates: list[BoxEstimate], *, margin_m: float = 0.3,
 ) -> tuple[Boxes, list[BoxEstimate], list[Skipped]]:
     """The usable estimates of one bay as bay-frame :class:`Boxes`, the estimates kept and those skipped.
@@ -210,7 +210,7 @@ def estimate_boxes(
 
 
 def boxes_from_estimates(bay: Bay, estimates: list[BoxEstimate]) -> Boxes:
-    """Bay-frame boxes of valid estimates (no checks: see :func:`estimate_boxes`)."""
+    """Bay-frame boxes of valid estimates (no checks: see :func:`usable_estimates`)."""
     n = len(estimates)
     centre = to_bay_frame(bay, np.array([e.centre for e in estimates], float).reshape(n, 3))
     size = np.array([e.size for e in estimates], float).reshape(n, 3)

@@ -36,6 +36,8 @@ FloatArray = npt.NDArray[np.float64]
 FRONT_REACH_M = 0.6
 """How far in front of a bay's opening (into the aisle) its objects may reach (overhanging loads)."""
 TOP_HEIGHT_M = 2.0
+BEHIND_M = 0.1
+"""Rays through a bay that meet nothing in it are kept as a point this far behind its back (background)."""
 """Height above the top level that still belongs to the bay (its loads)."""
 _SEAM_M = 0.015
 """Height above a pallet's top left out of the loads standing on it (points of both meet there)."""
@@ -278,6 +280,15 @@ def estimate_boxes(depth: npt.NDArray[Any], intrinsics: Intrinsics, world_from_o
     hidden = _occluded(sub)[rows, cols]
     centre = pose[:3, 3]
     sparse = points[::16]
+    # Rays of every other used pixel with their range (inf: no return or too far): a ray that passes through
+    # an empty bin and meets nothing in the bay still says the bin is seen and empty (a top bin against open space).
+    ray_sub = metres[::2 * stride, ::2 * stride]
+    ray_rows, ray_cols = np.indices(ray_sub.shape).reshape(2, -1) * 2 * stride
+    ray_range = ray_sub.ravel().astype(np.float64)
+    ray_range = np.where((ray_range > 0) & (ray_range <= max_range_m), ray_range, np.inf)
+    ray_dir = np.column_stack(((ray_cols - intrinsics.cx) / intrinsics.fx, (ray_rows - intrinsics.cy) / intrinsics.fy,
+                               np.ones(ray_cols.size))) @ pose[:3, :3].T  # optical z = 1: range is along z
+
     boxes: list[BoxEstimate] = []
     evidence: dict[str, DepthEvidence] = {}
     settings = _Grid(cell_m, edge_m, pallet_height_m, max(2, round(min_area_m2 / cell_m**2)), min_width_m,
@@ -303,8 +314,10 @@ def estimate_boxes(depth: npt.NDArray[Any], intrinsics: Intrinsics, world_from_o
             continue
         clear = index[np.abs(u[index]) <= 0.5 * bay.width_m - upright_margin_m]  # uprights are not modelled
         keep = clear[:: max(1, -(-len(clear) // max_evidence_points))]
+        behind = _through(centre, ray_dir, ray_range, bay, axes, top, upright_margin_m)
+        behind = behind[:: max(1, -(-len(behind) // (max_evidence_points // 4)))]
         evidence[bay.key] = DepthEvidence((float(centre[0]), float(centre[1]), float(centre[2])),
-                                          points[keep].copy(), stamp_ns)
+                                          np.vstack([points[keep], behind]), stamp_ns)
         view = _BayPoints(u[index], v[index], z[index], border[index], noise[index], hidden[index])
         boxes += _bay_boxes(bay, view, settings, stamp_ns)
     return RackView(tuple(boxes), evidence)
@@ -319,6 +332,23 @@ def _occluded(depth_m: npt.NDArray[np.float32]) -> npt.NDArray[np.bool_]:
     nearest = cv2.erode(far, kernel, anchor=(1, 0), borderType=cv2.BORDER_REPLICATE)
     with np.errstate(invalid="ignore"):
         return np.asarray(far - nearest > _OCCLUDER_M, dtype=np.bool_)
+
+
+def _through(centre: FloatArray, direction: FloatArray, depth: FloatArray, bay: Bay, axes: FloatArray, top: float,
+             margin_m: float) -> FloatArray:
+    """Map points ``BEHIND_M`` behind the bay's back of the rays (``direction`` scaled so that optical depth is 1,
+    ``depth`` their measured optical depth, inf for none) that enter its front opening (uprights left out) and meet
+    nothing before the back."""
+    v0 = float((centre[:2] - bay.origin) @ axes[:, 1])
+    dv = direction[:, :2] @ axes[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_front = np.where(dv > 1e-9, -v0 / dv, np.inf)
+        t_back = np.where(dv > 1e-9, (bay.depth_m + BEHIND_M - v0) / dv, np.inf)
+    u0 = (centre[:2] - bay.origin) @ axes[:, 0] + t_front * (direction[:, :2] @ axes[:, 0])
+    z0 = centre[2] + t_front * direction[:, 2]
+    ok = (np.isfinite(t_back) & (t_front > 0) & (depth > t_back) & (np.abs(u0) <= 0.5 * bay.width_m - margin_m)
+          & (z0 >= 0.0) & (z0 < top))
+    return np.asarray(centre + direction[ok] * t_back[ok, None], np.float64).reshape(-1, 3)
 
 
 def _inside(u: FloatArray, v: FloatArray, z: FloatArray, bay: Bay, top: float) -> npt.NDArray[np.bool_]:
@@ -503,3 +533,13 @@ def _beam(bay: Bay, level: int, pts: _BayPoints, stamp_ns: int) -> BoxEstimate:
                        size=(bay.width_m, bay.depth_m, bay.beam_height_m),
                        yaw_rad=_wrap(bay.yaw_rad - math.pi / 2), sigma=(sx, sy, 0.01), sigma_yaw_rad=0.01,
                        score=1.0, stamp_ns=stamp_ns, bay=bay.key, level=level)
+
+
+def camera_moved(before: npt.NDArray[Any], after: npt.NDArray[Any], *, min_move_m: float, min_turn_rad: float) -> bool:
+    """Whether a camera's pose (4x4, map from optical) moved at least ``min_move_m`` or turned at least
+    ``min_turn_rad`` from ``before`` to ``after``: a frame from where the last one was taken shows nothing new."""
+    shift = float(np.linalg.norm(np.asarray(after, float)[:3, 3] - np.asarray(before, float)[:3, 3]))
+    rotation = np.asarray(before, float)[:3, :3].T @ np.asarray(after, float)[:3, :3]
+    turn = math.acos(max(-1.0, min(1.0, 0.5 * (float(np.trace(rotation)) - 1.0))))
+    return shift >= min_move_m or turn >= min_turn_rad
+

@@ -44,11 +44,11 @@ from services.load_scenes.boxes import (
     Skipped,
     beam_boxes,
     concat,
-    estimate_boxes,
     hull_half,
     levels_of,
     supports,
     to_map_frame,
+    usable_estimates,
     validate_bay,
     yaw_to_map,
 )
@@ -333,7 +333,7 @@ def infer_bay_scene(
     """
     s = settings or InferenceSettings()
     validate_bay(bay)
-    detections, kept, skipped = estimate_boxes(bay, estimates)
+    detections, kept, skipped = usable_estimates(bay, estimates)
     if len(kept) > s.max_objects:
         raise SceneError(f"bay {bay.key!r} has {len(kept)} estimates, more than max_objects={s.max_objects}")
     base = concat(supports(bay), detections)

@@ -1,12 +1,13 @@
 """Bin occupancy from a bay's scene graph and its depth views; fusion of successive views of a bin.
 
-A bin (one level of a bay) is *seen* when enough depth rays pass through its front opening. Its probability
-of holding something is that of its objects (1 - prod(1 - p) over the scene's pallets and loads at that
-level, false estimates included with their low probability) raised to ``unexplained_probability`` when
-enough depth points inside the bin meet none of the scene's boxes (an object nobody detected), and kept
-``view_error`` away from 0 and 1 (one view is never certain). Seen bins are
-``occupied`` or ``empty`` when that probability (or its complement) reaches ``decide_probability``, else
-``unknown`` (the seed's 0.4-0.6 band of no decision); bins not seen are ``unknown``.
+A bin (one level of a bay) is *seen* when enough depth rays pass through its front opening; it is seen *empty*
+only when the width of the opening they left uncrossed is less than a pallet's (an oblique view that sees one half
+of a bin empty says nothing of the other half, where the pallet may stand). Its probability of holding something
+is that of its objects (1 - prod(1 - p) over the scene's pallets and loads at that level, false estimates included
+with their low probability) raised to ``unexplained_probability`` when enough depth points inside the bin meet
+none of the scene's boxes (an object nobody detected), and kept ``view_error`` away from 0 and 1 (one view is
+never certain). Seen bins are ``occupied`` or ``empty`` when that probability (or its complement) reaches
+``decide_probability``, else ``unknown`` (the seed's 0.4-0.6 band of no decision); bins not seen are ``unknown``.
 
 Successive views of a bin add their log-odds after the older sum is scaled by ``history_weight``: two views
 agreeing make the bin surer, and one clear view of a change (a pallet taken out) still flips it.
@@ -46,6 +47,9 @@ class OccupancySettings(BaseModel):
     view_error: float = Field(0.01, gt=0.0, lt=0.5, description="How sure one view can be at most (1 - this).")
     history_weight: float = Field(0.5, ge=0.0, le=1.0, description="Scale of the older log-odds per new view.")
     max_log_odds: float = Field(9.0, gt=0.0)
+    max_uncovered_m: float = Field(0.6, ge=0.0, description="Width of a bin's opening no ray crossed, metres, "
+                                                            "up to which it can be seen empty (narrower than a "
+                                                            "pallet).")
 
 
 class BinEvidence(NamedTuple):
@@ -55,10 +59,13 @@ class BinEvidence(NamedTuple):
     """(L,) rays through each level's front opening."""
     unexplained: npt.NDArray[np.int64]
     """(L,) points inside each level's volume that no box of the scene explains."""
+    covered: npt.NDArray[np.float64] | None = None
+    """(L,) share of the front opening's width the rays crossed (in strips of ``strip_m``); None: all of it."""
 
 
 def bin_evidence(
-    bay: Bay, graph: SceneGraph, evidence: list[DepthEvidence], settings: LikelihoodSettings | None = None,
+    bay: Bay, graph: SceneGraph, evidence: list[DepthEvidence], settings: LikelihoodSettings | None = None, *,
+    strip_m: float = 0.3,
 ) -> BinEvidence:
     """Count, per level, the rays through the front opening and the points the scene leaves unexplained.
 
@@ -71,6 +78,8 @@ def bin_evidence(
     settings
         The ray subsample and the range noise (a point more than 3 sigma before its ray's first box is
         unexplained too).
+    strip_m
+        Width of the strips of the front opening whose share crossed by rays is ``covered``.
     """
     s = settings or LikelihoodSettings()
     validate_bay(bay)
@@ -88,6 +97,10 @@ def bin_evidence(
     through = (np.isfinite(t0) & (t0 >= 0.0) & (r > t0) & (np.abs(cross[:, 0]) < 0.5 * bay.width_m)
                & (level >= 0) & (cross[:, 2] < tops[np.clip(level, 0, n - 1)]))
     seen = np.bincount(level[through], minlength=n)[:n]
+    strips = max(1, round(bay.width_m / strip_m))
+    strip = np.clip(((cross[:, 0] / bay.width_m + 0.5) * strips).astype(np.int64), 0, strips - 1)
+    crossed = np.unique(level[through] * strips + strip[through])
+    covered = np.bincount(crossed // strips, minlength=n)[:n] / strips
 
     nodes = [nd for nd in graph.nodes if nd.kind != ObjectKind.BEAM and Flag.FALSE_ESTIMATE not in nd.flags]
     boxes = boxes_from_nodes(bay, nodes)
@@ -97,9 +110,13 @@ def bin_evidence(
     expected = table.min(axis=1, initial=np.inf)
     unexplained = ~rays.background & (r < expected - 3.0 * s.range_sigma_m)
     point_level = np.searchsorted(levels, rays.point[:, 2], side="right") - 1
-    ok = unexplained & (point_level >= 0)
+    # A point between a level's top and the next support (beside a beam, or under the pallet standing on it) is
+    # in no bin: counted in the level below, the load above made an empty bin occupied.
+    inside = rays.point[:, 2] < tops[np.clip(point_level, 0, n - 1)]
+    ok = unexplained & (point_level >= 0) & inside
     return BinEvidence(rays=seen.astype(np.int64),
-                       unexplained=np.bincount(point_level[ok], minlength=n)[:n].astype(np.int64))
+                       unexplained=np.bincount(point_level[ok], minlength=n)[:n].astype(np.int64),
+                       covered=covered.astype(np.float64))
 
 
 def bin_occupancy(
@@ -122,7 +139,9 @@ def bin_occupancy(
     Returns
     -------
     list of BinOccupancy
-        One per level, in level order; ``detail`` holds ``p_occupied``, ``rays`` and ``unexplained_points``.
+        One per level, in level order; ``detail`` holds ``p_occupied``, ``rays``, ``unexplained_points`` and
+        ``covered``. A bin whose opening the rays left uncrossed over more than ``max_uncovered_m`` and where
+        nothing was found is not seen (``unknown``).
     """
     s = settings or OccupancySettings()
     validate_bay(bay)
@@ -141,12 +160,15 @@ def bin_occupancy(
         p = min(max(p, s.view_error), 1.0 - s.view_error)
         kept = sorted((nd for nd in nodes if Flag.FALSE_ESTIMATE not in nd.flags),
                       key=lambda nd: (nd.kind != ObjectKind.PALLET, nd.centre[2]))
-        seen = bool(evidence.rays[level] >= s.min_rays)
+        whole = evidence.covered is None or bool(
+            (1.0 - evidence.covered[level]) * bay.width_m <= s.max_uncovered_m + 1e-9)
+        seen = bool(evidence.rays[level] >= s.min_rays) and (whole or p >= 0.5)
         out.append(_bin(bin_id, bay.key, p, seen=seen, views=int(seen), stamp=(last_seen_ns or graph.stamp_ns),
                         objects=tuple(nd.id for nd in kept), unstable=any(nd.id in unstable for nd in kept),
                         hidden=any(Flag.HIDDEN_BELOW in nd.flags for nd in kept), settings=s,
                         detail={"p_occupied": p, "rays": int(evidence.rays[level]),
-                                "unexplained_points": int(evidence.unexplained[level])}))
+                                "unexplained_points": int(evidence.unexplained[level]),
+                                "covered": 1.0 if evidence.covered is None else float(evidence.covered[level])}))
     return out
 
 

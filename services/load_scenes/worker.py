@@ -1,7 +1,9 @@
 """The load-scene worker: RGB-D depth frames in, bay scene graphs and bin occupancy out.
 
 Per robot namespace it keeps the camera model (from camera info) and tf. Each depth frame waits (at most
-``pose_wait_s``) for its camera pose in the map, then :func:`~services.load_scenes.estimation.estimate_boxes`
+``pose_wait_s``) for its camera pose in the map; a frame taken where the robot's last estimated one was (camera
+moved less than ``min_move_m``, turned less than ``min_turn_rad``, within ``still_period_s``) is skipped, as it
+shows the same; then :func:`~services.load_scenes.estimation.estimate_boxes`
 gives the pallets, loads and beams of the bays in view and their depth evidence; a bay keeps its newest
 ``views_per_bay`` views. Every ``commit_period_s`` each bay seen since is explained: its views' estimates merged
 (:func:`~services.load_scenes.estimation.merge_views`), the scene graph inferred
@@ -9,7 +11,9 @@ gives the pallets, loads and beams of the bays in view and their depth evidence;
 (:func:`~services.load_scenes.occupancy.bin_occupancy`) and fused with what the bins showed before
 (:func:`~services.load_scenes.occupancy.fuse_occupancy`); the changed states and scenes go into ONE revision
 (:class:`shared.loads.SceneWriter`). The rack model (bays) is rebuilt from the map's ``bin`` features and the
-site's rack profiles at each commit. Frames that cannot be used are counted and skipped with the reason.
+site's rack profiles at each commit. At its first commit the stage reads the bin states stored before (by an
+earlier run), so fusion continues across restarts. Frames that cannot be used are counted and skipped with the
+reason.
 """
 
 from __future__ import annotations
@@ -26,14 +30,14 @@ from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
 from threadpoolctl import threadpool_limits
 
 from services.load_scenes.errors import LoadScenesError
-from services.load_scenes.estimation import RackView, bays_from_bins, estimate_boxes, merge_views
+from services.load_scenes.estimation import RackView, bays_from_bins, camera_moved, estimate_boxes, merge_views
 from services.load_scenes.frames import Intrinsics, decode_depth, intrinsics_from_camera_info
 from services.load_scenes.inference import infer_scene
 from services.load_scenes.model import Bay, BinOccupancy, SceneGraph
 from services.load_scenes.occupancy import bin_evidence, bin_occupancy, fuse_occupancy
 from shared import messages
 from shared.bins import Bin
-from shared.loads import SceneWriter
+from shared.loads import SceneWriter, occupancy_from_feature
 from shared.settings import LoadScenesStageSettings
 from shared.store import StoreUnavailableError
 from shared.transforms import TransformBuffer, to_matrix
@@ -48,6 +52,8 @@ class _Robot:
     transforms: TransformBuffer = field(default_factory=TransformBuffer)
     intrinsics: Intrinsics | None = None
     last_stamp_ns: int = -1
+    last_pose: npt.NDArray[np.float64] | None = None
+    """Camera pose of the last frame estimated."""
 
 
 class LoadScenesStage:
@@ -60,7 +66,8 @@ class LoadScenesStage:
         self.writer = SceneWriter(context.store, context.map.id)
         self.bays: dict[str, Bay] = {}
         self.views: dict[str, collections.deque[RackView]] = {}
-        self.states: dict[str, BinOccupancy] = {}
+        self.states: dict[str, BinOccupancy] | None = None
+        """Fused state per bin id; None until read back from the store (first commit)."""
         self._robots: dict[str, _Robot] = {}
         self._waiting: dict[str, tuple[Image, float]] = {}
         self._seen: set[str] = set()
@@ -133,10 +140,15 @@ class LoadScenesStage:
 
     def _handle(self, robot: _Robot, image: Image, pose: npt.NDArray[np.float64], stamp_ns: int) -> None:
         assert robot.intrinsics is not None
+        s = self.settings
+        if (robot.last_pose is not None and stamp_ns - robot.last_stamp_ns < s.still_period_s * 1e9
+                and not camera_moved(robot.last_pose, pose, min_move_m=s.min_move_m, min_turn_rad=s.min_turn_rad)):
+            self.context.count("frames_still")  # the same view again: nothing new to estimate
+            return
         depth = decode_depth(image)
         view = estimate_boxes(depth, robot.intrinsics, pose, list(self.bays.values()), stamp_ns=stamp_ns,
                               stride=self.settings.stride, max_range_m=self.settings.max_range_m)
-        robot.last_stamp_ns = stamp_ns
+        robot.last_stamp_ns, robot.last_pose = stamp_ns, pose
         self.context.count("frames_estimated")
         self.context.count("boxes_estimated", len(view.boxes))
         for key in view.evidence:
@@ -157,12 +169,21 @@ class LoadScenesStage:
             return
         self.bays = {bay.key: bay for bay in bays}
 
+    def _load_states(self) -> dict[str, BinOccupancy]:
+        """The bin states stored before, read once: fusion goes on from them after a restart."""
+        if self.states is None:
+            stored = self.context.store.features(self.context.map.id, kinds=[FeatureKind.BIN_STATE])
+            self.states = {s.bin_id: s for s in (occupancy_from_feature(item.feature) for item in stored)}
+            log.info("%d stored bin states read back", len(self.states))
+        return self.states
+
     def _commit(self) -> None:
         try:
             self._load_bays()
+            known = self._load_states()
         except StoreUnavailableError as err:
             self.context.count("store_unavailable")
-            log.warning("bins not read, will retry: %s", err)
+            log.warning("bins or bin states not read, will retry: %s", err)
             return
         scenes: list[SceneGraph] = []
         states: list[BinOccupancy] = []
@@ -184,8 +205,8 @@ class LoadScenesStage:
                 continue
             scenes.append(graph)
             for state in occupancy:
-                fused = fuse_occupancy(self.states.get(state.bin_id), state)
-                self.states[state.bin_id] = fused
+                fused = fuse_occupancy(known.get(state.bin_id), state)
+                known[state.bin_id] = fused
                 states.append(fused)
         if not scenes:
             return

@@ -100,3 +100,26 @@ def test_a_kept_writer_writes_again_what_a_store_outage_kept_out(store: MapStore
     states = {item.feature.key: item.feature.geometry["coordinates"]
               for item in store.features(map_id, kinds=["bin_state"])}
     assert states["01-002-02"] == [3.5, 1.0] and states["01-004-01"] == [7.0, 1.0]
+
+
+def test_states_of_bins_the_pillar_stage_removed_are_retired_the_others_stay(store: MapStore) -> None:
+    write_bins(store)
+    map_id = store.ensure_map("site").id
+    writer = SceneWriter(store, map_id)
+    assert writer.write([bay_1_scene(), bay_2_scene()], first_survey()).revision is not None
+    before = {item.feature.key: item.id for item in store.features(map_id, kinds=["bin_state"])}
+
+    kept = [item.feature for item in store.features(map_id, kinds=["bin"]) if item.feature.key != "01-002-02"]
+    store.write_revision(map_id, RevisionWrite("pillar_mapping", features={"bin": kept}))  # the bin is gone
+    update = [seen("01-001-02", Occupancy.OCCUPIED, views=3, objects=("p9",), bay=BAY_1)]
+    written = writer.write([], update)
+    assert written.revision is not None and written.revision.summary["bin_states_retired"] == 1
+    live = {item.feature.key: item for item in store.features(map_id, kinds=["bin_state"])}
+    assert set(live) == set(before) - {"01-002-02"}
+    assert occupancy_from_feature(live["01-001-02"].feature).objects == ("p9",)
+    assert live["01-001-01"].id == before["01-001-01"], "the other states stay the rows they were"
+    assert writer.write([], update).revision is None, "retired once"
+    assert SceneWriter(store, map_id).write([], update).revision is None, "a fresh writer finds nothing to retire"
+    previous = written.revision.id - 1
+    as_was = {item.feature.key for item in store.features(map_id, kinds=["bin_state"], revision=previous)}
+    assert "01-002-02" in as_was, "nothing stored is lost: the state is in the history"

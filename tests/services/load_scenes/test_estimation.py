@@ -11,7 +11,14 @@ import numpy.typing as npt
 import pytest
 
 from services.load_scenes.errors import LoadScenesError
-from services.load_scenes.estimation import RackView, bays_from_bins, estimate_boxes, merge_views
+from services.load_scenes.estimation import (
+    BEHIND_M,
+    RackView,
+    bays_from_bins,
+    camera_moved,
+    estimate_boxes,
+    merge_views,
+)
 from services.load_scenes.frames import Intrinsics, decode_depth, intrinsics_from_camera_info
 from services.load_scenes.model import Bay, BoxEstimate, ObjectKind
 from services.simulator import RgbdModel, depth_image_mm, loaded_layout, rack_view, render_boxes, world_from_layout
@@ -154,8 +161,11 @@ def test_depth_evidence_holds_the_points_in_each_bay_and_the_camera_origin(singl
     for key, evidence in frame.view.evidence.items():
         bay = next(b for b in single.bays if b.key == key)
         assert evidence.origin == pytest.approx(tuple(frame.pose[:3, 3]))
-        u, v = _bay_uv(bay, (evidence.points[:, 0], evidence.points[:, 1]))  # type: ignore[arg-type]
-        assert np.all(np.abs(u) <= 0.5 * bay.width_m + 1e-9) and np.all(v <= bay.depth_m + 1e-9)
+        uv = _bay_uv(bay, (evidence.points[:, 0], evidence.points[:, 1]))  # type: ignore[arg-type]
+        u, v = np.asarray(uv[0]), np.asarray(uv[1])
+        behind = v > bay.depth_m + 1e-9  # rays through the bay that met nothing in it: a point just behind
+        assert np.all(np.abs(u[~behind]) <= 0.5 * bay.width_m + 1e-9)
+        assert np.all(v[behind] == pytest.approx(bay.depth_m + BEHIND_M))
         assert np.all(evidence.points[:, 2] >= 0.0)
     target = single.bays[0]
     assert target.key in frame.view.evidence
@@ -267,3 +277,15 @@ def test_camera_info_and_depth_messages_are_read_and_bad_ones_refused() -> None:
     _, colour = rosmsgs.image(5, "cam", np.zeros((3, 4, 3), np.uint8))
     with pytest.raises(LoadScenesError, match="16UC1"):
         decode_depth(colour)
+
+
+def test_a_frame_from_where_the_last_one_was_taken_is_told_apart_from_one_that_moved() -> None:
+    world = world_from_layout(loaded_layout(1))
+    bin_id = world.bins[0].id
+    here = rack_view(world, bin_id, standoff_m=2.8, height_m=0.6)
+    nudged = rack_view(world, bin_id, standoff_m=2.8, height_m=0.6, along_m=0.05)
+    driven = rack_view(world, bin_id, standoff_m=2.8, height_m=0.6, along_m=0.5)
+    turned = rack_view(world, bin_id, standoff_m=2.8, height_m=0.6, pitch_up_rad=0.3)
+    kw = {"min_move_m": 0.2, "min_turn_rad": 0.1}
+    assert not camera_moved(here, here, **kw) and not camera_moved(here, nudged, **kw)
+    assert camera_moved(here, driven, **kw) and camera_moved(here, turned, **kw)

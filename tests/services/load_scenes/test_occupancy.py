@@ -3,7 +3,8 @@ import pytest
 
 from services.load_scenes import BinEvidence, SceneError, bin_evidence, bin_occupancy, fuse_occupancy, infer_scene
 from services.load_scenes import synthetic as syn
-from services.load_scenes.model import Bay, Flag, ObjectKind, Occupancy, SceneGraph, SceneNode
+from services.load_scenes.boxes import to_map_frame
+from services.load_scenes.model import Bay, DepthEvidence, Flag, ObjectKind, Occupancy, SceneGraph, SceneNode
 
 BAY = Bay(key="R1/001", row="R1", aisle=1, bay=1, origin=(0.0, 0.0), yaw_rad=0.0, width_m=2.7, depth_m=1.2,
           levels_z_m=(0.0, 1.6, 3.2), bin_ids=("R1-001-00", "R1-001-01", "R1-001-02"))
@@ -66,3 +67,17 @@ def test_a_graph_of_another_bay_is_refused() -> None:
     other = SceneGraph(bay="R9/009", nodes=(), edges=(), stamp_ns=0)
     with pytest.raises(SceneError, match="R9/009"):
         bin_occupancy(BAY, other, BinEvidence(rays=np.zeros(3, np.int64), unexplained=np.zeros(3, np.int64)))
+
+
+def test_the_underside_of_a_pallet_on_the_beams_does_not_fill_the_empty_bin_below() -> None:
+    rng = np.random.default_rng(3)
+    n = 300
+    floor = np.column_stack([rng.uniform(-1.2, 1.2, n), rng.uniform(0.1, 1.1, n), np.zeros(n)])
+    underside = np.column_stack([rng.uniform(-1.0, 1.0, 40), rng.uniform(0.6, 1.0, 40),
+                                 BAY.levels_z_m[1] - rng.uniform(0.0, 0.01, 40)])  # pallet bottom, noise below
+    origin = to_map_frame(BAY, np.array([[0.0, -2.6, 0.6]]))[0]
+    view = DepthEvidence(origin=tuple(origin), points=to_map_frame(BAY, np.vstack([floor, underside])), stamp_ns=5)
+    nothing = SceneGraph(bay=BAY.key, nodes=(), edges=(), stamp_ns=5)
+    evidence = bin_evidence(BAY, nothing, [view])
+    assert evidence.rays[0] > 0 and evidence.unexplained[0] == 0
+    assert bin_occupancy(BAY, nothing, evidence)[0].state == Occupancy.EMPTY
