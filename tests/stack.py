@@ -34,6 +34,7 @@ def aisle_run(tmp_path: Path, *args: str) -> Iterator[httpx.Client]:
     finally:
         if process.poll() is None:
             process.kill()
+            process.wait(timeout=30)  # reaped, so a failed run reports its failure, not a ResourceWarning
         log.close()
 
 
