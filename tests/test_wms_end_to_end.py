@@ -27,7 +27,7 @@ from skimage.graph import route_through_array
 from services.simulator import load_world, sim_run
 from shared.mapfiles import MapImage, read_map_yaml
 from tests.helpers import data_path, wait_for
-from tests.stack import aisle_run, health
+from tests.stack import POLL_S, aisle_run, health
 
 pytestmark = pytest.mark.slow
 
@@ -80,10 +80,11 @@ def answers(survey: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str,
     with aisle_run(tmp_path, "--replay", str(survey), "--rate", REPLAY_RATE) as client:
         admin = _first_admin_key(tmp_path / "aisle.log")
         frames = _frames(survey)
-        wait_for(lambda: _frames_handled(client) >= 0.95 * frames, timeout_s=300,
+        wait_for(lambda: _frames_handled(client) >= 0.95 * frames, timeout_s=300, interval_s=POLL_S,
                  what="the pillar stage to have taken in the survey's fisheye frames")
-        wait_for(lambda: _decomposed_after_survey(client), timeout_s=120, what="a decomposition of the survey")
-        wait_for(_settled(client), timeout_s=120, what="the bins to stop changing")
+        wait_for(lambda: _decomposed_after_survey(client), timeout_s=120, interval_s=POLL_S,
+                 what="a decomposition of the survey")
+        wait_for(_settled(client), timeout_s=120, interval_s=POLL_S, what="the bins to stop changing")
         out["places"] = [_put_dock(client, admin, dock) for dock in truth["dock"]]
         out["import"] = client.put(f"{MAP}/wms-bins", json=_site_bin_list(truth), headers={"X-API-Key": admin})
         matched = [m["wms_id"] for m in out["import"].json().get("matched", [])]
