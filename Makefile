@@ -16,15 +16,19 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(BIN)/aisle run --demo $(ARGS)
 
+# pytest over one process per core (pytest-xdist), each module's tests in one process so its fixtures are built
+# once; tests/conftest.py puts the end-to-end modules first
+PYTEST_PARALLEL := -n auto --dist loadscope --no-loadscope-reorder
+
 ## test: the whole test suite (PostgreSQL tests run when AISLE_TEST_POSTGRES_URL is set)
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy shared services atlas api migrations bench tests
-	$(BIN)/pytest
+	$(BIN)/pytest $(PYTEST_PARALLEL)
 
 ## test-fast: skip the slow end-to-end runs
 test-fast: $(STAMP)
-	$(BIN)/pytest -m "not slow"
+	$(BIN)/pytest $(PYTEST_PARALLEL) -m "not slow"
 
 bench: $(STAMP)
 	for f in bench/bench_*.py; do PYTHONPATH=. $(BIN)/python $$f; done

@@ -19,6 +19,21 @@ from tests.helpers import free_port
 POSTGRES_URL_ENV = "AISLE_TEST_POSTGRES_URL"
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Run the end-to-end modules (every test slow) first, then the modules with some slow tests, then the rest;
+    each module keeps its tests' order. ``make test`` hands modules to two processes in this order (pytest-xdist,
+    ``--dist loadscope``), so the long runs start early instead of ending last, each on its own."""
+    def module(item: pytest.Item) -> str:
+        return item.nodeid.split("::")[0]
+
+    slow: dict[str, list[bool]] = {}
+    for item in items:
+        slow.setdefault(module(item), []).append(item.get_closest_marker("slow") is not None)
+    weight = {name: 2 if all(marks) else int(any(marks)) for name, marks in slow.items()}
+    order = {name: index for index, name in enumerate(slow)}
+    items.sort(key=lambda item: (-weight[module(item)], order[module(item)]))
+
+
 @pytest.fixture
 def zenoh_listen() -> ZenohSettings:
     """Settings for a peer listening on a free loopback port, scouting off."""

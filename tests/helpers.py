@@ -29,13 +29,14 @@ def data_path(*parts: str) -> Path:
     return path
 
 
-def wait_for(condition: Callable[[], object], *, timeout_s: float = 10.0, what: str = "condition") -> None:
-    """Poll ``condition`` until truthy; fail the test after ``timeout_s``."""
+def wait_for(condition: Callable[[], object], *, timeout_s: float = 10.0, what: str = "condition",
+             interval_s: float = 0.02) -> None:
+    """Poll ``condition`` every ``interval_s`` until truthy; fail the test after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
     while not condition():
         if time.monotonic() > deadline:
             pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.02)
+        time.sleep(interval_s)
 
 
 NON_FINITE_JSON = ["NaN", "Infinity", "-Infinity", "1e400"]

@@ -15,6 +15,10 @@ import httpx2 as httpx
 
 from tests.helpers import free_port, wait_for
 
+POLL_S = 0.25
+"""How often a test asks a running stack over HTTP whether what it waits for has happened: often enough, and
+seldom enough to leave the CPU to the stages it waits on (a read of the bins or revisions is not free)."""
+
 
 @contextmanager
 def aisle_run(tmp_path: Path, *args: str) -> Iterator[httpx.Client]:
@@ -34,6 +38,7 @@ def aisle_run(tmp_path: Path, *args: str) -> Iterator[httpx.Client]:
     finally:
         if process.poll() is None:
             process.kill()
+            process.wait(timeout=30)  # reaped, so a failed run reports its failure, not a ResourceWarning
         log.close()
 
 

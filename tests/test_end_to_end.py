@@ -14,7 +14,7 @@ from shared.mapfiles import read_map_yaml
 from shared.settings import Settings
 from shared.store import GridLayer, MapStore
 from tests.helpers import data_path, wait_for
-from tests.stack import aisle_run, counter, health
+from tests.stack import POLL_S, aisle_run, counter, health
 
 pytestmark = pytest.mark.slow
 
@@ -26,7 +26,7 @@ def test_demo_stack_reports_healthy_and_builds_a_map(tmp_path: Path) -> None:
         assert status["database"]["ok"] and status["bus"]["ok"]
         assert {w["name"] for w in status["workers"] if w["alive"]} == set(Settings().stages)
         wait_for(lambda: client.get("/v1/maps/site/layers/occupancy.png").status_code == 200, timeout_s=60,
-                 what="an occupancy layer")
+                 interval_s=POLL_S, what="an occupancy layer")
         png = client.get("/v1/maps/site/layers/occupancy.png")
         image = cv2.imdecode(np.frombuffer(png.content, np.uint8), cv2.IMREAD_UNCHANGED)
         assert image is not None and (image == 0).sum() > 100  # walls drawn black
@@ -44,7 +44,7 @@ def test_replayed_mac_bag_lines_up_with_its_own_map(tmp_path: Path) -> None:
     reference = read_map_yaml(data_path("bags", "mac_first_floor", "mac_1st_floor_final.yaml"))
     with aisle_run(tmp_path, "--replay", str(bag), "--rate", "4") as client:
         wait_for(lambda: counter(client, "occupancy_mapping", "scans_integrated") >= 340, timeout_s=120,
-                 what="every scan integrated")
+                 interval_s=POLL_S, what="every scan integrated")
         png = client.get("/v1/maps/site/layers/occupancy.png")
         assert png.status_code == 200 and png.headers["content-type"] == "image/png"
         values = client.get("/v1/maps/site/layers/occupancy/values", params={"format": "npy"})

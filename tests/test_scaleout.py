@@ -25,7 +25,7 @@ from services.simulator import ground_truth_features, sim_run, world_from_layout
 from tests.conftest import POSTGRES_URL_ENV
 from tests.deployment import Deployment, dedicated_database, deployment, serve_env, stages_env
 from tests.helpers import free_port, wait_for
-from tests.stack import answers, health
+from tests.stack import POLL_S, answers, health
 
 pytestmark = pytest.mark.slow
 
@@ -150,7 +150,7 @@ def _run(stack: Deployment, tmp_path: Path, ports: list[int]) -> None:
 
         # SIGKILL the pillar worker once it has committed bins, mid-survey; both APIs see it missing
         wait_for(lambda: (newest := _newest(one)) is not None and _bins(one, newest), timeout_s=60,
-                 what="the first bins")
+                 interval_s=POLL_S, what="the first bins")
         before_kill = _revisions(one)
         pillar_revision = max(r["id"] for r in before_kill if r["stage"] == KILLED)
         bins_then = _bins(two, pillar_revision)
@@ -168,7 +168,8 @@ def _run(stack: Deployment, tmp_path: Path, ports: list[int]) -> None:
         assert codes == {503}, codes
         assert robots.wait(timeout=120) == 0, stack.log("robots")
 
-        wait_for(_settled(one, quiet_s=6.0), timeout_s=90, what="the map to stop changing after the survey")
+        wait_for(_settled(one, quiet_s=6.0), timeout_s=90, interval_s=POLL_S,
+                 what="the map to stop changing after the survey")
         revision = _newest(one)
         assert revision is not None
         final = _bins(one, revision)
