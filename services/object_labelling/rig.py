@@ -125,14 +125,19 @@ class AwaitingPose:
     def due(self, rig_of: Callable[[str], Rig], now_s: float
             ) -> Iterator[tuple[FramePair[Image], Transform | LookupError]]:
         """The pairs done waiting, each with its optical frame in the map from ``rig_of(namespace).transforms``, or
-        the look-up's error once it has waited ``wait_s``."""
+        the look-up's error once it has waited ``wait_s``. A pair waits (up to ``wait_s``) until tf has reached
+        its stamp, so its pose is interpolated, not the last one held beyond it."""
         for namespace, (pair, since) in list(self._pairs.items()):
+            transforms, frame_id = rig_of(namespace).transforms, pair.colour.header.frame_id
+            waiting = now_s - since < self.wait_s
+            newest = transforms.newest_stamp_ns(self.map_frame, frame_id)
+            if waiting and (newest is None or newest < pair.stamp_ns):
+                continue  # tf may still be on its way: interpolate the pose rather than hold the last one
             try:
-                pose: Transform | LookupError = rig_of(namespace).transforms.lookup(
-                    self.map_frame, pair.colour.header.frame_id, pair.stamp_ns)
+                pose: Transform | LookupError = transforms.lookup(self.map_frame, frame_id, pair.stamp_ns)
             except LookupError as err:
-                if now_s - since < self.wait_s:
-                    continue  # tf may still be on its way
+                if waiting:
+                    continue
                 pose = err
             del self._pairs[namespace]
             yield pair, pose

@@ -144,8 +144,10 @@ def test_a_restarted_stage_fuses_onto_the_states_stored_before(survey: Survey) -
         before, after = survey.first[bin_id], survey.second[bin_id]
         assert after.views > before.views or after == before, (before, after)
     assert sum(survey.second[k].views for k in seen) > sum(survey.first[k].views for k in seen) * 1.5
-    agreeing = [k for k in seen if survey.first[k].state is survey.second[k].state is not Occupancy.UNKNOWN]
-    assert agreeing and all(survey.second[k].confidence >= survey.first[k].confidence - 1e-9 for k in agreeing)
+    # older views are discounted (history_weight) so a rack that changes is followed; a restart must not flip
+    # what the robots saw before
+    decided = [k for k in seen if Occupancy.UNKNOWN not in (survey.first[k].state, survey.second[k].state)]
+    assert decided and all(survey.first[k].state is survey.second[k].state for k in decided)
 
 
 def test_the_wms_learns_through_the_api_where_its_stock_list_is_wrong(survey: Survey, tmp_path: Path) -> None:
