@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
-from typing import Any, cast
+from collections import Counter
+from collections.abc import Iterable, Mapping
+from typing import Any, Protocol, TypeVar, cast
 
-from fastapi import Request, status
+from fastapi import HTTPException, Request, status
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ValidationError
 
 MAX_ECHO_CHARS = 200
 """Longest input (as JSON text) an error echoes; longer ones are described, not repeated."""
@@ -64,3 +66,31 @@ async def invalid_request(_request: Request, exc: Exception) -> JSONResponse:
     """Exception handler for :class:`RequestValidationError`: 422 with FastAPI's ``detail`` list, made safe."""
     detail = [_error(error) for error in cast(RequestValidationError, exc).errors()]
     return JSONResponse({"detail": jsonable_encoder(detail)}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
+
+
+class _Identified(Protocol):
+    @property
+    def id(self) -> str: ...
+
+
+class _BinList(Protocol):
+    @property
+    def bins(self) -> Iterable[_Identified]: ...
+
+
+ListT = TypeVar("ListT", bound=BaseModel)
+
+
+def parse_bin_list(model: type[ListT], body: bytes, what: str) -> ListT:
+    """``body`` (JSON) read as ``model``, whose ``bins`` must have unique ids: a 422 naming the faults otherwise
+    (validation errors located in the body, or up to ten repeated ids), as a request FastAPI validated would get.
+    Lists too big for the event loop are parsed here, off it, rather than by a body parameter."""
+    try:
+        parsed = model.model_validate_json(body)
+    except ValidationError as err:
+        raise RequestValidationError([{**error, "loc": ("body", *error["loc"])}
+                                      for error in err.errors(include_url=False)]) from err
+    repeated = sorted(i for i, n in Counter(item.id for item in cast(_BinList, parsed).bins).items() if n > 1)
+    if repeated:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, f"{what} must be unique; repeated: {repeated[:10]}")
+    return parsed

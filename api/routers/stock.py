@@ -3,18 +3,17 @@
 from __future__ import annotations
 
 import datetime as dt
-from collections import Counter
 from typing import Annotated, Any, Literal
 
 import anyio
-from fastapi import APIRouter, HTTPException, Query, Request, Response, status
-from fastapi.exceptions import RequestValidationError
-from pydantic import BaseModel, Field, ValidationError
+from fastapi import APIRouter, Query, Request, Response, status
+from pydantic import BaseModel, Field
 
 from api.announce import Announcer
 from api.answers import node_out, occupancy_out
 from api.background import background_work
 from api.deps import AnnouncerDep, CacheDep, MapDep, RevisionQuery, SettingsDep, StoreDep, check_revision
+from api.invalid import parse_bin_list
 from api.models import COMMON_ERRORS, ErrorOut, OccupancyOut, Responses, SceneNodeOut, example_config, naming_revision
 from api.queries import BIN_ID_PATTERN, CursorQuery, next_cursor, page_start
 from api.translate import http_error
@@ -162,15 +161,7 @@ def _import(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInf
             min_views: int) -> bytes:
     """Parse, check and store the stock list in ``body``; the first page of discrepancies as JSON."""
     with background_work():
-        try:
-            parsed = StockImport.model_validate_json(body)
-        except ValidationError as err:
-            raise RequestValidationError([{**error, "loc": ("body", *error["loc"])}
-                                          for error in err.errors(include_url=False)]) from err
-        repeated = sorted(i for i, n in Counter(item.id for item in parsed.bins).items() if n > 1)
-        if repeated:
-            raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
-                                f"bin ids of a stock list must be unique; repeated: {repeated[:10]}")
+        parsed = parse_bin_list(StockImport, body, "bin ids of a stock list")
         items = [WmsStock(b.id, b.holds_stock, b.sku, b.quantity) for b in parsed.bins]
         written = import_wms_stock(store, map_info.id, items, complete=parsed.complete)
         announcer.announce(map_info, written)

@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-from collections import Counter
 from typing import Any, Literal
 
 import anyio
 from fastapi import APIRouter, HTTPException, Request, Response, status
-from fastapi.exceptions import RequestValidationError
-from pydantic import BaseModel, Field, ValidationError, model_validator
+from pydantic import BaseModel, Field, model_validator
 
 from api.announce import Announcer
 from api.background import background_work
 from api.deps import AnnouncerDep, CacheDep, MapDep, RevisionQuery, StoreDep
+from api.invalid import parse_bin_list
 from api.memory import return_freed_memory
 from api.models import COMMON_ERRORS, ErrorOut, Responses, example_config
 from api.queries import BIN_ID_PATTERN
@@ -213,15 +212,7 @@ def _import(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInf
 def _import_list(body: bytes, store: MapStore, cache: RevisionCache, map_info: MapInfo, announcer: Announcer
                  ) -> bytes:
     """:func:`_import` without its memory handling."""
-    try:
-        parsed = WmsImport.model_validate_json(body)
-    except ValidationError as err:
-        raise RequestValidationError([{**error, "loc": ("body", *error["loc"])}
-                                      for error in err.errors(include_url=False)]) from err
-    repeated = sorted(i for i, n in Counter(item.id for item in parsed.bins).items() if n > 1)
-    if repeated:
-        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
-                            f"WMS bin ids must be unique; repeated: {repeated[:10]}")
+    parsed = parse_bin_list(WmsImport, body, "WMS bin ids")
     items = [WmsBin(b.id, b.x_m, b.y_m, b.aisle, b.bay, b.level) for b in parsed.bins]
     tolerance_m, match_by = parsed.tolerance_m, MatchBy(parsed.match_by)
     del parsed

@@ -7,13 +7,14 @@ them, ``retired_revision_id`` superseded them), so any revision of the map can b
 
 from __future__ import annotations
 
+import collections
 import datetime as dt
 import json
 import logging
 import os
 import socket
 import zlib
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -72,6 +73,13 @@ class FeatureRow(NamedTuple):
 
 class StoreUnavailableError(StoreError):
     """The database cannot be reached right now; the caller may retry later."""
+
+
+def _check_unique(ids: Iterable[str], what: str) -> None:
+    """:class:`StoreError` naming up to ten repeated ids (one pass: a WMS list holds 10^5 and more)."""
+    repeated = sorted(i for i, n in collections.Counter(ids).items() if n > 1)
+    if repeated:
+        raise StoreError(f"{what} must be unique; repeated: {repeated[:10]}")
 
 
 def _now() -> dt.datetime:
@@ -559,10 +567,7 @@ class MapStore:
         ``before_commit`` is called with the new revision's id once everything is written, before anyone can see
         the revision (while the map is locked), e.g. to prepare what readers of it will need.
         """
-        ids = [item.wms_id for item in items]
-        if len(set(ids)) != len(ids):
-            duplicates = sorted({i for i in ids if ids.count(i) > 1})[:10]
-            raise StoreError(f"WMS bin ids must be unique; repeated: {duplicates}")
+        _check_unique((item.wms_id for item in items), "WMS bin ids")
         table = schema.wms_bins
         with self._begin() as connection:
             self._lock_map(connection, map_id)
@@ -602,10 +607,7 @@ class MapStore:
 
         ``summary`` is added to the revision's summary (e.g. whether bins the list leaves out are empty).
         """
-        ids = [item.bin_id for item in items]
-        if len(set(ids)) != len(ids):
-            duplicates = sorted({i for i in ids if ids.count(i) > 1})[:10]
-            raise StoreError(f"WMS stock bin ids must be unique; repeated: {duplicates}")
+        _check_unique((item.bin_id for item in items), "WMS stock bin ids")
         table = schema.wms_stock
         with self._begin() as connection:
             self._lock_map(connection, map_id)

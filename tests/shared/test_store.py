@@ -134,6 +134,15 @@ def test_a_large_wms_list_is_stored_whole_and_in_order(store: MapStore) -> None:
     assert [b.wms_id for b in store.wms_bins(site.id, revision=old.id)] == ["OLD-1"]
 
 
+
+def test_a_large_wms_list_with_repeated_ids_is_refused_at_once_and_the_stored_one_kept(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    store.replace_wms_bins(site.id, [WmsBin("OLD-1")])
+    items = [WmsBin(f"W-{i:06d}") for i in range(100_000)] + [WmsBin("W-000007"), WmsBin("W-000003")]
+    with pytest.raises(StoreError, match=r"repeated: \['W-000003', 'W-000007'\]"):
+        store.replace_wms_bins(site.id, items)
+    assert [b.wms_id for b in store.wms_bins(site.id)] == ["OLD-1"]
+
 def test_topology_is_versioned(store: MapStore) -> None:
     site = store.ensure_map("site")
     first = store.write_revision(site.id, RevisionWrite("grid", topology=(
