@@ -186,7 +186,7 @@ class LoadScenesStage:
             log.warning("bins or bin states not read, will retry: %s", err)
             return
         scenes: list[SceneGraph] = []
-        states: list[BinOccupancy] = []
+        states: dict[str, BinOccupancy] = {}  # fused onto ``known`` only once stored: a retry must not fuse twice
         for key in sorted(self._seen):
             bay = self.bays.get(key)
             if bay is None:
@@ -205,19 +205,18 @@ class LoadScenesStage:
                 continue
             scenes.append(graph)
             for state in occupancy:
-                fused = fuse_occupancy(known.get(state.bin_id), state)
-                known[state.bin_id] = fused
-                states.append(fused)
+                states[state.bin_id] = fuse_occupancy(known.get(state.bin_id), state)
         if not scenes:
             return
         inputs = self._inputs
         try:
-            written = self.writer.write(scenes, states, commit=self.context.commit, input_start_ns=inputs.first_ns,
-                                        input_end_ns=inputs.last_ns)
+            written = self.writer.write(scenes, list(states.values()), commit=self.context.commit,
+                                        input_start_ns=inputs.first_ns, input_end_ns=inputs.last_ns)
         except StoreUnavailableError as err:
             self.context.count("store_unavailable")
             log.warning("scenes not stored, will retry: %s", err)
             return
+        known.update(states)
         self._seen.clear()
         for key in [g.bay for g in scenes]:
             self.views.pop(key, None)
