@@ -72,6 +72,12 @@ class StageContext:
         self._subscriptions.append(subscription)
         return subscription
 
+    def subscribe_transforms(self) -> tuple[Subscription, Subscription]:
+        """``tf`` and ``tf_static`` of every robot, queued deep enough for frames waiting for their pose (feed them
+        to :func:`take_transforms`)."""
+        return (self.subscribe("tf", messages.TF_MESSAGE, maxsize=2000),
+                self.subscribe("tf_static", messages.TF_MESSAGE, maxsize=100))
+
     def map_events(self) -> Subscription:
         """The map events every worker and the API announce on ``/aisle/map_events`` (newest 64 kept)."""
         subscription = self.bus.subscribe(MAP_EVENTS_TOPIC, messages.MAP_EVENT, namespaces=[WORKER_NAMESPACE],

@@ -62,8 +62,7 @@ class LabellingStage:
         self.colour = context.subscribe(settings.colour_topic, messages.IMAGE, maxsize=settings.frame_queue_size)
         self.depth = context.subscribe(settings.depth_topic, messages.IMAGE, maxsize=settings.frame_queue_size)
         self.camera_info = context.subscribe(settings.camera_info_topic, messages.CAMERA_INFO, maxsize=8)
-        self.tf = context.subscribe("tf", messages.TF_MESSAGE, maxsize=2000)
-        self.tf_static = context.subscribe("tf_static", messages.TF_MESSAGE, maxsize=100)
+        self.tf, self.tf_static = context.subscribe_transforms()
 
     def run(self, stop: threading.Event) -> None:
         last_commit = time.monotonic()

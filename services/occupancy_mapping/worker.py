@@ -39,8 +39,7 @@ class OccupancyStage:
         self.settings = settings
         self.scans = context.subscribe(settings.scan_topic, messages.LASER_SCAN, maxsize=500)
         self.odometry = context.subscribe(settings.odom_topic, messages.ODOMETRY, maxsize=2000)
-        self.tf = context.subscribe("tf", messages.TF_MESSAGE, maxsize=2000)
-        self.tf_static = context.subscribe("tf_static", messages.TF_MESSAGE, maxsize=100)
+        self.tf, self.tf_static = context.subscribe_transforms()
         pose_topic = settings.pose_topic
         self.poses = context.subscribe(pose_topic, messages.POSE_STAMPED, maxsize=2000) if pose_topic else None
         self.matcher = (

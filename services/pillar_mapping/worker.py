@@ -52,8 +52,7 @@ class PillarStage:
         self.settings = settings
         self.images = context.subscribe(settings.image_topic, messages.IMAGE, maxsize=4)
         self.infos = context.subscribe(settings.info_topic, messages.CAMERA_INFO, maxsize=4)
-        self.tf = context.subscribe("tf", messages.TF_MESSAGE, maxsize=2000)
-        self.tf_static = context.subscribe("tf_static", messages.TF_MESSAGE, maxsize=100)
+        self.tf, self.tf_static = context.subscribe_transforms()
         self.mapper = BearingOnlyMapper(max_range_m=settings.max_range_m)
         self.profiles = [rack_profile(p.levels_m, p.area) for p in settings.rack_profiles]
         sigma_m, sigma_rad = settings.localisation_sigma_m, settings.localisation_sigma_rad
