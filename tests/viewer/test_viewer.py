@@ -147,7 +147,10 @@ def test_every_layer_is_listed_with_its_count_and_toggles(page: Any, site: Site)
 
 def test_a_bin_found_by_id_is_flown_to_and_its_card_matches_the_store(page: Any, site: Site) -> None:
     state = BinOccupancy(BIN_ID, Occupancy.OCCUPIED, 0.97, time.time_ns(), ("p1", "l1"), views=3, bay="r0/1")
-    assert write_scene_revision(site.store, site.info.id, [], [state]).bins_changed == (BIN_ID,)
+    written = write_scene_revision(site.store, site.info.id, [], [state])
+    assert written.bins_changed == (BIN_ID,) and written.revision is not None
+    wait_until(page, f"return Number(document.getElementById('revision-id').textContent) >= {written.revision.id}",
+               timeout_s=5, what="the scene revision on the page")  # the API has it: ask after that
     page.find_element("id", "bin-query").send_keys(BIN_ID + "\n")
     wait_until(page, f"return document.getElementById('card-title').textContent === 'Bin {BIN_ID}'",
                what="the bin's card")
