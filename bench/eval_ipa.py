@@ -10,9 +10,10 @@ Sets (``--sets``, all by default):
   occupied, the rest unknown), each ground-truth colour one room, scored on pixels free in the
   map only (both sides); ROSE\u00b2's own ``rose2_rooms.png`` scored the same way beside ours.
 * ``partial``: the 15 steps of one growing ubremen map, scored like ``rose2``, plus the share of
-  region ids kept from step k to k+1 where the room still exists (ids carried over by overlap
-  exactly as the live decomposition worker carries its keys:
-  :func:`~services.grid_decomposition.keys.stable_ids`).
+  region ids kept from step k to k+1 where the room still exists. Each step is decomposed with the
+  previous one as its prior and keyed exactly as the live decomposition worker does it
+  (:func:`~services.grid_decomposition.keys.region_prior`,
+  :func:`~services.grid_decomposition.keys.carry_keys`).
 
 Prints a Markdown table per set and ``name value unit`` summary lines. Run (one BLAS thread):
 ``PYTHONPATH=. .venv/bin/python bench/eval_ipa.py [--sets ipa rose2 partial] [--variants '' _furnitures]``.
@@ -41,8 +42,10 @@ from services.grid_decomposition.evaluation import (
     on_free,
     shift_into,
 )
-from services.grid_decomposition.keys import stable_ids
+from services.grid_decomposition.keys import NEXT_ID_KEY, carry_keys, region_prior
 from services.grid_decomposition.mapfile import read_map_file
+from services.grid_decomposition.records import decomposition_layers
+from shared.store import GridLayer
 
 MAPS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
 IPA = MAPS / "ipa_room_segmentation"
@@ -180,12 +183,20 @@ def _rose2_map(folder: Path) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool
     """Our segments, the free mask, our scores, ROSE2's scores and our row for one map folder."""
     grey = _grey(folder / "map.png")
     segments, seconds, cpu = _timed(rose2_occupancy(grey))
+    ours, s, peer, free = _rose2_scores(folder, grey, segments)
+    return ours, free, s, peer, Row(s, seconds, cpu)
+
+
+def _rose2_scores(
+    folder: Path, grey: npt.NDArray[np.uint8], segments: npt.NDArray[np.int32]
+) -> tuple[npt.NDArray[np.int32], IpaScores, IpaScores, npt.NDArray[np.bool_]]:
+    """Our segments (image order) and the free mask cut to the ground truth, our scores and ROSE2's."""
     grey, gt, theirs, ours = _common(grey, _rgb(folder / "gt.png"), _rgb(folder / "rose2_rooms.png"), segments)
     free = grey >= FREE_GREY
     rooms = on_free(colour_rooms(gt), free)
     s = ipa_scores(on_free(ours, free), rooms)
     peer = ipa_scores(on_free(colour_rooms(theirs, background=WHITE), free), rooms)
-    return np.asarray(ours, dtype=np.int32), free, s, peer, Row(s, seconds, cpu)
+    return np.asarray(ours, dtype=np.int32), s, peer, free
 
 
 def _rose2_full(only: list[str] | None) -> None:
@@ -205,6 +216,10 @@ def _rose2_full(only: list[str] | None) -> None:
 
 
 def _partial() -> None:
+    """Each step decomposed and keyed as the live worker does it: the steps are placed in one map frame (the FFT
+    alignment of their free masks gives each grid's origin), the previous step's segment layer and occupancy
+    are the prior (:func:`~services.grid_decomposition.keys.region_prior`) and the keys are carried
+    (:func:`~services.grid_decomposition.keys.carry_keys`)."""
     steps = sorted(
         (p for p in (ROSE2 / "partial_ubremen").iterdir() if p.is_dir()), key=lambda p: int(p.name[3:])
     )
@@ -212,10 +227,24 @@ def _partial() -> None:
     ours: list[Row] = []
     theirs: list[Row] = []
     shares: list[float] = []
-    previous: tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]] | None = None
-    next_id = 1
+    previous: tuple[GridLayer, GridLayer, npt.NDArray[np.int32], npt.NDArray[np.bool_]] | None = None
+    corner = np.zeros(2, dtype=np.int64)  # (y, x) cells of this step's lower-left corner in the first step's frame
     for folder in steps:
-        segments, free, s, peer, row = _rose2_map(folder)
+        grey = _grey(folder / "map.png")
+        free_px = grey >= FREE_GREY
+        if previous is not None:
+            offset = align_offset(previous[3], free_px)  # the previous image's top-left corner in this one
+            corner += [grey.shape[0] - offset[0] - previous[3].shape[0], offset[1]]  # its lower-left, here
+        occupancy = GridLayer("occupancy", rose2_occupancy(grey), RESOLUTION_M, float(-corner[1] * RESOLUTION_M),
+                              float(-corner[0] * RESOLUTION_M))
+        origin = (occupancy.origin_x_m, occupancy.origin_y_m)
+        start, cpu_start = time.perf_counter(), time.process_time()
+        prior = None if previous is None else region_prior(previous[0], previous[1], occupancy)
+        result, ids = carry_keys(decompose(occupancy.data, resolution_m=RESOLUTION_M, origin_xy_m=origin,
+                                           prior=prior), None if previous is None else previous[0])
+        seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+        segments, s, peer, free = _rose2_scores(folder, grey, np.ascontiguousarray(result.segments[::-1]))
+        row = Row(s, seconds, cpu)
         step = int(folder.name[3:])
         _row("partial", folder.name, s, row.seconds, row.cpu)
         _row("partial_peer", folder.name, peer)
@@ -224,18 +253,14 @@ def _partial() -> None:
             theirs.append(Row(peer, float("nan"), float("nan")))
         segments = on_free(segments, free)
         if previous is not None:
-            before, before_free = previous
-            offset = align_offset(before_free, free)
-            moved = shift_into(before, offset, segments.shape)
-            ids = stable_ids(moved, segments, next_id=next_id)
-            carried, next_id = ids.lut[segments].astype(np.int32), ids.next_id
+            moved = shift_into(previous[2], offset, segments.shape)
             rooms = on_free(colour_rooms(_common(_rgb(folder / "gt.png"), segments)[0]), free)
-            kept = id_stability(moved, carried, rooms)
+            kept = id_stability(moved, segments, rooms)
             shares.append(kept.share)
             print(f"| partial_ids | {folder.name} | kept {kept.kept} of {kept.matched} ({100 * kept.share:.0f} %) "
                   f"| offset {offset} | | | | | | | |")
-            segments = carried
-        previous = (segments, free)
+        layer = decomposition_layers(result, meta={NEXT_ID_KEY: ids.next_id})[1]
+        previous = (layer, occupancy, segments, free_px)
     _summary("partial_from_step5", ours)
     _summary("partial_peer_from_step5", theirs)
     if shares:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -98,3 +99,43 @@ def changed_fraction(before: GridLayer, after: GridLayer) -> float:
         obstacle += int(np.count_nonzero(whole >= UNCERTAIN) - np.count_nonzero(over >= UNCERTAIN))
     structural = int(np.count_nonzero(known_a & known_b & (over_a != over_b)))
     return max(explored / known if known else 0.0, structural / obstacle if obstacle else 0.0)
+
+
+def unchanged_cells(
+    before: npt.NDArray[np.integer],
+    after: npt.NDArray[np.integer],
+    *,
+    resolution_m: float,
+    covered: npt.NDArray[np.bool_] | None = None,
+    margin_m: float = 0.05,
+) -> npt.NDArray[np.bool_]:
+    """Cells of the same class (:func:`occupancy_classes`) in both grids, and not within ``margin_m`` of a changed one.
+
+    Parameters
+    ----------
+    before, after : (H, W) integer
+        Occupancy of the same cells (-1 unknown, 0..100).
+    resolution_m : float
+        Metres per cell.
+    covered : (H, W) bool, optional
+        Cells ``before`` held (the grid grew: the others are changed); all by default.
+    margin_m : float
+        A cell this close to a changed one counts as changed (a wall drawn one cell over moves its neighbours).
+
+    Returns
+    -------
+    (H, W) bool
+    """
+    b, a = np.asarray(before), np.asarray(after)
+    if b.shape != a.shape or (covered is not None and covered.shape != a.shape):
+        raise DecompositionError(f"grids differ in shape: {b.shape}, {a.shape}"
+                                 + ("" if covered is None else f", {covered.shape}"))
+    if not resolution_m > 0:
+        raise DecompositionError(f"resolution_m must be positive, got {resolution_m}")
+    changed = occupancy_classes(b) != occupancy_classes(a)
+    if covered is not None:
+        changed |= ~covered
+    reach = round(margin_m / resolution_m)
+    if reach > 0:
+        changed = cv2.dilate(changed.astype(np.uint8), np.ones((2 * reach + 1,) * 2, np.uint8)) > 0
+    return np.asarray(~changed)

@@ -3,7 +3,8 @@
 A decomposition numbers its regions afresh; a live map must not (a key a WMS or an operator holds, a
 block, must keep naming the same place). The previous decomposition's region ids are read on the new
 grid (the map may have grown, so both grids are aligned by their origins), the two are matched one to
-one by overlap (Hungarian assignment on IoU, :func:`match_regions`), matched regions keep the old id
+one by overlap (Hungarian assignment on IoU,
+:func:`~services.grid_decomposition.continuity.match_regions`), matched regions keep the old id
 and every other region gets a fresh id above every id handed out before (never reused).
 """
 
@@ -15,10 +16,9 @@ from typing import NamedTuple
 import networkx as nx
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
+from services.grid_decomposition.change import unchanged_cells
+from services.grid_decomposition.continuity import RegionPrior, match_regions
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.pipeline import Decomposition
 from shared.store import GridLayer
@@ -72,49 +72,6 @@ def ids_on_grid(
     return np.where(ok_r[:, None] & ok_c[None, :], out, 0)
 
 
-def match_regions(before: IdGrid, after: IdGrid, *, min_overlap: float = 0.5) -> dict[int, int]:
-    """One-to-one matching of the regions of ``after`` to those of ``before`` (same grid, 0 = none): new -> old.
-
-    A pair may match when more than ``min_overlap`` of either region lies in the other (a room seen
-    partly before and whole now, a corridor cut shorter). Among those, the assignment maximises the
-    summed IoU (:func:`scipy.optimize.linear_sum_assignment`, per group of regions linked by candidate
-    pairs, so a map of thousands of regions never builds a dense matrix of them all).
-    """
-    b, a = np.asarray(before, dtype=np.int64), np.asarray(after, dtype=np.int64)
-    if b.shape != a.shape:
-        raise DecompositionError(f"region grids differ in shape: {b.shape} and {a.shape}")
-    both = (b > 0) & (a > 0)
-    if not both.any():
-        return {}
-    pairs, inter = np.unique(np.stack([b[both], a[both]]), axis=1, return_counts=True)
-    size_b = np.bincount(b.ravel(), minlength=int(b.max()) + 1)
-    size_a = np.bincount(a.ravel(), minlength=int(a.max()) + 1)
-    old, new = pairs
-    sb, sa = size_b[old], size_a[new]
-    ok = (inter > min_overlap * sb) | (inter > min_overlap * sa)
-    old, new, inter, sb, sa = old[ok], new[ok], inter[ok], sb[ok], sa[ok]
-    if old.size == 0:
-        return {}
-    iou = inter / (sb + sa - inter)
-    olds, old_i = np.unique(old, return_inverse=True)
-    news, new_i = np.unique(new, return_inverse=True)
-    n_old = olds.size
-    graph = coo_matrix((np.ones(old.size), (old_i, n_old + new_i)), shape=(n_old + news.size,) * 2)
-    _, group = connected_components(graph, directed=False)
-    out: dict[int, int] = {}
-    for g in np.unique(group[old_i]):
-        pick = group[old_i] == g
-        rows, row_i = np.unique(old_i[pick], return_inverse=True)
-        cols, col_i = np.unique(new_i[pick], return_inverse=True)
-        weight = np.zeros((rows.size, cols.size))
-        weight[row_i, col_i] = iou[pick]
-        r, c = linear_sum_assignment(weight, maximize=True)
-        for i, j in zip(r.tolist(), c.tolist(), strict=True):
-            if weight[i, j] > 0:
-                out[int(news[cols[j]])] = int(olds[rows[i]])
-    return out
-
-
 def stable_ids(before: IdGrid | None, after: IdGrid, *, next_id: int, min_overlap: float = 0.5) -> StableIds:
     """Stable ids for the regions of ``after``: the matched previous id (:func:`match_regions`), else a fresh
     one from ``next_id`` up (raised above every id of ``before`` first, so none is ever handed out twice).
@@ -132,6 +89,24 @@ def stable_ids(before: IdGrid | None, after: IdGrid, *, next_id: int, min_overla
         else:
             lut[rid], fresh = fresh, fresh + 1
     return StableIds(lut, fresh, len(matched))
+
+
+def region_prior(previous: GridLayer, reference: GridLayer, occupancy: GridLayer) -> RegionPrior:
+    """The previous decomposition as a prior for decomposing ``occupancy``
+    (:func:`~services.grid_decomposition.continuity.keep_regions`): ``previous`` is its segment layer, ``reference``
+    the occupancy it was made from; both are read on the grid of ``occupancy`` (aligned by their origins, cells
+    ``reference`` did not cover are changed)."""
+    shape, to_resolution_m = occupancy.data.shape, occupancy.resolution_m
+    to_origin_xy_m = (occupancy.origin_x_m, occupancy.origin_y_m)
+    regions = ids_on_grid(previous.data, resolution_m=previous.resolution_m,
+                          origin_xy_m=(previous.origin_x_m, previous.origin_y_m), shape=shape,
+                          to_resolution_m=to_resolution_m, to_origin_xy_m=to_origin_xy_m)
+    # occupancy read shifted by 2, so that the 0 read off the reference grid tells those cells apart
+    before = ids_on_grid(np.asarray(reference.data, dtype=np.int64) + 2, resolution_m=reference.resolution_m,
+                         origin_xy_m=(reference.origin_x_m, reference.origin_y_m), shape=shape,
+                         to_resolution_m=to_resolution_m, to_origin_xy_m=to_origin_xy_m)
+    return RegionPrior(regions, unchanged_cells(before - 2, occupancy.data, resolution_m=to_resolution_m,
+                                                covered=before > 0))
 
 
 def renumber(decomposition: Decomposition, lut: npt.NDArray[np.int64]) -> Decomposition:

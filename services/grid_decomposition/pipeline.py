@@ -17,6 +17,7 @@ import numpy.typing as npt
 from services.grid_decomposition.arrays import label_sums
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
+from services.grid_decomposition.continuity import RegionPrior, keep_regions
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
@@ -257,6 +258,8 @@ def decompose(
     clean: bool = True,
     streak_reach_m: float = 2.0,
     known_places: RackLayout | None = None,
+    prior: RegionPrior | None = None,
+    settled_max_changed_share: float = 0.2,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -316,6 +319,12 @@ def decompose(
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
         before any the rack finder finds (which fills in the rest); a room touching a rack place is
         then the hall's open area.
+    prior : RegionPrior, optional
+        The previous decomposition of this map on this grid and the cells whose map content did not change
+        since (:func:`~services.grid_decomposition.keys.region_prior`): a previous region with at most
+        ``settled_max_changed_share`` of its cells changed keeps its unchanged cells, and the new region that
+        continues it grows it (:func:`~services.grid_decomposition.continuity.keep_regions`), so a growing
+        map's regions do not flicker where it did not change.
     seed : int
         Seed of the clusterings.
 
@@ -446,6 +455,11 @@ def decompose(
         segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2),
         n_known=0 if known_places is None else known_places.cell_labels.size - 1,
     )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
+    if prior is not None:
+        if prior.regions.shape != occ.shape or prior.unchanged.shape != occ.shape:
+            raise DecompositionError(f"a prior of shape {prior.regions.shape} on a grid of {occ.shape}")
+        segments = keep_regions(segments, prior, max_changed_share=settled_max_changed_share,
+                                min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)))
     pairs = _pairs(segments, sub)
     racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
     regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)

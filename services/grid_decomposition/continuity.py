@@ -1,0 +1,146 @@
+"""The previous decomposition as a prior: where a growing map did not change, its regions stay as they were.
+
+A decomposition of a map seen in part cuts rooms at its frontier into pieces that the next decomposition, with
+more of the map seen, cuts differently; and a change far away (a line found, a texture region moved) can move
+a border the map around it gives no new reason to move. On a live map each such flicker retires a region's key
+(:mod:`~services.grid_decomposition.keys`). So a region of the previous decomposition whose cells' map content
+did not change (:func:`~services.grid_decomposition.change.unchanged_cells`, up to ``max_changed_share`` of
+them) keeps its unchanged cells, and a new region that continues it (the one-to-one overlap match of
+:func:`match_regions`) is it, grown (:func:`keep_regions`). Regions over changed map are the new decomposition's.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from skimage.measure import label as connected_labels
+
+from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.segments import fill_from_neighbours
+
+IdGrid = npt.NDArray[np.integer]
+
+
+class RegionPrior(NamedTuple):
+    """The previous decomposition on the grid being decomposed.
+
+    ``regions`` (H, W) integer: previous region id per cell (0 none); ``unchanged`` (H, W) bool: cells whose map
+    content is as it was then (:func:`~services.grid_decomposition.change.unchanged_cells`).
+    """
+
+    regions: IdGrid
+    unchanged: npt.NDArray[np.bool_]
+
+
+def match_regions(before: IdGrid, after: IdGrid, *, min_overlap: float = 0.5) -> dict[int, int]:
+    """One-to-one matching of the regions of ``after`` to those of ``before`` (same grid, 0 = none): new -> old.
+
+    A pair may match when more than ``min_overlap`` of either region lies in the other (a room seen
+    partly before and whole now, a corridor cut shorter). Among those, the assignment maximises the
+    summed IoU (:func:`scipy.optimize.linear_sum_assignment`, per group of regions linked by candidate
+    pairs, so a map of thousands of regions never builds a dense matrix of them all).
+    """
+    b, a = np.asarray(before, dtype=np.int64), np.asarray(after, dtype=np.int64)
+    if b.shape != a.shape:
+        raise DecompositionError(f"region grids differ in shape: {b.shape} and {a.shape}")
+    both = (b > 0) & (a > 0)
+    if not both.any():
+        return {}
+    pairs, inter = np.unique(np.stack([b[both], a[both]]), axis=1, return_counts=True)
+    size_b = np.bincount(b.ravel(), minlength=int(b.max()) + 1)
+    size_a = np.bincount(a.ravel(), minlength=int(a.max()) + 1)
+    old, new = pairs
+    sb, sa = size_b[old], size_a[new]
+    ok = (inter > min_overlap * sb) | (inter > min_overlap * sa)
+    old, new, inter, sb, sa = old[ok], new[ok], inter[ok], sb[ok], sa[ok]
+    if old.size == 0:
+        return {}
+    iou = inter / (sb + sa - inter)
+    olds, old_i = np.unique(old, return_inverse=True)
+    news, new_i = np.unique(new, return_inverse=True)
+    n_old = olds.size
+    graph = coo_matrix((np.ones(old.size), (old_i, n_old + new_i)), shape=(n_old + news.size,) * 2)
+    _, group = connected_components(graph, directed=False)
+    out: dict[int, int] = {}
+    for g in np.unique(group[old_i]):
+        pick = group[old_i] == g
+        rows, row_i = np.unique(old_i[pick], return_inverse=True)
+        cols, col_i = np.unique(new_i[pick], return_inverse=True)
+        weight = np.zeros((rows.size, cols.size))
+        weight[row_i, col_i] = iou[pick]
+        r, c = linear_sum_assignment(weight, maximize=True)
+        for i, j in zip(r.tolist(), c.tolist(), strict=True):
+            if weight[i, j] > 0:
+                out[int(news[cols[j]])] = int(olds[rows[i]])
+    return out
+
+
+def keep_regions(
+    segments: IdGrid,
+    prior: RegionPrior,
+    *,
+    max_changed_share: float = 0.2,
+    min_overlap: float = 0.5,
+    min_area_px: int = 1,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with the regions of ``prior`` kept where the map did not change.
+
+    A previous region with at most ``max_changed_share`` of its cells changed is *settled*: its unchanged cells
+    that are in a region now are its again, and a new region matched to it (:func:`match_regions`, at
+    ``min_overlap``) is it, grown into what was seen since. Everything else is as ``segments`` has it. A region
+    left in pieces keeps its largest; smaller pieces than ``min_area_px`` join a neighbouring region.
+
+    Parameters
+    ----------
+    segments : (H, W) integer
+        Region id per cell of the new decomposition, 0 where no region.
+    prior : RegionPrior
+        On the same grid.
+
+    Returns
+    -------
+    (H, W) int32
+        Regions numbered 1..n afresh (their ids are for :mod:`~services.grid_decomposition.keys` to carry).
+    """
+    seg = np.asarray(segments, dtype=np.int64)
+    before = np.asarray(prior.regions, dtype=np.int64)
+    if before.shape != seg.shape or prior.unchanged.shape != seg.shape:
+        raise DecompositionError(f"prior of shape {before.shape} / {prior.unchanged.shape} on segments of {seg.shape}")
+    if not 0.0 <= max_changed_share <= 1.0:
+        raise DecompositionError(f"max_changed_share must be in [0, 1], got {max_changed_share}")
+    size = np.bincount(before.ravel(), minlength=int(before.max(initial=0)) + 1)
+    changed = np.bincount(before[~prior.unchanged], minlength=size.size)
+    settled = (size > 0) & (changed <= max_changed_share * size)
+    settled[0] = False
+    base = int(seg.max(initial=0)) + 1  # settled region k is base + k; new ones keep their own numbers
+    lut = np.arange(base, dtype=np.int64)
+    for new, old in match_regions(before, seg, min_overlap=min_overlap).items():
+        if settled[old]:
+            lut[new] = base + old
+    out = lut[seg]
+    keep = settled[before] & prior.unchanged & (seg > 0)
+    out[keep] = base + before[keep]
+    _, dense = np.unique(out, return_inverse=True)
+    dense = dense.reshape(out.shape).astype(np.int32) + np.int32(0 if out.min() == 0 else 1)
+    return _largest_pieces(dense, min_area_px)
+
+
+def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.NDArray[np.int32]:
+    """Each region's pieces (4-connected) other than its largest: smaller than ``min_area_px``, to a neighbour."""
+    pieces = connected_labels(segments, background=0, connectivity=1)
+    area = np.bincount(pieces.ravel())
+    owner = np.zeros(area.size, dtype=np.int64)
+    owner[pieces.ravel()] = segments.ravel()
+    order = np.lexsort((-area[1:], owner[1:])) + 1  # by region, largest piece first
+    first = np.r_[True, owner[order][1:] != owner[order][:-1]]
+    small = np.zeros(area.size, dtype=bool)
+    small[order[~first]] = area[order[~first]] < min_area_px
+    drop = small[pieces]
+    if not drop.any():
+        return segments
+    return fill_from_neighbours(np.where(drop, 0, segments), drop)
