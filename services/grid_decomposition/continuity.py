@@ -51,10 +51,10 @@ def match_regions(before: IdGrid, after: IdGrid, *, min_overlap: float = 0.5) ->
     both = (b > 0) & (a > 0)
     if not both.any():
         return {}
-    pairs, inter = np.unique(np.stack([b[both], a[both]]), axis=1, return_counts=True)
     size_b = np.bincount(b.ravel(), minlength=int(b.max()) + 1)
     size_a = np.bincount(a.ravel(), minlength=int(a.max()) + 1)
-    old, new = pairs
+    pair, inter = np.unique(b[both] * size_a.size + a[both], return_counts=True)
+    old, new = pair // size_a.size, pair % size_a.size
     sb, sa = size_b[old], size_a[new]
     ok = (inter > min_overlap * sb) | (inter > min_overlap * sa)
     old, new, inter, sb, sa = old[ok], new[ok], inter[ok], sb[ok], sa[ok]
@@ -125,9 +125,9 @@ def keep_regions(
     out = lut[seg]
     keep = settled[before] & prior.unchanged & (seg > 0)
     out[keep] = base + before[keep]
-    _, dense = np.unique(out, return_inverse=True)
-    dense = dense.reshape(out.shape).astype(np.int32) + np.int32(0 if out.min() == 0 else 1)
-    return _largest_pieces(dense, min_area_px)
+    present = np.bincount(out.ravel()) > 0
+    present[0] = False
+    return _largest_pieces(np.where(present, np.cumsum(present), 0).astype(np.int32)[out], min_area_px)
 
 
 def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.NDArray[np.int32]:

@@ -324,7 +324,8 @@ def decompose(
         since (:func:`~services.grid_decomposition.keys.region_prior`): a previous region with at most
         ``settled_max_changed_share`` of its cells changed keeps its unchanged cells, and the new region that
         continues it grows it (:func:`~services.grid_decomposition.continuity.keep_regions`), so a growing
-        map's regions do not flicker where it did not change.
+        map's regions do not flicker where it did not change. Racks, aisles and warehouse floors are the new
+        decomposition's.
     seed : int
         Seed of the clusterings.
 
@@ -458,8 +459,13 @@ def decompose(
     if prior is not None:
         if prior.regions.shape != occ.shape or prior.unchanged.shape != occ.shape:
             raise DecompositionError(f"a prior of shape {prior.regions.shape} on a grid of {occ.shape}")
-        segments = keep_regions(segments, prior, max_changed_share=settled_max_changed_share,
-                                min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)))
+        # rack places (racks, aisles, cross aisles) are found anew every time: a rack is often seen whole only later
+        found_anew = places > 0
+        segments = keep_regions(
+            segments, RegionPrior(np.where(found_anew, 0, prior.regions), prior.unchanged & ~found_anew),
+            max_changed_share=settled_max_changed_share,
+            min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+        )
     pairs = _pairs(segments, sub)
     racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
     regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)

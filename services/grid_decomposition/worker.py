@@ -8,8 +8,11 @@ every ``safety_poll_period_s``, and once on start.
 When the layer changed and ``min_period_s`` has passed since the last attempt, the newest layer is compared with
 the last decomposed one (:func:`changed_fraction`); at ``min_change_fraction`` or more it is decomposed and ONE
 revision is committed: label and segment layers (meta ``source_layer``, ``source_revision``), features, region graph,
-regions keyed as the stored ones they overlap (:func:`carry_keys`). A new label table (stage ``label_table``), or
-new rack rows of the pillar stage (:class:`KnownRacks`, evidence of racks), re-decompose the current grid at once.
+regions keyed as the stored ones they overlap (:func:`carry_keys`). The stored decomposition and the grid it was made
+from are its prior (:func:`region_prior`): a region over map that did not change keeps its extent, so keys do not
+flicker on a growing map. A new label table (stage ``label_table``), or new rack rows of the pillar stage
+(:class:`KnownRacks`, evidence of racks), re-decompose the current grid at once (new racks without the prior: they
+may move any region).
 A grid the decomposition cannot use is counted as ``decomposition_errors`` and becomes the reference all the same.
 On start the source revision is read back from the stored label layer: a grid is not decomposed twice.
 """
@@ -22,7 +25,7 @@ import time
 
 from services.grid_decomposition.change import changed_fraction
 from services.grid_decomposition.errors import DecompositionError
-from services.grid_decomposition.keys import NEXT_ID_KEY, carry_keys
+from services.grid_decomposition.keys import NEXT_ID_KEY, carry_keys, region_prior
 from services.grid_decomposition.known_racks import KNOWN_RACKS_STAGE, KnownRacks
 from services.grid_decomposition.pipeline import decompose
 from services.grid_decomposition.records import decomposition_features, decomposition_layers, decomposition_topology
@@ -52,6 +55,7 @@ class DecompositionStage:
         self._pending, self._relabel = True, False
         self._checked_revision: int | None = None
         self._reference: GridLayer | None = None
+        self._decomposed: GridLayer | None = None  # the grid the stored decomposition was made from
         self._last_attempt = -float("inf")
         self._overrides: dict[int, PlaceLabel] = {}
         self.racks = KnownRacks()
@@ -104,7 +108,7 @@ class DecompositionStage:
             log.debug("%s revision %d changed by %.4f, below %.4f: not decomposed", self.source_layer,
                       stored.revision_id, fraction, self.settings.min_change_fraction)
             return
-        self._decompose(stored, None if previous is None else previous.layer)
+        self._decompose(stored, None if previous is None else previous.layer, prior=not racks_changed)
 
     def _resume(self) -> int:
         """The newest revision id (watched after); the stored decomposition's source becomes the reference."""
@@ -118,7 +122,7 @@ class DecompositionStage:
         if isinstance(source, int):
             reference = store.layer(map_id, self.source_layer, revision=source)
             if reference is not None and reference.revision_id == source:
-                self._reference = reference.layer
+                self._reference = self._decomposed = reference.layer
                 self._checked_revision = source
                 log.info("resuming: %s revision %d is decomposed already", self.source_layer, source)
         return latest.id if latest is not None else 0
@@ -153,16 +157,20 @@ class DecompositionStage:
                  {c: label.name.lower() for c, label in sorted(overrides.items())} or "automatic")
         return changed
 
-    def _decompose(self, stored: StoredLayer, previous: GridLayer | None) -> None:  # previous segment layer
+    def _decompose(self, stored: StoredLayer, previous: GridLayer | None, *, prior: bool) -> None:
+        """Decompose ``stored`` and commit it, keyed as ``previous`` (the stored segment layer); with ``prior``, the
+        stored decomposition is kept where the map did not change since the grid it was made from."""
         layer, self._last_attempt, start = stored.layer, time.monotonic(), time.perf_counter()
         try:
             racks = self.racks.on_grid(layer)
+            kept = (region_prior(previous, self._decomposed, layer)
+                    if prior and previous is not None and self._decomposed is not None else None)
             result, ids = carry_keys(decompose(layer.data, resolution_m=layer.resolution_m,
                                                origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
                                                neck_half_width_m=self.settings.neck_half_width_m,
                                                door_max_width_m=self.settings.door_max_width_m,
                                                label_overrides=self._overrides or None,
-                                               known_places=racks), previous)
+                                               known_places=racks, prior=kept), previous)
             source = {"source_layer": self.source_layer, "source_revision": stored.revision_id}
             layers = decomposition_layers(result, label_layer=self.layer_names[0], segment_layer=self.layer_names[1],
                                           meta={**source, NEXT_ID_KEY: ids.next_id})
@@ -185,7 +193,7 @@ class DecompositionStage:
         if revision is None:  # store down: counted by commit; try this grid again
             self._checked_revision, self._pending = None, True
             return
-        self._reference = layer
+        self._reference = self._decomposed = layer
         self.context.count("decompositions")
         log.info("revision %d: %s revision %d decomposed in %.2f s: %d regions, %s", revision.id, self.source_layer,
                  stored.revision_id, seconds, len(result.regions),

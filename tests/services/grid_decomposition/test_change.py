@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import DecompositionError, changed_fraction, occupancy_classes
+from services.grid_decomposition.change import unchanged_cells
 from shared.store import GridLayer
 from tests.services.grid_decomposition.warehouse import synthetic_warehouse
 
@@ -104,3 +105,19 @@ def test_changed_fraction_is_symmetric_and_within_unit_interval(seed: int) -> No
     forward = changed_fraction(la, lb)
     assert 0.0 < forward <= 1.0
     assert changed_fraction(lb, la) == pytest.approx(forward)
+
+
+def test_unchanged_cells_leave_out_changes_their_margin_and_cells_the_old_grid_did_not_hold() -> None:
+    before = np.zeros((8, 8), dtype=np.int8)
+    after = before.copy()
+    after[4, 4] = 100  # a new obstacle
+    after[0, 0] = 10  # still free: the same class
+    covered = np.ones((8, 8), dtype=bool)
+    covered[:, 7] = False  # the grid grew by a column
+    same = unchanged_cells(before, after, resolution_m=0.1, covered=covered, margin_m=0.1)
+    expected = np.ones((8, 8), dtype=bool)
+    expected[3:6, 3:6] = False
+    expected[:, 6:] = False
+    assert np.array_equal(same, expected)
+    with pytest.raises(DecompositionError, match="shape"):
+        unchanged_cells(before, after[:, :4], resolution_m=0.1)

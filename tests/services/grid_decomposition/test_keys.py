@@ -11,10 +11,12 @@ from services.grid_decomposition.keys import (
     carry_keys,
     ids_on_grid,
     match_regions,
+    region_prior,
     renumber,
     stable_ids,
 )
 from services.grid_decomposition.records import decomposition_layers
+from shared.store import GridLayer
 from tests.services.grid_decomposition.warehouse import synthetic_warehouse
 
 RES_M = 0.1
@@ -110,3 +112,42 @@ def test_renumber_refuses_a_short_table() -> None:
     result = decompose(synthetic_warehouse(1, resolution_m=RES_M).occupancy, resolution_m=RES_M)
     with pytest.raises(DecompositionError, match="id table"):
         renumber(result, np.zeros(1, dtype=np.int64))
+
+
+def test_the_prior_reads_the_old_decomposition_on_a_grown_grid() -> None:
+    previous = GridLayer("segments", np.full((4, 5), 7, dtype=np.int32), RES_M, 1.0, 2.0)
+    reference = GridLayer("occupancy", np.zeros((4, 5), dtype=np.int8), RES_M, 1.0, 2.0)
+    grown = np.zeros((6, 8), dtype=np.int8)  # one cell more below and to the left, two to the right
+    grown[3, 4] = 100
+    prior = region_prior(previous, reference, GridLayer("occupancy", grown, RES_M, 0.9, 1.9))
+    inside = np.zeros((6, 8), dtype=bool)
+    inside[1:5, 1:6] = True
+    assert np.array_equal(prior.regions, np.where(inside, 7, 0))
+    # cells the old grid did not hold are new, and so is the obstacle and the cells next to it
+    assert not prior.unchanged[~inside].any()
+    assert not prior.unchanged[3, 4] and prior.unchanged[1, 1]
+
+
+def test_regions_over_unchanged_map_keep_their_cells_and_keys_as_the_map_grows() -> None:
+    house = synthetic_warehouse(0, resolution_m=RES_M)
+    occupancy = house.occupancy
+    steps = [occupancy.copy() for _ in range(3)]
+    steps[0][:, occupancy.shape[1] * 2 // 5:] = -1  # the robot sees more of the hall at every step
+    steps[1][:, occupancy.shape[1] * 7 // 10:] = -1
+    previous: tuple[GridLayer, GridLayer] | None = None
+    for grid in steps:
+        layer = GridLayer("occupancy", grid, RES_M, 0.0, 0.0)
+        prior = None if previous is None else region_prior(previous[0], previous[1], layer)
+        result, ids = carry_keys(decompose(grid, resolution_m=RES_M, prior=prior),
+                                 None if previous is None else previous[0])
+        if previous is not None and prior is not None:
+            old = previous[0].data
+            # a region none of whose cells changed is still there, on every cell, under its key
+            size = np.bincount(old.ravel())
+            changed = np.bincount(old[~prior.unchanged], minlength=size.size)
+            settled = [rid for rid in np.flatnonzero(size) if rid > 0 and changed[rid] == 0]
+            assert settled
+            for rid in settled:
+                assert np.all(result.segments[old == rid] == rid)
+            assert set(result.topology.nodes) == set(result.regions)
+        previous = (decomposition_layers(result, meta={NEXT_ID_KEY: ids.next_id})[1], layer)

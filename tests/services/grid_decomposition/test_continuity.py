@@ -1,0 +1,75 @@
+"""The previous decomposition as a prior: regions over map that did not change keep their extent."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.grid_decomposition import DecompositionError
+from services.grid_decomposition.continuity import RegionPrior, keep_regions
+
+
+def _grid(*blocks: tuple[int, slice, slice], shape: tuple[int, int] = (10, 20)) -> np.ndarray:
+    out = np.zeros(shape, dtype=np.int32)
+    for rid, rows, cols in blocks:
+        out[rows, cols] = rid
+    return out
+
+
+def _same_partition(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two region images cut the cells alike (ids aside)."""
+    pairs = np.unique(np.stack([a.ravel(), b.ravel()]), axis=1)
+    return bool(np.unique(pairs[0]).size == pairs.shape[1] == np.unique(pairs[1]).size)
+
+
+def test_a_room_whose_map_did_not_change_is_not_merged_into_its_neighbour() -> None:
+    before = _grid((4, slice(None), slice(0, 12)), (9, slice(None), slice(12, 20)))
+    merged = _grid((1, slice(None), slice(0, 20)))
+    out = keep_regions(merged, RegionPrior(before, np.ones(before.shape, dtype=bool)))
+    assert _same_partition(out, before)
+
+
+def test_where_the_map_changed_the_new_decomposition_decides() -> None:
+    before = _grid((4, slice(None), slice(0, 12)), (9, slice(None), slice(12, 20)))
+    merged = _grid((1, slice(None), slice(0, 20)))
+    unchanged = np.ones(before.shape, dtype=bool)
+    unchanged[:, 12:] = False  # the right room was seen anew: its border may go
+    out = keep_regions(merged, RegionPrior(before, unchanged))
+    assert _same_partition(out, merged)
+
+
+def test_a_settled_region_grows_into_newly_seen_space_its_continuation_covers() -> None:
+    before = _grid((4, slice(None), slice(0, 8)), (9, slice(None), slice(8, 12)), shape=(10, 20))
+    unchanged = np.zeros(before.shape, dtype=bool)
+    unchanged[:, :12] = True  # columns 12.. were unknown before
+    # the new decomposition moves the border between the two rooms and grows the second one
+    after = _grid((1, slice(None), slice(0, 6)), (2, slice(None), slice(6, 20)))
+    out = keep_regions(after, RegionPrior(before, unchanged))
+    assert _same_partition(out, _grid((1, slice(None), slice(0, 8)), (2, slice(None), slice(8, 20))))
+
+
+def test_no_region_is_added_where_the_new_decomposition_has_none() -> None:
+    before = _grid((4, slice(None), slice(0, 20)))
+    after = _grid((1, slice(None), slice(0, 15)))  # the right end is a wall now
+    unchanged = np.ones(before.shape, dtype=bool)
+    out = keep_regions(after, RegionPrior(before, unchanged))
+    assert np.array_equal(out > 0, after > 0)
+
+
+def test_pieces_a_kept_region_cuts_off_join_a_neighbour() -> None:
+    before = _grid((4, slice(None), slice(2, 10)), (9, slice(None), slice(10, 20)))
+    unchanged = np.zeros(before.shape, dtype=bool)
+    unchanged[:, :10] = True  # the right room was seen anew
+    # a strip along the top crosses the kept room 4: its 4-cell tip on the left is cut off
+    after = _grid((1, slice(2, 10), slice(0, 10)), (2, slice(2, 10), slice(10, 20)), (3, slice(0, 2), slice(0, 20)))
+    out = keep_regions(after, RegionPrior(before, unchanged), min_area_px=5)
+    expected = _grid((1, slice(None), slice(0, 10)), (2, slice(2, 10), slice(10, 20)), (3, slice(0, 2), slice(10, 20)))
+    assert _same_partition(out, expected)
+
+
+def test_a_prior_on_another_grid_is_refused() -> None:
+    with pytest.raises(DecompositionError, match="prior"):
+        keep_regions(np.zeros((3, 3), np.int32), RegionPrior(np.zeros((3, 4), np.int32), np.ones((3, 4), bool)))
+    with pytest.raises(DecompositionError, match="max_changed_share"):
+        keep_regions(np.zeros((3, 3), np.int32), RegionPrior(np.zeros((3, 3), np.int32), np.ones((3, 3), bool)),
+                     max_changed_share=2.0)
