@@ -132,7 +132,7 @@ def keep_regions(
 
 def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.NDArray[np.int32]:
     """Each region's pieces (4-connected) other than its largest: smaller than ``min_area_px``, to a neighbour."""
-    pieces = connected_labels(segments, background=0, connectivity=1)
+    pieces = np.asarray(connected_labels(segments, background=0, connectivity=1))  # type: ignore[no-untyped-call]
     area = np.bincount(pieces.ravel())
     owner = np.zeros(area.size, dtype=np.int64)
     owner[pieces.ravel()] = segments.ravel()
