@@ -16,6 +16,11 @@ import yaml
 from PIL import Image, UnidentifiedImageError
 
 FREE_PIXEL = 254
+MODE_SHARE = 0.01
+"""A grey value is a mode of a bare map image (its white, its unknown grey) when at least this share of the
+pixels has it: unknown and free space are drawn in one grey each, speckle spreads over many."""
+MODE_GAP = 8
+"""The unknown grey is darker than the white mode by at least this much (the white mode's own spread)."""
 OCCUPIED_PIXEL = 0
 UNKNOWN_PIXEL = 205
 
@@ -163,17 +168,50 @@ __all__ = [
     "UNKNOWN_PIXEL",
     "MapFileError",
     "MapImage",
+    "free_grey_threshold",
     "read_map_yaml",
     "write_map_yaml",
 ]
 
 
-def read_map_file(path: Path, *, resolution_m: float | None = None, free_darkness: bool = False) -> MapImage:
+def free_grey_threshold(grey: npt.NDArray[np.number[Any]]) -> float:
+    """The grey above which a pixel of a bare map image is free: midway between the image's unknown grey and its
+    white, and never below map_server's free threshold (darkness 0.196, grey 204.02).
+
+    Map images mark unknown space with a grey of their own (ROS 205, others 153, 178, 230) and free space white;
+    light-grey speckle between the two (cells seen free a few times) is nearer one or the other. The white is
+    the lightest grey held by at least :data:`MODE_SHARE` of the pixels; the unknown grey the most common one
+    between map_server's occupied threshold (darkness 0.65) and :data:`MODE_GAP` below the white, if one holds
+    that share. Without such a grey (a map drawn in black and white only) map_server's threshold stands.
+
+    >>> grey = np.r_[np.full(60, 255), np.full(30, 230), np.full(10, 0)]
+    >>> free_grey_threshold(grey)
+    242.5
+    """
+    values = np.clip(np.rint(np.asarray(grey, np.float64)), 0, 255).astype(np.int64).ravel()
+    share = np.bincount(values, minlength=256) / max(values.size, 1)
+    floor = 255.0 * (1.0 - 0.196)
+    common = np.flatnonzero(share >= MODE_SHARE)
+    if common.size == 0:
+        return floor
+    white = int(common.max())
+    band = np.arange(256)
+    band = band[(band > 255.0 * (1.0 - 0.65)) & (band <= white - MODE_GAP)]
+    if band.size == 0 or share[band].max() < MODE_SHARE:
+        return floor
+    unknown = int(band[np.argmax(share[band])])
+    return max(floor, (unknown + white) / 2.0)
+
+
+def read_map_file(path: Path, *, resolution_m: float | None = None, free_darkness: bool = False,
+                  free_from_modes: bool = False) -> MapImage:
     """A map_server YAML (:func:`read_map_yaml`) or a bare map image.
 
     A bare image is read with map_server's trinary thresholds (darkness above 0.65 occupied, below 0.196 free, the
     rest unknown) and needs ``resolution_m``; its origin is (0, 0). With ``free_darkness`` its free cells keep their
     darkness in percent (0..19, rounded down) instead of 0, so grey fringes at walls can be told from clear floor.
+    With ``free_from_modes`` a bare image's free cells must also be nearer its white than its unknown grey
+    (:func:`free_grey_threshold`): maps drawn with a light unknown grey (230) and light-grey speckle read right.
     For a YAML, ``resolution_m`` (if given) must match the file's.
 
     Raises
@@ -203,5 +241,7 @@ def read_map_file(path: Path, *, resolution_m: float | None = None, free_darknes
     occupancy = np.full(grey.shape, -1, dtype=np.int8)
     occupancy[darkness > 0.65] = 100
     free = darkness < 0.196
+    if free_from_modes:
+        free &= grey > free_grey_threshold(grey)
     occupancy[free] = np.floor(darkness[free] * 100.0).astype(np.int8) if free_darkness else 0
     return MapImage(occupancy[::-1].copy(), float(resolution_m), 0.0, 0.0)
