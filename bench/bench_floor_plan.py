@@ -4,8 +4,8 @@ Prints a Markdown table per set and ``name value unit`` lines, one BLAS thread, 
 CPU time (``time.process_time``) with the load average, since the machine may be shared.
 
 * ``rose2``: the ROSE\u00b2 full maps (``../shared/data/maps/rose2/full``, 0.05 m/px), read as ``aisle floor-plan
-  MAP.png --resolution 0.05`` reads a bare image (free = lighter than map_server's threshold and nearer the map's
-  white than its own unknown grey, :func:`shared.mapfiles.free_grey_threshold`): K(W,M) (eq. 3.39, every cell of
+  MAP.png --resolution 0.05`` reads a bare image (map_server's thresholds, but the map's own unknown grey and the
+  speckle nearer it than white are unknown, :func:`shared.mapfiles.unknown_greys`): K(W,M) (eq. 3.39, every cell of
   the map), K of the same world under the earlier fixed reading (free = grey >= 250, occupied <= 89, the rest
   unknown), K over known cells, and
   ``units.png`` scored as ``bench/eval_ipa.py`` scores segmentations of these maps (free pixels only,

@@ -17,10 +17,11 @@ from PIL import Image, UnidentifiedImageError
 
 FREE_PIXEL = 254
 MODE_SHARE = 0.01
-"""A grey value is a mode of a bare map image (its white, its unknown grey) when at least this share of the
-pixels has it: unknown and free space are drawn in one grey each, speckle spreads over many."""
+"""A grey value is a mode of a bare map image (drawn on purpose: its white, its unknown grey, walls filled grey)
+when at least this share of the pixels has it; speckle spreads over many values."""
 MODE_GAP = 8
-"""The unknown grey is darker than the white mode by at least this much (the white mode's own spread)."""
+"""The spread of a mode: the unknown grey lies at least this far below the white, and greys this near the
+unknown grey are unknown too."""
 OCCUPIED_PIXEL = 0
 UNKNOWN_PIXEL = 205
 
@@ -168,39 +169,43 @@ __all__ = [
     "UNKNOWN_PIXEL",
     "MapFileError",
     "MapImage",
-    "free_grey_threshold",
     "read_map_yaml",
+    "unknown_greys",
     "write_map_yaml",
 ]
 
 
-def free_grey_threshold(grey: npt.NDArray[np.number[Any]]) -> float:
-    """The grey above which a pixel of a bare map image is free: midway between the image's unknown grey and its
-    white, and never below map_server's free threshold (darkness 0.196, grey 204.02).
+def unknown_greys(grey: npt.NDArray[np.number[Any]]) -> npt.NDArray[np.bool_]:
+    """Which greys (a lookup table of 256) of a bare map image are unknown space although map_server's thresholds
+    would call them free: the image's own unknown grey and its spread, and the speckle not nearer white than it.
 
-    Map images mark unknown space with a grey of their own (ROS 205, others 153, 178, 230) and free space white;
-    light-grey speckle between the two (cells seen free a few times) is nearer one or the other. The white is
-    the lightest grey held by at least :data:`MODE_SHARE` of the pixels; the unknown grey the most common one
-    between map_server's occupied threshold (darkness 0.65) and :data:`MODE_GAP` below the white, if one holds
-    that share. Without such a grey (a map drawn in black and white only) map_server's threshold stands.
+    Map images mark unknown space with a grey of their own (ROS 205, others 153, 178, 230) and free space white.
+    A grey held by at least :data:`MODE_SHARE` of the pixels is drawn on purpose (unknown, free, walls or furniture
+    filled light grey); greys held by fewer are speckle, cells seen free only a few times. The white is the
+    lightest mode; the unknown grey the most common mode between map_server's occupied threshold (darkness 0.65)
+    and :data:`MODE_GAP` below the white. Unknown are then the greys within :data:`MODE_GAP` of the unknown grey
+    and the speckle not nearer the white than the unknown grey; other modes keep map_server's reading. Without an
+    unknown grey (a map drawn in black and white only) the table is all False: map_server's reading stands.
 
-    >>> grey = np.r_[np.full(60, 255), np.full(30, 230), np.full(10, 0)]
-    >>> free_grey_threshold(grey)
-    242.5
+    >>> grey = np.r_[np.full(120, 255), np.full(60, 230), np.full(19, 0), [240]]
+    >>> unknown_greys(grey)[[215, 230, 240, 243, 255]].tolist()
+    [True, True, True, False, False]
     """
     values = np.clip(np.rint(np.asarray(grey, np.float64)), 0, 255).astype(np.int64).ravel()
     share = np.bincount(values, minlength=256) / max(values.size, 1)
-    floor = 255.0 * (1.0 - 0.196)
-    common = np.flatnonzero(share >= MODE_SHARE)
-    if common.size == 0:
-        return floor
-    white = int(common.max())
-    band = np.arange(256)
-    band = band[(band > 255.0 * (1.0 - 0.65)) & (band <= white - MODE_GAP)]
-    if band.size == 0 or share[band].max() < MODE_SHARE:
-        return floor
-    unknown = int(band[np.argmax(share[band])])
-    return max(floor, (unknown + white) / 2.0)
+    out = np.zeros(256, bool)
+    levels = np.arange(256)
+    modes = share >= MODE_SHARE
+    if not modes.any():
+        return out
+    white = int(levels[modes].max())
+    band = (levels > 255.0 * (1.0 - 0.65)) & (levels <= white - MODE_GAP) & modes
+    if not band.any():
+        return out
+    unknown = int(levels[band][np.argmax(share[band])])
+    out[np.abs(levels - unknown) <= MODE_GAP] = True
+    out[~modes & (levels - unknown < white - levels)] = True
+    return out
 
 
 def read_map_file(path: Path, *, resolution_m: float | None = None, free_darkness: bool = False,
@@ -210,8 +215,8 @@ def read_map_file(path: Path, *, resolution_m: float | None = None, free_darknes
     A bare image is read with map_server's trinary thresholds (darkness above 0.65 occupied, below 0.196 free, the
     rest unknown) and needs ``resolution_m``; its origin is (0, 0). With ``free_darkness`` its free cells keep their
     darkness in percent (0..19, rounded down) instead of 0, so grey fringes at walls can be told from clear floor.
-    With ``free_from_modes`` a bare image's free cells must also be nearer its white than its unknown grey
-    (:func:`free_grey_threshold`): maps drawn with a light unknown grey (230) and light-grey speckle read right.
+    With ``free_from_modes`` a bare image's own unknown grey and the speckle nearer it than white are unknown
+    (:func:`unknown_greys`): maps drawn with a light unknown grey (230) and light-grey speckle read right.
     For a YAML, ``resolution_m`` (if given) must match the file's.
 
     Raises
@@ -242,6 +247,6 @@ def read_map_file(path: Path, *, resolution_m: float | None = None, free_darknes
     occupancy[darkness > 0.65] = 100
     free = darkness < 0.196
     if free_from_modes:
-        free &= grey > free_grey_threshold(grey)
+        free &= ~unknown_greys(grey)[np.clip(np.rint(grey), 0, 255).astype(np.intp)]
     occupancy[free] = np.floor(darkness[free] * 100.0).astype(np.int8) if free_darkness else 0
     return MapImage(occupancy[::-1].copy(), float(resolution_m), 0.0, 0.0)

@@ -111,7 +111,7 @@ def test_a_bare_image_with_a_light_unknown_grey_reads_its_speckle_by_the_nearer_
 
 
 def test_a_black_and_white_image_reads_as_map_server_reads_it(tmp_path: Path) -> None:
-    from shared.mapfiles import free_grey_threshold, read_map_file
+    from shared.mapfiles import read_map_file, unknown_greys
 
     grey = np.full((30, 30), 255, np.uint8)
     grey[::7] = 0
@@ -120,4 +120,18 @@ def test_a_black_and_white_image_reads_as_map_server_reads_it(tmp_path: Path) ->
     plain = read_map_file(tmp_path / "map.png", resolution_m=0.05)
     modes = read_map_file(tmp_path / "map.png", resolution_m=0.05, free_from_modes=True)
     assert np.array_equal(plain.occupancy, modes.occupancy)
-    assert free_grey_threshold(grey) == pytest.approx(255 * (1 - 0.196))
+    assert not unknown_greys(grey).any()
+
+
+def test_walls_filled_light_grey_keep_map_servers_reading(tmp_path: Path) -> None:
+    from shared.mapfiles import read_map_file
+
+    grey = np.full((40, 60), 180, np.uint8)  # unknown
+    grey[5:35, 5:55] = 255
+    grey[5:35, 29:31] = 211  # a wall drawn filled light grey: a mode of its own, not speckle
+    grey[20, 10] = 212  # one speckle pixel, nearer the unknown grey than white
+    Image.fromarray(grey).save(tmp_path / "map.png")
+    plain = read_map_file(tmp_path / "map.png", resolution_m=0.05).occupancy[::-1]
+    modes = read_map_file(tmp_path / "map.png", resolution_m=0.05, free_from_modes=True).occupancy[::-1]
+    assert plain[10, 30] == modes[10, 30] == 0
+    assert plain[20, 10] == 0 and modes[20, 10] == -1
