@@ -183,9 +183,11 @@ def unknown_greys(grey: npt.NDArray[np.number[Any]]) -> npt.NDArray[np.bool_]:
     A grey held by at least :data:`MODE_SHARE` of the pixels is drawn on purpose (unknown, free, walls or furniture
     filled light grey); greys held by fewer are speckle, cells seen free only a few times. The white is the
     lightest mode; the unknown grey the most common mode between map_server's occupied threshold (darkness 0.65)
-    and :data:`MODE_GAP` below the white. Unknown are then the greys within :data:`MODE_GAP` of the unknown grey
-    and the speckle not nearer the white than the unknown grey; other modes keep map_server's reading. Without an
-    unknown grey (a map drawn in black and white only) the table is all False: map_server's reading stands.
+    and :data:`MODE_GAP` below the white. A grey within :data:`MODE_GAP` of a mode reads as the nearest mode
+    (its spread: antialiasing, noise): unknown for the unknown grey and the modes near it, map_server's reading for
+    the others (white, walls or furniture filled grey). Speckle further from every mode is unknown unless it is
+    nearer the white than the unknown grey. Without an unknown grey (a map drawn in black and white only) the
+    table is all False: map_server's reading stands.
 
     >>> grey = np.r_[np.full(120, 255), np.full(60, 230), np.full(19, 0), [240]]
     >>> unknown_greys(grey)[[215, 230, 240, 243, 255]].tolist()
@@ -193,18 +195,22 @@ def unknown_greys(grey: npt.NDArray[np.number[Any]]) -> npt.NDArray[np.bool_]:
     """
     values = np.clip(np.rint(np.asarray(grey, np.float64)), 0, 255).astype(np.int64).ravel()
     share = np.bincount(values, minlength=256) / max(values.size, 1)
-    out = np.zeros(256, bool)
     levels = np.arange(256)
     modes = share >= MODE_SHARE
     if not modes.any():
-        return out
+        return np.zeros(256, bool)
     white = int(levels[modes].max())
     band = (levels > 255.0 * (1.0 - 0.65)) & (levels <= white - MODE_GAP) & modes
     if not band.any():
-        return out
+        return np.zeros(256, bool)
     unknown = int(levels[band][np.argmax(share[band])])
-    out[np.abs(levels - unknown) <= MODE_GAP] = True
-    out[~modes & (levels - unknown < white - levels)] = True
+    # a mode is unknown when it lies within MODE_GAP of the unknown grey or map_server does not call it free
+    mode_levels = levels[modes]
+    mode_unknown = (np.abs(mode_levels - unknown) <= MODE_GAP) | (mode_levels <= 255.0 * (1.0 - 0.196))
+    gap = np.abs(levels[:, None] - mode_levels[None, :])
+    nearest = np.argmin(gap, axis=1)
+    near_mode = gap[levels, nearest] <= MODE_GAP
+    out: npt.NDArray[np.bool_] = np.where(near_mode, mode_unknown[nearest], levels - unknown < white - levels)
     return out
 
 
