@@ -3,14 +3,17 @@
 Prints a Markdown table per set and ``name value unit`` lines, one BLAS thread, seconds as wall time and
 CPU time (``time.process_time``) with the load average, since the machine may be shared.
 
-* ``rose2``: the ROSE\u00b2 full maps (``../shared/data/maps/rose2/full``, free = grey >= 250, occupied <= 89, the
-  rest unknown, 0.05 m/px): K(W,M) (eq. 3.39, every cell of the map), K over known cells, and
+* ``rose2``: the ROSE\u00b2 full maps (``../shared/data/maps/rose2/full``, 0.05 m/px), read as ``aisle floor-plan
+  MAP.png --resolution 0.05`` reads a bare image (map_server's thresholds, but the map's own unknown grey and the
+  speckle nearer it than white are unknown, :func:`shared.mapfiles.unknown_greys`): K(W,M) (eq. 3.39, every cell of
+  the map), K of the same world under the earlier fixed reading (free = grey >= 250, occupied <= 89, the rest
+  unknown), K over known cells, and
   ``units.png`` scored as ``bench/eval_ipa.py`` scores segmentations of these maps (free pixels only,
   each ground-truth colour one room), beside ROSE\u00b2's own ``rose2_rooms.png``; and where K is lost (shares of
   all cells): free cells not drawn free, unknown cells drawn free, occupied cells not drawn as wall, and the
   cells inside the ground truth's rooms that are not free in the map (no room-shaped unit draws them right).
-* ``ipa``: the plain ipa maps read as ``aisle floor-plan MAP.png --resolution 0.05`` reads them; K(W,M)
-  and the ipa scores (every labelled pixel counts).
+* ``ipa``: the plain ipa maps read as ``aisle floor-plan MAP.png --resolution 0.05`` reads them; K(W,M), K of
+  the same world under map_server's fixed trinary reading, and the ipa scores (every labelled pixel counts).
 * ``partial``: the 15 growing ubremen maps in order, each warm-started from the previous world; the share
   of units of map k that keep their id in map k+1 (same rectangle after the map's shift, or the unit
   with the most overlap), and the seconds of each warm update.
@@ -38,6 +41,8 @@ from services.floor_plan import (
     FloorPlanSettings,
     World,
     carry,
+    cell_prediction_rate,
+    classify_map,
     floor_plan,
     make_frame,
     unit_labels,
@@ -51,6 +56,7 @@ from services.grid_decomposition.evaluation import (
     ipa_scores,
     on_free,
 )
+from shared.mapfiles import read_map_file
 
 MAPS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
 IPA = MAPS / "ipa_room_segmentation"
@@ -62,6 +68,7 @@ WHITE = ((0, 0, 0), (255, 255, 255))
 
 class Row(NamedTuple):
     k: float
+    k_fixed: float  # K(W,M) of the same world against the map read with fixed thresholds
     k_known: float
     recall: float
     precision: float
@@ -96,6 +103,11 @@ def _plan(occ: npt.NDArray[np.int8], iterations: int, start: World | None = None
     return plan, time.perf_counter() - t0, time.process_time() - c0
 
 
+def _k_fixed(plan: FloorPlan, occ: npt.NDArray[np.int8]) -> float:
+    """K(W,M) of the plan's world against another reading of the same map."""
+    return cell_prediction_rate(classify_map(occ), plan.classes_world)
+
+
 def _k_known(plan: FloorPlan) -> float:
     known = plan.classes_map != 1
     return float(np.mean(plan.classes_map[known] == plan.classes_world[known]))
@@ -109,6 +121,13 @@ def _lost(plan: FloorPlan) -> tuple[float, float, float]:
             float(np.mean((cm == 2) & (cw != 2))))
 
 
+def _result(plan: FloorPlan, fixed: npt.NDArray[np.int8], recall: float, precision: float, seconds: float,
+            cpu: float) -> Row:
+    """A row of figures; ``fixed`` is the map read with fixed thresholds (for K under that reading)."""
+    return Row(plan.k, _k_fixed(plan, fixed), _k_known(plan), recall, precision, seconds, cpu,
+               plan.iterations / max(seconds, 1e-9), plan.iterations / max(plan.cpu_seconds, 1e-9))
+
+
 def _common(*images: npt.NDArray[np.generic]) -> list[npt.NDArray[np.generic]]:
     h = min(i.shape[0] for i in images)
     w = min(i.shape[1] for i in images)
@@ -116,21 +135,21 @@ def _common(*images: npt.NDArray[np.generic]) -> list[npt.NDArray[np.generic]]:
 
 
 def _header() -> None:
-    print("\n| set | map | K(W,M) % | K known % | recall % | precision % | units | doors | it/s | it/CPU s | s "
-          "| CPU s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| set | map | K(W,M) % | K fixed reading % | K known % | recall % | precision % | units | doors | it/s "
+          "| it/CPU s | s | CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _row(tag: str, name: str, plan: FloorPlan, r: Row) -> None:
-    print(f"| {tag} | {name} | {100 * r.k:.1f} | {100 * r.k_known:.1f} | {100 * r.recall:.1f} | "
-          f"{100 * r.precision:.1f} | {len(plan.units)} | {len(plan.doors)} | {r.rate:.0f} | {r.cpu_rate:.0f} | "
-          f"{r.seconds:.1f} | {r.cpu:.1f} |")
+    print(f"| {tag} | {name} | {100 * r.k:.1f} | {100 * r.k_fixed:.1f} | {100 * r.k_known:.1f} | "
+          f"{100 * r.recall:.1f} | {100 * r.precision:.1f} | {len(plan.units)} | {len(plan.doors)} | {r.rate:.0f} | "
+          f"{r.cpu_rate:.0f} | {r.seconds:.1f} | {r.cpu:.1f} |")
 
 
 def _summary(tag: str, rows: list[Row]) -> None:
     if not rows:
         return
-    for field, unit in (("k", "%"), ("k_known", "%"), ("recall", "%"), ("precision", "%")):
+    for field, unit in (("k", "%"), ("k_fixed", "%"), ("k_known", "%"), ("recall", "%"), ("precision", "%")):
         values = [getattr(r, field) for r in rows]
         print(f"{tag}_{field}_mean {100 * statistics.fmean(values):.2f} {unit}")
         print(f"{tag}_{field}_min {100 * min(values):.2f} {unit}")
@@ -147,7 +166,8 @@ def _rose2(iterations: int, only: list[str] | None) -> None:
         if only and folder.name not in only:
             continue
         grey = _grey(folder / "map.png")
-        plan, seconds, cpu = _plan(rose2_occupancy(grey), iterations)
+        occ, _, _ = read_map(folder / "map.png", resolution_m=RES)
+        plan, seconds, cpu = _plan(occ, iterations)
         labels = np.ascontiguousarray(unit_labels(plan)[::-1])
         cut, gt, theirs, ours = _common(grey, _rgb(folder / "gt.png"), _rgb(folder / "rose2_rooms.png"), labels)
         free = np.asarray(cut) >= FREE_GREY
@@ -159,12 +179,12 @@ def _rose2(iterations: int, only: list[str] | None) -> None:
         free_lost, unknown_free, wall_lost = _lost(plan)
         print(f"| rose2_lost | {folder.name} | free not drawn free {100 * free_lost:.1f} % | unknown drawn free "
               f"{100 * unknown_free:.1f} % | occupied not drawn as wall {100 * wall_lost:.1f} % | not free inside the "
-              f"truth's rooms {100 * in_rooms:.1f} % | | | | | |")
-        r = Row(plan.k, _k_known(plan), s.recall, s.precision, seconds, cpu, plan.iterations / max(seconds, 1e-9),
-                plan.iterations / max(plan.cpu_seconds, 1e-9))
+              f"truth's rooms {100 * in_rooms:.1f} % | | | | | | |")
+        r = _result(plan, rose2_occupancy(grey), s.recall, s.precision, seconds, cpu)
         rows.append(r)
         _row("rose2", folder.name, plan, r)
-        print(f"| rose2_peer | {folder.name} | | | {100 * peer.recall:.1f} | {100 * peer.precision:.1f} | | | | | | |")
+        print(f"| rose2_peer | {folder.name} | | | | {100 * peer.recall:.1f} | {100 * peer.precision:.1f} "
+              "| | | | | | |")
     _summary("rose2", rows)
     if peers:
         print(f"rose2_peer_recall_mean {100 * statistics.fmean(p.recall for p in peers):.2f} %")
@@ -184,8 +204,8 @@ def _ipa(iterations: int, only: list[str] | None) -> None:
             continue
         plan, seconds, cpu = _plan(occ, iterations)
         s = ipa_scores(np.ascontiguousarray(unit_labels(plan)[::-1]), ground_truth_rooms(truth))
-        r = Row(plan.k, _k_known(plan), s.recall, s.precision, seconds, cpu, plan.iterations / max(seconds, 1e-9),
-                plan.iterations / max(plan.cpu_seconds, 1e-9))
+        fixed = read_map_file(IPA / f"{name}.png", resolution_m=RES).occupancy
+        r = _result(plan, fixed, s.recall, s.precision, seconds, cpu)
         rows.append(r)
         _row("ipa", name, plan, r)
     _summary("ipa", rows)
@@ -198,7 +218,7 @@ def _partial(iterations: int, warm_iterations: int) -> None:
     shares, updates = [], []
     for folder in steps:
         grey = _grey(folder / "map.png")
-        occ = rose2_occupancy(grey)
+        occ, _, _ = read_map(folder / "map.png", resolution_m=RES)
         free = grey >= FREE_GREY
         start, angle = None, None
         if previous is not None:
@@ -214,14 +234,13 @@ def _partial(iterations: int, warm_iterations: int) -> None:
             carried = carry(previous[0].world, old, new)
             start = World(carried.units, set(), carried.next_id)
         plan, seconds, cpu = _plan(occ, iterations if start is None else warm_iterations, start, angle)
-        r = Row(plan.k, _k_known(plan), float("nan"), float("nan"), seconds, cpu,
-                plan.iterations / max(seconds, 1e-9), plan.iterations / max(plan.cpu_seconds, 1e-9))
+        r = _result(plan, rose2_occupancy(grey), float("nan"), float("nan"), seconds, cpu)
         _row("partial", folder.name, plan, r)
         if start is not None:
             updates.append(cpu)
             kept = sum(1 for u in plan.units if u.id in start.units)
             shares.append(kept / max(len(start.units), 1))
-            print(f"| partial_ids | {folder.name} | kept {kept} of {len(start.units)} | | | | | | | | | |")
+            print(f"| partial_ids | {folder.name} | kept {kept} of {len(start.units)} | | | | | | | | | | |")
         previous = (plan, free)
     if shares:
         print(f"partial_ids_kept_mean {100 * statistics.fmean(shares):.2f} %")

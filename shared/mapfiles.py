@@ -16,6 +16,12 @@ import yaml
 from PIL import Image, UnidentifiedImageError
 
 FREE_PIXEL = 254
+MODE_SHARE = 0.01
+"""A grey value is a mode of a bare map image (drawn on purpose: its white, its unknown grey, walls filled grey)
+when at least this share of the pixels has it; speckle spreads over many values."""
+MODE_GAP = 8
+"""The spread of a mode: the unknown grey lies at least this far below the white, and greys this near the
+unknown grey are unknown too."""
 OCCUPIED_PIXEL = 0
 UNKNOWN_PIXEL = 205
 
@@ -164,16 +170,59 @@ __all__ = [
     "MapFileError",
     "MapImage",
     "read_map_yaml",
+    "unknown_greys",
     "write_map_yaml",
 ]
 
 
-def read_map_file(path: Path, *, resolution_m: float | None = None, free_darkness: bool = False) -> MapImage:
+def unknown_greys(grey: npt.NDArray[np.number[Any]]) -> npt.NDArray[np.bool_]:
+    """Which greys (a lookup table of 256) of a bare map image are unknown space although map_server's thresholds
+    would call them free: the image's own unknown grey and its spread, and the speckle not nearer white than it.
+
+    Map images mark unknown space with a grey of their own (ROS 205, others 153, 178, 230) and free space white.
+    A grey held by at least :data:`MODE_SHARE` of the pixels is drawn on purpose (unknown, free, walls or furniture
+    filled light grey); greys held by fewer are speckle, cells seen free only a few times. The white is the
+    lightest mode; the unknown grey the most common mode between map_server's occupied threshold (darkness 0.65)
+    and :data:`MODE_GAP` below the white. A grey within :data:`MODE_GAP` of a mode reads as the nearest mode
+    (its spread: antialiasing, noise): unknown for the unknown grey and the modes near it, map_server's reading for
+    the others (white, walls or furniture filled grey). Speckle further from every mode is unknown unless it is
+    nearer the white than the unknown grey. Without an unknown grey (a map drawn in black and white only) the
+    table is all False: map_server's reading stands.
+
+    >>> grey = np.r_[np.full(120, 255), np.full(60, 230), np.full(19, 0), [240]]
+    >>> unknown_greys(grey)[[215, 230, 240, 243, 255]].tolist()
+    [True, True, True, False, False]
+    """
+    values = np.clip(np.rint(np.asarray(grey, np.float64)), 0, 255).astype(np.int64).ravel()
+    share = np.bincount(values, minlength=256) / max(values.size, 1)
+    levels = np.arange(256)
+    modes = share >= MODE_SHARE
+    if not modes.any():
+        return np.zeros(256, bool)
+    white = int(levels[modes].max())
+    band = (levels > 255.0 * (1.0 - 0.65)) & (levels <= white - MODE_GAP) & modes
+    if not band.any():
+        return np.zeros(256, bool)
+    unknown = int(levels[band][np.argmax(share[band])])
+    # a mode is unknown when it lies within MODE_GAP of the unknown grey or map_server does not call it free
+    mode_levels = levels[modes]
+    mode_unknown = (np.abs(mode_levels - unknown) <= MODE_GAP) | (mode_levels <= 255.0 * (1.0 - 0.196))
+    gap = np.abs(levels[:, None] - mode_levels[None, :])
+    nearest = np.argmin(gap, axis=1)
+    near_mode = gap[levels, nearest] <= MODE_GAP
+    out: npt.NDArray[np.bool_] = np.where(near_mode, mode_unknown[nearest], levels - unknown < white - levels)
+    return out
+
+
+def read_map_file(path: Path, *, resolution_m: float | None = None, free_darkness: bool = False,
+                  free_from_modes: bool = False) -> MapImage:
     """A map_server YAML (:func:`read_map_yaml`) or a bare map image.
 
     A bare image is read with map_server's trinary thresholds (darkness above 0.65 occupied, below 0.196 free, the
     rest unknown) and needs ``resolution_m``; its origin is (0, 0). With ``free_darkness`` its free cells keep their
     darkness in percent (0..19, rounded down) instead of 0, so grey fringes at walls can be told from clear floor.
+    With ``free_from_modes`` a bare image's own unknown grey and the speckle nearer it than white are unknown
+    (:func:`unknown_greys`): maps drawn with a light unknown grey (230) and light-grey speckle read right.
     For a YAML, ``resolution_m`` (if given) must match the file's.
 
     Raises
@@ -203,5 +252,7 @@ def read_map_file(path: Path, *, resolution_m: float | None = None, free_darknes
     occupancy = np.full(grey.shape, -1, dtype=np.int8)
     occupancy[darkness > 0.65] = 100
     free = darkness < 0.196
+    if free_from_modes:
+        free &= ~unknown_greys(grey)[np.clip(np.rint(grey), 0, 255).astype(np.intp)]
     occupancy[free] = np.floor(darkness[free] * 100.0).astype(np.int8) if free_darkness else 0
     return MapImage(occupancy[::-1].copy(), float(resolution_m), 0.0, 0.0)

@@ -14,6 +14,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
+from skimage.morphology import skeletonize
 
 from services.floor_plan.errors import FloorPlanError
 from services.floor_plan.world import Rect, World
@@ -84,6 +85,21 @@ def solid_obstacles(classes_map: npt.NDArray[np.uint8], *, min_cells: int) -> np
     side = min_cells | 1  # an odd square: OpenCV's opening by an even one comes back shifted by a cell
     opened = cv2.morphologyEx(walls, cv2.MORPH_OPEN, np.ones((side, side), np.uint8))
     return opened.astype(bool)
+
+
+def wall_thickness_cells(classes_map: npt.NDArray[np.uint8], *, obstacles: npt.NDArray[np.bool_]) -> int:
+    """The map's typical wall thickness in cells (at least 1): its wall cells (occupied, not a solid obstacle)
+    over the length of their skeleton, i.e. the mean width of its walls; 2 for a map without such walls.
+
+    >>> grid = np.zeros((9, 12), np.uint8); grid[4, 1:11] = CellClass.WALL
+    >>> wall_thickness_cells(grid, obstacles=np.zeros(grid.shape, bool))
+    1
+    """
+    walls = (classes_map == CellClass.WALL) & ~obstacles
+    length = int(np.count_nonzero(skeletonize(walls)))  # type: ignore[no-untyped-call]  # skimage is untyped
+    if length == 0:
+        return 2
+    return max(1, round(int(np.count_nonzero(walls)) / length))
 
 
 def enclosed_blocks(obstacles: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:

@@ -25,13 +25,18 @@ def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.
     """Occupancy (GridLayer order: row 0 = lowest y), resolution and origin of a map_server YAML or bare image
     (:func:`shared.mapfiles.read_map_file`: a bare image needs ``resolution_m`` and has its origin at (0, 0)).
 
+    A YAML is read as map_server reads it (its thresholds, its mode). A bare image declares no unknown grey: it is
+    read with map_server's thresholds except that the image's own unknown grey and the speckle nearer it than white
+    are unknown (:func:`shared.mapfiles.unknown_greys`), so that a map drawing unknown space light grey (230) or
+    speckled with light grey inside rooms is not read as free there.
+
     Raises
     ------
     FloorPlanError
         Missing or unreadable files, malformed YAML, a bare image without a resolution.
     """
     try:
-        image = read_map_file(Path(map_path), resolution_m=resolution_m)
+        image = read_map_file(Path(map_path), resolution_m=resolution_m, free_from_modes=True)
     except MapFileError as err:
         raise FloorPlanError(str(err)) from err
     return image.occupancy, image.resolution_m, (image.origin_x_m, image.origin_y_m)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
 import cv2
@@ -34,6 +34,7 @@ from services.floor_plan.likelihood import (
     log_sensor_table,
     render,
     solid_obstacles,
+    wall_thickness_cells,
 )
 from services.floor_plan.world import Rect, UnitType, World, shared_band
 
@@ -42,7 +43,9 @@ from services.floor_plan.world import Rect, UnitType, World, shared_band
 class FloorPlanSettings:
     """Everything that tunes the floor plan; lengths in metres."""
 
-    wall_m: float = 0.1
+    wall_m: float | None = None
+    """Wall thickness of a unit; None: the map's own (:func:`~services.floor_plan.likelihood.wall_thickness_cells`,
+    1 cell for maps drawn with one-pixel walls, 4 for freiburg's 0.2 m walls)."""
     min_inner_m: float = 0.5
     min_door_m: float = 0.5
     min_line_m: float = 0.8
@@ -114,6 +117,8 @@ def _cells(metres: float, resolution_m: float) -> int:
 
 
 def kernel_settings(settings: FloorPlanSettings, resolution_m: float) -> KernelSettings:
+    if settings.wall_m is None:
+        raise FloorPlanError("kernel settings need a wall thickness: fit the map first (floor_plan)")
     return KernelSettings(
         wall_cells=_cells(settings.wall_m, resolution_m),
         min_inner_cells=_cells(settings.min_inner_m, resolution_m),
@@ -164,6 +169,9 @@ def floor_plan(
     if not math.isfinite(resolution_m) or resolution_m <= 0:
         raise FloorPlanError(f"resolution must be a positive number of metres, got {resolution_m}")
     classes_map = classify_map(occupancy, occupied_percent=s.occupied_percent, free_percent=s.free_percent)
+    solid = _obstacles(classes_map, s, resolution_m)
+    if s.wall_m is None:
+        s = replace(s, wall_m=wall_thickness_cells(classes_map, obstacles=solid) * resolution_m)
     if angle_rad is None:
         angle_rad = dominant_angle(classes_map, min_angle_rad=s.min_turn_rad)
     frame = make_frame(classes_map.shape, angle_rad=angle_rad, origin_xy_m=origin_xy_m, resolution_m=resolution_m)
@@ -173,7 +181,6 @@ def floor_plan(
     lines = wall_lines(classes, wall_cells=ks.wall_cells, min_length_cells=_cells(s.min_line_m, resolution_m))
     candidates = wbu_candidates(lines, evidence, wall_cells=ks.wall_cells, min_inner_cells=ks.min_inner_cells)
     proposer = Proposer(evidence, lines, ks, candidates)
-    solid = _obstacles(classes_map, s, resolution_m)
     canvas = Canvas(classes, log_sensor_table(s.sensor_model), wall_cells=ks.wall_cells,
                     log_overlap=math.log(s.overlap_psi),
                     obstacles=to_work(frame, solid.astype(np.uint8), fill=0).astype(bool),

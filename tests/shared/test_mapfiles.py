@@ -91,3 +91,47 @@ def test_reads_the_mac_floor_map() -> None:
     assert read.occupancy.shape == (1706, 903)
     assert read.resolution_m == pytest.approx(0.03)
     assert 10_000 < np.count_nonzero(read.occupancy == 100) < 30_000
+
+
+def test_a_bare_image_with_a_light_unknown_grey_reads_its_speckle_by_the_nearer_mode(tmp_path: Path) -> None:
+    from shared.mapfiles import read_map_file
+
+    grey = np.full((40, 60), 230, np.uint8)  # unknown drawn light grey, as some maps do
+    grey[5:35, 5:30] = 255  # a room seen free
+    grey[10:12, 10:20] = 236  # speckle nearer the unknown grey than white
+    grey[20:22, 10:20] = 248  # speckle nearer white
+    grey[5, 5:30] = 0  # a wall
+    Image.fromarray(grey).save(tmp_path / "map.png")
+    plain = read_map_file(tmp_path / "map.png", resolution_m=0.05).occupancy[::-1]
+    modes = read_map_file(tmp_path / "map.png", resolution_m=0.05, free_from_modes=True).occupancy[::-1]
+    assert plain[0, 0] == 0  # map_server's thresholds call 230 free
+    assert modes[0, 0] == -1 and modes[10, 15] == -1
+    assert modes[7, 7] == 0 and modes[20, 15] == 0
+    assert modes[5, 10] == 100
+
+
+def test_a_black_and_white_image_reads_as_map_server_reads_it(tmp_path: Path) -> None:
+    from shared.mapfiles import read_map_file, unknown_greys
+
+    grey = np.full((30, 30), 255, np.uint8)
+    grey[::7] = 0
+    grey[3, 3] = 220  # one light-grey pixel: no mode of its own
+    Image.fromarray(grey).save(tmp_path / "map.png")
+    plain = read_map_file(tmp_path / "map.png", resolution_m=0.05)
+    modes = read_map_file(tmp_path / "map.png", resolution_m=0.05, free_from_modes=True)
+    assert np.array_equal(plain.occupancy, modes.occupancy)
+    assert not unknown_greys(grey).any()
+
+
+def test_walls_filled_light_grey_keep_map_servers_reading(tmp_path: Path) -> None:
+    from shared.mapfiles import read_map_file
+
+    grey = np.full((40, 60), 180, np.uint8)  # unknown
+    grey[5:35, 5:55] = 255
+    grey[5:35, 29:31] = 211  # a wall drawn filled light grey: a mode of its own, not speckle
+    grey[5:35, 28] = 214  # its antialiased edge: the wall grey's spread, nearer the unknown grey than white
+    Image.fromarray(grey).save(tmp_path / "map.png")
+    plain = read_map_file(tmp_path / "map.png", resolution_m=0.05).occupancy[::-1]
+    modes = read_map_file(tmp_path / "map.png", resolution_m=0.05, free_from_modes=True).occupancy[::-1]
+    assert plain[10, 30] == modes[10, 30] == 0
+    assert plain[10, 28] == modes[10, 28] == 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -202,3 +203,30 @@ def test_robot_positions_seed_candidates_where_the_robot_passed() -> None:
     assert any(small_room(c.rect) for c in passed), "the room the robot passed gets its own candidate"
     plan = floor_plan(occ, resolution_m=RES, settings=_settings(1500), trajectory_xy_m=np.array([[6.0, 2.0]]))
     assert any(small_room(u.rect) for u in plan.units)
+
+
+def test_units_take_the_wall_thickness_the_map_is_drawn_with() -> None:
+    occ = np.full((80, 120), -1, np.int8)
+    for r0, r1, c0, c1 in ((10, 69, 10, 60), (10, 69, 60, 109)):  # walls one cell thick, one shared
+        occ[r0 : r1 + 1, c0 : c1 + 1] = 100
+        occ[r0 + 1 : r1, c0 + 1 : c1] = 0
+    occ[35:48, 60] = 0  # the door
+    thin = floor_plan(occ, resolution_m=RES, settings=_settings())
+    thick = floor_plan(occ, resolution_m=RES, settings=replace(_settings(), wall_m=0.1))
+    assert len(thin.units) == 2
+    drawn = thin.classes_world == CellClass.WALL
+    # every wall the world draws is a wall of the map, and it predicts more cells than two-cell walls do
+    assert np.all(thin.classes_map[drawn] == CellClass.WALL)
+    assert thin.k > thick.k
+
+
+def test_floor_plan_reads_a_bare_image_with_its_own_unknown_grey(tmp_path: Path) -> None:
+    from PIL import Image
+
+    grey = np.full((80, 120), 230, np.uint8)  # unknown drawn light grey (map_server's thresholds call it free)
+    occ = _two_rooms()[::-1]
+    grey[occ == 0] = 255
+    grey[occ == 100] = 0
+    Image.fromarray(grey).save(tmp_path / "map.png")
+    read, _, _ = read_map(tmp_path / "map.png", resolution_m=RES)
+    assert np.array_equal(read, _two_rooms())
