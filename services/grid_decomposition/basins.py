@@ -128,9 +128,10 @@ def _solidity(seg: npt.NDArray[np.int32], boxes: list[tuple[slice, slice] | None
     r0, r1 = min(box_a[0].start, box_b[0].start), max(box_a[0].stop, box_b[0].stop)
     c0, c1 = min(box_a[1].start, box_b[1].start), max(box_a[1].stop, box_b[1].stop)
     crop = seg[r0:r1, c0:c1]
-    union = ndimage.binary_fill_holes((crop == a) | (crop == b))
-    points = cv2.findNonZero(union.astype(np.uint8))
-    hull = cv2.convexHull(points)
+    union = ((crop == a) | (crop == b)).astype(np.uint8)
+    outlines, _ = cv2.findContours(union, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    filled = cv2.drawContours(np.zeros_like(union), outlines, -1, 1, thickness=cv2.FILLED)  # holes filled
+    hull = cv2.convexHull(np.concatenate(outlines))  # the outlines' hull is the pixels' hull
     # pixel centres span the hull: half a pixel all round is still the union's area
     hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
-    return float(np.count_nonzero(union) / hull_area)
+    return float(np.count_nonzero(filled) / hull_area)
