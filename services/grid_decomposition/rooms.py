@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.basins import join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.segments import (
@@ -135,6 +136,9 @@ def segment_rooms(
     room_min_area_m2: float = 1.5,
     room_min_half_width_m: float = 0.4,
     neck_half_width_m: float = 0.0,
+    join_saddle_ratio: float = 0.8,
+    join_solidity: float = 0.8,
+    island_max_extent_m: float = 3.0,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
     """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
 
@@ -149,6 +153,10 @@ def segment_rooms(
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`).
+    5. Pieces of one furnished room join (:func:`join_room_pieces`, when ``join_saddle_ratio`` > 0):
+       no neck between them on the clearance map (furniture and obstacle islands at most
+       ``island_max_extent_m`` across count as floor), a union about as convex as a room
+       (``join_solidity``), furniture near their border.
 
     Parameters
     ----------
@@ -193,7 +201,32 @@ def segment_rooms(
         fixed=_share(seg, floor) > 0.5,
         absorb=widest * resolution_m < room_min_half_width_m,
     )
+    if join_saddle_ratio > 0:
+        standing = clutter | islands(rooms == 0, max_extent_px=island_max_extent_m / resolution_m)
+        rooms = join_room_pieces(
+            rooms,
+            standing,
+            resolution_m=resolution_m,
+            fixed=_share(rooms, floor) > 0.5,
+            min_saddle_ratio=join_saddle_ratio,
+            min_solidity=join_solidity,
+        )
     return rooms, cut
+
+
+def islands(blocked: npt.NDArray[np.bool_], *, max_extent_px: float) -> npt.NDArray[np.bool_]:
+    """Parts of ``blocked`` standing free: 8-connected, off the map border, at most ``max_extent_px`` across.
+
+    Chairs, tables and clutter the furniture rule left as obstacles (a cluster of chairs, a large
+    table); walls reach farther or touch the map border (the unknown outside).
+    """
+    _n, parts, stats, _ = cv2.connectedComponentsWithStats(blocked.astype(np.uint8), connectivity=8)
+    h, w = blocked.shape
+    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
+    keep = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (np.maximum(bw, bh) <= max_extent_px)
+    keep[0] = False
+    return np.asarray(keep[parts], dtype=bool)
 
 
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:

@@ -1,0 +1,57 @@
+"""Pieces of one furnished room join; rooms behind a doorway, cubicles off a corridor and floors stay apart."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.grid_decomposition.basins import join_room_pieces
+
+RES = 0.05
+
+
+def _room_cut_in_two() -> tuple[np.ndarray, np.ndarray]:
+    """A 6 x 4 m room cut at x = 3 m along a gap between two desks (furniture on the cut)."""
+    seg = np.zeros((100, 140), dtype=np.int32)
+    seg[10:90, 10:70] = 1
+    seg[10:90, 70:130] = 2
+    desks = np.zeros(seg.shape, dtype=bool)
+    desks[20:36, 60:68] = desks[64:80, 72:80] = True
+    seg[desks] = 0
+    return seg, desks
+
+
+def test_two_pieces_of_a_furnished_room_join() -> None:
+    seg, desks = _room_cut_in_two()
+    out = join_room_pieces(seg, desks, resolution_m=RES)
+    assert out[50, 30] == out[50, 110] > 0
+    assert np.array_equal(out > 0, seg > 0)
+
+
+def test_rooms_behind_a_doorway_stay_apart() -> None:
+    seg, desks = _room_cut_in_two()
+    seg[10:90, 68:72] = 0  # a wall between the two halves
+    seg[46:54, 68:72] = 1  # with a 0.4 m wide doorway in it
+    out = join_room_pieces(seg, desks, resolution_m=RES)
+    assert out[50, 30] != out[50, 110]
+
+
+def test_a_room_opening_onto_a_corridor_stays_apart() -> None:
+    """A furnished 3 x 3 m office open over its whole width onto the side of a 2 m x 12 m corridor: an L, not a room."""
+    seg = np.zeros((120, 260), dtype=np.int32)
+    seg[10:50, 10:250] = 1  # corridor
+    seg[50:110, 10:70] = 2  # office below its left end
+    desks = np.zeros(seg.shape, dtype=bool)
+    desks[56:70, 20:40] = True
+    seg[desks] = 0
+    out = join_room_pieces(seg, desks, resolution_m=RES)
+    assert out[30, 200] != out[90, 40]
+
+
+def test_bare_pieces_and_fixed_floors_are_not_joined() -> None:
+    seg, desks = _room_cut_in_two()
+    bare = np.where(seg > 0, seg, np.where(desks, 1, 0)).astype(np.int32)
+    out = join_room_pieces(bare, np.zeros(seg.shape, dtype=bool), resolution_m=RES)
+    assert out[50, 30] != out[50, 110]  # no furniture near the border: not cut by furniture
+    fixed = np.array([False, True, False])
+    out = join_room_pieces(seg, desks, resolution_m=RES, fixed=fixed)
+    assert out[50, 30] != out[50, 110]
