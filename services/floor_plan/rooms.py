@@ -17,11 +17,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from skimage.segmentation import watershed
 
 from services.floor_plan.likelihood import CellClass
 from services.floor_plan.world import Rect, UnitType, World
@@ -31,10 +31,8 @@ from services.floor_plan.world import Rect, UnitType, World
 class RoomSettings:
     """When two units are one room; lengths in metres, shares in [0, 1]."""
 
-    min_open_share: float = 0.6
-    """A boundary open over at least this share of its length is no door: the two units are one room."""
-    corridor_open_share: float = 0.6
-    """The same for two corridor units (a corridor joined to a corridor is one corridor)."""
+    min_open_share: float = 0.8
+    """A boundary open over at least this share of the shorter side is no door: the two parts are one room."""
     min_depth_share: float = 0.5
     """... and free space runs on from its open part into both units over at least this share of their depth."""
     min_free_share: float = 0.9
@@ -45,7 +43,7 @@ class RoomSettings:
     min_contact_m: float = 0.5
     """Units border each other only where their free spaces face each other over at least this length."""
     margin_m: float = 0.1
-    cut_share: float = 0.5
+    cut_share: float = 0.3
     """A line of cells across a unit of which at least this share is not free is a wall the unit stands over:
     the room level cuts the unit there."""
     min_part_m: float = 0.5
@@ -99,7 +97,7 @@ def unit_parts(
     """
     blocked = classes != CellClass.FREE
     least = max(1, round(settings.min_part_m / resolution_m))
-    out = []
+    out: list[Part] = []
     for uid, rect in sorted(world.units.items()):
         inner = rect.inner(wall_cells)
         if inner.r0 > inner.r1 or inner.c0 > inner.c1:
@@ -116,7 +114,7 @@ def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, share: float, *
     n = line.size
     line[:least] = line[n - least :] = False  # a wall a little inside the unit's own is no cut
     edges = np.flatnonzero(np.diff(np.r_[False, line, False].astype(np.int8)))
-    lo, out = 0, []
+    lo, out = 0, list[tuple[int, int]]()
     for s, e in zip(edges[::2], edges[1::2], strict=True):
         if s - lo >= least:
             out.append((lo, int(s) - 1))
@@ -187,7 +185,8 @@ def boundaries(parts: list[Part], classes: npt.NDArray[np.uint8], *, resolution_
 def _free_run(walls: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
     """Per column, how many cells from row 0 down come before the first wall (all of them when none)."""
     hit = walls.any(axis=0)
-    return np.where(hit, walls.argmax(axis=0), walls.shape[0]).astype(np.int64)
+    runs: npt.NDArray[np.int64] = np.where(hit, walls.argmax(axis=0), walls.shape[0]).astype(np.int64)
+    return runs
 
 
 def group_rooms(
@@ -217,11 +216,8 @@ def group_rooms(
         return []
     joined = []
     for b in boundaries(parts, classes, resolution_m=resolution_m, settings=settings):
-        p, q = b.units
-        corridors = types.get(parts[p].unit) is UnitType.CORRIDOR and types.get(parts[q].unit) is UnitType.CORRIDOR
-        if (b.open_share >= (settings.corridor_open_share if corridors else settings.min_open_share)
-                and b.depth_share >= settings.min_depth_share):
-            joined.append((p, q))
+        if b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share:
+            joined.append(b.units)
     edges = np.array(joined, np.int64).reshape(-1, 2)
     n = len(parts)
     _, component = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
@@ -229,14 +225,26 @@ def group_rooms(
     rooms = []
     for k in np.unique(component):
         members = [parts[i] for i in np.flatnonzero(component == k)]
-        area = [p.rect.rows * p.rect.cols * resolution_m**2 for p in members]
+        area = [m.rect.rows * m.rect.cols * resolution_m**2 for m in members]
         by_type: dict[UnitType, float] = {}
-        for p, a in zip(members, area, strict=True):
-            by_type[types[p.unit]] = by_type.get(types[p.unit], 0.0) + a
+        for m, a in zip(members, area, strict=True):
+            by_type[types[m.unit]] = by_type.get(types[m.unit], 0.0) + a
         room_type = max(by_type, key=lambda t: by_type[t])
-        rooms.append(Room(tuple(sorted({p.unit for p in members})), tuple(p.rect for p in members), room_type,
+        rooms.append(Room(tuple(sorted({m.unit for m in members})), tuple(m.rect for m in members), room_type,
                           sum(area)))
     return sorted(rooms)
+
+
+def room_keys(rooms: list[Room]) -> list[str]:
+    """A key per room: ``r<first unit id>``, and ``r<id>.<n>`` for the n-th further room starting at the same unit
+    (a unit cut into parts of several rooms). It stays while the room's first unit keeps its id."""
+    seen: dict[int, int] = {}
+    keys = []
+    for room in rooms:
+        n = seen.get(room.units[0], 0)
+        seen[room.units[0]] = n + 1
+        keys.append(f"r{room.units[0]}" + (f".{n}" if n else ""))
+    return keys
 
 
 def fill_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
@@ -254,8 +262,17 @@ def fill_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_]) -> n
     (H, W) int32
         Ids on every free cell that free space links to a labelled cell, 0 elsewhere (and off free cells).
     """
-    lab = np.where(free, labels, 0).astype(np.int32)
-    if not lab.any():
-        return lab
-    grown = watershed(np.zeros(lab.shape, np.uint8), markers=lab, mask=free, connectivity=2)
-    return np.asarray(grown, np.int32)
+    out = np.where(free, labels, 0).astype(np.int32)
+    hole = free & (out == 0)
+    square = np.ones((3, 3), np.uint8)
+    while True:  # one ring of cells a round, within the box of the cells still to fill
+        rows, cols = np.flatnonzero(hole.any(axis=1)), np.flatnonzero(hole.any(axis=0))
+        if rows.size == 0:
+            return out
+        box = (slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2), slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2))
+        grown = cv2.dilate(out[box].astype(np.float32), square)  # ids below 2**24 are exact in float32
+        take = hole[box] & (grown > 0)
+        if not take.any():
+            return out  # free cells free space links to no label
+        out[box][take] = grown[take].astype(np.int32)
+        hole[box] &= ~take
