@@ -31,23 +31,26 @@ from services.floor_plan.world import Rect, UnitType, World
 class RoomSettings:
     """When two units are one room; lengths in metres, shares in [0, 1]."""
 
-    min_open_share: float = 0.8
+    min_open_share: float = 0.7
     """A boundary open over at least this share of the shorter side is no door: the two parts are one room."""
     min_depth_share: float = 0.5
     """... and free space runs on from its open part into both units over at least this share of their depth."""
-    min_free_share: float = 0.9
-    """A line across the boundary is open when it crosses no wall cell and at least this share of free cells
-    (unknown space between two units, as some maps draw their walls, is no opening)."""
+    barrier_m: float = 0.3
+    """Cells that are not free stop the way between two units (and cut a unit) where they run on in a line
+    at least this long, along rows or columns: a wall, drawn occupied or (as some maps draw them) unknown; not
+    the unknown speckle and clutter dots of a real map's free space."""
     max_gap_m: float = 0.3
     """Units whose free spaces are at most this far apart border each other (a shared wall is 0.1 m)."""
     min_contact_m: float = 0.5
     """Units border each other only where their free spaces face each other over at least this length."""
     margin_m: float = 0.1
-    cut_share: float = 0.3
+    cut_share: float = 0.2
     """A line of cells across a unit of which at least this share is not free is a wall the unit stands over:
     the room level cuts the unit there."""
     min_part_m: float = 0.5
     """No part thinner than this is cut off a unit."""
+    max_wall_m: float = 0.5
+    """A band of lines across a unit thicker than this is no wall (furniture, unexplored space): no cut."""
     """A boundary is looked at this far into both units too (a map wall a cell off the unit's wall)."""
 
 
@@ -83,32 +86,58 @@ class Room(NamedTuple):
     area_m2: float
 
 
-def unit_parts(
-    world: World, classes: npt.NDArray[np.uint8], *, wall_cells: int, resolution_m: float, settings: RoomSettings,
-) -> list[Part]:
-    """Each unit's free space cut along the lines of cells across it that are mostly not free (a wall the unit
-    stands over: two rooms with a door between them that the world explains as one unit); pieces thinner than
-    ``min_part_m`` are not cut off. Rows first, then columns within each piece.
+class Barriers(NamedTuple):
+    """The cells that are not free and lie on a straight run of such cells, along rows and along columns."""
+
+    along_rows: npt.NDArray[np.bool_]
+    along_cols: npt.NDArray[np.bool_]
+
+
+def barriers(cells: npt.NDArray[np.bool_], *, run_cells: int) -> Barriers:
+    """The ``cells`` that lie on a straight run of them at least ``run_cells`` long.
 
     Parameters
     ----------
-    classes : (H, W) uint8
-        C_M (:class:`CellClass`) in the world's frame.
+    cells : (H, W) bool
+        E.g. the cells of C_M that are not free.
     """
-    blocked = classes != CellClass.FREE
+    blocked = np.asarray(cells, np.uint8)
+    k = max(1, run_cells)
+    along_rows = cv2.morphologyEx(blocked, cv2.MORPH_OPEN, np.ones((1, k), np.uint8)) > 0
+    along_cols = cv2.morphologyEx(blocked, cv2.MORPH_OPEN, np.ones((k, 1), np.uint8)) > 0
+    return Barriers(along_rows, along_cols)
+
+
+def unit_parts(
+    world: World, barrier: Barriers, *, wall_cells: int, resolution_m: float, settings: RoomSettings,
+) -> list[Part]:
+    """Each unit's free space cut along the lines of cells across it that are mostly barrier running along the
+    line (a wall the unit stands over: two rooms with a door between them that the world explains as one
+    unit). A band of such lines thicker than ``max_wall_m`` is no wall but furniture or unexplored space, and
+    pieces thinner than ``min_part_m`` are not cut off. Rows first, then columns within each piece.
+
+    Parameters
+    ----------
+    barrier : Barriers
+        :func:`barriers` of C_M in the world's frame.
+    """
     least = max(1, round(settings.min_part_m / resolution_m))
+    most = max(1, round(settings.max_wall_m / resolution_m))
     out: list[Part] = []
     for uid, rect in sorted(world.units.items()):
         inner = rect.inner(wall_cells)
         if inner.r0 > inner.r1 or inner.c0 > inner.c1:
             continue
-        for piece in _cut(blocked, inner, least, settings.cut_share, rows=True):
-            out.extend(Part(uid, p) for p in _cut(blocked, piece, least, settings.cut_share, rows=False))
+        for piece in _cut(barrier.along_rows, inner, least, most, settings.cut_share, rows=True):
+            out.extend(Part(uid, p) for p in _cut(barrier.along_cols, piece, least, most, settings.cut_share,
+                                                  rows=False))
     return out
 
 
-def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, share: float, *, rows: bool) -> list[Rect]:
-    """``rect`` cut at its rows (or columns) whose share of blocked cells reaches ``share``."""
+def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, most: int, share: float, *,
+         rows: bool) -> list[Rect]:
+    """``rect`` cut at its bands of at most ``most`` rows (or columns) whose share of blocked cells reaches
+    ``share``, leaving no piece under ``least``."""
     crop = blocked[rect.r0 : rect.r1 + 1, rect.c0 : rect.c1 + 1]
     line = crop.mean(axis=1 if rows else 0) >= share
     n = line.size
@@ -116,7 +145,7 @@ def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, share: float, *
     edges = np.flatnonzero(np.diff(np.r_[False, line, False].astype(np.int8)))
     lo, out = 0, list[tuple[int, int]]()
     for s, e in zip(edges[::2], edges[1::2], strict=True):
-        if s - lo >= least:
+        if s - lo >= least and e - s <= most:
             out.append((lo, int(s) - 1))
             lo = int(e)
     out.append((lo, n - 1))
@@ -125,7 +154,7 @@ def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, share: float, *
             for a, b in out]
 
 
-def boundaries(parts: list[Part], classes: npt.NDArray[np.uint8], *, resolution_m: float,
+def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
                settings: RoomSettings) -> list[Boundary]:
     """Every pair of parts whose free spaces face each other, with how open the map is between them.
 
@@ -133,8 +162,8 @@ def boundaries(parts: list[Part], classes: npt.NDArray[np.uint8], *, resolution_
     ----------
     parts : list of Part
         From :func:`unit_parts`.
-    classes : (H, W) uint8
-        C_M (:class:`CellClass`) in the world's frame.
+    barrier : Barriers
+        :func:`barriers` of C_M in the world's frame.
 
     Returns
     -------
@@ -155,8 +184,6 @@ def boundaries(parts: list[Part], classes: npt.NDArray[np.uint8], *, resolution_
     beside = (col_gap >= 0) & (col_gap <= gap) & (-row_gap - 1 >= contact)
     overlap = (row_gap < 0) & (col_gap < 0)
     pairs = np.argwhere(np.triu(stacked | beside | overlap, k=1))
-    wall = classes == CellClass.WALL
-    free = classes == CellClass.FREE
     out = []
     for i, j in pairs:
         a, b = Rect(*inner[i]), Rect(*inner[j])
@@ -165,13 +192,14 @@ def boundaries(parts: list[Part], classes: npt.NDArray[np.uint8], *, resolution_
             out.append(Boundary((int(i), int(j)), length * resolution_m, 1.0, 1.0))
             continue
         vertical = bool(stacked[i, j])  # the cross lines run along rows
-        w, f = (wall, free) if vertical else (wall.T, free.T)  # beside in the map is stacked in the transpose
+        # walls between stacked parts run along rows; beside in the map is stacked in the transpose
+        w = barrier.along_rows if vertical else barrier.along_cols.T
         if not vertical:
             a, b = Rect(a.c0, a.c1, a.r0, a.r1), Rect(b.c0, b.c1, b.r0, b.r1)
         top, bottom = (a, b) if a.r1 < b.r0 else (b, a)
         cols = slice(max(a.c0, b.c0), min(a.c1, b.c1) + 1)
         rows = slice(max(top.r1 + 1 - margin, top.r0), min(bottom.r0 - 1 + margin, bottom.r1) + 1)
-        open_ = ~w[rows, cols].any(axis=0) & (f[rows, cols].mean(axis=0) >= settings.min_free_share)
+        open_ = ~w[rows, cols].any(axis=0)
         depth = 0.0
         if open_.any():
             up = _free_run(w[top.r0 : top.r1 + 1, cols][::-1, open_])
@@ -211,11 +239,12 @@ def group_rooms(
     list of Room
         Sorted by their units; every part of every unit is in exactly one room.
     """
-    parts = unit_parts(world, classes, wall_cells=wall_cells, resolution_m=resolution_m, settings=settings)
+    blocked = barriers(classes != CellClass.FREE, run_cells=round(settings.barrier_m / resolution_m))
+    parts = unit_parts(world, blocked, wall_cells=wall_cells, resolution_m=resolution_m, settings=settings)
     if not parts:
         return []
     joined = []
-    for b in boundaries(parts, classes, resolution_m=resolution_m, settings=settings):
+    for b in boundaries(parts, blocked, resolution_m=resolution_m, settings=settings):
         if b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share:
             joined.append(b.units)
     edges = np.array(joined, np.int64).reshape(-1, 2)
