@@ -49,7 +49,7 @@ class RoomSettings:
     the room level cuts the unit there."""
     min_part_m: float = 0.5
     """No part thinner than this is cut off a unit."""
-    max_wall_m: float = 0.5
+    max_wall_m: float = 1.0
     """A band of lines across a unit thicker than this is no wall (furniture, unexplored space): no cut."""
     """A boundary is looked at this far into both units too (a map wall a cell off the unit's wall)."""
 
