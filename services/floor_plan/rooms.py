@@ -2,13 +2,17 @@
 
 A room (seed 003's sense, and the ipa ground truth's) is a connected set of space units linked by open
 boundaries: no wall and no door between them. A unit is a rectangle, so an L-shaped room, a corridor with
-bends or a hall with alcoves is several units. Two units border each other where their free spaces face
-each other across at most ``max_gap_m`` (their shared wall, or a sliver the world leaves unexplained) over
-at least ``min_contact_m``; the boundary is **open** where the map shows no wall across it, position by
-position along it. A door is a short opening in a wall, so a boundary whose open share reaches
-``min_open_share`` is no door but the same room; two corridor units meeting (the context knowledge: a
-corridor joined to a corridor is one corridor) need only ``corridor_open_share``. Rooms are the connected
-components of the open boundaries.
+bends or a hall with alcoves is several units. And a unit may stand over a wall: two rooms with a door
+between them that the world explains as one rectangle. So the room level works on **parts**: each unit's
+free space cut along the lines across it that are mostly wall (:func:`unit_parts`). Two parts border each
+other where their free spaces face each other across at most ``max_gap_m`` (a shared wall, a cut, a sliver
+the world leaves unexplained) over at least ``min_contact_m``; the boundary is **open** where no barrier of
+the map lies across it, position by position (:func:`boundaries`). A door is a short opening in a wall, so
+parts whose boundary is open over ``min_open_share`` of the shorter side, and from whose open part free
+space runs on into both (``min_depth_share``), are one room. Rooms are the connected components of the open
+boundaries (:func:`group_rooms`). Barriers are cells that are not free lying on a straight run along the
+wall's direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or unknown, not the
+unknown speckle, laser streaks and clutter dots of a real map's free space.
 """
 
 from __future__ import annotations
