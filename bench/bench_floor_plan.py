@@ -8,12 +8,15 @@ CPU time (``time.process_time``) with the load average, since the machine may be
   speckle nearer it than white are unknown, :func:`shared.mapfiles.unknown_greys`): K(W,M) (eq. 3.39, every cell of
   the map), K of the same world under the earlier fixed reading (free = grey >= 250, occupied <= 89, the rest
   unknown), K over known cells, and
-  ``units.png`` scored as ``bench/eval_ipa.py`` scores segmentations of these maps (free pixels only,
-  each ground-truth colour one room), beside ROSE\u00b2's own ``rose2_rooms.png``; and where K is lost (shares of
+  ``units.png`` and ``rooms.png`` scored as ``bench/eval_ipa.py`` scores segmentations of these maps (free pixels
+  only, each ground-truth colour one room), beside ROSE\u00b2's own ``rose2_rooms.png``; and where K is lost (shares of
   all cells): free cells not drawn free, unknown cells drawn free, occupied cells not drawn as wall, and the
   cells inside the ground truth's rooms that are not free in the map (no room-shaped unit draws them right).
-* ``ipa``: the plain ipa maps read as ``aisle floor-plan MAP.png --resolution 0.05`` reads them; K(W,M), K of
-  the same world under map_server's fixed trinary reading, and the ipa scores (every labelled pixel counts).
+* ``ipa``: the ipa maps (plain, and the variants ``--variants`` names, e.g. ``_furnitures``) read as
+  ``aisle floor-plan MAP.png --resolution 0.05`` reads them; K(W,M), K of the same world under map_server's fixed
+  trinary reading, and the ipa scores (every labelled pixel
+  counts) of units and rooms, with the means over the two halves: the room level (``RoomSettings``) was tuned on
+  the maps at even places in name order (``tuning``), the others are held out (``held_out``).
 * ``partial``: the 15 growing ubremen maps in order, each warm-started from the previous world; the share
   of units of map k that keep their id in map k+1 (same rectangle after the map's shift, or the unit
   with the most overlap), and the seconds of each warm update.
@@ -45,6 +48,7 @@ from services.floor_plan import (
     classify_map,
     floor_plan,
     make_frame,
+    room_labels,
     unit_labels,
 )
 from services.floor_plan.mapfile import read_map
@@ -70,8 +74,10 @@ class Row(NamedTuple):
     k: float
     k_fixed: float  # K(W,M) of the same world against the map read with fixed thresholds
     k_known: float
-    recall: float
+    recall: float  # units
     precision: float
+    room_recall: float
+    room_precision: float
     seconds: float
     cpu: float
     rate: float  # iterations per wall second
@@ -121,10 +127,11 @@ def _lost(plan: FloorPlan) -> tuple[float, float, float]:
             float(np.mean((cm == 2) & (cw != 2))))
 
 
-def _result(plan: FloorPlan, fixed: npt.NDArray[np.int8], recall: float, precision: float, seconds: float,
-            cpu: float) -> Row:
-    """A row of figures; ``fixed`` is the map read with fixed thresholds (for K under that reading)."""
-    return Row(plan.k, _k_fixed(plan, fixed), _k_known(plan), recall, precision, seconds, cpu,
+def _result(plan: FloorPlan, fixed: npt.NDArray[np.int8], units: tuple[float, float], rooms: tuple[float, float],
+            seconds: float, cpu: float) -> Row:
+    """A row of figures: ``fixed`` is the map read with fixed thresholds (for K under that reading), ``units`` and
+    ``rooms`` the (recall, precision) of units.png and rooms.png."""
+    return Row(plan.k, _k_fixed(plan, fixed), _k_known(plan), *units, *rooms, seconds, cpu,
                plan.iterations / max(seconds, 1e-9), plan.iterations / max(plan.cpu_seconds, 1e-9))
 
 
@@ -135,21 +142,24 @@ def _common(*images: npt.NDArray[np.generic]) -> list[npt.NDArray[np.generic]]:
 
 
 def _header() -> None:
-    print("\n| set | map | K(W,M) % | K fixed reading % | K known % | recall % | precision % | units | doors | it/s "
-          "| it/CPU s | s | CPU s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| set | map | K(W,M) % | K fixed reading % | K known % | units recall % | units precision % "
+          "| rooms recall % | rooms precision % | units | rooms | doors | it/s | it/CPU s | s | CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _row(tag: str, name: str, plan: FloorPlan, r: Row) -> None:
     print(f"| {tag} | {name} | {100 * r.k:.1f} | {100 * r.k_fixed:.1f} | {100 * r.k_known:.1f} | "
-          f"{100 * r.recall:.1f} | {100 * r.precision:.1f} | {len(plan.units)} | {len(plan.doors)} | {r.rate:.0f} | "
-          f"{r.cpu_rate:.0f} | {r.seconds:.1f} | {r.cpu:.1f} |")
+          f"{100 * r.recall:.1f} | {100 * r.precision:.1f} | {100 * r.room_recall:.1f} | "
+          f"{100 * r.room_precision:.1f} | "
+          f"{len(plan.units)} | {len(plan.rooms)} | {len(plan.doors)} | {r.rate:.0f} | {r.cpu_rate:.0f} | "
+          f"{r.seconds:.1f} | {r.cpu:.1f} |")
 
 
 def _summary(tag: str, rows: list[Row]) -> None:
     if not rows:
         return
-    for field, unit in (("k", "%"), ("k_fixed", "%"), ("k_known", "%"), ("recall", "%"), ("precision", "%")):
+    for field, unit in (("k", "%"), ("k_fixed", "%"), ("k_known", "%"), ("recall", "%"), ("precision", "%"),
+                        ("room_recall", "%"), ("room_precision", "%")):
         values = [getattr(r, field) for r in rows]
         print(f"{tag}_{field}_mean {100 * statistics.fmean(values):.2f} {unit}")
         print(f"{tag}_{field}_min {100 * min(values):.2f} {unit}")
@@ -168,11 +178,13 @@ def _rose2(iterations: int, only: list[str] | None) -> None:
         grey = _grey(folder / "map.png")
         occ, _, _ = read_map(folder / "map.png", resolution_m=RES)
         plan, seconds, cpu = _plan(occ, iterations)
-        labels = np.ascontiguousarray(unit_labels(plan)[::-1])
-        cut, gt, theirs, ours = _common(grey, _rgb(folder / "gt.png"), _rgb(folder / "rose2_rooms.png"), labels)
+        units = np.ascontiguousarray(unit_labels(plan)[::-1])
+        cut, gt, theirs, ours, ours_rooms = _common(grey, _rgb(folder / "gt.png"), _rgb(folder / "rose2_rooms.png"),
+                                                    units, np.ascontiguousarray(room_labels(plan)[::-1]))
         free = np.asarray(cut) >= FREE_GREY
         rooms = on_free(colour_rooms(np.asarray(gt)), free)
         s = ipa_scores(on_free(np.asarray(ours), free), rooms)
+        sr = ipa_scores(on_free(np.asarray(ours_rooms), free), rooms)
         peer = ipa_scores(on_free(colour_rooms(np.asarray(theirs), background=WHITE), free), rooms)
         peers.append(peer)
         in_rooms = np.count_nonzero((colour_rooms(np.asarray(gt)) > 0) & ~free) / grey.size
@@ -180,35 +192,44 @@ def _rose2(iterations: int, only: list[str] | None) -> None:
         print(f"| rose2_lost | {folder.name} | free not drawn free {100 * free_lost:.1f} % | unknown drawn free "
               f"{100 * unknown_free:.1f} % | occupied not drawn as wall {100 * wall_lost:.1f} % | not free inside the "
               f"truth's rooms {100 * in_rooms:.1f} % | | | | | | |")
-        r = _result(plan, rose2_occupancy(grey), s.recall, s.precision, seconds, cpu)
+        r = _result(plan, rose2_occupancy(grey), (s.recall, s.precision), (sr.recall, sr.precision), seconds, cpu)
         rows.append(r)
         _row("rose2", folder.name, plan, r)
-        print(f"| rose2_peer | {folder.name} | | | | {100 * peer.recall:.1f} | {100 * peer.precision:.1f} "
-              "| | | | | | |")
+        print(f"| rose2_peer | {folder.name} | | | | | | {100 * peer.recall:.1f} | {100 * peer.precision:.1f} "
+              "| | | | | | | |")
     _summary("rose2", rows)
     if peers:
         print(f"rose2_peer_recall_mean {100 * statistics.fmean(p.recall for p in peers):.2f} %")
         print(f"rose2_peer_precision_mean {100 * statistics.fmean(p.precision for p in peers):.2f} %")
 
 
-def _ipa(iterations: int, only: list[str] | None) -> None:
+def _ipa(iterations: int, only: list[str] | None, variants: list[str]) -> None:
     names = sorted(p.name[: -len("_gt_segmentation.png")] for p in IPA.glob("*_gt_segmentation.png"))
+    tuning = set(names[0::2])
     _header()
-    rows: list[Row] = []
-    for name in names:
-        if only and name not in only:
-            continue
-        truth = _grey(IPA / f"{name}_gt_segmentation.png")
-        occ, _, _ = read_map(IPA / f"{name}.png", resolution_m=RES)
-        if occ.shape != truth.shape:
-            continue
-        plan, seconds, cpu = _plan(occ, iterations)
-        s = ipa_scores(np.ascontiguousarray(unit_labels(plan)[::-1]), ground_truth_rooms(truth))
-        fixed = read_map_file(IPA / f"{name}.png", resolution_m=RES).occupancy
-        r = _result(plan, fixed, s.recall, s.precision, seconds, cpu)
-        rows.append(r)
-        _row("ipa", name, plan, r)
-    _summary("ipa", rows)
+    for variant in variants:
+        tag = f"ipa_{variant.strip('_') or 'plain'}"
+        rows: dict[str, list[Row]] = {"tuning": [], "held_out": []}
+        for name in names:
+            path = IPA / f"{name}{variant}.png"
+            if (only and name not in only) or not path.exists():
+                continue
+            truth = ground_truth_rooms(_grey(IPA / f"{name}_gt_segmentation.png"))
+            occ, _, _ = read_map(path, resolution_m=RES)
+            if occ.shape != truth.shape:
+                continue
+            plan, seconds, cpu = _plan(occ, iterations)
+            s = ipa_scores(np.ascontiguousarray(unit_labels(plan)[::-1]), truth)
+            sr = ipa_scores(np.ascontiguousarray(room_labels(plan)[::-1]), truth)
+            fixed = read_map_file(path, resolution_m=RES).occupancy
+            r = _result(plan, fixed, (s.recall, s.precision), (sr.recall, sr.precision), seconds, cpu)
+            rows["tuning" if name in tuning else "held_out"].append(r)
+            _row(tag, name, plan, r)
+        _summary(tag, rows["tuning"] + rows["held_out"])
+        for half, part in rows.items():
+            for field in ("room_recall", "room_precision"):
+                if part:
+                    print(f"{tag}_{half}_{field}_mean {100 * statistics.fmean(getattr(r, field) for r in part):.2f} %")
 
 
 def _partial(iterations: int, warm_iterations: int) -> None:
@@ -234,13 +255,14 @@ def _partial(iterations: int, warm_iterations: int) -> None:
             carried = carry(previous[0].world, old, new)
             start = World(carried.units, set(), carried.next_id)
         plan, seconds, cpu = _plan(occ, iterations if start is None else warm_iterations, start, angle)
-        r = _result(plan, rose2_occupancy(grey), float("nan"), float("nan"), seconds, cpu)
+        unscored = (float("nan"), float("nan"))
+        r = _result(plan, rose2_occupancy(grey), unscored, unscored, seconds, cpu)
         _row("partial", folder.name, plan, r)
         if start is not None:
             updates.append(cpu)
             kept = sum(1 for u in plan.units if u.id in start.units)
             shares.append(kept / max(len(start.units), 1))
-            print(f"| partial_ids | {folder.name} | kept {kept} of {len(start.units)} | | | | | | | | | | |")
+            print(f"| partial_ids | {folder.name} | kept {kept} of {len(start.units)} | | | | | | | | | | | | | |")
         previous = (plan, free)
     if shares:
         print(f"partial_ids_kept_mean {100 * statistics.fmean(shares):.2f} %")
@@ -253,6 +275,7 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=20000)
     parser.add_argument("--warm-iterations", type=int, default=2000, help="iterations of each warm update (partial)")
     parser.add_argument("--maps", nargs="*", default=None, help="only these map names")
+    parser.add_argument("--variants", nargs="*", default=[""], help="ipa suffixes, '' = plain, e.g. _furnitures")
     args = parser.parse_args()
     if not MAPS.is_dir():
         print(f"skipped: {MAPS} is absent")
@@ -262,7 +285,7 @@ def main() -> None:
         if "rose2" in args.sets:
             _rose2(args.iterations, args.maps)
         if "ipa" in args.sets:
-            _ipa(args.iterations, args.maps)
+            _ipa(args.iterations, args.maps, args.variants)
         if "partial" in args.sets:
             _partial(args.iterations, args.warm_iterations)
     print(f"load average at end {os.getloadavg()[0]:.2f}")

@@ -19,7 +19,17 @@ from services.floor_plan.likelihood import (
     log_sensor_table,
     render,
 )
-from services.floor_plan.pipeline import Door, FloorPlan, FloorPlanSettings, Unit, describe, floor_plan, unit_labels
+from services.floor_plan.pipeline import (
+    Door,
+    FloorPlan,
+    FloorPlanSettings,
+    Unit,
+    describe,
+    floor_plan,
+    room_labels,
+    unit_labels,
+)
+from services.floor_plan.rooms import Room, RoomSettings, group_rooms, room_keys
 from services.floor_plan.world import Rect, Side, UnitType, World
 
 __all__ = [
@@ -43,6 +53,8 @@ __all__ = [
     "Phase",
     "Proposer",
     "Rect",
+    "Room",
+    "RoomSettings",
     "Side",
     "Unit",
     "UnitEvidence",
@@ -54,9 +66,12 @@ __all__ = [
     "describe",
     "dominant_angle",
     "floor_plan",
+    "group_rooms",
     "log_sensor_table",
     "make_frame",
     "render",
+    "room_keys",
+    "room_labels",
     "run_chain",
     "type_marginals",
     "unit_labels",

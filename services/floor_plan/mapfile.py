@@ -14,7 +14,8 @@ from PIL import Image
 
 from services.floor_plan.errors import FloorPlanError
 from services.floor_plan.overview import overview_image
-from services.floor_plan.pipeline import FloorPlan, FloorPlanSettings, floor_plan, unit_labels
+from services.floor_plan.pipeline import FloorPlan, FloorPlanSettings, floor_plan, room_labels, unit_labels
+from services.floor_plan.rooms import room_keys
 from shared.mapfiles import MapFileError, read_map_file
 from shared.vocabulary import FeatureKind
 
@@ -43,19 +44,24 @@ def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.
 
 
 def geojson(plan: FloorPlan) -> dict[str, Any]:
-    """GeoJSON FeatureCollection: unit polygons (type, probability, neighbours), door segments and the
+    """GeoJSON FeatureCollection: unit polygons (type, probability, neighbours, the keys of the rooms the unit is
+    part of: one, or several where the room level cuts it at a wall it stands over), door segments and the
     solid obstacles (polygons; ``standing``: a block in the building rather than a filled outside)."""
     neighbours: dict[int, list[int]] = {u.id: [] for u in plan.units}
     for a, b in plan.adjacency:
         neighbours[a].append(b)
         neighbours[b].append(a)
+    rooms: dict[int, list[str]] = {u.id: [] for u in plan.units}
+    for key, room in zip(room_keys(plan.rooms), plan.rooms, strict=True):
+        for u in room.units:
+            rooms[u].append(key)
     features: list[dict[str, Any]] = [
         {
             "type": "Feature",
             "geometry": {"type": "Polygon", "coordinates": [[list(p) for p in u.polygon_xy_m]]},
             "properties": {"kind": FeatureKind.UNIT, "id": u.id, "label": str(u.unit_type),
                            "probability": round(u.probability, 4), "area_m2": round(u.area_m2, 3),
-                           "adjacent": sorted(neighbours[u.id])},
+                           "adjacent": sorted(neighbours[u.id]), "rooms": rooms[u.id]},
         }
         for u in plan.units
     ]
@@ -80,18 +86,22 @@ def geojson(plan: FloorPlan) -> dict[str, Any]:
 
 
 def write_outputs(plan: FloorPlan, out_dir: Path) -> dict[str, Path]:
-    """Write floor_plan.geojson, units.png (16-bit unit ids on free cells) and overview.png; image rows top = high y."""
+    """Write floor_plan.geojson, units.png and rooms.png (16-bit unit / room ids on free cells: :func:`unit_labels`,
+    :func:`room_labels`) and overview.png; image rows top = high y."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise FloorPlanError(f"cannot create output folder {out}: {err}") from err
-    paths = {"geojson": out / "floor_plan.geojson", "units": out / "units.png", "overview": out / "overview.png"}
-    labels = unit_labels(plan)
-    if labels.max() > np.iinfo(np.uint16).max:
-        raise FloorPlanError(f"unit id {labels.max()} does not fit a 16-bit units.png")
+    paths = {"geojson": out / "floor_plan.geojson", "units": out / "units.png", "rooms": out / "rooms.png",
+             "overview": out / "overview.png"}
+    images = {"units": unit_labels(plan), "rooms": room_labels(plan)}
+    for name, labels in images.items():
+        if labels.max() > np.iinfo(np.uint16).max:
+            raise FloorPlanError(f"{name[:-1]} id {labels.max()} does not fit a 16-bit {name}.png")
     paths["geojson"].write_text(json.dumps(geojson(plan)))
-    cv2.imwrite(str(paths["units"]), np.ascontiguousarray(labels[::-1].astype(np.uint16)))
+    for name, labels in images.items():
+        cv2.imwrite(str(paths[name]), np.ascontiguousarray(labels[::-1].astype(np.uint16)))
     Image.fromarray(overview_image(plan)).save(paths["overview"])
     return paths
 

@@ -36,6 +36,7 @@ from services.floor_plan.likelihood import (
     solid_obstacles,
     wall_thickness_cells,
 )
+from services.floor_plan.rooms import Room, RoomSettings, fill_free, group_rooms
 from services.floor_plan.world import Rect, UnitType, World, shared_band
 
 
@@ -64,6 +65,8 @@ class FloorPlanSettings:
     """Where a warm-started chain enters the schedule: the last phase of table 3.2, every kernel on."""
     min_turn_rad: float = math.radians(1.0)
     """A map whose dominant walls are further than this from the grid's axes is explained turned to them."""
+    rooms: RoomSettings = field(default_factory=RoomSettings)
+    """When units are one room (:mod:`services.floor_plan.rooms`)."""
 
 
 class Unit(NamedTuple):
@@ -94,6 +97,8 @@ class FloorPlan(NamedTuple):
     units: list[Unit]
     doors: list[Door]
     adjacency: list[tuple[int, int]]
+    rooms: list[Room]
+    """Units joined through open boundaries (parts in cells of ``frame``)."""
     obstacles: list[tuple[tuple[tuple[float, float], ...], ...]]
     """The solid blocks as polygons (outer ring, then holes; closed rings in map metres)."""
     standing: list[bool]
@@ -248,6 +253,9 @@ def describe(
             seg = (p, q)
             width = d.cols * resolution_m
         doors.append(Door(d, seg, (holders[0], holders[1]), width))
+    classes_work = to_work(frame, classes_map, fill=CellClass.UNKNOWN)
+    rooms = group_rooms(world, classes_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
+                        resolution_m=resolution_m, settings=settings.rooms)
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
@@ -273,20 +281,32 @@ def describe(
             rings.append((outer, *(h for h in holes if h)))
             x, y = contour.reshape(-1, 2)[0]
             standing.append(bool(blocks[y, x]))
-    return FloorPlan(world, units, doors, adjacency, rings, standing, classes_map, cw,
+    return FloorPlan(world, units, doors, adjacency, rooms, rings, standing, classes_map, cw,
                      cell_prediction_rate(classes_map, cw), log_posterior, iterations, accepted, seconds, cpu_seconds,
                      resolution_m, origin_xy_m, frame)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
-    """A label image (GridLayer order, map cells): each unit's id on the map's free cells inside it, 0 elsewhere.
-
-    Where units overlap the smaller one wins.
+    """A label image (GridLayer order, map cells): each unit's id on the map's free cells, as the grid
+    decomposition's segments cover them: inside a unit its id (where units overlap the smaller one wins), and
+    every free cell the world leaves unexplained the id of the unit nearest to it through free space.
     """
+    items = sorted(((u.rect, u.id) for u in plan.units), key=lambda item: -item[0].rows * item[0].cols)
+    return _labels(plan, items)
+
+
+def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
+    """A label image like :func:`unit_labels` with one id per room (1..R in the order of ``plan.rooms``)."""
+    items = sorted(((r, k) for k, room in enumerate(plan.rooms, start=1) for r in room.parts),
+                   key=lambda item: -item[0].rows * item[0].cols)
+    return _labels(plan, items)
+
+
+def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.int32]:
+    """Each rectangle's id painted in order (cells of the plan's frame), on the map's free cells, grown through
+    free space to the free cells none covers."""
     work = np.zeros(plan.frame.shape, np.float32)  # ids as float32 (exact below 2**24) so OpenCV can turn them
-    for unit in sorted(plan.units, key=lambda u: -u.rect.rows * u.rect.cols):
-        r = unit.rect
-        work[r.r0 : r.r1 + 1, r.c0 : r.c1 + 1] = unit.id
-    labels = to_map(plan.frame, work, fill=0.0)
-    out: npt.NDArray[np.int32] = np.where(plan.classes_map == CellClass.FREE, labels, 0).astype(np.int32)
-    return out
+    for r, k in items:
+        work[r.r0 : r.r1 + 1, r.c0 : r.c1 + 1] = k
+    free = plan.classes_map == CellClass.FREE
+    return fill_free(to_map(plan.frame, work, fill=0.0).astype(np.int32), free)

@@ -52,7 +52,8 @@ def world_from_meta(meta: Mapping[str, Any]) -> World | None:
 
 
 def plan_features(plan: FloorPlan) -> dict[str, list[Feature]]:
-    """``unit`` features (polygon, ``label`` = type, ``probability``, ``area_m2``, ``adjacent`` keys), ``door``
+    """``unit`` features (polygon, ``label`` = type, ``probability``, ``area_m2``, ``adjacent`` keys, ``rooms``: the
+    keys of the rooms it is part of, :func:`~services.floor_plan.rooms.room_keys`), ``door``
     features (segment, the two unit keys, ``width_m``) and ``obstacle`` features (the solid blocks' polygons,
     for the grid decomposition and planners); every kind always present."""
     out: dict[str, list[Feature]] = {FeatureKind.UNIT: [], FeatureKind.DOOR: [], FeatureKind.OBSTACLE: []}
@@ -61,7 +62,7 @@ def plan_features(plan: FloorPlan) -> dict[str, list[Feature]]:
         if props["kind"] == FeatureKind.UNIT:
             out[FeatureKind.UNIT].append(Feature(FeatureKind.UNIT, unit_key(props["id"]), item["geometry"], {
                 "label": props["label"], "area_m2": props["area_m2"],
-                "adjacent": [unit_key(u) for u in props["adjacent"]],
+                "adjacent": [unit_key(u) for u in props["adjacent"]], "rooms": props["rooms"],
             }, confidence=props["probability"]))
         elif props["kind"] == FeatureKind.OBSTACLE:
             out[FeatureKind.OBSTACLE].append(Feature(FeatureKind.OBSTACLE, f"o{props['id']}", item["geometry"],

@@ -139,7 +139,8 @@ class FloorPlanStage:
                 "robot_positions": [list(p) for p in sorted(self._positions)]}
         write = RevisionWrite(self.context.name, layers=[plan_layer(plan, name=s.layer, meta=meta)],
                               features=plan_features(plan), topology=plan_topology(plan),
-                              summary={**source, "units": len(plan.units), "doors": len(plan.doors),
+                              summary={**source, "units": len(plan.units), "rooms": len(plan.rooms),
+                                       "doors": len(plan.doors),
                                        "k": round(plan.k, 4), "iterations": plan.iterations,
                                        "warm_start": start is not None, "seconds": round(plan.seconds, 3)})
         if self.context.commit(write) is None:

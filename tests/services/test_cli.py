@@ -110,7 +110,7 @@ def test_floor_plan_writes_every_output_and_prints_k(tmp_path: Path, capsys: pyt
     yaml_path = str(tmp_path / "demo" / "occupancy.yaml")
     assert main(["floor-plan", yaml_path, "--out", str(tmp_path / "fp"), "--iterations", "300"]) == 0
     assert "K(W,M)" in capsys.readouterr().out
-    for name in ("floor_plan.geojson", "units.png", "overview.png"):
+    for name in ("floor_plan.geojson", "units.png", "rooms.png", "overview.png"):
         assert (tmp_path / "fp" / name).is_file()
     assert main(["floor-plan", str(tmp_path / "demo" / "world.geojson"), "--out", str(tmp_path / "bad")]) == 1
     track = tmp_path / "track.csv"

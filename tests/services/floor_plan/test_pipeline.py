@@ -21,6 +21,7 @@ from services.floor_plan import (
     Rect,
     UnitType,
     floor_plan,
+    room_labels,
     unit_labels,
 )
 from services.floor_plan.detectors import Evidence, fsu_candidates
@@ -117,6 +118,23 @@ def test_units_png_labels_only_free_cells_one_id_per_unit() -> None:
     labels = unit_labels(plan)
     assert set(np.unique(labels)) == {0} | {u.id for u in plan.units}
     assert not labels[plan.classes_map != CellClass.FREE].any()
+    assert labels[plan.classes_map == CellClass.FREE].all(), "every free cell is some unit's, as in segments.png"
+
+
+def test_two_rooms_through_a_door_are_two_rooms_and_an_l_shaped_room_is_one() -> None:
+    plan = floor_plan(_two_rooms(), resolution_m=RES, settings=_settings())
+    assert len(plan.rooms) == 2
+    rooms = room_labels(plan)
+    left, right = rooms[40, 30], rooms[40, 85]
+    assert left and right and left != right
+    occ = np.full((90, 110), -1, np.int8)
+    occ[5:85, 5:45] = 100
+    occ[50:85, 5:105] = 100
+    occ[7:83, 7:43] = 0
+    occ[52:83, 7:103] = 0  # an L: a leg 1.8 m wide and a foot 4.8 m long, no wall between them
+    plan = floor_plan(occ, resolution_m=RES, settings=_settings(3000))
+    rooms = room_labels(plan)
+    assert len(set(np.unique(rooms[occ == 0]))) == 1, "one room over all of the L's free space"
 
 
 def test_a_warm_start_keeps_the_ids_of_units_that_still_exist() -> None:
@@ -182,6 +200,10 @@ def test_map_file_outputs_agree_with_the_plan(tmp_path: Path) -> None:
     assert min(xs) > -1.0  # in map coordinates: right of the origin
     units = cv2.imread(str(tmp_path / "out" / "units.png"), cv2.IMREAD_UNCHANGED)
     assert units is not None and units.shape == plan.classes_map.shape and units.dtype == np.uint16
+    rooms = cv2.imread(str(tmp_path / "out" / "rooms.png"), cv2.IMREAD_UNCHANGED)
+    assert rooms is not None and rooms.shape == plan.classes_map.shape and rooms.dtype == np.uint16
+    assert set(np.unique(rooms)) == {0} | set(range(1, len(plan.rooms) + 1))
+    assert all(f["properties"]["rooms"] for f in collection["features"] if f["properties"]["kind"] == "unit")
     assert (tmp_path / "out" / "overview.png").is_file()
 
 

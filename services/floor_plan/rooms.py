@@ -1,0 +1,311 @@
+"""The room level of a floor plan: units joined through open boundaries are one room.
+
+A room (seed 003's sense, and the ipa ground truth's) is a connected set of space units linked by open
+boundaries: no wall and no door between them. A unit is a rectangle, so an L-shaped room, a corridor with
+bends or a hall with alcoves is several units. And a unit may stand over a wall: two rooms with a door
+between them that the world explains as one rectangle. So the room level works on **parts**: each unit's
+free space cut along the lines across it that are mostly wall (:func:`unit_parts`). Two parts border each
+other where their free spaces face each other across at most ``max_gap_m`` (a shared wall, a cut, a sliver
+the world leaves unexplained) over at least ``min_contact_m``; the boundary is **open** where no barrier of
+the map lies across it, position by position (:func:`boundaries`). A door is a short opening in a wall, so
+parts whose boundary is open over ``min_open_share`` of the shorter side, and from whose open part free
+space runs on into both (``min_depth_share``), are one room. Rooms are the connected components of the open
+boundaries (:func:`group_rooms`). Barriers are cells that are not free lying on a straight run along the
+wall's direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or unknown, not the
+unknown speckle, laser streaks and clutter dots of a real map's free space.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from services.floor_plan.likelihood import CellClass
+from services.floor_plan.world import Rect, UnitType, World
+
+
+@dataclass(frozen=True)
+class RoomSettings:
+    """When two units are one room; lengths in metres, shares in [0, 1]."""
+
+    min_open_share: float = 0.7
+    """A boundary open over at least this share of the shorter side is no door: the two parts are one room."""
+    min_depth_share: float = 0.5
+    """... and free space runs on from its open part into both units over at least this share of their depth."""
+    barrier_m: float = 0.3
+    """Cells that are not free stop the way between two units (and cut a unit) where they run on in a line
+    at least this long, along rows or columns: a wall, drawn occupied or (as some maps draw them) unknown; not
+    the unknown speckle and clutter dots of a real map's free space."""
+    max_gap_m: float = 0.3
+    """Units whose free spaces are at most this far apart border each other (a shared wall is 0.1 m)."""
+    min_contact_m: float = 0.5
+    """Units border each other only where their free spaces face each other over at least this length."""
+    margin_m: float = 0.1
+    cut_share: float = 0.2
+    """A line of cells across a unit of which at least this share is not free is a wall the unit stands over:
+    the room level cuts the unit there."""
+    min_part_m: float = 0.5
+    """No part thinner than this is cut off a unit."""
+    max_wall_m: float = 1.0
+    """A band of lines across a unit thicker than this is no wall (furniture, unexplored space): no cut."""
+    """A boundary is looked at this far into both units too (a map wall a cell off the unit's wall)."""
+
+
+class Boundary(NamedTuple):
+    """Two units whose free spaces face each other: ``length_m`` along the boundary, ``open_share`` of it open."""
+
+
+    units: tuple[int, int]
+    length_m: float
+    open_share: float
+    """The open length as a share of the shorter of the two units' sides along the boundary: a door is a short
+    opening in a long wall, and units that face each other over a part of both their sides only (a unit
+    reaching across a wall into a corridor) have little."""
+    depth_share: float
+    """How far free space runs into the units from the open part of the boundary before a wall, as a share of
+    each unit's depth (the smaller of the two): a unit that reaches across a wall into its neighbour's space
+    (its own room lies behind that wall) has little."""
+
+
+class Part(NamedTuple):
+    """A rectangle of a unit's free space (``rect``: interior cells) between the walls that run across it."""
+
+    unit: int
+    rect: Rect
+
+
+class Room(NamedTuple):
+    """A room of the floor plan: its parts (and so its units, sorted), type and area (of its parts' free space)."""
+
+    units: tuple[int, ...]
+    parts: tuple[Rect, ...]
+    room_type: UnitType
+    area_m2: float
+
+
+class Barriers(NamedTuple):
+    """The cells that are not free and lie on a straight run of such cells, along rows and along columns."""
+
+    along_rows: npt.NDArray[np.bool_]
+    along_cols: npt.NDArray[np.bool_]
+
+
+def barriers(cells: npt.NDArray[np.bool_], *, run_cells: int) -> Barriers:
+    """The ``cells`` that lie on a straight run of them at least ``run_cells`` long.
+
+    Parameters
+    ----------
+    cells : (H, W) bool
+        E.g. the cells of C_M that are not free.
+    """
+    blocked = np.asarray(cells, np.uint8)
+    k = max(1, run_cells)
+    along_rows = cv2.morphologyEx(blocked, cv2.MORPH_OPEN, np.ones((1, k), np.uint8)) > 0
+    along_cols = cv2.morphologyEx(blocked, cv2.MORPH_OPEN, np.ones((k, 1), np.uint8)) > 0
+    return Barriers(along_rows, along_cols)
+
+
+def unit_parts(
+    world: World, barrier: Barriers, *, wall_cells: int, resolution_m: float, settings: RoomSettings,
+) -> list[Part]:
+    """Each unit's free space cut along the lines of cells across it that are mostly barrier running along the
+    line (a wall the unit stands over: two rooms with a door between them that the world explains as one
+    unit). A band of such lines thicker than ``max_wall_m`` is no wall but furniture or unexplored space, and
+    pieces thinner than ``min_part_m`` are not cut off. Rows first, then columns within each piece.
+
+    Parameters
+    ----------
+    barrier : Barriers
+        :func:`barriers` of C_M in the world's frame.
+    """
+    least = max(1, round(settings.min_part_m / resolution_m))
+    most = max(1, round(settings.max_wall_m / resolution_m))
+    out: list[Part] = []
+    for uid, rect in sorted(world.units.items()):
+        inner = rect.inner(wall_cells)
+        if inner.r0 > inner.r1 or inner.c0 > inner.c1:
+            continue
+        for piece in _cut(barrier.along_rows, inner, least, most, settings.cut_share, rows=True):
+            out.extend(Part(uid, p) for p in _cut(barrier.along_cols, piece, least, most, settings.cut_share,
+                                                  rows=False))
+    return out
+
+
+def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, most: int, share: float, *,
+         rows: bool) -> list[Rect]:
+    """``rect`` cut at its bands of at most ``most`` rows (or columns) whose share of blocked cells reaches
+    ``share``, leaving no piece under ``least``."""
+    crop = blocked[rect.r0 : rect.r1 + 1, rect.c0 : rect.c1 + 1]
+    line = crop.mean(axis=1 if rows else 0) >= share
+    n = line.size
+    line[:least] = line[n - least :] = False  # a wall a little inside the unit's own is no cut
+    edges = np.flatnonzero(np.diff(np.r_[False, line, False].astype(np.int8)))
+    lo, out = 0, list[tuple[int, int]]()
+    for s, e in zip(edges[::2], edges[1::2], strict=True):
+        if s - lo >= least and e - s <= most:
+            out.append((lo, int(s) - 1))
+            lo = int(e)
+    out.append((lo, n - 1))
+    first = rect.r0 if rows else rect.c0
+    return [rect._replace(r0=first + a, r1=first + b) if rows else rect._replace(c0=first + a, c1=first + b)
+            for a, b in out]
+
+
+def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
+               settings: RoomSettings) -> list[Boundary]:
+    """Every pair of parts whose free spaces face each other, with how open the map is between them.
+
+    Parameters
+    ----------
+    parts : list of Part
+        From :func:`unit_parts`.
+    barrier : Barriers
+        :func:`barriers` of C_M in the world's frame.
+
+    Returns
+    -------
+    list of Boundary
+        ``units`` are indices into ``parts``; parts whose free spaces overlap count as fully open.
+    """
+    if len(parts) < 2:
+        return []
+    inner = np.array([p.rect for p in parts], np.int64).reshape(-1, 4)  # r0, r1, c0, c1
+    gap = round(settings.max_gap_m / resolution_m)
+    contact = max(1, round(settings.min_contact_m / resolution_m))
+    margin = round(settings.margin_m / resolution_m)
+    r0, r1, c0, c1 = (inner[:, k] for k in range(4))
+    # cells strictly between two intervals (negative: they overlap by that many cells, less one)
+    row_gap = np.maximum(r0[:, None], r0[None, :]) - np.minimum(r1[:, None], r1[None, :]) - 1
+    col_gap = np.maximum(c0[:, None], c0[None, :]) - np.minimum(c1[:, None], c1[None, :]) - 1
+    stacked = (row_gap >= 0) & (row_gap <= gap) & (-col_gap - 1 >= contact)
+    beside = (col_gap >= 0) & (col_gap <= gap) & (-row_gap - 1 >= contact)
+    overlap = (row_gap < 0) & (col_gap < 0)
+    pairs = np.argwhere(np.triu(stacked | beside | overlap, k=1))
+    out = []
+    for i, j in pairs:
+        a, b = Rect(*inner[i]), Rect(*inner[j])
+        if overlap[i, j]:
+            length = min(a.r1, b.r1) - max(a.r0, b.r0) + 1
+            out.append(Boundary((int(i), int(j)), length * resolution_m, 1.0, 1.0))
+            continue
+        vertical = bool(stacked[i, j])  # the cross lines run along rows
+        # walls between stacked parts run along rows; beside in the map is stacked in the transpose
+        w = barrier.along_rows if vertical else barrier.along_cols.T
+        if not vertical:
+            a, b = Rect(a.c0, a.c1, a.r0, a.r1), Rect(b.c0, b.c1, b.r0, b.r1)
+        top, bottom = (a, b) if a.r1 < b.r0 else (b, a)
+        cols = slice(max(a.c0, b.c0), min(a.c1, b.c1) + 1)
+        rows = slice(max(top.r1 + 1 - margin, top.r0), min(bottom.r0 - 1 + margin, bottom.r1) + 1)
+        open_ = ~w[rows, cols].any(axis=0)
+        depth = 0.0
+        if open_.any():
+            up = _free_run(w[top.r0 : top.r1 + 1, cols][::-1, open_])
+            down = _free_run(w[bottom.r0 : bottom.r1 + 1, cols][:, open_])
+            depth = min(float(up.mean()) / top.rows, float(down.mean()) / bottom.rows)
+        side = min(a.c1 - a.c0, b.c1 - b.c0) + 1
+        out.append(Boundary((int(i), int(j)), open_.size * resolution_m, float(open_.sum()) / side, depth))
+    return out
+
+
+def _free_run(walls: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
+    """Per column, how many cells from row 0 down come before the first wall (all of them when none)."""
+    hit = walls.any(axis=0)
+    runs: npt.NDArray[np.int64] = np.where(hit, walls.argmax(axis=0), walls.shape[0]).astype(np.int64)
+    return runs
+
+
+def group_rooms(
+    world: World, classes: npt.NDArray[np.uint8], types: Mapping[int, UnitType], *, wall_cells: int,
+    resolution_m: float, settings: RoomSettings,
+) -> list[Room]:
+    """The rooms of a world: the units' parts joined through open boundaries (see the module docstring).
+
+    Parameters
+    ----------
+    world : World
+        Units in cells of ``classes``' frame.
+    classes : (H, W) uint8
+        C_M (:class:`CellClass`) in the world's frame.
+    types : mapping of unit id to UnitType
+        Each unit's type; a room takes the type covering most of its area.
+    wall_cells : int
+        Thickness of a unit's walls, cells.
+
+    Returns
+    -------
+    list of Room
+        Sorted by their units; every part of every unit is in exactly one room.
+    """
+    blocked = barriers(classes != CellClass.FREE, run_cells=round(settings.barrier_m / resolution_m))
+    parts = unit_parts(world, blocked, wall_cells=wall_cells, resolution_m=resolution_m, settings=settings)
+    if not parts:
+        return []
+    joined = []
+    for b in boundaries(parts, blocked, resolution_m=resolution_m, settings=settings):
+        if b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share:
+            joined.append(b.units)
+    edges = np.array(joined, np.int64).reshape(-1, 2)
+    n = len(parts)
+    _, component = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
+                                        directed=False)
+    rooms = []
+    for k in np.unique(component):
+        members = [parts[i] for i in np.flatnonzero(component == k)]
+        area = [m.rect.rows * m.rect.cols * resolution_m**2 for m in members]
+        by_type: dict[UnitType, float] = {}
+        for m, a in zip(members, area, strict=True):
+            by_type[types[m.unit]] = by_type.get(types[m.unit], 0.0) + a
+        room_type = max(by_type, key=lambda t: by_type[t])
+        rooms.append(Room(tuple(sorted({m.unit for m in members})), tuple(m.rect for m in members), room_type,
+                          sum(area)))
+    return sorted(rooms)
+
+
+def room_keys(rooms: list[Room]) -> list[str]:
+    """A key per room: ``r<first unit id>``, and ``r<id>.<n>`` for the n-th further room starting at the same unit
+    (a unit cut into parts of several rooms). It stays while the room's first unit keeps its id."""
+    seen: dict[int, int] = {}
+    keys = []
+    for room in rooms:
+        n = seen.get(room.units[0], 0)
+        seen[room.units[0]] = n + 1
+        keys.append(f"r{room.units[0]}" + (f".{n}" if n else ""))
+    return keys
+
+
+def fill_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
+    """Labels grown through free space: every free cell takes the label nearest to it through free cells.
+
+    Parameters
+    ----------
+    labels : (H, W) integer
+        Ids on the cells the world explains, 0 elsewhere.
+    free : (H, W) bool
+        Free cells of the map.
+
+    Returns
+    -------
+    (H, W) int32
+        Ids on every free cell that free space links to a labelled cell, 0 elsewhere (and off free cells).
+    """
+    out = np.where(free, labels, 0).astype(np.int32)
+    hole = free & (out == 0)
+    square = np.ones((3, 3), np.uint8)
+    while True:  # one ring of cells a round, within the box of the cells still to fill
+        rows, cols = np.flatnonzero(hole.any(axis=1)), np.flatnonzero(hole.any(axis=0))
+        if rows.size == 0:
+            return out
+        box = (slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2), slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2))
+        grown = cv2.dilate(out[box].astype(np.float32), square)  # ids below 2**24 are exact in float32
+        take = hole[box] & (grown > 0)
+        if not take.any():
+            return out  # free cells free space links to no label
+        out[box][take] = grown[take].astype(np.int32)
+        hole[box] &= ~take

@@ -1,0 +1,91 @@
+"""The room level: units joined through open boundaries are one room; a door or a wall keeps rooms apart."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from services.floor_plan import CellClass, Rect, RoomSettings, UnitType, World, group_rooms, room_keys
+from services.floor_plan.rooms import fill_free
+
+RES = 0.05
+T = 2  # wall cells
+
+
+def _walled(shape: tuple[int, int], *rooms: Rect) -> npt.NDArray[np.uint8]:
+    """Unknown space with walled rooms: each rectangle's border band (two cells) wall, its inside free."""
+    classes = np.full(shape, CellClass.UNKNOWN, np.uint8)
+    for r in rooms:
+        classes[r.r0 : r.r1 + 1, r.c0 : r.c1 + 1] = CellClass.WALL
+    for r in rooms:
+        classes[r.r0 + T : r.r1 - T + 1, r.c0 + T : r.c1 - T + 1] = CellClass.FREE
+    return classes
+
+
+def _rooms(world: World, classes: npt.NDArray[np.uint8]) -> list[tuple[int, ...]]:
+    types = dict.fromkeys(world.units, UnitType.ROOM)
+    return [room.units for room in group_rooms(world, classes, types, wall_cells=T, resolution_m=RES,
+                                               settings=RoomSettings())]
+
+
+def test_an_l_shaped_room_made_of_two_units_is_one_room() -> None:
+    leg, foot = Rect(0, 59, 0, 29), Rect(30, 59, 28, 89)  # they share the wall at columns 28-29
+    classes = _walled((70, 100), leg, foot)
+    classes[32:58, 26:30] = CellClass.FREE  # no wall where the leg meets the foot
+    world = World({1: leg, 2: foot}, set(), 3)
+    assert _rooms(world, classes) == [(1, 2)]
+
+
+def test_a_corridor_with_a_bend_made_of_two_units_is_one_room() -> None:
+    along, down = Rect(0, 29, 0, 99), Rect(28, 99, 70, 99)  # 1.2 m wide corridor turning down at its end
+    classes = _walled((110, 110), along, down)
+    classes[26:32, 72:98] = CellClass.FREE
+    world = World({1: along, 2: down}, set(), 3)
+    assert _rooms(world, classes) == [(1, 2)]
+
+
+def _two_rooms_with_a_door() -> npt.NDArray[np.uint8]:
+    classes = _walled((60, 80), Rect(0, 59, 0, 39), Rect(0, 59, 38, 79))
+    classes[22:38, 38:40] = CellClass.FREE  # a 0.8 m door in the 2.8 m wall between them
+    return classes
+
+
+def test_two_rooms_through_a_door_are_two_rooms() -> None:
+    world = World({1: Rect(0, 59, 0, 39), 2: Rect(0, 59, 38, 79)}, {Rect(22, 37, 38, 39)}, 3)
+    assert _rooms(world, _two_rooms_with_a_door()) == [(1,), (2,)]
+
+
+def test_a_unit_standing_over_a_wall_with_a_door_is_cut_into_two_rooms() -> None:
+    world = World({1: Rect(0, 59, 0, 79)}, set(), 2)  # one unit explains both rooms
+    groups = group_rooms(world, _two_rooms_with_a_door(), {1: UnitType.ROOM}, wall_cells=T, resolution_m=RES,
+                         settings=RoomSettings())
+    assert len(groups) == 2 and all(room.units == (1,) for room in groups)
+    lefts = sorted(part.c1 for room in groups for part in room.parts)
+    assert lefts[0] < 38 < lefts[1], "the cut runs along the wall"
+    assert room_keys(groups) == ["r1", "r1.1"]
+
+
+def test_speckle_and_clutter_in_a_room_do_not_cut_it_or_close_its_boundaries() -> None:
+    rng = np.random.default_rng(3)
+    big = Rect(0, 79, 0, 119)
+    classes = _walled((80, 120), big)
+    inside = classes == CellClass.FREE
+    speckle = inside & (rng.random(classes.shape) < 0.08)  # single unknown cells, as real maps have
+    classes[speckle] = CellClass.UNKNOWN
+    classes[40, 20] = classes[41, 21] = CellClass.WALL  # a clutter dot
+    world = World({1: Rect(0, 79, 0, 61), 2: Rect(0, 79, 60, 119)}, set(), 3)  # one room as two units
+    assert _rooms(world, classes) == [(1, 2)]
+
+
+def test_fill_free_gives_unexplained_free_cells_the_label_nearest_through_free_space() -> None:
+    free = np.zeros((5, 12), bool)
+    free[1:4, 1:11] = True
+    free[1:3, 6] = False  # a wall with a gap at row 3
+    free[1:4, 9] = False  # a full wall: the last column is cut off
+    labels = np.zeros(free.shape, np.int32)
+    labels[1, 1] = 7
+    labels[1, 7] = 9
+    out = fill_free(labels, free)
+    assert out[2, 3] == 7 and out[1, 8] == 9 and out[3, 6] == 9
+    assert (out[1:4, 10] == 0).all(), "free space no label reaches stays unlabelled"
+    assert not out[~free].any()
