@@ -49,18 +49,76 @@ def _pixels(ring: Footprint, resolution_m: float, origin_xy_m: tuple[float, floa
     return np.round((ring - origin_xy_m) * (float(1 << _SHIFT) / resolution_m) - 0.5 * (1 << _SHIFT)).astype(np.int32)
 
 
+def _frame(aisle: Footprint) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float, float, float, bool]:
+    """An aisle rectangle's centre (2,), unit axis along it (2,), length and width (metres), the angle of its
+    minimum-area rectangle (degrees) and whether that rectangle's first side runs along the axis."""
+    (cx, cy), (w, h), angle_deg = cv2.minAreaRect(np.asarray(aisle, dtype=np.float32).reshape(-1, 2))
+    turn = np.radians(angle_deg) + (0.0 if w >= h else np.pi / 2)
+    return np.array([cx, cy]), np.array([np.cos(turn), np.sin(turn)]), max(w, h), min(w, h), angle_deg, w >= h
+
+
+def _box(centre: npt.NDArray[np.float64], along: float, across: float, angle_deg: float, *, wide: bool
+         ) -> Footprint:
+    """Corners (4, 2) of a rectangle ``along`` x ``across`` metres turned like the aisle (``wide``: its long side
+    along the aisle's axis)."""
+    size = (along, across) if wide else (across, along)
+    out: Footprint = cv2.boxPoints(((float(centre[0]), float(centre[1])), size, angle_deg)).astype(np.float64)
+    return out
+
+
 def aisle_ends(aisle: Footprint) -> list[Footprint]:
     """The two squares (as wide as the aisle) beyond the ends of an aisle's rectangle: where it meets a cross
     aisle or the perimeter aisle, a junction."""
-    (cx, cy), (w, h), angle_deg = cv2.minAreaRect(np.asarray(aisle, dtype=np.float32).reshape(-1, 2))
-    length, width = max(w, h), min(w, h)
-    turn = np.radians(angle_deg) + (0.0 if w >= h else np.pi / 2)
-    axis = np.array([np.cos(turn), np.sin(turn)])
-    out = []
-    for side in (-1.0, 1.0):
-        centre = np.array([cx, cy]) + side * (length + width) / 2 * axis
-        out.append(cv2.boxPoints(((float(centre[0]), float(centre[1])), (width, width), angle_deg)).astype(np.float64))
-    return out
+    centre, axis, length, width, angle_deg, _ = _frame(aisle)
+    return [_box(centre + side * (length + width) / 2 * axis, width, width, angle_deg, wide=True)
+            for side in (-1.0, 1.0)]
+
+
+def aisle_crossings(aisle: Footprint, bins: Sequence[Footprint], *, min_gap_m: float = 0.5
+                    ) -> list[tuple[float, float]]:
+    """Stretches (start, end; metres along the aisle from its centre) where no bin faces the aisle on either side:
+    a cross aisle through the racks (an aisle the pillar stage spans from its first bin to its last runs through
+    the cross aisles between its sections). A side with no bin at all does not count; stretches shorter than
+    ``min_gap_m`` are no crossing (neighbouring bins share their uprights)."""
+    centre, axis, length, width, _, _ = _frame(aisle)
+    normal = np.array([-axis[1], axis[0]])
+    covered: dict[float, list[tuple[float, float]]] = {-1.0: [], 1.0: []}
+    for ring in bins:
+        rel = np.asarray(ring, dtype=np.float64).reshape(-1, 2) - centre
+        u, v = rel @ axis, rel @ normal
+        facing = abs(np.abs(v).min() - width / 2) <= 0.25 * width and np.ptp(np.sign(v)) == 0
+        if facing and u.max() > -length / 2 and u.min() < length / 2:
+            covered[float(np.sign(v.mean()))].append((float(u.min()), float(u.max())))
+    sides = [sorted(spans) for spans in covered.values() if spans]
+    if not sides:
+        return []
+    edges = np.unique(np.concatenate([[-length / 2, length / 2], *(np.ravel(spans) for spans in sides)]))
+    edges = edges[(edges >= -length / 2) & (edges <= length / 2)]
+    middle = (edges[:-1] + edges[1:]) / 2
+    open_ = np.ones(middle.size, dtype=bool)
+    for spans in sides:
+        lo, hi = np.array(spans).T
+        open_ &= ~((middle[:, None] >= lo) & (middle[:, None] <= hi)).any(axis=1)
+    out: list[tuple[float, float]] = []
+    for k in np.flatnonzero(open_):
+        if out and np.isclose(out[-1][1], edges[k]):
+            out[-1] = (out[-1][0], float(edges[k + 1]))
+        else:
+            out.append((float(edges[k]), float(edges[k + 1])))
+    return [(a, b) for a, b in out if b - a >= min_gap_m and -length / 2 < a and b < length / 2]
+
+
+def _aisle_pieces(aisle: Footprint, bins: Sequence[Footprint]) -> tuple[list[Footprint], list[Footprint]]:
+    """An aisle cut at its crossings (:func:`aisle_crossings`): its corridor pieces and its crossings."""
+    crossings = aisle_crossings(aisle, bins)
+    if not crossings:
+        return [aisle], []
+    centre, axis, length, width, angle_deg, wide = _frame(aisle)
+    cuts = [-length / 2, *np.ravel(crossings), length / 2]
+    pieces = [(a, b) for a, b in zip(cuts[0::2], cuts[1::2], strict=True) if b > a]
+    boxes = [[_box(centre + (a + b) / 2 * axis, b - a, width, angle_deg, wide=wide) for a, b in spans]
+             for spans in (pieces, crossings)]
+    return boxes[0], boxes[1]
 
 
 def known_layout(
@@ -73,7 +131,9 @@ def known_layout(
 ) -> RackLayout:
     """A :class:`~services.grid_decomposition.racks.RackLayout` of known places on a grid (row 0 = lowest y):
     every bin footprint a storage place, every aisle a corridor place and each end of it a junction
-    (:func:`aisle_ends`; a bin wins over an aisle, an aisle over a junction, where they overlap).
+    (:func:`aisle_ends`; a bin wins over an aisle, an aisle over a junction, where they overlap). An aisle that
+    runs through a cross aisle (no bin faces it there on either side, :func:`aisle_crossings`) is a junction
+    there and a corridor place on each side of it.
 
     Parameters
     ----------
@@ -86,8 +146,11 @@ def known_layout(
         raise DecompositionError(f"resolution_m must be positive, got {resolution_m}")
     cells = np.zeros(shape, dtype=np.int32)
     labels = [0]
-    ends = [end for aisle in aisles for end in aisle_ends(aisle)]
-    for polygons, label in ((ends, PlaceLabel.JUNCTION), (aisles, PlaceLabel.CORRIDOR), (bins, PlaceLabel.STORAGE)):
+    cut = [_aisle_pieces(aisle, bins) for aisle in aisles]
+    junctions = [end for aisle in aisles for end in aisle_ends(aisle)] + [box for _, boxes in cut for box in boxes]
+    corridors = [box for boxes, _ in cut for box in boxes]
+    for polygons, label in ((junctions, PlaceLabel.JUNCTION), (corridors, PlaceLabel.CORRIDOR),
+                            (bins, PlaceLabel.STORAGE)):
         for ring in polygons:
             labels.append(label.value)
             cv2.fillPoly(cells, [_pixels(ring, resolution_m, origin_xy_m)], len(labels) - 1, cv2.LINE_8, _SHIFT)
@@ -121,16 +184,18 @@ def footprint_mask(
 
 
 def aisle_regions(decomposition: Decomposition, aisles: Sequence[tuple[str, Footprint]]) -> dict[int, str]:
-    """Region id -> aisle key: for each aisle (key, outline in map metres), the corridor region holding more than
-    half of the aisle's region cells, if one does (the strip between two facing rows is that aisle)."""
+    """Region id -> aisle key: for each aisle (key, outline in map metres), the corridor regions that are the strip
+    between its facing rows: each holding more than half of the aisle's region cells, or lying more than half
+    inside it (an aisle cut by a cross aisle is a corridor region on each side of the crossing)."""
     segments = decomposition.segments
+    sizes = np.bincount(segments.ravel())
     out: dict[int, str] = {}
     for key, ring in aisles:
         inside = footprint_mask([ring], shape=segments.shape, resolution_m=decomposition.resolution_m,
                                 origin_xy_m=decomposition.origin_xy_m) & (segments > 0)
         ids, counts = np.unique(segments[inside], return_counts=True)
-        if counts.size and 2 * counts.max() > counts.sum():
-            rid = int(ids[counts.argmax()])
+        mine = (2 * counts > counts.sum()) | (2 * counts > sizes[ids])
+        for rid in ids[mine].tolist():
             if decomposition.regions[rid].label is PlaceLabel.CORRIDOR and rid not in out:
                 out[rid] = key
     return out
