@@ -2,9 +2,9 @@
 
 The pillar stage maps the uprights themselves and writes each rack row (``rack_row``), its pallet cells (``bin``
 features with their footprints) and the aisle between facing rows (``corridor`` features keyed ``aisle-NN``); where
-it has, it is the authority. Its bin footprints are storage and its aisles corridors
-(:func:`known_layout`), whatever the occupancy grid shows of the racks (a lidar below the beams sees a few
-uprights, or nothing).
+it has, it is the authority. Its bin footprints are storage and its aisles corridors, each end of an aisle and
+each cross aisle it runs through a junction (:func:`known_layout`), whatever the occupancy grid shows of the racks
+(a lidar below the beams sees a few uprights, or nothing).
 """
 
 from __future__ import annotations
@@ -74,22 +74,31 @@ def aisle_ends(aisle: Footprint) -> list[Footprint]:
             for side in (-1.0, 1.0)]
 
 
+def _facing(aisle: Footprint, bins: Sequence[Footprint]) -> dict[float, tuple[list[tuple[float, float]], float]]:
+    """Per side of an aisle (-1, +1 across it) with bins facing it: their stretches along it (metres from its
+    centre) and how far from its centre line their backs reach."""
+    centre, axis, length, width, _, _ = _frame(aisle)
+    normal = np.array([-axis[1], axis[0]])
+    out: dict[float, tuple[list[tuple[float, float]], float]] = {}
+    for ring in bins:
+        rel = np.asarray(ring, dtype=np.float64).reshape(-1, 2) - centre
+        u, v = rel @ axis, rel @ normal
+        facing = abs(np.abs(v).min() - width / 2) <= 0.25 * width and np.ptp(np.sign(v)) == 0
+        if facing and u.max() > -length / 2 and u.min() < length / 2:
+            spans, depth = out.get(float(np.sign(v.mean())), ([], 0.0))
+            spans.append((float(u.min()), float(u.max())))
+            out[float(np.sign(v.mean()))] = (spans, max(depth, float(np.abs(v).max())))
+    return out
+
+
 def aisle_crossings(aisle: Footprint, bins: Sequence[Footprint], *, min_gap_m: float = 0.5
                     ) -> list[tuple[float, float]]:
     """Stretches (start, end; metres along the aisle from its centre) where no bin faces the aisle on either side:
     a cross aisle through the racks (an aisle the pillar stage spans from its first bin to its last runs through
     the cross aisles between its sections). A side with no bin at all does not count; stretches shorter than
     ``min_gap_m`` are no crossing (neighbouring bins share their uprights)."""
-    centre, axis, length, width, _, _ = _frame(aisle)
-    normal = np.array([-axis[1], axis[0]])
-    covered: dict[float, list[tuple[float, float]]] = {-1.0: [], 1.0: []}
-    for ring in bins:
-        rel = np.asarray(ring, dtype=np.float64).reshape(-1, 2) - centre
-        u, v = rel @ axis, rel @ normal
-        facing = abs(np.abs(v).min() - width / 2) <= 0.25 * width and np.ptp(np.sign(v)) == 0
-        if facing and u.max() > -length / 2 and u.min() < length / 2:
-            covered[float(np.sign(v.mean()))].append((float(u.min()), float(u.max())))
-    sides = [sorted(spans) for spans in covered.values() if spans]
+    length = _frame(aisle)[2]
+    sides = [sorted(spans) for spans, _ in _facing(aisle, bins).values()]
     if not sides:
         return []
     edges = np.unique(np.concatenate([[-length / 2, length / 2], *(np.ravel(spans) for spans in sides)]))
@@ -108,17 +117,26 @@ def aisle_crossings(aisle: Footprint, bins: Sequence[Footprint], *, min_gap_m: f
     return [(a, b) for a, b in out if b - a >= min_gap_m and -length / 2 < a and b < length / 2]
 
 
-def _aisle_pieces(aisle: Footprint, bins: Sequence[Footprint]) -> tuple[list[Footprint], list[Footprint]]:
-    """An aisle cut at its crossings (:func:`aisle_crossings`): its corridor pieces and its crossings."""
+def _aisle_pieces(aisle: Footprint, bins: Sequence[Footprint], *, flue_m: float = 0.15
+                  ) -> tuple[list[Footprint], list[Footprint], list[Footprint]]:
+    """An aisle cut at its crossings (:func:`aisle_crossings`): its corridor pieces, its crossings, and the
+    cross-aisle pieces beside each crossing and each end square (:func:`aisle_ends`) through the racks on either
+    side, as deep as the bins there reach plus ``flue_m`` (a back-to-back row's flue)."""
     crossings = aisle_crossings(aisle, bins)
-    if not crossings:
-        return [aisle], []
     centre, axis, length, width, angle_deg, wide = _frame(aisle)
+    normal = np.array([-axis[1], axis[0]])
     cuts = [-length / 2, *np.ravel(crossings), length / 2]
     pieces = [(a, b) for a, b in zip(cuts[0::2], cuts[1::2], strict=True) if b > a]
-    boxes = [[_box(centre + (a + b) / 2 * axis, b - a, width, angle_deg, wide=wide) for a, b in spans]
-             for spans in (pieces, crossings)]
-    return boxes[0], boxes[1]
+    aisle_boxes = [aisle] if not crossings else [
+        _box(centre + (a + b) / 2 * axis, b - a, width, angle_deg, wide=wide) for a, b in pieces]
+    crossing_boxes = [_box(centre + (a + b) / 2 * axis, b - a, width, angle_deg, wide=wide) for a, b in crossings]
+    beside = []
+    for side, (_, depth) in _facing(aisle, bins).items():
+        across = depth + flue_m - width / 2
+        offset = side * (width / 2 + across / 2) * normal
+        for a, b in [(-length / 2 - width, -length / 2), *crossings, (length / 2, length / 2 + width)]:
+            beside.append(_box(centre + (a + b) / 2 * axis + offset, b - a, across, angle_deg, wide=wide))
+    return aisle_boxes, crossing_boxes, beside
 
 
 def known_layout(
@@ -133,7 +151,8 @@ def known_layout(
     every bin footprint a storage place, every aisle a corridor place and each end of it a junction
     (:func:`aisle_ends`; a bin wins over an aisle, an aisle over a junction, where they overlap). An aisle that
     runs through a cross aisle (no bin faces it there on either side, :func:`aisle_crossings`) is a junction
-    there and a corridor place on each side of it.
+    there and a corridor place on each side of it; beside each end square and crossing, the cross aisle through
+    the racks on either side is a corridor place (a pallet left at the racks' end is no rack).
 
     Parameters
     ----------
@@ -147,8 +166,8 @@ def known_layout(
     cells = np.zeros(shape, dtype=np.int32)
     labels = [0]
     cut = [_aisle_pieces(aisle, bins) for aisle in aisles]
-    junctions = [end for aisle in aisles for end in aisle_ends(aisle)] + [box for _, boxes in cut for box in boxes]
-    corridors = [box for boxes, _ in cut for box in boxes]
+    junctions = [end for aisle in aisles for end in aisle_ends(aisle)] + [box for _, boxes, _ in cut for box in boxes]
+    corridors = [box for boxes, _, beside in cut for box in boxes + beside]
     for polygons, label in ((junctions, PlaceLabel.JUNCTION), (corridors, PlaceLabel.CORRIDOR),
                             (bins, PlaceLabel.STORAGE)):
         for ring in polygons:

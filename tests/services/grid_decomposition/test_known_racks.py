@@ -45,6 +45,17 @@ def _racks_unseen() -> tuple[np.ndarray, GridLayer]:
     return np.where(hidden, 0, grids.occupancy).astype(np.int8), layer
 
 
+def _spanning_aisles() -> list[np.ndarray]:
+    """The nav-test world's aisles as the pillar stage spans them: from the first bin to the last, through the
+    cross aisle between the two sections."""
+    out = []
+    for number in sorted({a.detail["aisle"] for a in warehouse().world.areas if "aisle" in a.detail}):
+        xy = np.vstack([a.polygon for a in warehouse().world.areas if a.detail.get("aisle") == number])
+        (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
+        out.append(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]))
+    return out
+
+
 def test_bins_on_several_levels_share_one_footprint() -> None:
     features = bin_features(warehouse().world)
     assert len({tuple(map(tuple, f)) for f in footprints(features, FeatureKind.BIN)}) == len(
@@ -153,11 +164,7 @@ def test_an_aisle_known_over_its_sections_is_a_junction_where_a_cross_aisle_cros
     origin = (layer.origin_x_m, layer.origin_y_m)
     bins = footprints(bin_features(warehouse().world), FeatureKind.BIN)
     sections = _aisles()
-    spanning = []
-    for number in sorted({a.detail["aisle"] for a in warehouse().world.areas if "aisle" in a.detail}):
-        xy = np.vstack([a.polygon for a in warehouse().world.areas if a.detail.get("aisle") == number])
-        (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
-        spanning.append((f"aisle-{number:02d}", np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])))
+    spanning = list(zip([f"aisle-{n:02d}" for n in (1, 2)], _spanning_aisles(), strict=True))
     assert all(len(aisle_crossings(ring, bins)) == 1 for _, ring in spanning)
     known = known_layout(bins, [ring for _, ring in spanning], shape=occupancy.shape,
                          resolution_m=layer.resolution_m, origin_xy_m=origin)
@@ -174,3 +181,19 @@ def test_an_aisle_known_over_its_sections_is_a_junction_where_a_cross_aisle_cros
     for area in warehouse().world.areas:
         if area.kind.name == "JUNCTION":
             assert result.regions[main_region(np.asarray(area.polygon))].label is PlaceLabel.JUNCTION, area.id
+
+
+def test_the_cross_aisles_beside_an_aisles_ends_and_crossings_are_corridor_places() -> None:
+    """What the rack finder makes of the racks' ends (a pallet left there is closed into the rack) does not
+    decide the cross aisle the pillar stage's bins leave there: it is a corridor place, not storage."""
+    occupancy, layer = _racks_unseen()
+    origin = (layer.origin_x_m, layer.origin_y_m)
+    bins = footprints(bin_features(warehouse().world), FeatureKind.BIN)
+    known = known_layout(bins, _spanning_aisles(), shape=occupancy.shape, resolution_m=layer.resolution_m,
+                         origin_xy_m=origin)
+    for area in warehouse().world.areas:
+        if area.detail.get("corridor_kind") == "cross_aisle":
+            inside = footprint_mask([np.asarray(area.polygon)], shape=occupancy.shape,
+                                    resolution_m=layer.resolution_m, origin_xy_m=origin)
+            labels = known.cell_labels[known.cells[inside]]
+            assert (labels == PlaceLabel.CORRIDOR.value).mean() > 0.8, area.id
