@@ -176,6 +176,8 @@ def check(api: Api, truth: dict[str, list[dict[str, Any]]], *, tolerance_m: floa
     cell_m2 = labels.resolution_m ** 2
     out["storage_m2"] = round(float((labels.data == STORAGE).sum()) * cell_m2, 2)
     out["storage_off_racks_m2"] = round(float(stray.sum()) * cell_m2, 2)
+    labelled = labels.data[racks & (labels.data > 0)]  # free cells of the true racks (labels are on free cells)
+    out["storage_recall"] = round(float((labelled == STORAGE).mean()) if labelled.size else 0.0, 4)
     worst = np.bincount(segments.data[stray].astype(np.int64)) if stray.any() else np.zeros(1, np.int64)
     out["storage_off_racks_worst_region"] = (f"r{int(worst.argmax())} {worst.max() * cell_m2:.2f} m2"
                                              if worst.max() else "-")
