@@ -339,6 +339,7 @@ def decompose(
         For grids that are not 2-D, too small, out of range, or without free space.
     """
     occ = _check(occupancy, resolution_m)
+    surely_occupied = occ > OCCUPIED_PERCENT  # as mapped: the cleaning makes a faint trace across an aisle wall
     streaks = rays = np.zeros(occ.shape, dtype=bool)
     if clean:
         cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
@@ -374,7 +375,7 @@ def decompose(
     banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
     racks = find_racks_by_region(  # each texture region with its own directions
         obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
-        resolution_m=resolution_m,
+        resolution_m=resolution_m, solid=surely_occupied,
     )
     if known_places is not None:
         if known_places.cells.shape != occ.shape:

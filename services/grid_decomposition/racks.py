@@ -36,6 +36,7 @@ from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
 _OCCUPIED = 1
+_UNCERTAIN = 3  # an obstacle not surely occupied
 
 
 class RackLayout(NamedTuple):
@@ -112,6 +113,46 @@ def _edge(depths: npt.NDArray[np.int64], size: int, share: float = 0.2) -> float
     return float(first + int(np.argmax(counts[first : first + 3])))
 
 
+def _reopen_cross_aisles(
+    body: npt.NDArray[np.uint8], solid: npt.NDArray[np.bool_], *, gap_px: int, min_length_px: float,
+    off_pitch: float,
+) -> npt.NDArray[np.uint8]:
+    """``body`` (obstacles closed along x) with its gaps that are off the hall's bay pitch opened again.
+
+    A gap of a body is a run of its columns holding no ``solid`` cell of it (surely occupied: uprights and
+    pallets; an uncertain trace a person left across a cross aisle is not). One the closing bridged (half
+    ``gap_px`` to ``gap_px`` long) is an empty bay between uprights, or a cross aisle about one bay wide (the
+    simulator's halls: 2.7 m bays, 3.0 m cross aisles). Bays share a pitch: a bridged gap more than ``off_pitch``
+    times the median bridged gap of the image's bodies ``min_length_px`` long or longer is a cross aisle, and the
+    body is cut there through its whole depth. Where every bay is loaded (only cross aisles bridged) nothing is
+    cut.
+    """
+    n, parts, stats, _ = cv2.connectedComponentsWithStats(body, connectivity=4)
+    chosen = np.flatnonzero(stats[:, cv2.CC_STAT_WIDTH] >= min_length_px)
+    chosen = chosen[chosen > 0]
+    if chosen.size == 0:
+        return body
+    long = np.zeros(n, dtype=np.int64)
+    long[chosen] = np.arange(1, chosen.size + 1)
+    width = body.shape[1]
+    hit = np.zeros((chosen.size + 1, width), dtype=bool)  # (body, column): a solid cell of the body there
+    rows, cols = np.nonzero(solid)
+    hit[long[parts[rows, cols]], cols] = True
+    at = np.flatnonzero(hit[1:])
+    which, col = at // width, at % width
+    gap = np.diff(col) - 1
+    bridged = (which[1:] == which[:-1]) & (gap >= (gap_px + 1) // 2) & (gap <= gap_px)
+    if not bridged.any():
+        return body
+    out = body.copy()
+    for i in np.flatnonzero(bridged & (gap > off_pitch * float(np.median(gap[bridged])))):
+        k = int(chosen[which[i]])
+        y, h = int(stats[k, cv2.CC_STAT_TOP]), int(stats[k, cv2.CC_STAT_HEIGHT])
+        span = out[y : y + h, col[i] + 1 : col[i + 1]]
+        span[parts[y : y + h, col[i] + 1 : col[i + 1]] == k] = 0
+    return out
+
+
 def _racks(
     code: npt.NDArray[np.uint8],
     *,
@@ -121,8 +162,9 @@ def _racks(
     min_depth_px: float,
     max_depth_px: float,
     min_fill: float,
+    off_pitch: float,
 ) -> list[_Rack]:
-    """Rack rows running along x in a turned code image (0 free, 1 occupied, 2 unknown).
+    """Rack rows running along x in a turned code image (0 free, 1 occupied, 2 unknown, 3 uncertain).
 
     Kernel lengths are odd: an even one shifts OpenCV's closing by a pixel.
     """
@@ -136,7 +178,9 @@ def _racks(
     obstacle = ((code != 0) & ~outside[unknown]).astype(np.uint8)
     # a free pixel stays free only inside a free bay-by-depth rectangle: every such rectangle over a
     # bay holds an upright, an aisle or a cross aisle is wider
-    body = cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8))
+    closed = cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8))
+    body = _reopen_cross_aisles(np.asarray(closed, dtype=np.uint8), code == _OCCUPIED, gap_px=gap_px,
+                                min_length_px=min_length_px, off_pitch=off_pitch)
     _, parts, stats, _ = cv2.connectedComponentsWithStats(body, connectivity=4)
     w, h, area = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT], stats[:, cv2.CC_STAT_AREA]
     keep = np.flatnonzero((w >= min_length_px) & (h >= min_depth_px) & (area >= 0.3 * w * h))
@@ -545,6 +589,8 @@ def find_racks(
     min_fill: float = 0.7,
     min_free: float = 0.85,
     max_upright_m: float = 0.25,
+    off_pitch: float = 1.08,
+    solid: npt.NDArray[np.bool_] | None = None,
 ) -> RackLayout:
     """Rack rows (any drawing: solid, uprights, pallet faces, beams) and the places between them.
 
@@ -571,6 +617,12 @@ def find_racks(
     max_upright_m : float
         An edge drawn by obstacles at most this thick, covering under 30 % of it, is a row of
         uprights: the rack's edge runs through their centres.
+    off_pitch : float
+        A gap along a row that the closing bridged and that is this many times the median bridged gap (the
+        bays' pitch) or more is a cross aisle about one bay wide: the row is cut there.
+    solid : (H, W) bool, optional
+        Cells surely occupied (default: every occupied cell): only these bound a gap along a row (a person's
+        faint trace across a cross aisle does not).
 
     Returns
     -------
@@ -578,7 +630,8 @@ def find_racks(
         Empty (no places) where no rack is found.
     """
     shape = occupied.shape
-    code = np.where(known, np.where(occupied, np.uint8(_OCCUPIED), np.uint8(0)), np.uint8(_UNKNOWN))
+    sure = np.where(occupied if solid is None else solid, np.uint8(_OCCUPIED), np.uint8(_UNCERTAIN))
+    code = np.where(known, np.where(occupied, sure, np.uint8(0)), np.uint8(_UNKNOWN))
     if domain is not None:
         code[~domain] = _UNKNOWN
     free = code == 0
@@ -613,6 +666,7 @@ def find_racks(
                 min_depth_px=min_depth_m * px,
                 max_depth_px=max_depth_m * px,
                 min_fill=min_fill,
+                off_pitch=off_pitch,
             )
             for block in _blocks(racks, max_aisle_px=max_aisle_m * px):
                 grid = _grid(
@@ -683,6 +737,7 @@ def find_racks_by_region(
     regions: list[tuple[npt.NDArray[np.bool_] | None, list[float]]],
     *,
     resolution_m: float,
+    solid: npt.NDArray[np.bool_] | None = None,
 ) -> RackLayout:
     """:func:`find_racks` in each texture region (mask, its line directions), regions of one direction as one.
 
@@ -707,7 +762,8 @@ def find_racks_by_region(
         else:
             merged.append((mask, every, key))
     layouts = [
-        find_racks(occupied, known, resolution_m=resolution_m, angles_rad=a, domain=m) for m, a, _ in merged if a
+        find_racks(occupied, known, resolution_m=resolution_m, angles_rad=a, domain=m, solid=solid)
+        for m, a, _ in merged if a
     ]
     return combine(layouts, shape)
 

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import DecompositionError, decompose
-from services.grid_decomposition.known_racks import KnownRacks, footprint_mask, footprints, known_layout
+from services.grid_decomposition.known_racks import (
+    KnownRacks,
+    aisle_crossings,
+    aisle_regions,
+    footprint_mask,
+    footprints,
+    known_layout,
+)
 from services.grid_decomposition.records import RACK_ROW_SOURCE, decomposition_features, rack_row_features
 from services.simulator.rackmaps import RackStyle
 from shared.store import Feature, GridLayer, MapStore, RevisionWrite
@@ -36,6 +43,17 @@ def _racks_unseen() -> tuple[np.ndarray, GridLayer]:
     hidden = footprint_mask(bins, shape=grids.occupancy.shape, resolution_m=grids.resolution_m,
                             origin_xy_m=(grids.origin_x_m, grids.origin_y_m))
     return np.where(hidden, 0, grids.occupancy).astype(np.int8), layer
+
+
+def _spanning_aisles() -> list[np.ndarray]:
+    """The nav-test world's aisles as the pillar stage spans them: from the first bin to the last, through the
+    cross aisle between the two sections."""
+    out = []
+    for number in sorted({a.detail["aisle"] for a in warehouse().world.areas if "aisle" in a.detail}):
+        xy = np.vstack([a.polygon for a in warehouse().world.areas if a.detail.get("aisle") == number])
+        (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
+        out.append(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]))
+    return out
 
 
 def test_bins_on_several_levels_share_one_footprint() -> None:
@@ -137,3 +155,45 @@ def test_feature_footprints_skip_what_is_not_a_polygon() -> None:
     point = Feature("bin", "x", {"type": "Point", "coordinates": [1.0, 2.0]}, {})
     bad = Feature("bin", "y", {"type": "Polygon", "coordinates": [[[0, 0], [1, 1]]]}, {})
     assert footprints([point, bad], FeatureKind.BIN) == []
+
+
+def test_an_aisle_known_over_its_sections_is_a_junction_where_a_cross_aisle_crosses_it() -> None:
+    """The pillar stage spans an aisle from its first bin to its last, through the cross aisle between sections:
+    there no bin faces it, and that crossing is a junction between one corridor region per section."""
+    occupancy, layer = _racks_unseen()
+    origin = (layer.origin_x_m, layer.origin_y_m)
+    bins = footprints(bin_features(warehouse().world), FeatureKind.BIN)
+    sections = _aisles()
+    spanning = list(zip([f"aisle-{n:02d}" for n in (1, 2)], _spanning_aisles(), strict=True))
+    assert all(len(aisle_crossings(ring, bins)) == 1 for _, ring in spanning)
+    known = known_layout(bins, [ring for _, ring in spanning], shape=occupancy.shape,
+                         resolution_m=layer.resolution_m, origin_xy_m=origin)
+    result = decompose(occupancy, resolution_m=layer.resolution_m, origin_xy_m=origin, known_places=known)
+    names = aisle_regions(result, spanning)
+
+    def main_region(polygon: np.ndarray) -> int:
+        cells = footprint_mask([polygon], shape=occupancy.shape, resolution_m=layer.resolution_m, origin_xy_m=origin)
+        return int(np.bincount(result.segments[cells & (result.segments > 0)]).argmax())
+
+    corridors = {main_region(ring) for ring in sections}
+    assert len(corridors) == len(sections) and all(result.regions[r].label is PlaceLabel.CORRIDOR for r in corridors)
+    assert sorted(names[r] for r in corridors) == sorted(key for key, _ in spanning for _ in range(2))
+    for area in warehouse().world.areas:
+        if area.kind.name == "JUNCTION":
+            assert result.regions[main_region(np.asarray(area.polygon))].label is PlaceLabel.JUNCTION, area.id
+
+
+def test_the_cross_aisles_beside_an_aisles_ends_and_crossings_are_corridor_places() -> None:
+    """What the rack finder makes of the racks' ends (a pallet left there is closed into the rack) does not
+    decide the cross aisle the pillar stage's bins leave there: it is a corridor place, not storage."""
+    occupancy, layer = _racks_unseen()
+    origin = (layer.origin_x_m, layer.origin_y_m)
+    bins = footprints(bin_features(warehouse().world), FeatureKind.BIN)
+    known = known_layout(bins, _spanning_aisles(), shape=occupancy.shape, resolution_m=layer.resolution_m,
+                         origin_xy_m=origin)
+    for area in warehouse().world.areas:
+        if area.detail.get("corridor_kind") == "cross_aisle":
+            inside = footprint_mask([np.asarray(area.polygon)], shape=occupancy.shape,
+                                    resolution_m=layer.resolution_m, origin_xy_m=origin)
+            labels = known.cell_labels[known.cells[inside]]
+            assert (labels == PlaceLabel.CORRIDOR.value).mean() > 0.8, area.id
