@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.pipeline import FREE_PERCENT, OCCUPIED_PERCENT
-from shared.store import GridLayer
+
+if TYPE_CHECKING:  # the store (SQLAlchemy) is no import of the decomposition
+    from shared.store import GridLayer
 
 UNKNOWN, FREE, UNCERTAIN, OCCUPIED = 0, 1, 2, 3
 """Cell classes of :func:`occupancy_classes`."""

@@ -6,6 +6,7 @@ import enum
 import logging
 import math
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -340,6 +341,16 @@ def decompose(
     known = occ >= 0
     obstacle = ~free
     occupied = known & (occ > OCCUPIED_PERCENT)
+    # steps that need only the cleaned map run on the second core beside the line search (their
+    # OpenCV and numpy calls release the GIL); each gives the same result as run in turn
+    beside = ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose")
+    banks_job = beside.submit(find_shelf_banks, occupied, free, resolution_m=resolution_m)
+    clutter_job = beside.submit(furniture, obstacle, resolution_m=resolution_m)
+    places_job = beside.submit(
+        categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
+    )
+    against_walls_job = beside.submit(wall_furniture, obstacle, resolution_m=resolution_m)
+    beside.shutdown(wait=False)  # the jobs run on; their thread ends after the last
     occupancy01 = np.where(known, occ / 100.0, 1.0)
     gradients = oriented_gradients(obstacle)
     # the sides of laser rays are no walls: they would give the map directions of their own
@@ -361,7 +372,7 @@ def decompose(
         LineGroup(tuple(ln for ln in g.lines if resolution is Resolution.FINE or ln.coarse), g.mask) for g in groups
     ]
     logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
-    banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
+    banks = banks_job.result()
     racks = find_racks_by_region(  # each texture region with its own directions
         obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
         resolution_m=resolution_m,
@@ -371,7 +382,7 @@ def decompose(
             raise DecompositionError(f"known places of shape {known_places.cells.shape} on a grid of {occ.shape}")
         racks = combine([known_places, racks], occ.shape)
     sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
-    clutter = furniture(obstacle, resolution_m=resolution_m)
+    clutter = clutter_job.result()
     walls = (occupied | ~known) & ~clutter
     wall, door = wall_evidence(
         walls,
@@ -403,9 +414,7 @@ def decompose(
     # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)
     evidence[majority_faces(sub.face_image, sub.n_faces, banks.storage, free)] = PlaceLabel.STORAGE.value
     evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = PlaceLabel.CORRIDOR.value
-    rows, cols, cats = categorize_places(
-        obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
-    )
+    rows, cols, cats = places_job.result()
     face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
     rack_place = face_places(sub.face_image, sub.n_faces, racks, free)
     evidence = np.where(rack_place > 0, rack_place, evidence)
@@ -436,7 +445,7 @@ def decompose(
         neck_half_width_m=neck_half_width_m,
     )
     # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
-    against_walls = wall_furniture(obstacle, resolution_m=resolution_m) & (segments == 0)
+    against_walls = against_walls_job.result() & (segments == 0)
     grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
     segments = np.where(against_walls, grown, segments)
     # the streaks the cleaning took out are free space: they take the region they grow from

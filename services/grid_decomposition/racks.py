@@ -21,7 +21,9 @@ reach to the next obstacle (at most ``max_aisle_m``).
 
 from __future__ import annotations
 
+import functools
 import math
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import cv2
@@ -112,8 +114,24 @@ def _edge(depths: npt.NDArray[np.int64], size: int, share: float = 0.2) -> float
     return float(first + int(np.argmax(counts[first : first + 3])))
 
 
+def _inner_obstacles(code: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+    """Obstacles of a code image (0 free, 1 occupied, 2 unknown) but unknown space reaching its border.
+
+    Unknown space reaching the image border is the unexplored outside, not a rack: closed with the
+    obstacles it would join every rack row ending within a bay of it (a map explored only up to the
+    racks' ends) into one body with it, too large to be a rack. The same of the transposed image is
+    this transposed.
+    """
+    _, unknown, stats, _ = cv2.connectedComponentsWithStats((code == _UNKNOWN).astype(np.uint8), connectivity=4)
+    x, y, w, h = (stats[:, i] for i in range(4))
+    outside = (x == 0) | (y == 0) | (x + w == code.shape[1]) | (y + h == code.shape[0])
+    outside[0] = False
+    obstacle: npt.NDArray[np.uint8] = ((code != 0) & ~outside[unknown]).astype(np.uint8)
+    return obstacle
+
+
 def _racks(
-    code: npt.NDArray[np.uint8],
+    obstacle: npt.NDArray[np.uint8],
     *,
     gap_px: int,
     depth_gap_px: int,
@@ -122,18 +140,10 @@ def _racks(
     max_depth_px: float,
     min_fill: float,
 ) -> list[_Rack]:
-    """Rack rows running along x in a turned code image (0 free, 1 occupied, 2 unknown).
+    """Rack rows running along x in a turned obstacle image (:func:`_inner_obstacles`).
 
     Kernel lengths are odd: an even one shifts OpenCV's closing by a pixel.
     """
-    # unknown space reaching the image border is the unexplored outside, not a rack: closed with the
-    # obstacles it would join every rack row ending within a bay of it (a map explored only up to the
-    # racks' ends) into one body with it, too large to be a rack
-    _, unknown, stats, _ = cv2.connectedComponentsWithStats((code == _UNKNOWN).astype(np.uint8), connectivity=4)
-    x, y, w, h = (stats[:, i] for i in range(4))
-    outside = (x == 0) | (y == 0) | (x + w == code.shape[1]) | (y + h == code.shape[0])
-    outside[0] = False
-    obstacle = ((code != 0) & ~outside[unknown]).astype(np.uint8)
     # a free pixel stays free only inside a free bay-by-depth rectangle: every such rectangle over a
     # bay holds an upright, an aisle or a cross aisle is wider
     body = cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8))
@@ -603,17 +613,22 @@ def find_racks(
             dtype=np.uint8,
         )
         refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
-        for transpose in (False, True):
+        obstacle = _inner_obstacles(turned)
+        search = functools.partial(
+            _racks,
+            gap_px=2 * round(max_bay_gap_m * px / 2) + 1,
+            depth_gap_px=2 * round(max_depth_gap_m * px / 2) + 1,
+            min_length_px=min_length_m * px,
+            min_depth_px=min_depth_m * px,
+            max_depth_px=max_depth_m * px,
+            min_fill=min_fill,
+        )
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="racks") as beside:  # the second core
+            across = beside.submit(search, np.ascontiguousarray(obstacle.T))
+            along = search(obstacle)
+            found = ((False, along), (True, across.result()))
+        for transpose, racks in found:
             image = np.ascontiguousarray(turned.T) if transpose else turned
-            racks = _racks(
-                image,
-                gap_px=2 * round(max_bay_gap_m * px / 2) + 1,
-                depth_gap_px=2 * round(max_depth_gap_m * px / 2) + 1,
-                min_length_px=min_length_m * px,
-                min_depth_px=min_depth_m * px,
-                max_depth_px=max_depth_m * px,
-                min_fill=min_fill,
-            )
             for block in _blocks(racks, max_aisle_px=max_aisle_m * px):
                 grid = _grid(
                     block,
