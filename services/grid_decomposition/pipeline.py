@@ -402,8 +402,9 @@ def decompose(
         banks = banks_job.result()
         sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
         geometry_job = beside.submit(
-            face_geometry, sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m,
-            face_angle_rad=_face_angles(sub, used),
+            lambda: face_geometry(
+                sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m, face_angle_rad=_face_angles(sub, used)
+            )
         )
         rack_place_job = beside.submit(face_places, sub.face_image, sub.n_faces, racks, free)
         wall, door = evidence_job.result()
