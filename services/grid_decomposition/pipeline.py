@@ -338,8 +338,9 @@ def decompose(
     if n_categories < 1:
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
     # a second thread (the machine's second core: OpenCV and numpy calls release the GIL) loads the
-    # steps' modules beside the cleaning, then runs steps beside the line search and the rack search
-    # that do not need them; each step gives the same result as run in turn
+    # steps' modules while this one cleans the map and finds its furniture and shelf banks, then
+    # runs steps beside the line search, the rack search and the cogency that do not need their
+    # results; each step gives the same result as run in turn
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
         loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
         streaks = rays = np.zeros(occ.shape, dtype=bool)
@@ -351,12 +352,12 @@ def decompose(
         known = occ >= 0
         obstacle = ~free
         occupied = known & (occ > OCCUPIED_PERCENT)
-        clutter_job = beside.submit(furniture, obstacle, resolution_m=resolution_m)
-        banks_job = beside.submit(find_shelf_banks, occupied, free, resolution_m=resolution_m)
         places_job = beside.submit(
             categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
         )
-        against_walls_job = beside.submit(wall_furniture, obstacle, resolution_m=resolution_m)
+        clutter = furniture(obstacle, resolution_m=resolution_m)
+        banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
+        against_walls = wall_furniture(obstacle, resolution_m=resolution_m)
         occupancy01 = np.where(known, occ / 100.0, 1.0)
         gradients = oriented_gradients(obstacle)
         # the sides of laser rays are no walls: they would give the map directions of their own
@@ -379,7 +380,6 @@ def decompose(
             LineGroup(tuple(ln for ln in g.lines if resolution is Resolution.FINE or ln.coarse), g.mask) for g in groups
         ]
         logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
-        clutter = clutter_job.result()
         walls = (occupied | ~known) & ~clutter
         evidence_job = beside.submit(
             wall_evidence,
@@ -399,7 +399,6 @@ def decompose(
             if known_places.cells.shape != occ.shape:
                 raise DecompositionError(f"known places of shape {known_places.cells.shape} on a grid of {occ.shape}")
             racks = combine([known_places, racks], occ.shape)
-        banks = banks_job.result()
         sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
         geometry_job = beside.submit(
             lambda: face_geometry(
@@ -458,7 +457,7 @@ def decompose(
             neck_half_width_m=neck_half_width_m,
         )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
-        against_walls = against_walls_job.result() & (segments == 0)
+        against_walls &= segments == 0
         grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
         segments = np.where(against_walls, grown, segments)
         # the streaks the cleaning took out are free space: they take the region they grow from
