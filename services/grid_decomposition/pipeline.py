@@ -9,10 +9,9 @@ import math
 from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import cv2
-import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
@@ -49,6 +48,9 @@ from services.grid_decomposition.subdivision import LineGroup, Subdivision, subd
 from services.grid_decomposition.texture import segment_texture_regions
 from shared.vocabulary import PlaceLabel
 
+if TYPE_CHECKING:  # networkx is imported by the steps that build graphs, when first needed
+    import networkx as nx
+
 logger = logging.getLogger(__name__)
 
 FREE_PERCENT = 25
@@ -56,10 +58,12 @@ OCCUPIED_PERCENT = 65
 _REGION_CORE_M = 1.0
 _POCKET_MAX_M2 = 6.0  # a room this small among pallets, open to an open area, is floor between them
 _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by their pixels
-# imported by the steps when first needed (about 0.8 s, once a process), loaded by decompose on its
+# imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules
-_STEP_MODULES = ("scipy.signal", "scipy.stats", "sklearn.cluster", "sklearn.decomposition", "sklearn.preprocessing")
+_STEP_MODULES = (
+    "networkx", "scipy.signal", "scipy.stats", "sklearn.cluster", "sklearn.decomposition", "sklearn.preprocessing"
+)
 
 
 class Resolution(enum.Enum):
@@ -355,10 +359,10 @@ def decompose(
         places_job = beside.submit(
             categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
         )
+        occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
         clutter = furniture(obstacle, resolution_m=resolution_m)
         banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
         against_walls = wall_furniture(obstacle, resolution_m=resolution_m)
-        occupancy01 = np.where(known, occ / 100.0, 1.0)
         gradients = oriented_gradients(obstacle)
         # the sides of laser rays are no walls: they would give the map directions of their own
         ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
@@ -409,7 +413,7 @@ def decompose(
         wall, door = evidence_job.result()
         cog = edge_cogency(
             sub,
-            occupancy01,
+            occupancy01_job.result(),
             free,
             wall,
             door,
