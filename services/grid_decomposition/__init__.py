@@ -1,4 +1,10 @@
-"""Grid decomposition: dominant orientations, radiogram lines, cells, place labels and regions."""
+"""Grid decomposition: dominant orientations, radiogram lines, cells, place labels and regions.
+
+The store records (``records.py``: the map store's types, SQLAlchemy behind them) are imported when
+one of their names is first asked for: decomposing a map needs none of them.
+"""
+
+from typing import TYPE_CHECKING
 
 from services.grid_decomposition.change import changed_fraction, occupancy_classes
 from services.grid_decomposition.cogency import EdgeCogency, close_doorways, edge_cogency, wall_evidence
@@ -19,15 +25,6 @@ from services.grid_decomposition.overview import overview_image
 from services.grid_decomposition.pipeline import Decomposition, Resolution, decompose
 from services.grid_decomposition.places import cast_rays, categorize_places, raycast_features
 from services.grid_decomposition.radiogram import Line, Radiogram, line_offsets, radiogram
-from services.grid_decomposition.records import (
-    PLACE_LABELS,
-    PLACE_SEGMENTS,
-    REGION_FEATURE_KINDS,
-    decomposition_features,
-    decomposition_layers,
-    decomposition_topology,
-    region_key,
-)
 from services.grid_decomposition.regions import RegionInfo, face_regions, region_topology
 from services.grid_decomposition.semantics import (
     Connection,
@@ -38,6 +35,37 @@ from services.grid_decomposition.semantics import (
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.templates import Template, match_templates, template_branches
 from services.grid_decomposition.texture import gabor_features, segment_texture_regions
+
+if TYPE_CHECKING:
+    from services.grid_decomposition.records import (
+        PLACE_LABELS,
+        PLACE_SEGMENTS,
+        REGION_FEATURE_KINDS,
+        decomposition_features,
+        decomposition_layers,
+        decomposition_topology,
+        region_key,
+    )
+
+_RECORDS = frozenset(
+    {
+        "PLACE_LABELS",
+        "PLACE_SEGMENTS",
+        "REGION_FEATURE_KINDS",
+        "decomposition_features",
+        "decomposition_layers",
+        "decomposition_topology",
+        "region_key",
+    }
+)
+
+
+def __getattr__(name: str) -> object:
+    if name in _RECORDS:
+        from services.grid_decomposition import records
+
+        return getattr(records, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
     "PLACE_LABELS",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -10,7 +11,9 @@ import numpy.typing as npt
 
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.pipeline import FREE_PERCENT, OCCUPIED_PERCENT
-from shared.store import GridLayer
+
+if TYPE_CHECKING:  # the store (SQLAlchemy) is no import of the decomposition
+    from shared.store import GridLayer
 
 UNKNOWN, FREE, UNCERTAIN, OCCUPIED = 0, 1, 2, 3
 """Cell classes of :func:`occupancy_classes`."""

@@ -7,10 +7,9 @@ import logging
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
-import networkx as nx
 import numpy as np
 import numpy.typing as npt
 from PIL import Image
@@ -24,6 +23,9 @@ from services.grid_decomposition.subdivision import line_endpoints
 from shared.mapfiles import IMAGE_SUFFIXES, MapFileError
 from shared.mapfiles import read_map_file as shared_read_map_file
 from shared.vocabulary import FeatureKind, PlaceLabel
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 logger = logging.getLogger(__name__)
 
@@ -169,6 +171,8 @@ def _clip_line(
 
 def topology_json(graph: nx.Graph) -> dict[str, Any]:
     """networkx node-link JSON of the region graph."""
+    import networkx as nx  # imported when first needed
+
     data: dict[str, Any] = nx.node_link_data(graph, edges="links")
     return data
 

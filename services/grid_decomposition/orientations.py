@@ -8,8 +8,6 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
-from sklearn.cluster._kmeans import _kmeans_plusplus
-from sklearn.utils.extmath import row_norms
 
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.wavelets import find_peaks_ricker
@@ -95,6 +93,9 @@ def _fit_mixture(x: npt.NDArray[np.float64], k: int) -> _Mixture:
     dispatch, which cost many times the arithmetic on 1,500 samples; the start is scikit-learn's
     own k-means++ seeding.
     """
+    from sklearn.cluster._kmeans import _kmeans_plusplus  # scikit-learn is imported when first needed
+    from sklearn.utils.extmath import row_norms
+
     n = x.shape[0]
     resp = np.zeros((n, k), dtype=x.dtype)
     # sklearn.cluster.kmeans_plusplus less its input checks (a pandas/narwhals probe per call)

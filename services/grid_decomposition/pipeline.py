@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import enum
+import importlib
 import logging
 import math
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import cv2
-import networkx as nx
 import numpy as np
 import numpy.typing as npt
 
@@ -48,6 +49,9 @@ from services.grid_decomposition.subdivision import LineGroup, Subdivision, subd
 from services.grid_decomposition.texture import segment_texture_regions
 from shared.vocabulary import PlaceLabel
 
+if TYPE_CHECKING:  # networkx is imported by the steps that build graphs, when first needed
+    import networkx as nx
+
 logger = logging.getLogger(__name__)
 
 FREE_PERCENT = 25
@@ -55,6 +59,12 @@ OCCUPIED_PERCENT = 65
 _REGION_CORE_M = 1.0
 _POCKET_MAX_M2 = 6.0  # a room this small among pallets, open to an open area, is floor between them
 _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by their pixels
+# imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
+# second thread while the first steps run; all on one thread: two threads importing one package
+# at once can deadlock on its partly loaded modules
+_STEP_MODULES = (
+    "networkx", "scipy.signal", "scipy.stats", "sklearn.cluster", "sklearn.decomposition", "sklearn.preprocessing"
+)
 
 
 class Resolution(enum.Enum):
@@ -340,203 +350,222 @@ def decompose(
     """
     occ = _check(occupancy, resolution_m)
     surely_occupied = occ > OCCUPIED_PERCENT  # as mapped: the cleaning makes a faint trace across an aisle wall
-    streaks = rays = np.zeros(occ.shape, dtype=bool)
-    if clean:
-        cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
-        if np.any((cleaned >= 0) & (cleaned < FREE_PERCENT)):
-            occ, streaks, rays = cleaned, cleaning.streaks, cleaning.rays
     if n_categories < 1:
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
-    free = (occ >= 0) & (occ < FREE_PERCENT)
-    known = occ >= 0
-    obstacle = ~free
-    occupied = known & (occ > OCCUPIED_PERCENT)
-    occupancy01 = np.where(known, occ / 100.0, 1.0)
-    gradients = oriented_gradients(obstacle)
-    # the sides of laser rays are no walls: they would give the map directions of their own
-    ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    structure = _masked(
-        gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
-    )
-    global_lines = _lines(gradients, structure, None, resolution_m)
-    n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
-    texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
-    groups: list[LineGroup] = []
-    for t in range(n_tex):
-        mask = None if n_tex == 1 else texture == t
-        if mask is not None and not mask.any():
-            continue
-        per_angle = global_lines if mask is None else _lines(gradients, structure, mask, resolution_m)
-        groups.append(LineGroup(tuple(ln for lines in per_angle.values() for ln in lines), mask))
-    used = [
-        LineGroup(tuple(ln for ln in g.lines if resolution is Resolution.FINE or ln.coarse), g.mask) for g in groups
-    ]
-    logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
-    banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
-    racks = find_racks_by_region(  # each texture region with its own directions
-        obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
-        resolution_m=resolution_m, solid=surely_occupied,
-    )
-    if known_places is not None:
-        if known_places.cells.shape != occ.shape:
-            raise DecompositionError(f"known places of shape {known_places.cells.shape} on a grid of {occ.shape}")
-        racks = combine([known_places, racks], occ.shape)
-    sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
-    clutter = furniture(obstacle, resolution_m=resolution_m)
-    walls = (occupied | ~known) & ~clutter
-    wall, door = wall_evidence(
-        walls,
-        used,
-        tolerance_px=max(1, round(wall_tolerance_m / resolution_m)),
-        min_wall_px=max(1, round(wall_min_length_m / resolution_m)),
-        max_door_px=max(1, round(door_max_width_m / resolution_m)),
-        widening_px=max(1, round(door_widening_m / resolution_m)),
-        max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
-    )
-    cog = edge_cogency(
-        sub,
-        occupancy01,
-        free,
-        wall,
-        door,
-        face_disparity_threshold=face_disparity_threshold,
-        edge_occupancy_threshold=edge_occupancy_threshold,
-    )
-    is_face = cog.face_free_px > 0
-    connected = sub.edge_faces[~cog.cogent]
-    component = link_components(sub.n_faces + 1, connected, is_face)
-    geometry = face_geometry(
-        sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m, face_angle_rad=_face_angles(sub, used)
-    )
-    elongation = _elongation(component, sub.face_image, free, resolution_m)
-    found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
-    evidence = found.label.copy()
-    # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)
-    evidence[majority_faces(sub.face_image, sub.n_faces, banks.storage, free)] = PlaceLabel.STORAGE.value
-    evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = PlaceLabel.CORRIDOR.value
-    rows, cols, cats = categorize_places(
-        obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
-    )
-    face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
-    rack_place = face_places(sub.face_image, sub.n_faces, racks, free)
-    evidence = np.where(rack_place > 0, rack_place, evidence)
-    face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
-    # regions come from the automatic labels: a person's overrides rename places, they do not
-    # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
-    # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
-    cut_like_cells = np.where(found.off_pitch, PlaceLabel.STORAGE.value, evidence)
-    automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
-    # warehouse floors and road networks are split by their labels and left alone by the room stage
-    roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
-    structured = warehouse_floors(component, cog.face_free_px, automatic.label) | roads
-    region_of_face = face_regions(sub, cog, component, automatic.label, structured)
-    segments = segment_image(
-        sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
-    )
-    floor_px = structured[component[sub.face_image]] | (racks.cells > 0)  # the room stage leaves racks alone
-    segments, cuts = segment_rooms(
-        segments,
-        clutter,
-        floor_px,
-        wall | door,
-        resolution_m=resolution_m,
-        door_max_width_m=cut_max_width_m,
-        door_widening_m=door_widening_m,
-        door_max_depth_m=door_max_depth_m,
-        room_min_area_m2=room_min_area_m2,
-        neck_half_width_m=neck_half_width_m,
-    )
-    # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
-    against_walls = wall_furniture(obstacle, resolution_m=resolution_m) & (segments == 0)
-    grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
-    segments = np.where(against_walls, grown, segments)
-    # the streaks the cleaning took out are free space: they take the region they grow from
-    segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
-    # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
-    segments, places = place_segments(
-        segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2),
-        n_known=0 if known_places is None else known_places.cell_labels.size - 1,
-    )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
-    if prior is not None:
-        if prior.regions.shape != occ.shape or prior.unchanged.shape != occ.shape:
-            raise DecompositionError(f"a prior of shape {prior.regions.shape} on a grid of {occ.shape}")
-        # rack places (racks, aisles, cross aisles) are found anew every time: a rack is often seen whole only later
-        found_anew = places > 0
-        segments = keep_regions(
-            segments, RegionPrior(np.where(found_anew, 0, prior.regions), prior.unchanged & ~found_anew),
-            max_changed_share=settled_max_changed_share,
-            min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+    # a second thread (the machine's second core: OpenCV and numpy calls release the GIL) loads the
+    # steps' modules while this one cleans the map and finds its furniture and shelf banks, then
+    # runs steps beside the line search, the rack search and the cogency that do not need their
+    # results; each step gives the same result as run in turn
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
+        loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
+        streaks = rays = np.zeros(occ.shape, dtype=bool)
+        if clean:
+            cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
+            if np.any((cleaned >= 0) & (cleaned < FREE_PERCENT)):
+                occ, streaks, rays = cleaned, cleaning.streaks, cleaning.rays
+        free = (occ >= 0) & (occ < FREE_PERCENT)
+        known = occ >= 0
+        obstacle = ~free
+        occupied = known & (occ > OCCUPIED_PERCENT)
+        places_job = beside.submit(
+            categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
         )
-    pairs = _pairs(segments, sub)
-    racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
-    regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
-    # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
-    structured_segments = set(np.flatnonzero(np.bincount(segments[(places > 0) | floor_px])).tolist())
-    rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
-    open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
-    objects = floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
-    merges = pocket_merges(
-        segments, rooms, open_areas, objects, free, max_area_px=round(_POCKET_MAX_M2 / resolution_m**2)
-    )
-    if merges:
-        lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
-        lut[list(merges)] = list(merges.values())
-        segments = lut[lut[segments]]
+        occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
+        clutter = furniture(obstacle, resolution_m=resolution_m)
+        banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
+        against_walls = wall_furniture(obstacle, resolution_m=resolution_m)
+        gradients = oriented_gradients(obstacle)
+        # the sides of laser rays are no walls: they would give the map directions of their own
+        ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+        structure = _masked(
+            gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
+        )
+        loaded.result()  # the line search imports scipy.signal and scikit-learn
+        global_lines = _lines(gradients, structure, None, resolution_m)
+        n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
+        texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
+        groups: list[LineGroup] = []
+        for t in range(n_tex):
+            mask = None if n_tex == 1 else texture == t
+            if mask is not None and not mask.any():
+                continue
+            per_angle = global_lines if mask is None else _lines(gradients, structure, mask, resolution_m)
+            groups.append(LineGroup(tuple(ln for lines in per_angle.values() for ln in lines), mask))
+        used = [
+            LineGroup(tuple(ln for ln in g.lines if resolution is Resolution.FINE or ln.coarse), g.mask) for g in groups
+        ]
+        logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
+        walls = (occupied | ~known) & ~clutter
+        evidence_job = beside.submit(
+            wall_evidence,
+            walls,
+            used,
+            tolerance_px=max(1, round(wall_tolerance_m / resolution_m)),
+            min_wall_px=max(1, round(wall_min_length_m / resolution_m)),
+            max_door_px=max(1, round(door_max_width_m / resolution_m)),
+            widening_px=max(1, round(door_widening_m / resolution_m)),
+            max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
+        )
+        racks = find_racks_by_region(  # each texture region with its own directions
+            obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
+            resolution_m=resolution_m, solid=surely_occupied,
+        )
+        if known_places is not None:
+            if known_places.cells.shape != occ.shape:
+                raise DecompositionError(f"known places of shape {known_places.cells.shape} on a grid of {occ.shape}")
+            racks = combine([known_places, racks], occ.shape)
+        sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
+        geometry_job = beside.submit(
+            lambda: face_geometry(
+                sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m, face_angle_rad=_face_angles(sub, used)
+            )
+        )
+        rack_place_job = beside.submit(face_places, sub.face_image, sub.n_faces, racks, free)
+        wall, door = evidence_job.result()
+        cog = edge_cogency(
+            sub,
+            occupancy01_job.result(),
+            free,
+            wall,
+            door,
+            face_disparity_threshold=face_disparity_threshold,
+            edge_occupancy_threshold=edge_occupancy_threshold,
+        )
+        is_face = cog.face_free_px > 0
+        connected = sub.edge_faces[~cog.cogent]
+        component = link_components(sub.n_faces + 1, connected, is_face)
+        elongation = _elongation(component, sub.face_image, free, resolution_m)
+        geometry = geometry_job.result()
+        found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
+        evidence = found.label.copy()
+        # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)
+        evidence[majority_faces(sub.face_image, sub.n_faces, banks.storage, free)] = PlaceLabel.STORAGE.value
+        evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = PlaceLabel.CORRIDOR.value
+        rows, cols, cats = places_job.result()
+        face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
+        rack_place = rack_place_job.result()
+        evidence = np.where(rack_place > 0, rack_place, evidence)
+        face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
+        # regions come from the automatic labels: a person's overrides rename places, they do not
+        # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
+        # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
+        cut_like_cells = np.where(found.off_pitch, PlaceLabel.STORAGE.value, evidence)
+        automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
+        # warehouse floors and road networks are split by their labels and left alone by the room stage
+        roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
+        structured = warehouse_floors(component, cog.face_free_px, automatic.label) | roads
+        region_of_face = face_regions(sub, cog, component, automatic.label, structured)
+        segments = segment_image(
+            sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
+        )
+        floor_px = structured[component[sub.face_image]] | (racks.cells > 0)  # the room stage leaves racks alone
+        segments, cuts = segment_rooms(
+            segments,
+            clutter,
+            floor_px,
+            wall | door,
+            resolution_m=resolution_m,
+            door_max_width_m=cut_max_width_m,
+            door_widening_m=door_widening_m,
+            door_max_depth_m=door_max_depth_m,
+            room_min_area_m2=room_min_area_m2,
+            neck_half_width_m=neck_half_width_m,
+        )
+        # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
+        against_walls &= segments == 0
+        grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
+        segments = np.where(against_walls, grown, segments)
+        # the streaks the cleaning took out are free space: they take the region they grow from
+        segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
+        # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
+        segments, places = place_segments(
+            segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2),
+            n_known=0 if known_places is None else known_places.cell_labels.size - 1,
+        )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
+        if prior is not None:
+            if prior.regions.shape != occ.shape or prior.unchanged.shape != occ.shape:
+                raise DecompositionError(f"a prior of shape {prior.regions.shape} on a grid of {occ.shape}")
+            # rack places (racks, aisles, cross aisles) are found anew every time: a rack is often seen whole only
+            # later
+            found_anew = places > 0
+            segments = keep_regions(
+                segments, RegionPrior(np.where(found_anew, 0, prior.regions), prior.unchanged & ~found_anew),
+                max_changed_share=settled_max_changed_share,
+                min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+            )
         pairs = _pairs(segments, sub)
+        racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
         regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
-    for k in [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]:  # a rack place is no room: its label
-        held = places[segments == k]
-        if np.count_nonzero(held) > 0.5 * held.size:
-            label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))
-            regions[k] = regions[k]._replace(label=label)
-    if known_places is not None:  # in a hall another stage knows the racks of, floor touching a rack place is no room
-        hall = cv2.dilate((racks.cells > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-        in_hall = set(np.unique(segments[hall & (places == 0)]).tolist())
-        regions = {k: r._replace(label=PlaceLabel.OPEN_AREA) if r.label is PlaceLabel.ROOM and k in in_hall else r
-                   for k, r in regions.items()}
-    if label_overrides:  # a region of a renamed category is a place of that name (a rack place mixes categories)
-        regions = {
-            k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
-            for k, r in regions.items()
-        }
-    region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
-    for k, r in regions.items():
-        region_label[k] = r.label.value
-    own = region_label[segments]
-    loose = (labels == PlaceLabel.ROOM.value) | (labels == PlaceLabel.STORAGE.value) & ~floor_px & ~banks.storage
-    loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
-    labels = np.where(loose & (own > 0), own, labels)
-    # a rack place's label, unless a person renamed the category of the face there
-    kept_place = places > 0
-    if label_overrides:
-        kept_place &= ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
-    labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
-    labels = np.where(free | streaks, labels, 0).astype(np.uint8)
-    face_region_final = _final_face_regions(pairs, sub.n_faces)
-    topology = region_topology(
-        sub,
-        cog,
-        face_region_final,
-        regions,
-        segments=segments,
-        doorways=door | cuts,
-        min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
-    )
-    return Decomposition(
-        labels=labels,
-        segments=segments,
-        regions=regions,
-        topology=topology,
-        line_groups=tuple(groups),
-        subdivision=sub,
-        cogency=cog,
-        face_labels=face_labels,
-        texture_regions=texture,
-        resolution=resolution,
-        resolution_m=resolution_m,
-        origin_xy_m=origin_xy_m,
-        rack_rows_px=racks.rows_px,
-    )
+        # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
+        structured_segments = set(np.flatnonzero(np.bincount(segments[(places > 0) | floor_px])).tolist())
+        rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
+        open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
+        objects = (
+            floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
+        )
+        merges = pocket_merges(
+            segments, rooms, open_areas, objects, free, max_area_px=round(_POCKET_MAX_M2 / resolution_m**2)
+        )
+        if merges:
+            lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
+            lut[list(merges)] = list(merges.values())
+            segments = lut[lut[segments]]
+            pairs = _pairs(segments, sub)
+            regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
+        for k in [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]:  # a rack place is no room: its label
+            held = places[segments == k]
+            if np.count_nonzero(held) > 0.5 * held.size:
+                label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))
+                regions[k] = regions[k]._replace(label=label)
+        if known_places is not None:  # in a hall another stage knows the racks of, floor touching a rack place
+            # is no room
+            hall = cv2.dilate((racks.cells > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+            in_hall = set(np.unique(segments[hall & (places == 0)]).tolist())
+            regions = {k: r._replace(label=PlaceLabel.OPEN_AREA) if r.label is PlaceLabel.ROOM and k in in_hall else r
+                       for k, r in regions.items()}
+        if label_overrides:  # a region of a renamed category is a place of that name (a rack place mixes categories)
+            regions = {
+                k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
+                for k, r in regions.items()
+            }
+        region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
+        for k, r in regions.items():
+            region_label[k] = r.label.value
+        own = region_label[segments]
+        loose = (labels == PlaceLabel.ROOM.value) | (labels == PlaceLabel.STORAGE.value) & ~floor_px & ~banks.storage
+        loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
+        labels = np.where(loose & (own > 0), own, labels)
+        # a rack place's label, unless a person renamed the category of the face there
+        kept_place = places > 0
+        if label_overrides:
+            kept_place &= ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
+        labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
+        labels = np.where(free | streaks, labels, 0).astype(np.uint8)
+        face_region_final = _final_face_regions(pairs, sub.n_faces)
+        topology = region_topology(
+            sub,
+            cog,
+            face_region_final,
+            regions,
+            segments=segments,
+            doorways=door | cuts,
+            min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
+        )
+        return Decomposition(
+            labels=labels,
+            segments=segments,
+            regions=regions,
+            topology=topology,
+            line_groups=tuple(groups),
+            subdivision=sub,
+            cogency=cog,
+            face_labels=face_labels,
+            texture_regions=texture,
+            resolution=resolution,
+            resolution_m=resolution_m,
+            origin_xy_m=origin_xy_m,
+            rack_rows_px=racks.rows_px,
+        )
 
 
 class _Pairs(NamedTuple):

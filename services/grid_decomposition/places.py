@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import math
+import threading
 
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy.stats import kurtosis
-from sklearn.cluster import KMeans
-from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
 N_FEATURES = 13
+CLUSTERING = threading.Lock()
+"""Held by each clustering under one-thread limits: threadpoolctl's limits are the process's, restored on exit."""
 
 
 def cast_rays(
@@ -88,6 +88,8 @@ def raycast_features(ranges: npt.NDArray[np.float64], *, gap_threshold: float) -
     flat = np.ptp(ranges, axis=1) == 0
     kurt = np.zeros(n)
     if (~flat).any():
+        from scipy.stats import kurtosis  # scipy.stats is imported when first needed
+
         kurt[~flat] = kurtosis(ranges[~flat], axis=1)
     return np.stack(
         [
@@ -147,7 +149,10 @@ def categorize_places(
     for k in (4, 5, 6, 9, 10, 11):
         feats[:, k] = np.log1p(feats[:, k])
     k = min(n_categories, rows.size)
-    with threadpool_limits(1):
+    from sklearn.cluster import KMeans  # scikit-learn is imported when first needed
+    from sklearn.preprocessing import StandardScaler
+
+    with CLUSTERING, threadpool_limits(1):
         scaled = StandardScaler().fit_transform(feats)
         model = KMeans(k, n_init=3, random_state=seed).fit(scaled)
     order = np.argsort(np.argsort(model.cluster_centers_[:, 0]))

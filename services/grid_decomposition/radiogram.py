@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import math
 import warnings
 from typing import NamedTuple
@@ -9,7 +10,6 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
-from scipy.signal import find_peaks, peak_widths
 
 from services.grid_decomposition.orientations import Gradients
 from services.grid_decomposition.wavelets import find_peaks_ricker
@@ -100,6 +100,8 @@ def line_offsets(
     most ``coarse_max_width_m`` (diffuse clutter gives wide, low peaks). Of peaks closer than
     ``min_line_gap_m`` only the best supported is kept.
     """
+    from scipy.signal import find_peaks, peak_widths  # imported when first needed (decompose loads it early)
+
     signal = gram.signal
     if signal.size < 3 or not np.any(signal > 0):
         return []
@@ -138,9 +140,17 @@ def line_offsets(
 
 
 def _merge_close(lines: list[Line], *, min_gap_px: float) -> list[Line]:
-    """Of lines closer than ``min_gap_px``, keep the best supported."""
+    """Of lines closer than ``min_gap_px``, keep the best supported.
+
+    Best supported first, a line is kept when the kept offsets next to its own (a sorted list) are
+    at least ``min_gap_px`` away: then all are.
+    """
     kept: list[Line] = []
+    offsets: list[float] = []  # of the kept lines, ascending
     for line in sorted(lines, key=lambda ln: -ln.support_m):
-        if all(abs(line.offset_px - k.offset_px) >= min_gap_px for k in kept):
+        at = bisect.bisect_left(offsets, line.offset_px)
+        neighbours = offsets[max(at - 1, 0) : at + 1]
+        if all(abs(line.offset_px - k) >= min_gap_px for k in neighbours):
             kept.append(line)
+            offsets.insert(at, line.offset_px)
     return sorted(kept, key=lambda ln: ln.offset_px)

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
-import networkx as nx
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse import coo_matrix
@@ -15,6 +14,9 @@ from services.grid_decomposition.segments import border_closure
 from services.grid_decomposition.semantics import link_connection
 from services.grid_decomposition.subdivision import Subdivision
 from shared.vocabulary import PlaceLabel
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 
 def link_components(n_nodes: int, links: npt.NDArray[np.int64], keep: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
@@ -161,6 +163,8 @@ def region_topology(
     shared border is on a doorway, else by their labels (two road pieces touching at the corner of
     a crossing are no passage).
     """
+    import networkx as nx  # imported when first needed (decompose loads it early)
+
     graph = nx.Graph()
     for info in regions.values():
         graph.add_node(

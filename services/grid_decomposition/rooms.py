@@ -13,6 +13,7 @@ from services.grid_decomposition.segments import (
     fill_from_neighbours,
     merge_open_segments,
     merge_small_segments,
+    renumber,
     split_along,
 )
 
@@ -180,6 +181,8 @@ def segment_rooms(
     spread = fill_from_neighbours(seg, clutter)
     seg = np.where(clutter & fixed[spread], 0, spread).astype(np.int32)
     space = (seg > 0) & ~fixed[seg]
+    if not space.any():  # warehouse floors only (a rack hall): no room to split, cut or clean up
+        return renumber(seg), cut
     if neck_half_width_m > 0:
         seg = split_at_necks(seg, space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
     if door_max_width_m > 0 and space.any():

@@ -360,6 +360,9 @@ def merge_open_segments(
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
+    present = np.bincount(seg.ravel(), minlength=n) > 0
+    if fixed is not None and fixed[:n][present].all():  # no segment may join (a rack hall's floors)
+        return _relabel(seg, np.arange(n), present)
     pairs, total, shut = border_closure(seg, closed)
     join = shut <= max_closed_share * total
     if fixed is not None:
@@ -367,4 +370,4 @@ def merge_open_segments(
     pairs = pairs[join]
     m = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = connected_components(m, directed=False)
-    return _relabel(seg, comp, np.bincount(seg.ravel(), minlength=n) > 0)
+    return _relabel(seg, comp, present)

@@ -8,11 +8,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import distance_transform_edt
-from sklearn.cluster import KMeans
-from sklearn.decomposition import PCA
 from threadpoolctl import threadpool_limits
 
 from services.grid_decomposition.errors import DecompositionError
+from services.grid_decomposition.places import CLUSTERING
 
 
 def gabor_features(
@@ -101,7 +100,10 @@ def segment_texture_regions(
     samples = feats[small_known]
     if samples.shape[0] < n_regions:
         return np.zeros((h, w), dtype=np.int32)
-    with threadpool_limits(1):
+    from sklearn.cluster import KMeans  # scikit-learn is imported when first needed
+    from sklearn.decomposition import PCA
+
+    with CLUSTERING, threadpool_limits(1):
         logs = np.log1p(samples)
         reduced = PCA(min(n_components, logs.shape[1]), random_state=seed).fit_transform(logs)
         labels = KMeans(n_regions, n_init=4, random_state=seed).fit_predict(reduced)

@@ -8,10 +8,6 @@ import numpy as np
 import numpy.typing as npt
 from numpy.lib.stride_tricks import sliding_window_view
 
-# scipy's ridge tracking is reused as is; only its per-point noise loop (a Python loop of one
-# scoreatpercentile per signal point, most of find_peaks_cwt's time on long radiograms) is replaced
-from scipy.signal._peak_finding import _cwt, _identify_ridge_lines, _ricker
-
 
 def _window_percentile(row: npt.NDArray[np.float64], window: int, percent: float) -> npt.NDArray[np.float64]:
     """``percent`` percentile (linear interpolation) of ``row`` over a window around every point.
@@ -66,6 +62,11 @@ def find_peaks_ricker(
     (P,) int64
         Sorted peak indices.
     """
+    # scipy's ridge tracking is reused as is; only its per-point noise loop (a Python loop of one
+    # scoreatpercentile per signal point, most of find_peaks_cwt's time on long radiograms) is
+    # replaced. scipy.signal is imported when first needed (decompose loads it early).
+    from scipy.signal._peak_finding import _cwt, _identify_ridge_lines, _ricker
+
     widths = np.atleast_1d(np.asarray(widths))
     cwt = _cwt(np.asarray(signal, dtype=np.float64), _ricker, widths)
     ridges = _identify_ridge_lines(cwt, widths / 4.0, math.ceil(widths[0]))
