@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -89,3 +90,12 @@ def test_fill_free_gives_unexplained_free_cells_the_label_nearest_through_free_s
     assert out[2, 3] == 7 and out[1, 8] == 9 and out[3, 6] == 9
     assert (out[1:4, 10] == 0).all(), "free space no label reaches stays unlabelled"
     assert not out[~free].any()
+
+
+def test_a_slanted_wall_between_two_rooms_keeps_them_apart() -> None:
+    classes = _walled((64, 100), Rect(0, 63, 0, 99))
+    cv2.line(classes, (44, 2), (52, 61), int(CellClass.WALL), 1)  # one cell thick, leaning 8 cells over 3 m
+    world = World({1: Rect(0, 63, 0, 49), 2: Rect(0, 63, 47, 99)}, set(), 3)  # their free spaces 1 cell apart
+    assert _rooms(world, classes) == [(1,), (2,)]
+    classes[2:62, 2:98] = CellClass.FREE  # without the wall: one room
+    assert _rooms(world, classes) == [(1, 2)]
