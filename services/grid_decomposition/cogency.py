@@ -61,8 +61,8 @@ def close_doorways(
     """Wall runs of a 1-D occupancy profile and the doorway-sized gaps between them.
 
     Runs shorter than ``min_wall_px`` (furniture legs, rack uprights) are not walls; gaps of at
-    most ``max_door_px`` between two wall runs are candidate doorways. With ``posts`` (any
-    obstacle on the line, however small), a wider gap of at most ``2 * max_door_px`` is one too
+    most ``max_door_px`` between two wall runs are candidate doorways. With ``posts`` (small
+    obstacles on the line, no wall runs), a wider gap of at most ``2 * max_door_px`` is one too
     when posts in it leave no free stretch wider than ``max_door_px``: two doors side by side
     with a post or door frame between them (a real map draws the post as a speck, no wall).
 
@@ -119,8 +119,7 @@ def wall_evidence(
     tolerance_px, min_wall_px, max_door_px, widening_px, max_depth_px : int
         Pixels.
     posts : (H, W) bool, optional
-        Every obstacle cell, furniture and specks included: posts between doors
-        (:func:`close_doorways`).
+        Free-standing obstacles (furniture, specks): posts between doors (:func:`close_doorways`).
 
     Returns
     -------

@@ -392,7 +392,7 @@ def decompose(
         max_door_px=max(1, round(door_max_width_m / resolution_m)),
         widening_px=max(1, round(door_widening_m / resolution_m)),
         max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
-        posts=obstacle,
+        posts=clutter,
     )
     cog = edge_cogency(
         sub,
