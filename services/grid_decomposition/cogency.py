@@ -52,12 +52,19 @@ def _runs(profile: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.ND
 
 
 def close_doorways(
-    profile: npt.NDArray[np.bool_], *, min_wall_px: int, max_door_px: int
+    profile: npt.NDArray[np.bool_],
+    *,
+    min_wall_px: int,
+    max_door_px: int,
+    posts: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Wall runs of a 1-D occupancy profile and the doorway-sized gaps between them.
 
     Runs shorter than ``min_wall_px`` (furniture legs, rack uprights) are not walls; gaps of at
-    most ``max_door_px`` between two wall runs are candidate doorways.
+    most ``max_door_px`` between two wall runs are candidate doorways. With ``posts`` (small
+    obstacles on the line, no wall runs), a wider gap of at most ``2 * max_door_px`` is one too
+    when posts in it leave no free stretch wider than ``max_door_px``: two doors side by side
+    with a post or door frame between them (a real map draws the post as a speck, no wall).
 
     Returns
     -------
@@ -78,6 +85,10 @@ def close_doorways(
     wall[:] = np.cumsum(cover)[:-1] > 0
     gaps = starts[1:] - ends[:-1]
     small = gaps <= max_door_px
+    if posts is not None:
+        for i in np.flatnonzero(~small & (gaps <= 2 * max_door_px)):
+            free_starts, free_ends = _runs(~posts[ends[i] : starts[i + 1]])
+            small[i] = free_starts.size > 1 and int((free_ends - free_starts).max()) <= max_door_px
     return wall, ends[:-1][small].astype(np.int64), starts[1:][small].astype(np.int64)
 
 
@@ -90,6 +101,7 @@ def wall_evidence(
     max_door_px: int,
     widening_px: int,
     max_depth_px: int,
+    posts: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
 
@@ -106,6 +118,8 @@ def wall_evidence(
     groups : sequence of LineGroup
     tolerance_px, min_wall_px, max_door_px, widening_px, max_depth_px : int
         Pixels.
+    posts : (H, W) bool, optional
+        Free-standing obstacles (furniture, specks): posts between doors (:func:`close_doorways`).
 
     Returns
     -------
@@ -114,7 +128,9 @@ def wall_evidence(
     """
     h, w = occupied.shape
     k = 2 * tolerance_px + 1
-    near = cv2.dilate(occupied.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
+    near = cv2.dilate(occupied.astype(np.uint8), disk) > 0
+    near_post = None if posts is None else cv2.dilate(posts.astype(np.uint8), disk) > 0
     wall = np.zeros((h, w), dtype=bool)
     door = np.zeros((h, w), dtype=bool)
     for group in groups:
@@ -130,7 +146,10 @@ def wall_evidence(
                 xs, ys = xs[keep], ys[keep]
             if xs.size == 0:
                 continue
-            on_wall, g0, g1 = close_doorways(near[ys, xs], min_wall_px=min_wall_px, max_door_px=max_door_px)
+            on_wall, g0, g1 = close_doorways(
+                near[ys, xs], min_wall_px=min_wall_px, max_door_px=max_door_px,
+                posts=None if near_post is None else near_post[ys, xs],
+            )
             wall[ys[on_wall], xs[on_wall]] = True
             if g0.size == 0:
                 continue

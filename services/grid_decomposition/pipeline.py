@@ -405,6 +405,7 @@ def decompose(
             max_door_px=max(1, round(door_max_width_m / resolution_m)),
             widening_px=max(1, round(door_widening_m / resolution_m)),
             max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
+            posts=clutter,
         )
         racks = find_racks_by_region(  # each texture region with its own directions
             obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],

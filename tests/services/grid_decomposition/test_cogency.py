@@ -21,6 +21,22 @@ def test_close_doorways_bridges_a_door_between_walls_but_not_furniture_legs() ->
     assert g0.size == 0
 
 
+def test_close_doorways_bridges_two_doors_split_by_a_post_but_not_an_open_side() -> None:
+    profile = np.zeros(100, dtype=bool)
+    profile[0:20] = True  # wall
+    profile[56:100] = True  # wall after a 36-cell opening
+    posts = profile.copy()
+    posts[37:39] = True  # a post: two doors of 17 and 18 cells
+    _, g0, g1 = close_doorways(profile, min_wall_px=5, max_door_px=20)
+    assert g0.size == 0
+    _, g0, g1 = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=posts)
+    assert (g0.tolist(), g1.tolist()) == ([20], [56])
+    posts[37:39] = False
+    posts[24] = True  # a speck near one end leaves 31 cells open: no doorway
+    _, g0, _ = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=posts)
+    assert g0.size == 0
+
+
 def test_subdivide_two_crossing_lines_gives_four_faces_and_four_edges() -> None:
     lines = (Line(0.0, 50.0, 1.0, 0.1, True), Line(math.pi / 2, -40.0, 1.0, 0.1, True))
     sub = subdivide([LineGroup(lines, None)], (100, 80))

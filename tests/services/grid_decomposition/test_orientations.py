@@ -26,6 +26,21 @@ def test_dominant_orientations_of_axis_aligned_rooms_are_horizontal_and_vertical
     assert min(_angle_error(a, math.pi / 2) for a in angles) < math.radians(1)
 
 
+def test_a_family_pulled_two_degrees_off_square_is_made_square_to_the_sharper_one() -> None:
+    # long straight walls across, and short walls up that lean 2 degrees (as speckle and ray fans
+    # pull a real map's weaker family): the lines up must stay on the walls, square to the others
+    occ = np.zeros((300, 400), dtype=np.uint8)
+    for y in (20, 150, 280):
+        cv2.line(occ, (10, y), (390, y), 1, 1)
+    lean = math.tan(math.radians(2.0)) * 120
+    for x in range(40, 380, 40):
+        cv2.line(occ, (x, 30), (round(x + lean), 150), 1, 1)
+    angles = dominant_orientations(oriented_gradients(occ.astype(bool)))
+    assert len(angles) == 2
+    assert min(_angle_error(a, 0.0) for a in angles) < math.radians(0.5)
+    assert _angle_error(angles[0] - angles[1], math.pi / 2) < 1e-9
+
+
 def test_dominant_orientations_follow_a_rotated_building() -> None:
     occ = np.zeros((400, 400), dtype=np.uint8)
     box = cv2.boxPoints(((200.0, 200.0), (250.0, 150.0), 30.0)).astype(np.int32)

@@ -33,6 +33,21 @@ def test_decompose_splits_two_rooms_at_their_door() -> None:
     assert {info.label for info in d.regions.values()} == {PlaceLabel.ROOM}
 
 
+def test_two_doors_with_a_post_between_them_keep_two_rooms() -> None:
+    # 10 x 13 m at 5 cm, a wall down the middle opened 3 m wide: two 1.4 m doors and a 0.2 m
+    # post, drawn as a speck (a real map's door frame), too wide as one doorway
+    occ = np.full((200, 260), -1, dtype=np.int8)
+    occ[5:195, 5:255] = 100
+    occ[8:192, 8:252] = 0
+    occ[8:192, 128:131] = 100
+    occ[70:130, 128:131] = 0
+    occ[98:102, 128:131] = 100
+    d = decompose(occ, resolution_m=0.05)
+    left, right = d.segments[40, 60], d.segments[160, 200]
+    assert left > 0 and right > 0 and left != right
+    assert len(d.regions) == 2
+
+
 def test_segments_and_labels_cover_exactly_the_free_space() -> None:
     occ = _two_rooms_and_a_door()
     d = decompose(occ, resolution_m=0.05, origin_xy_m=(-2.0, 3.0))
