@@ -44,11 +44,6 @@ SEED_SCHEDULE: tuple[Phase, ...] = (
 )
 """Table 3.2."""
 
-SCHEDULE: tuple[Phase, ...] = (*SEED_SCHEDULE[:-1], Phase(None, {
-    **SEED_SCHEDULE[-1].probabilities, Kernel.DETACH: 0.05, Kernel.ATTACH: 0.05}))
-"""The default: table 3.2 with the DETACH/ATTACH pair beside every other kernel in the last phase (a unit whose
-walls hold doors can shrink off a door and grow back onto one)."""
-
 
 @dataclass(frozen=True)
 class ChainSettings:
@@ -56,7 +51,7 @@ class ChainSettings:
 
     iterations: int = 20000
     max_seconds: float = 60.0
-    schedule: tuple[Phase, ...] = SCHEDULE
+    schedule: tuple[Phase, ...] = SEED_SCHEDULE
     fsu_from: int = 1
     fsu_every: int = 200
     seed: int = 0

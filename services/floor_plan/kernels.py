@@ -26,7 +26,7 @@ from services.floor_plan.detectors import (
     split_options,
     split_rect,
 )
-from services.floor_plan.world import Rect, Side, World, in_wall, moved, shared_band
+from services.floor_plan.world import Rect, Side, World, moved
 
 
 class Kernel(enum.Enum):
@@ -41,17 +41,12 @@ class Kernel(enum.Enum):
     INTERCHANGE = "interchange"
     ALLOCATE = "allocate"
     DELETE = "delete"
-    DETACH = "detach"
-    """SHRINK a wall that holds one door, dropping the door (not in the seed: a unit pinned by its doors)."""
-    ATTACH = "attach"
-    """DILATE a wall onto a neighbour's and open a door in it (DETACH's reverse)."""
 
 
 REVERSE: dict[Kernel, Kernel] = {
     Kernel.ADD: Kernel.REMOVE, Kernel.REMOVE: Kernel.ADD, Kernel.SPLIT: Kernel.MERGE, Kernel.MERGE: Kernel.SPLIT,
     Kernel.SHRINK: Kernel.DILATE, Kernel.DILATE: Kernel.SHRINK, Kernel.INTERCHANGE: Kernel.INTERCHANGE,
-    Kernel.ALLOCATE: Kernel.DELETE, Kernel.DELETE: Kernel.ALLOCATE, Kernel.DETACH: Kernel.ATTACH,
-    Kernel.ATTACH: Kernel.DETACH,
+    Kernel.ALLOCATE: Kernel.DELETE, Kernel.DELETE: Kernel.ALLOCATE,
 }
 
 
@@ -337,86 +332,6 @@ class Proposer:
         side, cells = move.detail
         return float(b[ids.index(uid)] / b.sum() * v[side] / v.sum() * self._shift[cells - 1])
 
-    def _pick_wall(self, world: World, chooser: Chooser, inward: int) -> tuple[int, Rect, Side, int, Rect] | None:
-        """SHRINK's (``inward`` +1) or DILATE's (-1) picks: a unit by b, a side by v, a distance: (id, old, side,
-        cells, new), None when the new rectangle is too small or leaves the map."""
-        if not world.units:
-            return None
-        ids, b = self._b_all(world)
-        uid = ids[chooser.pick(b)]
-        rect = world.units[uid]
-        side = Side(chooser.pick(self.wall_v(rect)))
-        cells = chooser.pick(self._shift) + 1
-        new = moved(rect, side, inward * cells)
-        return (uid, rect, side, cells, new) if self.valid(new) else None
-
-    def _p_wall(self, world: World, move: Move, inward: int) -> float:
-        """The probability of :meth:`_pick_wall`'s picks for ``move`` (0 if they give another rectangle)."""
-        ids, b = self._b_all(world)
-        uid = move.removed[0]
-        rect = world.units[uid]
-        side, cells = move.detail
-        if moved(rect, Side(side), inward * cells) != move.added[0]:
-            return 0.0
-        v = self.wall_v(rect)
-        return float(b[ids.index(uid)] / b.sum() * v[side] / v.sum() * self._shift[cells - 1])
-
-    def _dropped(self, world: World, old: Rect, new: Rect) -> list[Rect]:
-        """The doors in ``old``'s walls that ``new``'s walls no longer hold."""
-        t = self.settings.wall_cells
-        return [d for d in sorted(world.doors) if in_wall(old, d, t) and not in_wall(new, d, t)]
-
-    def _opened(self, world: World, uid: int, old: Rect, new: Rect) -> tuple[list[Rect], npt.NDArray[np.float64]]:
-        """Door candidates (eq. 3.23) on the walls ``new`` (unit ``uid`` grown from ``old``) shares with its
-        neighbours, in the part of its walls that ``old``'s did not hold."""
-        t = self.settings.wall_cells
-        near = {o: r for o, r in world.units.items() if o != uid and shared_band(new, r, t) is not None}
-        local = World({**near, uid: new}, set(), 0)
-        rects, w = self.doors(local)
-        keep = [k for k, d in enumerate(rects) if in_wall(new, d, t) and not in_wall(old, d, t)]
-        return [rects[k] for k in keep], w[keep]
-
-    def _draw_detach(self, world: World, chooser: Chooser) -> Move | None:
-        picked = self._pick_wall(world, chooser, 1)
-        if picked is None:
-            return None
-        uid, rect, side, cells, new = picked
-        dropped = self._dropped(world, rect, new)
-        if len(dropped) != 1:
-            return None
-        return Move(Kernel.DETACH, removed=(uid,), added=(new,), door_removed=dropped[0], detail=(int(side), cells),
-                    window=(self._strip(rect, new).union(dropped[0]),))
-
-    def _p_detach(self, world: World, move: Move) -> float:
-        rect = world.units[move.removed[0]]
-        if self._dropped(world, rect, move.added[0]) != [move.door_removed]:
-            return 0.0
-        return self._p_wall(world, move, 1)
-
-    def _draw_attach(self, world: World, chooser: Chooser) -> Move | None:
-        picked = self._pick_wall(world, chooser, -1)
-        if picked is None:
-            return None
-        uid, rect, side, cells, new = picked
-        rects, w = self._opened(world, uid, rect, new)
-        if not rects:
-            return None
-        door = rects[chooser.pick(w)]
-        if any(door.intersects(d) for d in world.doors):
-            return None
-        return Move(Kernel.ATTACH, removed=(uid,), added=(new,), door_added=door, detail=(int(side), cells),
-                    window=(self._strip(rect, new).union(door),))
-
-    def _p_attach(self, world: World, move: Move) -> float:
-        uid = move.removed[0]
-        p = self._p_wall(world, move, -1)
-        if p == 0.0:
-            return 0.0
-        rects, w = self._opened(world, uid, world.units[uid], move.added[0])
-        if move.door_added not in rects:
-            return 0.0
-        return p * float(w[rects.index(move.door_added)] / w.sum())
-
     def _draw_allocate(self, world: World, chooser: Chooser) -> Move | None:
         rects, w = self.doors(world)
         if not rects:
@@ -476,8 +391,6 @@ _DRAW: dict[Kernel, Callable[[Proposer, World, Chooser], Move | None]] = {
     Kernel.INTERCHANGE: Proposer._draw_interchange,
     Kernel.ALLOCATE: Proposer._draw_allocate,
     Kernel.DELETE: Proposer._draw_delete,
-    Kernel.DETACH: Proposer._draw_detach,
-    Kernel.ATTACH: Proposer._draw_attach,
 }
 
 _PROBABILITY: dict[Kernel, Callable[[Proposer, World, Move], float]] = {
@@ -490,8 +403,6 @@ _PROBABILITY: dict[Kernel, Callable[[Proposer, World, Move], float]] = {
     Kernel.INTERCHANGE: Proposer._p_interchange,
     Kernel.ALLOCATE: Proposer._p_allocate,
     Kernel.DELETE: Proposer._p_delete,
-    Kernel.DETACH: Proposer._p_detach,
-    Kernel.ATTACH: Proposer._p_attach,
 }
 
 

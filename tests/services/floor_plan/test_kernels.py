@@ -186,18 +186,3 @@ def test_split_then_merge_restores_the_unit() -> None:
         a, b = after.units.values()
         merged = proposer.merged(a, b)
         assert merged is not None and merged[0] == Rect(0, 5, 0, 8)
-
-
-def test_detach_drops_the_door_of_the_wall_it_shrinks_and_attach_opens_it_again() -> None:
-    classes, proposer, prior = _tiny()
-    door = Rect(2, 3, 4, 4)
-    world = World({1: Rect(0, 5, 0, 4), 2: Rect(0, 5, 4, 8)}, {door}, 3)
-    phi = {k: 1.0 / len(Kernel) for k in Kernel}
-    chain = _chain(world, classes, proposer, prior)
-    detached = [m for _, m in _draws(proposer, Kernel.DETACH, world) if m is not None]
-    assert detached and all(m.door_removed == door for m in detached)
-    for move in detached:
-        ev = chain.evaluate(move, phi)
-        assert ev is not None and not ev.after.doors
-        back = [m for _, m in _draws(proposer, Kernel.ATTACH, ev.after) if m is not None]
-        assert any(apply_move(ev.after, m)[0].key() == world.key() for m in back)
