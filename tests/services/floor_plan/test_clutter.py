@@ -6,10 +6,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from services.floor_plan import CellClass, ChainSettings, FloorPlanSettings, floor_plan
 from services.floor_plan.clutter import explain_clutter
 from services.floor_plan.likelihood import log_sensor_table
+from shared.settings import FloorPlanStageSettings
 
 RES = 0.05
 TABLE = log_sensor_table()
@@ -69,3 +71,11 @@ def test_bad_arguments_are_refused() -> None:
         explain_clutter(cm, np.zeros((4, 5), np.uint8), TABLE, max_cells=10, log_cost=1.0)
     with pytest.raises(ValueError, match="max_cells"):
         explain_clutter(cm, cm, TABLE, max_cells=0, log_cost=1.0)
+
+
+def test_the_worker_settings_take_clutter_obstacles_off_and_refuse_a_nonsense_size() -> None:
+    assert FloorPlanStageSettings(clutter_max_m2=None).clutter_max_m2 is None
+    with pytest.raises(ValidationError, match="clutter_max_m2"):
+        FloorPlanStageSettings(clutter_max_m2=0.0)
+    with pytest.raises(ValidationError, match="clutter_log_cost"):
+        FloorPlanStageSettings(clutter_log_cost=-1.0)
