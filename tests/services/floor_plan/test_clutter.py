@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from services.floor_plan import CellClass, ChainSettings, FloorPlanSettings, floor_plan
-from services.floor_plan.clutter import explain_clutter
+from services.floor_plan import CellClass, ChainSettings, FloorPlanSettings, explain_clutter, floor_plan
 from services.floor_plan.likelihood import log_sensor_table
 from shared.settings import FloorPlanStageSettings
 
