@@ -14,7 +14,7 @@ CPU time (``time.process_time``) with the load average, since the machine may be
   cells inside the ground truth's rooms that are not free in the map (no room-shaped unit draws them right).
 * ``ipa``: the ipa maps (plain, and the variants ``--variants`` names, e.g. ``_furnitures``) read as
   ``aisle floor-plan MAP.png --resolution 0.05`` reads them; K(W,M), K of the same world under map_server's fixed
-  trinary reading, and the ipa scores (every labelled pixel
+  trinary reading, K of the units alone (no clutter obstacles), and the ipa scores (every labelled pixel
   counts) of units and rooms, with the means over the two halves: the room level (``RoomSettings``) was tuned on
   the maps at even places in name order (``tuning``), the others are held out (``held_out``).
 * ``partial``: the 15 growing ubremen maps in order, each warm-started from the previous world; the share
@@ -73,6 +73,7 @@ WHITE = ((0, 0, 0), (255, 255, 255))
 class Row(NamedTuple):
     k: float
     k_fixed: float  # K(W,M) of the same world against the map read with fixed thresholds
+    k_units: float  # K(W,M) of the seed's world alone (no clutter obstacles)
     k_known: float
     recall: float  # units
     precision: float
@@ -131,7 +132,7 @@ def _result(plan: FloorPlan, fixed: npt.NDArray[np.int8], units: tuple[float, fl
             seconds: float, cpu: float) -> Row:
     """A row of figures: ``fixed`` is the map read with fixed thresholds (for K under that reading), ``units`` and
     ``rooms`` the (recall, precision) of units.png and rooms.png."""
-    return Row(plan.k, _k_fixed(plan, fixed), _k_known(plan), *units, *rooms, seconds, cpu,
+    return Row(plan.k, _k_fixed(plan, fixed), plan.k_units, _k_known(plan), *units, *rooms, seconds, cpu,
                plan.iterations / max(seconds, 1e-9), plan.iterations / max(plan.cpu_seconds, 1e-9))
 
 
@@ -142,13 +143,15 @@ def _common(*images: npt.NDArray[np.generic]) -> list[npt.NDArray[np.generic]]:
 
 
 def _header() -> None:
-    print("\n| set | map | K(W,M) % | K fixed reading % | K known % | units recall % | units precision % "
-          "| rooms recall % | rooms precision % | units | rooms | doors | it/s | it/CPU s | s | CPU s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| set | map | K(W,M) % | K fixed reading % | K units alone % | K known % | units recall % "
+          "| units precision % | rooms recall % | rooms precision % "
+          "| units | rooms | doors | it/s | it/CPU s | s | CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _row(tag: str, name: str, plan: FloorPlan, r: Row) -> None:
-    print(f"| {tag} | {name} | {100 * r.k:.1f} | {100 * r.k_fixed:.1f} | {100 * r.k_known:.1f} | "
+    print(f"| {tag} | {name} | {100 * r.k:.1f} | {100 * r.k_fixed:.1f} | {100 * r.k_units:.1f} | "
+          f"{100 * r.k_known:.1f} | "
           f"{100 * r.recall:.1f} | {100 * r.precision:.1f} | {100 * r.room_recall:.1f} | "
           f"{100 * r.room_precision:.1f} | "
           f"{len(plan.units)} | {len(plan.rooms)} | {len(plan.doors)} | {r.rate:.0f} | {r.cpu_rate:.0f} | "
@@ -158,8 +161,8 @@ def _row(tag: str, name: str, plan: FloorPlan, r: Row) -> None:
 def _summary(tag: str, rows: list[Row]) -> None:
     if not rows:
         return
-    for field, unit in (("k", "%"), ("k_fixed", "%"), ("k_known", "%"), ("recall", "%"), ("precision", "%"),
-                        ("room_recall", "%"), ("room_precision", "%")):
+    for field, unit in (("k", "%"), ("k_fixed", "%"), ("k_units", "%"), ("k_known", "%"), ("recall", "%"),
+                        ("precision", "%"), ("room_recall", "%"), ("room_precision", "%")):
         values = [getattr(r, field) for r in rows]
         print(f"{tag}_{field}_mean {100 * statistics.fmean(values):.2f} {unit}")
         print(f"{tag}_{field}_min {100 * min(values):.2f} {unit}")
@@ -195,7 +198,7 @@ def _rose2(iterations: int, only: list[str] | None) -> None:
         r = _result(plan, rose2_occupancy(grey), (s.recall, s.precision), (sr.recall, sr.precision), seconds, cpu)
         rows.append(r)
         _row("rose2", folder.name, plan, r)
-        print(f"| rose2_peer | {folder.name} | | | | | | {100 * peer.recall:.1f} | {100 * peer.precision:.1f} "
+        print(f"| rose2_peer | {folder.name} | | | | | | | {100 * peer.recall:.1f} | {100 * peer.precision:.1f} "
               "| | | | | | | |")
     _summary("rose2", rows)
     if peers:

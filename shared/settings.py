@@ -276,6 +276,9 @@ class FloorPlanStageSettings(BaseModel):
     type_rule_weight: float = Field(2.0, ge=0.0, description="Weight of each type rule of table 3.5.")
     same_length_rule_weight: float = Field(1.5, ge=0.0, description="Weight of each SaLe rule of table 3.5.")
     same_length_sigma_m: float = Field(0.5, gt=0.0, description="sigma of the same-length prior (eq. 3.34).")
+    clutter_max_m2: float | None = Field(4.0, gt=0.0, description=(
+        "Largest blob of non-free cells inside the units the layer draws as a clutter obstacle; null: none."))
+    clutter_log_cost: float = Field(10.0, ge=0.0, description="Prior cost of one clutter obstacle (nats).")
 
     @model_validator(mode="after")
     def _distinct_layers(self) -> FloorPlanStageSettings:

@@ -6,6 +6,7 @@ under a Markov-logic context prior.
 """
 
 from services.floor_plan.chain import SEED_SCHEDULE, Chain, ChainResult, ChainSettings, Phase, run_chain
+from services.floor_plan.clutter import Clutter, explain_clutter
 from services.floor_plan.context import ContextPrior, ContextSettings, UnitEvidence, type_marginals
 from services.floor_plan.errors import FloorPlanError
 from services.floor_plan.frame import Frame, carry, dominant_angle, make_frame
@@ -40,6 +41,7 @@ __all__ = [
     "Chain",
     "ChainResult",
     "ChainSettings",
+    "Clutter",
     "ContextPrior",
     "ContextSettings",
     "Door",
@@ -65,6 +67,7 @@ __all__ = [
     "classify_map",
     "describe",
     "dominant_angle",
+    "explain_clutter",
     "floor_plan",
     "group_rooms",
     "log_sensor_table",

@@ -82,7 +82,8 @@ def geojson(plan: FloorPlan) -> dict[str, Any]:
         for i, (polygon, standing) in enumerate(zip(plan.obstacles, plan.standing, strict=True))
     ]
     return {"type": "FeatureCollection", "features": features,
-            "properties": {"k": round(plan.k, 6), "iterations": plan.iterations}}
+            "properties": {"k": round(plan.k, 6), "k_units": round(plan.k_units, 6),
+                           "clutter": plan.clutter, "iterations": plan.iterations}}
 
 
 def write_outputs(plan: FloorPlan, out_dir: Path) -> dict[str, Path]:

@@ -11,6 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.floor_plan.chain import Chain, ChainSettings, run_chain
+from services.floor_plan.clutter import explain_clutter
 from services.floor_plan.context import ContextPrior, ContextSettings
 from services.floor_plan.detectors import Evidence, wall_lines, wbu_candidates
 from services.floor_plan.errors import FloorPlanError
@@ -67,6 +68,11 @@ class FloorPlanSettings:
     """A map whose dominant walls are further than this from the grid's axes is explained turned to them."""
     rooms: RoomSettings = field(default_factory=RoomSettings)
     """When units are one room (:mod:`services.floor_plan.rooms`)."""
+    clutter_max_m2: float | None = 4.0
+    """The largest blob of non-free cells inside the units drawn as an obstacle (furniture, the unseen space behind
+    it: :mod:`services.floor_plan.clutter`); None: no clutter obstacles, C_W is the seed's world alone."""
+    clutter_log_cost: float = 10.0
+    """The prior's cost of one clutter obstacle in nats (one cell the sensor model explains is worth log 8 = 2.1)."""
 
 
 class Unit(NamedTuple):
@@ -107,6 +113,10 @@ class FloorPlan(NamedTuple):
     classes_map: npt.NDArray[np.uint8]
     classes_world: npt.NDArray[np.uint8]
     k: float
+    k_units: float
+    """K(W,M) of the seed's world alone: units, doors and solid blocks, without the clutter obstacles."""
+    clutter: int
+    """Clutter obstacles drawn in ``classes_world`` (:mod:`services.floor_plan.clutter`)."""
     log_posterior: float
     iterations: int
     accepted: int
@@ -262,6 +272,13 @@ def describe(
     solid = _obstacles(classes_map, settings, resolution_m)
     cw = to_map(frame, render(world, frame.shape, wall_cells=t), fill=CellClass.UNKNOWN)
     cw = np.where(solid, np.uint8(CellClass.WALL), cw).astype(np.uint8)
+    k_units = cell_prediction_rate(classes_map, cw)
+    clutter = 0
+    if settings.clutter_max_m2 is not None:
+        found = explain_clutter(classes_map, cw, log_sensor_table(settings.sensor_model),
+                                max_cells=max(1, round(settings.clutter_max_m2 / resolution_m**2)),
+                                log_cost=settings.clutter_log_cost)
+        cw, clutter = found.classes_world, found.drawn
     contours, hierarchy = cv2.findContours(solid.astype(np.uint8), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
 
     def ring_of(contour: npt.NDArray[np.integer[Any]] | cv2.typing.MatLike) -> tuple[tuple[float, float], ...]:
@@ -282,8 +299,8 @@ def describe(
             x, y = contour.reshape(-1, 2)[0]
             standing.append(bool(blocks[y, x]))
     return FloorPlan(world, units, doors, adjacency, rooms, rings, standing, classes_map, cw,
-                     cell_prediction_rate(classes_map, cw), log_posterior, iterations, accepted, seconds, cpu_seconds,
-                     resolution_m, origin_xy_m, frame)
+                     cell_prediction_rate(classes_map, cw), k_units, clutter, log_posterior, iterations, accepted,
+                     seconds, cpu_seconds, resolution_m, origin_xy_m, frame)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
