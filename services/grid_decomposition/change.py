@@ -152,7 +152,7 @@ def unchanged_cells(
         disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * jitter + 1,) * 2)
         near_b = np.stack([cv2.dilate((cb == c).astype(np.uint8), disk) for c in range(OCCUPIED + 1)]) > 0
         near_a = np.stack([cv2.dilate((ca == c).astype(np.uint8), disk) for c in range(OCCUPIED + 1)]) > 0
-        rows, cols = np.indices(cb.shape, sparse=True)
+        rows, cols = np.arange(cb.shape[0])[:, None], np.arange(cb.shape[1])[None, :]
         changed &= ~(near_b[ca, rows, cols] & near_a[cb, rows, cols])
     if covered is not None:
         changed |= ~covered
