@@ -111,8 +111,14 @@ def unchanged_cells(
     resolution_m: float,
     covered: npt.NDArray[np.bool_] | None = None,
     margin_m: float = 0.05,
+    jitter_m: float = 0.0,
 ) -> npt.NDArray[np.bool_]:
     """Cells of the same class (:func:`occupancy_classes`) in both grids, and not within ``margin_m`` of a changed one.
+
+    A cell whose class differs counts as the same when each grid has the other's class within ``jitter_m`` of it:
+    a map drawn again shifted by a fraction of a cell (a growing map whose origin moved, a SLAM pass that
+    nudged the walls) moves every wall by a cell, which is no change of the room behind it. A wall that
+    appeared or went, and ground seen further than ``jitter_m`` beyond what was seen, are changes.
 
     Parameters
     ----------
@@ -124,6 +130,8 @@ def unchanged_cells(
         Cells ``before`` held (the grid grew: the others are changed); all by default.
     margin_m : float
         A cell this close to a changed one counts as changed (a wall drawn one cell over moves its neighbours).
+    jitter_m : float
+        How far a cell's content may have moved and still be the same (0: cell by cell).
 
     Returns
     -------
@@ -135,7 +143,17 @@ def unchanged_cells(
                                  + ("" if covered is None else f", {covered.shape}"))
     if not resolution_m > 0:
         raise DecompositionError(f"resolution_m must be positive, got {resolution_m}")
-    changed = occupancy_classes(b) != occupancy_classes(a)
+    if jitter_m < 0:
+        raise DecompositionError(f"jitter_m must not be negative, got {jitter_m}")
+    cb, ca = occupancy_classes(b), occupancy_classes(a)
+    changed = cb != ca
+    jitter = round(jitter_m / resolution_m)
+    if jitter > 0:
+        disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * jitter + 1,) * 2)
+        near_b = np.stack([cv2.dilate((cb == c).astype(np.uint8), disk) for c in range(OCCUPIED + 1)]) > 0
+        near_a = np.stack([cv2.dilate((ca == c).astype(np.uint8), disk) for c in range(OCCUPIED + 1)]) > 0
+        rows, cols = np.arange(cb.shape[0])[:, None], np.arange(cb.shape[1])[None, :]
+        changed &= ~(near_b[ca, rows, cols] & near_a[cb, rows, cols])
     if covered is not None:
         changed |= ~covered
     reach = round(margin_m / resolution_m)

@@ -6,7 +6,9 @@ a border the map around it gives no new reason to move. On a live map each such 
 (:mod:`~services.grid_decomposition.keys`). So a region of the previous decomposition whose cells' map content
 did not change (:func:`~services.grid_decomposition.change.unchanged_cells`, up to ``max_changed_share`` of
 them) keeps its unchanged cells, and a new region that continues it (the one-to-one overlap match of
-:func:`match_regions`) is it, grown (:func:`keep_regions`). Regions over changed map are the new decomposition's.
+:func:`match_regions`) is it, grown (:func:`keep_regions`). Regions over changed map are the new decomposition's,
+and so is a new region found mostly on ground no settled region keeps: kept cells inside it would leave both
+in ragged pieces.
 """
 
 from __future__ import annotations
@@ -92,8 +94,11 @@ def keep_regions(
 
     A previous region with at most ``max_changed_share`` of its cells changed is *settled*: its unchanged cells
     that are in a region now are its again, and a new region matched to it (:func:`match_regions`, at
-    ``min_overlap``) is it, grown into what was seen since. Everything else is as ``segments`` has it. A region
-    left in pieces keeps its largest; smaller pieces than ``min_area_px`` join a neighbouring region.
+    ``min_overlap``) is it, grown into what was seen since. A new region that continues no previous one and of
+    which at most ``min_overlap`` lies on those kept cells is a place found anew (a room seen through its door
+    before, entered now) and stands whole; one lying mostly on them is a piece of them and gives way. Everything
+    else is as ``segments`` has it. A region left in pieces keeps its largest; smaller pieces than
+    ``min_area_px`` join a neighbouring region.
 
     Parameters
     ----------
@@ -119,11 +124,19 @@ def keep_regions(
     settled[0] = False
     base = int(seg.max(initial=0)) + 1  # settled region k is base + k; new ones keep their own numbers
     lut = np.arange(base, dtype=np.int64)
-    for new, old in match_regions(before, seg, min_overlap=min_overlap).items():
+    matches = match_regions(before, seg, min_overlap=min_overlap)
+    for new, old in matches.items():
         if settled[old]:
             lut[new] = base + old
     out = lut[seg]
     keep = settled[before] & prior.unchanged & (seg > 0)
+    # a new region that continues no previous one and lies mostly on ground the settled regions do not hold is
+    # a place found anew (a room seen through its door before, now entered): it stands whole
+    continues = np.zeros(base, dtype=bool)
+    continues[list(matches)] = True
+    on_kept = np.bincount(seg[keep], minlength=base)
+    anew = ~continues & (on_kept <= min_overlap * np.bincount(seg.ravel(), minlength=base))
+    keep &= ~anew[seg]
     out[keep] = base + before[keep]
     present = np.bincount(out.ravel()) > 0
     present[0] = False

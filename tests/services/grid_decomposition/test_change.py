@@ -121,3 +121,17 @@ def test_unchanged_cells_leave_out_changes_their_margin_and_cells_the_old_grid_d
     assert np.array_equal(same, expected)
     with pytest.raises(DecompositionError, match="shape"):
         unchanged_cells(before, after[:, :4], resolution_m=0.1)
+
+
+def test_a_map_drawn_again_a_cell_over_is_unchanged_within_the_jitter_but_a_new_wall_is_not() -> None:
+    before = np.zeros((12, 12), dtype=np.int8)
+    before[:, 5] = 100  # a wall
+    after = np.roll(before, 1, axis=1)  # drawn again one cell to the right
+    after[9:, 1] = 100  # and a wall that was not there
+    assert not unchanged_cells(before, after, resolution_m=0.1, margin_m=0.0)[:, 5:7].any()
+    same = unchanged_cells(before, after, resolution_m=0.1, margin_m=0.0, jitter_m=0.1)
+    expected = np.ones((12, 12), dtype=bool)
+    expected[9:, 1] = False
+    assert np.array_equal(same, expected)
+    with pytest.raises(DecompositionError, match="jitter_m"):
+        unchanged_cells(before, after, resolution_m=0.1, jitter_m=-0.1)

@@ -48,6 +48,16 @@ def test_a_settled_region_grows_into_newly_seen_space_its_continuation_covers() 
     assert _same_partition(out, _grid((1, slice(None), slice(0, 8)), (2, slice(None), slice(8, 20))))
 
 
+def test_a_room_found_mostly_on_newly_seen_ground_stands_whole() -> None:
+    before = _grid((4, slice(None), slice(0, 12)))  # a corridor, and rays through a door at its right end
+    unchanged = np.zeros(before.shape, dtype=bool)
+    unchanged[:, :12] = True  # columns 12.. were unknown before: the room behind the door
+    # the new decomposition finds the room, a third of it on the rays the corridor held
+    after = _grid((1, slice(None), slice(0, 8)), (2, slice(None), slice(8, 20)))
+    out = keep_regions(after, RegionPrior(before, unchanged))
+    assert _same_partition(out, after), "the corridor's old cells left inside the room would cut it in pieces"
+
+
 def test_no_region_is_added_where_the_new_decomposition_has_none() -> None:
     before = _grid((4, slice(None), slice(0, 20)))
     after = _grid((1, slice(None), slice(0, 15)))  # the right end is a wall now
@@ -60,10 +70,10 @@ def test_pieces_a_kept_region_cuts_off_join_a_neighbour() -> None:
     before = _grid((4, slice(None), slice(2, 10)), (9, slice(None), slice(10, 20)))
     unchanged = np.zeros(before.shape, dtype=bool)
     unchanged[:, :10] = True  # the right room was seen anew
-    # a strip along the top crosses the kept room 4: its 4-cell tip on the left is cut off
-    after = _grid((1, slice(2, 10), slice(0, 10)), (2, slice(2, 10), slice(10, 20)), (3, slice(0, 2), slice(0, 20)))
+    # a strip along the top, mostly over the kept room 4, crosses it: its 4-cell tip on the left is cut off
+    after = _grid((1, slice(2, 10), slice(0, 10)), (2, slice(2, 10), slice(10, 20)), (3, slice(0, 2), slice(0, 14)))
     out = keep_regions(after, RegionPrior(before, unchanged), min_area_px=5)
-    expected = _grid((1, slice(None), slice(0, 10)), (2, slice(2, 10), slice(10, 20)), (3, slice(0, 2), slice(10, 20)))
+    expected = _grid((1, slice(None), slice(0, 10)), (2, slice(2, 10), slice(10, 20)), (3, slice(0, 2), slice(10, 14)))
     assert _same_partition(out, expected)
 
 

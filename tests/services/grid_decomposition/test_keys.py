@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import cv2
@@ -216,3 +217,35 @@ def test_on_a_real_growing_map_the_rooms_over_unchanged_map_keep_their_cells_and
         lost = (old == rid) & prior.unchanged & (second.segments > 0) & (second.segments != rid)
         _, _, stats, _ = cv2.connectedComponentsWithStats(lost.astype(np.uint8), connectivity=4)
         assert np.all(stats[1:, cv2.CC_STAT_AREA] < sliver_px)
+
+
+def test_where_the_growing_map_was_drawn_again_with_its_origin_moved_the_rooms_keep_their_keys() -> None:
+    """Steps 10 and 11 of ROSE\u00b2's growing ubremen map: step 11 grew on the left and top and was drawn again a
+    fraction of a cell over (a quarter of the wall cells moved by a cell). The regions of step 10 whose ground is
+    still free hold their keys on most of their cells (compared cell by cell, the moved walls unsettled whole
+    rooms: 18 of 23 kept theirs)."""
+    folder = Path(__file__).resolve().parents[4] / "shared" / "data" / "maps" / "rose2" / "partial_ubremen"
+    if not (folder / "map11" / "map.png").exists():
+        pytest.skip(f"{folder} is absent: the ROSE2 maps are not on this machine")
+    before = _rose2_step(folder / "map10" / "map.png")
+    # step 10's image lies 38 rows down and 217 columns right in step 11's (the FFT alignment of eval_ipa.py):
+    # step 11's lower-left corner is 217 cells left of step 10's and, both 658 rows high, 38 cells above it
+    moved = _rose2_step(folder / "map11" / "map.png")
+    rise = 38 + before.data.shape[0] - moved.data.shape[0]
+    after = dataclasses.replace(moved, origin_x_m=-217 * 0.05, origin_y_m=rise * 0.05)
+    first, ids = carry_keys(decompose(before.data, resolution_m=0.05), None)
+    previous = decomposition_layers(first, meta={NEXT_ID_KEY: ids.next_id})[1]
+    second, _ = carry_keys(decompose(after.data, resolution_m=0.05, origin_xy_m=(after.origin_x_m, after.origin_y_m),
+                                     prior=region_prior(previous, before, after)), previous)
+    old = ids_on_grid(previous.data, resolution_m=0.05, origin_xy_m=(0.0, 0.0), shape=after.data.shape,
+                      to_resolution_m=0.05, to_origin_xy_m=(after.origin_x_m, after.origin_y_m))
+    still_free = after.data == 0
+    kept = counted = 0
+    for rid in np.unique(old[old > 0]).tolist():
+        cells = (old == rid) & still_free
+        if cells.sum() < round(1.0 / 0.05**2) or cells.sum() < 0.5 * (old == rid).sum():
+            continue
+        counted += 1
+        kept += int(np.count_nonzero(second.segments[cells] == rid) > 0.5 * cells.sum())
+    assert counted >= 10
+    assert kept >= 0.9 * counted
