@@ -210,10 +210,11 @@ def merge_small_segments(
         neighbours[p][q] = c
         neighbours[q][p] = c
     parent = np.arange(n)
+    dropped = np.zeros(n, dtype=bool)  # with the pieces merged into them before
     for s in sorted(np.flatnonzero(small).tolist(), key=lambda i: area[i]):
         if (area[s] >= min_area_px and not must[s]) or not neighbours[s]:
             if not neighbours[s] and lone_dropped is not None and lone_dropped[s]:
-                area[s] = 0
+                dropped[s] = True
             continue
         t = max(neighbours[s], key=lambda k: neighbours[s][k])
         parent[s] = t
@@ -230,7 +231,7 @@ def merge_small_segments(
         if np.array_equal(nxt, root):
             break
         root = nxt
-    return _relabel(seg, root, area > 0)
+    return _relabel(seg, root, (area > 0) & ~dropped[root])
 
 
 def _relabel(
