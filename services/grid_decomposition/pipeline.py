@@ -471,6 +471,8 @@ def decompose(
             door_max_depth_m=door_max_depth_m,
             room_min_area_m2=room_min_area_m2,
             neck_half_width_m=neck_half_width_m,
+            rays=rays,
+            occupied=occupied,
         )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls &= segments == 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 
 from services.grid_decomposition.basins import join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
@@ -140,6 +141,11 @@ def segment_rooms(
     join_saddle_ratio: float = 0.8,
     join_solidity: float = 0.8,
     island_max_extent_m: float = 3.0,
+    rays: npt.NDArray[np.bool_] | None = None,
+    occupied: npt.NDArray[np.bool_] | None = None,
+    lone_max_ray_share: float = 0.5,
+    outside_min_open_share: float = 0.4,
+    outside_reach_m: float = 6.0,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
     """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
 
@@ -153,7 +159,13 @@ def segment_rooms(
        (:func:`find_doorways`) cut rooms apart.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
-       longest border with (:func:`merge_small_segments`).
+       longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
+       room when it is mostly thin laser rays (more than ``lone_max_ray_share`` of its pixels on
+       ``rays``) and lies outside the building: at least ``outside_min_open_share`` of 32 beams
+       from its middle meet no ``occupied`` cell within ``outside_reach_m`` (:func:`open_share`;
+       beside an outer wall about half of them escape). That is a bundle of rays seen through
+       the outer wall, with no floor of its own; rays into a small room nobody entered have the
+       room's walls round them and stay a room.
     5. Pieces of one furnished room join (:func:`join_room_pieces`, when ``join_saddle_ratio`` > 0):
        no neck between them on the clearance map (furniture and obstacle islands at most
        ``island_max_extent_m`` across count as floor), a union about as convex as a room
@@ -165,6 +177,8 @@ def segment_rooms(
         Region id per free pixel from the faces, 0 elsewhere.
     clutter, floor, closed : (H, W) bool
         Furniture (:func:`furniture`); pixels of warehouse floors; closed line pixels.
+    rays, occupied : (H, W) bool, optional
+        Thin free space the map cleaning kept (``Cleaning.rays``); occupied cells (walls).
     resolution_m : float
         Metres per pixel.
 
@@ -198,11 +212,14 @@ def segment_rooms(
     clearance = cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5)
     widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)  # clearance >= 0: a max per segment
     np.maximum.at(widest, seg.ravel(), clearance.ravel())
+    narrow = widest * resolution_m < room_min_half_width_m
     rooms = merge_small_segments(
         seg,
         min_area_px=max(1, round(room_min_area_m2 / resolution_m**2)),
         fixed=_share(seg, floor) > 0.5,
-        absorb=widest * resolution_m < room_min_half_width_m,
+        absorb=narrow,
+        lone_dropped=_outside_rays(seg, narrow, rays, occupied, lone_max_ray_share, outside_min_open_share,
+                                   round(outside_reach_m / resolution_m)),
     )
     if join_saddle_ratio > 0:
         standing = clutter | islands(rooms == 0, max_extent_px=island_max_extent_m / resolution_m)
@@ -215,6 +232,51 @@ def segment_rooms(
             min_solidity=join_solidity,
         )
     return rooms, cut
+
+
+def _outside_rays(
+    seg: npt.NDArray[np.int32],
+    narrow: npt.NDArray[np.bool_],
+    rays: npt.NDArray[np.bool_] | None,
+    occupied: npt.NDArray[np.bool_] | None,
+    max_ray_share: float,
+    min_open_share: float,
+    reach_px: int,
+) -> npt.NDArray[np.bool_] | None:
+    """Per segment id: narrow, mostly on ``rays`` and open on at least ``min_open_share`` of its sides."""
+    if rays is None or occupied is None:
+        return None
+    out = narrow & (_share(seg, rays) > max_ray_share)
+    ids = np.flatnonzero(out)
+    if ids.size:
+        boxes = ndimage.find_objects(seg, max_label=int(ids.max()))
+        middles = np.zeros((ids.size, 2), dtype=np.int64)
+        for i, k in enumerate(ids.tolist()):
+            box = boxes[k - 1]
+            assert box is not None  # a narrow segment has pixels
+            rows, cols = np.nonzero(seg[box] == k)
+            j = np.argmin((rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2)  # its pixel nearest its centroid
+            middles[i] = rows[j] + box[0].start, cols[j] + box[1].start
+        out[ids] = open_share(occupied, middles, reach_px=reach_px) >= min_open_share
+    return out
+
+
+def open_share(
+    occupied: npt.NDArray[np.bool_], points: npt.NDArray[np.int64], *, reach_px: int, n_beams: int = 32
+) -> npt.NDArray[np.float64]:
+    """(K,) share of ``n_beams`` beams from each (row, col) point that meet no ``occupied`` cell within ``reach_px``.
+
+    Unknown space does not stop a beam; a beam leaving the map escapes.
+    """
+    angle = np.linspace(0.0, 2 * np.pi, n_beams, endpoint=False)
+    step = np.arange(1, max(1, reach_px) + 1, dtype=np.float64)
+    rows = np.rint(points[:, 0, None, None] + step[None, None, :] * np.sin(angle)[None, :, None]).astype(np.int64)
+    cols = np.rint(points[:, 1, None, None] + step[None, None, :] * np.cos(angle)[None, :, None]).astype(np.int64)
+    h, w = occupied.shape
+    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+    hit = inside & occupied[np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)]
+    share: npt.NDArray[np.float64] = 1.0 - hit.any(axis=2).mean(axis=1)
+    return share
 
 
 def islands(blocked: npt.NDArray[np.bool_], *, max_extent_px: float) -> npt.NDArray[np.bool_]:

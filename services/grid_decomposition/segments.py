@@ -170,11 +170,12 @@ def merge_small_segments(
     min_area_px: int,
     fixed: npt.NDArray[np.bool_] | None = None,
     absorb: npt.NDArray[np.bool_] | None = None,
+    lone_dropped: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.int32]:
     """Merge every segment smaller than ``min_area_px`` into the neighbour it shares the longest border with.
 
     Smallest first; a merged segment's borders add up, so a chain of slivers ends in the room
-    they line. Segments without a neighbour (an enclosed closet) stay.
+    they line. Segments without a neighbour (an enclosed closet) stay, unless ``lone_dropped``.
 
     Parameters
     ----------
@@ -185,11 +186,13 @@ def merge_small_segments(
         Per segment id: never merged away (it may still absorb small neighbours).
     absorb : (N + 1,) bool, optional
         Per segment id: merged like a small one whatever its area.
+    lone_dropped : (N + 1,) bool, optional
+        Per segment id: no segment (0) when it is to be merged but has no neighbour.
 
     Returns
     -------
     (H, W) int32
-        Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
+        Segment ids 1..M (consecutive), 0 where ``segments`` is 0 and on dropped segments.
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
@@ -207,8 +210,11 @@ def merge_small_segments(
         neighbours[p][q] = c
         neighbours[q][p] = c
     parent = np.arange(n)
+    dropped = np.zeros(n, dtype=bool)  # with the pieces merged into them before
     for s in sorted(np.flatnonzero(small).tolist(), key=lambda i: area[i]):
         if (area[s] >= min_area_px and not must[s]) or not neighbours[s]:
+            if not neighbours[s] and lone_dropped is not None and lone_dropped[s]:
+                dropped[s] = True
             continue
         t = max(neighbours[s], key=lambda k: neighbours[s][k])
         parent[s] = t
@@ -225,7 +231,7 @@ def merge_small_segments(
         if np.array_equal(nxt, root):
             break
         root = nxt
-    return _relabel(seg, root, area > 0)
+    return _relabel(seg, root, (area > 0) & ~dropped[root])
 
 
 def _relabel(

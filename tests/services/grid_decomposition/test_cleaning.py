@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 import pytest
@@ -90,6 +91,33 @@ def test_decomposition_labels_no_fringe_and_a_streak_only_near_its_room() -> Non
     assert not result.segments[22:98, 22:24].any()
     assert result.segments[60, 145] == room  # the ray by the room is the room's free space
     assert not result.segments[60, 220:299].any()  # far out it is no region
+
+
+def _fan(occ: npt.NDArray[np.int8], origin: tuple[int, int], angles_deg: list[int], length_px: int) -> None:
+    """Free rays 2 px wide from ``origin`` (row, col) over the unknown cells of ``occ``."""
+    rays = np.zeros(occ.shape, np.uint8)
+    for a in np.radians(angles_deg):
+        end = (round(origin[1] + length_px * np.cos(a)), round(origin[0] + length_px * np.sin(a)))
+        cv2.line(rays, (origin[1], origin[0]), end, 1, 2)
+    occ[(rays > 0) & (occ == -1)] = 0
+
+
+def test_rays_seen_through_an_outer_wall_are_no_region_and_rays_into_a_closed_room_are() -> None:
+    """ROSE\u00b2 ``map_with_clutter``: bundles of rays just outside the outer wall (seen through glass) were
+    regions of their own, each a segment in no room. Rays into a small walled room nobody entered stay one."""
+    occ = np.full((160, 220), -1, dtype=np.int8)
+    occ[20:100, 20:200] = 100
+    occ[22:98, 22:198] = 0  # a 8.8 m x 3.8 m room
+    _fan(occ, (101, 60), [20, 40, 60, 80, 100, 120, 140, 160], 50)  # beyond its wall: outside
+    occ[98:150, 130:200] = 100  # a 3.3 m x 2.4 m room above it, walled, seen only as rays
+    occ[100:148, 132:198] = -1
+    _fan(occ, (100, 165), [30, 50, 70, 90, 110, 130, 150], 60)
+    segments = decompose(occ, resolution_m=RES).segments
+    room = segments[60, 100]
+    assert room > 0
+    assert not segments[100:160, 20:128].any()  # the rays outside: no region (one of 1146 px before)
+    closed = segments[100:148, 132:198]
+    assert np.count_nonzero(closed) > 500 and room not in np.unique(closed)
 
 
 def _two_furnished_rooms() -> npt.NDArray[np.int8]:

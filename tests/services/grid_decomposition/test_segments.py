@@ -53,6 +53,24 @@ def test_merge_small_segments_keeps_an_enclosed_piece_and_fixed_segments() -> No
     assert sorted(np.unique(kept).tolist()) == [1, 2, 3]
 
 
+def test_a_lone_dropped_strip_takes_the_slivers_merged_into_it_along() -> None:
+    seg = _room_sliver_room()
+    seg[:, 28:31] = 0  # the rooms apart
+    seg[5:6, 45:60] = 0
+    seg[2:5, 45:60] = 4  # a lone strip in the right room's corner, walled off ...
+    seg[2:5, 44] = 5  # ... with a sliver at its end
+    seg[1, 43:61] = 0
+    seg[1:6, 43] = 0
+    seg[5, 43:61] = 0
+    lone = np.zeros(6, dtype=bool)
+    lone[4] = True
+    absorb = np.zeros(6, dtype=bool)
+    absorb[4] = True
+    out = merge_small_segments(seg, min_area_px=20, absorb=absorb, lone_dropped=lone)
+    assert not out[2:5, 44:60].any()  # the strip and its sliver: no segment
+    assert out[20, 10] > 0 and out[20, 50] > 0 and sorted(np.unique(out).tolist()) == [0, 1, 2]
+
+
 def test_merge_open_segments_joins_open_borders_only() -> None:
     seg = np.zeros((20, 40), dtype=np.int32)
     seg[:, :20] = 1
