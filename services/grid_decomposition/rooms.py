@@ -265,7 +265,8 @@ def free_standing(
         return isl
     rest = obstacle & ~isl
     gap = cv2.distanceTransform((~rest).astype(np.uint8), cv2.DIST_L2, 5)
-    n, parts = cv2.connectedComponents(isl.astype(np.uint8), connectivity=8)
+    n, found = cv2.connectedComponents(isl.astype(np.uint8), connectivity=8)
+    parts = np.asarray(found, dtype=np.int32)
     nearest = np.full(n, np.inf, dtype=np.float32)
     np.minimum.at(nearest, parts[isl], gap[isl])
     keep = nearest * resolution_m >= min_clearance_m
