@@ -42,7 +42,7 @@ from services.grid_decomposition.regions import (
     road_networks,
     warehouse_floors,
 )
-from services.grid_decomposition.rooms import furniture, segment_rooms, wall_furniture
+from services.grid_decomposition.rooms import free_standing, furniture, segment_rooms, wall_furniture
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -259,6 +259,8 @@ def decompose(
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
     wall_tolerance_m: float = 0.1,
+    island_max_extent_m: float = 2.0,
+    island_min_clearance_m: float = 0.3,
     face_disparity_threshold: float = 0.5,
     edge_occupancy_threshold: float = 0.5,
     min_region_area_m2: float = 0.3,
@@ -301,6 +303,11 @@ def decompose(
         (:func:`~services.grid_decomposition.doorways.find_doorways`, same widening). On real maps
         the gaps between furniture along a line closed as doors up to 2.5 m and cut furnished
         rooms apart; 2.0 m keeps the ipa doors.
+    island_max_extent_m, island_min_clearance_m : float
+        Obstacles standing free in a room (off the map border, at most ``island_max_extent_m``
+        across, at least ``island_min_clearance_m`` from every other obstacle: a desk cluster, a
+        table with its chairs) are no wall along the lines: a gap between one and a wall is no
+        doorway (:func:`~services.grid_decomposition.rooms.free_standing`); 0 turns it off.
     face_disparity_threshold, edge_occupancy_threshold : float
         t1, t2 of the cogency test.
     min_region_area_m2 : float
@@ -395,7 +402,15 @@ def decompose(
             LineGroup(tuple(ln for ln in g.lines if resolution is Resolution.FINE or ln.coarse), g.mask) for g in groups
         ]
         logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
+        # furniture and obstacles standing free in a room are no wall: no doorway ends on them
         walls = (occupied | ~known) & ~clutter
+        if island_max_extent_m > 0:
+            walls &= ~free_standing(
+                obstacle,
+                resolution_m=resolution_m,
+                max_extent_m=island_max_extent_m,
+                min_clearance_m=island_min_clearance_m,
+            )
         evidence_job = beside.submit(
             wall_evidence,
             walls,

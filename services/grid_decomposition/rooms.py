@@ -294,6 +294,48 @@ def islands(blocked: npt.NDArray[np.bool_], *, max_extent_px: float) -> npt.NDAr
     return np.asarray(keep[parts], dtype=bool)
 
 
+def free_standing(
+    obstacle: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    max_extent_m: float = 2.0,
+    min_clearance_m: float = 0.3,
+) -> npt.NDArray[np.bool_]:
+    """Obstacles standing free in a room: :func:`islands` at most ``max_extent_m`` across with floor all round them.
+
+    A desk cluster, a table with its chairs or a pile of boxes is one obstacle too large for
+    :func:`furniture`; along a line through it, the gaps between it and the walls looked like
+    doorways and cut an open-plan office into pieces. A doorway is an opening in a wall, and an
+    obstacle with at least ``min_clearance_m`` of floor between it and every other obstacle is no
+    wall. An obstacle closer than that to a wall (a blob of clutter in a doorway, a door frame,
+    the end of a dotted wall) is left to the walls.
+
+    Parameters
+    ----------
+    obstacle : (H, W) bool
+        Occupied or unknown cells.
+    resolution_m : float
+        Metres per cell.
+
+    Returns
+    -------
+    (H, W) bool
+        A subset of ``obstacle``.
+    """
+    isl = islands(obstacle, max_extent_px=max_extent_m / resolution_m)
+    if not isl.any():
+        return isl
+    rest = obstacle & ~isl
+    gap = cv2.distanceTransform((~rest).astype(np.uint8), cv2.DIST_L2, 5)
+    n, found = cv2.connectedComponents(isl.astype(np.uint8), connectivity=8)
+    parts = np.asarray(found, dtype=np.int32)
+    nearest = np.full(n, np.inf, dtype=np.float32)
+    np.minimum.at(nearest, parts[isl], gap[isl])
+    keep = nearest * resolution_m >= min_clearance_m
+    keep[0] = False
+    return np.asarray(keep[parts], dtype=bool)
+
+
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
     """(N + 1,) share of each segment's pixels inside ``mask``."""
     n = int(segments.max()) + 1

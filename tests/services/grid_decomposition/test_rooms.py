@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from services.grid_decomposition import Connection, decompose
-from services.grid_decomposition.rooms import furniture, segment_rooms
+from services.grid_decomposition.rooms import free_standing, furniture, segment_rooms
 
 RES = 0.05
 
@@ -163,3 +163,32 @@ def test_two_furnished_rooms_joined_by_a_door_stay_two_rooms_each_in_one_piece()
     assert ids_left.size == 1 and ids_right.size == 1  # each room one region, furniture or not
     assert ids_left[0] != ids_right[0]  # kept apart at their door
     assert len(d.regions) == 2
+
+
+def _room_with_a_desk_cluster() -> np.ndarray:
+    """7.2 x 5.2 m at 5 cm, 0.15 m walls, unknown outside; in its middle four desks in a cross
+    (two 1.8 x 0.6 m bars), too large for furniture, 1.7-2.7 m of floor all round it."""
+    occ = np.full((120, 160), -1, dtype=np.int8)
+    occ[5:115, 5:155] = 100
+    occ[8:112, 8:152] = 0
+    occ[54:66, 62:98] = 100
+    occ[42:78, 74:86] = 100
+    return occ
+
+
+def test_free_standing_obstacles_are_a_desk_cluster_not_a_wall_or_clutter_at_a_wall() -> None:
+    occ = _room_with_a_desk_cluster()
+    occ[30:36, 9:20] = 100  # a box 0.05 m from the left wall
+    found = free_standing(occ != 0, resolution_m=RES)
+    assert found[60, 80] and found[45, 80]  # the desk cluster
+    assert not found[32, 15]  # too close to the wall: left to the walls
+    assert not found[6, 80] and not found[60, 150]  # walls
+
+
+def test_a_room_with_a_desk_cluster_in_its_middle_is_one_segment() -> None:
+    occ = _room_with_a_desk_cluster()
+    free = occ == 0
+    assert np.unique(decompose(occ, resolution_m=RES).segments[free]).size == 1
+    # with the cluster as a wall, the lines along its desks close "doorways" to the walls
+    walled = decompose(occ, resolution_m=RES, island_max_extent_m=0.0).segments
+    assert np.unique(walled[free]).size > 1
