@@ -58,10 +58,7 @@ def split_at_necks(
         return renumber(seg)
     in_split = split[seg]
     marker = np.where(in_split & big[parts], parts + n_seg, 0).astype(np.int32)
-    grown = marker
-    for _ in range(max(1, round(max_growth_m / resolution_m / 10))):
-        grown = fill_from_neighbours(grown, in_split, max_iterations=10)
-        if not np.any(in_split & (grown == 0)):
-            break
+    # one fill: it stops by itself once every reachable pixel is taken
+    grown = fill_from_neighbours(marker, in_split, max_iterations=10 * max(1, round(max_growth_m / resolution_m / 10)))
     out = np.where(in_split & (grown > 0), grown, seg)
     return renumber(out)

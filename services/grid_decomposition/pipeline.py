@@ -513,11 +513,16 @@ def decompose(
             segments = lut[lut[segments]]
             pairs = _pairs(segments, sub)
             regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
-        for k in [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]:  # a rack place is no room: its label
-            held = places[segments == k]
-            if np.count_nonzero(held) > 0.5 * held.size:
-                label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))
-                regions[k] = regions[k]._replace(label=label)
+        room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
+        if room_ids:  # a room mostly on rack places is no room: it takes their label
+            n_seg = int(segments.max()) + 1
+            in_places = np.bincount(segments[places > 0], minlength=n_seg)
+            size = np.bincount(segments.ravel(), minlength=n_seg)
+            for k in room_ids:
+                if in_places[k] > 0.5 * size[k]:
+                    held = places[segments == k]
+                    label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))
+                    regions[k] = regions[k]._replace(label=label)
         if known_places is not None:  # in a hall another stage knows the racks of, floor touching a rack place
             # is no room
             hall = cv2.dilate((racks.cells > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
