@@ -670,6 +670,8 @@ def _region_records(
 
 def _share_in(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_], n_seg: int) -> npt.NDArray[np.float64]:
     """(n_seg,) share of each segment's pixels inside ``mask``."""
+    if not mask.any():
+        return np.zeros(n_seg)
     area = np.bincount(segments.ravel(), minlength=n_seg)
     inside = np.bincount(segments[mask], minlength=n_seg)
     share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
