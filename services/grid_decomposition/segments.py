@@ -31,19 +31,17 @@ def fill_from_neighbours(
     r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, out.shape[0])
     c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, out.shape[1])
     crop = out[r0:r1, c0:c1]
-    h, w = crop.shape
-    lab = np.zeros((h + 2, w + 2), dtype=np.int32)
-    lab[1:-1, 1:-1] = crop
-    open_ = np.zeros((h + 2, w + 2), dtype=bool)
-    open_[1:-1, 1:-1] = hole[r0:r1, c0:c1]
+    w = crop.shape[1]
+    lab = cv2.copyMakeBorder(crop, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    open_ = cv2.copyMakeBorder(hole[r0:r1, c0:c1].view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0).view(bool)
     lab_flat, open_flat = lab.ravel(), open_.ravel()
     stride = w + 2
     offsets = np.array([-stride - 1, -stride, -stride + 1, -1, 1, stride - 1, stride, stride + 1], dtype=np.int64)
     steps = max_iterations
     if steps > 0 and np.count_nonzero(open_) * 32 >= open_.size and int(lab.max()) < 2**24:
         # many holes (the lines through a map): the first step at once, as a grey dilation of the
-        # box (ids below 2**24 are exact in float32)
-        grown = cv2.dilate(lab.astype(np.float32), np.ones((3, 3), np.uint8))
+        # box (ids below 2**16 in uint16, below 2**24 exact in float32)
+        grown = cv2.dilate(lab.astype(np.uint16 if int(lab.max()) < 2**16 else np.float32), np.ones((3, 3), np.uint8))
         front = np.flatnonzero(open_ & (grown > 0))
         lab_flat[front] = grown.ravel()[front].astype(np.int32)
         open_flat[front] = False
@@ -122,7 +120,7 @@ def segment_image(
             keep = stats[:, cv2.CC_STAT_AREA] >= min_area_px // 2
             keep[0] = False
             ids = np.where(keep, np.cumsum(keep) + next_id - 1, 0)
-            out = np.where(alone, ids[pieces], out).astype(np.int32)
+            out[alone] = ids[pieces[alone]]  # out is fill_from_neighbours' own copy
     return out
 
 
