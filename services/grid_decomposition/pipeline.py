@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import label_sums
+from services.grid_decomposition.arrays import label_counts, label_sums
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.continuity import RegionPrior, keep_regions
@@ -516,8 +516,7 @@ def decompose(
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
         if room_ids:  # a room mostly on rack places is no room: it takes their label
             n_seg = int(segments.max()) + 1
-            in_places = np.bincount(segments[places > 0], minlength=n_seg)
-            size = np.bincount(segments.ravel(), minlength=n_seg)
+            size, in_places = label_counts(segments, n_seg, places > 0)
             for k in room_ids:
                 if in_places[k] > 0.5 * size[k]:
                     held = places[segments == k]
@@ -672,7 +671,6 @@ def _share_in(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_], n_se
     """(n_seg,) share of each segment's pixels inside ``mask``."""
     if not mask.any():
         return np.zeros(n_seg)
-    area = np.bincount(segments.ravel(), minlength=n_seg)
-    inside = np.bincount(segments[mask], minlength=n_seg)
+    area, inside = label_counts(segments, n_seg, mask)
     share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
     return share

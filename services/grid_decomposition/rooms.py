@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import label_counts
 from services.grid_decomposition.basins import join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -239,7 +240,6 @@ def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.
     n = int(segments.max()) + 1
     if not mask.any():  # no warehouse floor (an office): no segment has a share in it
         return np.zeros(n)
-    area = np.bincount(segments.ravel(), minlength=n)
-    inside = np.bincount(segments[mask], minlength=n)
+    area, inside = label_counts(segments, n, mask)
     share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
     return share

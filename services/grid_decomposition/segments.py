@@ -9,7 +9,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import distinct
+from services.grid_decomposition.arrays import distinct, label_counts
 
 
 def fill_from_neighbours(
@@ -100,7 +100,7 @@ def segment_image(
     seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
     pieces, n_pieces = same_value_pieces(seg)
-    area = np.bincount(pieces.ravel(), minlength=n_pieces + 1)
+    area = label_counts(pieces, n_pieces + 1)[0]
     owner = np.zeros(n_pieces + 1, dtype=np.int64)
     owner[pieces.ravel()] = seg.ravel()
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
@@ -191,7 +191,7 @@ def merge_small_segments(
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
-    area = np.bincount(seg.ravel(), minlength=n).astype(np.int64)
+    area = label_counts(seg, n)[0]
     must = np.zeros(n, dtype=bool) if absorb is None else absorb[:n].copy()
     small = ((area < min_area_px) | must) & (area > 0)
     small[0] = False
@@ -249,7 +249,7 @@ def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArra
 
 def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     """Ids 1..N in the order of the old ids, 0 kept."""
-    present = np.bincount(seg.ravel(), minlength=1) > 0
+    present = label_counts(seg, int(seg.max(initial=0)) + 1)[0] > 0
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
     return _apply(lut, seg)
@@ -358,7 +358,7 @@ def merge_open_segments(
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
-    present = np.bincount(seg.ravel(), minlength=n) > 0
+    present = label_counts(seg, n)[0] > 0
     if fixed is not None and fixed[:n][present].all():  # no segment may join (a rack hall's floors)
         return _relabel(seg, np.arange(n), present)
     pairs, total, shut = border_closure(seg, closed)
