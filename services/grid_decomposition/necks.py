@@ -17,6 +17,7 @@ def split_at_necks(
     neck_half_width_m: float = 0.5,
     min_core_area_m2: float = 1.0,
     max_growth_m: float = 3.0,
+    distance: npt.NDArray[np.float32] | None = None,
 ) -> npt.NDArray[np.int32]:
     """Split every segment whose free space, shrunk by ``neck_half_width_m``, falls into several cores.
 
@@ -32,6 +33,8 @@ def split_at_necks(
     free : (H, W) bool
     resolution_m : float
         Metres per pixel.
+    distance : (H, W) float32, optional
+        ``cv2.distanceTransform(free, cv2.DIST_L2, 5)`` when the caller has it already.
 
     Returns
     -------
@@ -39,7 +42,7 @@ def split_at_necks(
         Segment ids 1..N (consecutive), 0 where ``segments`` is 0.
     """
     seg = np.asarray(segments, dtype=np.int32)
-    dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 5)
+    dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 5) if distance is None else distance
     padded = np.pad(seg, 1, mode="edge")
     border = (
         (padded[:-2, 1:-1] != seg) | (padded[2:, 1:-1] != seg) | (padded[1:-1, :-2] != seg) | (padded[1:-1, 2:] != seg)
@@ -58,10 +61,7 @@ def split_at_necks(
         return renumber(seg)
     in_split = split[seg]
     marker = np.where(in_split & big[parts], parts + n_seg, 0).astype(np.int32)
-    grown = marker
-    for _ in range(max(1, round(max_growth_m / resolution_m / 10))):
-        grown = fill_from_neighbours(grown, in_split, max_iterations=10)
-        if not np.any(in_split & (grown == 0)):
-            break
+    # one fill: it stops by itself once every reachable pixel is taken
+    grown = fill_from_neighbours(marker, in_split, max_iterations=10 * max(1, round(max_growth_m / resolution_m / 10)))
     out = np.where(in_split & (grown > 0), grown, seg)
     return renumber(out)

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import label_sums
+from services.grid_decomposition.arrays import label_counts, label_sums
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.continuity import RegionPrior, keep_regions
@@ -530,11 +530,15 @@ def decompose(
             segments = lut[lut[segments]]
             pairs = _pairs(segments, sub)
             regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
-        for k in [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]:  # a rack place is no room: its label
-            held = places[segments == k]
-            if np.count_nonzero(held) > 0.5 * held.size:
-                label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))
-                regions[k] = regions[k]._replace(label=label)
+        room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
+        if room_ids:  # a room mostly on rack places is no room: it takes their label
+            n_seg = int(segments.max()) + 1
+            size, in_places = label_counts(segments, n_seg, places > 0)
+            for k in room_ids:
+                if in_places[k] > 0.5 * size[k]:
+                    held = places[segments == k]
+                    label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))
+                    regions[k] = regions[k]._replace(label=label)
         if known_places is not None:  # in a hall another stage knows the racks of, floor touching a rack place
             # is no room
             hall = cv2.dilate((racks.cells > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
@@ -682,7 +686,8 @@ def _region_records(
 
 def _share_in(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_], n_seg: int) -> npt.NDArray[np.float64]:
     """(n_seg,) share of each segment's pixels inside ``mask``."""
-    area = np.bincount(segments.ravel(), minlength=n_seg)
-    inside = np.bincount(segments[mask], minlength=n_seg)
+    if not mask.any():
+        return np.zeros(n_seg)
+    area, inside = label_counts(segments, n_seg, mask)
     share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
     return share

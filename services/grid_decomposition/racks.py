@@ -39,6 +39,8 @@ from shared.vocabulary import PlaceLabel
 _UNKNOWN = 2
 _OCCUPIED = 1
 _UNCERTAIN = 3  # an obstacle not surely occupied
+# what cv2.connectedComponentsWithStats returns: count, labels, stats, centroids
+_Labelled = tuple[int, cv2.typing.MatLike, cv2.typing.MatLike, cv2.typing.MatLike]
 
 
 class RackLayout(NamedTuple):
@@ -132,8 +134,8 @@ def _inner_obstacles(code: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
 
 
 def _reopen_cross_aisles(
-    body: npt.NDArray[np.uint8], solid: npt.NDArray[np.bool_], *, gap_px: int, min_length_px: float,
-    off_pitch: float,
+    body: npt.NDArray[np.uint8], labelled: _Labelled, solid: npt.NDArray[np.bool_], *, gap_px: int,
+    min_length_px: float, off_pitch: float,
 ) -> npt.NDArray[np.uint8]:
     """``body`` (obstacles closed along x) with its gaps that are off the hall's bay pitch opened again.
 
@@ -143,9 +145,10 @@ def _reopen_cross_aisles(
     simulator's halls: 2.7 m bays, 3.0 m cross aisles). Bays share a pitch: a bridged gap more than ``off_pitch``
     times the median bridged gap of the image's bodies ``min_length_px`` long or longer is a cross aisle, and the
     body is cut there through its whole depth. Where every bay is loaded (only cross aisles bridged) nothing is
-    cut.
+    cut. ``labelled`` is ``cv2.connectedComponentsWithStats(body, connectivity=4)``; ``body`` itself is returned
+    when nothing is cut.
     """
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(body, connectivity=4)
+    n, parts, stats, _ = labelled
     chosen = np.flatnonzero(stats[:, cv2.CC_STAT_WIDTH] >= min_length_px)
     chosen = chosen[chosen > 0]
     if chosen.size == 0:
@@ -190,10 +193,12 @@ def _racks(
     """
     # a free pixel stays free only inside a free bay-by-depth rectangle: every such rectangle over a
     # bay holds an upright, an aisle or a cross aisle is wider
-    closed = cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8))
-    body = _reopen_cross_aisles(np.asarray(closed, dtype=np.uint8), solid, gap_px=gap_px,
-                                min_length_px=min_length_px, off_pitch=off_pitch)
-    _, parts, stats, _ = cv2.connectedComponentsWithStats(body, connectivity=4)
+    closed = np.asarray(cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8)),
+                        dtype=np.uint8)
+    labelled = cv2.connectedComponentsWithStats(closed, connectivity=4)
+    body = _reopen_cross_aisles(closed, labelled, solid, gap_px=gap_px, min_length_px=min_length_px,
+                                off_pitch=off_pitch)
+    _, parts, stats, _ = labelled if body is closed else cv2.connectedComponentsWithStats(body, connectivity=4)
     w, h, area = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT], stats[:, cv2.CC_STAT_AREA]
     keep = np.flatnonzero((w >= min_length_px) & (h >= min_depth_px) & (area >= 0.3 * w * h))
     keep = keep[keep > 0]

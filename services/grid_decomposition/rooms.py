@@ -7,6 +7,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
+from services.grid_decomposition.arrays import label_counts
 from services.grid_decomposition.basins import join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -197,8 +198,11 @@ def segment_rooms(
     space = (seg > 0) & ~fixed[seg]
     if not space.any():  # warehouse floors only (a rack hall): no room to split, cut or clean up
         return renumber(seg), cut
+    clearance = np.asarray(cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
     if neck_half_width_m > 0:
-        seg = split_at_necks(seg, space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m)
+        seg = split_at_necks(
+            seg, space, resolution_m=resolution_m, neck_half_width_m=neck_half_width_m, distance=clearance
+        )
     if door_max_width_m > 0 and space.any():
         cuts = find_doorways(
             space,
@@ -209,7 +213,6 @@ def segment_rooms(
         )
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
-    clearance = cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5)
     widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)  # clearance >= 0: a max per segment
     np.maximum.at(widest, seg.ravel(), clearance.ravel())
     narrow = widest * resolution_m < room_min_half_width_m
@@ -339,7 +342,8 @@ def free_standing(
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
     """(N + 1,) share of each segment's pixels inside ``mask``."""
     n = int(segments.max()) + 1
-    area = np.bincount(segments.ravel(), minlength=n)
-    inside = np.bincount(segments[mask], minlength=n)
+    if not mask.any():  # no warehouse floor (an office): no segment has a share in it
+        return np.zeros(n)
+    area, inside = label_counts(segments, n, mask)
     share: npt.NDArray[np.float64] = inside / np.maximum(area, 1)
     return share

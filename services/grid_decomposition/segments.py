@@ -9,7 +9,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import distinct
+from services.grid_decomposition.arrays import distinct, label_counts
 
 
 def fill_from_neighbours(
@@ -31,19 +31,17 @@ def fill_from_neighbours(
     r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, out.shape[0])
     c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, out.shape[1])
     crop = out[r0:r1, c0:c1]
-    h, w = crop.shape
-    lab = np.zeros((h + 2, w + 2), dtype=np.int32)
-    lab[1:-1, 1:-1] = crop
-    open_ = np.zeros((h + 2, w + 2), dtype=bool)
-    open_[1:-1, 1:-1] = hole[r0:r1, c0:c1]
+    w = crop.shape[1]
+    lab = cv2.copyMakeBorder(crop, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    open_ = cv2.copyMakeBorder(hole[r0:r1, c0:c1].view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0).view(bool)
     lab_flat, open_flat = lab.ravel(), open_.ravel()
     stride = w + 2
     offsets = np.array([-stride - 1, -stride, -stride + 1, -1, 1, stride - 1, stride, stride + 1], dtype=np.int64)
     steps = max_iterations
     if steps > 0 and np.count_nonzero(open_) * 32 >= open_.size and int(lab.max()) < 2**24:
         # many holes (the lines through a map): the first step at once, as a grey dilation of the
-        # box (ids below 2**24 are exact in float32)
-        grown = cv2.dilate(lab.astype(np.float32), np.ones((3, 3), np.uint8))
+        # box (ids below 2**16 in uint16, below 2**24 exact in float32)
+        grown = cv2.dilate(lab.astype(np.uint16 if int(lab.max()) < 2**16 else np.float32), np.ones((3, 3), np.uint8))
         front = np.flatnonzero(open_ & (grown > 0))
         lab_flat[front] = grown.ravel()[front].astype(np.int32)
         open_flat[front] = False
@@ -102,7 +100,7 @@ def segment_image(
     seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
     pieces, n_pieces = same_value_pieces(seg)
-    area = np.bincount(pieces.ravel(), minlength=n_pieces + 1)
+    area = label_counts(pieces, n_pieces + 1)[0]
     owner = np.zeros(n_pieces + 1, dtype=np.int64)
     owner[pieces.ravel()] = seg.ravel()
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
@@ -122,7 +120,7 @@ def segment_image(
             keep = stats[:, cv2.CC_STAT_AREA] >= min_area_px // 2
             keep[0] = False
             ids = np.where(keep, np.cumsum(keep) + next_id - 1, 0)
-            out = np.where(alone, ids[pieces], out).astype(np.int32)
+            out[alone] = ids[pieces[alone]]  # out is fill_from_neighbours' own copy
     return out
 
 
@@ -196,7 +194,7 @@ def merge_small_segments(
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
-    area = np.bincount(seg.ravel(), minlength=n).astype(np.int64)
+    area = label_counts(seg, n)[0]
     must = np.zeros(n, dtype=bool) if absorb is None else absorb[:n].copy()
     small = ((area < min_area_px) | must) & (area > 0)
     small[0] = False
@@ -257,7 +255,7 @@ def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArra
 
 def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     """Ids 1..N in the order of the old ids, 0 kept."""
-    present = np.bincount(seg.ravel(), minlength=1) > 0
+    present = label_counts(seg, int(seg.max(initial=0)) + 1)[0] > 0
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
     return _apply(lut, seg)
@@ -366,7 +364,7 @@ def merge_open_segments(
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
-    present = np.bincount(seg.ravel(), minlength=n) > 0
+    present = label_counts(seg, n)[0] > 0
     if fixed is not None and fixed[:n][present].all():  # no segment may join (a rack hall's floors)
         return _relabel(seg, np.arange(n), present)
     pairs, total, shut = border_closure(seg, closed)

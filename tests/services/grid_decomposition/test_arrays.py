@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.grid_decomposition.arrays import distinct, label_sums, unique_inverse
+from services.grid_decomposition.arrays import distinct, label_counts, label_sums, unique_inverse
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -38,3 +38,16 @@ def test_label_sums_are_the_weighted_counts_per_label(shape: tuple[int, int]) ->
     assert np.array_equal(count, np.bincount(flat, minlength=8))
     assert np.array_equal(sum_col, np.bincount(flat, np.tile(np.arange(w, dtype=np.float64), h), 8))
     assert np.array_equal(sum_row, np.bincount(flat, np.repeat(np.arange(h, dtype=np.float64), w), 8))
+
+
+@pytest.mark.parametrize("shape", [(0, 5), (1, 1), (1, 9), (7, 1), (40, 33)])
+def test_label_counts_are_the_pixel_counts_per_label_in_and_out_of_a_mask(shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(shape[1])
+    labels = np.repeat(rng.integers(0, 6, (shape[0], shape[1] // 3 + 1)), 3, axis=1)[:, : shape[1]].astype(np.int32)
+    mask = rng.random(shape) < 0.4
+    count, inside = label_counts(labels, 8, mask)
+    assert np.array_equal(count, np.bincount(labels.ravel(), minlength=8))
+    assert np.array_equal(inside, np.bincount(labels[mask], minlength=8))
+    alone, nothing = label_counts(labels, 8)
+    assert np.array_equal(alone, count)
+    assert not nothing.any()
