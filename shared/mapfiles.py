@@ -177,8 +177,8 @@ __all__ = [
     "UNKNOWN_PIXEL",
     "MapFileError",
     "MapImage",
-    "read_map_yaml",
     "grey_walls",
+    "read_map_yaml",
     "unknown_greys",
     "write_map_yaml",
 ]
@@ -232,8 +232,10 @@ def grey_walls(grey: npt.NDArray[np.number[Any]], *, resolution_m: float) -> npt
     (:func:`unknown_greys`) is a candidate; its pixels (with its spread, :data:`MODE_GAP`) are walls where they
     form lines: 8-connected pieces whose skeleton is at least :data:`WALL_LINE_M` long, at most
     :data:`WALL_WIDTH_M` wide on average (area over skeleton length) and wider than one pixel (a one-pixel line
-    is the antialiased edge of a black wall). Furniture in the same grey (desks, bins, legs) is shorter and
-    stays free. Without such a mode (every map drawn in black, white and an unknown grey) nothing is a wall.
+    is the antialiased edge of a black wall). Their drawn outline and antialiased edge (darker or lighter greys
+    that map_server reads as unknown or free) are wall too: the pixels within :data:`WALL_EDGE_M` of such a line,
+    reached through pixels that are not the white's. Furniture in the same grey (desks, bins, legs) is shorter
+    and stays free. Without such a mode (every map drawn in black, white and an unknown grey) nothing is a wall.
 
     Parameters
     ----------
@@ -265,7 +267,8 @@ def grey_walls(grey: npt.NDArray[np.number[Any]], *, resolution_m: float) -> npt
         pieces = mask[values]
         parts, n = ndimage.label(pieces, structure=np.ones((3, 3), bool))
         n += 1
-        length = np.bincount(parts[skeletonize(pieces)], minlength=n).astype(np.float64)
+        skeleton = skeletonize(pieces)  # type: ignore[no-untyped-call]  # skimage is untyped
+        length = np.bincount(parts[skeleton], minlength=n).astype(np.float64)
         area = np.bincount(parts.ravel(), minlength=n).astype(np.float64)
         width = area / np.maximum(length, 1.0)
         line = (length * resolution_m >= WALL_LINE_M) & (width > 1.5) & (width * resolution_m <= WALL_WIDTH_M)
