@@ -5,7 +5,8 @@ CPU time (``time.process_time``) with the load average, since the machine may be
 
 * ``rose2``: the ROSE\u00b2 full maps (``../shared/data/maps/rose2/full``, 0.05 m/px), read as ``aisle floor-plan
   MAP.png --resolution 0.05`` reads a bare image (map_server's thresholds, but the map's own unknown grey and the
-  speckle nearer it than white are unknown, :func:`shared.mapfiles.unknown_greys`): K(W,M) (eq. 3.39, every cell of
+  speckle nearer it than white are unknown, :func:`shared.mapfiles.unknown_greys`, and walls drawn light grey are
+  occupied, :func:`shared.mapfiles.grey_walls`): K(W,M) (eq. 3.39, every cell of
   the map), K of the same world under the earlier fixed reading (free = grey >= 250, occupied <= 89, the rest
   unknown), K over known cells, and
   ``units.png`` and ``rooms.png`` scored as ``bench/eval_ipa.py`` scores segmentations of these maps (free pixels
@@ -14,9 +15,10 @@ CPU time (``time.process_time``) with the load average, since the machine may be
   cells inside the ground truth's rooms that are not free in the map (no room-shaped unit draws them right).
 * ``ipa``: the ipa maps (plain, and the variants ``--variants`` names, e.g. ``_furnitures``) read as
   ``aisle floor-plan MAP.png --resolution 0.05`` reads them; K(W,M), K of the same world under map_server's fixed
-  trinary reading, K of the units alone (no clutter obstacles), and the ipa scores (every labelled pixel
-  counts) of units and rooms, with the means over the two halves: the room level (``RoomSettings``) was tuned on
-  the maps at even places in name order (``tuning``), the others are held out (``held_out``).
+  trinary reading (which reads Freiburg52's light-grey walls as free), K of the units alone (no clutter
+  obstacles), and the ipa scores (every labelled pixel counts) of units and rooms, with the means over the two
+  halves: the room level (``RoomSettings``) was tuned on the maps at even places in name order (``tuning``), the
+  others are held out (``held_out``).
 * ``partial``: the 15 growing ubremen maps in order, each warm-started from the previous world; the share
   of units of map k that keep their id in map k+1 (same rectangle after the map's shift, or the unit
   with the most overlap), and the seconds of each warm update.

@@ -24,6 +24,14 @@ MODE_GAP = 8
 unknown grey are unknown too."""
 OCCUPIED_PIXEL = 0
 UNKNOWN_PIXEL = 205
+WALL_LINE_M = 4.0
+"""A light-grey mode's piece is a wall drawn grey when its skeleton is at least this long: walls run on for
+metres through a building, furniture drawn in the same grey (desks, bins, table legs) is shorter."""
+WALL_WIDTH_M = 0.6
+"""... and when it is at most this wide on average (a wall, not a filled light-grey area)."""
+WALL_EDGE_M = 0.1
+"""A light-grey wall's drawn outline and antialiased edge: the pixels this near it, through pixels that are not
+white, are wall too."""
 
 
 class MapFileError(ValueError):
@@ -169,6 +177,7 @@ __all__ = [
     "UNKNOWN_PIXEL",
     "MapFileError",
     "MapImage",
+    "grey_walls",
     "read_map_yaml",
     "unknown_greys",
     "write_map_yaml",
@@ -214,6 +223,64 @@ def unknown_greys(grey: npt.NDArray[np.number[Any]]) -> npt.NDArray[np.bool_]:
     return out
 
 
+def grey_walls(grey: npt.NDArray[np.number[Any]], *, resolution_m: float) -> npt.NDArray[np.bool_]:
+    """Which pixels of a bare map image are walls drawn light grey (filled with a grey map_server reads as free).
+
+    Some maps fill their walls with a light grey of their own (ipa's Freiburg52: 211, between a darker outline),
+    the same grey other maps use for furniture. A grey mode (:data:`MODE_SHARE` of the pixels) that map_server
+    reads as free, lies more than :data:`MODE_GAP` below the white and is not the unknown grey's
+    (:func:`unknown_greys`) is a candidate; its pixels (with its spread, :data:`MODE_GAP`) are walls where they
+    form lines: 8-connected pieces whose skeleton is at least :data:`WALL_LINE_M` long, at most
+    :data:`WALL_WIDTH_M` wide on average (area over skeleton length) and wider than one pixel (a one-pixel line
+    is the antialiased edge of a black wall). Their drawn outline and antialiased edge (darker or lighter greys
+    that map_server reads as unknown or free) are wall too: the pixels within :data:`WALL_EDGE_M` of such a line,
+    reached through pixels that are not the white's. Furniture in the same grey (desks, bins, legs) is shorter
+    and stays free. Without such a mode (every map drawn in black, white and an unknown grey) nothing is a wall.
+
+    Parameters
+    ----------
+    grey : (H, W) number
+        The image's grey values, 0..255.
+    resolution_m : float
+        Metres per pixel.
+
+    Returns
+    -------
+    (H, W) bool
+        True where a light-grey wall is drawn.
+    """
+    from scipy import ndimage  # imported when first needed
+    from skimage.morphology import skeletonize
+
+    values = np.clip(np.rint(np.asarray(grey, np.float64)), 0, 255).astype(np.intp)
+    share = np.bincount(values.ravel(), minlength=256) / max(values.size, 1)
+    levels = np.arange(256)
+    modes = levels[share >= MODE_SHARE]
+    walls = np.zeros(values.shape, bool)
+    if modes.size == 0:
+        return walls
+    unknown = unknown_greys(values)
+    free_grey = (255.0 - levels) / 255.0 < 0.196
+    candidates = [m for m in modes if free_grey[m] and not unknown[m] and m <= modes.max() - MODE_GAP]
+    for mode in candidates:
+        mask = (np.abs(levels - mode) <= MODE_GAP) & free_grey & ~unknown
+        pieces = mask[values]
+        parts, n = ndimage.label(pieces, structure=np.ones((3, 3), bool))
+        n += 1
+        skeleton = skeletonize(pieces)  # type: ignore[no-untyped-call]  # skimage is untyped
+        length = np.bincount(parts[skeleton], minlength=n).astype(np.float64)
+        area = np.bincount(parts.ravel(), minlength=n).astype(np.float64)
+        width = area / np.maximum(length, 1.0)
+        line = (length * resolution_m >= WALL_LINE_M) & (width > 1.5) & (width * resolution_m <= WALL_WIDTH_M)
+        line[0] = False
+        walls |= line[parts]
+    if walls.any():
+        not_white = np.abs(values - modes.max()) > MODE_GAP
+        edge = max(1, round(WALL_EDGE_M / resolution_m))
+        walls = ndimage.binary_dilation(walls, structure=np.ones((3, 3), bool), iterations=edge, mask=not_white)
+    return np.asarray(walls, bool)
+
+
 def read_map_file(path: Path, *, resolution_m: float | None = None, free_darkness: bool = False,
                   free_from_modes: bool = False) -> MapImage:
     """A map_server YAML (:func:`read_map_yaml`) or a bare map image.
@@ -222,7 +289,8 @@ def read_map_file(path: Path, *, resolution_m: float | None = None, free_darknes
     rest unknown) and needs ``resolution_m``; its origin is (0, 0). With ``free_darkness`` its free cells keep their
     darkness in percent (0..19, rounded down) instead of 0, so grey fringes at walls can be told from clear floor.
     With ``free_from_modes`` a bare image's own unknown grey and the speckle nearer it than white are unknown
-    (:func:`unknown_greys`): maps drawn with a light unknown grey (230) and light-grey speckle read right.
+    (:func:`unknown_greys`), and walls drawn light grey are occupied (:func:`grey_walls`): maps drawn with a light
+    unknown grey (230), light-grey speckle or light-grey walls read right.
     For a YAML, ``resolution_m`` (if given) must match the file's.
 
     Raises
@@ -254,5 +322,8 @@ def read_map_file(path: Path, *, resolution_m: float | None = None, free_darknes
     free = darkness < 0.196
     if free_from_modes:
         free &= ~unknown_greys(grey)[np.clip(np.rint(grey), 0, 255).astype(np.intp)]
+        walls = grey_walls(grey, resolution_m=float(resolution_m))
+        occupancy[walls] = 100
+        free &= ~walls
     occupancy[free] = np.floor(darkness[free] * 100.0).astype(np.int8) if free_darkness else 0
     return MapImage(occupancy[::-1].copy(), float(resolution_m), 0.0, 0.0)

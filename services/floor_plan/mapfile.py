@@ -29,7 +29,9 @@ def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.
     A YAML is read as map_server reads it (its thresholds, its mode). A bare image declares no unknown grey: it is
     read with map_server's thresholds except that the image's own unknown grey and the speckle nearer it than white
     are unknown (:func:`shared.mapfiles.unknown_greys`), so that a map drawing unknown space light grey (230) or
-    speckled with light grey inside rooms is not read as free there.
+    speckled with light grey inside rooms is not read as free there; and walls drawn light grey (a grey mode
+    map_server reads as free, in long thin lines, with their outline) are occupied
+    (:func:`shared.mapfiles.grey_walls`), so that no unit's free space lies on them.
 
     Raises
     ------

@@ -123,15 +123,21 @@ def test_a_black_and_white_image_reads_as_map_server_reads_it(tmp_path: Path) ->
     assert not unknown_greys(grey).any()
 
 
-def test_walls_filled_light_grey_keep_map_servers_reading(tmp_path: Path) -> None:
+def test_walls_drawn_light_grey_read_occupied_and_furniture_in_that_grey_stays_free(tmp_path: Path) -> None:
     from shared.mapfiles import read_map_file
 
-    grey = np.full((40, 60), 180, np.uint8)  # unknown
-    grey[5:35, 5:55] = 255
-    grey[5:35, 29:31] = 211  # a wall drawn filled light grey: a mode of its own, not speckle
-    grey[5:35, 28] = 214  # its antialiased edge: the wall grey's spread, nearer the unknown grey than white
+    grey = np.full((120, 160), 180, np.uint8)  # unknown
+    grey[10:110, 10:150] = 211  # the building's walls, filled light grey (map_server reads 211 as free)
+    grey[13:107, 13:147] = 255
+    grey[13:107, 79:82] = 211  # a wall between two rooms, 4.7 m long
+    grey[40:70, 100:112] = 211  # a desk in the same grey, 1.5 m x 0.6 m
+    grey[20:100, 30] = 0  # a black wall ...
+    grey[20:100, 31] = 214  # ... with an antialiased edge in the light grey: one pixel wide
     Image.fromarray(grey).save(tmp_path / "map.png")
     plain = read_map_file(tmp_path / "map.png", resolution_m=0.05).occupancy[::-1]
     modes = read_map_file(tmp_path / "map.png", resolution_m=0.05, free_from_modes=True).occupancy[::-1]
-    assert plain[10, 30] == modes[10, 30] == 0
-    assert plain[10, 28] == modes[10, 28] == 0
+    assert plain[50, 80] == plain[11, 50] == 0  # map_server's thresholds call the walls free
+    assert modes[50, 80] == modes[11, 50] == 100
+    assert modes[55, 105] == 0  # the desk
+    assert modes[50, 31] == 0  # the black wall's edge
+    assert modes[50, 60] == 0 and modes[0, 0] == -1

@@ -252,3 +252,21 @@ def test_floor_plan_reads_a_bare_image_with_its_own_unknown_grey(tmp_path: Path)
     Image.fromarray(grey).save(tmp_path / "map.png")
     read, _, _ = read_map(tmp_path / "map.png", resolution_m=RES)
     assert np.array_equal(read, _two_rooms())
+
+
+def test_walls_drawn_light_grey_are_walls_of_the_floor_plan_and_no_room_lies_on_them(tmp_path: Path) -> None:
+    from PIL import Image
+
+    grey = np.full((80, 120), 180, np.uint8)  # unknown
+    occ = _two_rooms()[::-1]
+    grey[occ == 0] = 255
+    grey[occ == 100] = 211  # walls filled light grey (map_server's thresholds call it free), as ipa's Freiburg52
+    Image.fromarray(grey).save(tmp_path / "map.png")
+    read, _, _ = read_map(tmp_path / "map.png", resolution_m=RES)
+    drawn = _two_rooms()
+    assert np.all(read[drawn == 100] == 100) and np.all(read[drawn == 0] == 0)
+    plan = floor_plan(read, resolution_m=RES, settings=_settings())
+    rooms = room_labels(plan)
+    assert not rooms[drawn == 100].any()
+    assert len(np.unique(rooms[20:60, 15:55])) == len(np.unique(rooms[20:60, 65:105])) == 1
+    assert rooms[40, 30] != rooms[40, 80]
