@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from skimage.draw import line
 
 from services.grid_decomposition import decompose
 from services.grid_decomposition.fans import split_fans
@@ -21,9 +22,7 @@ def _hall_and_fan() -> tuple[np.ndarray, np.ndarray]:
     fan = np.zeros(occ.shape, dtype=bool)
     eye = (100, 139)  # the robot, 1 m below the door
     for end_col in range(60, 220, 3):  # rays to the room's far wall, 2.5 m behind the door
-        along = np.linspace(0.0, 1.0, 400)
-        rows = np.round(eye[0] + along * (172 - eye[0])).astype(int)
-        cols = np.round(eye[1] + along * (end_col - eye[1])).astype(int)
+        rows, cols = line(*eye, 172, end_col)  # type: ignore[no-untyped-call]  # skimage is untyped
         # a ray passes the door and goes on into the room: above the wall only if it went through the gap
         through = (rows >= 120) & (rows <= 121)
         if not np.all((cols[through] >= 130) & (cols[through] < 148)):
