@@ -7,10 +7,13 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
+from services.grid_decomposition.rooms import open_share
+
 
 def split_fans(
     segments: npt.NDArray[np.int32],
     thin: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
     fixed: npt.NDArray[np.bool_],
     *,
     resolution_m: float,
@@ -20,6 +23,8 @@ def split_fans(
     min_depth_m: float = 2.0,
     min_thin_share: float = 0.3,
     min_segment_area_m2: float = 50.0,
+    outside_reach_m: float = 6.0,
+    max_open_share: float = 0.4,
 ) -> npt.NDArray[np.int32]:
     """Give every fan of rays that leaves a segment through a doorway-wide neck a segment of its own.
 
@@ -28,7 +33,11 @@ def split_fans(
     lies whole inside the corridor's segment. A segment's *core* is its largest part that survives
     an opening with a disc ``2 * core_half_width_m`` wide; a part of the rest is a fan when it is at
     least ``min_area_m2``, at least ``min_thin_share`` of it is ``thin`` (rays, streaks), it touches
-    the core along at most ``max_neck_m`` and reaches at least ``min_depth_m`` beyond it.
+    the core along at most ``max_neck_m``, reaches at least ``min_depth_m`` beyond it and has walls
+    round it: less than ``max_open_share`` of 32 beams from its middle meet no ``occupied`` cell
+    within ``outside_reach_m`` (:func:`~services.grid_decomposition.rooms.open_share`; rays through
+    a gap in an outer wall have none beyond them). Only segments of at least
+    ``min_segment_area_m2`` (halls, corridors) lose fans.
 
     Parameters
     ----------
@@ -36,6 +45,8 @@ def split_fans(
         Segment id per pixel, 0 off free space.
     thin : (H, W) bool
         Free space too thin to be floor (the cleaning's rays and streaks).
+    occupied : (H, W) bool
+        Walls and obstacles as mapped.
     fixed : (N + 1,) bool
         Segments left alone (warehouse floors, roads).
     resolution_m : float
@@ -78,6 +89,10 @@ def split_fans(
         reach = ndimage.maximum(depth, parts, index=np.arange(n))
         fans = [c for c in big if thin_share[c] >= min_thin_share and 0 < neck[c] * resolution_m <= max_neck_m
                 and reach[c] * resolution_m >= min_depth_m]
+        if fans:
+            fans = [c for c, share in zip(fans, open_share(
+                occupied, np.array([_middle(parts == c) for c in fans]) + np.array([box[0].start, box[1].start]),
+                reach_px=round(outside_reach_m / resolution_m)), strict=True) if share < max_open_share]
         if not fans:
             continue
         lut = np.zeros(n, dtype=np.int32)
@@ -85,3 +100,10 @@ def split_fans(
         next_id += len(fans)
         out[box] = np.where(lut[parts] > 0, lut[parts], out[box])
     return out
+
+
+def _middle(mask: npt.NDArray[np.bool_]) -> tuple[int, int]:
+    """(row, col) of the pixel of ``mask`` nearest its centroid."""
+    rows, cols = np.nonzero(mask)
+    j = int(np.argmin((rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2))
+    return int(rows[j]), int(cols[j])

@@ -502,8 +502,9 @@ def decompose(
         segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
         if fan_max_neck_m > 0:  # a room seen only through its door: a fan of rays, not the corridor's floor
             on_floor = np.bincount(segments[floor_px], minlength=int(segments.max()) + 1)
+            floors = on_floor > 0.5 * np.bincount(segments.ravel(), minlength=on_floor.size)
             segments = split_fans(
-                segments, rays | streaks, on_floor > 0.5 * np.bincount(segments.ravel(), minlength=on_floor.size),
+                segments, rays | streaks, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
             )
         # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
