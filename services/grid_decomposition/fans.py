@@ -59,7 +59,6 @@ def split_fans(
     """
     out = segments.copy()
     radius = max(1, round(core_half_width_m / resolution_m))
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     ring = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     next_id = int(segments.max()) + 1
     min_area_px = min_area_m2 / resolution_m**2
@@ -70,25 +69,25 @@ def split_fans(
         mine = segments[box] == k
         if mine.sum() < min_segment_area_m2 / resolution_m**2:
             continue
-        opened = cv2.morphologyEx(mine.astype(np.uint8), cv2.MORPH_OPEN, disc)
-        n, parts, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
+        # the opening by distances (a disc's erosion and dilation are thresholds of the distance transform)
+        inner = cv2.distanceTransform(mine.astype(np.uint8), cv2.DIST_L2, 5) > radius
+        n, parts, stats, _ = cv2.connectedComponentsWithStats(inner.astype(np.uint8), connectivity=8)
         if n < 2:
             continue
-        core = parts == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        largest = parts != 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        core = mine & (cv2.distanceTransform(largest.astype(np.uint8), cv2.DIST_L2, 5) <= radius)
         n, parts, stats, _ = cv2.connectedComponentsWithStats((mine & ~core).astype(np.uint8), connectivity=8)
         big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_px)
         big = big[big > 0]
         if big.size == 0:
             continue
-        index = parts.ravel()
-        thin_share = np.bincount(index, weights=thin[box].ravel(), minlength=n) / np.maximum(
+        thin_share = np.bincount(parts.ravel(), weights=thin[box].ravel(), minlength=n) / np.maximum(
             stats[:, cv2.CC_STAT_AREA], 1)
-        touching = cv2.dilate(core.astype(np.uint8), ring).astype(bool)
-        neck = np.bincount(parts[touching], minlength=n)
-        depth = cv2.distanceTransform((~core).astype(np.uint8), cv2.DIST_L2, 5)
-        reach = ndimage.maximum(depth, parts, index=np.arange(n))
-        fans = [c for c in big if thin_share[c] >= min_thin_share and 0 < neck[c] * resolution_m <= max_neck_m
-                and reach[c] * resolution_m >= min_depth_m]
+        neck = np.bincount(parts[cv2.dilate(core.astype(np.uint8), ring).astype(bool)], minlength=n)
+        fans = [c for c in big if thin_share[c] >= min_thin_share and 0 < neck[c] * resolution_m <= max_neck_m]
+        if fans:
+            depth = cv2.distanceTransform((~core).astype(np.uint8), cv2.DIST_L2, 5)
+            fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]
         if fans:
             fans = [c for c, share in zip(fans, open_share(
                 occupied, np.array([_middle(parts == c) for c in fans]) + np.array([box[0].start, box[1].start]),
