@@ -21,6 +21,7 @@ from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_
 from services.grid_decomposition.continuity import RegionPrior, keep_regions
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
+from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -269,6 +270,7 @@ def decompose(
     room_min_area_m2: float = 1.5,
     clean: bool = True,
     streak_reach_m: float = 2.0,
+    fan_max_neck_m: float = 1.2,
     known_places: RackLayout | None = None,
     prior: RegionPrior | None = None,
     settled_max_changed_share: float = 0.2,
@@ -331,6 +333,9 @@ def decompose(
         (a wall fringe is never labelled).
     streak_reach_m : float
         See ``clean``.
+    fan_max_neck_m : float
+        A fan of rays leaving a room region through a neck at most this wide is a room of its own
+        (:func:`~services.grid_decomposition.fans.split_fans`); 0 turns it off.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -495,6 +500,13 @@ def decompose(
         segments = np.where(against_walls, grown, segments)
         # the streaks the cleaning took out are free space: they take the region they grow from
         segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
+        if fan_max_neck_m > 0:  # a room seen only through its door: a fan of rays, not the corridor's floor
+            on_floor = np.bincount(segments[floor_px], minlength=int(segments.max()) + 1)
+            floors = on_floor > 0.5 * np.bincount(segments.ravel(), minlength=on_floor.size)
+            segments = split_fans(
+                segments, rays | streaks, occupied, floors,
+                resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
+            )
         # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
         segments, places = place_segments(
             segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2),

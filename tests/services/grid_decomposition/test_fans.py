@@ -1,0 +1,74 @@
+"""A room seen only through its door: a fan of rays off a hall is a region of its own."""
+
+from __future__ import annotations
+
+import numpy as np
+from skimage.draw import line
+
+from services.grid_decomposition import decompose
+from services.grid_decomposition.fans import split_fans
+
+RESOLUTION_M = 0.05
+
+
+def _hall_and_fan() -> tuple[np.ndarray, np.ndarray]:
+    """Occupancy (-1 unknown, 0 free, 100 wall) of a 12 m x 5 m hall with a 0.9 m door in its top wall, and the
+    fan of laser rays a robot in the hall saw through the door into the small room behind it (2.5 m deep, 3.8 m
+    wide, walls round it, unknown but for the rays)."""
+    occ = np.full((200, 300), -1, dtype=np.int16)
+    occ[20:122, 20:262] = 100
+    occ[22:120, 22:260] = 0  # the hall, rows 22..119
+    occ[120:122, 130:148] = 0  # the door in its top wall
+    occ[172:174, 100:176] = occ[122:174, [100, 101, 174, 175]] = 100  # the room's walls
+    fan = np.zeros(occ.shape, dtype=bool)
+    eye = (100, 139)  # the robot, 1 m below the door
+    for end_col in range(60, 220, 3):  # rays to the room's far wall, 2.5 m behind the door
+        rows, cols = line(*eye, 172, end_col)  # type: ignore[no-untyped-call]  # skimage is untyped
+        # a ray passes the door and goes on into the room: above the wall only if it went through the gap
+        through = (rows >= 120) & (rows <= 121)
+        if not np.all((cols[through] >= 130) & (cols[through] < 148)):
+            continue
+        beyond = (rows >= 122) & (rows < 172)
+        occ[rows[beyond], cols[beyond]] = 0
+        fan[rows[beyond], cols[beyond]] = True
+    return occ, fan
+
+
+def test_a_fan_of_rays_through_a_door_is_a_region_apart_from_the_hall() -> None:
+    occ, fan = _hall_and_fan()
+    assert fan.sum() * RESOLUTION_M**2 > 1.0  # a room's worth of rays
+    segments = decompose(occ, resolution_m=RESOLUTION_M).segments
+    hall = np.bincount(segments[50:100, 40:240].ravel()).argmax()
+    on_fan = segments[fan & (segments > 0)]
+    assert np.mean(on_fan != hall) > 0.8
+
+
+def test_a_hall_without_rays_keeps_its_region_whole() -> None:
+    occ, _ = _hall_and_fan()
+    occ[occ == 0] = -1
+    occ[22:120, 22:260] = 0
+    occ[120:122, 130:148] = 0
+    segments = decompose(occ, resolution_m=RESOLUTION_M).segments
+    assert len(np.unique(segments[segments > 0])) == 1
+
+
+def test_split_fans_leaves_a_thick_bay_rays_out_of_the_building_and_floors_alone() -> None:
+    segments = np.zeros((200, 300), dtype=np.int32)
+    segments[22:120, 22:260] = 1
+    segments[120:170, 134:146] = 1  # a bay 0.6 m wide and 2.5 m deep through the hall's top wall
+    thin = np.zeros(segments.shape, dtype=bool)
+    hall = np.zeros(segments.shape, dtype=bool)
+    hall[[20, 121], 20:262] = hall[20:122, [20, 261]] = True
+    room = hall.copy()
+    room[170, 100:180] = room[120:170, [120, 160]] = True  # the walls of a room behind the opening
+    none_fixed = np.zeros(2, dtype=bool)
+
+    def split(occupied: np.ndarray, fixed: np.ndarray = none_fixed) -> np.ndarray:
+        return split_fans(segments, thin, occupied, fixed, resolution_m=RESOLUTION_M)
+
+    assert np.array_equal(split(room), segments)  # floor, not rays
+    thin[120:170, 134:146] = True  # the same shape drawn by rays
+    fan = split(room)
+    assert len(np.unique(fan[130:170, 134:146])) == 1 and fan[150, 140] != 1
+    assert np.array_equal(split(hall), segments)  # no walls beyond: rays out of the building
+    assert np.array_equal(split(room, np.array([False, True])), segments)  # a warehouse floor
