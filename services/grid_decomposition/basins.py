@@ -60,78 +60,133 @@ def join_room_pieces(
     floor = ((seg > 0) | furniture).astype(np.uint8)
     clearance = np.asarray(cv2.distanceTransform(floor, cv2.DIST_L2, 5), dtype=np.float32)
     reach = max(1, round(furniture_reach_m / resolution_m))
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
-    near = cv2.dilate(furniture.astype(np.uint8), disc) > 0
     peak = np.zeros(n, dtype=np.float32)
     np.maximum.at(peak, seg.ravel(), clearance.ravel())
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
     frozen[0] = True
-    parent = np.arange(n)
+    pairs, saddle, furnished = _saddles(seg, clearance, furniture, reach)
+    boxes = _boxes(seg, n)
+    lut = np.arange(n, dtype=np.int32)  # segment id -> the id of the segment it has joined
+    solidity: dict[tuple[int, int], float] = {}
     while True:
-        pairs, saddle, furnished = _saddles(seg, clearance, near)
         keep = furnished & ~frozen[pairs[:, 0]] & ~frozen[pairs[:, 1]]
         keep &= saddle >= min_saddle_ratio * np.minimum(peak[pairs[:, 0]], peak[pairs[:, 1]])
-        pairs = pairs[keep]
-        if pairs.size == 0:
+        candidates = pairs[keep]
+        if candidates.size == 0:
             break
-        boxes = ndimage.find_objects(seg)
-        solid = np.array([_solidity(seg, boxes, int(a), int(b)) for a, b in pairs])
+        solid = np.array([_solidity(seg, lut, boxes, int(a), int(b), solidity) for a, b in candidates])
         order = np.argsort(-solid, kind="stable")
         used = np.zeros(n, dtype=bool)
-        joined = False
         for k in order[solid[order] >= min_solidity]:
-            a, b = (int(v) for v in pairs[k])
+            a, b = (int(v) for v in candidates[k])
             if used[a] or used[b]:
                 continue
             used[a] = used[b] = True
-            parent[b] = a
+            lut[lut == b] = a
             peak[a] = max(peak[a], peak[b])
-            joined = True
-        if not joined:
+            boxes[a, :2] = np.minimum(boxes[a, :2], boxes[b, :2])
+            boxes[a, 2:] = np.maximum(boxes[a, 2:], boxes[b, 2:])
+        if not used.any():
             break
-        lut = np.arange(n, dtype=np.int32)
-        lut[used] = parent[used].astype(np.int32)
-        seg = lut[seg]
-    return renumber(seg)
+        solidity = {ab: s for ab, s in solidity.items() if not (used[ab[0]] or used[ab[1]])}
+        pairs, saddle, furnished = _merge_pairs(lut[pairs].astype(np.int64), saddle, furnished, n)
+    return renumber(lut[seg])
 
 
 def _saddles(
-    seg: npt.NDArray[np.int32],
-    clearance: npt.NDArray[np.float32],
-    near: npt.NDArray[np.bool_],
+    seg: npt.NDArray[np.int32], clearance: npt.NDArray[np.float32], furniture: npt.NDArray[np.bool_], reach: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
-    """Touching segment pairs (a < b), the highest clearance along their border, and whether furniture is near it."""
+    """Touching segment pairs (a < b), the highest clearance along their border, and whether furniture is
+    within ``reach`` (the elliptic disc of that radius) of it."""
     n = int(seg.max()) + 1
+    h, w = seg.shape
     keys: list[npt.NDArray[np.int64]] = []
     heights: list[npt.NDArray[np.float32]] = []
-    nears: list[npt.NDArray[np.bool_]] = []
+    sides: list[npt.NDArray[np.int64]] = []
     for dy, dx in ((0, 1), (1, 0)):
-        h, w = seg.shape
         a, b = seg[: h - dy, : w - dx], seg[dy:, dx:]
         rows, cols = np.nonzero((a != b) & (a > 0) & (b > 0))
         p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
         keys.append(np.minimum(p, q) * n + np.maximum(p, q))
         heights.append(np.minimum(clearance[rows, cols], clearance[rows + dy, cols + dx]))
-        nears.append(near[rows, cols] | near[rows + dy, cols + dx])
-    key, height = np.concatenate(keys), np.concatenate(heights)
+        sides.append(rows.astype(np.int64) * w + cols)
+        sides.append((rows.astype(np.int64) + dy) * w + cols + dx)
+    near = _near(furniture, np.concatenate(sides), reach)
+    half = sides[0].size, sides[0].size + sides[1].size, sides[0].size + sides[1].size + sides[2].size
+    nears = np.concatenate([near[: half[0]] | near[half[0] : half[1]], near[half[1] : half[2]] | near[half[2] :]])
+    return _merge_pairs_keys(np.concatenate(keys), np.concatenate(heights), nears, n)
+
+
+def _near(furniture: npt.NDArray[np.bool_], pixels: npt.NDArray[np.int64], reach: int) -> npt.NDArray[np.bool_]:
+    """Per flat pixel index: furniture within the elliptic disc of radius ``reach`` (``cv2.dilate`` by
+    ``cv2.MORPH_ELLIPSE`` read at these pixels), from the furniture counts of the disc's rows."""
+    h, w = furniture.shape
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
+    counts = np.zeros((h, w + 1), dtype=np.int32)
+    np.cumsum(furniture, axis=1, dtype=np.int32, out=counts[:, 1:])
+    at, inverse = np.unique(pixels, return_inverse=True)
+    y, x = np.divmod(at, w)
+    out = np.zeros(at.size, dtype=bool)
+    for dy, row in zip(range(-reach, reach + 1), disc, strict=True):
+        half = (int(np.count_nonzero(row)) - 1) // 2
+        if half < 0:
+            continue
+        yy = y + dy
+        on = (yy >= 0) & (yy < h)
+        x0, x1 = np.clip(x[on] - half, 0, w), np.clip(x[on] + half + 1, 0, w)
+        out[on] |= counts[yy[on], x1] > counts[yy[on], x0]
+    return out[inverse.ravel()]
+
+
+def _merge_pairs(
+    pairs: npt.NDArray[np.int64], saddle: npt.NDArray[np.float32], furnished: npt.NDArray[np.bool_], n: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+    """The pairs of :func:`_saddles` after joins (``pairs`` renamed to the joined ids): pairs now one
+    segment dropped, the others' borders pooled."""
+    apart = pairs[:, 0] != pairs[:, 1]
+    p, q = pairs[apart, 0], pairs[apart, 1]
+    return _merge_pairs_keys(np.minimum(p, q) * n + np.maximum(p, q), saddle[apart], furnished[apart], n)
+
+
+def _merge_pairs_keys(
+    key: npt.NDArray[np.int64], height: npt.NDArray[np.float32], near: npt.NDArray[np.bool_], n: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
     codes, inverse = np.unique(key, return_inverse=True)
     top = np.zeros(codes.size, dtype=np.float32)
     np.maximum.at(top, inverse, height)
-    furnished = np.bincount(inverse, weights=np.concatenate(nears), minlength=codes.size) > 0
+    furnished = np.bincount(inverse, weights=near, minlength=codes.size) > 0
     return np.stack([codes // n, codes % n], axis=1), top, furnished
 
 
-def _solidity(seg: npt.NDArray[np.int32], boxes: list[tuple[slice, slice] | None], a: int, b: int) -> float:
-    """Area of segments ``a`` and ``b`` together, holes filled, over the area of their convex hull."""
-    box_a, box_b = boxes[a - 1], boxes[b - 1]
-    assert box_a is not None and box_b is not None
-    r0, r1 = min(box_a[0].start, box_b[0].start), max(box_a[0].stop, box_b[0].stop)
-    c0, c1 = min(box_a[1].start, box_b[1].start), max(box_a[1].stop, box_b[1].stop)
-    crop = seg[r0:r1, c0:c1]
+def _boxes(seg: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.int64]:
+    """(n, 4) bounding box (row0, col0, row1, col1) of every segment id (zeros where it has no pixel)."""
+    boxes = np.zeros((n, 4), dtype=np.int64)
+    for i, box in enumerate(ndimage.find_objects(seg), start=1):
+        if box is not None:
+            boxes[i] = box[0].start, box[1].start, box[0].stop, box[1].stop
+    return boxes
+
+
+def _solidity(
+    seg: npt.NDArray[np.int32],
+    lut: npt.NDArray[np.int32],
+    boxes: npt.NDArray[np.int64],
+    a: int,
+    b: int,
+    known: dict[tuple[int, int], float],
+) -> float:
+    """Area of segments ``a`` and ``b`` (ids of ``lut[seg]``) together, holes filled, over the area of their
+    convex hull; remembered in ``known``."""
+    if (a, b) in known:
+        return known[a, b]
+    r0, c0 = np.minimum(boxes[a, :2], boxes[b, :2])
+    r1, c1 = np.maximum(boxes[a, 2:], boxes[b, 2:])
+    crop = lut[seg[r0:r1, c0:c1]]
     union = ((crop == a) | (crop == b)).astype(np.uint8)
     outlines, _ = cv2.findContours(union, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     filled = cv2.drawContours(np.zeros_like(union), outlines, -1, 1, thickness=cv2.FILLED)  # holes filled
     hull = cv2.convexHull(np.concatenate(outlines))  # the outlines' hull is the pixels' hull
     # pixel centres span the hull: half a pixel all round is still the union's area
     hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
-    return float(np.count_nonzero(filled) / hull_area)
+    known[a, b] = float(np.count_nonzero(filled) / hull_area)
+    return known[a, b]
