@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -31,12 +30,10 @@ def _centre_runs(
     """
     h, w = blocked.shape
     t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
-    pts = points[..., None, :] + t[:, None] * direction[..., None, :]
-    x = np.rint(pts[..., 0]).astype(np.int64)
-    y = np.rint(pts[..., 1]).astype(np.int64)
+    x = np.rint(points[..., 0, None] + t * direction[..., 0, None]).astype(np.int64)
+    y = np.rint(points[..., 1, None] + t * direction[..., 1, None]).astype(np.int64)
     inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-    stop = ~inside
-    stop[inside] = blocked[y[inside], x[inside]]
+    stop = ~inside | blocked[np.clip(y, 0, h - 1), np.clip(x, 0, w - 1)]
     end = np.ones((*stop.shape[:-1], 1), dtype=bool)
     ahead = np.concatenate([stop[..., reach_px:], end], axis=-1)
     behind = np.concatenate([stop[..., reach_px::-1], end], axis=-1)
@@ -199,9 +196,9 @@ def find_doorways(
     """
     if space.all() or not space.any():
         return np.zeros((0, 2, 2))
-    rows, cols = np.nonzero(space)
-    r0, c0 = max(int(rows.min()) - 1, 0), max(int(cols.min()) - 1, 0)
-    box = space[r0 : int(rows.max()) + 2, c0 : int(cols.max()) + 2]
+    rows, cols = np.flatnonzero(space.any(axis=1)), np.flatnonzero(space.any(axis=0))
+    r0, c0 = max(int(rows[0]) - 1, 0), max(int(cols[0]) - 1, 0)
+    box = space[r0 : int(rows[-1]) + 2, c0 : int(cols[-1]) + 2]
     return _find_doorways(
         box,
         resolution_m=resolution_m,
@@ -236,15 +233,21 @@ def _find_doorways(
     room_margin_m: float,
 ) -> npt.NDArray[np.float64]:
     """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
-    dist, nearest = _nearest_walls(space, reach_px=math.ceil(max_width_m / resolution_m) + 2)
+    dist, wall_x, wall_y = _nearest_walls(space, reach_px=math.ceil(max_width_m / resolution_m) + 2)
     lo, hi = min_width_m / resolution_m, max_width_m / resolution_m
     h, w = space.shape
     band = space & (dist >= lo / 2 - 1) & (dist <= hi / 2 + 1)
     cuts: list[npt.NDArray[np.float64]] = []
     for dy, dx in ((0, 1), (1, 0)):
         rows, cols = np.nonzero(band[: h - dy, : w - dx] & space[dy:, dx:])
-        p = nearest(rows * w + cols)
-        q = nearest((rows + dy) * w + cols + dx)
+        at, next_at = rows * w + cols, (rows + dy) * w + cols + dx
+        span_x, span_y = wall_x[at] - wall_x[next_at], wall_y[at] - wall_y[next_at]
+        # whole-pixel squared lengths a unit off the bounds cannot pass them: only the others are measured
+        span = span_x * span_x + span_y * span_y
+        near = np.flatnonzero((span >= lo * lo - 1) & (span <= hi * hi + 1))
+        rows, cols, at, next_at = rows[near], cols[near], at[near], next_at[near]
+        p = np.stack([wall_x[at], wall_y[at]], axis=1).astype(np.float64)
+        q = np.stack([wall_x[next_at], wall_y[next_at]], axis=1).astype(np.float64)
         sep = np.hypot(*(p - q).T)
         clear = dist[rows, cols] + dist[rows + dy, cols + dx]
         ok = (sep >= lo) & (sep <= hi) & (sep >= straightness * clear)
@@ -254,7 +257,9 @@ def _find_doorways(
         return np.zeros((0, 2, 2))
     swap = (pairs[:, 0, 0] > pairs[:, 1, 0]) | ((pairs[:, 0, 0] == pairs[:, 1, 0]) & (pairs[:, 0, 1] > pairs[:, 1, 1]))
     pairs[swap] = pairs[swap, ::-1]
-    pairs = np.unique(pairs.reshape(-1, 4), axis=0).reshape(-1, 2, 2)
+    # np.unique(axis=0) of whole non-negative pixel coordinates: one sort of a key in the same order
+    x0, y0, x1, y1 = pairs.reshape(-1, 4).astype(np.int64).T
+    pairs = pairs[np.unique(((x0 * h + y0) * w + x1) * h + y1, return_index=True)[1]]
     walls = ~space
     pairs = pairs[_is_neck(dist, pairs, round(neck_reach_m / resolution_m), neck_tolerance_m / resolution_m)]
     keep = _extends_a_wall(
@@ -275,9 +280,9 @@ def _find_doorways(
 
 def _nearest_walls(
     space: npt.NDArray[np.bool_], *, reach_px: int, tile_px: int = 256, max_share: float = 0.25
-) -> tuple[npt.NDArray[np.float32], Callable[[npt.NDArray[np.int64]], npt.NDArray[np.float64]]]:
-    """Distance to the nearest wall pixel, (H, W) float32 pixels, and a lookup from flat pixel indices
-    to the (x, y) of their nearest wall pixel, (K, 2) float64 (exact Euclidean feature transform).
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    """Distance to the nearest wall pixel, (H, W) float32 pixels, and the x and y of that wall pixel per
+    flat pixel index, (H * W,) int32 each (exact Euclidean feature transform).
 
     Exact wherever the distance is at most ``reach_px`` (and at least ``reach_px`` elsewhere).
     When free space is a small share of the image (a warehouse floor with a perimeter aisle), the
@@ -293,23 +298,25 @@ def _nearest_walls(
             for c in range(0, w, tile_px)
             if space[r : r + tile_px, c : c + tile_px].any()
         ]
-    dist = np.zeros((h, w), dtype=np.float32)
-    fx = np.zeros((h, w), dtype=np.int32)
-    fy = np.zeros((h, w), dtype=np.int32)
-    for r0, r1, c0, c1 in tiles:
-        a0, a1 = max(r0 - reach_px, 0), min(r1 + reach_px, h)
-        b0, b1 = max(c0 - reach_px, 0), min(c1 + reach_px, w)
-        d, (iy, ix) = ndimage.distance_transform_edt(space[a0:a1, b0:b1], return_indices=True)
-        core = (slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0))
-        dist[r0:r1, c0:c1] = d[core]
-        fy[r0:r1, c0:c1] = iy[core] + a0
-        fx[r0:r1, c0:c1] = ix[core] + b0
-    flat_x, flat_y = fx.ravel(), fy.ravel()
-
-    def wall_xy(index: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
-        return np.stack([flat_x[index], flat_y[index]], axis=1).astype(np.float64)
-
-    return dist, wall_xy
+    if tiles == [(0, h, 0, w)]:
+        fy, fx = ndimage.distance_transform_edt(space, return_distances=False, return_indices=True)
+    else:
+        fy, fx = np.indices((h, w), dtype=np.int32)  # a wall pixel is its own nearest (distance 0)
+        for r0, r1, c0, c1 in tiles:
+            a0, a1 = max(r0 - reach_px, 0), min(r1 + reach_px, h)
+            b0, b1 = max(c0 - reach_px, 0), min(c1 + reach_px, w)
+            iy, ix = ndimage.distance_transform_edt(space[a0:a1, b0:b1], return_distances=False, return_indices=True)
+            core = (slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0))
+            fy[r0:r1, c0:c1] = iy[core] + a0
+            fx[r0:r1, c0:c1] = ix[core] + b0
+    off_y = fy - np.arange(h, dtype=np.int32)[:, None]
+    off_x = fx - np.arange(w, dtype=np.int32)[None, :]
+    squared = off_y * off_y + off_x * off_x
+    # scipy's distance is the float64 square root; rounded to float32 it is the float32 square root of
+    # the same whole number when float32 holds that exactly (square roots round once, 53 >= 2 * 24 + 2)
+    exact = np.float32 if h * h + w * w < 2**24 else np.float64
+    dist = np.sqrt(squared.astype(exact)).astype(np.float32, copy=False)
+    return dist, fx.ravel(), fy.ravel()
 
 
 def _is_neck(
