@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
-from services.grid_decomposition.basins import join_room_pieces
+from services.grid_decomposition.basins import _near, join_room_pieces
 
 RES = 0.05
 
@@ -55,3 +56,14 @@ def test_bare_pieces_and_fixed_floors_are_not_joined() -> None:
     fixed = np.array([False, True, False])
     out = join_room_pieces(seg, desks, resolution_m=RES, fixed=fixed)
     assert out[50, 30] != out[50, 110]
+
+
+def test_furniture_near_a_border_is_read_as_a_dilation_by_the_disc() -> None:
+    """The furniture test at border pixels agrees with ``cv2.dilate`` by the elliptic disc everywhere."""
+    rng = np.random.default_rng(3)
+    furniture = rng.random((60, 80)) < 0.002
+    pixels = np.arange(furniture.size, dtype=np.int64)
+    for reach in (1, 4, 9):
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
+        dilated = cv2.dilate(furniture.astype(np.uint8), disc) > 0
+        assert np.array_equal(_near(furniture, pixels, reach), dilated.ravel())

@@ -6,8 +6,9 @@ import math
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
-from services.grid_decomposition.doorways import draw_cuts, find_doorways, widens
+from services.grid_decomposition.doorways import _nearest_walls, draw_cuts, find_doorways, widens
 
 RES = 0.05
 
@@ -79,3 +80,15 @@ def test_widens_tells_a_doorway_from_the_mouth_of_a_passage() -> None:
     walls[53:110, 10:110] = True
     walls[53:110, 50:68] = False  # below the gap a passage as narrow as the gap
     assert not widens(walls, doorway, widening_px=6, max_depth_px=20, depth_step_px=5).any()
+
+
+def test_distances_to_walls_are_scipys_exact_ones() -> None:
+    """The distance to the nearest wall is scipy's Euclidean distance transform (as float32), whole or tiled."""
+    rng = np.random.default_rng(5)
+    space = rng.random((300, 520)) > 0.01
+    for share in (0.0, 1.0):  # one transform; tiles
+        dist, wall_x, wall_y = _nearest_walls(space, reach_px=600, max_share=share)
+        expected = ndimage.distance_transform_edt(space).astype(np.float32)
+        assert np.array_equal(dist, expected)
+        rows, cols = np.indices(space.shape)
+        assert np.array_equal(np.hypot(wall_x - cols.ravel(), wall_y - rows.ravel()).astype(np.float32), dist.ravel())
