@@ -43,7 +43,14 @@ from services.grid_decomposition.regions import (
     road_networks,
     warehouse_floors,
 )
-from services.grid_decomposition.rooms import free_standing, furniture, segment_rooms, wall_furniture
+from services.grid_decomposition.rooms import (
+    Components,
+    components,
+    free_standing,
+    furniture,
+    segment_rooms,
+    wall_furniture,
+)
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -187,12 +194,11 @@ def _core(mask: npt.NDArray[np.bool_], depth_px: int) -> npt.NDArray[np.bool_]:
     return inner if inner.any() else mask
 
 
-def _structure(obstacle: npt.NDArray[np.bool_], min_area_px: int) -> npt.NDArray[np.bool_]:
+def _structure(obstacle: Components, min_area_px: int) -> npt.NDArray[np.bool_]:
     """Pixels near obstacle components of at least ``min_area_px`` (walls, blocks), not furniture or uprights."""
-    _, parts, stats, _ = cv2.connectedComponentsWithStats(obstacle.astype(np.uint8), connectivity=8)
-    big = stats[:, cv2.CC_STAT_AREA] >= min_area_px
+    big = obstacle.stats[:, cv2.CC_STAT_AREA] >= min_area_px
     big[0] = False
-    return np.asarray(cv2.dilate(big[parts].astype(np.uint8), np.ones((5, 5), np.uint8)), dtype=bool)
+    return np.asarray(cv2.dilate(big[obstacle.labels].astype(np.uint8), np.ones((5, 5), np.uint8)), dtype=bool)
 
 
 def _texture_count(lines: dict[float, list[Line]]) -> int:
@@ -383,14 +389,15 @@ def decompose(
             categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
         )
         occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
-        clutter = furniture(obstacle, resolution_m=resolution_m)
+        obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
+        clutter = furniture(obstacle, resolution_m=resolution_m, labelled=obstacle_parts)
         banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
         against_walls = wall_furniture(obstacle, resolution_m=resolution_m)
         gradients = oriented_gradients(obstacle)
         # the sides of laser rays are no walls: they would give the map directions of their own
         ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
         structure = _masked(
-            gradients, _structure(obstacle, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
+            gradients, _structure(obstacle_parts, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
         )
         loaded.result()  # the line search imports scipy.signal and scikit-learn
         global_lines = _lines(gradients, structure, None, resolution_m)
@@ -415,6 +422,7 @@ def decompose(
                 resolution_m=resolution_m,
                 max_extent_m=island_max_extent_m,
                 min_clearance_m=island_min_clearance_m,
+                labelled=obstacle_parts,
             )
         evidence_job = beside.submit(
             wall_evidence,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +22,20 @@ from services.grid_decomposition.segments import (
 )
 
 
+@dataclass(frozen=True)
+class Components:
+    """The 8-connected components of a mask, as ``cv2.connectedComponentsWithStats`` gives them."""
+
+    labels: npt.NDArray[np.int32]  # (H, W) component id per pixel, 0 off the mask
+    stats: npt.NDArray[np.int32]  # (N + 1, 5) left, top, width, height, area per id
+
+
+def components(mask: npt.NDArray[np.bool_]) -> Components:
+    """:class:`Components` of ``mask`` (label the obstacles once for :func:`furniture` and :func:`free_standing`)."""
+    _n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    return Components(np.asarray(labels, dtype=np.int32), np.asarray(stats, dtype=np.int32))
+
+
 def furniture(
     obstacle: npt.NDArray[np.bool_],
     *,
@@ -33,6 +49,7 @@ def furniture(
     block_min_thickness_m: float = 0.4,
     block_max_elongation: float = 3.0,
     block_min_solid: float = 0.3,
+    labelled: Components | None = None,
 ) -> npt.NDArray[np.bool_]:
     """Free-standing obstacles: furniture, bins, pillars, table legs, clutter, desks and cabinets.
 
@@ -61,13 +78,16 @@ def furniture(
         Occupied or unknown cells.
     resolution_m : float
         Metres per cell.
+    labelled : Components, optional
+        ``components(obstacle)``, when already labelled.
 
     Returns
     -------
     (H, W) bool
         The furniture cells (a subset of ``obstacle``).
     """
-    _n, parts, stats, _ = cv2.connectedComponentsWithStats(obstacle.astype(np.uint8), connectivity=8)
+    labelled = components(obstacle) if labelled is None else labelled
+    parts, stats = labelled.labels, labelled.stats
     h, w = obstacle.shape
     x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
     bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
@@ -282,13 +302,16 @@ def open_share(
     return share
 
 
-def islands(blocked: npt.NDArray[np.bool_], *, max_extent_px: float) -> npt.NDArray[np.bool_]:
+def islands(
+    blocked: npt.NDArray[np.bool_], *, max_extent_px: float, labelled: Components | None = None
+) -> npt.NDArray[np.bool_]:
     """Parts of ``blocked`` standing free: 8-connected, off the map border, at most ``max_extent_px`` across.
 
     Chairs, tables and clutter the furniture rule left as obstacles (a cluster of chairs, a large
     table); walls reach farther or touch the map border (the unknown outside).
     """
-    _n, parts, stats, _ = cv2.connectedComponentsWithStats(blocked.astype(np.uint8), connectivity=8)
+    labelled = components(blocked) if labelled is None else labelled
+    parts, stats = labelled.labels, labelled.stats
     h, w = blocked.shape
     x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
     bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
@@ -303,6 +326,7 @@ def free_standing(
     resolution_m: float,
     max_extent_m: float = 2.0,
     min_clearance_m: float = 0.3,
+    labelled: Components | None = None,
 ) -> npt.NDArray[np.bool_]:
     """Obstacles standing free in a room: :func:`islands` at most ``max_extent_m`` across with floor all round them.
 
@@ -319,24 +343,26 @@ def free_standing(
         Occupied or unknown cells.
     resolution_m : float
         Metres per cell.
+    labelled : Components, optional
+        ``components(obstacle)``, when already labelled.
 
     Returns
     -------
     (H, W) bool
         A subset of ``obstacle``.
     """
-    isl = islands(obstacle, max_extent_px=max_extent_m / resolution_m)
+    labelled = components(obstacle) if labelled is None else labelled
+    isl = islands(obstacle, max_extent_px=max_extent_m / resolution_m, labelled=labelled)
     if not isl.any():
         return isl
     rest = obstacle & ~isl
     gap = cv2.distanceTransform((~rest).astype(np.uint8), cv2.DIST_L2, 5)
-    n, found = cv2.connectedComponents(isl.astype(np.uint8), connectivity=8)
-    parts = np.asarray(found, dtype=np.int32)
-    nearest = np.full(n, np.inf, dtype=np.float32)
+    parts = labelled.labels  # an island is a whole component of the obstacles
+    nearest = np.full(len(labelled.stats), np.inf, dtype=np.float32)
     np.minimum.at(nearest, parts[isl], gap[isl])
     keep = nearest * resolution_m >= min_clearance_m
     keep[0] = False
-    return np.asarray(keep[parts], dtype=bool)
+    return np.asarray(keep[parts] & isl, dtype=bool)
 
 
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from services.grid_decomposition import Connection, decompose
-from services.grid_decomposition.rooms import free_standing, furniture, segment_rooms
+from services.grid_decomposition.rooms import components, free_standing, furniture, segment_rooms
 
 RES = 0.05
 
@@ -183,6 +183,11 @@ def test_free_standing_obstacles_are_a_desk_cluster_not_a_wall_or_clutter_at_a_w
     assert found[60, 80] and found[45, 80]  # the desk cluster
     assert not found[32, 15]  # too close to the wall: left to the walls
     assert not found[6, 80] and not found[60, 150]  # walls
+    labelled = components(occ != 0)  # the obstacles labelled once, as decompose does: the same answer
+    assert np.array_equal(free_standing(occ != 0, resolution_m=RES, labelled=labelled), found)
+    assert np.array_equal(
+        furniture(occ != 0, resolution_m=RES, labelled=labelled), furniture(occ != 0, resolution_m=RES)
+    )
 
 
 def test_a_room_with_a_desk_cluster_in_its_middle_is_one_segment() -> None:
