@@ -7,6 +7,9 @@ integers: a count per id finds them in one pass.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -128,3 +131,21 @@ def label_counts(
     on = m[first]
     inside = np.bincount(label[on], weights=length[on], minlength=n).astype(np.int64)
     return count, inside
+
+
+@dataclass(frozen=True)
+class Components:
+    """The 8-connected components of a mask, as ``cv2.connectedComponentsWithStats`` gives them."""
+
+    labels: npt.NDArray[np.int32]  # (H, W) component id per pixel, 0 off the mask
+    stats: npt.NDArray[np.int32]  # (N + 1, 5) left, top, width, height, area per id
+
+
+def components(mask: npt.NDArray[np.bool_]) -> Components:
+    """:class:`Components` of ``mask``, labelled once for every step that reads them.
+
+    The obstacles for the furniture, the line search's structure and the free-standing obstacles; the
+    occupied cells for the shelf dashes and the floor objects.
+    """
+    _n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    return Components(np.asarray(labels, dtype=np.int32), np.asarray(stats, dtype=np.int32))

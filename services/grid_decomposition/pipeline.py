@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import label_counts, label_sums
+from services.grid_decomposition.arrays import Components, components, label_counts, label_sums
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.continuity import RegionPrior, keep_regions
@@ -44,8 +44,6 @@ from services.grid_decomposition.regions import (
     warehouse_floors,
 )
 from services.grid_decomposition.rooms import (
-    Components,
-    components,
     free_standing,
     furniture,
     segment_rooms,
@@ -391,7 +389,8 @@ def decompose(
         occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
         clutter = furniture(obstacle, resolution_m=resolution_m, labelled=obstacle_parts)
-        banks = find_shelf_banks(occupied, free, resolution_m=resolution_m)
+        occupied_parts = components(occupied)  # labelled once: shelf dashes, floor objects
+        banks = find_shelf_banks(occupied, free, resolution_m=resolution_m, labelled=occupied_parts)
         against_walls = wall_furniture(obstacle, resolution_m=resolution_m)
         gradients = oriented_gradients(obstacle)
         # the sides of laser rays are no walls: they would give the map directions of their own
@@ -539,7 +538,9 @@ def decompose(
         rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
         open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
         objects = (
-            floor_objects(occupied, known, resolution_m=resolution_m) if rooms and open_areas else np.zeros_like(free)
+            floor_objects(occupied, known, resolution_m=resolution_m, labelled=occupied_parts)
+            if rooms and open_areas
+            else np.zeros_like(free)
         )
         merges = pocket_merges(
             segments, rooms, open_areas, objects, free, max_area_px=round(_POCKET_MAX_M2 / resolution_m**2)

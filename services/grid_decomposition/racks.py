@@ -33,7 +33,7 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import unique_inverse
+from services.grid_decomposition.arrays import Components, components, unique_inverse
 from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
@@ -916,14 +916,18 @@ def floor_objects(
     max_length_m: float = 6.0,
     min_thickness_m: float = 0.4,
     min_fill: float = 0.75,
+    labelled: Components | None = None,
 ) -> npt.NDArray[np.bool_]:
     """(H, W) bool: things standing on the floor (pallets, box stacks, blocks of pallets).
 
     Occupied components of at most ``max_area_m2`` and ``max_length_m`` that touch neither unknown
     space nor the map border (walls and racks seen from one side do), blocks at least
     ``min_thickness_m`` thick filling ``min_fill`` of their rectangle (not a piece of wall).
+    ``labelled`` is ``components(occupied)``, when already labelled.
     """
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(occupied.astype(np.uint8), connectivity=8)
+    labelled = components(occupied) if labelled is None else labelled
+    parts, stats = labelled.labels, labelled.stats
+    n = len(stats)
     if n <= 1:
         return np.zeros(occupied.shape, dtype=bool)
     near_unknown = cv2.dilate((~known).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
-from services.grid_decomposition.arrays import label_counts
+from services.grid_decomposition.arrays import Components, components, label_counts
 from services.grid_decomposition.basins import join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -20,20 +18,6 @@ from services.grid_decomposition.segments import (
     renumber,
     split_along,
 )
-
-
-@dataclass(frozen=True)
-class Components:
-    """The 8-connected components of a mask, as ``cv2.connectedComponentsWithStats`` gives them."""
-
-    labels: npt.NDArray[np.int32]  # (H, W) component id per pixel, 0 off the mask
-    stats: npt.NDArray[np.int32]  # (N + 1, 5) left, top, width, height, area per id
-
-
-def components(mask: npt.NDArray[np.bool_]) -> Components:
-    """:class:`Components` of ``mask`` (label the obstacles once for :func:`furniture` and :func:`free_standing`)."""
-    _n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
-    return Components(np.asarray(labels, dtype=np.int32), np.asarray(stats, dtype=np.int32))
 
 
 def furniture(

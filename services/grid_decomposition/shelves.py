@@ -24,6 +24,8 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from services.grid_decomposition.arrays import Components, components
+
 
 class ShelfBanks(NamedTuple):
     """Racks and the aisles between them, found from rows of dashes.
@@ -51,10 +53,10 @@ class _Dashes(NamedTuple):
 
 
 def _dashes(
-    occupied: npt.NDArray[np.bool_], min_length_px: float, max_length_px: float, max_thickness_px: float
+    occupied: Components, min_length_px: float, max_length_px: float, max_thickness_px: float
 ) -> _Dashes:
     """Thin straight obstacle components between ``min_length_px`` and ``max_length_px`` long."""
-    _, parts, stats, _ = cv2.connectedComponentsWithStats(occupied.astype(np.uint8), connectivity=8)
+    parts, stats = occupied.labels, occupied.stats
     big = np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT])
     candidates = np.flatnonzero(
         (big >= min_length_px * math.sqrt(0.5))
@@ -103,6 +105,7 @@ def find_shelf_banks(
     max_row_gap_m: float = 2.5,
     max_angle_deg: float = 5.0,
     collinear_m: float = 0.15,
+    labelled: Components | None = None,
 ) -> ShelfBanks:
     """Racks seen as rows of short dashes, and the aisles between them.
 
@@ -121,6 +124,8 @@ def find_shelf_banks(
         dashes aligned (centres within a quarter pitch along the row).
     max_angle_deg, collinear_m : float
         Tolerances for parallel and collinear.
+    labelled : Components, optional
+        ``components(occupied)``, when already labelled.
 
     Returns
     -------
@@ -129,7 +134,8 @@ def find_shelf_banks(
     """
     shape = occupied.shape
     empty = np.zeros(shape, dtype=bool)
-    d = _dashes(occupied, min_dash_m / resolution_m, max_dash_m / resolution_m, max_thickness_m / resolution_m)
+    labelled = components(occupied) if labelled is None else labelled
+    d = _dashes(labelled, min_dash_m / resolution_m, max_dash_m / resolution_m, max_thickness_m / resolution_m)
     n = d.length.size
     if n < 2 * min_dashes:
         return ShelfBanks(empty, empty.copy(), empty.copy())

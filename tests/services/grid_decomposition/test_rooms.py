@@ -6,7 +6,8 @@ import cv2
 import numpy as np
 
 from services.grid_decomposition import Connection, decompose
-from services.grid_decomposition.rooms import components, free_standing, furniture, segment_rooms
+from services.grid_decomposition.arrays import components
+from services.grid_decomposition.rooms import free_standing, furniture, segment_rooms
 
 RES = 0.05
 
