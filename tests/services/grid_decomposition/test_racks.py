@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import decompose
-from services.grid_decomposition.racks import _interval_image, _turn, find_racks
+from services.grid_decomposition.arrays import components
+from services.grid_decomposition.racks import _interval_image, _turn, find_racks, floor_objects
 from services.simulator import ground_truth_grids, load_world
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
 from shared.vocabulary import PlaceLabel
@@ -85,6 +86,15 @@ def test_a_pallet_on_open_floor_is_no_room_and_open_floor_is_no_storage() -> Non
     assert not any(r.label is PlaceLabel.ROOM for r in d.regions.values())
     assert not (d.labels[free] == PlaceLabel.STORAGE.value).any()
     assert len(d.rack_rows_px) == 0
+
+
+def test_the_pallets_on_open_floor_are_floor_objects_however_the_occupied_cells_are_labelled() -> None:
+    hall = rack_hall_map(0, style=RackStyle.DEPOT, rotation_rad=0.2)
+    occupied, known = hall.occupancy > 65, hall.occupancy >= 0
+    objects = floor_objects(occupied, known, resolution_m=hall.resolution_m)
+    assert objects.any()
+    shared = floor_objects(occupied, known, resolution_m=hall.resolution_m, labelled=components(occupied))
+    assert np.array_equal(objects, shared)
 
 
 def test_an_office_has_no_racks() -> None:

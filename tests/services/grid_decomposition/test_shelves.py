@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from services.grid_decomposition import decompose
+from services.grid_decomposition.arrays import components
 from services.grid_decomposition.shelves import find_shelf_banks
 from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.test_rooms import RES, _furnish, _office_row
@@ -34,6 +35,15 @@ def test_a_bank_of_racks_seen_as_dashes_is_storage_with_aisles_between() -> None
     assert (rack == PlaceLabel.STORAGE.value).mean() > 0.9
     assert (aisle == PlaceLabel.CORRIDOR.value).mean() > 0.9
     assert (d.labels[180:210, 20:260] != PlaceLabel.STORAGE.value).all()  # the floor beside the bank is no rack
+
+
+def test_the_occupied_cells_labelled_once_find_the_same_banks() -> None:
+    occ = _rack_bank()
+    banks = find_shelf_banks(occ == 100, occ == 0, resolution_m=RES)
+    shared = find_shelf_banks(occ == 100, occ == 0, resolution_m=RES, labelled=components(occ == 100))
+    assert banks.storage.any()
+    for own, given in zip(banks, shared, strict=True):
+        assert np.array_equal(own, given)
 
 
 def test_one_row_of_dashes_or_unaligned_rows_are_no_racks() -> None:
