@@ -133,6 +133,7 @@ def wall_evidence(
     near_post = None if posts is None else cv2.dilate(posts.astype(np.uint8), disk) > 0
     wall = np.zeros((h, w), dtype=bool)
     door = np.zeros((h, w), dtype=bool)
+    gaps: list[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]] = []
     for group in groups:
         for line in group.lines:
             (x0, y0), (x1, y1) = line_endpoints(line, (h, w))
@@ -151,19 +152,25 @@ def wall_evidence(
                 posts=None if near_post is None else near_post[ys, xs],
             )
             wall[ys[on_wall], xs[on_wall]] = True
-            if g0.size == 0:
-                continue
-            ends = np.stack(
-                [np.stack([xs[g0], ys[g0]], axis=1), np.stack([xs[g1 - 1], ys[g1 - 1]], axis=1)], axis=1
-            ).astype(np.float64)
-            doorway = widens(
-                near,
-                ends,
-                widening_px=widening_px,
-                max_depth_px=max_depth_px + tolerance_px,
-                depth_step_px=max(1, max_depth_px // 4),
-            )
-            for a, b in zip(g0[doorway], g1[doorway], strict=True):
+            if g0.size:
+                gaps.append((xs, ys, g0, g1))
+    if gaps:  # every line's gaps in one call: each gap's answer is its own
+        ends = np.concatenate([
+            np.stack([np.stack([xs[g0], ys[g0]], axis=1), np.stack([xs[g1 - 1], ys[g1 - 1]], axis=1)], axis=1)
+            for xs, ys, g0, g1 in gaps
+        ]).astype(np.float64)
+        doorway = widens(
+            near,
+            ends,
+            widening_px=widening_px,
+            max_depth_px=max_depth_px + tolerance_px,
+            depth_step_px=max(1, max_depth_px // 4),
+        )
+        first = 0
+        for xs, ys, g0, g1 in gaps:
+            opened = doorway[first : first + g0.size]
+            first += g0.size
+            for a, b in zip(g0[opened], g1[opened], strict=True):
                 wall[ys[a:b], xs[a:b]] = True
                 door[ys[a:b], xs[a:b]] = True
     kernel = np.ones((3, 3), np.uint8)
