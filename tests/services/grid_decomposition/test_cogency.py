@@ -70,3 +70,23 @@ def test_wall_with_a_door_is_cogent_and_an_open_line_is_not() -> None:
     assert cog.cogent[crosses_wall].all()
     assert cog.door[crosses_wall].any()
     assert not cog.cogent[~crosses_wall].any()
+
+
+def test_the_doorways_of_several_lines_are_each_lines_own() -> None:
+    occ = np.zeros((100, 100), dtype=bool)
+    occ[5:95, 30] = occ[5:95, 70] = True
+    occ[20:30, 30] = False  # a 10 px door in one wall
+    occ[50:72, 70] = False  # a 22 px door in the other: the gaps of both lines are judged together
+    lines = [Line(math.pi / 2, -30.0, 5.0, 0.1, True), Line(math.pi / 2, -70.0, 5.0, 0.1, True)]
+
+    def evidence(on: list[Line]) -> tuple[np.ndarray, np.ndarray]:
+        return wall_evidence(
+            occ, [LineGroup(tuple(on), None)], tolerance_px=1, min_wall_px=5, max_door_px=25, widening_px=6,
+            max_depth_px=20,
+        )
+
+    wall, door = evidence(lines)
+    alone = [evidence([ln]) for ln in lines]
+    assert door[20:30, 30].all() and door[50:72, 70].all()
+    assert np.array_equal(wall, alone[0][0] | alone[1][0])
+    assert np.array_equal(door, alone[0][1] | alone[1][1])
