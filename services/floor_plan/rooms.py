@@ -50,6 +50,7 @@ class RoomSettings:
     min_contact_m: float = 0.5
     """Units border each other only where their free spaces face each other over at least this length."""
     margin_m: float = 0.1
+    """A boundary is looked at this far into both units too (a map wall a cell off the unit's wall)."""
     cut_share: float = 0.2
     """A line of cells across a unit of which at least this share is not free is a wall the unit stands over:
     the room level cuts the unit there."""
@@ -65,7 +66,6 @@ class RoomSettings:
     corridor_room_depth: float = 2.5
     """... and at least this many corridor widths deep: a room or hall the corridor opens into, not a corridor
     it turns into (those are about as deep as it is wide). The two are not one room, however open."""
-    """A boundary is looked at this far into both units too (a map wall a cell off the unit's wall)."""
 
 
 class Boundary(NamedTuple):
