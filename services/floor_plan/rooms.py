@@ -9,7 +9,9 @@ other where their free spaces face each other across at most ``max_gap_m`` (a sh
 the world leaves unexplained) over at least ``min_contact_m``; the boundary is **open** where no barrier of
 the map lies across it, position by position (:func:`boundaries`). A door is a short opening in a wall, so
 parts whose boundary is open over ``min_open_share`` of the shorter side, and from whose open part free
-space runs on into both (``min_depth_share``), are one room. Rooms are the connected components of the open
+space runs on into both (``min_depth_share``), are one room, unless the boundary is the end of a corridor at
+a room or hall much wider and deeper than the corridor (:func:`corridor_end`): the ground truth's rooms and a
+reader of a floor plan cut a corridor there, however open it is. Rooms are the connected components of the open
 boundaries (:func:`group_rooms`). Barriers are cells that are not free lying on a straight run along the
 wall's direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or unknown, not the
 unknown speckle, laser streaks and clutter dots of a real map's free space.
@@ -48,6 +50,7 @@ class RoomSettings:
     min_contact_m: float = 0.5
     """Units border each other only where their free spaces face each other over at least this length."""
     margin_m: float = 0.1
+    """A boundary is looked at this far into both units too (a map wall a cell off the unit's wall)."""
     cut_share: float = 0.2
     """A line of cells across a unit of which at least this share is not free is a wall the unit stands over:
     the room level cuts the unit there."""
@@ -55,7 +58,14 @@ class RoomSettings:
     """No part thinner than this is cut off a unit."""
     max_wall_m: float = 1.0
     """A band of lines across a unit thicker than this is no wall (furniture, unexplored space): no cut."""
-    """A boundary is looked at this far into both units too (a map wall a cell off the unit's wall)."""
+    corridor_length_ratio: float | None = 3.0
+    """A part at least this many times as long (away from a boundary) as it is wide (along it) is a corridor
+    there; None: no corridor ends (:func:`corridor_end`)."""
+    corridor_width_share: float = 0.5
+    """A corridor ends at a part at least 1 / this share as wide along their boundary ..."""
+    corridor_room_depth: float = 2.5
+    """... and at least this many corridor widths deep: a room or hall the corridor opens into, not a corridor
+    it turns into (those are about as deep as it is wide). The two are not one room, however open."""
 
 
 class Boundary(NamedTuple):
@@ -72,6 +82,8 @@ class Boundary(NamedTuple):
     """How far free space runs into the units from the open part of the boundary before a wall, as a share of
     each unit's depth (the smaller of the two): a unit that reaches across a wall into its neighbour's space
     (its own room lies behind that wall) has little."""
+    corridor_end: bool = False
+    """One part is a corridor that ends here at a much wider and deeper part (:func:`corridor_end`)."""
 
 
 class Part(NamedTuple):
@@ -172,7 +184,8 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
     Returns
     -------
     list of Boundary
-        ``units`` are indices into ``parts``; parts whose free spaces overlap count as fully open.
+        ``units`` are indices into ``parts``; parts whose free spaces overlap count as fully open (whether one
+        is a corridor ending at the other is judged as if the one sticking into the other stopped at it).
     """
     if len(parts) < 2:
         return []
@@ -193,7 +206,9 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
         a, b = Rect(*inner[i]), Rect(*inner[j])
         if overlap[i, j]:
             length = min(a.r1, b.r1) - max(a.r0, b.r0) + 1
-            out.append(Boundary((int(i), int(j)), length * resolution_m, 1.0, 1.0))
+            abutting = _abut(a, b)
+            out.append(Boundary((int(i), int(j)), length * resolution_m, 1.0, 1.0,
+                                abutting is not None and corridor_end(*abutting, settings)))
             continue
         vertical = bool(stacked[i, j])  # the cross lines run along rows
         # walls between stacked parts run along rows; beside in the map is stacked in the transpose
@@ -210,8 +225,44 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
             down = _free_run(w[bottom.r0 : bottom.r1 + 1, cols][:, open_])
             depth = min(float(up.mean()) / top.rows, float(down.mean()) / bottom.rows)
         side = min(a.c1 - a.c0, b.c1 - b.c0) + 1
-        out.append(Boundary((int(i), int(j)), open_.size * resolution_m, float(open_.sum()) / side, depth))
+        out.append(Boundary((int(i), int(j)), open_.size * resolution_m, float(open_.sum()) / side, depth,
+                            corridor_end(a, b, settings)))
     return out
+
+
+def corridor_end(a: Rect, b: Rect, settings: RoomSettings) -> bool:
+    """Whether one of two stacked parts (``a`` above ``b`` or below it: their boundary runs along the columns)
+    is a corridor that ends there at a room or hall: at least ``corridor_length_ratio`` times as long (rows) as
+    wide (columns), at most ``corridor_width_share`` as wide as the other, which is at least
+    ``corridor_room_depth`` corridor widths deep. A corridor turning a corner meets a part about as deep as it is
+    wide; an alcove or the leg of an L-shaped room is not that long."""
+    if settings.corridor_length_ratio is None:
+        return False
+    narrow, wide = (a, b) if a.cols <= b.cols else (b, a)
+    return (narrow.rows >= settings.corridor_length_ratio * narrow.cols
+            and narrow.cols <= settings.corridor_width_share * wide.cols
+            and wide.rows >= settings.corridor_room_depth * narrow.cols)
+
+
+def _abut(a: Rect, b: Rect) -> tuple[Rect, Rect] | None:
+    """Two overlapping rectangles made to abut, stacked (transposed when they end up side by side): the one that
+    sticks into the other stops at it on that side, whichever gives up the least share of its cells; None when
+    neither can (one holds the other's whole extent on every side it crosses)."""
+    best: tuple[float, Rect, Rect, bool] | None = None
+    for x, y in ((a, b), (b, a)):
+        for cut, stacked in ((x._replace(r1=y.r0 - 1), True), (x._replace(r0=y.r1 + 1), True),
+                             (x._replace(c1=y.c0 - 1), False), (x._replace(c0=y.c1 + 1), False)):
+            if cut.r0 > cut.r1 or cut.c0 > cut.c1 or not x.contains(cut) or cut == x:
+                continue
+            lost = 1.0 - cut.rows * cut.cols / (x.rows * x.cols)
+            if best is None or lost < best[0]:
+                best = (lost, cut, y, stacked)
+    if best is None:
+        return None
+    _, p, q, stacked = best
+    if stacked:
+        return p, q
+    return Rect(p.c0, p.c1, p.r0, p.r1), Rect(q.c0, q.c1, q.r0, q.r1)
 
 
 def _free_run(walls: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
@@ -249,7 +300,8 @@ def group_rooms(
         return []
     joined = []
     for b in boundaries(parts, blocked, resolution_m=resolution_m, settings=settings):
-        if b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share:
+        if (b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share
+                and not b.corridor_end):
             joined.append(b.units)
     edges = np.array(joined, np.int64).reshape(-1, 2)
     n = len(parts)

@@ -99,3 +99,29 @@ def test_a_slanted_wall_between_two_rooms_keeps_them_apart() -> None:
     assert _rooms(world, classes) == [(1,), (2,)]
     classes[2:62, 2:98] = CellClass.FREE  # without the wall: one room
     assert _rooms(world, classes) == [(1, 2)]
+
+
+def _hall_with_a_corridor(corridor: Rect) -> tuple[World, npt.NDArray[np.uint8]]:
+    """An 8 m square hall and a 1.2 m wide, 6 m long corridor running off its right side, open over its whole
+    width (no wall, no door where it meets the hall); the corridor unit is ``corridor``."""
+    hall = Rect(0, 159, 0, 159)
+    classes = _walled((160, 280), hall, Rect(40, 65, 158, 279))
+    classes[42:64, 156:162] = CellClass.FREE
+    return World({1: hall, 2: corridor}, set(), 3), classes
+
+
+def test_a_corridor_opening_into_a_hall_is_not_part_of_the_hall() -> None:
+    world, classes = _hall_with_a_corridor(Rect(40, 65, 158, 279))  # the two units share the wall at 158-159
+    assert _rooms(world, classes) == [(1,), (2,)]
+
+
+def test_a_corridor_unit_reaching_into_the_hall_is_still_a_room_of_its_own() -> None:
+    world, classes = _hall_with_a_corridor(Rect(40, 65, 140, 279))  # its rectangle stands 1 m into the hall
+    assert _rooms(world, classes) == [(1,), (2,)]
+
+
+def test_corridor_ends_can_be_turned_off() -> None:
+    world, classes = _hall_with_a_corridor(Rect(40, 65, 158, 279))
+    groups = group_rooms(world, classes, dict.fromkeys(world.units, UnitType.ROOM), wall_cells=T, resolution_m=RES,
+                         settings=RoomSettings(corridor_length_ratio=None))
+    assert [room.units for room in groups] == [(1, 2)]
