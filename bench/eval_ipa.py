@@ -42,7 +42,6 @@ from services.grid_decomposition.evaluation import (
     on_free,
     shift_into,
 )
-from services.grid_decomposition.joins import JoinModel
 from services.grid_decomposition.keys import NEXT_ID_KEY, carry_keys, region_prior
 from services.grid_decomposition.mapfile import read_map_file
 from services.grid_decomposition.records import decomposition_layers
@@ -56,7 +55,6 @@ VARIANTS = ("", "_furnitures", "_trashbins", "_furnitures_trashbins")
 SETS = ("ipa", "rose2", "partial")
 OCCUPIED_GREY = 89  # map_server: darkness above 0.65 is occupied
 WHITE = ((0, 0, 0), (255, 255, 255))
-DECOMPOSE: dict[str, Any] = {}  # keywords of every decompose() call (the room-join options)
 
 
 class Row(NamedTuple):
@@ -80,21 +78,7 @@ def main() -> None:
     parser.add_argument("--sets", nargs="*", default=list(SETS), choices=SETS, help="which sets to run")
     parser.add_argument("--variants", nargs="*", default=list(VARIANTS), help="ipa suffixes, '' = plain")
     parser.add_argument("--maps", nargs="*", default=None, help="only these ROSE2 full maps / ipa map names")
-    parser.add_argument("--no-learned-joins", action="store_true", help="the hand-made room-join rule instead")
-    parser.add_argument("--join-model", type=Path, default=None, help="a room-join model (bench/fit_joins.py)")
-    parser.add_argument("--join-min-log-odds", type=float, default=None)
-    parser.add_argument("--join-gate", type=float, nargs=2, default=None, metavar=("SADDLE", "SOLIDITY"))
-    parser.add_argument("--join-any-border", action="store_true", help="join pieces without furniture near the border")
     args = parser.parse_args()
-    if args.join_gate is not None:
-        DECOMPOSE["join_saddle_ratio"], DECOMPOSE["join_solidity"] = args.join_gate
-    if args.join_any_border:
-        DECOMPOSE["join_furnished_only"] = False
-    DECOMPOSE["learned_joins"] = not args.no_learned_joins
-    if args.join_model is not None:
-        DECOMPOSE["join_model"] = JoinModel.from_json(args.join_model.read_text())
-    if args.join_min_log_odds is not None:
-        DECOMPOSE["join_min_log_odds"] = args.join_min_log_odds
     print(f"load average at start {os.getloadavg()[0]:.2f}")
     with threadpool_limits(1):
         if "ipa" in args.sets:
@@ -151,7 +135,7 @@ def _summary(tag: str, rows: list[Row]) -> None:
 def _timed(occupancy: npt.NDArray[np.int8]) -> tuple[npt.NDArray[np.int32], float, float]:
     """Segments (image row order) of a decomposition, wall and CPU seconds."""
     start, cpu_start = time.perf_counter(), time.process_time()
-    result = decompose(occupancy, resolution_m=RESOLUTION_M, **DECOMPOSE)
+    result = decompose(occupancy, resolution_m=RESOLUTION_M)
     seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
     return np.ascontiguousarray(result.segments[::-1]), seconds, cpu
 
@@ -257,7 +241,7 @@ def _partial() -> None:
         start, cpu_start = time.perf_counter(), time.process_time()
         prior = None if previous is None else region_prior(previous[0], previous[1], occupancy)
         result, ids = carry_keys(decompose(occupancy.data, resolution_m=RESOLUTION_M, origin_xy_m=origin,
-                                           prior=prior, **DECOMPOSE), None if previous is None else previous[0])
+                                           prior=prior), None if previous is None else previous[0])
         seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         segments, s, peer, free = _rose2_scores(folder, grey, np.ascontiguousarray(result.segments[::-1]))
         row = Row(s, seconds, cpu)

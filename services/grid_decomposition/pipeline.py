@@ -22,7 +22,6 @@ from services.grid_decomposition.continuity import RegionPrior, keep_regions
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
-from services.grid_decomposition.joins import JoinModel, default_model
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -276,12 +275,6 @@ def decompose(
     clean: bool = True,
     streak_reach_m: float = 2.0,
     fan_max_neck_m: float = 1.2,
-    learned_joins: bool = False,
-    join_model: JoinModel | None = None,
-    join_min_log_odds: float = 0.0,
-    join_saddle_ratio: float = 0.8,
-    join_solidity: float = 0.8,
-    join_furnished_only: bool = True,
     known_places: RackLayout | None = None,
     prior: RegionPrior | None = None,
     settled_max_changed_share: float = 0.2,
@@ -347,12 +340,6 @@ def decompose(
     fan_max_neck_m : float
         A fan of rays leaving a room region through a neck at most this wide is a room of its own
         (:func:`~services.grid_decomposition.fans.split_fans`); 0 turns it off.
-    learned_joins, join_model, join_min_log_odds
-        Touching room pieces are joined when a classifier over their border and shapes
-        (``join_model``, by default the one shipped, :func:`~services.grid_decomposition.joins.default_model`)
-        gives them log-odds of being one room above ``join_min_log_odds``
-        (:func:`~services.grid_decomposition.joins.learned_joins`); with ``learned_joins`` off, the
-        hand-made rule of :func:`~services.grid_decomposition.basins.join_room_pieces` decides.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -511,11 +498,6 @@ def decompose(
             door_max_depth_m=door_max_depth_m,
             room_min_area_m2=room_min_area_m2,
             neck_half_width_m=neck_half_width_m,
-            join_model=(join_model or default_model()) if learned_joins else None,
-            join_min_log_odds=join_min_log_odds,
-            join_saddle_ratio=join_saddle_ratio,
-            join_solidity=join_solidity,
-            join_furnished_only=join_furnished_only,
             rays=rays,
             occupied=occupied,
         )

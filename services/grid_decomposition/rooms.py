@@ -10,7 +10,6 @@ from scipy import ndimage
 from services.grid_decomposition.arrays import Components, components, label_counts
 from services.grid_decomposition.basins import join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
-from services.grid_decomposition.joins import JoinModel, learned_joins
 from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.segments import (
     fill_from_neighbours,
@@ -146,9 +145,6 @@ def segment_rooms(
     neck_half_width_m: float = 0.0,
     join_saddle_ratio: float = 0.8,
     join_solidity: float = 0.8,
-    join_model: JoinModel | None = None,
-    join_min_log_odds: float = 0.0,
-    join_furnished_only: bool = True,
     island_max_extent_m: float = 3.0,
     rays: npt.NDArray[np.bool_] | None = None,
     occupied: npt.NDArray[np.bool_] | None = None,
@@ -178,9 +174,7 @@ def segment_rooms(
     5. Pieces of one furnished room join (:func:`join_room_pieces`, when ``join_saddle_ratio`` > 0):
        no neck between them on the clearance map (furniture and obstacle islands at most
        ``island_max_extent_m`` across count as floor), a union about as convex as a room
-       (``join_solidity``), furniture near their border. With a ``join_model``, that model decides
-       instead (:func:`~services.grid_decomposition.joins.learned_joins`: pairs whose log-odds of
-       being one room exceed ``join_min_log_odds``).
+       (``join_solidity``), furniture near their border.
 
     Parameters
     ----------
@@ -234,21 +228,7 @@ def segment_rooms(
         lone_dropped=_outside_rays(seg, narrow, rays, occupied, lone_max_ray_share, outside_min_open_share,
                                    round(outside_reach_m / resolution_m)),
     )
-    if join_model is not None:
-        rooms = learned_joins(
-            rooms,
-            clutter | islands(rooms == 0, max_extent_px=island_max_extent_m / resolution_m),
-            closed,
-            cut,
-            resolution_m=resolution_m,
-            model=join_model,
-            fixed=_share(rooms, floor) > 0.5,
-            min_log_odds=join_min_log_odds,
-            min_saddle_ratio=join_saddle_ratio,
-            min_solidity=join_solidity,
-            furnished_only=join_furnished_only,
-        )
-    elif join_saddle_ratio > 0:
+    if join_saddle_ratio > 0:
         standing = clutter | islands(rooms == 0, max_extent_px=island_max_extent_m / resolution_m)
         rooms = join_room_pieces(
             rooms,
