@@ -171,7 +171,7 @@ def fit_walls(
     >>> out = fit_walls(w, cm, log_sensor_table(), wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=2,
     ...                 max_thickness=4, log_cost=1.0, segment_cells=2)
     >>> out.segments[1][0][0], out.fitted, bool((out.classes_world == cm).all())
-    (Segment(start=2, end=9, shift=2, thickness=3), 4, True)
+    (Segment(start=2, end=11, shift=2, thickness=3), 4, True)
     """
     if classes_map.shape != fixed.shape:
         raise ValueError(f"C_M {classes_map.shape} and the fixed walls {fixed.shape} differ in shape")
@@ -246,12 +246,12 @@ def _best(
     none = cumulative(n_int, n_wall, n_door)
     band = cumulative(n_int, n_wall + 1, n_door + strip.door)
     inside = cumulative(n_int + strip.mid, n_wall, n_door)
-    shift, thick = np.meshgrid(np.arange(-max_shift, strip.k1 + 2), np.arange(max_thickness + 1), indexing="ij")
-    shift, thick = shift.ravel(), thick.ravel()
-    ok = shift - thick >= strip.k0
-    shift, thick = shift[ok], thick[ok]
+    grid = np.meshgrid(np.arange(-max_shift, strip.k1 + 2), np.arange(max_thickness + 1), indexing="ij")
+    ok = grid[0] - grid[1] >= strip.k0  # the band's first row is in the strip
+    shift, thick = grid[0][ok], grid[1][ok]
     a, b = shift - thick - strip.k0, shift - strip.k0  # rows before the band, rows up to the band's end
     per_cell = none[a] + band[b] - band[a] + inside[-1] - inside[b]  # (options, positions along)
+    per_cell -= 1e-6 * thick[:, None]  # where the map cannot tell (a free cell drawn wall or unknown), less wall
     blocks = np.arange(0, per_cell.shape[1], segment_cells)
     score = np.add.reduceat(per_cell, blocks, axis=1)
     default = int(np.flatnonzero((shift == 0) & (thick == t))[0])
