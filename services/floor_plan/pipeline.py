@@ -76,7 +76,7 @@ class FloorPlanSettings:
     """The prior's cost of one clutter obstacle in nats (one cell the sensor model explains is worth log 8 = 2.1).
     The same cap and cost hold for the exterior obstacles (occupied blobs against a wall's outside,
     :func:`~services.floor_plan.clutter.explain_exterior`), drawn when clutter obstacles are."""
-    wall_shift_m: float | None = 0.15
+    wall_shift_m: float | None = 0.2
     """Walls as the map draws them (:mod:`services.floor_plan.walls`): a segment of a unit's wall moves its inner face
     at most this far either way; None: every wall is the seed's band."""
     wall_extra_m: float = 0.15
