@@ -279,6 +279,9 @@ class FloorPlanStageSettings(BaseModel):
     clutter_max_m2: float | None = Field(4.0, gt=0.0, description=(
         "Largest blob of non-free cells inside the units the layer draws as a clutter obstacle; null: none."))
     clutter_log_cost: float = Field(10.0, ge=0.0, description="Prior cost of one clutter obstacle (nats).")
+    wall_shift_m: float | None = Field(0.2, gt=0.0, description=(
+        "Walls as the map draws them: how far a wall segment's inner face may move either way; null: every wall "
+        "is drawn as the fixed band."))
 
     @model_validator(mode="after")
     def _distinct_layers(self) -> FloorPlanStageSettings:

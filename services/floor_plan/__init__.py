@@ -6,7 +6,7 @@ under a Markov-logic context prior.
 """
 
 from services.floor_plan.chain import SEED_SCHEDULE, Chain, ChainResult, ChainSettings, Phase, run_chain
-from services.floor_plan.clutter import Clutter, explain_clutter
+from services.floor_plan.clutter import Clutter, explain_clutter, explain_exterior
 from services.floor_plan.context import ContextPrior, ContextSettings, UnitEvidence, type_marginals
 from services.floor_plan.errors import FloorPlanError
 from services.floor_plan.frame import Frame, carry, dominant_angle, make_frame
@@ -31,6 +31,7 @@ from services.floor_plan.pipeline import (
     unit_labels,
 )
 from services.floor_plan.rooms import Room, RoomSettings, group_rooms, room_keys
+from services.floor_plan.walls import Segment, Walls, fit_walls
 from services.floor_plan.world import Rect, Side, UnitType, World
 
 __all__ = [
@@ -57,10 +58,12 @@ __all__ = [
     "Rect",
     "Room",
     "RoomSettings",
+    "Segment",
     "Side",
     "Unit",
     "UnitEvidence",
     "UnitType",
+    "Walls",
     "World",
     "carry",
     "cell_prediction_rate",
@@ -68,6 +71,8 @@ __all__ = [
     "describe",
     "dominant_angle",
     "explain_clutter",
+    "explain_exterior",
+    "fit_walls",
     "floor_plan",
     "group_rooms",
     "log_sensor_table",

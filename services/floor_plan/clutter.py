@@ -74,3 +74,51 @@ def explain_clutter(
     out = classes_world.copy()
     out[mask] = np.where(as_wall, np.uint8(CellClass.WALL), np.uint8(CellClass.UNKNOWN))[labels[mask]]
     return Clutter(out, obstacles, int(take.sum()), int((take & as_wall).sum()))
+
+
+def explain_exterior(
+    classes_map: npt.NDArray[np.uint8], classes_world: npt.NDArray[np.uint8], log_table: npt.NDArray[np.float64],
+    *, max_cells: int, log_cost: float,
+) -> Clutter:
+    """Draw the occupied blobs of the map just outside the world's walls as wall obstacles where they pay.
+
+    A wall's ragged outer edge, a pillar or a radiator against it, a wall of a space no unit explains: every
+    8-connected blob of occupied map cells that C_W draws unknown (outside every unit and wall) and that touches a
+    wall C_W draws, as a polygon (its outline simplified by Douglas-Peucker to within one cell, filled over the cells
+    C_W draws unknown), when that polygon's gain in log likelihood beats ``log_cost`` and the blob is no larger than
+    ``max_cells``. Blobs further from the walls (objects seen through windows and doors) are left alone.
+
+    >>> from services.floor_plan.likelihood import log_sensor_table
+    >>> cm = np.ones((8, 12), np.uint8); cm[3, 1:9] = CellClass.WALL; cm[6, 10] = CellClass.WALL
+    >>> cw = np.ones_like(cm); cw[4:, :] = CellClass.WALL  # a wall drawn below the map's ragged edge
+    >>> out = explain_exterior(cm, cw, log_sensor_table(), max_cells=50, log_cost=4.0)
+    >>> out.drawn, int(out.classes_world[3, 5]), int(out.classes_world[2, 5])
+    (1, 2, 1)
+    """
+    if classes_map.shape != classes_world.shape:
+        raise ValueError(f"C_M {classes_map.shape} and C_W {classes_world.shape} differ in shape")
+    if max_cells < 1 or log_cost < 0:
+        raise ValueError(f"need max_cells >= 1 and log_cost >= 0, got {max_cells}, {log_cost}")
+    outside = classes_world == CellClass.UNKNOWN
+    blobs = outside & (classes_map == CellClass.WALL)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(blobs.astype(np.uint8), connectivity=8)
+    near = cv2.dilate((classes_world == CellClass.WALL).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    touching = np.zeros(count, bool)
+    touching[labels[blobs & near]] = True
+    out = classes_world.copy()
+    obstacles = np.zeros(classes_map.shape, np.int32)
+    drawn = 0
+    for i in np.flatnonzero(touching & (stats[:, cv2.CC_STAT_AREA] <= max_cells)):
+        x, y, w, h = (int(v) for v in stats[i, :4])
+        window = (slice(y, y + h), slice(x, x + w))
+        contours, _ = cv2.findContours((labels[window] == i).astype(np.uint8), cv2.RETR_EXTERNAL,
+                                       cv2.CHAIN_APPROX_SIMPLE)
+        polygon = np.zeros((h, w), np.uint8)
+        cv2.fillPoly(polygon, [cv2.approxPolyDP(c, 1.0, True) for c in contours], 1)
+        cells = polygon.astype(bool) & outside[window]
+        seen = classes_map[window][cells]
+        if float(np.sum(log_table[CellClass.WALL, seen] - log_table[CellClass.UNKNOWN, seen])) > log_cost:
+            drawn += 1
+            out[window][cells] = CellClass.WALL
+            obstacles[window][cells] = drawn
+    return Clutter(out, obstacles, drawn, drawn)

@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.floor_plan.chain import Chain, ChainSettings, run_chain
-from services.floor_plan.clutter import explain_clutter
+from services.floor_plan.clutter import explain_clutter, explain_exterior
 from services.floor_plan.context import ContextPrior, ContextSettings
 from services.floor_plan.detectors import Evidence, wall_lines, wbu_candidates
 from services.floor_plan.errors import FloorPlanError
@@ -38,6 +38,7 @@ from services.floor_plan.likelihood import (
     wall_thickness_cells,
 )
 from services.floor_plan.rooms import Room, RoomSettings, fill_free, group_rooms
+from services.floor_plan.walls import Segment, fit_walls
 from services.floor_plan.world import Rect, UnitType, World, shared_band
 
 
@@ -72,7 +73,18 @@ class FloorPlanSettings:
     """The largest blob of non-free cells inside the units drawn as an obstacle (furniture, the unseen space behind
     it: :mod:`services.floor_plan.clutter`); None: no clutter obstacles, C_W is the seed's world alone."""
     clutter_log_cost: float = 10.0
-    """The prior's cost of one clutter obstacle in nats (one cell the sensor model explains is worth log 8 = 2.1)."""
+    """The prior's cost of one clutter obstacle in nats (one cell the sensor model explains is worth log 8 = 2.1).
+    The same cap and cost hold for the exterior obstacles (occupied blobs against a wall's outside,
+    :func:`~services.floor_plan.clutter.explain_exterior`), drawn when clutter obstacles are."""
+    wall_shift_m: float | None = 0.2
+    """Walls as the map draws them (:mod:`services.floor_plan.walls`): a segment of a unit's wall moves its inner face
+    at most this far either way; None: every wall is the seed's band."""
+    wall_extra_m: float = 0.15
+    """A wall segment is at most this much thicker than the seed's band (and at least 0: an opening)."""
+    wall_segment_m: float = 0.25
+    """Wall segments start and end on a grid of this length along each wall."""
+    wall_log_cost: float = 10.0
+    """The prior's cost of one wall segment other than the seed's band (nats)."""
 
 
 class Unit(NamedTuple):
@@ -117,6 +129,13 @@ class FloorPlan(NamedTuple):
     """K(W,M) of the seed's world alone: units, doors and solid blocks, without the clutter obstacles."""
     clutter: int
     """Clutter obstacles drawn in ``classes_world`` (:mod:`services.floor_plan.clutter`)."""
+    walls: dict[int, tuple[tuple[Segment, ...], ...]]
+    """Per unit id, its four walls as drawn in ``classes_world`` (:mod:`services.floor_plan.walls`; cells of
+    ``frame``, :class:`~services.floor_plan.world.Side` order); empty when the walls are the seed's bands."""
+    wall_segments: int
+    """Wall segments drawn other than the seed's band."""
+    exterior: int
+    """Exterior obstacles drawn in ``classes_world`` (occupied blobs against the walls' outside)."""
     log_posterior: float
     iterations: int
     accepted: int
@@ -270,15 +289,28 @@ def describe(
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
     solid = _obstacles(classes_map, settings, resolution_m)
-    cw = to_map(frame, render(world, frame.shape, wall_cells=t), fill=CellClass.UNKNOWN)
+    seed_world = to_map(frame, render(world, frame.shape, wall_cells=t), fill=CellClass.UNKNOWN)
+    k_units = cell_prediction_rate(classes_map, np.where(solid, np.uint8(CellClass.WALL), seed_world))
+    log_table = log_sensor_table(settings.sensor_model)
+    walls: dict[int, tuple[tuple[Segment, ...], ...]] = {}
+    wall_segments = 0
+    cw = seed_world
+    if settings.wall_shift_m is not None:
+        fitted = fit_walls(world, classes_work, log_table, wall_cells=t,
+                           fixed=to_work(frame, solid.astype(np.uint8), fill=0).astype(bool),
+                           max_shift=round(settings.wall_shift_m / resolution_m),
+                           max_thickness=t + round(settings.wall_extra_m / resolution_m),
+                           log_cost=settings.wall_log_cost, segment_cells=_cells(settings.wall_segment_m, resolution_m))
+        cw = to_map(frame, fitted.classes_world, fill=CellClass.UNKNOWN)
+        walls, wall_segments = fitted.segments, fitted.fitted
     cw = np.where(solid, np.uint8(CellClass.WALL), cw).astype(np.uint8)
-    k_units = cell_prediction_rate(classes_map, cw)
-    clutter = 0
+    clutter = exterior = 0
     if settings.clutter_max_m2 is not None:
-        found = explain_clutter(classes_map, cw, log_sensor_table(settings.sensor_model),
-                                max_cells=max(1, round(settings.clutter_max_m2 / resolution_m**2)),
-                                log_cost=settings.clutter_log_cost)
-        cw, clutter = found.classes_world, found.drawn
+        max_cells = max(1, round(settings.clutter_max_m2 / resolution_m**2))
+        found = explain_clutter(classes_map, cw, log_table, max_cells=max_cells, log_cost=settings.clutter_log_cost)
+        outside = explain_exterior(classes_map, found.classes_world, log_table, max_cells=max_cells,
+                                   log_cost=settings.clutter_log_cost)
+        cw, clutter, exterior = outside.classes_world, found.drawn, outside.drawn
     contours, hierarchy = cv2.findContours(solid.astype(np.uint8), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
 
     def ring_of(contour: npt.NDArray[np.integer[Any]] | cv2.typing.MatLike) -> tuple[tuple[float, float], ...]:
@@ -299,7 +331,8 @@ def describe(
             x, y = contour.reshape(-1, 2)[0]
             standing.append(bool(blocks[y, x]))
     return FloorPlan(world, units, doors, adjacency, rooms, rings, standing, classes_map, cw,
-                     cell_prediction_rate(classes_map, cw), k_units, clutter, log_posterior, iterations, accepted,
+                     cell_prediction_rate(classes_map, cw), k_units, clutter, walls, wall_segments, exterior,
+                     log_posterior, iterations, accepted,
                      seconds, cpu_seconds, resolution_m, origin_xy_m, frame)
 
 

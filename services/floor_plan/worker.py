@@ -124,7 +124,7 @@ class FloorPlanStage:
                                     type_rule_weight=s.type_rule_weight,
                                     same_length_rule_weight=s.same_length_rule_weight,
                                     same_length_sigma_m=s.same_length_sigma_m),
-            clutter_max_m2=s.clutter_max_m2, clutter_log_cost=s.clutter_log_cost,
+            clutter_max_m2=s.clutter_max_m2, clutter_log_cost=s.clutter_log_cost, wall_shift_m=s.wall_shift_m,
         )
         try:
             plan = floor_plan(layer.data, resolution_m=layer.resolution_m,

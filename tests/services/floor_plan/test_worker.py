@@ -97,6 +97,8 @@ def test_worker_writes_units_doors_and_graph_and_keeps_ids_as_the_map_grows(
     layer = store.layer(map_id, "floor_plan")
     assert layer is not None and layer.layer.data.shape == grown.shape
     assert layer.layer.meta["source_revision"] == second.summary["source_revision"]
+    meta = layer.layer.meta
+    assert meta["k"] >= meta["k_units"] and meta["wall_segments"] >= 0, "fitted walls never explain the map worse"
     nodes, edges = store.topology(map_id)
     assert {n.key for n in nodes} == set(now)
     assert {e.attributes["connection"] for e in edges} <= {"door", "wall"}

@@ -1,0 +1,274 @@
+"""Walls as the map draws them: each unit wall's own thickness and offset, fitted after the chain.
+
+The seed's world (section 3.4) draws every wall as a band of one thickness along the border of its unit's
+rectangle. A real map's walls vary: freiburg's are 0.2 m on average but thinner and thicker in places, a wall
+drawn by a laser from one side lies off the band by a cell or two, g4s_y2 draws them blurred. Given the units
+and doors, each of a unit's four walls is drawn as a run of **segments** along it, each with its own **inner
+face** (moved into the unit by ``shift`` cells, negative: outwards; the unit's free space reaches the inner
+face) and **thickness** (cells from the inner face outwards; 0: no wall there, an opening), where a segment
+other than the seed's band beats a prior cost per such segment. Segments start and end on a grid of
+``segment_cells`` along the wall. A door stays an opening through its two walls at whatever shape they take.
+
+A wall's best segments depend on its unit's other walls and on its neighbours' walls, so the walls are fitted by
+coordinate ascent: each wall the exact best run of segments given all the others (dynamic programming along the
+wall), until none changes: a maximum of the posterior over wall shapes for the given units, not necessarily
+the global one. The chain does not see them.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+
+from services.floor_plan.likelihood import CellClass
+from services.floor_plan.world import Rect, Side, World, wall_band
+
+_T = TypeVar("_T", bound=np.generic)
+
+
+class Segment(NamedTuple):
+    """A piece of a unit's wall: cells ``start..end`` along it (rows for the left and right walls, columns for the
+    top and bottom ones), its inner face moved ``shift`` cells into the unit (negative: outwards) and its
+    ``thickness`` in cells outwards from that face (0: an opening). The seed's band is ``shift`` 0, ``thickness``
+    the world's wall cells."""
+
+    start: int
+    end: int
+    shift: int
+    thickness: int
+
+
+class Walls(NamedTuple):
+    """The world's rendering with fitted walls and the walls' shapes."""
+
+    classes_world: npt.NDArray[np.uint8]
+    """C_W (working frame) with every wall drawn as fitted and the fixed walls drawn as walls."""
+    segments: dict[int, tuple[tuple[Segment, ...], ...]]
+    """Per unit id, its four walls (:class:`~services.floor_plan.world.Side` order) as segments, from the low
+    end; a wall drawn as the seed's band is one segment."""
+    fitted: int
+    """How many segments differ from the seed's band."""
+
+
+_Counts = tuple[npt.NDArray[np.int16], npt.NDArray[np.int16], npt.NDArray[np.int16]]
+
+
+def _classes(n_int: npt.NDArray[np.integer], n_wall: npt.NDArray[np.integer], n_door: npt.NDArray[np.integer],
+             fixed: npt.NDArray[np.bool_]) -> npt.NDArray[np.uint8]:
+    wall = ((n_wall > 0) & (n_door == 0)) | fixed
+    free = ~wall & ((n_int > 0) | (n_door > 0))
+    out = np.where(wall, np.uint8(CellClass.WALL), np.where(free, np.uint8(CellClass.FREE),
+                                                                np.uint8(CellClass.UNKNOWN)))
+    return out.astype(np.uint8)
+
+
+def _oriented(grid: npt.NDArray[_T], side: Side, face: int, k0: int, k1: int, j0: int, j1: int) -> npt.NDArray[_T]:
+    """A view of ``grid`` at offsets ``k0..k1`` from ``face`` into the unit (rows of the view) and ``j0..j1``
+    along the wall (columns of the view)."""
+    match side:
+        case Side.TOP:
+            return grid[..., face + k0 : face + k1 + 1, j0 : j1 + 1]
+        case Side.BOTTOM:
+            return grid[..., face - k1 : face - k0 + 1, j0 : j1 + 1][..., ::-1, :]
+        case Side.LEFT:
+            return np.swapaxes(grid[..., j0 : j1 + 1, face + k0 : face + k1 + 1], -1, -2)
+        case _:
+            return np.swapaxes(grid[..., j0 : j1 + 1, face - k1 : face - k0 + 1][..., ::-1], -1, -2)
+
+
+class _Strip(NamedTuple):
+    """The cells one wall of a unit can change: ``k0..k1`` from its nominal inner face ``face`` into the unit,
+    ``j0..j1`` along it; ``mid`` marks the positions along it that face the unit's free space, ``door`` the
+    positions a door opens."""
+
+    side: Side
+    face: int
+    k0: int
+    k1: int
+    j0: int
+    j1: int
+    mid: npt.NDArray[np.bool_]
+    door: npt.NDArray[np.bool_]
+
+    def view(self, grid: npt.NDArray[_T]) -> npt.NDArray[_T]:
+        return _oriented(grid, self.side, self.face, self.k0, self.k1, self.j0, self.j1)
+
+
+def _strips(rect: Rect, doors: list[Rect], shape: tuple[int, int], *, t: int, depth: int,
+            reach: int) -> tuple[list[_Strip], Rect]:
+    """A unit's four wall strips (``depth`` cells into the unit, ``reach`` outside its nominal inner face) and the
+    core of its free space no wall may change."""
+    h, w = shape
+    a0, a1, b0, b1 = rect.r0 + t, rect.r1 - t, rect.c0 + t, rect.c1 - t
+    strips = []
+    for side in Side:
+        vertical = side in (Side.LEFT, Side.RIGHT)
+        face = (a0, a1, b0, b1)[side]
+        room = face if side in (Side.TOP, Side.LEFT) else (w if vertical else h) - 1 - face
+        j0, j1, m0, m1 = (rect.r0, rect.r1, a0, a1) if vertical else (rect.c0, rect.c1, b0, b1)
+        along = np.arange(j0, j1 + 1)
+        door = np.zeros(along.shape, bool)
+        for d in doors:
+            if wall_band(rect, side, t).contains(d):
+                lo, up = (d.r0, d.r1) if vertical else (d.c0, d.c1)
+                door |= (along >= lo) & (along <= up)
+        strips.append(_Strip(side, face, -min(reach, room), depth - 1, j0, j1, (along >= m0) & (along <= m1), door))
+    return strips, Rect(a0 + depth, a1 - depth, b0 + depth, b1 - depth)
+
+
+def _masks(strip: _Strip, shift: npt.NDArray[np.integer],
+           thick: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """(free space, wall) a wall drawn with ``shift``/``thick`` per position along it puts in its strip."""
+    k = np.arange(strip.k0, strip.k1 + 1)[:, None]
+    wall = (k >= shift - thick) & (k < shift)
+    return (k >= shift) & strip.mid, wall
+
+
+def _draw(counts: _Counts, strip: _Strip, shift: npt.NDArray[np.integer], thick: npt.NDArray[np.integer],
+          sign: int) -> None:
+    free, wall = _masks(strip, shift, thick)
+    n_int, n_wall, n_door = (strip.view(c) for c in counts)
+    n_int += sign * free
+    n_wall += sign * wall
+    n_door += sign * (wall & strip.door)
+
+
+def fit_walls(
+    world: World, classes_map: npt.NDArray[np.uint8], log_table: npt.NDArray[np.float64], *, wall_cells: int,
+    fixed: npt.NDArray[np.bool_], max_shift: int, max_thickness: int, log_cost: float, segment_cells: int,
+    passes: int = 4,
+) -> Walls:
+    """Fit every unit wall's segments (inner face, thickness) to the map, given the units and doors.
+
+    Parameters
+    ----------
+    world : World
+        Units and doors in cells of ``classes_map``'s grid.
+    classes_map : (H, W) uint8
+        C_M (:class:`~services.floor_plan.likelihood.CellClass`) in the world's grid.
+    log_table : (3, 3) float
+        ``log p[C_W][C_M]`` (:func:`~services.floor_plan.likelihood.log_sensor_table`).
+    wall_cells : int
+        The seed's band thickness (every wall's default segment is ``shift`` 0, ``thickness`` ``wall_cells``).
+    fixed : (H, W) bool
+        Cells the world draws as walls whatever the units are (the solid blocks).
+    max_shift, max_thickness : int
+        A segment's inner face moves at most ``max_shift`` cells either way (into the unit at most to a third of
+        its free space); it is 0 (an opening) to ``max_thickness`` cells thick.
+    log_cost : float
+        The prior's cost (nats, >= 0) of a segment other than the seed's band.
+    segment_cells : int
+        Segments start and end on a grid of this many cells along each wall.
+    passes : int
+        At most this many rounds over all walls (coordinate ascent stops earlier when no wall changes).
+
+    >>> from services.floor_plan.likelihood import log_sensor_table
+    >>> cm = np.full((12, 14), CellClass.UNKNOWN, np.uint8); cm[2:10, 2:12] = CellClass.WALL
+    >>> cm[5:7, 5:9] = CellClass.FREE  # walls three cells thick round a room
+    >>> w = World({1: Rect(2, 9, 2, 11)})  # the unit drawn with one-cell walls
+    >>> out = fit_walls(w, cm, log_sensor_table(), wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=2,
+    ...                 max_thickness=4, log_cost=1.0, segment_cells=2)
+    >>> out.segments[1][0][0], out.fitted, bool((out.classes_world == cm).all())
+    (Segment(start=2, end=11, shift=2, thickness=3), 4, True)
+    """
+    if classes_map.shape != fixed.shape:
+        raise ValueError(f"C_M {classes_map.shape} and the fixed walls {fixed.shape} differ in shape")
+    if min(max_shift, log_cost) < 0 or min(max_thickness, wall_cells, segment_cells) < 1:
+        raise ValueError(f"need max_shift >= 0, log_cost >= 0, max_thickness, wall_cells, segment_cells >= 1, got "
+                         f"{max_shift}, {log_cost}, {max_thickness}, {wall_cells}, {segment_cells}")
+    t = wall_cells
+    max_thickness = max(max_thickness, t)
+    shape = (int(classes_map.shape[0]), int(classes_map.shape[1]))
+    ll = np.ascontiguousarray(log_table[:, classes_map])  # (3, H, W): log p(C_M | C_W = class)
+    counts: _Counts = (np.zeros(shape, np.int16), np.zeros(shape, np.int16), np.zeros(shape, np.int16))
+    doors: dict[int, list[Rect]] = {uid: [] for uid in world.units}
+    for d in world.doors:
+        for uid in world.door_units(d, t):
+            doors[uid].append(d)
+    strips: dict[int, list[_Strip]] = {}
+    drawn: dict[tuple[int, Side], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]] = {}
+    for uid, rect in world.units.items():
+        inner = min(rect.rows, rect.cols) - 2 * t
+        depth = max(0, min(max_shift, inner // 3))  # the free space keeps a third of its width
+        strips[uid], core = _strips(rect, doors[uid], shape, t=t, depth=depth, reach=max_shift + max_thickness)
+        if core.r0 <= core.r1 and core.c0 <= core.c1:
+            counts[0][core.r0 : core.r1 + 1, core.c0 : core.c1 + 1] += 1
+        for strip in strips[uid]:
+            n = strip.j1 - strip.j0 + 1
+            drawn[uid, strip.side] = (np.zeros(n, np.int64), np.full(n, t, np.int64))
+            _draw(counts, strip, *drawn[uid, strip.side], +1)
+    for _ in range(passes):
+        changed = False
+        for uid in sorted(world.units):
+            for strip in strips[uid]:
+                old = drawn[uid, strip.side]
+                _draw(counts, strip, *old, -1)
+                new = _best(counts, ll, fixed, strip, t=t, max_shift=max_shift, max_thickness=max_thickness,
+                            log_cost=log_cost, segment_cells=segment_cells)
+                if not (np.array_equal(new[0], old[0]) and np.array_equal(new[1], old[1])):
+                    changed = True
+                    drawn[uid, strip.side] = new
+                _draw(counts, strip, *drawn[uid, strip.side], +1)
+        if not changed:
+            break
+    segments = {uid: tuple(_segments(strip, *drawn[uid, strip.side]) for strip in strips[uid])
+                for uid in world.units}
+    fitted = sum(s.shift != 0 or s.thickness != t for walls in segments.values() for wall in walls for s in wall)
+    return Walls(_classes(*counts, fixed), segments, fitted)
+
+
+def _segments(strip: _Strip, shift: npt.NDArray[np.int64], thick: npt.NDArray[np.int64]) -> tuple[Segment, ...]:
+    cut = np.flatnonzero((np.diff(shift) != 0) | (np.diff(thick) != 0)) + 1
+    starts = np.r_[0, cut]
+    ends = np.r_[cut - 1, len(shift) - 1]
+    return tuple(Segment(strip.j0 + int(a), strip.j0 + int(b), int(shift[a]), int(thick[a]))
+                 for a, b in zip(starts, ends, strict=True))
+
+
+def _best(
+    counts: _Counts, ll: npt.NDArray[np.float64], fixed: npt.NDArray[np.bool_], strip: _Strip, *, t: int,
+    max_shift: int, max_thickness: int, log_cost: float, segment_cells: int,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """The best segments of one wall given everything else (its own cells are off ``counts``): per position along
+    the wall its (shift, thickness)."""
+    n_int, n_wall, n_door = (strip.view(c) for c in counts)
+    fix = strip.view(fixed)
+    lls = strip.view(ll)
+
+    def cumulative(n_i: npt.NDArray[np.integer], n_w: npt.NDArray[np.integer],
+                   n_d: npt.NDArray[np.integer]) -> npt.NDArray[np.float64]:
+        cls = _classes(n_i, n_w, n_d, fix)
+        cells = np.take_along_axis(lls, cls[None], axis=0)[0]
+        return np.concatenate([np.zeros((1, cells.shape[1])), np.cumsum(cells, axis=0)])
+
+    none = cumulative(n_int, n_wall, n_door)
+    band = cumulative(n_int, n_wall + 1, n_door + strip.door)
+    inside = cumulative(n_int + strip.mid, n_wall, n_door)
+    grid = np.meshgrid(np.arange(-max_shift, strip.k1 + 2), np.arange(max_thickness + 1), indexing="ij")
+    ok = grid[0] - grid[1] >= strip.k0  # the band's first row is in the strip
+    shift, thick = grid[0][ok], grid[1][ok]
+    a, b = shift - thick - strip.k0, shift - strip.k0  # rows before the band, rows up to the band's end
+    per_cell = none[a] + band[b] - band[a] + inside[-1] - inside[b]  # (options, positions along)
+    per_cell -= 1e-6 * thick[:, None]  # where the map cannot tell (a free cell drawn wall or unknown), less wall
+    blocks = np.arange(0, per_cell.shape[1], segment_cells)
+    score = np.add.reduceat(per_cell, blocks, axis=1)
+    default = int(np.flatnonzero((shift == 0) & (thick == t))[0])
+    enter = np.full(len(shift), log_cost)  # a segment other than the seed's band costs log_cost
+    enter[default] = 0.0
+    value = score[:, 0] - enter
+    back = np.zeros(score.shape, np.int64)
+    for i in range(1, score.shape[1]):
+        top = int(np.argmax(value))
+        switch = value[top] - enter
+        stay = value >= switch - 1e-9
+        back[:, i] = np.where(stay, np.arange(len(value)), top)
+        value = score[:, i] + np.where(stay, value, switch)
+    best = default if value[default] >= value.max() - 1e-9 else int(np.argmax(value))
+    choice = np.empty(score.shape[1], np.int64)
+    for i in range(score.shape[1] - 1, -1, -1):
+        choice[i] = best
+        best = int(back[best, i])
+    per_position = np.repeat(choice, np.diff(np.r_[blocks, per_cell.shape[1]]))
+    return shift[per_position], thick[per_position]
