@@ -102,6 +102,7 @@ def wall_evidence(
     widening_px: int,
     max_depth_px: int,
     posts: npt.NDArray[np.bool_] | None = None,
+    corridor_length_px: int = 0,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
 
@@ -109,7 +110,9 @@ def wall_evidence(
     sit on their line) is read as a 1-D profile; doorway-sized gaps between wall runs
     (:func:`close_doorways`) are closed when the free space behind them widens by at least
     ``widening_px`` on both sides within ``max_depth_px`` of the line (a doorway between rooms);
-    a gap that stays as narrow on one side is a corridor or a passage between blocks, left open.
+    a gap that stays as narrow on one side is a corridor or a passage between blocks, left open,
+    and so is a gap across a corridor that widens only through the doors in its side walls
+    (with ``corridor_length_px`` > 0, :func:`~services.grid_decomposition.doorways.across_a_corridor`).
 
     Parameters
     ----------
@@ -120,6 +123,8 @@ def wall_evidence(
         Pixels.
     posts : (H, W) bool, optional
         Free-standing obstacles (furniture, specks): posts between doors (:func:`close_doorways`).
+    corridor_length_px : int
+        See :func:`~services.grid_decomposition.doorways.across_a_corridor`; 0 turns it off.
 
     Returns
     -------
@@ -165,6 +170,7 @@ def wall_evidence(
             widening_px=widening_px,
             max_depth_px=max_depth_px + tolerance_px,
             depth_step_px=max(1, max_depth_px // 4),
+            corridor_length_px=corridor_length_px,
         )
         first = 0
         for xs, ys, g0, g1 in gaps:

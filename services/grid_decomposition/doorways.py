@@ -50,6 +50,7 @@ def widens(
     depth_step_px: int,
     clearance: npt.NDArray[np.floating] | None = None,
     room_margin_px: float = 0.0,
+    corridor_length_px: int = 0,
 ) -> npt.NDArray[np.bool_]:
     """Gaps behind which the free space widens on both sides: doorways, not corridors or passages.
 
@@ -60,6 +61,9 @@ def widens(
     stays as narrow on one side. With ``clearance``, the space on each side must also hold a
     disc wider than the gap by ``room_margin_px`` on its radius, reached straight along the
     normal (a parallel run can leak through another doorway of a corridor; a disc cannot).
+    With ``corridor_length_px`` > 0, a gap across a stretch of corridor is no doorway either
+    (:func:`across_a_corridor`): a run that widens only through a door in the corridor's side
+    wall, or a notch of a ragged wall, does not make the corridor a doorway.
 
     Parameters
     ----------
@@ -93,7 +97,65 @@ def widens(
         door &= runs.max(axis=1) >= need
     if clearance is not None:
         door &= _room_on_both_sides(blocked, clearance, mid, normal, width / 2.0 + room_margin_px, max_depth_px)
+    if corridor_length_px > 0 and door.any():
+        door[door] = ~across_a_corridor(blocked, ends[door], widening_px=widening_px, length_px=corridor_length_px)
     return door
+
+
+def across_a_corridor(
+    blocked: npt.NDArray[np.bool_],
+    ends: npt.NDArray[np.float64],
+    *,
+    widening_px: float,
+    length_px: int,
+    length_ratio: float = 1.5,
+    max_wide_share: float = 0.7,
+    step_px: int = 2,
+    chunk: int = 256,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: gaps across a stretch of corridor, not doorways.
+
+    On both sides of the gap the free space goes on straight along its normal for at least
+    ``length_px`` (and ``length_ratio`` times the gap's width: a band longer than it is wide),
+    and over that length the free run through the gap's middle parallel to the gap reaches the
+    gap's width plus ``widening_px`` at fewer than ``max_wide_share`` of the depths (every
+    ``step_px``): the space behind the gap is a band about as wide as the gap, a corridor, and
+    where it widens it does so through openings in its side walls (office doors, a notch of a
+    ragged wall), not into a room. A doorway opens into a room or crosses a corridor's wall: on
+    at least one side the space is wider than the gap over most of its depth, or it ends.
+
+    Parameters
+    ----------
+    blocked : (H, W) bool
+        Walls.
+    ends : (G, 2, 2) float64
+        The two ends (x, y) of each gap, pixels.
+    """
+    if len(ends) == 0:
+        return np.zeros(0, dtype=bool)
+    span = ends[:, 1] - ends[:, 0]
+    width = np.linalg.norm(span, axis=1)
+    u = span / np.maximum(width, 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    mid = ends.mean(axis=1)
+    length = np.maximum(float(length_px), np.ceil(length_ratio * width))
+    # the band goes on straight along the normal on both sides (a cheap test first: most gaps fail it)
+    out = np.ones(len(ends), dtype=bool)
+    for sign in (1.0, -1.0):
+        out &= _free_depth(blocked, mid, sign * normal, int(length.max())) >= length
+    candidates = np.flatnonzero(out)
+    for first in range(0, candidates.size, chunk):
+        at = candidates[first : first + chunk]
+        need = width[at] + widening_px
+        depths = np.arange(step_px, float(length[at].max()) + 1, step_px, dtype=np.float64)
+        inside = depths[None, :] <= length[at, None]
+        reach = math.ceil(float(need.max())) + 1
+        for sign in (1.0, -1.0):
+            points = mid[at, None, :] + sign * depths[None, :, None] * normal[at, None, :]
+            runs = _centre_runs(blocked, points, np.broadcast_to(u[at, None, :], points.shape), reach)
+            wide = (runs >= need[:, None]) & inside
+            out[at] &= wide.sum(axis=1) < max_wide_share * inside.sum(axis=1)
+    return out
 
 
 def _room_on_both_sides(
@@ -154,6 +216,7 @@ def find_doorways(
     neck_reach_m: float = 0.5,
     neck_tolerance_m: float = 0.05,
     room_margin_m: float = 0.0,
+    corridor_length_m: float = 2.0,
 ) -> npt.NDArray[np.float64]:
     """Doorways of a floor: cuts across the narrow passages between walls, independent of any line.
 
@@ -188,6 +251,9 @@ def find_doorways(
     straightness : float
         Minimum ratio of the feature points' distance to the sum of the two clearances (1 for
         walls facing each other straight across; a room corner's bisector is about 0.7).
+    corridor_length_m : float
+        A cut across a corridor, whose space goes on as a band about as wide as the cut for this
+        long on both sides, is no doorway (:func:`across_a_corridor`); 0 turns it off.
 
     Returns
     -------
@@ -213,6 +279,7 @@ def find_doorways(
         neck_reach_m=neck_reach_m,
         neck_tolerance_m=neck_tolerance_m,
         room_margin_m=room_margin_m,
+        corridor_length_m=corridor_length_m,
     ) + np.array([c0, r0], dtype=np.float64)
 
 
@@ -231,6 +298,7 @@ def _find_doorways(
     neck_reach_m: float,
     neck_tolerance_m: float,
     room_margin_m: float,
+    corridor_length_m: float,
 ) -> npt.NDArray[np.float64]:
     """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
     dist, wall_x, wall_y = _nearest_walls(space, reach_px=math.ceil(max_width_m / resolution_m) + 2)
@@ -274,6 +342,7 @@ def _find_doorways(
         depth_step_px=max(1, round(max_depth_m / resolution_m / 4)),
         clearance=dist,
         room_margin_px=room_margin_m / resolution_m,
+        corridor_length_px=round(corridor_length_m / resolution_m),
     )
     return pairs[keep]
 

@@ -263,6 +263,7 @@ def decompose(
     wall_min_length_m: float = 0.5,
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
+    corridor_length_m: float = 2.0,
     wall_tolerance_m: float = 0.1,
     island_max_extent_m: float = 2.0,
     island_min_clearance_m: float = 0.3,
@@ -309,6 +310,11 @@ def decompose(
         (:func:`~services.grid_decomposition.doorways.find_doorways`, same widening). On real maps
         the gaps between furniture along a line closed as doors up to 2.5 m and cut furnished
         rooms apart; 2.0 m keeps the ipa doors.
+    corridor_length_m : float
+        A gap across a corridor is no doorway, along a line or off it, when the corridor goes on
+        for this long on both sides as a band about as wide as the gap: beside an office door
+        the corridor seems to widen (:func:`~services.grid_decomposition.doorways.across_a_corridor`);
+        0 turns it off.
     island_max_extent_m, island_min_clearance_m : float
         Obstacles standing free in a room (off the map border, at most ``island_max_extent_m``
         across, at least ``island_min_clearance_m`` from every other obstacle: a desk cluster, a
@@ -433,6 +439,7 @@ def decompose(
             widening_px=max(1, round(door_widening_m / resolution_m)),
             max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
             posts=clutter,
+            corridor_length_px=round(corridor_length_m / resolution_m),
         )
         racks = find_racks_by_region(  # each texture region with its own directions
             obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
@@ -496,6 +503,7 @@ def decompose(
             door_max_width_m=cut_max_width_m,
             door_widening_m=door_widening_m,
             door_max_depth_m=door_max_depth_m,
+            corridor_length_m=corridor_length_m,
             room_min_area_m2=room_min_area_m2,
             neck_half_width_m=neck_half_width_m,
             rays=rays,

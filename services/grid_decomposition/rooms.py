@@ -140,6 +140,7 @@ def segment_rooms(
     door_max_width_m: float = 2.5,
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
+    corridor_length_m: float = 2.0,
     room_min_area_m2: float = 1.5,
     room_min_half_width_m: float = 0.4,
     neck_half_width_m: float = 0.0,
@@ -161,7 +162,8 @@ def segment_rooms(
     2. Furniture (``clutter``) takes the room around it: a room's area is its floor plan.
     3. Rooms joined through a neck are split (:func:`split_at_necks`, when
        ``neck_half_width_m`` > 0), and doorways found from the free space itself
-       (:func:`find_doorways`) cut rooms apart.
+       (:func:`find_doorways`) cut rooms apart; a cut across a corridor, which goes on for
+       ``corridor_length_m`` on both sides about as wide as the cut, is no doorway.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
@@ -214,6 +216,7 @@ def segment_rooms(
             max_width_m=door_max_width_m,
             widening_m=door_widening_m,
             max_depth_m=door_max_depth_m,
+            corridor_length_m=corridor_length_m,
         )
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from services.grid_decomposition.doorways import _nearest_walls, draw_cuts, find_doorways, widens
+from services.grid_decomposition.doorways import _nearest_walls, across_a_corridor, draw_cuts, find_doorways, widens
 
 RES = 0.05
 
@@ -80,6 +80,28 @@ def test_widens_tells_a_doorway_from_the_mouth_of_a_passage() -> None:
     walls[53:110, 10:110] = True
     walls[53:110, 50:68] = False  # below the gap a passage as narrow as the gap
     assert not widens(walls, doorway, widening_px=6, max_depth_px=20, depth_step_px=5).any()
+
+
+def test_a_gap_across_a_corridor_beside_an_office_door_is_no_doorway_a_door_into_a_room_is() -> None:
+    walls = np.ones((120, 200), dtype=bool)
+    walls[10:40, 10:190] = False  # a 1.5 m corridor
+    walls[43:110, 10:190] = False  # offices above its 3 px side wall
+    walls[40:43, 104:122] = False  # an office door each side of the line x = 100, right beside it
+    walls[40:43, 78:96] = False
+    across = np.array([[[100.0, 10.0], [100.0, 39.0]]])  # the gap across the corridor on that line
+    # through the doors the corridor "widens" on both sides
+    assert widens(walls, across, widening_px=6, max_depth_px=20, depth_step_px=5).all()
+    assert across_a_corridor(walls, across, widening_px=6, length_px=40).all()
+    assert not widens(walls, across, widening_px=6, max_depth_px=20, depth_step_px=5, corridor_length_px=40).any()
+    door = np.array([[[104.0, 41.0], [121.0, 41.0]]])  # the office door itself: corridor below, office above
+    assert not across_a_corridor(walls, door, widening_px=6, length_px=40).any()
+    assert widens(walls, door, widening_px=6, max_depth_px=20, depth_step_px=5, corridor_length_px=40).all()
+    hall = walls.copy()
+    hall[10:40, 101:190] = False
+    hall[40:110, 101:190] = False  # the corridor ends in a hall at x = 100: not a band on that side
+    assert not across_a_corridor(hall, across, widening_px=6, length_px=40).any()
+    gaps = np.concatenate([door, across, door])  # each gap's answer is its own, however they are chunked
+    assert across_a_corridor(walls, gaps, widening_px=6, length_px=40, chunk=1).tolist() == [False, True, False]
 
 
 def test_distances_to_walls_are_scipys_exact_ones() -> None:

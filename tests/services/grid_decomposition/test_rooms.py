@@ -198,3 +198,39 @@ def test_a_room_with_a_desk_cluster_in_its_middle_is_one_segment() -> None:
     # with the cluster as a wall, the lines along its desks close "doorways" to the walls
     walled = decompose(occ, resolution_m=RES, island_max_extent_m=0.0).segments
     assert np.unique(walled[free]).size > 1
+
+
+def _corridor_with_offices() -> tuple[np.ndarray, list[int], list[int]]:
+    """20.3 x 6.5 m at 5 cm: a 1.6 m corridor along the bottom, four offices (4, 3.8, 3.8 and 1.8 m wide,
+    4.5 m deep) above it and a 5.9 x 6.2 m hall at its right end through a 0.9 m door; 0.15 m walls,
+    unknown all round. The offices' doors (0.9 m) are in the corridor's side wall right beside the
+    partitions, two by two (one each side of a partition), as in a real office floor: beside a door
+    the corridor seems to widen.
+
+    Returns the map, the offices' middle columns and the corridor's rows."""
+    occ = np.full((170, 446), -1, dtype=np.int8)
+    occ[20:150, 20:426] = 100
+    occ[23:55, 23:303] = 0  # the corridor, rows 23..54
+    occ[58:147, 23:303] = 0  # the offices
+    for x in (103, 183, 263):  # partitions
+        occ[58:147, x : x + 3] = 100
+    occ[23:147, 306:423] = 0  # the hall, 6 m wide, behind a 0.15 m wall
+    occ[23:147, 303:306] = 100
+    occ[30:48, 303:306] = 0  # the hall's 0.9 m door, narrower than the corridor
+    for x in (81, 110, 241, 270):  # doors beside the partitions at 103 and 263
+        occ[55:58, x : x + 18] = 0
+    return occ, [63, 143, 223, 283], list(range(24, 54))
+
+
+def test_a_corridor_is_not_cut_beside_the_doors_of_its_offices() -> None:
+    occ, office_cols, corridor_rows = _corridor_with_offices()
+    d = decompose(occ, resolution_m=RES)
+    corridor = np.unique(d.segments[corridor_rows[0] : corridor_rows[-1] + 1, 25:301])
+    assert corridor.size == 1 and corridor[0] > 0  # one region from end to end
+    rooms = [int(d.segments[100, x]) for x in office_cols] + [int(d.segments[100, 360])]  # offices, hall
+    assert len({int(corridor[0]), *rooms}) == len(rooms) + 1  # every office and the hall a region of their own
+    for room in rooms:
+        assert d.topology.edges[int(corridor[0]), room]["connection"] == Connection.DOOR.value
+    # without the rule the lines along the partitions close the corridor where its doors make it "widen"
+    old = decompose(occ, resolution_m=RES, corridor_length_m=0.0)
+    assert np.unique(old.segments[corridor_rows[0] : corridor_rows[-1] + 1, 25:301]).size > 1
