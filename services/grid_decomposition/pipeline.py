@@ -212,11 +212,10 @@ def _texture_count(lines: dict[float, list[Line]]) -> int:
 def _elongation(
     component: npt.NDArray[np.int64],
     face_image: npt.NDArray[np.int32],
-    free: npt.NDArray[np.bool_],
+    dist: npt.NDArray[np.float32],
     resolution_m: float,
 ) -> npt.NDArray[np.float64]:
-    """Area / clearance^2 of each component (clearance = twice the largest distance to an obstacle)."""
-    dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3)
+    """Area / clearance^2 of each component (clearance = twice the largest distance ``dist`` to an obstacle)."""
     n = int(component.max()) + 1
     # per face first, then per component (a face's pixels all lie in its component)
     face_width = np.zeros(component.size, dtype=np.float32)
@@ -383,8 +382,11 @@ def decompose(
         known = occ >= 0
         obstacle = ~free
         occupied = known & (occ > OCCUPIED_PERCENT)
+        # the distance to obstacles, for the rays and the elongation
+        clearance = np.asarray(cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3), dtype=np.float32)
         places_job = beside.submit(
-            categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
+            categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed,
+            distance=clearance,
         )
         occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
@@ -434,9 +436,12 @@ def decompose(
             max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
             posts=clutter,
         )
+        known_obstacle = obstacle & known
         racks = find_racks_by_region(  # each texture region with its own directions
-            obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
+            known_obstacle, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
             resolution_m=resolution_m, solid=surely_occupied,
+            # without uncertain cells (a trinary map) the known obstacles are the occupied cells, labelled already
+            labelled=occupied_parts if np.array_equal(known_obstacle, occupied) else None,
         )
         if known_places is not None:
             if known_places.cells.shape != occ.shape:
@@ -462,7 +467,7 @@ def decompose(
         is_face = cog.face_free_px > 0
         connected = sub.edge_faces[~cog.cogent]
         component = link_components(sub.n_faces + 1, connected, is_face)
-        elongation = _elongation(component, sub.face_image, free, resolution_m)
+        elongation = _elongation(component, sub.face_image, clearance, resolution_m)
         geometry = geometry_job.result()
         found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
         evidence = found.label.copy()
