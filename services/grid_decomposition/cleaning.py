@@ -53,7 +53,8 @@ def _specks(free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], max_ar
     """
     if max_area_px == 1:
         not_free = cv2.boxFilter((~free).astype(np.uint8), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-        return occupied & (not_free == 1)
+        speck: npt.NDArray[np.bool_] = occupied & (not_free == 1)
+        return speck
     candidate = _small_components(occupied, max_area_px)
     other = cv2.dilate((~free & ~candidate).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     n, parts = cv2.connectedComponents(candidate.astype(np.uint8), connectivity=8)
