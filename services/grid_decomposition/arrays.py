@@ -134,6 +134,29 @@ def label_counts(
     return count, inside
 
 
+def label_max(
+    labels: npt.NDArray[np.integer], values: npt.NDArray[np.floating], n: int
+) -> tuple[npt.NDArray[np.floating], npt.NDArray[np.int64]]:
+    """Largest value (at least 0) and pixel count of every label ``0..n - 1`` of a label image.
+
+    ``np.maximum.at(zeros, labels.ravel(), values.ravel())`` and ``np.bincount(labels.ravel(), minlength=n)``
+    from the runs of equal labels in raster order: the maximum of each run (``np.maximum.reduceat``), then of
+    the runs of each label. A maximum is exact in any order.
+    """
+    flat = np.ascontiguousarray(labels).ravel()
+    out = np.zeros(n, dtype=values.dtype)
+    if flat.size == 0:
+        return out, np.zeros(n, dtype=np.int64)
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    first = np.flatnonzero(start)
+    label = flat[first]
+    np.maximum.at(out, label, np.maximum.reduceat(np.ascontiguousarray(values).ravel(), first))
+    count = np.bincount(label, weights=np.diff(np.append(first, flat.size)), minlength=n).astype(np.int64)
+    return out, count
+
+
 @dataclass(frozen=True)
 class Components:
     """The 8-connected components of a mask, as ``cv2.connectedComponentsWithStats`` gives them."""

@@ -6,7 +6,14 @@ import cv2
 import numpy as np
 import pytest
 
-from services.grid_decomposition.arrays import distinct, label_counts, label_sums, near, unique_inverse
+from services.grid_decomposition.arrays import (
+    distinct,
+    label_counts,
+    label_max,
+    label_sums,
+    near,
+    unique_inverse,
+)
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -63,3 +70,16 @@ def test_near_is_the_distance_transform_within_a_radius(mask_size: int, radius: 
         mask = rng.random((int(rng.integers(3, 90)), int(rng.integers(3, 90)))) < density
         expected = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, mask_size) <= radius
         assert np.array_equal(near(mask, radius, mask_size), expected)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_label_max_gives_numpys_maximum_at_and_bincount(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(1, 60, 2))
+    labels = np.repeat(rng.integers(0, 12, (h, (w + 3) // 4)), 4, axis=1)[:, :w].astype(np.int32)  # runs
+    values = (rng.random((h, w)) * 50).astype(np.float32)
+    expected = np.zeros(15, dtype=np.float32)
+    np.maximum.at(expected, labels.ravel(), values.ravel())
+    largest, count = label_max(labels, values, 15)
+    assert largest.dtype == np.float32 and np.array_equal(largest, expected)
+    assert np.array_equal(count, np.bincount(labels.ravel(), minlength=15))
