@@ -653,9 +653,7 @@ def find_racks(
     code = np.where(known, np.where(occupied, sure, np.uint8(0)), np.uint8(_UNKNOWN))
     if domain is not None:
         code[~domain] = _UNKNOWN
-    free = code == 0
-    border = (code != 0) & (cv2.dilate(free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
-    border_rc = np.argwhere(border).astype(np.float64)
+    border_rc: npt.NDArray[np.float64] | None = None  # the free space's border, once a rack row is found
     families: list[float] = []
     for angle in angles_rad:
         a = math.remainder(angle, math.pi / 2)
@@ -674,7 +672,6 @@ def find_racks(
             ),
             dtype=np.uint8,
         )
-        refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
         obstacle = _inner_obstacles(turned)
         solid_turned = turned == _OCCUPIED
         search = functools.partial(
@@ -691,6 +688,11 @@ def find_racks(
             across = beside.submit(search, np.ascontiguousarray(obstacle.T), np.ascontiguousarray(solid_turned.T))
             along = search(obstacle, solid_turned)
             found = ((False, along), (True, across.result()))
+        if along or found[1][1]:
+            if border_rc is None:
+                border = (code != 0) & (cv2.dilate((code == 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+                border_rc = np.argwhere(border).astype(np.float64)
+            refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
         for transpose, racks in found:
             image = np.ascontiguousarray(turned.T) if transpose else turned
             for block in _blocks(racks, max_aisle_px=max_aisle_m * px):
