@@ -181,9 +181,8 @@ def categorize_places(
     """
     spacing_m = max(sample_spacing_m, math.sqrt(float(np.count_nonzero(free)) / max(max_samples, 1)) * resolution_m)
     step = max(1, round(spacing_m / resolution_m))
-    grid = np.zeros_like(free)
-    grid[step // 2 :: step, step // 2 :: step] = True
-    rows, cols = np.nonzero(grid & free)
+    rows, cols = np.nonzero(free[step // 2 :: step, step // 2 :: step])  # the grid's free pixels, in raster order
+    rows, cols = rows * step + step // 2, cols * step + step // 2
     if rows.size == 0:
         return rows.astype(np.int64), cols.astype(np.int64), np.zeros(0, np.int64)
     ranges = cast_rays(

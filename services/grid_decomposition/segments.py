@@ -99,10 +99,7 @@ def segment_image(
     seg = face_segment.astype(np.int32)[face_image]  # ids are far below 2**31
     seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
-    pieces, n_pieces = same_value_pieces(seg)
-    area = label_counts(pieces, n_pieces + 1)[0]
-    owner = np.zeros(n_pieces + 1, dtype=np.int64)
-    owner[pieces.ravel()] = seg.ravel()
+    pieces, n_pieces, owner, area = _pieces(seg)
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
     order = np.lexsort((np.arange(n_pieces + 1), owner))
     big = (area >= min_area_px) & (owner > 0)
@@ -132,6 +129,14 @@ def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32]
     joined runs are labelled as a graph, and pieces are numbered by their first pixel in raster
     order, as OpenCV numbers the components of an image.
     """
+    pieces, n, _, _ = _pieces(seg)
+    return pieces, n
+
+
+def _pieces(
+    seg: npt.NDArray[np.int32],
+) -> tuple[npt.NDArray[np.int32], int, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """:func:`same_value_pieces`, and each piece's value and pixel count (index 0: the zero pixels) from its runs."""
     h, w = seg.shape
     flat = np.ascontiguousarray(seg, dtype=np.int32).ravel()
     start = np.empty(flat.size, dtype=bool)
@@ -159,7 +164,10 @@ def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32]
     rank[ids[np.argsort(first_run)]] = np.arange(1, ids.size + 1, dtype=np.int32)
     piece_of_run = np.zeros(n_runs, dtype=np.int32)
     piece_of_run[on] = rank[comp[on]]
-    return np.repeat(piece_of_run, length).reshape(h, w), int(ids.size)
+    owner = np.zeros(ids.size + 1, dtype=np.int64)
+    owner[piece_of_run] = value  # a piece's runs share its value; piece 0's are 0
+    area = np.bincount(piece_of_run, weights=length, minlength=ids.size + 1).astype(np.int64)
+    return np.repeat(piece_of_run, length).reshape(h, w), int(ids.size), owner, area
 
 
 def merge_small_segments(
