@@ -33,7 +33,7 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import Components, components, unique_inverse
+from services.grid_decomposition.arrays import Components, components, label_counts, unique_inverse
 from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
@@ -983,7 +983,7 @@ def pocket_merges(
     h, w = segments.shape
     if not rooms:
         return merges
-    area = np.bincount(segments.ravel(), minlength=max(rooms) + 1)
+    area = label_counts(segments, max(int(segments.max()), *rooms) + 1)[0]
     boxes = ndimage.find_objects(segments, max_label=max(rooms))
     for sid in rooms:
         if area[sid] == 0 or (max_area_px is not None and area[sid] > max_area_px):
