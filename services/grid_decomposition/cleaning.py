@@ -42,7 +42,8 @@ def _small_components(mask: npt.NDArray[np.bool_], max_area_px: int) -> npt.NDAr
     n, parts, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     small = stats[:, cv2.CC_STAT_AREA] <= max_area_px
     small[0] = False
-    return np.asarray(small[parts], dtype=bool) if n > 1 else np.zeros(mask.shape, dtype=bool)
+    out: npt.NDArray[np.bool_] = np.take(small, np.asarray(parts)) if n > 1 else np.zeros(mask.shape, dtype=bool)
+    return out
 
 
 def _specks(free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], max_area_px: int) -> npt.NDArray[np.bool_]:

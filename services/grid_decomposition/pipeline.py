@@ -497,7 +497,7 @@ def decompose(
             sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
         )
         # the room stage leaves racks alone (a flag per face first: one gather of the face image)
-        floor_px = structured[component][sub.face_image] | (racks.cells > 0)
+        floor_px = np.take(structured[component], sub.face_image) | (racks.cells > 0)
         segments, cuts = segment_rooms(
             segments,
             clutter,
@@ -562,7 +562,7 @@ def decompose(
         if merges:
             lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
             lut[list(merges)] = list(merges.values())
-            segments = lut[lut][segments]
+            segments = np.take(lut[lut], segments)
             pairs = _pairs(segments, sub)
             regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
@@ -588,7 +588,7 @@ def decompose(
         region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
         for k, r in regions.items():
             region_label[k] = r.label.value
-        own = region_label[segments]
+        own = np.take(region_label, segments)  # np.take: a faster gather than indexing, the same values
         loose = (labels == PlaceLabel.ROOM.value) | (labels == PlaceLabel.STORAGE.value) & ~floor_px & ~banks.storage
         loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
         labels = np.where(loose & (own > 0), own, labels)
