@@ -7,6 +7,7 @@ integers: a count per id finds them in one pass.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -133,6 +134,29 @@ def label_counts(
     return count, inside
 
 
+def label_max(
+    labels: npt.NDArray[np.integer], values: npt.NDArray[np.floating], n: int
+) -> tuple[npt.NDArray[np.floating], npt.NDArray[np.int64]]:
+    """Largest value (at least 0) and pixel count of every label ``0..n - 1`` of a label image.
+
+    ``np.maximum.at(zeros, labels.ravel(), values.ravel())`` and ``np.bincount(labels.ravel(), minlength=n)``
+    from the runs of equal labels in raster order: the maximum of each run (``np.maximum.reduceat``), then of
+    the runs of each label. A maximum is exact in any order.
+    """
+    flat = np.ascontiguousarray(labels).ravel()
+    out = np.zeros(n, dtype=values.dtype)
+    if flat.size == 0:
+        return out, np.zeros(n, dtype=np.int64)
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    first = np.flatnonzero(start)
+    label = flat[first]
+    np.maximum.at(out, label, np.maximum.reduceat(np.ascontiguousarray(values).ravel(), first))
+    count = np.bincount(label, weights=np.diff(np.append(first, flat.size)), minlength=n).astype(np.int64)
+    return out, count
+
+
 @dataclass(frozen=True)
 class Components:
     """The 8-connected components of a mask, as ``cv2.connectedComponentsWithStats`` gives them."""
@@ -149,3 +173,28 @@ def components(mask: npt.NDArray[np.bool_]) -> Components:
     """
     _n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     return Components(np.asarray(labels, dtype=np.int32), np.asarray(stats, dtype=np.int32))
+
+
+@functools.lru_cache(maxsize=32, typed=True)
+def _chamfer_ball(radius_px: float, mask_size: int) -> npt.NDArray[np.uint8]:
+    """The offsets whose ``cv2.distanceTransform(..., cv2.DIST_L2, mask_size)`` distance is at most ``radius_px``.
+
+    Measured by the transform itself from one zero pixel, compared as the caller compares (typed cache: an
+    int, a float and a numpy float radius compare differently with the float32 distances).
+    """
+    reach = int(radius_px) + 2  # each step of the chamfer masks is at least 0.955 px
+    image = np.ones((2 * reach + 1, 2 * reach + 1), dtype=np.uint8)
+    image[reach, reach] = 0
+    inside = cv2.distanceTransform(image, cv2.DIST_L2, mask_size) <= radius_px
+    r = reach - int(np.flatnonzero(inside.any(axis=1))[0])
+    return np.ascontiguousarray(inside[reach - r : reach + r + 1, reach - r : reach + r + 1], dtype=np.uint8)
+
+
+def near(mask: npt.NDArray[np.bool_], radius_px: float, mask_size: int = 3) -> npt.NDArray[np.bool_]:
+    """``cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, mask_size) <= radius_px``, by one dilation.
+
+    The chamfer transform's distance of a pixel is the least over the mask's pixels of one propagation from
+    each, and its float sums do not depend on where the pixel lies: so it is the dilation of ``mask`` by the
+    transform's own ball. A dilation by a small ball is a few times faster than the transform.
+    """
+    return np.asarray(cv2.dilate(mask.astype(np.uint8), _chamfer_ball(radius_px, mask_size)), dtype=bool)

@@ -16,6 +16,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import near
+
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
 
@@ -40,7 +42,27 @@ def _small_components(mask: npt.NDArray[np.bool_], max_area_px: int) -> npt.NDAr
     n, parts, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     small = stats[:, cv2.CC_STAT_AREA] <= max_area_px
     small[0] = False
-    return np.asarray(small[parts], dtype=bool) if n > 1 else np.zeros(mask.shape, dtype=bool)
+    out: npt.NDArray[np.bool_] = np.take(small, np.asarray(parts)) if n > 1 else np.zeros(mask.shape, dtype=bool)
+    return out
+
+
+def _specks(free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], max_area_px: int) -> npt.NDArray[np.bool_]:
+    """Occupied components of at most ``max_area_px`` pixels with only free cells around them.
+
+    A small blob on a wall or at unknown space is no speck. At one pixel (0.05 m maps) a speck is an
+    occupied cell whose 8 neighbours on the map are all free: a 3 x 3 count of the cells not free, no labelling.
+    """
+    if max_area_px == 1:
+        not_free = cv2.boxFilter((~free).astype(np.uint8), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        speck: npt.NDArray[np.bool_] = occupied & (not_free == 1)
+        return speck
+    candidate = _small_components(occupied, max_area_px)
+    other = cv2.dilate((~free & ~candidate).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    n, parts = cv2.connectedComponents(candidate.astype(np.uint8), connectivity=8)
+    touched = np.zeros(n, dtype=bool)
+    touched[np.unique(parts[other & candidate])] = True
+    touched[0] = True
+    return np.asarray(~touched[parts], dtype=bool)
 
 
 def _fringe(
@@ -49,8 +71,7 @@ def _fringe(
     """Uncertain free cells joined to an obstacle through uncertain cells, within ``depth_px`` of it."""
     if not uncertain.any():
         return np.zeros(free.shape, dtype=bool)
-    near = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3) <= depth_px
-    candidate = uncertain & near
+    candidate = uncertain & near(~free, depth_px)
     # a candidate component counts when it touches a non-free cell
     n, parts = cv2.connectedComponents(candidate.astype(np.uint8), connectivity=8)
     touching = np.zeros(n, dtype=bool)
@@ -119,15 +140,7 @@ def clean_occupancy(
     free &= ~fringe
     occupied |= fringe
 
-    speck_px = int(speck_max_area_m2 / px + 1e-9)
-    candidate = _small_components(occupied, speck_px)
-    # a speck has only free cells around it (a small blob on a wall or at unknown space stays)
-    other = cv2.dilate((~free & ~candidate).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    n, parts = cv2.connectedComponents(candidate.astype(np.uint8), connectivity=8)
-    touched = np.zeros(n, dtype=bool)
-    touched[np.unique(parts[other & candidate])] = True
-    touched[0] = True
-    specks = np.asarray(~touched[parts], dtype=bool)
+    specks = _specks(free, occupied, int(speck_max_area_m2 / px + 1e-9))
     free |= specks
     occupied &= ~specks
 
@@ -139,7 +152,7 @@ def clean_occupancy(
     closed = cv2.morphologyEx(free.astype(np.uint8), cv2.MORPH_CLOSE, _disk(gap)).astype(bool)
     between_rays = cv2.morphologyEx(rays.astype(np.uint8), cv2.MORPH_CLOSE, _disk(gap)).astype(bool)
     # never next to a wall: the unknown cells along a wall (its grey edge) are wall
-    off_walls = cv2.distanceTransform((~occupied).astype(np.uint8), cv2.DIST_L2, 3) > gap
+    off_walls = ~near(occupied, gap)
     # only thin unknown (no disk of the gap's radius fits): the wedges between rays, not the
     # bays of a ragged border with a large unknown space behind it
     thin = ~cv2.morphologyEx(unknown.astype(np.uint8), cv2.MORPH_OPEN, _disk(gap)).astype(bool)
@@ -148,14 +161,14 @@ def clean_occupancy(
     opened = cv2.morphologyEx(body.astype(np.uint8), cv2.MORPH_OPEN, _disk(width)).astype(bool)
     kept = opened & ~_small_components(opened, max(1, round(min_free_area_m2 / px)))
     # thin free space near the body (gaps between furniture legs, corners) stays
-    reach = cv2.distanceTransform((~kept).astype(np.uint8), cv2.DIST_L2, 3) > streak_reach_m / resolution_m
+    reach = ~near(kept, streak_reach_m / resolution_m)
     streaks = free & ~kept & reach
     filled &= kept & fill_fans
     free = (free & ~streaks) | filled
 
-    out = np.full(occ.shape, -1, dtype=np.int16)
-    out[known] = occ[known]
-    out[occupied] = np.maximum(out[occupied], 100)
-    out[free] = np.where(known[free] & (occ[free] < FREE_PERCENT), occ[free], 0)
-    out[streaks] = -1
+    # whole-image passes, no boolean gathers: free and occupied are disjoint here
+    out = np.where(known, occ, np.int16(-1))
+    np.maximum(out, np.int16(100), out=out, where=occupied)
+    np.copyto(out, np.int16(0), where=free & ~(known & (occ < FREE_PERCENT)))
+    np.copyto(out, np.int16(-1), where=streaks)
     return out, Cleaning(fringe=fringe, specks=specks, streaks=streaks, filled=filled, rays=rays & free)

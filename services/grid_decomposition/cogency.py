@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import label_counts
 from services.grid_decomposition.doorways import widens
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, line_endpoints
 
@@ -45,18 +46,13 @@ class EdgeCogency(NamedTuple):
         return self.cogent & (self.edge_door_px >= DOOR_MIN_PX)
 
 
-def _runs(profile: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Start and end (exclusive) of the True runs of a 1-D mask."""
-    d = np.diff(np.r_[0, profile.astype(np.int8), 0])
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-
-
 def close_doorways(
     profile: npt.NDArray[np.bool_],
     *,
     min_wall_px: int,
     max_door_px: int,
     posts: npt.NDArray[np.bool_] | None = None,
+    first: npt.NDArray[np.int64] | None = None,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Wall runs of a 1-D occupancy profile and the doorway-sized gaps between them.
 
@@ -65,6 +61,8 @@ def close_doorways(
     obstacles on the line, no wall runs), a wider gap of at most ``2 * max_door_px`` is one too
     when posts in it leave no free stretch wider than ``max_door_px``: two doors side by side
     with a post or door frame between them (a real map draws the post as a speck, no wall).
+    ``first`` (ascending) is where each profile begins when several lines' profiles come one
+    after the other: runs and gaps never cross from one line to the next.
 
     Returns
     -------
@@ -73,23 +71,90 @@ def close_doorways(
     gap_start, gap_end : (G,) int64
         Candidate doorways ``[gap_start, gap_end)``.
     """
-    starts, ends = _runs(profile)
+    size = profile.size
+    wall = np.zeros(size, dtype=bool)
+    if size == 0:
+        return wall, np.zeros(0, np.int64), np.zeros(0, np.int64)
+    on = np.asarray(profile, dtype=bool)
+    line_start = np.zeros(size + 1, dtype=bool)  # one more: the end of the last line
+    line_start[0] = line_start[size] = True
+    if first is not None:
+        line_start[first] = True
+    before = np.zeros(size, dtype=bool)
+    before[1:] = on[:-1]
+    after = np.zeros(size, dtype=bool)
+    after[:-1] = on[1:]
+    starts = np.flatnonzero(on & ~(before & ~line_start[:-1]))
+    ends = np.flatnonzero(on & ~(after & ~line_start[1:])) + 1
     long = (ends - starts) >= min_wall_px
     starts, ends = starts[long], ends[long]
-    wall = np.zeros(profile.size, dtype=bool)
     if starts.size == 0:
         return wall, np.zeros(0, np.int64), np.zeros(0, np.int64)
-    cover = np.zeros(profile.size + 1, dtype=np.int64)
+    cover = np.zeros(size + 1, dtype=np.int64)
     np.add.at(cover, starts, 1)
     np.add.at(cover, ends, -1)
     wall[:] = np.cumsum(cover)[:-1] > 0
+    line = np.searchsorted(np.flatnonzero(line_start[:-1]), starts, side="right")
+    same = line[1:] == line[:-1]
     gaps = starts[1:] - ends[:-1]
-    small = gaps <= max_door_px
+    small = same & (gaps <= max_door_px)
     if posts is not None:
-        for i in np.flatnonzero(~small & (gaps <= 2 * max_door_px)):
-            free_starts, free_ends = _runs(~posts[ends[i] : starts[i + 1]])
-            small[i] = free_starts.size > 1 and int((free_ends - free_starts).max()) <= max_door_px
+        wide = np.flatnonzero(same & ~small & (gaps <= 2 * max_door_px))
+        if wide.size:  # a wide gap split by posts: more than one free stretch, none wider than a door
+            lo, hi = ends[wide], starts[wide + 1]  # disjoint: a wall run lies between two gaps
+            span = np.zeros(size + 1, dtype=np.int64)
+            np.add.at(span, lo, 1)
+            np.add.at(span, hi, -1)
+            free = ~np.asarray(posts, dtype=bool) & (np.cumsum(span)[:-1] > 0)
+            edge = np.diff(np.r_[0, free.astype(np.int8), 0])
+            run_start, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+            gap_of = np.searchsorted(lo, run_start, side="right") - 1
+            stretches = np.bincount(gap_of, minlength=wide.size)
+            widest = np.zeros(wide.size, dtype=np.int64)
+            np.maximum.at(widest, gap_of, run_end - run_start)
+            small[wide] = (stretches > 1) & (widest <= max_door_px)
     return wall, ends[:-1][small].astype(np.int64), starts[1:][small].astype(np.int64)
+
+
+def _line_samples(
+    ends: list[tuple[tuple[int, int], tuple[int, int]]], shape: tuple[int, int]
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Pixels of ``np.rint(np.linspace(x0, x1, n))`` (and y), ``n = int(hypot) + 1``, inside the image, of every line.
+
+    The samples of each line in order, lines one after the other, with each sample's line. Only the
+    samples of a range covering the image are computed (the lines reach far beyond it), with
+    numpy's linspace expressions: ``i * step + start``, the last one ``stop``.
+    """
+    h, w = shape
+    pieces: list[tuple[int, int, int, float, float, float, float, int, int, int]] = []
+    for k, ((x0, y0), (x1, y1)) in enumerate(ends):
+        n = int(math.hypot(x1 - x0, y1 - y0)) + 1
+        div = n - 1
+        sx = float(x1 - x0) / div if div > 0 else 0.0
+        sy = float(y1 - y0) / div if div > 0 else 0.0
+        lo, hi = 0, n - 1
+        for start, step, size in ((x0, sx, w), (y0, sy, h)):
+            if step != 0.0:  # inside the image (-1 < value < size) in a range of i, with a margin
+                a, b = (-1 - start) / step, (size - start) / step
+                lo, hi = max(lo, math.floor(min(a, b)) - 2), min(hi, math.ceil(max(a, b)) + 2)
+        if lo <= hi:
+            pieces.append((k, lo, hi, float(x0), float(y0), sx, sy, n, x1, y1))
+    if not pieces:
+        empty = np.zeros(0, np.int64)
+        return empty, empty, empty
+    k_, lo_, hi_, x0_, y0_, sx_, sy_, n_, x1_, y1_ = (np.array(v) for v in zip(*pieces, strict=True))
+    count = hi_ - lo_ + 1
+    i = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count - lo_, count)
+    fi = i.astype(np.float64)
+    x = fi * np.repeat(sx_, count) + np.repeat(x0_, count)
+    y = fi * np.repeat(sy_, count) + np.repeat(y0_, count)
+    # the last sample of a line is its end (linspace's endpoint), where the range reaches it
+    last = np.cumsum(count)[(hi_ == n_ - 1) & (n_ > 1)] - 1
+    has_last = (hi_ == n_ - 1) & (n_ > 1)
+    x[last], y[last] = x1_[has_last], y1_[has_last]
+    xs, ys = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
+    inside = (xs.view(np.uint64) < w) & (ys.view(np.uint64) < h)  # negative ones too
+    return xs[inside], ys[inside], np.repeat(k_, count)[inside]
 
 
 def wall_evidence(
@@ -138,32 +203,27 @@ def wall_evidence(
     near_post = None if posts is None else cv2.dilate(posts.astype(np.uint8), disk) > 0
     wall = np.zeros((h, w), dtype=bool)
     door = np.zeros((h, w), dtype=bool)
-    gaps: list[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]] = []
-    for group in groups:
-        for line in group.lines:
-            (x0, y0), (x1, y1) = line_endpoints(line, (h, w))
-            n = int(math.hypot(x1 - x0, y1 - y0)) + 1
-            xs = np.rint(np.linspace(x0, x1, n)).astype(np.int64)
-            ys = np.rint(np.linspace(y0, y1, n)).astype(np.int64)
-            inside = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
-            xs, ys = xs[inside], ys[inside]
-            if group.mask is not None:
-                keep = group.mask[ys, xs]
-                xs, ys = xs[keep], ys[keep]
-            if xs.size == 0:
-                continue
-            on_wall, g0, g1 = close_doorways(
-                near[ys, xs], min_wall_px=min_wall_px, max_door_px=max_door_px,
-                posts=None if near_post is None else near_post[ys, xs],
-            )
-            wall[ys[on_wall], xs[on_wall]] = True
-            if g0.size:
-                gaps.append((xs, ys, g0, g1))
-    if gaps:  # every line's gaps in one call: each gap's answer is its own
-        ends = np.concatenate([
-            np.stack([np.stack([xs[g0], ys[g0]], axis=1), np.stack([xs[g1 - 1], ys[g1 - 1]], axis=1)], axis=1)
-            for xs, ys, g0, g1 in gaps
-        ]).astype(np.float64)
+    # every line's pixels at once (lines in order, each from one end to the other), each line clipped to its
+    # group's mask; the profiles one after the other, closed in one call: runs and gaps stay within a line
+    lines = [(g, line) for g, group in enumerate(groups) for line in group.lines]
+    xs, ys, of = _line_samples([line_endpoints(line, (h, w)) for _, line in lines], (h, w))
+    group_of = np.array([g for g, _ in lines], dtype=np.int64)[of] if lines else of
+    keep = np.ones(xs.size, dtype=bool)
+    for g, group in enumerate(groups):
+        if group.mask is not None:
+            mine = np.flatnonzero(group_of == g)
+            keep[mine] = group.mask[ys[mine], xs[mine]]
+    xs, ys, of = xs[keep], ys[keep], of[keep]
+    first = np.flatnonzero(np.r_[True, of[1:] != of[:-1]]) if of.size else of
+    on_wall, g0, g1 = close_doorways(
+        near[ys, xs], min_wall_px=min_wall_px, max_door_px=max_door_px,
+        posts=None if near_post is None else near_post[ys, xs], first=first,
+    )
+    wall[ys[on_wall], xs[on_wall]] = True
+    if g0.size:  # every line's gaps in one call: each gap's answer is its own
+        ends = np.stack(
+            [np.stack([xs[g0], ys[g0]], axis=1), np.stack([xs[g1 - 1], ys[g1 - 1]], axis=1)], axis=1
+        ).astype(np.float64)
         doorway = widens(
             near,
             ends,
@@ -172,13 +232,12 @@ def wall_evidence(
             depth_step_px=max(1, max_depth_px // 4),
             corridor_length_px=corridor_length_px,
         )
-        first = 0
-        for xs, ys, g0, g1 in gaps:
-            opened = doorway[first : first + g0.size]
-            first += g0.size
-            for a, b in zip(g0[opened], g1[opened], strict=True):
-                wall[ys[a:b], xs[a:b]] = True
-                door[ys[a:b], xs[a:b]] = True
+        cover = np.zeros(xs.size + 1, dtype=np.int64)
+        np.add.at(cover, g0[doorway], 1)
+        np.add.at(cover, g1[doorway], -1)
+        opened = np.cumsum(cover)[:-1] > 0
+        wall[ys[opened], xs[opened]] = True
+        door[ys[opened], xs[opened]] = True
     kernel = np.ones((3, 3), np.uint8)
     solid = cv2.dilate((wall & ~door).astype(np.uint8), kernel) > 0
     wall = cv2.dilate(wall.astype(np.uint8), kernel) > 0
@@ -211,10 +270,12 @@ def edge_cogency(
     """
     faces = sub.face_image.ravel()
     n = sub.n_faces + 1
-    area = np.bincount(faces, minlength=n).astype(np.float64)
-    occ_sum = np.bincount(faces, weights=occupancy01.ravel(), minlength=n)
+    count, free_px = label_counts(sub.face_image, n, free)
+    area = count.astype(np.float64)
+    # each face's sum in pixel order, as over the whole image (face 0, the lines, is set to 1 below)
+    on_face = np.flatnonzero(faces)
+    occ_sum = np.bincount(faces[on_face], weights=occupancy01.ravel()[on_face], minlength=n)
     face_occ = np.divide(occ_sum, area, out=np.ones(n), where=area > 0)
-    free_px = np.bincount(faces[free.ravel()], minlength=n).astype(np.int64)
     free_px[0] = 0
     face_occ[0] = 1.0
     e_n = np.diff(sub.edge_starts)

@@ -43,7 +43,7 @@ def split_at_necks(
     """
     seg = np.asarray(segments, dtype=np.int32)
     dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 5) if distance is None else distance
-    padded = np.pad(seg, 1, mode="edge")
+    padded = cv2.copyMakeBorder(seg, 1, 1, 1, 1, cv2.BORDER_REPLICATE)  # numpy's "edge" padding
     border = (
         (padded[:-2, 1:-1] != seg) | (padded[2:, 1:-1] != seg) | (padded[1:-1, :-2] != seg) | (padded[1:-1, 2:] != seg)
     )
@@ -51,8 +51,14 @@ def split_at_necks(
     n, parts, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
     big = stats[:, cv2.CC_STAT_AREA] >= min_core_area_m2 / resolution_m**2
     big[0] = False
+    # each core's segment, from the first pixel of each run of one core along the rows (a core lies in one segment)
+    flat = parts.ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    first = np.flatnonzero(start)
     owner = np.zeros(n, dtype=np.int64)
-    owner[parts.ravel()] = seg.ravel()
+    owner[flat[first]] = seg.ravel()[first]
     n_seg = int(seg.max()) + 1
     cores_per_seg = np.bincount(owner[big], minlength=n_seg)
     split = cores_per_seg >= 2

@@ -38,16 +38,24 @@ def oriented_gradients(obstacle: npt.NDArray[np.bool_]) -> Gradients:
     image = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.0)
     gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)
-    magnitude, phase = cv2.cartToPolar(gx, gy)
-    at = np.flatnonzero(magnitude > 0.05)  # flat indices: one pass, and plain 1-D gathers
+    # cartToPolar (magnitude and angle) only near the edges: cv2.magnitude, which may differ from
+    # cartToPolar's in the last bit, picks the pixels with a margin, cartToPolar's own magnitude decides
+    near = np.flatnonzero(cv2.magnitude(gx, gy) > 0.05 * (1 - 1e-5))  # flat indices: plain 1-D gathers
+    magnitude, phase = (
+        (a.ravel() for a in cv2.cartToPolar(gx.ravel()[near], gy.ravel()[near]))
+        if near.size
+        else (np.zeros(0, np.float32), np.zeros(0, np.float32))  # no edge (OpenCV gives None)
+    )
+    keep = magnitude > 0.05
+    at, magnitude, phase = near[keep], magnitude[keep], phase[keep]
     rows, cols = np.divmod(at, mask.shape[1])
-    direction = phase.ravel()[at].astype(np.float64) + math.pi / 2
+    direction = phase.astype(np.float64) + math.pi / 2
     direction = (direction + math.pi / 2) % math.pi - math.pi / 2
     return Gradients(
         (int(mask.shape[0]), int(mask.shape[1])),
         rows.astype(np.int64),
         cols.astype(np.int64),
-        magnitude.ravel()[at].astype(np.float64),
+        magnitude.astype(np.float64),
         direction,
     )
 
@@ -133,11 +141,14 @@ def _m_step(
 
 
 def _weighted_log_prob(gmm: _Mixture, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """scikit-learn's per component ``np.sum(np.square(x @ P - mean @ P), axis=1)`` for one feature, all at once.
+
+    With 1 x 1 factors each product is one multiplication and each sum one term, so the broadcast
+    ``(x * p - mean * p) ** 2`` is the same floats.
+    """
     log_det = np.sum(np.log(np.reshape(gmm.precisions_chol, (gmm.means.shape[0], -1))[:, ::2]), axis=1)
-    log_prob = np.empty((x.shape[0], gmm.means.shape[0]), dtype=x.dtype)
-    for c in range(gmm.means.shape[0]):
-        y = (x @ gmm.precisions_chol[c, :, :]) - (gmm.means[c, :] @ gmm.precisions_chol[c, :, :])
-        log_prob[:, c] = np.sum(np.square(y), axis=1)
+    p = gmm.precisions_chol[:, 0, 0]
+    log_prob = np.square(x * p - gmm.means[:, 0] * p)
     out: npt.NDArray[np.float64] = -0.5 * (math.log(2 * math.pi) + log_prob) + log_det + np.log(gmm.weights)
     return out
 
@@ -154,16 +165,28 @@ def _score_samples(gmm: _Mixture, x: npt.NDArray[np.float64]) -> npt.NDArray[np.
     return _logsumexp(_weighted_log_prob(gmm, x))
 
 
+def _columns(array: npt.NDArray[np.float64], op: np.ufunc) -> npt.NDArray[np.float64]:
+    """``op.reduce(array, axis=1, keepdims=True)`` of a C-ordered (N, K) array, as numpy orders it.
+
+    numpy reduces a short last axis one column after the other, ``op(op(a0, a1), a2) ...``: so do
+    column operations, without numpy's per-row inner loops over K < 8 values.
+    """
+    out = array[:, 0].copy()
+    for j in range(1, array.shape[1]):
+        op(out, array[:, j], out=out)
+    return out[:, np.newaxis]
+
+
 def _logsumexp(array: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Log of the sum of exponentials along axis 1, as scikit-learn computes it."""
-    array_max = np.max(array, axis=1, keepdims=True)
+    """Log of the sum of exponentials along axis 1, as scikit-learn computes it (the same floats)."""
+    array_max = _columns(array, np.maximum)
     index_max = array == array_max
     array = np.array(array, copy=True)
     array[index_max] = -np.inf
-    m = np.sum(index_max.astype(array.dtype), axis=1, keepdims=True, dtype=array.dtype)
+    m = _columns(index_max.astype(array.dtype), np.add)
     shift = np.where(np.isfinite(array_max), array_max, 0)
     exp = np.exp(array - shift)
-    s = np.sum(exp, axis=1, keepdims=True, dtype=exp.dtype)
+    s = _columns(exp, np.add)
     s = np.where(s == 0, s, s / m)
     out: npt.NDArray[np.float64] = np.squeeze(np.log1p(s) + np.log(m) + array_max, axis=1)
     return out

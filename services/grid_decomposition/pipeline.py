@@ -15,7 +15,14 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import Components, components, label_counts, label_sums
+from services.grid_decomposition.arrays import (
+    Components,
+    components,
+    label_counts,
+    label_max,
+    label_sums,
+    unique_inverse,
+)
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.continuity import RegionPrior, keep_regions
@@ -212,19 +219,16 @@ def _texture_count(lines: dict[float, list[Line]]) -> int:
 def _elongation(
     component: npt.NDArray[np.int64],
     face_image: npt.NDArray[np.int32],
-    free: npt.NDArray[np.bool_],
+    dist: npt.NDArray[np.float32],
     resolution_m: float,
 ) -> npt.NDArray[np.float64]:
-    """Area / clearance^2 of each component (clearance = twice the largest distance to an obstacle)."""
-    dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3)
+    """Area / clearance^2 of each component (clearance = twice the largest distance ``dist`` to an obstacle)."""
     n = int(component.max()) + 1
     # per face first, then per component (a face's pixels all lie in its component)
-    face_width = np.zeros(component.size, dtype=np.float32)
-    np.maximum.at(face_width, face_image.ravel(), dist.ravel())
+    face_width, face_area = label_max(face_image, dist, component.size)
     width = np.zeros(n, dtype=np.float32)
     np.maximum.at(width, component, face_width)
     width[0] = 0.0
-    face_area = np.bincount(face_image.ravel(), minlength=component.size)
     area = np.bincount(component, weights=face_area, minlength=n).astype(np.float64)
     elongation: npt.NDArray[np.float64] = area / np.maximum(2.0 * width.astype(np.float64), 1.0) ** 2
     return elongation
@@ -242,8 +246,8 @@ def _face_angles(sub: Subdivision, groups: list[LineGroup]) -> npt.NDArray[np.fl
         for ln in group.lines:
             support[ln.angle_rad] = support.get(ln.angle_rad, 0.0) + ln.support_m
         main = max(support, key=lambda a: support[a])
-        pixels = sub.face_image if group.mask is None else sub.face_image[group.mask]
-        count = np.bincount(pixels.ravel(), minlength=n)
+        everywhere, inside = label_counts(sub.face_image, n, group.mask)
+        count = everywhere if group.mask is None else inside
         more = count > best
         angle[more], best[more] = main, count[more]
     return angle
@@ -389,8 +393,11 @@ def decompose(
         known = occ >= 0
         obstacle = ~free
         occupied = known & (occ > OCCUPIED_PERCENT)
+        # the distance to obstacles, for the rays and the elongation
+        clearance = np.asarray(cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3), dtype=np.float32)
         places_job = beside.submit(
-            categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
+            categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed,
+            distance=clearance,
         )
         occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
@@ -441,9 +448,12 @@ def decompose(
             posts=clutter,
             corridor_length_px=round(corridor_length_m / resolution_m),
         )
+        known_obstacle = obstacle & known
         racks = find_racks_by_region(  # each texture region with its own directions
-            obstacle & known, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
+            known_obstacle, known, [(g.mask, sorted({ln.angle_rad for ln in g.lines})) for g in groups],
             resolution_m=resolution_m, solid=surely_occupied,
+            # without uncertain cells (a trinary map) the known obstacles are the occupied cells, labelled already
+            labelled=occupied_parts if np.array_equal(known_obstacle, occupied) else None,
         )
         if known_places is not None:
             if known_places.cells.shape != occ.shape:
@@ -469,7 +479,7 @@ def decompose(
         is_face = cog.face_free_px > 0
         connected = sub.edge_faces[~cog.cogent]
         component = link_components(sub.n_faces + 1, connected, is_face)
-        elongation = _elongation(component, sub.face_image, free, resolution_m)
+        elongation = _elongation(component, sub.face_image, clearance, resolution_m)
         geometry = geometry_job.result()
         found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
         evidence = found.label.copy()
@@ -493,7 +503,8 @@ def decompose(
         segments = segment_image(
             sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
         )
-        floor_px = structured[component[sub.face_image]] | (racks.cells > 0)  # the room stage leaves racks alone
+        # the room stage leaves racks alone (a flag per face first: one gather of the face image)
+        floor_px = np.take(structured[component], sub.face_image) | (racks.cells > 0)
         segments, cuts = segment_rooms(
             segments,
             clutter,
@@ -516,33 +527,36 @@ def decompose(
         # the streaks the cleaning took out are free space: they take the region they grow from
         segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
         if fan_max_neck_m > 0:  # a room seen only through its door: a fan of rays, not the corridor's floor
-            on_floor = np.bincount(segments[floor_px], minlength=int(segments.max()) + 1)
-            floors = on_floor > 0.5 * np.bincount(segments.ravel(), minlength=on_floor.size)
+            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            floors = on_floor > 0.5 * size
             segments = split_fans(
                 segments, rays | streaks, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
             )
         # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
+        floor_space = free | streaks
         segments, places = place_segments(
-            segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2),
+            segments, racks, floor_space, min_area_px=round(room_min_area_m2 / resolution_m**2),
             n_known=0 if known_places is None else known_places.cell_labels.size - 1,
         )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
+        on_places = places > 0
         if prior is not None:
             if prior.regions.shape != occ.shape or prior.unchanged.shape != occ.shape:
                 raise DecompositionError(f"a prior of shape {prior.regions.shape} on a grid of {occ.shape}")
             # rack places (racks, aisles, cross aisles) are found anew every time: a rack is often seen whole only
             # later
-            found_anew = places > 0
             segments = keep_regions(
-                segments, RegionPrior(np.where(found_anew, 0, prior.regions), prior.unchanged & ~found_anew),
+                segments, RegionPrior(np.where(on_places, 0, prior.regions), prior.unchanged & ~on_places),
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
             )
         pairs = _pairs(segments, sub)
-        racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
+        racked = floor_px | banks.storage | on_places  # the only floor a storage region may stand on
         regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
         # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
-        structured_segments = set(np.flatnonzero(np.bincount(segments[(places > 0) | floor_px])).tolist())
+        structured_segments = set(
+            np.flatnonzero(label_counts(segments, int(segments.max()) + 1, on_places | floor_px)[1]).tolist()
+        )
         rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
         open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
         objects = (
@@ -556,13 +570,13 @@ def decompose(
         if merges:
             lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
             lut[list(merges)] = list(merges.values())
-            segments = lut[lut[segments]]
+            segments = np.take(lut[lut], segments)
             pairs = _pairs(segments, sub)
             regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
         if room_ids:  # a room mostly on rack places is no room: it takes their label
             n_seg = int(segments.max()) + 1
-            size, in_places = label_counts(segments, n_seg, places > 0)
+            size, in_places = label_counts(segments, n_seg, on_places)
             for k in room_ids:
                 if in_places[k] > 0.5 * size[k]:
                     held = places[segments == k]
@@ -582,16 +596,17 @@ def decompose(
         region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
         for k, r in regions.items():
             region_label[k] = r.label.value
-        own = region_label[segments]
+        own = np.take(region_label, segments)  # np.take: a faster gather than indexing, the same values
         loose = (labels == PlaceLabel.ROOM.value) | (labels == PlaceLabel.STORAGE.value) & ~floor_px & ~banks.storage
         loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
         labels = np.where(loose & (own > 0), own, labels)
         # a rack place's label, unless a person renamed the category of the face there
-        kept_place = places > 0
+        kept_place = on_places
         if label_overrides:
-            kept_place &= ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
-        labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
-        labels = np.where(free | streaks, labels, 0).astype(np.uint8)
+            kept_place = kept_place & ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
+        if kept_place.any():
+            labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
+        labels = np.where(floor_space, labels, 0).astype(np.uint8, copy=False)
         face_region_final = _final_face_regions(pairs, sub.n_faces)
         topology = region_topology(
             sub,
@@ -628,28 +643,25 @@ class _Pairs(NamedTuple):
 
 
 def _pairs(segments: npt.NDArray[np.int32], sub: Subdivision) -> _Pairs:
-    """(face, segment) pixel counts in a few linear passes.
+    """(face, segment) pixel counts from the runs of equal (face, segment) pairs in raster order.
 
-    Nearly every face lies in one segment: each face's pixels are compared with one representative
-    pixel's segment and counted by face; only the rest (line pixels, faces a segment boundary cuts)
-    go through a sort.
+    A face lies in few segments and a segment's faces are large: far fewer runs than pixels. The
+    runs' pairs (segment > 0) are sorted once and their lengths summed (whole numbers, exact).
     """
-    f = sub.face_image.ravel()
-    s = segments.ravel()
-    rep = np.zeros(sub.n_faces + 1, dtype=np.int32)
-    rep[f] = s
-    agree = (s == rep[f]) & (s > 0)
-    agree_count = np.bincount(f, weights=agree, minlength=rep.size)
-    other = np.flatnonzero(~agree & (s > 0))
+    f = np.ascontiguousarray(sub.face_image).ravel()
+    s = np.ascontiguousarray(segments).ravel()
+    start = np.empty(f.size, dtype=bool)
+    start[0] = True
+    np.not_equal(f[1:], f[:-1], out=start[1:])
+    start[1:] |= s[1:] != s[:-1]
+    first = np.flatnonzero(start)
+    length = np.diff(np.append(first, f.size))
+    on = s[first] > 0
+    first, length = first[on], length[on]
     n_seg = np.int64(int(s.max()) + 1)
-    keys, counts = np.unique(f[other].astype(np.int64) * n_seg + s[other], return_counts=True)
-    has = agree_count > 0
-    # the two sets are disjoint: the rest never holds a face's representative segment
-    face = np.r_[np.flatnonzero(has), keys // n_seg]
-    seg = np.r_[rep[has].astype(np.int64), keys % n_seg]
-    pixels = np.r_[agree_count[has], counts.astype(np.float64)]
-    order = np.lexsort((seg, face))
-    return _Pairs(face[order], seg[order], pixels[order])
+    keys, which = unique_inverse(f[first].astype(np.int64) * n_seg + s[first])
+    pixels = np.bincount(which, weights=length, minlength=keys.size).astype(np.float64)
+    return _Pairs(keys // n_seg, keys % n_seg, pixels)
 
 
 def _final_face_regions(pairs: _Pairs, n_faces: int) -> npt.NDArray[np.int64]:
@@ -706,8 +718,8 @@ def _region_records(
             int(sid), PlaceLabel(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
         )
     inside = segments > 0
-    labels = np.where(inside, face_labels.label.astype(np.int32)[sub.face_image], 0).astype(np.int32)
-    labels = fill_from_neighbours(labels, inside)
+    # gathered as bytes (labels are below 256); the fill works on its own int32 copy
+    labels = fill_from_neighbours(np.where(inside, face_labels.label.astype(np.uint8)[sub.face_image], 0), inside)
     hole = inside & (labels == 0)
     labels[hole] = seg_label[segments[hole]]
     return regions, labels.astype(np.uint8)

@@ -2,17 +2,34 @@
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
 import threading
 
 import cv2
 import numpy as np
 import numpy.typing as npt
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 N_FEATURES = 13
 CLUSTERING = threading.Lock()
 """Held by each clustering under one-thread limits: threadpoolctl's limits are the process's, restored on exit."""
+
+
+@functools.cache
+def _thread_pools() -> ThreadpoolController:
+    return ThreadpoolController()
+
+
+def one_thread() -> contextlib.AbstractContextManager[object]:
+    """``threadpool_limits(1)`` (every thread pool of the process: OpenMP, BLAS) without looking the pools up again.
+
+    ``threadpool_limits`` lists the process's loaded libraries at every call (about 1 ms); the pools are listed
+    once, at the first clustering, when scikit-learn and its OpenMP are loaded.
+    """
+    limiter: contextlib.AbstractContextManager[object] = _thread_pools().limit(limits=1)
+    return limiter
 
 
 def cast_rays(
@@ -22,16 +39,25 @@ def cast_rays(
     *,
     n_beams: int,
     max_range_px: float,
+    distance: npt.NDArray[np.float32] | None = None,
 ) -> npt.NDArray[np.float64]:
     """Simulated laser ranges from given pixels, by sphere tracing on the obstacle distance map.
+
+    ``distance`` is ``cv2.distanceTransform((~obstacle).astype(np.uint8), cv2.DIST_L2, 3)``, when the caller
+    has it.
 
     Returns
     -------
     (N, n_beams) float64
         Range in pixels of each beam (beam ``k`` at ``2 pi k / n_beams``), capped at ``max_range_px``.
     """
-    dist = cv2.distanceTransform((~obstacle).astype(np.uint8), cv2.DIST_L2, 3)
+    dist = cv2.distanceTransform((~obstacle).astype(np.uint8), cv2.DIST_L2, 3) if distance is None else distance
     h, w = obstacle.shape
+    # distances by flat index; a pixel off the map reads an obstacle pixel's 0, so a ray leaving the map stops
+    flat = dist.ravel()
+    off_map = int(np.argmax(obstacle))
+    if not obstacle.flat[off_map]:  # no obstacle: a 0 of its own
+        flat, off_map = np.append(flat, np.float32(0.0)), flat.size
     angles = np.arange(n_beams) * (2 * math.pi / n_beams)
     dx, dy = np.cos(angles).astype(np.float32), np.sin(angles).astype(np.float32)
     n = rows.size
@@ -43,14 +69,15 @@ def cast_rays(
     for _ in range(64):
         if active.size == 0:
             break
-        xi = np.rint(x0[active] + t[active] * ux[active]).astype(np.int64)
-        yi = np.rint(y0[active] + t[active] * uy[active]).astype(np.int64)
-        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
-        d = np.zeros(active.size, dtype=np.float32)
-        d[inside] = dist[yi[inside], xi[inside]]
-        go = inside & (d >= 1.0) & (t[active] < max_range_px)
-        t[active[go]] += np.maximum(d[go] - 0.5, 1.0)
+        ta = t[active]
+        xi = np.rint(x0[active] + ta * ux[active]).astype(np.int64)
+        yi = np.rint(y0[active] + ta * uy[active]).astype(np.int64)
+        at = yi * w + xi
+        at[(xi.view(np.uint64) >= w) | (yi.view(np.uint64) >= h)] = off_map  # negative ones too
+        d = np.take(flat, at)
+        go = (d >= 1.0) & (ta < max_range_px)
         active = active[go]
+        t[active] = ta[go] + np.maximum(d[go] - 0.5, 1.0)
     return np.minimum(t, max_range_px).reshape(n, n_beams).astype(np.float64)
 
 
@@ -88,9 +115,7 @@ def raycast_features(ranges: npt.NDArray[np.float64], *, gap_threshold: float) -
     flat = np.ptp(ranges, axis=1) == 0
     kurt = np.zeros(n)
     if (~flat).any():
-        from scipy.stats import kurtosis  # scipy.stats is imported when first needed
-
-        kurt[~flat] = kurtosis(ranges[~flat], axis=1)
+        kurt[~flat] = _kurtosis(ranges[~flat])
     return np.stack(
         [
             ranges.mean(axis=1),
@@ -111,6 +136,21 @@ def raycast_features(ranges: npt.NDArray[np.float64], *, gap_threshold: float) -
     )
 
 
+def _kurtosis(rows: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """``scipy.stats.kurtosis(rows, axis=1)`` (Fisher, biased) with scipy's own expressions, so the same floats.
+
+    scipy's argument checks and its cancellation warning cost more than the arithmetic.
+    """
+    mean = np.mean(rows, axis=1, keepdims=True)
+    square = (rows - mean) ** 2
+    m2 = np.mean(square, axis=1)
+    m4 = np.mean(square**2, axis=1)
+    with np.errstate(all="ignore"):
+        zero = m2 <= (np.finfo(m2.dtype).eps * mean[:, 0]) ** 2
+        vals: npt.NDArray[np.float64] = np.where(zero, np.nan, m4 / m2**2.0) - 3
+    return vals
+
+
 def categorize_places(
     obstacle: npt.NDArray[np.bool_],
     free: npt.NDArray[np.bool_],
@@ -123,6 +163,7 @@ def categorize_places(
     max_range_m: float = 12.0,
     gap_threshold_m: float = 1.0,
     seed: int = 0,
+    distance: npt.NDArray[np.float32] | None = None,
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Cluster free pixels into place categories by the shape of simulated scans (k-means).
 
@@ -130,7 +171,8 @@ def categorize_places(
     ``max_samples`` of them on large maps) are ray-cast, described by
     :func:`raycast_features` (lengths in metres, log-compressed where heavy-tailed, standardised)
     and clustered into ``n_categories`` with k-means; categories are renumbered by mean range so
-    that the numbering is stable (0 = most confined).
+    that the numbering is stable (0 = most confined). ``distance`` is the obstacles' distance map
+    (:func:`cast_rays`), when the caller has it.
 
     Returns
     -------
@@ -139,12 +181,13 @@ def categorize_places(
     """
     spacing_m = max(sample_spacing_m, math.sqrt(float(np.count_nonzero(free)) / max(max_samples, 1)) * resolution_m)
     step = max(1, round(spacing_m / resolution_m))
-    grid = np.zeros_like(free)
-    grid[step // 2 :: step, step // 2 :: step] = True
-    rows, cols = np.nonzero(grid & free)
+    rows, cols = np.nonzero(free[step // 2 :: step, step // 2 :: step])  # the grid's free pixels, in raster order
+    rows, cols = rows * step + step // 2, cols * step + step // 2
     if rows.size == 0:
         return rows.astype(np.int64), cols.astype(np.int64), np.zeros(0, np.int64)
-    ranges = cast_rays(obstacle, rows, cols, n_beams=n_beams, max_range_px=max_range_m / resolution_m)
+    ranges = cast_rays(
+        obstacle, rows, cols, n_beams=n_beams, max_range_px=max_range_m / resolution_m, distance=distance
+    )
     feats = raycast_features(ranges * resolution_m, gap_threshold=gap_threshold_m)
     for k in (4, 5, 6, 9, 10, 11):
         feats[:, k] = np.log1p(feats[:, k])
@@ -152,7 +195,7 @@ def categorize_places(
     from sklearn.cluster import KMeans  # scikit-learn is imported when first needed
     from sklearn.preprocessing import StandardScaler
 
-    with CLUSTERING, threadpool_limits(1):
+    with CLUSTERING, one_thread():
         scaled = StandardScaler().fit_transform(feats)
         model = KMeans(k, n_init=3, random_state=seed).fit(scaled)
     order = np.argsort(np.argsort(model.cluster_centers_[:, 0]))

@@ -33,7 +33,7 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import Components, components, unique_inverse
+from services.grid_decomposition.arrays import Components, components, label_counts, unique_inverse
 from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
@@ -123,13 +123,12 @@ def _inner_obstacles(code: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     Unknown space reaching the image border is the unexplored outside, not a rack: closed with the
     obstacles it would join every rack row ending within a bay of it (a map explored only up to the
     racks' ends) into one body with it, too large to be a rack. The same of the transposed image is
-    this transposed.
+    this transposed. The unknown space reaching the border is one 4-connected fill from a frame of
+    unknown cells around the image, not a labelling of all of it.
     """
-    _, unknown, stats, _ = cv2.connectedComponentsWithStats((code == _UNKNOWN).astype(np.uint8), connectivity=4)
-    x, y, w, h = (stats[:, i] for i in range(4))
-    outside = (x == 0) | (y == 0) | (x + w == code.shape[1]) | (y + h == code.shape[0])
-    outside[0] = False
-    obstacle: npt.NDArray[np.uint8] = ((code != 0) & ~outside[unknown]).astype(np.uint8)
+    framed = cv2.copyMakeBorder((code == _UNKNOWN).astype(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=1)
+    cv2.floodFill(framed, None, (0, 0), 2, flags=4)
+    obstacle: npt.NDArray[np.uint8] = ((code != 0) & (framed[1:-1, 1:-1] != 2)).astype(np.uint8)
     return obstacle
 
 
@@ -165,8 +164,11 @@ def _reopen_cross_aisles(
     bridged = (which[1:] == which[:-1]) & (gap >= (gap_px + 1) // 2) & (gap <= gap_px)
     if not bridged.any():
         return body
+    cuts = np.flatnonzero(bridged & (gap > off_pitch * float(np.median(gap[bridged]))))
+    if cuts.size == 0:  # every bridged gap on the pitch: bays
+        return body
     out = body.copy()
-    for i in np.flatnonzero(bridged & (gap > off_pitch * float(np.median(gap[bridged])))):
+    for i in cuts:
         k = int(chosen[which[i]])
         y, h = int(stats[k, cv2.CC_STAT_TOP]), int(stats[k, cv2.CC_STAT_HEIGHT])
         span = out[y : y + h, col[i] + 1 : col[i + 1]]
@@ -651,9 +653,7 @@ def find_racks(
     code = np.where(known, np.where(occupied, sure, np.uint8(0)), np.uint8(_UNKNOWN))
     if domain is not None:
         code[~domain] = _UNKNOWN
-    free = code == 0
-    border = (code != 0) & (cv2.dilate(free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
-    border_rc = np.argwhere(border).astype(np.float64)
+    border_rc: npt.NDArray[np.float64] | None = None  # the free space's border, once a rack row is found
     families: list[float] = []
     for angle in angles_rad:
         a = math.remainder(angle, math.pi / 2)
@@ -672,7 +672,6 @@ def find_racks(
             ),
             dtype=np.uint8,
         )
-        refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
         obstacle = _inner_obstacles(turned)
         solid_turned = turned == _OCCUPIED
         search = functools.partial(
@@ -689,6 +688,11 @@ def find_racks(
             across = beside.submit(search, np.ascontiguousarray(obstacle.T), np.ascontiguousarray(solid_turned.T))
             along = search(obstacle, solid_turned)
             found = ((False, along), (True, across.result()))
+        if along or found[1][1]:
+            if border_rc is None:
+                border = (code != 0) & (cv2.dilate((code == 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+                border_rc = np.argwhere(border).astype(np.float64)
+            refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
         for transpose, racks in found:
             image = np.ascontiguousarray(turned.T) if transpose else turned
             for block in _blocks(racks, max_aisle_px=max_aisle_m * px):
@@ -717,7 +721,12 @@ def find_racks(
 
 
 def structure_angles(
-    occupied: npt.NDArray[np.bool_], *, resolution_m: float, min_length_m: float = 6.0, share: float = 0.2
+    occupied: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    min_length_m: float = 6.0,
+    share: float = 0.2,
+    labelled: Components | None = None,
 ) -> list[float]:
     """Directions (radians, x = column, y = row) of long obstacle components: solid racks and walls.
 
@@ -725,9 +734,10 @@ def structure_angles(
     rectangle's long side with that length (mod 90 degrees); directions with at
     least ``share`` of the top vote are returned, each the weighted mean of its cluster (within 2
     degrees). Rasterised edges at a shallow angle can mislead gradient histograms; the rectangle of
-    a 20 m rack cannot.
+    a 20 m rack cannot. ``labelled`` is ``components(occupied)``, when already labelled.
     """
-    _, parts, stats, _ = cv2.connectedComponentsWithStats(occupied.astype(np.uint8), connectivity=8)
+    labelled = components(occupied) if labelled is None else labelled
+    parts, stats = labelled.labels, labelled.stats
     extent = np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT])
     long = np.flatnonzero(extent >= min_length_m / resolution_m)
     found: list[tuple[float, float]] = []  # (angle mod 90 degrees in radians, length)
@@ -761,18 +771,20 @@ def find_racks_by_region(
     *,
     resolution_m: float,
     solid: npt.NDArray[np.bool_] | None = None,
+    labelled: Components | None = None,
 ) -> RackLayout:
     """:func:`find_racks` in each texture region (mask, its line directions), regions of one direction as one.
 
     A region's directions are its lines' and those of its long obstacle components
     (:func:`structure_angles`); regions whose strongest direction agrees within 2 degrees are
-    searched together, so a texture border through a hall does not cut its racks.
+    searched together, so a texture border through a hall does not cut its racks. ``labelled`` is
+    ``components(occupied)``, when already labelled.
     """
     shape = occupied.shape
     merged: list[tuple[npt.NDArray[np.bool_] | None, list[float], float]] = []
     for mask, angles in regions:
         inside = occupied if mask is None else occupied & mask
-        own = structure_angles(inside, resolution_m=resolution_m)
+        own = structure_angles(inside, resolution_m=resolution_m, labelled=labelled if mask is None else None)
         # a line direction near a long component's is that direction, less precisely
         tol = math.radians(10.0)
         every = own + [a for a in angles if all(abs(math.remainder(a - b, math.pi / 2)) > tol for b in own)]
@@ -971,7 +983,7 @@ def pocket_merges(
     h, w = segments.shape
     if not rooms:
         return merges
-    area = np.bincount(segments.ravel(), minlength=max(rooms) + 1)
+    area = label_counts(segments, max(int(segments.max()), *rooms) + 1)[0]
     boxes = ndimage.find_objects(segments, max_label=max(rooms))
     for sid in rooms:
         if area[sid] == 0 or (max_area_px is not None and area[sid] > max_area_px):

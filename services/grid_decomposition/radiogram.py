@@ -63,18 +63,22 @@ def radiogram(
     mask : (H, W) bool, optional
         Only edge pixels inside it vote (a texture region).
     """
-    tilt = np.abs((gradients.direction - angle_rad + math.pi / 2) % math.pi - math.pi / 2)
-    keep = tilt <= max_gradient_tilt_rad
+    # (v % pi) by its cases, the same floats as numpy's remainder (fmod, then + pi below 0): directions and
+    # angles lie in [-pi/2, pi/2), so v in (-pi/2, 3pi/2), and v - pi above pi is exact (Sterbenz)
+    v = gradients.direction - angle_rad + math.pi / 2
+    folded = np.where(v < 0, v + math.pi, np.where(v >= math.pi, v - math.pi, v))
+    keep = np.abs(folded - math.pi / 2) <= max_gradient_tilt_rad
     if mask is not None:
         keep &= mask[gradients.rows, gradients.cols]
-    rows, cols, magnitude = gradients.rows[keep], gradients.cols[keep], gradients.magnitude[keep]
     h, w = gradients.shape
     corners = np.array([[0, 0], [0, w], [h, 0], [h, w]], dtype=np.float64)
     s_corner = -math.sin(angle_rad) * corners[:, 1] + math.cos(angle_rad) * corners[:, 0]
     start = math.floor(s_corner.min())
     size = math.ceil(s_corner.max()) - start + 1
-    s = -math.sin(angle_rad) * cols + math.cos(angle_rad) * rows
-    signal = np.bincount(np.rint(s - start).astype(np.int64), weights=magnitude, minlength=size)
+    # every edge pixel, a rejected one with weight 0 (its bin lies in range; adding 0.0 changes no sum): no gathers
+    s = -math.sin(angle_rad) * gradients.cols + math.cos(angle_rad) * gradients.rows
+    weights = np.where(keep, gradients.magnitude, 0.0)
+    signal = np.bincount(np.rint(s - start).astype(np.int64), weights=weights, minlength=size)
     return Radiogram(angle_rad, start, signal[:size].astype(np.float64))
 
 

@@ -9,7 +9,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import distinct, label_counts
+from services.grid_decomposition.arrays import distinct, label_counts, unique_inverse
 
 
 def fill_from_neighbours(
@@ -96,13 +96,10 @@ def segment_image(
     (H, W) int32
         Segment ids 1..N (consecutive), 0 off free space.
     """
-    seg = face_segment.astype(np.int32)[face_image]  # ids are far below 2**31
+    seg = np.take(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
     seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
-    pieces, n_pieces = same_value_pieces(seg)
-    area = label_counts(pieces, n_pieces + 1)[0]
-    owner = np.zeros(n_pieces + 1, dtype=np.int64)
-    owner[pieces.ravel()] = seg.ravel()
+    pieces, n_pieces, owner, area = _pieces(seg)
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
     order = np.lexsort((np.arange(n_pieces + 1), owner))
     big = (area >= min_area_px) & (owner > 0)
@@ -110,8 +107,8 @@ def segment_image(
     kept = order[big[order]]
     lut[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
     next_id = kept.size + 1
-    out = lut[pieces]
-    small = ((owner > 0) & ~big)[pieces]
+    out = np.take(lut, pieces)
+    small = np.take((owner > 0) & ~big, pieces)
     if small.any():
         out = fill_from_neighbours(out, small)
         alone = small & (out == 0)
@@ -132,6 +129,14 @@ def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32]
     joined runs are labelled as a graph, and pieces are numbered by their first pixel in raster
     order, as OpenCV numbers the components of an image.
     """
+    pieces, n, _, _ = _pieces(seg)
+    return pieces, n
+
+
+def _pieces(
+    seg: npt.NDArray[np.int32],
+) -> tuple[npt.NDArray[np.int32], int, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """:func:`same_value_pieces`, and each piece's value and pixel count (index 0: the zero pixels) from its runs."""
     h, w = seg.shape
     flat = np.ascontiguousarray(seg, dtype=np.int32).ravel()
     start = np.empty(flat.size, dtype=bool)
@@ -159,7 +164,10 @@ def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32]
     rank[ids[np.argsort(first_run)]] = np.arange(1, ids.size + 1, dtype=np.int32)
     piece_of_run = np.zeros(n_runs, dtype=np.int32)
     piece_of_run[on] = rank[comp[on]]
-    return np.repeat(piece_of_run, length).reshape(h, w), int(ids.size)
+    owner = np.zeros(ids.size + 1, dtype=np.int64)
+    owner[piece_of_run] = value  # a piece's runs share its value; piece 0's are 0
+    area = np.bincount(piece_of_run, weights=length, minlength=ids.size + 1).astype(np.int64)
+    return np.repeat(piece_of_run, length).reshape(h, w), int(ids.size), owner, area
 
 
 def merge_small_segments(
@@ -249,7 +257,7 @@ def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArra
     """``lut[seg]``; a copy of ``seg`` when ``lut`` changes no id (most calls on a warehouse)."""
     if np.array_equal(lut, np.arange(lut.size)):
         return np.array(seg, dtype=np.int32, copy=True)
-    out: npt.NDArray[np.int32] = lut[seg]
+    out: npt.NDArray[np.int32] = np.take(lut, seg)  # faster than lut[seg], the same values
     return out
 
 
@@ -285,8 +293,8 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
     touched = np.zeros(next_id, dtype=bool)
     touched[seg[barrier]] = True
     touched[0] = False
-    for sid, box in enumerate(ndimage.find_objects(np.where(touched[seg], seg, 0)), start=1):
-        if box is None:
+    for sid, box in enumerate(ndimage.find_objects(seg), start=1):  # a segment's box is its own pixels'
+        if box is None or not touched[sid]:
             continue
         n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=8)
         view = out[box]
@@ -312,24 +320,30 @@ def border_closure(
     total, shut : (K,) int64
         Border pixel pairs, and those closed.
     """
-    seg = np.asarray(segments)
+    seg = np.ascontiguousarray(segments)
     n = int(seg.max()) + 1
+    h, w = seg.shape
+    flat = seg.ravel()
+    shut_flat = None if closed is None else np.ascontiguousarray(closed, dtype=bool).ravel()
     firsts: list[npt.NDArray[np.int64]] = []
     seconds: list[npt.NDArray[np.int64]] = []
     shuts: list[npt.NDArray[np.bool_]] = []
     for dy, dx in ((0, 1), (1, 0)):
-        h, w = seg.shape
-        rows, cols = np.nonzero(seg[: h - dy, : w - dx] != seg[dy:, dx:])
-        firsts.append(seg[rows, cols].astype(np.int64))
-        seconds.append(seg[rows + dy, cols + dx].astype(np.int64))
-        if closed is None:
-            shuts.append(np.zeros(rows.size, dtype=bool))
-        else:
-            shuts.append(closed[rows, cols] | closed[rows + dy, cols + dx])
+        if h - dy == 0 or w - dx == 0:
+            continue
+        # flat indices of the pairs' first pixels (raster order), read with 1-D gathers
+        k = np.flatnonzero(seg[: h - dy, : w - dx] != seg[dy:, dx:])
+        first = k + k // (w - dx) * dx
+        second = first + dy * w + dx
+        firsts.append(flat[first].astype(np.int64))
+        seconds.append(flat[second].astype(np.int64))
+        shuts.append(np.zeros(k.size, dtype=bool) if shut_flat is None else shut_flat[first] | shut_flat[second])
+    if not firsts:
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     a, b, shut_px = np.concatenate(firsts), np.concatenate(seconds), np.concatenate(shuts)
     ok = (a > 0) & (b > 0)
     a, b, shut_px = a[ok], b[ok], shut_px[ok]
-    codes, inverse = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True)
+    codes, inverse = unique_inverse(np.minimum(a, b) * n + np.maximum(a, b))
     total = np.bincount(inverse, minlength=len(codes)).astype(np.int64)
     shut = np.bincount(inverse, weights=shut_px, minlength=len(codes)).astype(np.int64)
     return np.stack([codes // n, codes % n], axis=1), total, shut

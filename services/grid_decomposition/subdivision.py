@@ -144,18 +144,19 @@ def subdivide(
         line_image |= cuts
     inside = ~line_image if domain is None else ~line_image & domain
     n_labels, labels = cv2.connectedComponents(inside.astype(np.uint8), connectivity=4, ltype=cv2.CV_32S)
-    face_image = labels.astype(np.int32)
-    padded = np.pad(face_image, 1)
+    face_image = np.asarray(labels, dtype=np.int32)
+    # the 4 neighbours of every line pixel, by flat index into the face image with a frame of zeros
+    padded = cv2.copyMakeBorder(face_image, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0).ravel()
     idx = np.flatnonzero(line_image)
     r, c = np.divmod(idx, w)
-    r, c = r + 1, c + 1
-    nb = np.stack([padded[r - 1, c], padded[r + 1, c], padded[r, c - 1], padded[r, c + 1]])
+    at = (r + 1) * (w + 2) + c + 1
+    nb = np.stack([padded[at - (w + 2)], padded[at + (w + 2)], padded[at - 1], padded[at + 1]]).astype(np.int64)
     keys: list[npt.NDArray[np.int64]] = []
     pix: list[npt.NDArray[np.int64]] = []
     n_labels64 = np.int64(n_labels)
     for i in range(4):
         for j in range(i + 1, 4):
-            a, b = nb[i].astype(np.int64), nb[j].astype(np.int64)
+            a, b = nb[i], nb[j]
             ok = (a > 0) & (b > 0) & (a != b)
             lo, hi = np.minimum(a[ok], b[ok]), np.maximum(a[ok], b[ok])
             keys.append(lo * n_labels64 + hi)

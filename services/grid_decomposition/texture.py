@@ -8,10 +8,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import distance_transform_edt
-from threadpoolctl import threadpool_limits
 
 from services.grid_decomposition.errors import DecompositionError
-from services.grid_decomposition.places import CLUSTERING
+from services.grid_decomposition.places import CLUSTERING, one_thread
 
 
 def gabor_features(
@@ -103,7 +102,7 @@ def segment_texture_regions(
     from sklearn.cluster import KMeans  # scikit-learn is imported when first needed
     from sklearn.decomposition import PCA
 
-    with CLUSTERING, threadpool_limits(1):
+    with CLUSTERING, one_thread():
         logs = np.log1p(samples)
         reduced = PCA(min(n_components, logs.shape[1]), random_state=seed).fit_transform(logs)
         labels = KMeans(n_regions, n_init=4, random_state=seed).fit_predict(reduced)

@@ -2,10 +2,18 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
-from services.grid_decomposition.arrays import distinct, label_counts, label_sums, unique_inverse
+from services.grid_decomposition.arrays import (
+    distinct,
+    label_counts,
+    label_max,
+    label_sums,
+    near,
+    unique_inverse,
+)
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -51,3 +59,27 @@ def test_label_counts_are_the_pixel_counts_per_label_in_and_out_of_a_mask(shape:
     alone, nothing = label_counts(labels, 8)
     assert np.array_equal(alone, count)
     assert not nothing.any()
+
+
+@pytest.mark.parametrize("mask_size", [3, 5])
+@pytest.mark.parametrize("radius", [0, 1, 2.5, 5, 10.000000000000002, 13.7])
+def test_near_is_the_distance_transform_within_a_radius(mask_size: int, radius: float) -> None:
+    """Sparse and dense masks, pixels at every image border, and a mask without any pixel."""
+    rng = np.random.default_rng(mask_size * 100 + round(radius * 10))
+    for density in (0.0, 0.002, 0.05, 0.6):
+        mask = rng.random((int(rng.integers(3, 90)), int(rng.integers(3, 90)))) < density
+        expected = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, mask_size) <= radius
+        assert np.array_equal(near(mask, radius, mask_size), expected)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_label_max_gives_numpys_maximum_at_and_bincount(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(1, 60, 2))
+    labels = np.repeat(rng.integers(0, 12, (h, (w + 3) // 4)), 4, axis=1)[:, :w].astype(np.int32)  # runs
+    values = (rng.random((h, w)) * 50).astype(np.float32)
+    expected = np.zeros(15, dtype=np.float32)
+    np.maximum.at(expected, labels.ravel(), values.ravel())
+    largest, count = label_max(labels, values, 15)
+    assert largest.dtype == np.float32 and np.array_equal(largest, expected)
+    assert np.array_equal(count, np.bincount(labels.ravel(), minlength=15))

@@ -57,6 +57,22 @@ def test_a_live_map_keeps_its_floor_along_walls_and_uprights() -> None:
     assert np.all(cleaned[22:98, 22:24] == 100) and what.fringe[22:98, 22:24].all()
 
 
+@pytest.mark.parametrize("resolution_m", [RES, RES / 2])  # a speck is 1 cell at 5 cm, up to 4 cells at 2.5 cm
+def test_specks_at_the_map_edge_and_beside_walls(resolution_m: float) -> None:
+    """A speck at the map's edge with only free cells beside it is free; one touching a wall, even at a corner, or
+    touching another obstacle cell is no speck."""
+    occ = np.zeros((40, 40), dtype=np.int8)
+    occ[10:30, 20] = 100  # a wall
+    occ[0, 0] = occ[39, 17] = 100  # alone at the map's corner and edge
+    occ[9, 21] = 100  # diagonal to the wall's end
+    occ[35:37, 30] = 100  # a 2-cell blob: a speck at 2.5 cm only
+    occ[20, 5] = 100  # alone in the middle
+    cleaned, what = clean_occupancy(occ, resolution_m=resolution_m)
+    assert cleaned[0, 0] == cleaned[39, 17] == cleaned[20, 5] == 0 and what.specks[20, 5]
+    assert cleaned[9, 21] == 100 and np.all(cleaned[10:30, 20] == 100)
+    assert np.all(cleaned[35:37, 30] == (0 if resolution_m < RES else 100))
+
+
 def test_an_isolated_free_speck_in_unknown_space_is_removed() -> None:
     occ = _room()
     occ[5:8, 5:8] = 0

@@ -37,6 +37,24 @@ def test_close_doorways_bridges_two_doors_split_by_a_post_but_not_an_open_side()
     assert g0.size == 0
 
 
+def test_close_doorways_of_several_lines_at_once_closes_each_line_alone() -> None:
+    """Profiles one after the other: a wall ending one line and a wall starting the next are two runs with no
+    doorway between them, a short run split by the change of line is no wall, and each line's own doors and posts
+    close as they do alone."""
+    rng = np.random.default_rng(3)
+    profiles = [rng.random(int(rng.integers(1, 80))) < 0.7 for _ in range(12)]
+    profiles[3][-4:] = profiles[4][:4] = True  # 4 + 4 cells across a change of line: two short runs
+    posts = [p | (rng.random(p.size) < 0.2) for p in profiles]
+    first = np.cumsum([0] + [p.size for p in profiles[:-1]])
+    wall, g0, g1 = close_doorways(
+        np.concatenate(profiles), min_wall_px=5, max_door_px=6, posts=np.concatenate(posts), first=first
+    )
+    alone = [close_doorways(p, min_wall_px=5, max_door_px=6, posts=q) for p, q in zip(profiles, posts, strict=True)]
+    assert np.array_equal(wall, np.concatenate([w for w, _, _ in alone]))
+    assert np.array_equal(g0, np.concatenate([a + f for (_, a, _), f in zip(alone, first, strict=True)]))
+    assert np.array_equal(g1, np.concatenate([b + f for (_, _, b), f in zip(alone, first, strict=True)]))
+
+
 def test_subdivide_two_crossing_lines_gives_four_faces_and_four_edges() -> None:
     lines = (Line(0.0, 50.0, 1.0, 0.1, True), Line(math.pi / 2, -40.0, 1.0, 0.1, True))
     sub = subdivide([LineGroup(lines, None)], (100, 80))
