@@ -17,6 +17,10 @@ Sets (``--sets``, all by default):
 
 Prints a Markdown table per set and ``name value unit`` summary lines. Run (one BLAS thread):
 ``PYTHONPATH=. .venv/bin/python bench/eval_ipa.py [--sets ipa rose2 partial] [--variants '' _furnitures]``.
+``--explain DIR`` adds, per ROSE² full map, what its scores are made of: per ground-truth room the
+segment holding most of it, its recall and best IoU; per segment its purity (its precision term);
+and ``DIR/<map>_explain.png``: the rooms coloured by their best IoU over the segments coloured by
+their purity (red 0, green 1; white borders, room and segment numbers).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 from PIL import Image
@@ -39,6 +44,7 @@ from services.grid_decomposition.evaluation import (
     align_offset,
     colour_rooms,
     id_stability,
+    matches,
     on_free,
     shift_into,
 )
@@ -78,13 +84,14 @@ def main() -> None:
     parser.add_argument("--sets", nargs="*", default=list(SETS), choices=SETS, help="which sets to run")
     parser.add_argument("--variants", nargs="*", default=list(VARIANTS), help="ipa suffixes, '' = plain")
     parser.add_argument("--maps", nargs="*", default=None, help="only these ROSE2 full maps / ipa map names")
+    parser.add_argument("--explain", type=Path, default=None, help="per room / segment tables and pictures here")
     args = parser.parse_args()
     print(f"load average at start {os.getloadavg()[0]:.2f}")
     with threadpool_limits(1):
         if "ipa" in args.sets:
             _ipa(args.variants, args.maps)
         if "rose2" in args.sets:
-            _rose2_full(args.maps)
+            _rose2_full(args.maps, args.explain)
         if "partial" in args.sets:
             _partial()
     print(f"load average at end {os.getloadavg()[0]:.2f}")
@@ -199,20 +206,62 @@ def _rose2_scores(
     return np.asarray(ours, dtype=np.int32), s, peer, free
 
 
-def _rose2_full(only: list[str] | None) -> None:
+def _rose2_full(only: list[str] | None, explain: Path | None = None) -> None:
     _header("set")
     ours: list[Row] = []
     theirs: list[Row] = []
     for folder in sorted(p for p in (ROSE2 / "full").iterdir() if p.is_dir()):
         if only and folder.name not in only:
             continue
-        _, _, s, peer, row = _rose2_map(folder)
+        segments, free, s, peer, row = _rose2_map(folder)
+        if explain is not None:
+            _explain(folder, segments, free, explain)
         ours.append(row)
         theirs.append(Row(peer, float("nan"), float("nan")))
         _row("rose2", folder.name, s, row.seconds, row.cpu)
         _row("rose2_peer", folder.name, peer)
     _summary("rose2", ours)
     _summary("rose2_peer", theirs)
+
+
+def _explain(folder: Path, segments: npt.NDArray[np.int32], free: npt.NDArray[np.bool_], out: Path) -> None:
+    """Print what one map's scores are made of and draw it (see the module docstring)."""
+    rooms = on_free(colour_rooms(_common(_rgb(folder / "gt.png"), free)[0]), free)
+    ours = on_free(segments, free)
+    room_rows, segment_rows = matches(ours, rooms)
+    print(f"\n{folder.name}: room, m\u00b2, segment holding most of it, recall, best IoU")
+    for r in room_rows:
+        print(f"  R{r.room} {r.pixels * RESOLUTION_M**2:.1f} {r.segment} {r.recall:.2f} {r.iou:.2f}")
+    print(f"{folder.name}: segment, m\u00b2, room holding most of it, purity")
+    for g in segment_rows:
+        print(f"  {g.segment} {g.pixels * RESOLUTION_M**2:.1f} R{g.room} {g.purity:.2f}")
+    top, bottom = (np.repeat(np.where(free, 90, 170).astype(np.uint8)[..., None], 3, axis=2) for _ in range(2))
+    iou = np.zeros(int(rooms.max()) + 1)
+    iou[[r.room for r in room_rows]] = [r.iou for r in room_rows]
+    purity = np.zeros(int(ours.max()) + 1)
+    purity[[g.segment for g in segment_rows]] = [g.purity for g in segment_rows]
+    scored = np.isin(ours, [g.segment for g in segment_rows])
+    for image, labels, value, mask in ((top, rooms, iou, rooms > 0), (bottom, ours, purity, scored)):
+        v = value[labels][mask]
+        image[mask] = np.stack([255 * (1 - v), 255 * v, np.zeros_like(v)], axis=1).astype(np.uint8)
+        image[_borders(labels)] = 255
+        for k in np.unique(labels[mask]).tolist():
+            rows, cols = np.nonzero(labels == k)
+            cv2.putText(image, f"R{k}" if labels is rooms else str(k), (int(cols.mean()), int(rows.mean())),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1)
+    rows, cols = np.nonzero(free)
+    crop = (slice(max(int(rows.min()) - 20, 0), int(rows.max()) + 21),
+            slice(max(int(cols.min()) - 20, 0), int(cols.max()) + 21))
+    picture = np.vstack([top[crop], np.full((8, top[crop].shape[1], 3), 255, np.uint8), bottom[crop]])
+    out.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(picture).save(out / f"{folder.name}_explain.png")
+
+
+def _borders(labels: npt.NDArray[np.int32]) -> npt.NDArray[np.bool_]:
+    edge = np.zeros(labels.shape, dtype=bool)
+    edge[1:] |= labels[1:] != labels[:-1]
+    edge[:, 1:] |= labels[:, 1:] != labels[:, :-1]
+    return edge
 
 
 def _partial() -> None:

@@ -59,6 +59,36 @@ def _drop_small(labels: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.int32]:
     return remap[labels]
 
 
+class _Overlap(NamedTuple):
+    segment_ids: npt.NDArray[np.int64]  # (S,) the segmentation's own id of each scored segment
+    pixels: npt.NDArray[np.int64]  # (S, R) pixels of segment i in room j
+    segment_px: npt.NDArray[np.float64]  # (S,)
+    room_px: npt.NDArray[np.float64]  # (R,)
+
+
+def _overlap(segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]) -> _Overlap:
+    seg = np.asarray(segments)
+    if seg.shape != rooms.shape:
+        raise DecompositionError(f"segmentation shape {seg.shape} differs from ground truth {rooms.shape}")
+    values, inverse = np.unique(seg, return_inverse=True)
+    shift = 0 if values[0] == 0 else 1
+    dense = inverse.reshape(seg.shape).astype(np.int32) + np.int32(shift)
+    seg_ids = _drop_small(dense, int(dense.max()) + 1)
+    n_seg, n_room = int(seg_ids.max()), int(rooms.max())
+    if n_room == 0:
+        raise DecompositionError("ground truth has no room larger than 100 px")
+    both = (seg_ids > 0) & (rooms > 0)
+    overlap = np.zeros((n_seg + 1, n_room + 1), dtype=np.int64)
+    np.add.at(overlap, (seg_ids[both], rooms[both]), 1)
+    seg_size = np.bincount(seg_ids.ravel(), minlength=n_seg + 1)[1:].astype(np.float64)
+    room_size = np.bincount(rooms.ravel(), minlength=n_room + 1)[1:].astype(np.float64)
+    # the dense id each scored segment had before the small ones were dropped, and its own id
+    first = np.zeros(n_seg + 1, dtype=np.int64)
+    first[seg_ids.ravel()] = dense.ravel()
+    own = values[np.maximum(first[1:] - shift, 0)].astype(np.int64)
+    return _Overlap(own, overlap[1:, 1:], seg_size, room_size)
+
+
 def ipa_scores(segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]) -> IpaScores:
     """Score a segmentation against ground-truth rooms with the ipa protocol.
 
@@ -69,23 +99,12 @@ def ipa_scores(segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]) 
     rooms : (H, W) int32
         From :func:`ground_truth_rooms`.
     """
-    seg = np.asarray(segments)
-    if seg.shape != rooms.shape:
-        raise DecompositionError(f"segmentation shape {seg.shape} differs from ground truth {rooms.shape}")
-    values, inverse = np.unique(seg, return_inverse=True)
-    dense = inverse.reshape(seg.shape).astype(np.int32) + np.int32(0 if values[0] == 0 else 1)
-    seg_ids = _drop_small(dense, int(dense.max()) + 1)
-    n_seg, n_room = int(seg_ids.max()), int(rooms.max())
-    if n_room == 0:
-        raise DecompositionError("ground truth has no room larger than 100 px")
-    both = (seg_ids > 0) & (rooms > 0)
-    overlap = np.zeros((n_seg + 1, n_room + 1), dtype=np.int64)
-    np.add.at(overlap, (seg_ids[both], rooms[both]), 1)
-    seg_size = np.bincount(seg_ids.ravel(), minlength=n_seg + 1)[1:].astype(np.float64)
-    room_size = np.bincount(rooms.ravel(), minlength=n_room + 1)[1:].astype(np.float64)
-    o = overlap[1:, 1:].astype(np.float64)
-    if n_seg == 0:
+    ov = _overlap(segments, rooms)
+    seg_size, room_size = ov.segment_px, ov.room_px
+    n_room = room_size.size
+    if seg_size.size == 0:
         return IpaScores(0.0, 0.0, 0.0, 0.0, 0.0, n_room, 0)
+    o = ov.pixels.astype(np.float64)
     precision = o.max(axis=1) / seg_size
     recall = o.max(axis=0) / room_size
     iou = (o / (seg_size[:, None] + room_size[None, :] - o)).max(axis=0)
@@ -96,8 +115,62 @@ def ipa_scores(segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]) 
         precision_weighted=float(np.average(precision, weights=seg_size)),
         mean_iou=float(iou.mean()),
         n_rooms=n_room,
-        n_segments=n_seg,
+        n_segments=int(seg_size.size),
     )
+
+
+class RoomMatch(NamedTuple):
+    """One ground-truth room's terms of :func:`ipa_scores`: its recall (share of it in the segment holding
+    most of it) and its best IoU with any segment."""
+
+    room: int
+    pixels: int
+    segment: int  # the segment holding most of the room (its own id), 0 if none
+    recall: float
+    iou: float
+
+
+class SegmentMatch(NamedTuple):
+    """One segment's term of :func:`ipa_scores`: its precision (purity: the share of it in its best room)."""
+
+    segment: int
+    pixels: int
+    room: int  # the room holding most of it, 0 if none
+    purity: float
+
+
+def matches(
+    segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]
+) -> tuple[list[RoomMatch], list[SegmentMatch]]:
+    """Per room and per segment, the terms :func:`ipa_scores` averages: what a low score is made of.
+
+    Segments keep their own ids; segments and rooms of at most 100 px are left out, as in the scores.
+    """
+    ov = _overlap(segments, rooms)
+    o = ov.pixels.astype(np.float64)
+    if ov.segment_px.size == 0:
+        return [RoomMatch(j + 1, int(p), 0, 0.0, 0.0) for j, p in enumerate(ov.room_px) if p > 0], []
+    iou = o / (ov.segment_px[:, None] + ov.room_px[None, :] - o)
+    best_segment = o.argmax(axis=0)
+    best_room = o.argmax(axis=1)
+    room_rows = [
+        RoomMatch(
+            j + 1, int(ov.room_px[j]),
+            int(ov.segment_ids[best_segment[j]]) if o[best_segment[j], j] > 0 else 0,
+            float(o[best_segment[j], j] / ov.room_px[j]), float(iou[:, j].max()),
+        )
+        for j in range(ov.room_px.size)
+        if ov.room_px[j] > 0
+    ]
+    segment_rows = [
+        SegmentMatch(
+            int(ov.segment_ids[i]), int(ov.segment_px[i]),
+            int(best_room[i]) + 1 if o[i, best_room[i]] > 0 else 0,
+            float(o[i, best_room[i]] / ov.segment_px[i]),
+        )
+        for i in range(ov.segment_px.size)
+    ]
+    return room_rows, segment_rows
 
 
 def colour_rooms(

@@ -10,6 +10,7 @@ from services.grid_decomposition.evaluation import (
     align_offset,
     colour_rooms,
     id_stability,
+    matches,
     on_free,
     shift_into,
 )
@@ -40,6 +41,26 @@ def test_small_segments_and_rooms_are_dropped() -> None:
     seg = rooms.copy()
     seg[6:8, 6:8] = 9  # 4 px segment: ignored
     assert ipa_scores(seg, rooms).n_segments == 2
+
+
+def test_matches_say_which_room_a_mixed_segment_spoils_and_keep_segment_ids() -> None:
+    rooms = ground_truth_rooms(_two_rooms())  # two rooms of 30 x 35 px
+    seg = np.where(rooms > 0, 42, 0).astype(np.int32)  # one segment over both rooms...
+    seg[5:35, 60:76] = 7  # ...but for the right part of the right room
+    seg[6:8, 6:8] = 9  # 4 px: not scored
+    room_rows, segment_rows = matches(seg, rooms)
+    by_room = {r.room: r for r in room_rows}
+    assert by_room[1].segment == 42 and by_room[1].recall == pytest.approx(1046 / 1050)
+    assert by_room[1].iou == pytest.approx(1046 / 1620)  # the segment also holds 570 px of room 2
+    assert by_room[2].segment == 42 and by_room[2].recall == pytest.approx(19 / 35)
+    assert by_room[2].iou == pytest.approx(16 / 35)  # its best IoU is segment 7's
+    purity = {g.segment: (g.room, g.purity) for g in segment_rows}
+    assert set(purity) == {7, 42}
+    assert purity[7] == (2, 1.0) and purity[42][0] == 1 and purity[42][1] == pytest.approx(1046 / 1616)
+    s = ipa_scores(seg, rooms)  # the terms the scores average
+    assert s.recall == pytest.approx(np.mean([r.recall for r in room_rows]))
+    assert s.precision == pytest.approx(np.mean([g.purity for g in segment_rows]))
+    assert s.mean_iou == pytest.approx(np.mean([r.iou for r in room_rows]))
 
 
 def test_shape_mismatch_is_an_error() -> None:
