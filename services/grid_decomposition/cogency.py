@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import label_counts
 from services.grid_decomposition.doorways import widens
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, line_endpoints
 
@@ -205,10 +206,10 @@ def edge_cogency(
     """
     faces = sub.face_image.ravel()
     n = sub.n_faces + 1
-    area = np.bincount(faces, minlength=n).astype(np.float64)
+    count, free_px = label_counts(sub.face_image, n, free)
+    area = count.astype(np.float64)
     occ_sum = np.bincount(faces, weights=occupancy01.ravel(), minlength=n)
     face_occ = np.divide(occ_sum, area, out=np.ones(n), where=area > 0)
-    free_px = np.bincount(faces[free.ravel()], minlength=n).astype(np.int64)
     free_px[0] = 0
     face_occ[0] = 1.0
     e_n = np.diff(sub.edge_starts)

@@ -224,7 +224,7 @@ def _elongation(
     width = np.zeros(n, dtype=np.float32)
     np.maximum.at(width, component, face_width)
     width[0] = 0.0
-    face_area = np.bincount(face_image.ravel(), minlength=component.size)
+    face_area = label_counts(face_image, component.size)[0]
     area = np.bincount(component, weights=face_area, minlength=n).astype(np.float64)
     elongation: npt.NDArray[np.float64] = area / np.maximum(2.0 * width.astype(np.float64), 1.0) ** 2
     return elongation
@@ -242,8 +242,7 @@ def _face_angles(sub: Subdivision, groups: list[LineGroup]) -> npt.NDArray[np.fl
         for ln in group.lines:
             support[ln.angle_rad] = support.get(ln.angle_rad, 0.0) + ln.support_m
         main = max(support, key=lambda a: support[a])
-        pixels = sub.face_image if group.mask is None else sub.face_image[group.mask]
-        count = np.bincount(pixels.ravel(), minlength=n)
+        count = label_counts(sub.face_image, n, group.mask)[0 if group.mask is None else 1]
         more = count > best
         angle[more], best[more] = main, count[more]
     return angle
@@ -387,11 +386,23 @@ def decompose(
             categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed
         )
         occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
+        against_walls_job = beside.submit(wall_furniture, obstacle, resolution_m=resolution_m)
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
+        standing_job = (
+            beside.submit(
+                free_standing,
+                obstacle,
+                resolution_m=resolution_m,
+                max_extent_m=island_max_extent_m,
+                min_clearance_m=island_min_clearance_m,
+                labelled=obstacle_parts,
+            )
+            if island_max_extent_m > 0
+            else None
+        )
         clutter = furniture(obstacle, resolution_m=resolution_m, labelled=obstacle_parts)
         occupied_parts = components(occupied)  # labelled once: shelf dashes, floor objects
         banks = find_shelf_banks(occupied, free, resolution_m=resolution_m, labelled=occupied_parts)
-        against_walls = wall_furniture(obstacle, resolution_m=resolution_m)
         gradients = oriented_gradients(obstacle)
         # the sides of laser rays are no walls: they would give the map directions of their own
         ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
@@ -415,14 +426,8 @@ def decompose(
         logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
         # furniture and obstacles standing free in a room are no wall: no doorway ends on them
         walls = (occupied | ~known) & ~clutter
-        if island_max_extent_m > 0:
-            walls &= ~free_standing(
-                obstacle,
-                resolution_m=resolution_m,
-                max_extent_m=island_max_extent_m,
-                min_clearance_m=island_min_clearance_m,
-                labelled=obstacle_parts,
-            )
+        if standing_job is not None:
+            walls &= ~standing_job.result()
         evidence_job = beside.submit(
             wall_evidence,
             walls,
@@ -502,14 +507,14 @@ def decompose(
             occupied=occupied,
         )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
-        against_walls &= segments == 0
+        against_walls = against_walls_job.result() & (segments == 0)
         grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
         segments = np.where(against_walls, grown, segments)
         # the streaks the cleaning took out are free space: they take the region they grow from
         segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
         if fan_max_neck_m > 0:  # a room seen only through its door: a fan of rays, not the corridor's floor
-            on_floor = np.bincount(segments[floor_px], minlength=int(segments.max()) + 1)
-            floors = on_floor > 0.5 * np.bincount(segments.ravel(), minlength=on_floor.size)
+            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            floors = on_floor > 0.5 * size
             segments = split_fans(
                 segments, rays | streaks, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
@@ -519,22 +524,24 @@ def decompose(
             segments, racks, free | streaks, min_area_px=round(room_min_area_m2 / resolution_m**2),
             n_known=0 if known_places is None else known_places.cell_labels.size - 1,
         )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
+        in_place = places > 0
         if prior is not None:
             if prior.regions.shape != occ.shape or prior.unchanged.shape != occ.shape:
                 raise DecompositionError(f"a prior of shape {prior.regions.shape} on a grid of {occ.shape}")
             # rack places (racks, aisles, cross aisles) are found anew every time: a rack is often seen whole only
             # later
-            found_anew = places > 0
             segments = keep_regions(
-                segments, RegionPrior(np.where(found_anew, 0, prior.regions), prior.unchanged & ~found_anew),
+                segments, RegionPrior(np.where(in_place, 0, prior.regions), prior.unchanged & ~in_place),
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
             )
         pairs = _pairs(segments, sub)
-        racked = floor_px | banks.storage | (places > 0)  # the only floor a storage region may stand on
+        racked = floor_px | banks.storage | in_place  # the only floor a storage region may stand on
         regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
         # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
-        structured_segments = set(np.flatnonzero(np.bincount(segments[(places > 0) | floor_px])).tolist())
+        structured_segments = set(
+            np.flatnonzero(label_counts(segments, int(segments.max()) + 1, in_place | floor_px)[1]).tolist()
+        )
         rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
         open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
         objects = (
@@ -554,7 +561,7 @@ def decompose(
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
         if room_ids:  # a room mostly on rack places is no room: it takes their label
             n_seg = int(segments.max()) + 1
-            size, in_places = label_counts(segments, n_seg, places > 0)
+            size, in_places = label_counts(segments, n_seg, in_place)
             for k in room_ids:
                 if in_places[k] > 0.5 * size[k]:
                     held = places[segments == k]
@@ -571,6 +578,16 @@ def decompose(
                 k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
                 for k, r in regions.items()
             }
+        topology_job = beside.submit(
+            region_topology,
+            sub,
+            cog,
+            _final_face_regions(pairs, sub.n_faces),
+            regions,
+            segments=segments,
+            doorways=door | cuts,
+            min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
+        )
         region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
         for k, r in regions.items():
             region_label[k] = r.label.value
@@ -579,26 +596,16 @@ def decompose(
         loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
         labels = np.where(loose & (own > 0), own, labels)
         # a rack place's label, unless a person renamed the category of the face there
-        kept_place = places > 0
+        kept_place = in_place
         if label_overrides:
-            kept_place &= ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
+            kept_place = in_place & ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
         labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
         labels = np.where(free | streaks, labels, 0).astype(np.uint8)
-        face_region_final = _final_face_regions(pairs, sub.n_faces)
-        topology = region_topology(
-            sub,
-            cog,
-            face_region_final,
-            regions,
-            segments=segments,
-            doorways=door | cuts,
-            min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
-        )
         return Decomposition(
             labels=labels,
             segments=segments,
             regions=regions,
-            topology=topology,
+            topology=topology_job.result(),
             line_groups=tuple(groups),
             subdivision=sub,
             cogency=cog,
@@ -631,7 +638,7 @@ def _pairs(segments: npt.NDArray[np.int32], sub: Subdivision) -> _Pairs:
     rep = np.zeros(sub.n_faces + 1, dtype=np.int32)
     rep[f] = s
     agree = (s == rep[f]) & (s > 0)
-    agree_count = np.bincount(f, weights=agree, minlength=rep.size)
+    agree_count = label_counts(f, rep.size, agree)[1].astype(np.float64)
     other = np.flatnonzero(~agree & (s > 0))
     n_seg = np.int64(int(s.max()) + 1)
     keys, counts = np.unique(f[other].astype(np.int64) * n_seg + s[other], return_counts=True)

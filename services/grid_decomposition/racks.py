@@ -33,7 +33,7 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import Components, components, unique_inverse
+from services.grid_decomposition.arrays import Components, components, label_counts, unique_inverse
 from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
@@ -855,7 +855,7 @@ def place_segments(
     region = free | (segments > 0)  # furniture inside a room is part of its segment
     in_cells = layout.cells > 0
     # a place with a crumb of free space (a solid rack's edge pixel) is no region of its own
-    n_free = np.bincount(layout.cells[free], minlength=layout.cell_labels.size)
+    n_free = label_counts(layout.cells, layout.cell_labels.size, free)[1]
     crumb = (n_free > 0) & (n_free < min_area_px)
     crumb[: n_known + 1] = False
     cells = np.where(crumb[layout.cells], 0, layout.cells) if crumb.any() else layout.cells
@@ -863,8 +863,8 @@ def place_segments(
     n_old = int(segments.max()) + 1
     # known places are no reason to give up what is left of a segment (a hall's floor round its racks)
     known = in_cells & (layout.cells <= n_known) if n_known else None
-    before = np.bincount(segments.ravel() if known is None else segments[~known], minlength=n_old)
-    after = np.bincount(segments[~in_cells], minlength=n_old)
+    count, after = label_counts(segments, n_old, ~in_cells)
+    before = count if known is None else label_counts(segments, n_old, ~known)[1]
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
     floor = left[segments] & ~in_cells & region if left.any() else np.zeros(free.shape, dtype=bool)
@@ -901,7 +901,7 @@ def place_segments(
         largest[owner[order][first]] = order[first]
         target = np.where(size >= min_area_px, np.arange(size.size), largest[owner])
         out[cell] = n_old + layout.cell_labels.size + target[pieces]
-    present = np.bincount(out.ravel(), minlength=int(out.max()) + 1) > 0
+    present = label_counts(out, int(out.max()) + 1)[0] > 0
     present[0] = True
     lut = (np.cumsum(present) - 1).astype(np.int32)
     return lut[out], np.where(inside, place, 0).astype(np.int32, copy=False)
