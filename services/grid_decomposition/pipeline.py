@@ -491,7 +491,7 @@ def decompose(
         segments = segment_image(
             sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
         )
-        floor_px = structured[component[sub.face_image]] | (racks.cells > 0)  # the room stage leaves racks alone
+        floor_px = structured[component][sub.face_image] | (racks.cells > 0)  # the room stage leaves racks alone
         segments, cuts = segment_rooms(
             segments,
             clutter,

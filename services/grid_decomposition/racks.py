@@ -820,10 +820,11 @@ def face_places(
     out = np.zeros(n_faces + 1, dtype=np.int64)
     if layout.cell_labels.size <= 1:
         return out
-    faces = face_image[free]
-    place = layout.cell_labels[layout.cells[free]]
     n_lab = len(PlaceLabel)
-    votes = np.bincount(faces * n_lab + place, minlength=(n_faces + 1) * n_lab).reshape(n_faces + 1, n_lab)
+    # free pixels per (face, place label), counted from the runs of equal keys along the rows
+    dtype = np.int32 if (n_faces + 1) * n_lab < 2**31 else np.int64
+    key = face_image.astype(dtype, copy=False) * n_lab + layout.cell_labels.astype(dtype)[layout.cells]
+    votes = label_counts(key, (n_faces + 1) * n_lab, free)[1].reshape(n_faces + 1, n_lab)
     best = votes[:, 1:].argmax(axis=1) + 1
     majority = votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1)
     out[majority] = best[majority]
