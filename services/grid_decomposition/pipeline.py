@@ -69,7 +69,13 @@ _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by 
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules
 _STEP_MODULES = (
-    "networkx", "scipy.signal", "scipy.stats", "sklearn.cluster", "sklearn.decomposition", "sklearn.preprocessing"
+    "networkx",
+    "scipy.optimize",
+    "scipy.signal",
+    "scipy.stats",
+    "sklearn.cluster",
+    "sklearn.decomposition",
+    "sklearn.preprocessing",
 )
 
 
@@ -369,8 +375,9 @@ def decompose(
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
     # a second thread (the machine's second core: OpenCV and numpy calls release the GIL) loads the
     # steps' modules while this one cleans the map and finds its furniture and shelf banks, then
-    # runs steps beside the line search, the rack search and the cogency that do not need their
-    # results; each step gives the same result as run in turn
+    # runs steps beside the line search (place categories, furniture against walls, free-standing
+    # obstacles), the rack search and the cogency that do not need their results, and the region
+    # graph beside the label image; each step gives the same result as run in turn
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
         loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
         streaks = rays = np.zeros(occ.shape, dtype=bool)

@@ -149,7 +149,9 @@ def _grown_step_by_step(seg: np.ndarray, target: np.ndarray, steps: int) -> np.n
     out = seg.copy()
     hole = target & (out == 0)
     for _ in range(steps):
-        grown = cv2.dilate(out.astype(np.float64), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+        grown = cv2.dilate(
+            out.astype(np.float64), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0
+        )
         take = hole & (grown > 0)
         if not take.any():
             break
@@ -174,4 +176,5 @@ def test_fill_from_neighbours_grows_a_step_at_a_time_through_lines_and_wide_gaps
     target[60:, :] = False
     seg[60:, :] = 0
     target[66:70, 10:20] = True
-    assert np.array_equal(fill_from_neighbours(seg, target, max_iterations=steps), _grown_step_by_step(seg, target, steps))
+    filled = fill_from_neighbours(seg, target, max_iterations=steps)
+    assert np.array_equal(filled, _grown_step_by_step(seg, target, steps))
