@@ -215,14 +215,15 @@ def _texture_count(lines: dict[float, list[Line]]) -> int:
     return max(1, len(strong))
 
 
+def _clearance(free: npt.NDArray[np.bool_]) -> npt.NDArray[np.float32]:
+    """Distance of every free pixel to the nearest obstacle, pixels (0 off free space)."""
+    return np.asarray(cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3), dtype=np.float32)
+
+
 def _elongation(
-    component: npt.NDArray[np.int64],
-    face_image: npt.NDArray[np.int32],
-    free: npt.NDArray[np.bool_],
-    resolution_m: float,
+    component: npt.NDArray[np.int64], face_image: npt.NDArray[np.int32], dist: npt.NDArray[np.float32]
 ) -> npt.NDArray[np.float64]:
-    """Area / clearance^2 of each component (clearance = twice the largest distance to an obstacle)."""
-    dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3)
+    """Area / clearance^2 of each component (clearance = twice the largest distance ``dist`` to an obstacle)."""
     n = int(component.max()) + 1
     # per face first, then per component (a face's pixels all lie in its component)
     face_width = np.zeros(component.size, dtype=np.float32)
@@ -454,13 +455,13 @@ def decompose(
             if known_places.cells.shape != occ.shape:
                 raise DecompositionError(f"known places of shape {known_places.cells.shape} on a grid of {occ.shape}")
             racks = combine([known_places, racks], occ.shape)
+        clearance_job = beside.submit(_clearance, free)  # for the elongation, while this thread subdivides
         sub = subdivide(used, occ.shape, domain=free, cuts=banks.outline | racks.outline)
         geometry_job = beside.submit(
             lambda: face_geometry(
                 sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m, face_angle_rad=_face_angles(sub, used)
             )
         )
-        rack_place_job = beside.submit(face_places, sub.face_image, sub.n_faces, racks, free)
         wall, door = evidence_job.result()
         cog = edge_cogency(
             sub,
@@ -474,7 +475,8 @@ def decompose(
         is_face = cog.face_free_px > 0
         connected = sub.edge_faces[~cog.cogent]
         component = link_components(sub.n_faces + 1, connected, is_face)
-        elongation = _elongation(component, sub.face_image, free, resolution_m)
+        elongation = _elongation(component, sub.face_image, clearance_job.result())
+        rack_place = face_places(sub.face_image, sub.n_faces, racks, free)  # while the other thread finds geometry
         geometry = geometry_job.result()
         found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
         evidence = found.label.copy()
@@ -483,7 +485,6 @@ def decompose(
         evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = PlaceLabel.CORRIDOR.value
         rows, cols, cats = places_job.result()
         face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
-        rack_place = rack_place_job.result()
         evidence = np.where(rack_place > 0, rack_place, evidence)
         face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
         # regions come from the automatic labels: a person's overrides rename places, they do not
