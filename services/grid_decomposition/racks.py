@@ -822,7 +822,7 @@ def face_places(
         return out
     n_lab = len(PlaceLabel)
     # free pixels per (face, place label), counted from the runs of equal keys along the rows
-    dtype = np.int32 if (n_faces + 1) * n_lab < 2**31 else np.int64
+    dtype = np.dtype(np.int32 if (n_faces + 1) * n_lab < 2**31 else np.int64)
     key = face_image.astype(dtype, copy=False) * n_lab + layout.cell_labels.astype(dtype)[layout.cells]
     votes = label_counts(key, (n_faces + 1) * n_lab, free)[1].reshape(n_faces + 1, n_lab)
     best = votes[:, 1:].argmax(axis=1) + 1
