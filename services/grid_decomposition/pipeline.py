@@ -487,6 +487,7 @@ def decompose(
         face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
         evidence = np.where(rack_place > 0, rack_place, evidence)
         face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
+        label_image_job = beside.submit(lambda: face_labels.label.astype(np.int32)[sub.face_image])
         # regions come from the automatic labels: a person's overrides rename places, they do not
         # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
         # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
@@ -545,7 +546,9 @@ def decompose(
             )
         pairs = _pairs(segments, sub)
         racked = floor_px | banks.storage | in_place  # the only floor a storage region may stand on
-        regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
+        regions, labels = _region_records(
+            segments, pairs, face_labels, label_image_job.result(), racked, resolution_m, origin_xy_m
+        )
         # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
         structured_segments = set(
             np.flatnonzero(label_counts(segments, int(segments.max()) + 1, in_place | floor_px)[1]).tolist()
@@ -565,7 +568,9 @@ def decompose(
             lut[list(merges)] = list(merges.values())
             segments = lut[lut[segments]]
             pairs = _pairs(segments, sub)
-            regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
+            regions, labels = _region_records(
+            segments, pairs, face_labels, label_image_job.result(), racked, resolution_m, origin_xy_m
+        )
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
         if room_ids:  # a room mostly on rack places is no room: it takes their label
             n_seg = int(segments.max()) + 1
@@ -672,14 +677,14 @@ def _final_face_regions(pairs: _Pairs, n_faces: int) -> npt.NDArray[np.int64]:
 
 def _region_records(
     segments: npt.NDArray[np.int32],
-    sub: Subdivision,
     pairs: _Pairs,
     face_labels: FaceLabels,
+    label_image: npt.NDArray[np.int32],
     racked: npt.NDArray[np.bool_],
     resolution_m: float,
     origin_xy_m: tuple[float, float],
 ) -> tuple[dict[int, RegionInfo], npt.NDArray[np.uint8]]:
-    """Region records (label: its faces' majority) and the label image (each face's own label).
+    """Region records (label: its faces' majority) and the label image (each face's own label, ``label_image``).
 
     Open floor is never storage: a region mostly off ``racked`` (racks, rack places, warehouse
     floors, shelf banks) takes the majority of its other faces' labels, open area when all its
@@ -713,7 +718,7 @@ def _region_records(
             int(sid), PlaceLabel(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
         )
     inside = segments > 0
-    labels = np.where(inside, face_labels.label.astype(np.int32)[sub.face_image], 0).astype(np.int32)
+    labels = np.where(inside, label_image, 0).astype(np.int32, copy=False)
     labels = fill_from_neighbours(labels, inside)
     hole = inside & (labels == 0)
     labels[hole] = seg_label[segments[hole]]
