@@ -487,7 +487,6 @@ def decompose(
         face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
         evidence = np.where(rack_place > 0, rack_place, evidence)
         face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
-        label_image_job = beside.submit(lambda: face_labels.label.astype(np.int32)[sub.face_image])
         # regions come from the automatic labels: a person's overrides rename places, they do not
         # merge a warehouse's pallet cells and aisles into one region; a cross aisle one bay wide
         # keeps the place of a pallet cell in that structure (it is cut like one), named corridor
@@ -544,11 +543,11 @@ def decompose(
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
             )
+        grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)
         racked = floor_px | banks.storage | in_place  # the only floor a storage region may stand on
-        regions, labels = _region_records(
-            segments, pairs, face_labels, label_image_job.result(), racked, resolution_m, origin_xy_m
-        )
+        regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked, resolution_m,
+                                          origin_xy_m)
         # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
         structured_segments = set(
             np.flatnonzero(label_counts(segments, int(segments.max()) + 1, in_place | floor_px)[1]).tolist()
@@ -567,10 +566,10 @@ def decompose(
             lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
             lut[list(merges)] = list(merges.values())
             segments = lut[lut[segments]]
+            grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)
             pairs = _pairs(segments, sub)
-            regions, labels = _region_records(
-            segments, pairs, face_labels, label_image_job.result(), racked, resolution_m, origin_xy_m
-        )
+            regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked,
+                                              resolution_m, origin_xy_m)
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
         if room_ids:  # a room mostly on rack places is no room: it takes their label
             n_seg = int(segments.max()) + 1
@@ -675,16 +674,26 @@ def _final_face_regions(pairs: _Pairs, n_faces: int) -> npt.NDArray[np.int64]:
     return out
 
 
+def _grown_face_labels(
+    segments: npt.NDArray[np.int32], face_labels: FaceLabels, face_image: npt.NDArray[np.int32]
+) -> npt.NDArray[np.int32]:
+    """Each segment pixel's face label; line pixels take a neighbour's (0 where none reaches)."""
+    inside = segments > 0
+    labels = np.where(inside, face_labels.label.astype(np.int32)[face_image], 0).astype(np.int32, copy=False)
+    return fill_from_neighbours(labels, inside)
+
+
 def _region_records(
     segments: npt.NDArray[np.int32],
     pairs: _Pairs,
     face_labels: FaceLabels,
-    label_image: npt.NDArray[np.int32],
+    grown_labels: npt.NDArray[np.int32],
     racked: npt.NDArray[np.bool_],
     resolution_m: float,
     origin_xy_m: tuple[float, float],
 ) -> tuple[dict[int, RegionInfo], npt.NDArray[np.uint8]]:
-    """Region records (label: its faces' majority) and the label image (each face's own label, ``label_image``).
+    """Region records (label: its faces' majority) and the label image (each face's own label,
+    :func:`_grown_face_labels`; its region's where none reaches).
 
     Open floor is never storage: a region mostly off ``racked`` (racks, rack places, warehouse
     floors, shelf banks) takes the majority of its other faces' labels, open area when all its
@@ -717,10 +726,8 @@ def _region_records(
         regions[int(sid)] = RegionInfo(
             int(sid), PlaceLabel(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
         )
-    inside = segments > 0
-    labels = np.where(inside, label_image, 0).astype(np.int32, copy=False)
-    labels = fill_from_neighbours(labels, inside)
-    hole = inside & (labels == 0)
+    labels = grown_labels  # its holes filled in place
+    hole = (segments > 0) & (labels == 0)
     labels[hole] = seg_label[segments[hole]]
     return regions, labels.astype(np.uint8)
 
