@@ -272,9 +272,11 @@ def edge_cogency(
     n = sub.n_faces + 1
     count, free_px = label_counts(sub.face_image, n, free)
     area = count.astype(np.float64)
-    # each face's sum in pixel order, as over the whole image (face 0, the lines, is set to 1 below)
-    on_face = np.flatnonzero(faces)
-    occ_sum = np.bincount(faces[on_face], weights=occupancy01.ravel()[on_face], minlength=n)
+    # a face's sum over its pixels in raster order, as bincount adds them, without the zeros (adding 0.0
+    # changes no sum: the same bits); face 0 (lines and obstacles) is set to 1 below
+    weights = occupancy01.ravel()
+    some = np.flatnonzero((faces > 0) & (weights != 0))
+    occ_sum = np.bincount(faces[some], weights=weights[some], minlength=n)
     face_occ = np.divide(occ_sum, area, out=np.ones(n), where=area > 0)
     free_px[0] = 0
     face_occ[0] = 1.0

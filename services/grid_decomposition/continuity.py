@@ -17,7 +17,6 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from skimage.measure import label as connected_labels
@@ -47,6 +46,8 @@ def match_regions(before: IdGrid, after: IdGrid, *, min_overlap: float = 0.5) ->
     summed IoU (:func:`scipy.optimize.linear_sum_assignment`, per group of regions linked by candidate
     pairs, so a map of thousands of regions never builds a dense matrix of them all).
     """
+    from scipy.optimize import linear_sum_assignment  # imported when first needed (decompose loads it early)
+
     b, a = np.asarray(before, dtype=np.int64), np.asarray(after, dtype=np.int64)
     if b.shape != a.shape:
         raise DecompositionError(f"region grids differ in shape: {b.shape} and {a.shape}")

@@ -76,7 +76,13 @@ _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by 
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules
 _STEP_MODULES = (
-    "networkx", "scipy.signal", "scipy.stats", "sklearn.cluster", "sklearn.decomposition", "sklearn.preprocessing"
+    "networkx",
+    "scipy.optimize",
+    "scipy.signal",
+    "scipy.stats",
+    "sklearn.cluster",
+    "sklearn.decomposition",
+    "sklearn.preprocessing",
 )
 
 
@@ -214,6 +220,11 @@ def _texture_count(lines: dict[float, list[Line]]) -> int:
     support = [sum(ln.support_m for a in fam for ln in lines[a] if ln.coarse) for fam in families]
     strong = [s for s in support if s >= 0.1 * max(support)]
     return max(1, len(strong))
+
+
+def _clearance(free: npt.NDArray[np.bool_]) -> npt.NDArray[np.float32]:
+    """Distance of every free pixel to the nearest obstacle, pixels (0 off free space)."""
+    return np.asarray(cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3), dtype=np.float32)
 
 
 def _elongation(
@@ -380,8 +391,9 @@ def decompose(
         raise DecompositionError(f"n_categories must be >= 1, got {n_categories}")
     # a second thread (the machine's second core: OpenCV and numpy calls release the GIL) loads the
     # steps' modules while this one cleans the map and finds its furniture and shelf banks, then
-    # runs steps beside the line search, the rack search and the cogency that do not need their
-    # results; each step gives the same result as run in turn
+    # runs steps beside the line search (place categories, furniture against walls, free-standing
+    # obstacles), the rack search and the cogency that do not need their results, and the region
+    # graph beside the label image; each step gives the same result as run in turn
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
         loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
         streaks = rays = np.zeros(occ.shape, dtype=bool)
@@ -393,18 +405,32 @@ def decompose(
         known = occ >= 0
         obstacle = ~free
         occupied = known & (occ > OCCUPIED_PERCENT)
-        # the distance to obstacles, for the rays and the elongation
-        clearance = np.asarray(cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 3), dtype=np.float32)
+        # the distance to obstacles, for the rays and the elongation (on the other thread, in turn)
+        clearance_job = beside.submit(_clearance, free)
         places_job = beside.submit(
-            categorize_places, obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed,
-            distance=clearance,
+            lambda: categorize_places(
+                obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed,
+                distance=clearance_job.result(),
+            )
         )
         occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
+        against_walls_job = beside.submit(wall_furniture, obstacle, resolution_m=resolution_m)
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
+        standing_job = (
+            beside.submit(
+                free_standing,
+                obstacle,
+                resolution_m=resolution_m,
+                max_extent_m=island_max_extent_m,
+                min_clearance_m=island_min_clearance_m,
+                labelled=obstacle_parts,
+            )
+            if island_max_extent_m > 0
+            else None
+        )
         clutter = furniture(obstacle, resolution_m=resolution_m, labelled=obstacle_parts)
         occupied_parts = components(occupied)  # labelled once: shelf dashes, floor objects
         banks = find_shelf_banks(occupied, free, resolution_m=resolution_m, labelled=occupied_parts)
-        against_walls = wall_furniture(obstacle, resolution_m=resolution_m)
         gradients = oriented_gradients(obstacle)
         # the sides of laser rays are no walls: they would give the map directions of their own
         ray_sides = cv2.dilate(rays.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
@@ -428,14 +454,8 @@ def decompose(
         logger.debug("texture regions %d, lines %s", n_tex, [len(g.lines) for g in used])
         # furniture and obstacles standing free in a room are no wall: no doorway ends on them
         walls = (occupied | ~known) & ~clutter
-        if island_max_extent_m > 0:
-            walls &= ~free_standing(
-                obstacle,
-                resolution_m=resolution_m,
-                max_extent_m=island_max_extent_m,
-                min_clearance_m=island_min_clearance_m,
-                labelled=obstacle_parts,
-            )
+        if standing_job is not None:
+            walls &= ~standing_job.result()
         evidence_job = beside.submit(
             wall_evidence,
             walls,
@@ -465,7 +485,6 @@ def decompose(
                 sub.face_image, sub.n_faces, obstacle, resolution_m=resolution_m, face_angle_rad=_face_angles(sub, used)
             )
         )
-        rack_place_job = beside.submit(face_places, sub.face_image, sub.n_faces, racks, free)
         wall, door = evidence_job.result()
         cog = edge_cogency(
             sub,
@@ -479,7 +498,8 @@ def decompose(
         is_face = cog.face_free_px > 0
         connected = sub.edge_faces[~cog.cogent]
         component = link_components(sub.n_faces + 1, connected, is_face)
-        elongation = _elongation(component, sub.face_image, clearance, resolution_m)
+        elongation = _elongation(component, sub.face_image, clearance_job.result(), resolution_m)
+        rack_place = face_places(sub.face_image, sub.n_faces, racks, free)  # while the other thread finds geometry
         geometry = geometry_job.result()
         found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
         evidence = found.label.copy()
@@ -488,7 +508,6 @@ def decompose(
         evidence[majority_faces(sub.face_image, sub.n_faces, banks.aisle, free)] = PlaceLabel.CORRIDOR.value
         rows, cols, cats = places_job.result()
         face_cat = face_categories(sub.face_image, sub.n_faces, rows, cols, cats, n_categories)
-        rack_place = rack_place_job.result()
         evidence = np.where(rack_place > 0, rack_place, evidence)
         face_labels = assign_labels(evidence, face_cat, cog.face_free_px, overrides=label_overrides)
         # regions come from the automatic labels: a person's overrides rename places, they do not
@@ -521,7 +540,7 @@ def decompose(
             occupied=occupied,
         )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
-        against_walls &= segments == 0
+        against_walls = against_walls_job.result() & (segments == 0)
         grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
         segments = np.where(against_walls, grown, segments)
         # the streaks the cleaning took out are free space: they take the region they grow from
@@ -550,9 +569,11 @@ def decompose(
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
             )
+        grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)
         racked = floor_px | banks.storage | on_places  # the only floor a storage region may stand on
-        regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
+        regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked, resolution_m,
+                                          origin_xy_m)
         # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
         structured_segments = set(
             np.flatnonzero(label_counts(segments, int(segments.max()) + 1, on_places | floor_px)[1]).tolist()
@@ -571,8 +592,10 @@ def decompose(
             lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
             lut[list(merges)] = list(merges.values())
             segments = np.take(lut[lut], segments)
+            grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)
             pairs = _pairs(segments, sub)
-            regions, labels = _region_records(segments, sub, pairs, face_labels, racked, resolution_m, origin_xy_m)
+            regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked,
+                                              resolution_m, origin_xy_m)
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
         if room_ids:  # a room mostly on rack places is no room: it takes their label
             n_seg = int(segments.max()) + 1
@@ -593,6 +616,16 @@ def decompose(
                 k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
                 for k, r in regions.items()
             }
+        topology_job = beside.submit(
+            region_topology,
+            sub,
+            cog,
+            _final_face_regions(pairs, sub.n_faces),
+            regions,
+            segments=segments,
+            doorways=door | cuts,
+            min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
+        )
         region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
         for k, r in regions.items():
             region_label[k] = r.label.value
@@ -607,21 +640,11 @@ def decompose(
         if kept_place.any():
             labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
         labels = np.where(floor_space, labels, 0).astype(np.uint8, copy=False)
-        face_region_final = _final_face_regions(pairs, sub.n_faces)
-        topology = region_topology(
-            sub,
-            cog,
-            face_region_final,
-            regions,
-            segments=segments,
-            doorways=door | cuts,
-            min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
-        )
         return Decomposition(
             labels=labels,
             segments=segments,
             regions=regions,
-            topology=topology,
+            topology=topology_job.result(),
             line_groups=tuple(groups),
             subdivision=sub,
             cogency=cog,
@@ -675,16 +698,26 @@ def _final_face_regions(pairs: _Pairs, n_faces: int) -> npt.NDArray[np.int64]:
     return out
 
 
+def _grown_face_labels(
+    segments: npt.NDArray[np.int32], face_labels: FaceLabels, face_image: npt.NDArray[np.int32]
+) -> npt.NDArray[np.int32]:
+    """Each segment pixel's face label; line pixels take a neighbour's (0 where none reaches)."""
+    inside = segments > 0
+    # gathered as bytes (labels are below 256); the fill works on its own int32 copy
+    return fill_from_neighbours(np.where(inside, face_labels.label.astype(np.uint8)[face_image], 0), inside)
+
+
 def _region_records(
     segments: npt.NDArray[np.int32],
-    sub: Subdivision,
     pairs: _Pairs,
     face_labels: FaceLabels,
+    grown_labels: npt.NDArray[np.int32],
     racked: npt.NDArray[np.bool_],
     resolution_m: float,
     origin_xy_m: tuple[float, float],
 ) -> tuple[dict[int, RegionInfo], npt.NDArray[np.uint8]]:
-    """Region records (label: its faces' majority) and the label image (each face's own label).
+    """Region records (label: its faces' majority) and the label image (each face's own label,
+    :func:`_grown_face_labels`; its region's where none reaches).
 
     Open floor is never storage: a region mostly off ``racked`` (racks, rack places, warehouse
     floors, shelf banks) takes the majority of its other faces' labels, open area when all its
@@ -717,10 +750,8 @@ def _region_records(
         regions[int(sid)] = RegionInfo(
             int(sid), PlaceLabel(int(seg_label[sid])), int(seg_cat[sid]), area[sid] * resolution_m**2, (cx, cy)
         )
-    inside = segments > 0
-    # gathered as bytes (labels are below 256); the fill works on its own int32 copy
-    labels = fill_from_neighbours(np.where(inside, face_labels.label.astype(np.uint8)[sub.face_image], 0), inside)
-    hole = inside & (labels == 0)
+    labels = grown_labels  # its holes filled in place
+    hole = (segments > 0) & (labels == 0)
     labels[hole] = seg_label[segments[hole]]
     return regions, labels.astype(np.uint8)
 

@@ -832,10 +832,11 @@ def face_places(
     out = np.zeros(n_faces + 1, dtype=np.int64)
     if layout.cell_labels.size <= 1:
         return out
-    faces = face_image[free]
-    place = layout.cell_labels[layout.cells[free]]
     n_lab = len(PlaceLabel)
-    votes = np.bincount(faces * n_lab + place, minlength=(n_faces + 1) * n_lab).reshape(n_faces + 1, n_lab)
+    # free pixels per (face, place label), counted from the runs of equal keys along the rows
+    dtype = np.dtype(np.int32 if (n_faces + 1) * n_lab < 2**31 else np.int64)
+    key = face_image.astype(dtype, copy=False) * n_lab + layout.cell_labels.astype(dtype)[layout.cells]
+    votes = label_counts(key, (n_faces + 1) * n_lab, free)[1].reshape(n_faces + 1, n_lab)
     best = votes[:, 1:].argmax(axis=1) + 1
     majority = votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1)
     out[majority] = best[majority]
@@ -867,7 +868,7 @@ def place_segments(
     region = free | (segments > 0)  # furniture inside a room is part of its segment
     in_cells = layout.cells > 0
     # a place with a crumb of free space (a solid rack's edge pixel) is no region of its own
-    n_free = np.bincount(layout.cells[free], minlength=layout.cell_labels.size)
+    n_free = label_counts(layout.cells, layout.cell_labels.size, free)[1]
     crumb = (n_free > 0) & (n_free < min_area_px)
     crumb[: n_known + 1] = False
     cells = np.where(crumb[layout.cells], 0, layout.cells) if crumb.any() else layout.cells
@@ -875,8 +876,8 @@ def place_segments(
     n_old = int(segments.max()) + 1
     # known places are no reason to give up what is left of a segment (a hall's floor round its racks)
     known = in_cells & (layout.cells <= n_known) if n_known else None
-    before = np.bincount(segments.ravel() if known is None else segments[~known], minlength=n_old)
-    after = np.bincount(segments[~in_cells], minlength=n_old)
+    count, after = label_counts(segments, n_old, ~in_cells)
+    before = count if known is None else label_counts(segments, n_old, ~known)[1]
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
     floor = left[segments] & ~in_cells & region if left.any() else np.zeros(free.shape, dtype=bool)
@@ -913,7 +914,7 @@ def place_segments(
         largest[owner[order][first]] = order[first]
         target = np.where(size >= min_area_px, np.arange(size.size), largest[owner])
         out[cell] = n_old + layout.cell_labels.size + target[pieces]
-    present = np.bincount(out.ravel(), minlength=int(out.max()) + 1) > 0
+    present = label_counts(out, int(out.max()) + 1)[0] > 0
     present[0] = True
     lut = (np.cumsum(present) - 1).astype(np.int32)
     return lut[out], np.where(inside, place, 0).astype(np.int32, copy=False)

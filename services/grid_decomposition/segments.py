@@ -38,14 +38,25 @@ def fill_from_neighbours(
     stride = w + 2
     offsets = np.array([-stride - 1, -stride, -stride + 1, -1, 1, stride - 1, stride, stride + 1], dtype=np.int64)
     steps = max_iterations
-    if steps > 0 and np.count_nonzero(open_) * 32 >= open_.size and int(lab.max()) < 2**24:
+    top = int(lab.max())
+    if steps > 0 and np.count_nonzero(open_) * 32 >= open_.size and top < 2**24:
         # many holes (the lines through a map): the first step at once, as a grey dilation of the
-        # box (ids below 2**16 in uint16, below 2**24 exact in float32)
-        grown = cv2.dilate(lab.astype(np.uint16 if int(lab.max()) < 2**16 else np.float32), np.ones((3, 3), np.uint8))
+        # box (ids below 2**8 in uint8, below 2**16 in uint16, below 2**24 exact in float32)
+        dtype = np.uint8 if top < 2**8 else np.uint16 if top < 2**16 else np.float32
+        grown = cv2.dilate(lab.astype(dtype), np.ones((3, 3), np.uint8))
         front = np.flatnonzero(open_ & (grown > 0))
         lab_flat[front] = grown.ravel()[front].astype(np.int32)
         open_flat[front] = False
         steps -= 1
+        # the holes left touch no pixel labelled before: only those just filled next to them move on
+        left = np.flatnonzero(open_flat) if steps > 0 else front[:0]
+        if left.size < front.size:
+            filled_now = np.zeros(lab_flat.size, dtype=bool)
+            filled_now[front] = True
+            around = (left[:, None] + offsets).ravel()  # in the box: its border is never a hole
+            front = around[filled_now[around]]
+            filled_now[:] = False
+            front = distinct(front, filled_now)
     else:
         near_hole = cv2.dilate(open_.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
         near_hole &= lab > 0

@@ -108,3 +108,21 @@ def test_the_doorways_of_several_lines_are_each_lines_own() -> None:
     assert door[20:30, 30].all() and door[50:72, 70].all()
     assert np.array_equal(wall, alone[0][0] | alone[1][0])
     assert np.array_equal(door, alone[0][1] | alone[1][1])
+
+
+def test_face_occupancy_is_the_mean_of_its_pixels_as_summed_in_raster_order() -> None:
+    rng = np.random.default_rng(5)
+    occ = rng.integers(0, 25, (90, 120)) / 100.0  # free cells of every occupancy below 25 %
+    occ[rng.random(occ.shape) < 0.5] = 0.0
+    occ[:, 60] = 1.0
+    free = occ < 0.25
+    lines = (Line(0.0, 30.0, 1.0, 0.1, True), Line(math.pi / 2, -90.0, 1.0, 0.1, True))
+    sub = subdivide([LineGroup(lines, None)], occ.shape, domain=free)
+    none = np.zeros(occ.shape, dtype=bool)
+    cog = edge_cogency(sub, occ, free, none, none)
+    faces = sub.face_image.ravel()
+    area = np.bincount(faces, minlength=sub.n_faces + 1)
+    mean = np.bincount(faces, weights=occ.ravel(), minlength=sub.n_faces + 1)[1:] / area[1:]
+    assert np.array_equal(cog.face_occupancy[1:], mean)  # the same bits
+    assert np.array_equal(cog.face_free_px[1:], area[1:])
+    assert cog.face_occupancy[0] == 1.0 and cog.face_free_px[0] == 0

@@ -9,6 +9,7 @@ import pytest
 from services.grid_decomposition.regions import warehouse_floors
 from services.grid_decomposition.segments import (
     border_closure,
+    fill_from_neighbours,
     merge_open_segments,
     merge_small_segments,
     same_value_pieces,
@@ -141,3 +142,39 @@ def test_same_value_pieces_are_the_pieces_of_each_value_in_scan_order(seed: int)
     expected = _pieces_one_value_at_a_time(seg)
     assert n == int(expected.max())
     assert np.array_equal(pieces, expected)
+
+
+def _grown_step_by_step(seg: np.ndarray, target: np.ndarray, steps: int) -> np.ndarray:
+    """Each step every hole next to a labelled pixel takes the largest id among its 8-neighbours."""
+    out = seg.copy()
+    hole = target & (out == 0)
+    for _ in range(steps):
+        grown = cv2.dilate(
+            out.astype(np.float64), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0
+        )
+        take = hole & (grown > 0)
+        if not take.any():
+            break
+        out[take] = grown[take].astype(np.int32)
+        hole &= ~take
+    return out
+
+
+@pytest.mark.parametrize("top", [200, 3000, 70000, 2**25])
+@pytest.mark.parametrize("steps", [1, 2, 3, 200])
+def test_fill_from_neighbours_grows_a_step_at_a_time_through_lines_and_wide_gaps(top: int, steps: int) -> None:
+    # faces between one-pixel lines (filled in one step), a band of lines side by side and an unlabelled
+    # block (filled over several steps), and a hole with no labelled pixel near it
+    rng = np.random.default_rng(top + steps)
+    seg = np.repeat(np.repeat(rng.integers(1, top, (12, 14)), 6, axis=0), 6, axis=1).astype(np.int32)
+    seg[::6] = 0
+    seg[:, ::6] = 0
+    seg[20:27] = 0
+    seg[40:55, 30:50] = 0
+    target = seg == 0
+    target[:, 80:] = False
+    target[60:, :] = False
+    seg[60:, :] = 0
+    target[66:70, 10:20] = True
+    filled = fill_from_neighbours(seg, target, max_iterations=steps)
+    assert np.array_equal(filled, _grown_step_by_step(seg, target, steps))

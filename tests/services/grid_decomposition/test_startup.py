@@ -18,11 +18,12 @@ def _fresh(code: str) -> str:
     return done.stdout
 
 
-def test_importing_the_decomposition_loads_no_store_and_no_clustering_or_signal_library() -> None:
+def test_importing_the_decomposition_loads_no_store_and_no_clustering_signal_or_optimisation_library() -> None:
     out = _fresh(
         "import sys\n"
         "import services.grid_decomposition\n"
-        "print(sorted(m for m in ('sqlalchemy', 'sklearn', 'scipy.signal', 'scipy.stats') if m in sys.modules))\n"
+        "print(sorted(m for m in ('sqlalchemy', 'sklearn', 'scipy.signal', 'scipy.stats', 'scipy.optimize')\n"
+        "             if m in sys.modules))\n"
     )
     assert out.strip() == "[]"
 
