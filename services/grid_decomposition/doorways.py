@@ -41,6 +41,17 @@ def _centre_runs(
     return np.maximum(run, 0)
 
 
+def _gap_frame(
+    ends: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Width, unit direction along, unit normal and middle of each gap ``ends`` (G, 2, 2)."""
+    span = ends[:, 1] - ends[:, 0]
+    width = np.linalg.norm(span, axis=1)
+    u = span / np.maximum(width, 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    return width, u, normal, ends.mean(axis=1)
+
+
 def widens(
     blocked: npt.NDArray[np.bool_],
     ends: npt.NDArray[np.float64],
@@ -80,11 +91,7 @@ def widens(
     """
     if len(ends) == 0:
         return np.zeros(0, dtype=bool)
-    span = ends[:, 1] - ends[:, 0]
-    width = np.linalg.norm(span, axis=1)
-    u = span / np.maximum(width, 1e-9)[:, None]
-    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    mid = ends.mean(axis=1)
+    width, u, normal, mid = _gap_frame(ends)
     need = width + widening_px
     depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
     reach = math.ceil(float(need.max())) + 1
@@ -133,11 +140,7 @@ def across_a_corridor(
     """
     if len(ends) == 0:
         return np.zeros(0, dtype=bool)
-    span = ends[:, 1] - ends[:, 0]
-    width = np.linalg.norm(span, axis=1)
-    u = span / np.maximum(width, 1e-9)[:, None]
-    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    mid = ends.mean(axis=1)
+    width, u, normal, mid = _gap_frame(ends)
     length = np.maximum(float(length_px), np.ceil(length_ratio * width))
     # the band goes on straight along the normal on both sides (a cheap test first: most gaps fail it)
     out = np.ones(len(ends), dtype=bool)
