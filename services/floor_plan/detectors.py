@@ -84,6 +84,49 @@ def wall_lines(
     return WallLines(np.array(horizontal, np.int64).reshape(-1, 3), np.array(vertical, np.int64).reshape(-1, 3))
 
 
+def slanted_lines(
+    classes_map: npt.NDArray[np.uint8], *, min_length_cells: int, max_gap_cells: int = 3,
+    min_angle_rad: float = 0.09,
+) -> npt.NDArray[np.float64]:
+    """Wall lines that run at an angle to the grid (a building whose walls run in more than one direction).
+
+    Hough line segments (OpenCV probabilistic Hough, half-degree steps) on the wall cells, kept when at least
+    ``min_angle_rad`` from both axes, each refitted (``cv2.fitLine``, least squares) to the wall cells within 1.5
+    cells of it. Returns (N, 4) ``x0, y0, x1, y1`` (x = column, y = row, cell centres), the refitted line between
+    the segment's ends projected onto it.
+
+    >>> cm = np.zeros((40, 40), np.uint8); rr = np.arange(5, 35)
+    >>> cm[rr, rr // 2 + 5] = CellClass.WALL  # a wall leaning about 27 degrees off the columns
+    >>> lines = slanted_lines(cm, min_length_cells=20)
+    >>> len(lines) >= 1, bool(np.all(np.abs(np.diff(lines[:, 1::2], axis=1)) > 20))
+    (True, True)
+    """
+    walls = (classes_map == CellClass.WALL).astype(np.uint8)
+    segs = cv2.HoughLinesP(walls * 255, 1, np.pi / 360, threshold=max(min_length_cells // 2, 3),
+                           minLineLength=min_length_cells, maxLineGap=max_gap_cells)
+    if segs is None:
+        return np.zeros((0, 4))
+    segs = segs.reshape(-1, 4).astype(np.float64)
+    angle = np.arctan2(segs[:, 3] - segs[:, 1], segs[:, 2] - segs[:, 0])
+    off_axis = np.abs((angle + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+    out = []
+    for x0, y0, x1, y1 in segs[off_axis >= min_angle_rad]:
+        d = np.array([x1 - x0, y1 - y0])
+        length = float(np.hypot(*d))
+        u = d / length
+        left, top = int(min(x0, x1)) - 2, int(min(y0, y1)) - 2
+        ys, xs = np.nonzero(walls[max(top, 0) : int(max(y0, y1)) + 3, max(left, 0) : int(max(x0, x1)) + 3])
+        points = np.stack([xs + max(left, 0), ys + max(top, 0)], axis=1).astype(np.float64)
+        rel = points - (x0, y0)
+        along = rel @ u
+        near = (np.abs(rel @ np.array([-u[1], u[0]])) <= 1.5) & (along >= 0) & (along <= length)
+        vx, vy, cx, cy = cv2.fitLine(points[near].astype(np.float32), cv2.DIST_L2, 0, 0.01, 0.01).ravel()
+        v, c = np.array([vx, vy], np.float64), np.array([cx, cy], np.float64)
+        a, b = (np.array([x0, y0]) - c) @ v, (np.array([x1, y1]) - c) @ v
+        out.append((*(c + a * v), *(c + b * v)))
+    return np.array(out, np.float64).reshape(-1, 4)
+
+
 def _positions(lines: npt.NDArray[np.int64], merge_cells: int) -> npt.NDArray[np.int64]:
     """Line positions with neighbours closer than ``merge_cells`` merged (weighted by length)."""
     if len(lines) == 0:

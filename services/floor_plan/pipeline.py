@@ -13,7 +13,7 @@ import numpy.typing as npt
 from services.floor_plan.chain import Chain, ChainSettings, run_chain
 from services.floor_plan.clutter import explain_clutter, explain_exterior
 from services.floor_plan.context import ContextPrior, ContextSettings
-from services.floor_plan.detectors import Evidence, wall_lines, wbu_candidates
+from services.floor_plan.detectors import Evidence, slanted_lines, wall_lines, wbu_candidates
 from services.floor_plan.errors import FloorPlanError
 from services.floor_plan.frame import (
     Frame,
@@ -85,6 +85,10 @@ class FloorPlanSettings:
     """Wall segments start and end on a grid of this length along each wall."""
     wall_log_cost: float = 10.0
     """The prior's cost of one wall segment other than the seed's band (nats)."""
+    slant_min_m: float | None = 1.0
+    """Walls at an angle to the working grid (a second wall direction, :class:`~services.floor_plan.walls.Slant`):
+    wall lines at least this long that run at an angle may cut a unit, drawn with the fitted walls and at the same
+    cost per wall; None: no slanted walls."""
 
 
 class Unit(NamedTuple):
@@ -300,7 +304,9 @@ def describe(
                            fixed=to_work(frame, solid.astype(np.uint8), fill=0).astype(bool),
                            max_shift=round(settings.wall_shift_m / resolution_m),
                            max_thickness=t + round(settings.wall_extra_m / resolution_m),
-                           log_cost=settings.wall_log_cost, segment_cells=_cells(settings.wall_segment_m, resolution_m))
+                           log_cost=settings.wall_log_cost, segment_cells=_cells(settings.wall_segment_m, resolution_m),
+                           lines=None if settings.slant_min_m is None else slanted_lines(
+                               classes_work, min_length_cells=_cells(settings.slant_min_m, resolution_m)))
         cw = to_map(frame, fitted.classes_world, fill=CellClass.UNKNOWN)
         walls, wall_segments = fitted.segments, fitted.fitted
     cw = np.where(solid, np.uint8(CellClass.WALL), cw).astype(np.uint8)

@@ -40,6 +40,18 @@ class Segment(NamedTuple):
     thickness: int
 
 
+class Slant(NamedTuple):
+    """A wall at an angle to the grid that cuts a unit's rectangle along a line (cell-centre coordinates of the
+    working frame): the unit keeps the cells with ``d < -thickness``, ``d = (row - row0) * normal_row + (col - col0)
+    * normal_col``, draws the cells with ``-thickness <= d < 0`` as its wall and gives up the rest (outside)."""
+
+    row0: float
+    col0: float
+    normal_row: float
+    normal_col: float
+    thickness: float
+
+
 class Walls(NamedTuple):
     """The world's rendering with fitted walls and the walls' shapes."""
 
@@ -50,6 +62,8 @@ class Walls(NamedTuple):
     end; a wall drawn as the seed's band is one segment."""
     fitted: int
     """How many segments differ from the seed's band."""
+    slants: dict[int, tuple[Slant, ...]]
+    """Per unit id, the slanted walls that cut it (none for most units)."""
 
 
 _Counts = tuple[npt.NDArray[np.int16], npt.NDArray[np.int16], npt.NDArray[np.int16]]
@@ -138,7 +152,7 @@ def _draw(counts: _Counts, strip: _Strip, shift: npt.NDArray[np.integer], thick:
 def fit_walls(
     world: World, classes_map: npt.NDArray[np.uint8], log_table: npt.NDArray[np.float64], *, wall_cells: int,
     fixed: npt.NDArray[np.bool_], max_shift: int, max_thickness: int, log_cost: float, segment_cells: int,
-    passes: int = 4,
+    passes: int = 4, lines: npt.NDArray[np.float64] | None = None, max_slants: int = 2,
 ) -> Walls:
     """Fit every unit wall's segments (inner face, thickness) to the map, given the units and doors.
 
@@ -163,6 +177,11 @@ def fit_walls(
         Segments start and end on a grid of this many cells along each wall.
     passes : int
         At most this many rounds over all walls (coordinate ascent stops earlier when no wall changes).
+    lines : (N, 4) float, optional
+        Wall lines at an angle to the grid (:func:`~services.floor_plan.detectors.slanted_lines`, ``x0, y0, x1, y1``
+        cell centres). After the walls, a unit a line runs through may be cut along it (:class:`Slant`): the part
+        beyond the line given up, a wall drawn along it, where that beats ``log_cost``; the unit's centre and doors
+        stay. At most ``max_slants`` per unit, best first.
 
     >>> from services.floor_plan.likelihood import log_sensor_table
     >>> cm = np.full((12, 14), CellClass.UNKNOWN, np.uint8); cm[2:10, 2:12] = CellClass.WALL
@@ -189,9 +208,11 @@ def fit_walls(
             doors[uid].append(d)
     strips: dict[int, list[_Strip]] = {}
     drawn: dict[tuple[int, Side], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]] = {}
+    def depth_of(rect: Rect) -> int:
+        return max(0, min(max_shift, (min(rect.rows, rect.cols) - 2 * t) // 3))  # free space keeps a third
+
     for uid, rect in world.units.items():
-        inner = min(rect.rows, rect.cols) - 2 * t
-        depth = max(0, min(max_shift, inner // 3))  # the free space keeps a third of its width
+        depth = depth_of(rect)
         strips[uid], core = _strips(rect, doors[uid], shape, t=t, depth=depth, reach=max_shift + max_thickness)
         if core.r0 <= core.r1 and core.c0 <= core.c1:
             counts[0][core.r0 : core.r1 + 1, core.c0 : core.c1 + 1] += 1
@@ -216,7 +237,20 @@ def fit_walls(
     segments = {uid: tuple(_segments(strip, *drawn[uid, strip.side]) for strip in strips[uid])
                 for uid in world.units}
     fitted = sum(s.shift != 0 or s.thickness != t for walls in segments.values() for wall in walls for s in wall)
-    return Walls(_classes(*counts, fixed), segments, fitted)
+    slants: dict[int, tuple[Slant, ...]] = {uid: () for uid in world.units}
+    if lines is not None and len(lines) and max_slants > 0:
+        reach = max_shift + max_thickness
+        scratch: _Counts = (np.zeros(shape, np.int16), np.zeros(shape, np.int16), np.zeros(shape, np.int16))
+        for uid, rect in sorted(world.units.items()):
+            own = _Own.of(rect, reach, shape, scratch, strips[uid], drawn, uid, t=t, depth=depth_of(rect))
+            for _ in range(max_slants):
+                cut = _best_slant(counts, ll, fixed, own, rect, lines, t=t, log_cost=log_cost,
+                                  min_inside=segment_cells)
+                if cut is None:
+                    break
+                own.cut(counts, cut)
+                slants[uid] += (cut,)
+    return Walls(_classes(*counts, fixed), segments, fitted, slants)
 
 
 def _segments(strip: _Strip, shift: npt.NDArray[np.int64], thick: npt.NDArray[np.int64]) -> tuple[Segment, ...]:
@@ -272,3 +306,133 @@ def _best(
         best = int(back[best, i])
     per_position = np.repeat(choice, np.diff(np.r_[blocks, per_cell.shape[1]]))
     return shift[per_position], thick[per_position]
+
+
+class _Own:
+    """One unit's own counts (free space, wall, door) in a window round its rectangle, so that a slanted wall can
+    take them off the world's counts where it cuts the unit."""
+
+    def __init__(self, window: tuple[slice, slice], counts: _Counts) -> None:
+        self.window = window
+        self.counts = counts
+
+    @classmethod
+    def of(cls, rect: Rect, reach: int, shape: tuple[int, int], scratch: _Counts, strips: list[_Strip],
+           drawn: dict[tuple[int, Side], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]], uid: int, *, t: int,
+           depth: int) -> _Own:
+        window = (slice(max(rect.r0 - reach, 0), min(rect.r1 + reach + 1, shape[0])),
+                  slice(max(rect.c0 - reach, 0), min(rect.c1 + reach + 1, shape[1])))
+        a0, a1, b0, b1 = rect.r0 + t + depth, rect.r1 - t - depth, rect.c0 + t + depth, rect.c1 - t - depth
+        if a0 <= a1 and b0 <= b1:
+            scratch[0][a0 : a1 + 1, b0 : b1 + 1] += 1
+        for strip in strips:
+            _draw(scratch, strip, *drawn[uid, strip.side], +1)
+        own = (scratch[0][window].copy(), scratch[1][window].copy(), scratch[2][window].copy())
+        for c in scratch:
+            c[window] = 0
+        return cls(window, own)
+
+    def cut(self, counts: _Counts, slant: Slant) -> None:
+        d = _distance(self.window, slant)
+        n_int, n_wall, n_door = self.counts
+        foot = (n_int > 0) | (n_wall > 0) | (n_door > 0)
+        drop = foot & (d >= 0)
+        band = foot & (d >= -slant.thickness) & (d < 0)
+        new = (np.where(drop | band, 0, n_int).astype(np.int16),
+               np.where(band, 1, np.where(drop, 0, n_wall)).astype(np.int16),
+               np.where(drop, 0, n_door).astype(np.int16))
+        for total, old, now in zip(counts, self.counts, new, strict=True):
+            total[self.window] += now - old
+        self.counts = new
+
+
+def _distance(window: tuple[slice, slice], slant: Slant) -> npt.NDArray[np.float64]:
+    rows = np.arange(window[0].start, window[0].stop, dtype=np.float64)[:, None]
+    cols = np.arange(window[1].start, window[1].stop, dtype=np.float64)[None, :]
+    out: npt.NDArray[np.float64] = (rows - slant.row0) * slant.normal_row + (cols - slant.col0) * slant.normal_col
+    return out
+
+
+def _inside(lines: npt.NDArray[np.float64], r0: float, r1: float, c0: float, c1: float) -> npt.NDArray[np.float64]:
+    """How long each segment (``x0, y0, x1, y1``) runs inside rows ``r0..r1``, columns ``c0..c1`` (Liang-Barsky)."""
+    x0, y0, dx, dy = lines[:, 0], lines[:, 1], lines[:, 2] - lines[:, 0], lines[:, 3] - lines[:, 1]
+    lo, up = np.zeros(len(lines)), np.ones(len(lines))
+    for p, a, b in ((dx, c0 - x0, c1 - x0), (dy, r0 - y0, r1 - y0)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta, tb = a / p, b / p
+        flat = p == 0
+        lo = np.maximum(lo, np.where(flat, np.where(a <= 0, 0.0, 2.0), np.minimum(ta, tb)))
+        up = np.minimum(up, np.where(flat, np.where(b >= 0, 1.0, -1.0), np.maximum(ta, tb)))
+    out: npt.NDArray[np.float64] = np.clip(up - lo, 0.0, None) * np.hypot(dx, dy)
+    return out
+
+
+def _best_slant(
+    counts: _Counts, ll: npt.NDArray[np.float64], fixed: npt.NDArray[np.bool_], own: _Own, rect: Rect,
+    lines: npt.NDArray[np.float64], *, t: int, log_cost: float, min_inside: int, reach_half: int = 4,
+) -> Slant | None:
+    """The slanted wall that explains the map best where it cuts the unit (its line through one of ``lines``, moved
+    up to ``reach_half`` half cells either way, ``t`` to ``t + 1`` cells thick), if it beats ``log_cost``."""
+    a0, a1, b0, b1 = rect.r0 + t, rect.r1 - t, rect.c0 + t, rect.c1 - t
+    lines = lines[_inside(lines, a0, a1, b0, b1) >= min_inside]
+    if not len(lines):
+        return None
+    n_int, n_wall, n_door = (c[own.window] for c in counts)
+    o_int, o_wall, o_door = own.counts
+    fix, lls = fixed[own.window], ll[(slice(None), *own.window)]
+
+    def cell_ll(cls: npt.NDArray[np.uint8]) -> npt.NDArray[np.float64]:
+        out: npt.NDArray[np.float64] = np.take_along_axis(lls, cls[None], axis=0)[0]
+        return out
+
+    old = cell_ll(_classes(n_int, n_wall, n_door, fix))
+    foot = (o_int > 0) | (o_wall > 0) | (o_door > 0)
+    g_drop = cell_ll(_classes(n_int - o_int, n_wall - o_wall, n_door - o_door, fix))[foot] - old[foot]
+    g_band = cell_ll(_classes(n_int - o_int, n_wall - o_wall + 1, n_door - o_door, fix))[foot] - old[foot]
+    door = o_door[foot] > 0
+    g_drop[door] = -1e9  # the unit's doors stay
+    g_band[door] = -1e9
+    if np.maximum(np.maximum(g_drop, g_band), 0.0).sum() <= log_cost:
+        return None  # no cut can pay
+    rows, cols = np.nonzero(foot)
+    rows, cols = rows + own.window[0].start, cols + own.window[1].start
+    widths = np.arange(2 * t, 2 * t + 3)  # half cells
+    lo = -reach_half - int(widths[-1]) - 1
+    size = reach_half - lo + 1
+    q = np.arange(-reach_half, reach_half + 1)
+    qi, wi = q[:, None] - lo, widths[None, :]
+    r_c, c_c = (rect.r0 + rect.r1) / 2, (rect.c0 + rect.c1) / 2
+    length = np.hypot(lines[:, 2] - lines[:, 0], lines[:, 3] - lines[:, 1])
+    normals = np.stack([(lines[:, 2] - lines[:, 0]) / length, -(lines[:, 3] - lines[:, 1]) / length], axis=1)
+    # branch and bound: a cut gains at most its far side's cells where every position puts them beyond the line
+    # and, nearer, each cell's best; summed over blocks of 8 x 8 cells (a block's cells lie within `slack` half
+    # cells of its centre's distance), the most promising cut first
+    per_row = 1 + own.window[1].stop // 8
+    keys, where = np.unique((rows // 8) * per_row + cols // 8, return_inverse=True)
+    beyond = np.bincount(where, g_drop)
+    gaining = np.bincount(where, np.maximum(np.maximum(g_drop, g_band), 0.0))
+    far = 2 * (((keys // per_row) * 8 + 3.5)[:, None] - lines[None, :, 1]) * normals[None, :, 0] \
+        + 2 * (((keys % per_row) * 8 + 3.5)[:, None] - lines[None, :, 0]) * normals[None, :, 1]  # (blocks, lines)
+    slack = 7 * np.sqrt(2)
+    bound = np.stack([beyond @ (f - slack >= reach_half) + gaining @ ((f + slack > lo) & (f - slack < reach_half))
+                      for f in (far, -far)], axis=1)  # (lines, sign)
+    best: tuple[float, Slant] | None = None
+    for flat in np.argsort(-bound, axis=None):
+        k, side = divmod(int(flat), 2)
+        if bound[k, side] <= max(log_cost, -np.inf if best is None else best[0]):
+            break
+        x0, y0 = lines[k, 0], lines[k, 1]
+        nr, nc = normals[k]
+        d = 2 * ((rows - y0) * nr + (cols - x0) * nc)
+        centre = 2 * ((r_c - y0) * nr + (c_c - x0) * nc)
+        for sign in ((1.0,) if side == 0 else (-1.0,)):
+            half = np.clip(np.floor(sign * d), lo, reach_half).astype(np.int64) - lo
+            drop = np.cumsum(np.bincount(half, g_drop, size)[::-1])[::-1]  # sum over b >= index
+            band = np.r_[0.0, np.cumsum(np.bincount(half, g_band, size))]  # sum over b < index
+            gain = np.where(np.floor(sign * centre) < q[:, None] - wi, drop[qi] + band[qi] - band[qi - wi], -np.inf)
+            i, j = np.unravel_index(int(np.argmax(gain)), gain.shape)
+            if gain[i, j] > log_cost and (best is None or gain[i, j] > best[0]):
+                shift = q[i] / 2
+                best = (float(gain[i, j]), Slant(y0 + shift * sign * nr, x0 + shift * sign * nc, sign * nr, sign * nc,
+                                                 float(widths[j]) / 2))
+    return None if best is None else best[1]
