@@ -278,7 +278,8 @@ def _floor_plan(args: argparse.Namespace) -> None:
                                settings=FloorPlanSettings(chain=chain), trajectory_xy_m=trajectory)
     rate = plan.iterations / plan.seconds if plan.seconds > 0 else float("inf")
     print(f"K(W,M) {100 * plan.k:.2f} % ({100 * plan.k_units:.2f} % the units alone, without {plan.wall_segments} "
-          f"fitted wall segments, {plan.clutter} clutter and {plan.exterior} exterior obstacles)  "
+          f"fitted wall segments, {plan.slanted_walls} slanted walls, {plan.clutter} clutter and {plan.exterior} "
+          "exterior obstacles)  "
           f"units {len(plan.units)}  doors {len(plan.doors)}  "
           f"iterations {plan.iterations}  {rate:.0f} iterations/s  (CPU {plan.cpu_seconds:.2f} s)")
 

@@ -31,7 +31,7 @@ from services.floor_plan.pipeline import (
     unit_labels,
 )
 from services.floor_plan.rooms import Room, RoomSettings, group_rooms, room_keys
-from services.floor_plan.walls import Segment, Walls, fit_walls
+from services.floor_plan.walls import Segment, Slant, Walls, fit_walls
 from services.floor_plan.world import Rect, Side, UnitType, World
 
 __all__ = [
@@ -60,6 +60,7 @@ __all__ = [
     "RoomSettings",
     "Segment",
     "Side",
+    "Slant",
     "Unit",
     "UnitEvidence",
     "UnitType",

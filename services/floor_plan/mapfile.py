@@ -85,7 +85,8 @@ def geojson(plan: FloorPlan) -> dict[str, Any]:
     ]
     return {"type": "FeatureCollection", "features": features,
             "properties": {"k": round(plan.k, 6), "k_units": round(plan.k_units, 6),
-                           "clutter": plan.clutter, "wall_segments": plan.wall_segments, "exterior": plan.exterior,
+                           "clutter": plan.clutter, "wall_segments": plan.wall_segments,
+                           "slanted_walls": plan.slanted_walls, "exterior": plan.exterior,
                            "iterations": plan.iterations}}
 
 

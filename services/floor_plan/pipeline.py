@@ -38,7 +38,7 @@ from services.floor_plan.likelihood import (
     wall_thickness_cells,
 )
 from services.floor_plan.rooms import Room, RoomSettings, fill_free, group_rooms
-from services.floor_plan.walls import Segment, fit_walls
+from services.floor_plan.walls import Segment, Slant, fit_walls
 from services.floor_plan.world import Rect, UnitType, World, shared_band
 
 
@@ -138,6 +138,9 @@ class FloorPlan(NamedTuple):
     ``frame``, :class:`~services.floor_plan.world.Side` order); empty when the walls are the seed's bands."""
     wall_segments: int
     """Wall segments drawn other than the seed's band."""
+    slants: dict[int, tuple[Slant, ...]]
+    """Per unit id, the slanted walls (at an angle to ``frame``) that cut it (:class:`~services.floor_plan.walls.Slant`,
+    cells of ``frame``); only units that have any."""
     exterior: int
     """Exterior obstacles drawn in ``classes_world`` (occupied blobs against the walls' outside)."""
     log_posterior: float
@@ -148,6 +151,11 @@ class FloorPlan(NamedTuple):
     resolution_m: float
     origin_xy_m: tuple[float, float]
     frame: Frame
+
+    @property
+    def slanted_walls(self) -> int:
+        """Slanted walls drawn in ``classes_world``."""
+        return sum(len(cuts) for cuts in self.slants.values())
 
 
 def _cells(metres: float, resolution_m: float) -> int:
@@ -297,6 +305,7 @@ def describe(
     k_units = cell_prediction_rate(classes_map, np.where(solid, np.uint8(CellClass.WALL), seed_world))
     log_table = log_sensor_table(settings.sensor_model)
     walls: dict[int, tuple[tuple[Segment, ...], ...]] = {}
+    slants: dict[int, tuple[Slant, ...]] = {}
     wall_segments = 0
     cw = seed_world
     if settings.wall_shift_m is not None:
@@ -309,6 +318,7 @@ def describe(
                                classes_work, min_length_cells=_cells(settings.slant_min_m, resolution_m)))
         cw = to_map(frame, fitted.classes_world, fill=CellClass.UNKNOWN)
         walls, wall_segments = fitted.segments, fitted.fitted
+        slants = {uid: cuts for uid, cuts in fitted.slants.items() if cuts}
     cw = np.where(solid, np.uint8(CellClass.WALL), cw).astype(np.uint8)
     clutter = exterior = 0
     if settings.clutter_max_m2 is not None:
@@ -337,7 +347,7 @@ def describe(
             x, y = contour.reshape(-1, 2)[0]
             standing.append(bool(blocks[y, x]))
     return FloorPlan(world, units, doors, adjacency, rooms, rings, standing, classes_map, cw,
-                     cell_prediction_rate(classes_map, cw), k_units, clutter, walls, wall_segments, exterior,
+                     cell_prediction_rate(classes_map, cw), k_units, clutter, walls, wall_segments, slants, exterior,
                      log_posterior, iterations, accepted,
                      seconds, cpu_seconds, resolution_m, origin_xy_m, frame)
 

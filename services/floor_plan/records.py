@@ -28,7 +28,8 @@ def plan_layer(plan: FloorPlan, *, name: str, meta: Mapping[str, Any] | None = N
     return GridLayer(name, plan.classes_world.astype(np.uint8), plan.resolution_m, ox, oy, {
         "encoding": FLOOR_PLAN_ENCODING, "classes": [c.name.lower() for c in CellClass],
         "k": round(plan.k, 6), "k_units": round(plan.k_units, 6), "clutter": plan.clutter,
-        "wall_segments": plan.wall_segments, "exterior": plan.exterior, **dict(meta or {}),
+        "wall_segments": plan.wall_segments, "slanted_walls": plan.slanted_walls, "exterior": plan.exterior,
+        **dict(meta or {}),
     })
 
 

@@ -242,7 +242,7 @@ def fit_walls(
         reach = max_shift + max_thickness
         scratch: _Counts = (np.zeros(shape, np.int16), np.zeros(shape, np.int16), np.zeros(shape, np.int16))
         for uid, rect in sorted(world.units.items()):
-            own = _Own.of(rect, reach, shape, scratch, strips[uid], drawn, uid, t=t, depth=depth_of(rect))
+            own = _Own.of(rect, reach, shape, scratch, strips[uid], drawn, uid, doors[uid], t=t, depth=depth_of(rect))
             for _ in range(max_slants):
                 cut = _best_slant(counts, ll, fixed, own, rect, lines, t=t, log_cost=log_cost,
                                   min_inside=segment_cells)
@@ -312,14 +312,16 @@ class _Own:
     """One unit's own counts (free space, wall, door) in a window round its rectangle, so that a slanted wall can
     take them off the world's counts where it cuts the unit."""
 
-    def __init__(self, window: tuple[slice, slice], counts: _Counts) -> None:
+    def __init__(self, window: tuple[slice, slice], counts: _Counts, keep: npt.NDArray[np.float64]) -> None:
         self.window = window
         self.counts = counts
+        self.keep = keep
+        """(N, 2) cells (row, column) every cut keeps: the unit's centre and its doors' corners."""
 
     @classmethod
     def of(cls, rect: Rect, reach: int, shape: tuple[int, int], scratch: _Counts, strips: list[_Strip],
-           drawn: dict[tuple[int, Side], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]], uid: int, *, t: int,
-           depth: int) -> _Own:
+           drawn: dict[tuple[int, Side], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]], uid: int,
+           doors: list[Rect], *, t: int, depth: int) -> _Own:
         window = (slice(max(rect.r0 - reach, 0), min(rect.r1 + reach + 1, shape[0])),
                   slice(max(rect.c0 - reach, 0), min(rect.c1 + reach + 1, shape[1])))
         a0, a1, b0, b1 = rect.r0 + t + depth, rect.r1 - t - depth, rect.c0 + t + depth, rect.c1 - t - depth
@@ -330,7 +332,9 @@ class _Own:
         own = (scratch[0][window].copy(), scratch[1][window].copy(), scratch[2][window].copy())
         for c in scratch:
             c[window] = 0
-        return cls(window, own)
+        keep = [((rect.r0 + rect.r1) / 2, (rect.c0 + rect.c1) / 2)]
+        keep += [(r, c) for d in doors for r in (d.r0, d.r1) for c in (d.c0, d.c1)]
+        return cls(window, own, np.array(keep, np.float64))
 
     def cut(self, counts: _Counts, slant: Slant) -> None:
         d = _distance(self.window, slant)
@@ -372,7 +376,8 @@ def _best_slant(
     lines: npt.NDArray[np.float64], *, t: int, log_cost: float, min_inside: int, reach_half: int = 4,
 ) -> Slant | None:
     """The slanted wall that explains the map best where it cuts the unit (its line through one of ``lines``, moved
-    up to ``reach_half`` half cells either way, ``t`` to ``t + 1`` cells thick), if it beats ``log_cost``."""
+    up to ``reach_half`` half cells either way, ``t`` to ``t + 1`` cells thick) that keeps the unit's centre and doors,
+    if it beats ``log_cost``."""
     a0, a1, b0, b1 = rect.r0 + t, rect.r1 - t, rect.c0 + t, rect.c1 - t
     lines = lines[_inside(lines, a0, a1, b0, b1) >= min_inside]
     if not len(lines):
@@ -389,9 +394,6 @@ def _best_slant(
     foot = (o_int > 0) | (o_wall > 0) | (o_door > 0)
     g_drop = cell_ll(_classes(n_int - o_int, n_wall - o_wall, n_door - o_door, fix))[foot] - old[foot]
     g_band = cell_ll(_classes(n_int - o_int, n_wall - o_wall + 1, n_door - o_door, fix))[foot] - old[foot]
-    door = o_door[foot] > 0
-    g_drop[door] = -1e9  # the unit's doors stay
-    g_band[door] = -1e9
     if np.maximum(np.maximum(g_drop, g_band), 0.0).sum() <= log_cost:
         return None  # no cut can pay
     rows, cols = np.nonzero(foot)
@@ -401,7 +403,6 @@ def _best_slant(
     size = reach_half - lo + 1
     q = np.arange(-reach_half, reach_half + 1)
     qi, wi = q[:, None] - lo, widths[None, :]
-    r_c, c_c = (rect.r0 + rect.r1) / 2, (rect.c0 + rect.c1) / 2
     length = np.hypot(lines[:, 2] - lines[:, 0], lines[:, 3] - lines[:, 1])
     normals = np.stack([(lines[:, 2] - lines[:, 0]) / length, -(lines[:, 3] - lines[:, 1]) / length], axis=1)
     # branch and bound: a cut gains at most its far side's cells where every position puts them beyond the line
@@ -424,12 +425,13 @@ def _best_slant(
         x0, y0 = lines[k, 0], lines[k, 1]
         nr, nc = normals[k]
         d = 2 * ((rows - y0) * nr + (cols - x0) * nc)
-        centre = 2 * ((r_c - y0) * nr + (c_c - x0) * nc)
+        keep = 2 * ((own.keep[:, 0] - y0) * nr + (own.keep[:, 1] - x0) * nc)
         for sign in ((1.0,) if side == 0 else (-1.0,)):
             half = np.clip(np.floor(sign * d), lo, reach_half).astype(np.int64) - lo
             drop = np.cumsum(np.bincount(half, g_drop, size)[::-1])[::-1]  # sum over b >= index
             band = np.r_[0.0, np.cumsum(np.bincount(half, g_band, size))]  # sum over b < index
-            gain = np.where(np.floor(sign * centre) < q[:, None] - wi, drop[qi] + band[qi] - band[qi - wi], -np.inf)
+            kept = np.floor(np.max(sign * keep)) < q[:, None] - wi  # the centre and the doors stay
+            gain = np.where(kept, drop[qi] + band[qi] - band[qi - wi], -np.inf)
             i, j = np.unravel_index(int(np.argmax(gain)), gain.shape)
             if gain[i, j] > log_cost and (best is None or gain[i, j] > best[0]):
                 shift = q[i] / 2

@@ -11,6 +11,7 @@ from pydantic import ValidationError
 
 from services.floor_plan import CellClass, ChainSettings, FloorPlanSettings, Rect, World, floor_plan, render
 from services.floor_plan.clutter import explain_exterior
+from services.floor_plan.detectors import slanted_lines
 from services.floor_plan.likelihood import log_sensor_table
 from services.floor_plan.walls import Walls, fit_walls
 from shared.settings import FloorPlanStageSettings
@@ -124,3 +125,65 @@ def test_the_worker_settings_take_fitted_walls_off_and_refuse_a_nonsense_shift()
     with pytest.raises(ValueError, match="segment_cells"):
         fit_walls(World(), np.zeros((5, 5), np.uint8), TABLE, wall_cells=1, fixed=np.zeros((5, 5), bool),
                   max_shift=1, max_thickness=2, log_cost=1.0, segment_cells=0)
+
+
+def _slanted_room(shape: tuple[int, int] = (60, 80)) -> npt.NDArray[np.uint8]:
+    """A room whose right wall leans 0.4 cells outwards per row (about 22 degrees off the columns), one-cell walls,
+    unknown outside: no axis-parallel rectangle fits it."""
+    cm = np.full(shape, CellClass.UNKNOWN, np.uint8)
+    for r in range(10, 50):
+        right = round(50 + 0.4 * (r - 10))
+        cm[r, 10 : right + 1] = CellClass.WALL if r in (10, 49) else CellClass.FREE
+        cm[r, 10] = cm[r, right] = CellClass.WALL
+    return cm
+
+
+def test_a_unit_over_a_slanted_wall_is_cut_along_it_and_gives_up_the_corner_beyond() -> None:
+    cm = _slanted_room()
+    world = World({1: Rect(10, 49, 10, 66)})  # the room's bounding box, as an axis-parallel unit stands over it
+    lines = slanted_lines(cm, min_length_cells=20)
+    out = fit_walls(world, cm, TABLE, wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=3, max_thickness=4,
+                    log_cost=10.0, segment_cells=5, lines=lines)
+    seed = _fit(world, cm, t=1)
+    assert seed.slants == {1: ()} and seed.classes_world[15, 62] == CellClass.FREE, "without lines: a rectangle"
+    (cut,) = out.slants[1]
+    assert abs(cut.normal_row) > 0.3 and abs(cut.normal_col) > 0.8, "the wall leans, its normal is not an axis"
+    corner = (cm == CellClass.UNKNOWN)[10:50, 10:67]
+    assert np.mean(out.classes_world[10:50, 10:67][corner] == CellClass.UNKNOWN) > 0.9, "the corner is given up"
+    slanted = np.zeros(cm.shape, bool)
+    for r in range(12, 48):
+        slanted[r, round(50 + 0.4 * (r - 10))] = True
+    assert np.mean(out.classes_world[slanted] == CellClass.WALL) > 0.8, "the wall is drawn along the slanted line"
+    assert np.all(out.classes_world[12:48, 12:48] == CellClass.FREE), "the room's free space stays"
+    k = [float(np.mean(w.classes_world == cm)) for w in (seed, out)]
+    assert k[1] > k[0]
+
+
+def test_a_slanted_wall_keeps_the_units_door_and_pays_its_cost() -> None:
+    cm = _slanted_room()
+    world = World({1: Rect(10, 49, 10, 66)})
+    lines = slanted_lines(cm, min_length_cells=20)
+    dear = fit_walls(world, cm, TABLE, wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=3, max_thickness=4,
+                     log_cost=1e6, segment_cells=5, lines=lines)
+    assert dear.slants == {1: ()}, "a cut that does not pay its cost is not drawn"
+    cm[0:11, 55:71] = CellClass.WALL  # a room beyond the corner, a door in the top wall to it
+    cm[1:10, 56:70] = CellClass.FREE
+    cm[10, 60:66] = CellClass.FREE
+    world = World({1: Rect(10, 49, 10, 66), 2: Rect(0, 10, 55, 70)}, {Rect(10, 10, 60, 65)})
+    assert world.door_units(Rect(10, 10, 60, 65), 1) == [1, 2]
+    out = fit_walls(world, cm, TABLE, wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=3, max_thickness=4,
+                    log_cost=10.0, segment_cells=5, lines=lines)
+    assert np.all(out.classes_world[10, 60:66] == CellClass.FREE), "the door stays open"
+    for cut in out.slants[1]:
+        d = (10 - cut.row0) * cut.normal_row + (np.arange(60, 66) - cut.col0) * cut.normal_col
+        assert np.all(d < -cut.thickness), "no cut gives up the cells of the unit's door"
+
+
+def test_a_plan_of_a_slanted_room_draws_the_slanted_wall_and_leaves_the_units_alone() -> None:
+    occ = np.where(_slanted_room() == CellClass.FREE, 0, np.where(_slanted_room() == CellClass.WALL, 100, -1))
+    settings = FloorPlanSettings(chain=ChainSettings(iterations=1500, seed=1))
+    plan = floor_plan(occ.astype(np.int8), resolution_m=RES, settings=settings)
+    flat = floor_plan(occ.astype(np.int8), resolution_m=RES, settings=replace(settings, slant_min_m=None))
+    assert plan.world == flat.world and plan.rooms == flat.rooms and plan.k_units == flat.k_units
+    assert flat.slanted_walls == 0 and plan.slanted_walls >= 1
+    assert plan.k > flat.k
