@@ -67,3 +67,22 @@ def test_furniture_near_a_border_is_read_as_a_dilation_by_the_disc() -> None:
         disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
         dilated = cv2.dilate(furniture.astype(np.uint8), disc) > 0
         assert np.array_equal(_near(furniture, pixels, reach), dilated.ravel())
+
+
+def test_a_narrow_office_cut_where_a_cupboard_narrows_it_joins() -> None:
+    """A furnished 2.6 x 6 m office, cut across where a cupboard against its wall leaves 1.6 m: one room.
+
+    The cut is a neck (saddle 0.8 m against peaks of 1.3 m), but the union is no less convex than its
+    pieces: a room cut in two, not a room beside a corridor.
+    """
+    seg = np.zeros((140, 80), dtype=np.int32)
+    seg[10:70, 10:62] = 1
+    seg[70:130, 10:62] = 2
+    seg[60:80, 10:30] = 0  # the cupboard against the left wall
+    desk = np.zeros(seg.shape, dtype=bool)
+    desk[64:76, 44:54] = True
+    seg[desk] = 0
+    before = join_room_pieces(seg, desk, resolution_m=RES, min_relative_solidity=np.inf)
+    assert before[30, 40] != before[110, 40]  # the saddle alone keeps it cut
+    out = join_room_pieces(seg, desk, resolution_m=RES)
+    assert out[30, 40] == out[110, 40] > 0
