@@ -34,10 +34,12 @@ def join_room_pieces(
     pieces of one room fill their convex hull (furniture holes counted in), so the union's
     solidity must reach ``min_solidity``. A furnished room's own outline is often far from convex
     (cupboards and desks against its walls), and a cupboard or desk can narrow it to a neck where it
-    was cut: pieces meeting at a saddle of at least ``low_saddle_ratio`` of the smaller peak also
-    join when their union is at least ``min_relative_solidity`` times as convex as the more convex
-    piece (cutting a room in two leaves pieces no more convex than the room; a room and a corridor
-    piece make a T or an L, less convex than either). Only borders with furniture within
+    was cut: pieces of which one at least is less convex than ``min_solidity``, meeting at a saddle
+    of at least ``low_saddle_ratio`` of the smaller peak, also join when their union is at least
+    ``min_relative_solidity`` times as convex as the more convex piece (cutting a room in two
+    leaves pieces no more convex than the room; a room and a corridor piece make a T or an L, less
+    convex than either). Two convex pieces (rooms side by side, both rectangles) still need the
+    first test: their union is convex too. Only borders with furniture within
     ``furniture_reach_m`` are joined: the pieces of a bare room were not cut by furniture (a row
     of bare cubicles, each as wide as its opening onto the corridor, stays apart).
 
@@ -86,10 +88,12 @@ def join_room_pieces(
         if candidates.size == 0:
             break
         solid = np.array([_solidity(seg, lut, boxes, int(a), int(b), solidity) for a, b in candidates])
-        own = np.array([max(_solidity(seg, lut, boxes, int(a), int(a), solidity),
-                            _solidity(seg, lut, boxes, int(b), int(b), solidity)) for a, b in candidates])
+        own = np.array([sorted((_solidity(seg, lut, boxes, int(a), int(a), solidity),
+                                _solidity(seg, lut, boxes, int(b), int(b), solidity))) for a, b in candidates])
         # a room cut in two: its union no less convex than its more convex piece (a room and a corridor: a T or L)
-        joins = (high & (solid >= min_solidity)) | (low & (solid >= min_relative_solidity * own))
+        joins = (high & (solid >= min_solidity)) | (
+            low & (own[:, 0] < min_solidity) & (solid >= min_relative_solidity * own[:, 1])
+        )
         order = np.argsort(-solid, kind="stable")
         used = np.zeros(n, dtype=bool)
         for k in order[joins[order]]:
