@@ -88,12 +88,13 @@ def join_room_pieces(
         if candidates.size == 0:
             break
         solid = np.array([_solidity(seg, lut, boxes, int(a), int(b), solidity) for a, b in candidates])
-        own = np.array([sorted((_solidity(seg, lut, boxes, int(a), int(a), solidity),
-                                _solidity(seg, lut, boxes, int(b), int(b), solidity))) for a, b in candidates])
-        # a room cut in two: its union no less convex than its more convex piece (a room and a corridor: a T or L)
-        joins = (high & (solid >= min_solidity)) | (
-            low & (own[:, 0] < min_solidity) & (solid >= min_relative_solidity * own[:, 1])
-        )
+        joins = high & (solid >= min_solidity)
+        # a room cut in two: its union no less convex than its more convex piece (a room and a corridor: a T or
+        # L), when a piece is not convex itself (two convex rooms side by side make a convex union too)
+        for k in np.flatnonzero(low & ~joins):
+            a, b = (int(v) for v in candidates[k])
+            sa, sb = sorted((_solidity(seg, lut, boxes, a, a, solidity), _solidity(seg, lut, boxes, b, b, solidity)))
+            joins[k] = sa < min_solidity and solid[k] >= min_relative_solidity * sb
         order = np.argsort(-solid, kind="stable")
         used = np.zeros(n, dtype=bool)
         for k in order[joins[order]]:
