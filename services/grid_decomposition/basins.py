@@ -19,6 +19,8 @@ def join_room_pieces(
     fixed: npt.NDArray[np.bool_] | None = None,
     min_saddle_ratio: float = 0.8,
     min_solidity: float = 0.8,
+    low_saddle_ratio: float = 0.5,
+    min_relative_solidity: float = 0.95,
 ) -> npt.NDArray[np.int32]:
     """Join touching segments that are pieces of one furnished room rather than rooms joined by a doorway.
 
@@ -30,7 +32,14 @@ def join_room_pieces(
     smaller piece has no room of its own behind the border). A wide opening between a small room
     and a corridor is no neck either: there the union has the shape of a T or an L, while two
     pieces of one room fill their convex hull (furniture holes counted in), so the union's
-    solidity must reach ``min_solidity``. Only borders with furniture within
+    solidity must reach ``min_solidity``. A furnished room's own outline is often far from convex
+    (cupboards and desks against its walls), and a cupboard or desk can narrow it to a neck where it
+    was cut: pieces of which one at least is less convex than ``min_solidity``, meeting at a saddle
+    of at least ``low_saddle_ratio`` of the smaller peak, also join when their union is at least
+    ``min_relative_solidity`` times as convex as the more convex piece (cutting a room in two
+    leaves pieces no more convex than the room; a room and a corridor piece make a T or an L, less
+    convex than either). Two convex pieces (rooms side by side, both rectangles) still need the
+    first test: their union is convex too. Only borders with furniture within
     ``furniture_reach_m`` are joined: the pieces of a bare room were not cut by furniture (a row
     of bare cubicles, each as wide as its opening onto the corridor, stays apart).
 
@@ -47,6 +56,8 @@ def join_room_pieces(
         Metres per pixel.
     fixed : (N + 1,) bool, optional
         Per segment id: never joined (warehouse floors, road networks).
+    low_saddle_ratio, min_relative_solidity : float
+        The second test above; ``min_relative_solidity=np.inf`` turns it off.
 
     Returns
     -------
@@ -70,14 +81,23 @@ def join_room_pieces(
     solidity: dict[tuple[int, int], float] = {}
     while True:
         keep = furnished & ~frozen[pairs[:, 0]] & ~frozen[pairs[:, 1]]
-        keep &= saddle >= min_saddle_ratio * np.minimum(peak[pairs[:, 0]], peak[pairs[:, 1]])
-        candidates = pairs[keep]
+        lower = np.minimum(peak[pairs[:, 0]], peak[pairs[:, 1]])
+        high, low = saddle >= min_saddle_ratio * lower, saddle >= low_saddle_ratio * lower
+        keep &= high | low
+        candidates, high, low = pairs[keep], high[keep], low[keep]
         if candidates.size == 0:
             break
         solid = np.array([_solidity(seg, lut, boxes, int(a), int(b), solidity) for a, b in candidates])
+        joins = high & (solid >= min_solidity)
+        # a room cut in two: its union no less convex than its more convex piece (a room and a corridor: a T or
+        # L), when a piece is not convex itself (two convex rooms side by side make a convex union too)
+        for k in np.flatnonzero(low & ~joins):
+            a, b = (int(v) for v in candidates[k])
+            sa, sb = sorted((_solidity(seg, lut, boxes, a, a, solidity), _solidity(seg, lut, boxes, b, b, solidity)))
+            joins[k] = sa < min_solidity and solid[k] >= min_relative_solidity * sb
         order = np.argsort(-solid, kind="stable")
         used = np.zeros(n, dtype=bool)
-        for k in order[solid[order] >= min_solidity]:
+        for k in order[joins[order]]:
             a, b = (int(v) for v in candidates[k])
             if used[a] or used[b]:
                 continue

@@ -67,3 +67,40 @@ def test_furniture_near_a_border_is_read_as_a_dilation_by_the_disc() -> None:
         disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
         dilated = cv2.dilate(furniture.astype(np.uint8), disc) > 0
         assert np.array_equal(_near(furniture, pixels, reach), dilated.ravel())
+
+
+def _office_with_cupboards() -> tuple[np.ndarray, np.ndarray]:
+    """A 3.2 x 6.5 m office with cupboards along both walls, cut in two beside one of them (a desk near the cut)."""
+    seg = np.zeros((150, 90), dtype=np.int32)
+    seg[10:75, 10:74] = 1
+    seg[75:140, 10:74] = 2
+    seg[65:85, 10:32] = 0  # the cupboard beside the cut
+    for r0, c0, c1 in ((25, 48, 74), (45, 10, 36), (95, 48, 74), (115, 10, 36)):  # cupboards along the walls
+        seg[r0 : r0 + 14, c0:c1] = 0
+    desk = np.zeros(seg.shape, dtype=bool)
+    desk[70:80, 50:60] = True
+    seg[desk] = 0
+    return seg, desk
+
+
+def test_an_office_with_cupboards_along_its_walls_cut_in_two_joins() -> None:
+    """Its outline is far from convex (solidity 0.77), but no less convex than either piece: one room."""
+    seg, desk = _office_with_cupboards()
+    before = join_room_pieces(seg, desk, resolution_m=RES, min_relative_solidity=np.inf)
+    assert before[30, 40] != before[110, 40]  # the union's solidity alone keeps it cut
+    out = join_room_pieces(seg, desk, resolution_m=RES)
+    assert out[30, 40] == out[110, 40] > 0
+
+
+def test_two_furnished_rooms_side_by_side_behind_a_wide_opening_stay_apart() -> None:
+    """Two 3 x 4 m rooms, a 1.8 m opening in the wall between them: both pieces are convex, so their
+    convex union is no sign of one room."""
+    seg = np.zeros((100, 150), dtype=np.int32)
+    seg[10:90, 10:70] = 1
+    seg[10:90, 74:134] = 2
+    seg[32:68, 70:74] = 1  # the opening
+    desks = np.zeros(seg.shape, dtype=bool)
+    desks[20:30, 56:66] = desks[70:80, 78:88] = True
+    seg[desks] = 0
+    out = join_room_pieces(seg, desks, resolution_m=RES)
+    assert out[50, 30] != out[50, 110]
