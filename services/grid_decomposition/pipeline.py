@@ -30,7 +30,6 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.layout import split_by_layout
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.racks import (
@@ -295,7 +294,6 @@ def decompose(
     known_places: RackLayout | None = None,
     prior: RegionPrior | None = None,
     settled_max_changed_share: float = 0.2,
-    layout_min_region_m2: float = 100.0,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -375,10 +373,6 @@ def decompose(
         continues it grows it (:func:`~services.grid_decomposition.continuity.keep_regions`), so a growing
         map's regions do not flicker where it did not change. Racks, aisles and warehouse floors are the new
         decomposition's.
-    layout_min_region_m2 : float
-        A room region at least this large (off warehouse floors) that the building's layout parts into
-        rooms is split where the map never drew their walls
-        (:func:`~services.grid_decomposition.layout.split_by_layout`); 0 turns it off.
     seed : int
         Seed of the clusterings.
 
@@ -545,12 +539,6 @@ def decompose(
             rays=rays,
             occupied=occupied,
         )
-        if layout_min_region_m2 > 0:  # rooms open onto a corridor where the map never drew their wall
-            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
-            splittable = (size >= layout_min_region_m2 / resolution_m**2) & (on_floor == 0)
-            splittable[0] = False
-            if splittable.any():
-                segments = split_by_layout(segments, occupied, used, splittable, resolution_m=resolution_m)
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)
         grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
