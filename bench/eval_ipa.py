@@ -21,16 +21,12 @@ Prints a Markdown table per set and ``name value unit`` summary lines. Run (one 
 segment holding most of it, its recall and best IoU; per segment its purity (its precision term);
 and ``DIR/<map>_explain.png``: the rooms coloured by their best IoU over the segments coloured by
 their purity (red 0, green 1; white borders, room and segment numbers).
-``--floor-plan-evidence DIR`` decomposes every map with its floor plan's room parts as evidence
-(``decompose(floor_plan_parts=...)``): the floor plans are fitted as ``bench/bench_floor_plan.py`` fits them
-(20000 iterations, seed 0; the partial steps warm-started, 2000 iterations) once per map and kept in ``DIR``.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import pickle
 import statistics
 import time
 from pathlib import Path
@@ -42,17 +38,6 @@ import numpy.typing as npt
 from PIL import Image
 from threadpoolctl import threadpool_limits
 
-from services.floor_plan import (
-    ChainSettings,
-    FloorPlan,
-    FloorPlanSettings,
-    World,
-    carry,
-    floor_plan,
-    make_frame,
-    part_cells,
-)
-from services.floor_plan.mapfile import read_map
 from services.grid_decomposition import IpaScores, decompose, ground_truth_rooms, ipa_scores
 from services.grid_decomposition.evaluation import (
     FREE_GREY,
@@ -94,52 +79,21 @@ def _rgb(path: Path) -> npt.NDArray[np.uint8]:
         return np.asarray(image.convert("RGB"))
 
 
-def cached_plan(cache: Path, key: str, path: Path, previous: tuple[FloorPlan, Path] | None = None) -> FloorPlan:
-    """The floor plan of one map image as ``bench/bench_floor_plan.py`` fits it (read as ``aisle floor-plan``
-    reads a bare image, 20000 iterations, seed 0; a growing map's step warm-started from the previous step's
-    world with 2000 iterations), computed once and kept in ``cache/<key>.pkl``."""
-    out = cache / f"{key}.pkl"
-    if out.exists():
-        with out.open("rb") as f:
-            plan: FloorPlan = pickle.load(f)
-        return plan
-    occ, _, _ = read_map(path, resolution_m=RESOLUTION_M)
-    start, angle, iterations = None, None, 20000
-    if previous is not None:
-        old_plan, old_path = previous
-        old_free, free = _grey(old_path) >= FREE_GREY, _grey(path) >= FREE_GREY
-        dr, dc = align_offset(old_free, free)
-        lr = (occ.shape[0] - old_free.shape[0]) - dr
-        angle = old_plan.frame.angle_rad
-        new = make_frame(occ.shape, angle_rad=angle, origin_xy_m=(-dc * RESOLUTION_M, -lr * RESOLUTION_M),
-                         resolution_m=RESOLUTION_M)
-        carried = carry(old_plan.world, old_plan.frame, new)
-        start, iterations = World(carried.units, set(), carried.next_id), 2000
-    settings = FloorPlanSettings(chain=ChainSettings(iterations=iterations, max_seconds=600.0, seed=0))
-    plan = floor_plan(occ, resolution_m=RESOLUTION_M, settings=settings, start=start, angle_rad=angle)
-    cache.mkdir(parents=True, exist_ok=True)
-    with out.open("wb") as f:
-        pickle.dump(plan, f)
-    return plan
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sets", nargs="*", default=list(SETS), choices=SETS, help="which sets to run")
     parser.add_argument("--variants", nargs="*", default=list(VARIANTS), help="ipa suffixes, '' = plain")
     parser.add_argument("--maps", nargs="*", default=None, help="only these ROSE2 full maps / ipa map names")
     parser.add_argument("--explain", type=Path, default=None, help="per room / segment tables and pictures here")
-    parser.add_argument("--floor-plan-evidence", type=Path, default=None, metavar="DIR",
-                        help="join regions within the floor plan's room parts; floor plans cached in DIR")
     args = parser.parse_args()
     print(f"load average at start {os.getloadavg()[0]:.2f}")
     with threadpool_limits(1):
         if "ipa" in args.sets:
-            _ipa(args.variants, args.maps, args.floor_plan_evidence)
+            _ipa(args.variants, args.maps)
         if "rose2" in args.sets:
-            _rose2_full(args.maps, args.explain, args.floor_plan_evidence)
+            _rose2_full(args.maps, args.explain)
         if "partial" in args.sets:
-            _partial(args.floor_plan_evidence)
+            _partial()
     print(f"load average at end {os.getloadavg()[0]:.2f}")
 
 
@@ -185,26 +139,15 @@ def _summary(tag: str, rows: list[Row]) -> None:
     print(f"{tag}_max_cpu_seconds {max(r.cpu for r in rows):.3f} s")
 
 
-def _parts(plans: Path | None, key: str, path: Path, previous: tuple[FloorPlan, Path] | None = None) -> tuple[
-        npt.NDArray[np.int32] | None, FloorPlan | None]:
-    """The floor plan's room parts of one map (GridLayer order) and the plan, with ``--floor-plan-evidence``
-    (``plans``: the cache)."""
-    if plans is None:
-        return None, None
-    plan = cached_plan(plans, key, path, previous)
-    return part_cells(plan), plan
-
-
-def _timed(occupancy: npt.NDArray[np.int8], parts: npt.NDArray[np.int32] | None = None) -> tuple[
-        npt.NDArray[np.int32], float, float]:
+def _timed(occupancy: npt.NDArray[np.int8]) -> tuple[npt.NDArray[np.int32], float, float]:
     """Segments (image row order) of a decomposition, wall and CPU seconds."""
     start, cpu_start = time.perf_counter(), time.process_time()
-    result = decompose(occupancy, resolution_m=RESOLUTION_M, floor_plan_parts=parts)
+    result = decompose(occupancy, resolution_m=RESOLUTION_M)
     seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
     return np.ascontiguousarray(result.segments[::-1]), seconds, cpu
 
 
-def _ipa(variants: list[str], only: list[str] | None, plans: Path | None) -> None:
+def _ipa(variants: list[str], only: list[str] | None) -> None:
     names = sorted(p.name[: -len("_gt_segmentation.png")] for p in IPA.glob("*_gt_segmentation.png"))
     if only:
         names = [n for n in names if n in only]
@@ -221,7 +164,7 @@ def _ipa(variants: list[str], only: list[str] | None, plans: Path | None) -> Non
             if occupancy.shape != truth.shape:
                 print(f"| {tag} | {name} | skipped: map {occupancy.shape} != ground truth {truth.shape} |")
                 continue
-            segments, seconds, cpu = _timed(occupancy, _parts(plans, f"ipa_{name}{variant}", path)[0])
+            segments, seconds, cpu = _timed(occupancy)
             s = ipa_scores(segments, ground_truth_rooms(truth))
             rows.append(Row(s, seconds, cpu))
             _row(tag, name, s, seconds, cpu)
@@ -243,12 +186,10 @@ def _common(*images: npt.NDArray[Any]) -> list[npt.NDArray[Any]]:
     return [i[:h, :w] for i in images]
 
 
-def _rose2_map(
-    folder: Path, plans: Path | None
-) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], IpaScores, IpaScores, Row]:
+def _rose2_map(folder: Path) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], IpaScores, IpaScores, Row]:
     """Our segments, the free mask, our scores, ROSE2's scores and our row for one map folder."""
     grey = _grey(folder / "map.png")
-    segments, seconds, cpu = _timed(rose2_occupancy(grey), _parts(plans, f"rose2_{folder.name}", folder / "map.png")[0])
+    segments, seconds, cpu = _timed(rose2_occupancy(grey))
     ours, s, peer, free = _rose2_scores(folder, grey, segments)
     return ours, free, s, peer, Row(s, seconds, cpu)
 
@@ -265,14 +206,14 @@ def _rose2_scores(
     return np.asarray(ours, dtype=np.int32), s, peer, free
 
 
-def _rose2_full(only: list[str] | None, explain: Path | None = None, plans: Path | None = None) -> None:
+def _rose2_full(only: list[str] | None, explain: Path | None = None) -> None:
     _header("set")
     ours: list[Row] = []
     theirs: list[Row] = []
     for folder in sorted(p for p in (ROSE2 / "full").iterdir() if p.is_dir()):
         if only and folder.name not in only:
             continue
-        segments, free, s, peer, row = _rose2_map(folder, plans)
+        segments, free, s, peer, row = _rose2_map(folder)
         if explain is not None:
             _explain(folder, segments, free, explain)
         ours.append(row)
@@ -323,7 +264,7 @@ def _borders(labels: npt.NDArray[np.int32]) -> npt.NDArray[np.bool_]:
     return edge
 
 
-def _partial(plans: Path | None = None) -> None:
+def _partial() -> None:
     """Each step decomposed and keyed as the live worker does it: the steps are placed in one map frame (the FFT
     alignment of their free masks gives each grid's origin), the previous step's segment layer and occupancy
     are the prior (:func:`~services.grid_decomposition.keys.region_prior`) and the keys are carried
@@ -336,7 +277,6 @@ def _partial(plans: Path | None = None) -> None:
     theirs: list[Row] = []
     shares: list[float] = []
     previous: tuple[GridLayer, GridLayer, npt.NDArray[np.int32], npt.NDArray[np.bool_]] | None = None
-    plan: tuple[FloorPlan, Path] | None = None
     corner = np.zeros(2, dtype=np.int64)  # (y, x) cells of this step's lower-left corner in the first step's frame
     for folder in steps:
         grey = _grey(folder / "map.png")
@@ -347,13 +287,10 @@ def _partial(plans: Path | None = None) -> None:
         occupancy = GridLayer("occupancy", rose2_occupancy(grey), RESOLUTION_M, float(-corner[1] * RESOLUTION_M),
                               float(-corner[0] * RESOLUTION_M))
         origin = (occupancy.origin_x_m, occupancy.origin_y_m)
-        parts, fitted = _parts(plans, f"partial_{folder.name}", folder / "map.png", plan)
-        plan = None if fitted is None else (fitted, folder / "map.png")
         start, cpu_start = time.perf_counter(), time.process_time()
         prior = None if previous is None else region_prior(previous[0], previous[1], occupancy)
-        decomposed = decompose(occupancy.data, resolution_m=RESOLUTION_M, origin_xy_m=origin, prior=prior,
-                               floor_plan_parts=parts)
-        result, ids = carry_keys(decomposed, None if previous is None else previous[0])
+        result, ids = carry_keys(decompose(occupancy.data, resolution_m=RESOLUTION_M, origin_xy_m=origin,
+                                           prior=prior), None if previous is None else previous[0])
         seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         segments, s, peer, free = _rose2_scores(folder, grey, np.ascontiguousarray(result.segments[::-1]))
         row = Row(s, seconds, cpu)

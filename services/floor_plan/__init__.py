@@ -27,7 +27,6 @@ from services.floor_plan.pipeline import (
     Unit,
     describe,
     floor_plan,
-    part_cells,
     room_labels,
     unit_labels,
 )
@@ -78,7 +77,6 @@ __all__ = [
     "group_rooms",
     "log_sensor_table",
     "make_frame",
-    "part_cells",
     "render",
     "room_keys",
     "room_labels",

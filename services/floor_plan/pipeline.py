@@ -352,18 +352,6 @@ def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
     return _labels(plan, items)
 
 
-def part_cells(plan: FloorPlan) -> npt.NDArray[np.int32]:
-    """A label image (GridLayer order, map cells) of the rooms' parts (:mod:`services.floor_plan.rooms`: each
-    unit's free space cut at the walls it stands over), 1..P in the order of ``plan.rooms`` and their parts,
-    painted on every cell of a part (where parts overlap the smaller one wins), 0 elsewhere: evidence for the
-    grid decomposition (:func:`~services.grid_decomposition.plan_parts.join_in_parts`)."""
-    work = np.zeros(plan.frame.shape, np.float32)  # ids as float32 (exact below 2**24) so OpenCV can turn them
-    items = enumerate((part for room in plan.rooms for part in room.parts), start=1)
-    for k, r in sorted(items, key=lambda item: -item[1].rows * item[1].cols):
-        work[r.r0 : r.r1 + 1, r.c0 : r.c1 + 1] = k
-    return to_map(plan.frame, work, fill=0.0).astype(np.int32)
-
-
 def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.int32]:
     """Each rectangle's id painted in order (cells of the plan's frame), on the map's free cells, grown through
     free space to the free cells none covers."""

@@ -24,7 +24,6 @@ from services.grid_decomposition.orientations import Gradients, dominant_orienta
 from services.grid_decomposition.overview import overview_image
 from services.grid_decomposition.pipeline import Decomposition, Resolution, decompose
 from services.grid_decomposition.places import cast_rays, categorize_places, raycast_features
-from services.grid_decomposition.plan_parts import join_in_parts
 from services.grid_decomposition.radiogram import Line, Radiogram, line_offsets, radiogram
 from services.grid_decomposition.regions import RegionInfo, face_regions, region_topology
 from services.grid_decomposition.semantics import (
@@ -107,7 +106,6 @@ __all__ = [
     "gabor_features",
     "ground_truth_rooms",
     "ipa_scores",
-    "join_in_parts",
     "layout_features",
     "line_offsets",
     "link_connection",

@@ -32,7 +32,6 @@ from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
-from services.grid_decomposition.plan_parts import join_in_parts
 from services.grid_decomposition.racks import (
     RackLayout,
     combine,
@@ -295,9 +294,6 @@ def decompose(
     known_places: RackLayout | None = None,
     prior: RegionPrior | None = None,
     settled_max_changed_share: float = 0.2,
-    floor_plan_parts: npt.NDArray[np.integer] | None = None,
-    part_min_share: float = 0.5,
-    part_min_cover: float = 0.5,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -377,14 +373,6 @@ def decompose(
         continues it grows it (:func:`~services.grid_decomposition.continuity.keep_regions`), so a growing
         map's regions do not flicker where it did not change. Racks, aisles and warehouse floors are the new
         decomposition's.
-    floor_plan_parts : (H, W) integer, optional
-        The rooms' parts of a floor plan of this grid (:func:`~services.floor_plan.pipeline.part_cells`: pieces of
-        one room with no wall across them): touching room regions that both lie mostly (``part_min_share``) in one
-        part and together cover ``part_min_cover`` of it are one region
-        (:func:`~services.grid_decomposition.plan_parts.join_in_parts`); racks, aisles and warehouse floors are
-        left alone.
-    part_min_share, part_min_cover : float
-        See ``floor_plan_parts``.
     seed : int
         Seed of the clusterings.
 
@@ -571,9 +559,6 @@ def decompose(
             n_known=0 if known_places is None else known_places.cell_labels.size - 1,
         )  # streaks the cleaning took out of a rack (a flue seen through an empty bay) are in it too
         on_places = places > 0
-        if floor_plan_parts is not None:
-            segments = join_in_parts(segments, floor_plan_parts, min_share=part_min_share, min_cover=part_min_cover,
-                                     keep=on_places | floor_px)
         if prior is not None:
             if prior.regions.shape != occ.shape or prior.unchanged.shape != occ.shape:
                 raise DecompositionError(f"a prior of shape {prior.regions.shape} on a grid of {occ.shape}")

@@ -21,7 +21,6 @@ from services.floor_plan import (
     Rect,
     UnitType,
     floor_plan,
-    part_cells,
     room_labels,
     unit_labels,
 )
@@ -136,14 +135,6 @@ def test_two_rooms_through_a_door_are_two_rooms_and_an_l_shaped_room_is_one() ->
     plan = floor_plan(occ, resolution_m=RES, settings=_settings(3000))
     rooms = room_labels(plan)
     assert len(set(np.unique(rooms[occ == 0]))) == 1, "one room over all of the L's free space"
-
-
-def test_part_cells_give_each_room_its_own_part_and_no_part_on_the_wall_between() -> None:
-    plan = floor_plan(_two_rooms(), resolution_m=RES, settings=_settings())
-    parts = part_cells(plan)
-    left, right = parts[40, 30], parts[40, 85]
-    assert left and right and left != right
-    assert not parts[20:30, 59:61].any(), "the wall between the rooms is in no part"
 
 
 def test_a_warm_start_keeps_the_ids_of_units_that_still_exist() -> None:
