@@ -5,7 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
+from scipy import ndimage, sparse
+from scipy.sparse import csgraph
 
 from services.grid_decomposition.segments import renumber
 
@@ -210,3 +211,170 @@ def _solidity(
     hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
     known[a, b] = float(np.count_nonzero(filled) / hull_area)
     return known[a, b]
+
+
+def join_furnished_groups(
+    segments: npt.NDArray[np.int32],
+    furniture: npt.NDArray[np.bool_],
+    *,
+    doors: npt.NDArray[np.bool_] | None = None,
+    reach_px: int = 2,
+    wall_reach_px: float = 10.0,
+    fixed: npt.NDArray[np.bool_] | None = None,
+    min_solidity: float = 0.8,
+) -> npt.NDArray[np.int32]:
+    """Join the pieces of an open-plan room that only furniture separates, when together they are room-shaped.
+
+    Desk clusters standing free in an open-plan office end the room stage's cuts (a doorway cut or
+    neck from a cluster to the wall, a line along a cluster's edge) and cut the office into pieces
+    that no pair test joins: two pieces wrapped round a cluster are not convex together, only the
+    whole office is. A border between two pieces is *furniture-made* when every run of it (a
+    connected stretch of border pixels: one cut, one line) comes within ``reach_px`` of
+    ``furniture`` and none lies on ``doors`` (doorways between two walls, whatever stands beside
+    them), and what stands between the two pieces is furniture rather than wall: the line of
+    obstacle pixels as near to one piece as to the other (their Voronoi border inside the
+    obstacles) is at least as long through ``furniture`` as through walls within ``wall_reach_px``
+    of both pieces (a partition between two rooms; the outside beyond an outer wall is farther).
+    Pieces linked so form a group, and a group becomes one segment when it is shaped like one
+    room: its floor with the furniture it touches fills at least ``min_solidity`` of its convex
+    hull. A group that also takes in a corridor through furniture at its door is an L or a T, and
+    a corridor ring round a block of rooms has the block in its hull (no hole is filled that is
+    not furniture): they stay in their pieces.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Segment ids 1..N per pixel, 0 = none.
+    furniture : (H, W) bool
+        Obstacles standing free on the floor: furniture, desk clusters (off the segments).
+    doors : (H, W) bool, optional
+        Doorways between walls (a border run on one is never furniture-made).
+    fixed : (N + 1,) bool, optional
+        Per segment id: never joined (warehouse floors, road networks).
+
+    Returns
+    -------
+    (H, W) int32
+        Segment ids 1..M (consecutive), 0 where ``segments`` is 0.
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max()) + 1
+    if n <= 2 or not furniture.any():
+        return renumber(seg)
+    h, w = seg.shape
+    keys: list[npt.NDArray[np.int64]] = []
+    sides: list[npt.NDArray[np.int64]] = []
+    for dy, dx in ((0, 1), (1, 0)):
+        a, b = seg[: h - dy, : w - dx], seg[dy:, dx:]
+        rows, cols = np.nonzero((a != b) & (a > 0) & (b > 0))
+        p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
+        key = np.minimum(p, q) * n + np.maximum(p, q)
+        keys += [key, key]
+        sides += [rows.astype(np.int64) * w + cols, (rows.astype(np.int64) + dy) * w + cols + dx]
+    key, pixel = np.concatenate(keys), np.concatenate(sides)
+    if key.size == 0:
+        return renumber(seg)
+    codes, pair = np.unique(key, return_inverse=True)
+    pair = pair.ravel()
+    size = 2 * reach_px + 1
+    near = cv2.dilate(furniture.astype(np.uint8), np.ones((size, size), np.uint8)).ravel().astype(bool)
+    run, n_runs = _runs(pixel, pair, h, w)
+    made = np.zeros(n_runs, dtype=bool)
+    made[run[near[pixel]]] = True
+    if doors is not None:  # a doorway between two walls stays one, whatever stands beside it
+        made[run[doors.ravel()[pixel]]] = False
+    linked = np.bincount(pair, weights=~made[run], minlength=codes.size) == 0
+    through_wall, through_furniture = _separators(seg, furniture, codes, n, wall_reach_px)
+    linked &= through_wall <= through_furniture
+    frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
+    frozen[0] = True
+    a, b = codes // n, codes % n
+    linked &= ~frozen[a] & ~frozen[b]
+    if not linked.any():
+        return renumber(seg)
+    graph = sparse.coo_matrix((np.ones(int(linked.sum())), (a[linked], b[linked])), shape=(n, n))
+    _, group = csgraph.connected_components(graph, directed=False)
+    members = np.bincount(group, minlength=n)
+    lut = np.arange(n, dtype=np.int32)
+    standing = np.asarray(cv2.connectedComponents(furniture.astype(np.uint8), connectivity=8)[1], dtype=np.int32)
+    boxes = _boxes(seg, n)
+    for g in np.flatnonzero(members >= 2).tolist():
+        ids = np.flatnonzero(group == g)
+        if _group_solidity(seg, ids, boxes, standing, n) >= min_solidity:
+            lut[ids] = ids[0]
+    return renumber(lut[seg])
+
+
+def _separators(
+    seg: npt.NDArray[np.int32], furniture: npt.NDArray[np.bool_], codes: npt.NDArray[np.int64], n: int, wall_px: float
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Per pair ``codes`` (``a * n + b``): pixels of their Voronoi border inside the obstacles (neighbouring
+    obstacle pixels nearest to ``a`` and to ``b``) on walls within ``wall_px`` of both, and on ``furniture``."""
+    blocked = (seg == 0).astype(np.uint8)
+    dist, label = cv2.distanceTransformWithLabels(blocked, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
+    owners = seg.ravel()[np.flatnonzero(seg.ravel() > 0)]
+    nearest = np.zeros(label.shape, dtype=np.int64)
+    on = blocked > 0
+    nearest[on] = owners[label[on] - 1]
+    h, w = seg.shape
+    wall = np.zeros(codes.size)
+    furn = np.zeros(codes.size)
+    for dy, dx in ((0, 1), (1, 0)):
+        a, b = nearest[: h - dy, : w - dx], nearest[dy:, dx:]
+        both = on[: h - dy, : w - dx] & on[dy:, dx:] & (a != b) & (a > 0) & (b > 0)
+        rows, cols = np.nonzero(both)
+        key = np.minimum(a[rows, cols], b[rows, cols]) * n + np.maximum(a[rows, cols], b[rows, cols])
+        at = np.minimum(np.searchsorted(codes, key), codes.size - 1)
+        known = codes[at] == key
+        d = np.maximum(dist[rows, cols], dist[rows + dy, cols + dx])
+        f = furniture[rows, cols] | furniture[rows + dy, cols + dx]
+        np.add.at(furn, at[known & f], 1.0)
+        np.add.at(wall, at[known & ~f & (d <= wall_px)], 1.0)
+    return wall, furn
+
+
+def _runs(
+    pixel: npt.NDArray[np.int64], pair: npt.NDArray[np.int64], h: int, w: int
+) -> tuple[npt.NDArray[np.int64], int]:
+    """Per border pixel entry (flat ``pixel``, ``pair`` index): its run, the 8-connected stretch of border
+    pixels of the same pair it lies on; and the number of runs."""
+    code = pair * (h * w) + pixel
+    unique, entry = np.unique(code, return_inverse=True)
+    entry = entry.ravel()
+    at_pixel, at_pair = unique % (h * w), unique // (h * w)
+    row, col = np.divmod(at_pixel, w)
+    starts, ends = [], []
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        inside = (row + dy < h) & (col + dx >= 0) & (col + dx < w)
+        other = at_pair * (h * w) + at_pixel + dy * w + dx
+        at = np.minimum(np.searchsorted(unique, other), unique.size - 1)
+        found = np.flatnonzero(inside & (unique[at] == other))
+        starts.append(found)
+        ends.append(at[found])
+    i, j = np.concatenate(starts), np.concatenate(ends)
+    graph = sparse.coo_matrix((np.ones(i.size), (i, j)), shape=(unique.size, unique.size))
+    n_runs, run = csgraph.connected_components(graph, directed=False)
+    return run[entry], int(n_runs)
+
+
+def _group_solidity(
+    seg: npt.NDArray[np.int32],
+    ids: npt.NDArray[np.int64],
+    boxes: npt.NDArray[np.int64],
+    standing: npt.NDArray[np.int32],
+    n: int,
+) -> float:
+    """Area of the segments ``ids`` with the furniture pieces (``standing`` ids) touching them over the
+    area of their convex hull."""
+    member = np.zeros(n, dtype=bool)
+    member[ids] = True
+    r0, c0 = (max(int(v) - 1, 0) for v in boxes[ids, :2].min(axis=0))
+    r1, c1 = (int(v) + 1 for v in boxes[ids, 2:].max(axis=0))
+    union = member[seg[r0:r1, c0:c1]]
+    crop = standing[r0:r1, c0:c1]
+    touching = np.unique(crop[cv2.dilate(union.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)])
+    union |= np.isin(crop, touching[touching > 0])
+    outlines, _ = cv2.findContours(union.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    hull = cv2.convexHull(np.concatenate(outlines))
+    hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
+    return float(np.count_nonzero(union) / hull_area)

@@ -282,6 +282,7 @@ def decompose(
     wall_tolerance_m: float = 0.1,
     island_max_extent_m: float = 2.0,
     island_min_clearance_m: float = 0.3,
+    desk_max_extent_m: float = 4.5,
     face_disparity_threshold: float = 0.5,
     edge_occupancy_threshold: float = 0.5,
     min_region_area_m2: float = 0.3,
@@ -335,6 +336,10 @@ def decompose(
         across, at least ``island_min_clearance_m`` from every other obstacle: a desk cluster, a
         table with its chairs) are no wall along the lines: a gap between one and a wall is no
         doorway (:func:`~services.grid_decomposition.rooms.free_standing`); 0 turns it off.
+    desk_max_extent_m : float
+        Pieces of a room that only furniture separates (desk clusters, tables and chairs standing
+        free, solid and compact, up to this size across) join when together they are room-shaped
+        (:func:`~services.grid_decomposition.basins.join_furnished_groups`); 0 turns it off.
     face_disparity_threshold, edge_occupancy_threshold : float
         t1, t2 of the cogency test.
     min_region_area_m2 : float
@@ -538,6 +543,8 @@ def decompose(
             neck_half_width_m=neck_half_width_m,
             rays=rays,
             occupied=occupied,
+            line_doors=door,
+            desk_max_extent_m=desk_max_extent_m,
         )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)

@@ -8,7 +8,7 @@ import numpy.typing as npt
 from scipy import ndimage
 
 from services.grid_decomposition.arrays import Components, components, label_counts
-from services.grid_decomposition.basins import join_room_pieces
+from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.segments import (
@@ -147,6 +147,13 @@ def segment_rooms(
     join_saddle_ratio: float = 0.8,
     join_solidity: float = 0.8,
     island_max_extent_m: float = 3.0,
+    desk_max_extent_m: float = 4.5,
+    desk_max_elongation: float = 2.5,
+    desk_min_thickness_m: float = 0.6,
+    desk_small_m2: float = 0.25,
+    desk_small_extent_m: float = 0.7,
+    desk_wall_reach_m: float = 0.5,
+    line_doors: npt.NDArray[np.bool_] | None = None,
     rays: npt.NDArray[np.bool_] | None = None,
     occupied: npt.NDArray[np.bool_] | None = None,
     lone_max_ray_share: float = 0.5,
@@ -177,6 +184,14 @@ def segment_rooms(
        no neck between them on the clearance map (furniture and obstacle islands at most
        ``island_max_extent_m`` across count as floor), a union about as convex as a room
        (``join_solidity``), furniture near their border.
+    6. Pieces that only furniture separates join when together they are room-shaped
+       (:func:`join_furnished_groups`, when ``desk_max_extent_m`` > 0): an open-plan office cut
+       round its desk clusters (:func:`desk_clusters`: obstacle islands up to ``desk_max_extent_m``
+       across, solid, compact, or chairs up to ``desk_small_m2``; the laser saw them), linked by
+       borders that end on them and not on a doorway between walls (free-space cuts with both ends
+       on walls, gaps closed along lines, ``line_doors``, off the furniture), with more furniture
+       than wall (within ``desk_wall_reach_m`` of both) between them, whose union fills
+       ``join_solidity`` of its hull.
 
     Parameters
     ----------
@@ -198,6 +213,7 @@ def segment_rooms(
     """
     seg = merge_open_segments(segments, closed, fixed=_share(segments, floor) > 0.5)
     cut = np.zeros(seg.shape, dtype=bool)
+    cuts = np.zeros((0, 2, 2))
     fixed = _share(seg, floor) > 0.5
     spread = fill_from_neighbours(seg, clutter)
     seg = np.where(clutter & fixed[spread], 0, spread).astype(np.int32)
@@ -241,7 +257,56 @@ def segment_rooms(
             min_saddle_ratio=join_saddle_ratio,
             min_solidity=join_solidity,
         )
+    if desk_max_extent_m > 0:
+        desks = desk_clusters(
+            rooms == 0,
+            max_extent_px=desk_max_extent_m / resolution_m,
+            compact_from_px=island_max_extent_m / resolution_m,
+            max_elongation=desk_max_elongation,
+            min_thickness_px=desk_min_thickness_m / resolution_m,
+            small_px=desk_small_m2 / resolution_m**2,
+            small_extent_px=desk_small_extent_m / resolution_m,
+        )
+        standing = clutter | desks
+        if occupied is not None:  # furniture is something the laser hit, not unknown space between rays
+            parts = components(standing).labels
+            seen = np.zeros(int(parts.max()) + 1, dtype=bool)
+            seen[parts[occupied]] = True
+            seen[0] = False
+            standing = seen[parts]
+        rooms = join_furnished_groups(
+            rooms,
+            standing,
+            doors=_wall_doors(cuts, line_doors, standing),
+            wall_reach_px=desk_wall_reach_m / resolution_m,
+            fixed=_share(rooms, floor) > 0.5,
+            min_solidity=join_solidity,
+        )
     return rooms, cut
+
+
+def _wall_doors(
+    cuts: npt.NDArray[np.float64],
+    line_doors: npt.NDArray[np.bool_] | None,
+    standing: npt.NDArray[np.bool_],
+    reach_px: int = 2,
+) -> npt.NDArray[np.bool_]:
+    """Raster of the doorways between walls, widened by a pixel (the border a doorway leaves runs beside it):
+    the doorway cuts with no end within ``reach_px`` of ``standing`` and the gaps closed along lines
+    (``line_doors``) that come no nearer to it."""
+    size = 2 * reach_px + 1
+    near = cv2.dilate(standing.astype(np.uint8), np.ones((size, size), np.uint8)).astype(bool)
+    h, w = standing.shape
+    ends = np.rint(cuts).astype(np.int64)
+    on = near[np.clip(ends[..., 1], 0, h - 1), np.clip(ends[..., 0], 0, w - 1)]
+    raster = draw_cuts(cuts[~on.any(axis=1)], (h, w))
+    if line_doors is not None and line_doors.any():
+        gaps = components(line_doors).labels
+        beside = np.zeros(int(gaps.max()) + 1, dtype=bool)
+        beside[gaps[near]] = True
+        beside[0] = True
+        raster |= ~beside[gaps]
+    return np.asarray(cv2.dilate(raster.astype(np.uint8), np.ones((3, 3), np.uint8)), dtype=bool)
 
 
 def _outside_rays(
@@ -305,6 +370,48 @@ def islands(
     keep = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (np.maximum(bw, bh) <= max_extent_px)
     keep[0] = False
     return np.asarray(keep[parts], dtype=bool)
+
+
+def desk_clusters(
+    blocked: npt.NDArray[np.bool_],
+    *,
+    max_extent_px: float,
+    compact_from_px: float,
+    max_elongation: float,
+    min_thickness_px: float,
+    min_solid: float = 0.3,
+    small_px: float = 0.0,
+    small_extent_px: float = 0.0,
+) -> npt.NDArray[np.bool_]:
+    """Bulky obstacles standing free in a room: desk clusters, tables, cabinets, chairs; not pieces of wall.
+
+    :func:`islands` up to ``max_extent_px`` across that are small (at most ``small_px`` pixels and
+    ``small_extent_px`` across: a chair, a bin; not a dash of wall) or solid (at least
+    ``min_solid`` of them survives an opening with a disc ``min_thickness_px`` wide: a desk is
+    deeper than a wall is thick, so a T or an L of walls, even thick ones, is not) and, when
+    longer than ``compact_from_px``, compact (their minimum-area rectangle at most
+    ``max_elongation`` times as long as wide: a row of cupboards along a corridor is long).
+    """
+    labelled = components(blocked)
+    keep = islands(blocked, max_extent_px=max_extent_px, labelled=labelled)
+    parts, stats = labelled.labels, labelled.stats
+    radius = max(1, round(min_thickness_px / 2))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    thick = cv2.morphologyEx(keep.astype(np.uint8), cv2.MORPH_OPEN, disc).astype(bool)
+    ok = np.bincount(parts[thick], minlength=len(stats)) >= min_solid * np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
+    ok |= (stats[:, cv2.CC_STAT_AREA] <= small_px) & (
+        np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]) <= small_extent_px
+    )
+    ok[0] = False
+    large = np.zeros(len(stats), dtype=bool)
+    large[np.unique(parts[keep])] = True
+    large &= ok & (np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]) > compact_from_px)
+    for k in np.flatnonzero(large).tolist():
+        x, y, bw, bh = (int(v) for v in stats[k, :4])
+        rows, cols = np.nonzero(parts[y : y + bh, x : x + bw] == k)
+        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+        ok[k] = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
+    return np.asarray(keep & ok[parts], dtype=bool)
 
 
 def free_standing(

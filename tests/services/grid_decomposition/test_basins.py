@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from services.grid_decomposition.basins import _near, join_room_pieces
+from services.grid_decomposition.basins import _near, join_furnished_groups, join_room_pieces
 
 RES = 0.05
 
@@ -104,3 +104,44 @@ def test_two_furnished_rooms_side_by_side_behind_a_wide_opening_stay_apart() -> 
     seg[desks] = 0
     out = join_room_pieces(seg, desks, resolution_m=RES)
     assert out[50, 30] != out[50, 110]
+
+def _office_cut_round_a_desk_cluster() -> tuple[np.ndarray, np.ndarray]:
+    """A 6 x 4 m office cut in two at x = 3 m from a 1.5 x 1 m desk cluster in its middle to both walls."""
+    seg = np.zeros((100, 140), dtype=np.int32)
+    seg[10:90, 10:70] = 1
+    seg[10:90, 70:130] = 2
+    desks = np.zeros(seg.shape, dtype=bool)
+    desks[40:60, 55:85] = True
+    seg[desks] = 0
+    return seg, desks
+
+
+def test_pieces_only_furniture_separates_join_when_together_they_are_room_shaped() -> None:
+    seg, desks = _office_cut_round_a_desk_cluster()
+    out = join_furnished_groups(seg, desks)
+    assert out[20, 30] == out[80, 110] > 0
+    assert np.array_equal(out > 0, seg > 0)
+    assert join_furnished_groups(seg, np.zeros_like(desks)).max() == 2  # no furniture: nothing joins
+
+
+def test_a_doorway_between_walls_keeps_its_pieces_apart_whatever_stands_beside_it() -> None:
+    seg, desks = _office_cut_round_a_desk_cluster()
+    doors = np.zeros(seg.shape, dtype=bool)
+    doors[10:40, 69:71] = True  # the upper cut is a doorway from wall to wall
+    out = join_furnished_groups(seg, desks, doors=doors)
+    assert out[20, 30] != out[20, 110]
+
+
+def test_an_office_linked_to_a_corridor_by_furniture_at_its_door_does_not_take_the_corridor() -> None:
+    """The office above the left end of a 12 m corridor, open onto it, a chair on the border: a T, not a room."""
+    seg = np.zeros((120, 260), dtype=np.int32)
+    seg[10:90, 10:70] = 1
+    seg[10:90, 70:130] = 2
+    seg[90:110, 10:250] = 3
+    desks = np.zeros(seg.shape, dtype=bool)
+    desks[40:60, 55:85] = True
+    desks[86:94, 30:36] = True  # a chair on the office's border with the corridor
+    seg[desks] = 0
+    out = join_furnished_groups(seg, desks)
+    assert out[100, 200] not in (out[20, 30], out[20, 110])
+    assert join_furnished_groups(seg, desks, fixed=np.array([False, True, True, True])).max() == 3

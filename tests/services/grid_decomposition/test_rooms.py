@@ -195,8 +195,9 @@ def test_a_room_with_a_desk_cluster_in_its_middle_is_one_segment() -> None:
     occ = _room_with_a_desk_cluster()
     free = occ == 0
     assert np.unique(decompose(occ, resolution_m=RES).segments[free]).size == 1
-    # with the cluster as a wall, the lines along its desks close "doorways" to the walls
-    walled = decompose(occ, resolution_m=RES, island_max_extent_m=0.0).segments
+    # with the cluster as a wall, the lines along its desks close "doorways" to the walls (and without the
+    # joining of what only furniture separates, which would make the pieces one room again)
+    walled = decompose(occ, resolution_m=RES, island_max_extent_m=0.0, desk_max_extent_m=0.0).segments
     assert np.unique(walled[free]).size > 1
 
 
@@ -234,3 +235,39 @@ def test_a_corridor_is_not_cut_beside_the_doors_of_its_offices() -> None:
     # without the rule the lines along the partitions close the corridor where its doors make it "widen"
     old = decompose(occ, resolution_m=RES, corridor_length_m=0.0)
     assert np.unique(old.segments[corridor_rows[0] : corridor_rows[-1] + 1, 25:301]).size > 1
+
+
+def _open_plan_office() -> np.ndarray:
+    """29.2 x 5.5 m at 5 cm, 0.15 m walls, unknown outside: an open-plan office with three desk clusters
+    (3.2 x 1.6 m of desks with four chairs along each long side: 3.2 x 2.4 m, too large to be
+    furniture or a free-standing obstacle on their own) in a row down its middle, 1.15 m of floor
+    between them and the walls, five cupboards (4 x 0.8 m) along the top wall; on the right a
+    5.5 m office behind a 0.9 m door."""
+    occ = np.full((126, 600), -1, dtype=np.int8)
+    occ[5:121, 5:595] = 100
+    occ[8:118, 8:592] = 0
+    occ[8:118, 480:483] = 100  # the wall to the office
+    occ[54:72, 480:483] = 0  # its door
+    for x0 in (40, 160, 280):
+        occ[47:79, x0 : x0 + 64] = 100  # desks
+        for dx in range(4, 64, 16):  # chairs touching them
+            occ[39:47, x0 + dx : x0 + dx + 8] = 100
+            occ[79:87, x0 + dx : x0 + dx + 8] = 100
+    for x0 in range(30, 470, 100):
+        occ[8:24, x0 : x0 + 80] = 100  # cupboards against the top wall
+    return occ
+
+
+def test_an_open_plan_office_with_desk_clusters_is_one_room_and_the_office_behind_its_door_another() -> None:
+    occ = _open_plan_office()
+    free = occ == 0
+    hall, office = free.copy(), free.copy()
+    hall[:, 480:] = False
+    office[:, :483] = False
+    d = decompose(occ, resolution_m=RES)
+    assert np.unique(d.segments[hall]).size == 1
+    assert np.unique(d.segments[office]).size == 1
+    assert d.segments[60, 300] != d.segments[60, 540]  # kept apart at their door
+    # without joining what only furniture separates, the cuts from the clusters to the walls cut it up
+    old = decompose(occ, resolution_m=RES, desk_max_extent_m=0.0)
+    assert np.unique(old.segments[hall]).size > 1
