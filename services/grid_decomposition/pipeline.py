@@ -26,6 +26,7 @@ from services.grid_decomposition.arrays import (
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.continuity import RegionPrior, keep_regions
+from services.grid_decomposition.corridors import part_rooms_from_corridors
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
@@ -295,6 +296,7 @@ def decompose(
     known_places: RackLayout | None = None,
     prior: RegionPrior | None = None,
     settled_max_changed_share: float = 0.2,
+    corridor_min_region_m2: float = 100.0,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -546,6 +548,14 @@ def decompose(
             line_doors=door,
             desk_max_extent_m=desk_max_extent_m,
         )
+        if corridor_min_region_m2 > 0:  # rooms open onto a corridor where the map never drew their wall
+            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            candidates = (size >= corridor_min_region_m2 / resolution_m**2) & (on_floor == 0)
+            candidates[0] = False
+            if candidates.any():
+                segments = part_rooms_from_corridors(
+                    segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m
+                )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)
         grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)

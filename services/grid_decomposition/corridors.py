@@ -1,0 +1,209 @@
+"""Corridors first: a corridor band is never cut; rooms open onto it where no wall was drawn part from it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from services.grid_decomposition.radiogram import Line
+
+
+@dataclass(frozen=True)
+class Band:
+    """A corridor band between the parallel lines ``offset_a_px < offset_b_px`` of one angle.
+
+    Along the lines (``t = cos(angle) * x + sin(angle) * y``) it runs from ``t0_px`` to ``t1_px``.
+    """
+
+    angle_rad: float
+    offset_a_px: int
+    offset_b_px: int
+    t0_px: int
+    t1_px: int
+
+
+def _coordinates(
+    shape: tuple[int, int], top: int, left: int, angle_rad: float
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Across (``u``, the lines' offsets) and along (``t``) coordinates of a window's pixels, rounded."""
+    rows, cols = np.indices(shape)
+    x, y = cols + left, rows + top
+    s, c = np.sin(angle_rad), np.cos(angle_rad)
+    return np.rint(-s * x + c * y).astype(np.int64), np.rint(c * x + s * y).astype(np.int64)
+
+
+def _runs(flags: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Starts and ends (exclusive) of the runs of True."""
+    edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
+    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+
+
+def corridor_bands(
+    region: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    lines: list[Line],
+    *,
+    top: int,
+    left: int,
+    resolution_m: float,
+    min_width_m: float = 1.0,
+    max_width_m: float = 3.0,
+    min_length_m: float = 6.0,
+    min_length_widths: float = 3.0,
+    min_clear: float = 0.9,
+    min_side_wall: float = 0.3,
+    min_wall: float = 0.35,
+    tolerance_px: int = 2,
+) -> list[Band]:
+    """Corridor bands of one region: long clear strips between two parallel lines with walls on both.
+
+    For every pair of parallel lines ``min_width_m`` to ``max_width_m`` apart, the strip between them
+    (``tolerance_px`` in from each line) is clear where at least ``min_clear`` of its cross-section lies in
+    ``region``. A clear run at least ``min_length_m`` and ``min_length_widths`` widths long is a band when
+    an occupied cell lies within ``tolerance_px`` of each line over at least ``min_side_wall`` of the run
+    and of both lines together over ``min_wall``: a side may open onto rooms over long stretches. Bands
+    are taken best walled first; one whose strip lies mostly inside a band already taken is left out (a
+    narrower pair of lines inside a corridor).
+
+    ``region`` and ``occupied`` are windows whose top-left pixel is (``top``, ``left``) of the image the
+    lines were drawn in.
+    """
+    shape = (region.shape[0], region.shape[1])
+    min_w, max_w = round(min_width_m / resolution_m), round(max_width_m / resolution_m)
+    found: list[tuple[float, Band]] = []
+    for angle in sorted({round(ln.angle_rad, 4) for ln in lines}):
+        u, t = _coordinates(shape, top, left, angle)
+        u0, t0 = int(u.min()), int(t.min())
+        nu, nt = int(u.max()) - u0 + 1, int(t.max()) - t0 + 1
+        key = (u - u0) * nt + (t - t0)
+        every = np.bincount(key.ravel(), minlength=nu * nt).reshape(nu, nt)
+        inside = np.bincount(key[region], minlength=nu * nt).reshape(nu, nt)
+        walls = np.bincount(key[occupied], minlength=nu * nt).reshape(nu, nt) > 0
+        # a wall along offset v: an occupied cell within the tolerance across
+        walls = cv2.dilate(walls.astype(np.uint8), np.ones((2 * tolerance_px + 1, 1), np.uint8)).astype(bool)
+        every_c = np.vstack([np.zeros((1, nt), np.int64), np.cumsum(every, axis=0)])
+        inside_c = np.vstack([np.zeros((1, nt), np.int64), np.cumsum(inside, axis=0)])
+        offsets = sorted(
+            {round(ln.offset_px) - u0 for ln in lines if round(ln.angle_rad, 4) == angle} & set(range(nu))
+        )
+        for i, a in enumerate(offsets):
+            for b in offsets[i + 1 :]:
+                width = b - a
+                if width < min_w:
+                    continue
+                if width > max_w:
+                    break
+                lo, hi = a + tolerance_px + 1, b - tolerance_px
+                total = every_c[hi] - every_c[lo]
+                clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
+                length = max(round(min_length_m / resolution_m), round(min_length_widths * width))
+                for s, e in zip(*_runs(clear), strict=True):
+                    if e - s < length:
+                        continue
+                    side_a, side_b = walls[a, s:e].mean(), walls[b, s:e].mean()
+                    if min(side_a, side_b) >= min_side_wall and (side_a + side_b) / 2 >= min_wall:
+                        found.append(((side_a + side_b) / 2, Band(angle, a + u0, b + u0, int(s) + t0, int(e) - 1 + t0)))
+    bands: list[Band] = []
+    taken = np.zeros(shape, dtype=bool)
+    for _, band in sorted(found, key=lambda f: -f[0]):
+        strip = band_mask(band, shape, top, left)
+        if taken[strip].mean() <= 0.5:
+            bands.append(band)
+            taken |= strip
+    return bands
+
+
+def band_mask(band: Band, shape: tuple[int, int], top: int, left: int, *, margin_px: int = 0) -> npt.NDArray[np.bool_]:
+    """The pixels of a window (top-left at ``top``, ``left``) between a band's lines and within its run."""
+    u, t = _coordinates(shape, top, left, band.angle_rad)
+    return (
+        (u >= band.offset_a_px - margin_px)
+        & (u <= band.offset_b_px + margin_px)
+        & (t >= band.t0_px)
+        & (t <= band.t1_px)
+    )
+
+
+def _side_cuts(band: Band, shape: tuple[int, int], top: int, left: int, thickness_px: int) -> npt.NDArray[np.bool_]:
+    """Both side lines of a band over its run, ``thickness_px`` either side of each line."""
+    u, t = _coordinates(shape, top, left, band.angle_rad)
+    along = (t >= band.t0_px) & (t <= band.t1_px)
+    near_a = np.abs(u - band.offset_a_px) <= thickness_px
+    near_b = np.abs(u - band.offset_b_px) <= thickness_px
+    return along & (near_a | near_b)
+
+
+def part_rooms_from_corridors(
+    segments: npt.NDArray[np.int32],
+    occupied: npt.NDArray[np.bool_],
+    lines: list[Line],
+    candidates: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    room_min_area_m2: float = 8.0,
+    room_min_radius_m: float = 1.0,
+    room_min_solidity: float = 0.6,
+    cut_thickness_px: int = 1,
+) -> npt.NDArray[np.int32]:
+    """Part the rooms from the corridor bands of candidate regions, along the bands' side lines.
+
+    In every region ``k`` with ``candidates[k]`` the corridor bands (:func:`corridor_bands`) are found and
+    the region is cut along both side lines of every band over its run. A 4-connected piece that holds no
+    square of a band's strip (at most, say, the end of a band crossing the other's side line) becomes a
+    region of its own when it is room-like: at least ``room_min_area_m2``, a disc
+    of ``room_min_radius_m`` fits in it and its area is at least ``room_min_solidity`` of its convex
+    hull's. Every other piece and the cut pixels stay in the band's region: a band is never cut across,
+    and a piece that is no room (a corner, a wall's niche) stays with the corridor.
+
+    Returns
+    -------
+    (H, W) int32
+        The segments with the parted rooms numbered after the existing ones.
+    """
+    out = segments.copy()
+    next_id = int(segments.max()) + 1
+    min_area = room_min_area_m2 / resolution_m**2
+    min_radius = room_min_radius_m / resolution_m
+    for k in np.flatnonzero(candidates):
+        rows, cols = np.nonzero(segments == k)
+        if rows.size == 0:
+            continue
+        top, left = int(rows.min()), int(cols.min())
+        bottom, right = int(rows.max()) + 1, int(cols.max()) + 1
+        region = segments[top:bottom, left:right] == k
+        bands = corridor_bands(
+            region, occupied[top:bottom, left:right], lines, top=top, left=left, resolution_m=resolution_m
+        )
+        if not bands:
+            continue
+        shape = (region.shape[0], region.shape[1])
+        cut = np.zeros(shape, dtype=bool)
+        for band in bands:
+            cut |= _side_cuts(band, shape, top, left, cut_thickness_px)
+        pieces = region & ~cut
+        n, labels = cv2.connectedComponents(pieces.astype(np.uint8), connectivity=4)
+        on_strip = np.zeros(n, dtype=bool)
+        for band in bands:  # a band's piece holds a square of its strip, not only the end of a crossing band
+            width = band.offset_b_px - band.offset_a_px
+            held = np.bincount(labels[band_mask(band, shape, top, left) & pieces], minlength=n)
+            on_strip |= held >= width**2
+        window = out[top:bottom, left:right]
+        for p in range(1, n):
+            if on_strip[p]:
+                continue
+            piece = labels == p
+            area = int(piece.sum())
+            if area < min_area:
+                continue
+            clearance = cv2.distanceTransform(np.pad(piece, 1).astype(np.uint8), cv2.DIST_L2, 5)
+            if clearance.max() < min_radius:
+                continue
+            points = np.stack(np.nonzero(piece)[::-1], axis=1).astype(np.int32)
+            if area < room_min_solidity * cv2.contourArea(cv2.convexHull(points)):
+                continue
+            window[piece] = next_id
+            next_id += 1
+    return out
