@@ -147,6 +147,7 @@ def part_rooms_from_corridors(
     room_min_radius_m: float = 1.0,
     room_min_solidity: float = 0.6,
     cut_thickness_px: int = 1,
+    margin_px: int = 4,
 ) -> npt.NDArray[np.int32]:
     """Part the rooms from the corridor bands of candidate regions, along the bands' side lines.
 
@@ -171,8 +172,9 @@ def part_rooms_from_corridors(
         rows, cols = np.nonzero(segments == k)
         if rows.size == 0:
             continue
-        top, left = int(rows.min()), int(cols.min())
-        bottom, right = int(rows.max()) + 1, int(cols.max()) + 1
+        # the window holds the walls round the region too
+        top, left = max(0, int(rows.min()) - margin_px), max(0, int(cols.min()) - margin_px)
+        bottom, right = int(rows.max()) + 1 + margin_px, int(cols.max()) + 1 + margin_px
         region = segments[top:bottom, left:right] == k
         bands = corridor_bands(
             region, occupied[top:bottom, left:right], lines, top=top, left=left, resolution_m=resolution_m

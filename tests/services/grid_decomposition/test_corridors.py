@@ -1,0 +1,88 @@
+"""Corridors first: a room open onto a corridor where the map never drew its wall parts from the corridor."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from services.grid_decomposition.corridors import corridor_bands, part_rooms_from_corridors
+from services.grid_decomposition.radiogram import Line
+
+RESOLUTION_M = 0.05
+
+
+def _corridor_and_room(seen_wall_m: float) -> tuple[np.ndarray, list[Line]]:
+    """Walls of a 33 m x 2.5 m corridor (rows 100..149) and a 6 m x 5 m room above it (rows 152..250,
+    columns 300..420) open onto the corridor over its whole width (6 m, wider than the corridor: no neck).
+    The corridor's upper wall is drawn for ``seen_wall_m`` on each side of the opening; the lines are the
+    walls' (as the decomposition's line search finds them)."""
+    walls = np.zeros((260, 700), dtype=bool)
+    walls[98:100, 18:682] = True  # the corridor's lower wall
+    walls[100:150, [18, 19, 680, 681]] = True  # its ends
+    reach = round(seen_wall_m / RESOLUTION_M)
+    walls[150:152, 300 - reach : 300] = walls[150:152, 421 : 421 + reach] = True  # its upper wall, but the opening
+    walls[150:253, [298, 299, 421, 422]] = True  # the room's side walls
+    walls[251:253, 298:423] = True  # and its far wall
+    horizontal = [Line(0.0, float(y), 30.0, 0.1, True) for y in (99, 150, 251)]
+    vertical = [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (299, 421)]
+    return walls, horizontal + vertical
+
+
+def _one_region(walls: np.ndarray) -> np.ndarray:
+    segments = np.zeros(walls.shape, dtype=np.int32)
+    segments[100:150, 20:680] = 1
+    segments[150:251, 300:421] = 1
+    segments[walls] = 0
+    return segments
+
+
+def test_a_room_open_onto_a_corridor_where_its_wall_is_missing_is_a_region_of_its_own() -> None:
+    walls, lines = _corridor_and_room(seen_wall_m=14.0)
+    segments = _one_region(walls)
+    out = part_rooms_from_corridors(segments, walls, lines, np.array([False, True]), resolution_m=RESOLUTION_M)
+    room = np.unique(out[160:245, 305:415])
+    corridor = np.unique(out[101:149, 21:679])
+    assert room.size == 1 and corridor.size == 1, "the room and the whole corridor are one region each"
+    assert room[0] != corridor[0] and room[0] > 0 and corridor[0] > 0
+    assert np.array_equal(out > 0, segments > 0), "every pixel of the region stays in a region"
+
+
+def test_the_corridor_is_found_as_a_band_between_its_walls() -> None:
+    walls, lines = _corridor_and_room(seen_wall_m=14.0)
+    segments = _one_region(walls)
+    bands = corridor_bands(segments == 1, walls, lines, top=0, left=0, resolution_m=RESOLUTION_M)
+    assert [(b.offset_a_px, b.offset_b_px) for b in bands] == [(99, 150)]
+    assert bands[0].t0_px <= 25 and bands[0].t1_px >= 675, "the band runs the corridor's whole length"
+
+
+def test_a_wall_not_yet_seen_along_the_corridor_parts_nothing() -> None:
+    # a growing map: the corridor's upper wall has been seen for only 1 m on each side of the opening (the robot
+    # has not been further): no corridor band is known yet and the region stays whole
+    walls, lines = _corridor_and_room(seen_wall_m=1.0)
+    segments = _one_region(walls)
+    out = part_rooms_from_corridors(segments, walls, lines, np.array([False, True]), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out, segments)
+
+
+def test_an_open_hall_is_no_corridor_and_stays_whole() -> None:
+    # a 20 m x 12 m hall with lines across it (its walls' and a column row's) but no wall along any pair of
+    # lines 1-3 m apart
+    walls = np.zeros((260, 420), dtype=bool)
+    walls[[8, 9, 250, 251], 8:412] = True
+    walls[8:252, [8, 9, 410, 411]] = True
+    walls[128:132, 100:104] = walls[128:132, 300:304] = True  # two columns
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (9, 130, 160, 250)]
+    lines += [Line(math.pi / 2, -float(x), 12.0, 0.1, True) for x in (9, 102, 140, 302, 410)]
+    segments = np.zeros(walls.shape, dtype=np.int32)
+    segments[10:250, 10:410] = 1
+    segments[walls] = 0
+    out = part_rooms_from_corridors(segments, walls, lines, np.array([False, True]), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out, segments)
+
+
+def test_regions_not_offered_are_left_alone() -> None:
+    walls, lines = _corridor_and_room(seen_wall_m=14.0)
+    segments = _one_region(walls)
+    out = part_rooms_from_corridors(segments, walls, lines, np.array([False, False]), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out, segments)
