@@ -29,9 +29,9 @@ def _coordinates(
     shape: tuple[int, int], top: int, left: int, angle_rad: float
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Across (``u``, the lines' offsets) and along (``t``) coordinates of a window's pixels, rounded."""
-    rows, cols = np.indices(shape)
-    x, y = cols + left, rows + top
-    s, c = np.sin(angle_rad), np.cos(angle_rad)
+    x = np.arange(left, left + shape[1], dtype=np.float32)[None, :]
+    y = np.arange(top, top + shape[0], dtype=np.float32)[:, None]
+    s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
     return np.rint(-s * x + c * y).astype(np.int64), np.rint(c * x + s * y).astype(np.int64)
 
 
@@ -74,8 +74,8 @@ def corridor_bands(
     shape = (region.shape[0], region.shape[1])
     min_w, max_w = round(min_width_m / resolution_m), round(max_width_m / resolution_m)
     found: list[tuple[float, Band]] = []
-    for angle in sorted({round(ln.angle_rad, 4) for ln in lines}):
-        u, t = _coordinates(shape, top, left, angle)
+    coordinates = {angle: _coordinates(shape, top, left, angle) for angle in {round(ln.angle_rad, 4) for ln in lines}}
+    for angle, (u, t) in sorted(coordinates.items()):
         u0, t0 = int(u.min()), int(t.min())
         nu, nt = int(u.max()) - u0 + 1, int(t.max()) - t0 + 1
         key = (u - u0) * nt + (t - t0)
@@ -109,27 +109,22 @@ def corridor_bands(
     bands: list[Band] = []
     taken = np.zeros(shape, dtype=bool)
     for _, band in sorted(found, key=lambda f: -f[0]):
-        strip = band_mask(band, shape, top, left)
+        strip = band_mask(band, *coordinates[band.angle_rad])
         if taken[strip].mean() <= 0.5:
             bands.append(band)
             taken |= strip
     return bands
 
 
-def band_mask(band: Band, shape: tuple[int, int], top: int, left: int, *, margin_px: int = 0) -> npt.NDArray[np.bool_]:
-    """The pixels of a window (top-left at ``top``, ``left``) between a band's lines and within its run."""
-    u, t = _coordinates(shape, top, left, band.angle_rad)
-    return (
-        (u >= band.offset_a_px - margin_px)
-        & (u <= band.offset_b_px + margin_px)
-        & (t >= band.t0_px)
-        & (t <= band.t1_px)
-    )
+def band_mask(band: Band, u: npt.NDArray[np.int64], t: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
+    """The pixels between a band's lines and within its run (``u``, ``t``: the pixels' coordinates)."""
+    return (u >= band.offset_a_px) & (u <= band.offset_b_px) & (t >= band.t0_px) & (t <= band.t1_px)
 
 
-def _side_cuts(band: Band, shape: tuple[int, int], top: int, left: int, thickness_px: int) -> npt.NDArray[np.bool_]:
+def _side_cuts(
+    band: Band, u: npt.NDArray[np.int64], t: npt.NDArray[np.int64], thickness_px: int
+) -> npt.NDArray[np.bool_]:
     """Both side lines of a band over its run, ``thickness_px`` either side of each line."""
-    u, t = _coordinates(shape, top, left, band.angle_rad)
     along = (t >= band.t0_px) & (t <= band.t1_px)
     near_a = np.abs(u - band.offset_a_px) <= thickness_px
     near_b = np.abs(u - band.offset_b_px) <= thickness_px
@@ -182,30 +177,30 @@ def part_rooms_from_corridors(
         if not bands:
             continue
         shape = (region.shape[0], region.shape[1])
+        coordinates = {a: _coordinates(shape, top, left, a) for a in {band.angle_rad for band in bands}}
         cut = np.zeros(shape, dtype=bool)
         for band in bands:
-            cut |= _side_cuts(band, shape, top, left, cut_thickness_px)
+            cut |= _side_cuts(band, *coordinates[band.angle_rad], cut_thickness_px)
         pieces = region & ~cut
-        n, labels = cv2.connectedComponents(pieces.astype(np.uint8), connectivity=4)
-        on_strip = np.zeros(n, dtype=bool)
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(pieces.astype(np.uint8), connectivity=4)
+        offered = stats[:, cv2.CC_STAT_AREA] >= min_area
+        offered[0] = False
         for band in bands:  # a band's piece holds a square of its strip, not only the end of a crossing band
             width = band.offset_b_px - band.offset_a_px
-            held = np.bincount(labels[band_mask(band, shape, top, left) & pieces], minlength=n)
-            on_strip |= held >= width**2
+            held = np.bincount(labels[band_mask(band, *coordinates[band.angle_rad]) & pieces], minlength=n)
+            offered &= held < width**2
         window = out[top:bottom, left:right]
-        for p in range(1, n):
-            if on_strip[p]:
-                continue
-            piece = labels == p
-            area = int(piece.sum())
-            if area < min_area:
-                continue
+        for p in np.flatnonzero(offered):
+            x, y = stats[p, cv2.CC_STAT_LEFT], stats[p, cv2.CC_STAT_TOP]
+            box = (slice(y, y + stats[p, cv2.CC_STAT_HEIGHT]), slice(x, x + stats[p, cv2.CC_STAT_WIDTH]))
+            piece = labels[box] == p
+            area = int(stats[p, cv2.CC_STAT_AREA])
             clearance = cv2.distanceTransform(np.pad(piece, 1).astype(np.uint8), cv2.DIST_L2, 5)
             if clearance.max() < min_radius:
                 continue
             points = np.stack(np.nonzero(piece)[::-1], axis=1).astype(np.int32)
             if area < room_min_solidity * cv2.contourArea(cv2.convexHull(points)):
                 continue
-            window[piece] = next_id
+            window[box][piece] = next_id
             next_id += 1
     return out
