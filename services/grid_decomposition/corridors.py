@@ -143,6 +143,8 @@ def part_rooms_from_corridors(
     room_min_solidity: float = 0.6,
     cut_thickness_px: int = 1,
     margin_px: int = 4,
+    joinable: npt.NDArray[np.bool_] | None = None,
+    join_min_share: float = 0.8,
 ) -> npt.NDArray[np.int32]:
     """Part the rooms from the corridor bands of candidate regions, along the bands' side lines.
 
@@ -152,7 +154,9 @@ def part_rooms_from_corridors(
     region of its own when it is room-like: at least ``room_min_area_m2``, a disc
     of ``room_min_radius_m`` fits in it and its area is at least ``room_min_solidity`` of its convex
     hull's. Every other piece and the cut pixels stay in the band's region: a band is never cut across,
-    and a piece that is no room (a corner, a wall's niche) stays with the corridor.
+    and a piece that is no room (a corner, a wall's niche) stays with the corridor. With ``joinable``
+    (per region id: may join a corridor), regions beside ``k`` that lie along one of its bands join it: the
+    corridor's pieces cut apart before.
 
     Returns
     -------
@@ -203,4 +207,46 @@ def part_rooms_from_corridors(
                 continue
             window[box][piece] = next_id
             next_id += 1
+        if joinable is not None:
+            out = _join_along(out, int(k), bands, joinable, min_share=join_min_share, tolerance_px=cut_thickness_px + 1)
     return out
+
+
+def _join_along(
+    segments: npt.NDArray[np.int32],
+    k: int,
+    bands: list[Band],
+    joinable: npt.NDArray[np.bool_],
+    *,
+    min_share: float,
+    tolerance_px: int,
+) -> npt.NDArray[np.int32]:
+    """Join region ``k`` and the regions beside it that lie along one of its bands: pieces of the corridor.
+
+    A ``joinable`` region touching ``k`` (or a region joined before it) joins when at least ``min_share``
+    of it lies between the lines of a band (widened by ``tolerance_px``), wherever along them, and that
+    part holds a square of the band's width.
+    """
+    n = int(segments.max()) + 1
+    size = np.bincount(segments.ravel(), minlength=n)
+    along = np.zeros(n, dtype=bool)
+    shape = (segments.shape[0], segments.shape[1])
+    for band in bands:
+        u, _ = _coordinates(shape, 0, 0, band.angle_rad)
+        strip = (u >= band.offset_a_px - tolerance_px) & (u <= band.offset_b_px + tolerance_px)
+        held = np.bincount(segments[strip], minlength=n)
+        along |= (held >= min_share * size) & (held >= (band.offset_b_px - band.offset_a_px) ** 2)
+    along[: joinable.size] &= joinable[:n]
+    along[joinable.size :] = False  # the rooms parted just now
+    along[[0, k]] = False
+    if not along.any():
+        return segments
+    corridor = segments == k
+    ring = np.ones((2 * tolerance_px + 1, 2 * tolerance_px + 1), np.uint8)
+    while True:
+        touching = np.unique(segments[cv2.dilate(corridor.astype(np.uint8), ring).astype(bool)])
+        new = touching[along[touching]]
+        if new.size == 0:
+            return np.where(corridor, k, segments).astype(np.int32)
+        along[new] = False
+        corridor |= np.isin(segments, new)

@@ -554,7 +554,8 @@ def decompose(
             candidates[0] = False
             if candidates.any():
                 segments = part_rooms_from_corridors(
-                    segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m
+                    segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m,
+                    joinable=on_floor == 0,
                 )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)

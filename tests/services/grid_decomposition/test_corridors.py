@@ -86,3 +86,20 @@ def test_regions_not_offered_are_left_alone() -> None:
     segments = _one_region(walls)
     out = part_rooms_from_corridors(segments, walls, lines, np.array([False, False]), resolution_m=RESOLUTION_M)
     assert np.array_equal(out, segments)
+
+
+def test_pieces_of_the_corridor_cut_apart_before_join_it_and_a_room_beside_it_does_not() -> None:
+    walls, lines = _corridor_and_room(seen_wall_m=14.0)
+    segments = _one_region(walls)
+    segments[100:150, 20:200] = np.where(segments[100:150, 20:200] > 0, 2, 0)  # the corridor's left end, cut off
+    segments[100:150, 200] = 0  # by a cut
+    segments[160:200, 20:100] = 3  # a room beside it, not along it
+    joinable = np.array([False, True, True, True])
+    out = part_rooms_from_corridors(
+        segments, walls, lines, np.array([False, True, False, False]), resolution_m=RESOLUTION_M, joinable=joinable
+    )
+    corridor = out[101:149, 21:679]
+    assert np.unique(corridor[corridor > 0]).size == 1, "the corridor is one region again (but the cut's pixels)"
+    assert np.unique(out[160:200, 20:100]).tolist() == [3]
+    room = np.unique(out[160:245, 305:415])
+    assert room.size == 1 and room[0] not in (0, 3, out[120, 100])
