@@ -27,12 +27,12 @@ class Band:
 
 def _coordinates(
     shape: tuple[int, int], top: int, left: int, angle_rad: float
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
     """Across (``u``, the lines' offsets) and along (``t``) coordinates of a window's pixels, rounded."""
     x = np.arange(left, left + shape[1], dtype=np.float32)[None, :]
     y = np.arange(top, top + shape[0], dtype=np.float32)[:, None]
     s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
-    return np.rint(-s * x + c * y).astype(np.int64), np.rint(c * x + s * y).astype(np.int64)
+    return np.rint(-s * x + c * y).astype(np.int32), np.rint(c * x + s * y).astype(np.int32)
 
 
 def _runs(flags: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -116,13 +116,13 @@ def corridor_bands(
     return bands
 
 
-def band_mask(band: Band, u: npt.NDArray[np.int64], t: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
+def band_mask(band: Band, u: npt.NDArray[np.int32], t: npt.NDArray[np.int32]) -> npt.NDArray[np.bool_]:
     """The pixels between a band's lines and within its run (``u``, ``t``: the pixels' coordinates)."""
     return (u >= band.offset_a_px) & (u <= band.offset_b_px) & (t >= band.t0_px) & (t <= band.t1_px)
 
 
 def _side_cuts(
-    band: Band, u: npt.NDArray[np.int64], t: npt.NDArray[np.int64], thickness_px: int
+    band: Band, u: npt.NDArray[np.int32], t: npt.NDArray[np.int32], thickness_px: int
 ) -> npt.NDArray[np.bool_]:
     """Both side lines of a band over its run, ``thickness_px`` either side of each line."""
     along = (t >= band.t0_px) & (t <= band.t1_px)
@@ -202,8 +202,8 @@ def part_rooms_from_corridors(
             clearance = cv2.distanceTransform(np.pad(piece, 1).astype(np.uint8), cv2.DIST_L2, 5)
             if clearance.max() < min_radius:
                 continue
-            points = np.stack(np.nonzero(piece)[::-1], axis=1).astype(np.int32)
-            if area < room_min_solidity * cv2.contourArea(cv2.convexHull(points)):
+            outline, _ = cv2.findContours(piece.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+            if area < room_min_solidity * cv2.contourArea(cv2.convexHull(np.concatenate(outline))):
                 continue
             window[box][piece] = next_id
             next_id += 1
@@ -244,9 +244,9 @@ def _join_along(
     corridor = segments == k
     ring = np.ones((2 * tolerance_px + 1, 2 * tolerance_px + 1), np.uint8)
     while True:
-        touching = np.unique(segments[cv2.dilate(corridor.astype(np.uint8), ring).astype(bool)])
-        new = touching[along[touching]]
-        if new.size == 0:
+        touching = np.bincount(segments[cv2.dilate(corridor.view(np.uint8), ring).view(bool)], minlength=n) > 0
+        new = touching & along
+        if not new.any():
             return np.where(corridor, k, segments).astype(np.int32)
-        along[new] = False
-        corridor |= np.isin(segments, new)
+        along &= ~new
+        corridor |= new[segments]
