@@ -19,6 +19,7 @@ unknown speckle, laser streaks and clutter dots of a real map's free space.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -66,6 +67,17 @@ class RoomSettings:
     corridor_room_depth: float = 2.5
     """... and at least this many corridor widths deep: a room or hall the corridor opens into, not a corridor
     it turns into (those are about as deep as it is wide). The two are not one room, however open."""
+    slant_line_m: float | None = 1.0
+    """Wall lines at least this long that run slanted through the frame split rooms
+    (:mod:`services.floor_plan.slanted`); None: rooms are made of rectangles only."""
+    slant_gap_m: float = 1.25
+    """... with gaps up to this long bridged (dashed walls, doorways) ..."""
+    slant_wall_share: float = 0.5
+    """... lying on or beside the free space's outline over at least this share of their length ..."""
+    slant_min_angle_rad: float = math.radians(15.0)
+    """... and at least this far from both axes of the frame (axis-parallel walls cut the units already)."""
+    slant_min_piece_m2: float = 1.0
+    """A room is re-cut where a slanted line splits it into pieces at least this large."""
 
 
 class Boundary(NamedTuple):
