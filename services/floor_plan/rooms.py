@@ -12,9 +12,11 @@ parts whose boundary is open over ``min_open_share`` of the shorter side, and fr
 space runs on into both (``min_depth_share``), are one room, unless the boundary is the end of a corridor at
 a room or hall much wider and deeper than the corridor (:func:`corridor_end`): the ground truth's rooms and a
 reader of a floor plan cut a corridor there, however open it is. Rooms are the connected components of the open
-boundaries (:func:`group_rooms`). Barriers are cells that are not free lying on a straight run along the
-wall's direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or unknown, not the
-unknown speckle, laser streaks and clutter dots of a real map's free space.
+boundaries (:func:`group_rooms`); a room smaller than ``min_room_m2`` (a sliver between units) joins the neighbour it
+shares the longest open length with. Walls running slanted through the frame cut no rectangle: the pipeline then
+re-cuts the rooms they split (:mod:`services.floor_plan.slanted`). Barriers are cells that are not free lying on
+a straight run along the wall's direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or
+unknown, not the unknown speckle, laser streaks and clutter dots of a real map's free space.
 """
 
 from __future__ import annotations

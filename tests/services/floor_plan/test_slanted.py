@@ -8,8 +8,16 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.floor_plan import CellClass, Rect, RoomSettings, UnitType, World, group_rooms
-from services.floor_plan.slanted import split_at_slanted_walls, wall_line_mask
+from services.floor_plan import (
+    CellClass,
+    Rect,
+    RoomSettings,
+    UnitType,
+    World,
+    group_rooms,
+    split_at_slanted_walls,
+)
+from services.floor_plan.slanted import wall_line_mask
 
 RES = 0.05
 T = 2  # wall cells
