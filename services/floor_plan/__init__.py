@@ -31,6 +31,7 @@ from services.floor_plan.pipeline import (
     unit_labels,
 )
 from services.floor_plan.rooms import Room, RoomSettings, group_rooms, room_keys
+from services.floor_plan.slanted import split_at_slanted_walls
 from services.floor_plan.walls import Segment, Slant, Walls, fit_walls
 from services.floor_plan.world import Rect, Side, UnitType, World
 
@@ -82,6 +83,7 @@ __all__ = [
     "room_keys",
     "room_labels",
     "run_chain",
+    "split_at_slanted_walls",
     "type_marginals",
     "unit_labels",
 ]

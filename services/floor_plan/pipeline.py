@@ -38,6 +38,7 @@ from services.floor_plan.likelihood import (
     wall_thickness_cells,
 )
 from services.floor_plan.rooms import Room, RoomSettings, fill_free, group_rooms
+from services.floor_plan.slanted import split_at_slanted_walls
 from services.floor_plan.walls import Segment, Slant, fit_walls
 from services.floor_plan.world import Rect, UnitType, World, shared_band
 
@@ -120,7 +121,9 @@ class FloorPlan(NamedTuple):
     doors: list[Door]
     adjacency: list[tuple[int, int]]
     rooms: list[Room]
-    """Units joined through open boundaries (parts in cells of ``frame``)."""
+    """Units joined through open boundaries (parts in cells of ``frame``), re-cut along slanted walls."""
+    room_cells: npt.NDArray[np.int32]
+    """Each room's index in ``rooms`` + 1 on its free cells (cells of ``frame``), 0 elsewhere."""
     obstacles: list[tuple[tuple[tuple[float, float], ...], ...]]
     """The solid blocks as polygons (outer ring, then holes; closed rings in map metres)."""
     standing: list[bool]
@@ -295,8 +298,10 @@ def describe(
             width = d.cols * resolution_m
         doors.append(Door(d, seg, (holders[0], holders[1]), width))
     classes_work = to_work(frame, classes_map, fill=CellClass.UNKNOWN)
-    rooms = group_rooms(world, classes_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
-                        resolution_m=resolution_m, settings=settings.rooms)
+    rooms, room_cells = split_at_slanted_walls(
+        group_rooms(world, classes_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
+                    resolution_m=resolution_m, settings=settings.rooms),
+        world, classes_work, resolution_m=resolution_m, settings=settings.rooms)
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
@@ -346,7 +351,7 @@ def describe(
             rings.append((outer, *(h for h in holes if h)))
             x, y = contour.reshape(-1, 2)[0]
             standing.append(bool(blocks[y, x]))
-    return FloorPlan(world, units, doors, adjacency, rooms, rings, standing, classes_map, cw,
+    return FloorPlan(world, units, doors, adjacency, rooms, room_cells, rings, standing, classes_map, cw,
                      cell_prediction_rate(classes_map, cw), k_units, clutter, walls, wall_segments, slants, exterior,
                      log_posterior, iterations, accepted,
                      seconds, cpu_seconds, resolution_m, origin_xy_m, frame)
@@ -362,10 +367,10 @@ def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
 
 
 def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
-    """A label image like :func:`unit_labels` with one id per room (1..R in the order of ``plan.rooms``)."""
-    items = sorted(((r, k) for k, room in enumerate(plan.rooms, start=1) for r in room.parts),
-                   key=lambda item: -item[0].rows * item[0].cols)
-    return _labels(plan, items)
+    """A label image like :func:`unit_labels` with one id per room (1..R in the order of ``plan.rooms``): each
+    room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds."""
+    cells = to_map(plan.frame, plan.room_cells.astype(np.float32), fill=0.0).astype(np.int32)
+    return fill_free(cells, plan.classes_map == CellClass.FREE)
 
 
 def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.int32]:

@@ -12,13 +12,16 @@ parts whose boundary is open over ``min_open_share`` of the shorter side, and fr
 space runs on into both (``min_depth_share``), are one room, unless the boundary is the end of a corridor at
 a room or hall much wider and deeper than the corridor (:func:`corridor_end`): the ground truth's rooms and a
 reader of a floor plan cut a corridor there, however open it is. Rooms are the connected components of the open
-boundaries (:func:`group_rooms`). Barriers are cells that are not free lying on a straight run along the
-wall's direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or unknown, not the
-unknown speckle, laser streaks and clutter dots of a real map's free space.
+boundaries (:func:`group_rooms`); a room smaller than ``min_room_m2`` (a sliver between units) joins the neighbour it
+shares the longest open length with. Walls running slanted through the frame cut no rectangle: the pipeline then
+re-cuts the rooms they split (:mod:`services.floor_plan.slanted`). Barriers are cells that are not free lying on
+a straight run along the wall's direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or
+unknown, not the unknown speckle, laser streaks and clutter dots of a real map's free space.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -66,6 +69,20 @@ class RoomSettings:
     corridor_room_depth: float = 2.5
     """... and at least this many corridor widths deep: a room or hall the corridor opens into, not a corridor
     it turns into (those are about as deep as it is wide). The two are not one room, however open."""
+    min_room_m2: float | None = 0.5
+    """A room of parts smaller than this (a sliver between units, a doorway's corner) joins the neighbouring room it
+    shares the longest open length with; None: no such joins."""
+    slant_line_m: float | None = 1.0
+    """Wall lines at least this long that run slanted through the frame split rooms
+    (:mod:`services.floor_plan.slanted`); None: rooms are made of rectangles only."""
+    slant_gap_m: float = 1.25
+    """... with gaps up to this long bridged (dashed walls, doorways) ..."""
+    slant_wall_share: float = 0.5
+    """... lying on or beside the free space's outline over at least this share of their length ..."""
+    slant_min_angle_rad: float = math.radians(15.0)
+    """... and at least this far from both axes of the frame (axis-parallel walls cut the units already)."""
+    slant_min_piece_m2: float = 1.0
+    """A room is re-cut where a slanted line splits it into pieces at least this large."""
 
 
 class Boundary(NamedTuple):
@@ -299,7 +316,8 @@ def group_rooms(
     if not parts:
         return []
     joined = []
-    for b in boundaries(parts, blocked, resolution_m=resolution_m, settings=settings):
+    found = boundaries(parts, blocked, resolution_m=resolution_m, settings=settings)
+    for b in found:
         if (b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share
                 and not b.corridor_end):
             joined.append(b.units)
@@ -307,6 +325,8 @@ def group_rooms(
     n = len(parts)
     _, component = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
                                         directed=False)
+    if settings.min_room_m2 is not None:
+        component = _absorb_small(component, parts, found, least_m2=settings.min_room_m2, resolution_m=resolution_m)
     rooms = []
     for k in np.unique(component):
         members = [parts[i] for i in np.flatnonzero(component == k)]
@@ -318,6 +338,28 @@ def group_rooms(
         rooms.append(Room(tuple(sorted({m.unit for m in members})), tuple(m.rect for m in members), room_type,
                           sum(area)))
     return sorted(rooms)
+
+
+def _absorb_small(component: npt.NDArray[np.int32], parts: list[Part], found: list[Boundary], *, least_m2: float,
+                  resolution_m: float) -> npt.NDArray[np.int32]:
+    """Rooms (``component`` per part) smaller than ``least_m2`` joined to the neighbouring room, at least as large,
+    that they share the longest open length with (their boundaries, open or not)."""
+    size = np.bincount(component, weights=[p.rect.rows * p.rect.cols * resolution_m**2 for p in parts])
+    best: dict[int, tuple[float, int]] = {}
+    for b in found:
+        i, j = (int(component[u]) for u in b.units)
+        for small, other in ((i, j), (j, i)):
+            open_m = b.length_m * b.open_share
+            if small != other and size[small] < least_m2 <= size[other] and open_m > best.get(small, (-1.0, 0))[0]:
+                best[small] = (open_m, other)
+    if not best:
+        return component
+    links = np.array([[a, b] for a, (_, b) in best.items()], np.int64)
+    n = size.size
+    _, merged = connected_components(coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(n, n)),
+                                     directed=False)
+    out: npt.NDArray[np.int32] = merged[component].astype(np.int32)
+    return out
 
 
 def room_keys(rooms: list[Room]) -> list[str]:

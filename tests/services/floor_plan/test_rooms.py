@@ -125,3 +125,23 @@ def test_corridor_ends_can_be_turned_off() -> None:
     groups = group_rooms(world, classes, dict.fromkeys(world.units, UnitType.ROOM), wall_cells=T, resolution_m=RES,
                          settings=RoomSettings(corridor_length_ratio=None))
     assert [room.units for room in groups] == [(1, 2)]
+
+
+def _room_with_a_sliver() -> tuple[World, npt.NDArray[np.uint8]]:
+    """A 3 m room and a 0.3 m x 1 m sliver unit beside it, half walled off (a unit the chain put in a recess)."""
+    room, sliver = Rect(0, 59, 0, 59), Rect(10, 33, 58, 67)
+    classes = _walled((60, 70), room, sliver)
+    classes[12:22, 58:60] = CellClass.FREE  # 0.5 m of the 1 m between them open
+    return World({1: room, 2: sliver}, set(), 3), classes
+
+
+def test_a_sliver_of_a_room_too_small_to_be_one_joins_its_neighbour() -> None:
+    world, classes = _room_with_a_sliver()
+    assert _rooms(world, classes) == [(1, 2)]
+
+
+def test_small_rooms_stay_apart_when_the_setting_is_off() -> None:
+    world, classes = _room_with_a_sliver()
+    groups = group_rooms(world, classes, dict.fromkeys(world.units, UnitType.ROOM), wall_cells=T, resolution_m=RES,
+                         settings=RoomSettings(min_room_m2=None))
+    assert [room.units for room in groups] == [(1,), (2,)]

@@ -1,0 +1,166 @@
+"""Rooms cut along walls that run slanted through the working frame.
+
+The room level (:mod:`services.floor_plan.rooms`) cuts units along rows and columns, so a wall that runs at an
+angle to the frame (office_e's pentagon, explained along one of its five sides) cuts nothing, and the units on
+both sides of it each hold a piece of both rooms. Here a room's free space is cut along the straight wall lines of
+the map that run slanted (Hough segments on the outline of the free space, dashes and doorways bridged, lying on
+wall over most of their length; :func:`wall_line_mask`). Where such a line splits a room into pieces of
+``slant_min_piece_m2`` or more, the room is no longer made of its rectangles: its free space is re-cut into the
+regions that the map's wall lines of every direction enclose, one room each (:func:`split_at_slanted_walls`). A
+room no slanted line splits keeps its parts as they are.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+from services.floor_plan.likelihood import CellClass
+from services.floor_plan.rooms import Room, RoomSettings
+from services.floor_plan.world import Rect, World
+
+_LINE_CELLS = 3
+"""Width of a drawn wall line: 4-connected free space never leaks across it."""
+
+
+def room_cells(rooms: list[Room], shape: tuple[int, int]) -> npt.NDArray[np.int32]:
+    """Each room's index + 1 painted over its parts (cells of the frame; where parts overlap the smaller wins)."""
+    items = sorted(((r, k) for k, room in enumerate(rooms, start=1) for r in room.parts),
+                   key=lambda item: -item[0].rows * item[0].cols)
+    out = np.zeros(shape, np.int32)
+    for r, k in items:
+        out[r.r0 : r.r1 + 1, r.c0 : r.c1 + 1] = k
+    return out
+
+
+def wall_line_mask(
+    classes: npt.NDArray[np.uint8], *, resolution_m: float, settings: RoomSettings, min_angle_rad: float | None,
+) -> npt.NDArray[np.bool_]:
+    """The map's straight wall lines drawn as cells (``_LINE_CELLS`` wide).
+
+    Lines are OpenCV ``HoughLinesP`` segments on the outline of the free space (cells that are not free beside a
+    free one, so unknown space drawn as wall counts and the unknown outside does not), at least ``slant_line_m``
+    long, with gaps up to ``slant_gap_m`` bridged (dashed walls, doorways), kept where at least
+    ``slant_wall_share`` of their cells lie on or beside that outline, and drawn prolonged by half that gap at
+    both ends (a dashed wall whose last dash stops short of the wall it meets).
+
+    Parameters
+    ----------
+    classes : (H, W) uint8
+        C_M in the working frame.
+    min_angle_rad : float or None
+        Keep only lines at least this far from both axes of the frame (slanted walls); None: every direction.
+    """
+    if settings.slant_line_m is None:
+        return np.zeros(classes.shape, np.bool_)
+    blocked = classes != CellClass.FREE
+    outline = blocked & (cv2.dilate((~blocked).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+    length = max(2, round(settings.slant_line_m / resolution_m))
+    found = cv2.HoughLinesP(outline.astype(np.uint8) * 255, 1, math.pi / 180, round(0.75 * length),
+                            minLineLength=length, maxLineGap=round(settings.slant_gap_m / resolution_m))
+    out = np.zeros(classes.shape, np.uint8)
+    if found is None:
+        return out.astype(np.bool_)
+    near = cv2.dilate(outline.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    reach = 0.5 * settings.slant_gap_m / resolution_m  # a line runs on by half the gap it bridges
+    for x0, y0, x1, y1 in found.reshape(-1, 4).tolist():
+        angle = math.atan2(y1 - y0, x1 - x0) % (math.pi / 2)
+        if min_angle_rad is not None and min(angle, math.pi / 2 - angle) < min_angle_rad:
+            continue
+        n = max(abs(x1 - x0), abs(y1 - y0)) + 1
+        cols = np.rint(np.linspace(x0, x1, n)).astype(np.int64)
+        rows = np.rint(np.linspace(y0, y1, n)).astype(np.int64)
+        if near[rows, cols].mean() >= settings.slant_wall_share:
+            d = reach / max(math.hypot(x1 - x0, y1 - y0), 1.0)
+            ex, ey = round((x1 - x0) * d), round((y1 - y0) * d)
+            cv2.line(out, (x0 - ex, y0 - ey), (x1 + ex, y1 + ey), 1, _LINE_CELLS)
+    return out.astype(np.bool_)
+
+
+def _split(painted: npt.NDArray[np.int32], free: npt.NDArray[np.bool_], lines: npt.NDArray[np.bool_],
+           least: int) -> list[int]:
+    """The rooms (indices + 1 in ``painted``, over all their parts' cells) that ``lines`` cut into two or more
+    pieces holding at least ``least`` free cells each."""
+    inside = painted > 0
+    whole, _ = ndimage.label(inside)
+    pieces, _ = ndimage.label(inside & ~lines)
+    at = (pieces > 0) & free
+    # every (room, whole component, piece) once, with the piece's free cells in that room
+    keys, size = np.unique(np.stack([painted[at], whole[at], pieces[at]]), axis=1, return_counts=True)
+    big = keys[:, size >= least]
+    rooms_of, count = np.unique(big[:2], axis=1, return_counts=True)
+    return sorted(set(rooms_of[0, count >= 2].tolist()))
+
+
+def split_at_slanted_walls(
+    rooms: list[Room], world: World, classes: npt.NDArray[np.uint8], *, resolution_m: float,
+    settings: RoomSettings,
+) -> tuple[list[Room], npt.NDArray[np.int32]]:
+    """Rooms that a slanted wall line splits, re-cut along the map's wall lines (see the module docstring).
+
+    Parameters
+    ----------
+    rooms : list of Room
+        From :func:`~services.floor_plan.rooms.group_rooms`.
+    world : World
+        The units, cells of ``classes``' frame.
+    classes : (H, W) uint8
+        C_M in the working frame.
+
+    Returns
+    -------
+    list of Room, (H, W) int32
+        The rooms, sorted (a re-cut room keeps its type; its units and parts are those of the room it came from
+        that its free space overlaps), and each room's index + 1 on its free cells (0 elsewhere, and on the wall
+        lines through a re-cut room).
+    """
+    free = classes == CellClass.FREE
+    painted = room_cells(rooms, classes.shape)
+    cells = np.where(free, painted, 0).astype(np.int32)
+    slanted = wall_line_mask(classes, resolution_m=resolution_m, settings=settings,
+                             min_angle_rad=settings.slant_min_angle_rad)
+    least = max(1, round(settings.slant_min_piece_m2 / resolution_m**2))
+    split = _split(painted, free, slanted, least) if slanted.any() else []
+    if not split:
+        return rooms, cells
+    lines = slanted | wall_line_mask(classes, resolution_m=resolution_m, settings=settings, min_angle_rad=None)
+    region, _ = ndimage.label(free & ~lines)
+    size = np.bincount(region.ravel())
+    size[0] = 0
+    recut = np.isin(cells, split)
+    region = np.where(recut & (size[region] >= least), region, 0)
+    kept = [(room, k) for k, room in enumerate(rooms, start=1) if k not in split]
+    recut_rooms: list[tuple[Room, tuple[slice, slice], npt.NDArray[np.bool_]]] = []
+    for r, box in enumerate(ndimage.find_objects(region), start=1):
+        if box is None:
+            continue
+        at = region[box] == r
+        source = rooms[int(np.bincount(cells[box][at]).argmax()) - 1]
+        parts = tuple(p for p in source.parts if _covers(p, box, at))
+        units = tuple(u for u in source.units if _covers(world.units[u], box, at))
+        recut_rooms.append((Room(units or source.units, parts or source.parts, source.room_type,
+                                 float(at.sum()) * resolution_m**2), box, at))
+    every = [room for room, _ in kept] + [room for room, _, _ in recut_rooms]
+    order = sorted(range(len(every)), key=lambda i: every[i])
+    rank = np.empty(len(every), np.int32)
+    rank[order] = np.arange(1, len(every) + 1, dtype=np.int32)
+    lut = np.zeros(len(rooms) + 1, np.int32)
+    for i, (_, k) in enumerate(kept):
+        lut[k] = rank[i]
+    labels = lut[cells]
+    for i, (_, box, at) in enumerate(recut_rooms, start=len(kept)):
+        labels[box][at] = rank[i]
+    ordered = [every[i] for i in order]
+    return ordered, labels
+
+
+def _covers(rect: Rect, box: tuple[slice, slice], at: npt.NDArray[np.bool_]) -> bool:
+    """Whether ``rect`` holds a cell of ``at`` (a mask over the window ``box``)."""
+    r0, c0 = box[0].start, box[1].start
+    rows = slice(max(rect.r0 - r0, 0), max(rect.r1 + 1 - r0, 0))
+    cols = slice(max(rect.c0 - c0, 0), max(rect.c1 + 1 - c0, 0))
+    return bool(at[rows, cols].any())
