@@ -79,6 +79,7 @@ def join_room_pieces(
     pairs, saddle, furnished = _saddles(seg, clearance, furniture, reach)
     boxes = _boxes(seg, n)
     lut = np.arange(n, dtype=np.int32)  # segment id -> the id of the segment it has joined
+    current = seg.copy()  # lut[seg], kept up to date join by join within the joined segment's box
     solidity: dict[tuple[int, int], float] = {}
     while True:
         keep = furnished & ~frozen[pairs[:, 0]] & ~frozen[pairs[:, 1]]
@@ -88,13 +89,17 @@ def join_room_pieces(
         candidates, high, low = pairs[keep], high[keep], low[keep]
         if candidates.size == 0:
             break
-        solid = np.array([_solidity(seg, lut, boxes, int(a), int(b), solidity) for a, b in candidates])
+        # a pair that only reaches the second test, of two convex pieces, cannot join: its union is not looked at
+        solid = np.zeros(len(candidates))
+        for k, (a, b) in enumerate(candidates.tolist()):
+            if high[k] or min(_solidity(current, boxes, a, a, solidity), _solidity(current, boxes, b, b, solidity)) < min_solidity:
+                solid[k] = _solidity(current, boxes, a, b, solidity)
         joins = high & (solid >= min_solidity)
         # a room cut in two: its union no less convex than its more convex piece (a room and a corridor: a T or
         # L), when a piece is not convex itself (two convex rooms side by side make a convex union too)
         for k in np.flatnonzero(low & ~joins):
             a, b = (int(v) for v in candidates[k])
-            sa, sb = sorted((_solidity(seg, lut, boxes, a, a, solidity), _solidity(seg, lut, boxes, b, b, solidity)))
+            sa, sb = sorted((_solidity(current, boxes, a, a, solidity), _solidity(current, boxes, b, b, solidity)))
             joins[k] = sa < min_solidity and solid[k] >= min_relative_solidity * sb
         order = np.argsort(-solid, kind="stable")
         used = np.zeros(n, dtype=bool)
@@ -104,6 +109,9 @@ def join_room_pieces(
                 continue
             used[a] = used[b] = True
             lut[lut == b] = a
+            r0, c0, r1, c1 = (int(v) for v in boxes[b])
+            box = current[r0:r1, c0:c1]
+            box[box == b] = a
             peak[a] = max(peak[a], peak[b])
             boxes[a, :2] = np.minimum(boxes[a, :2], boxes[b, :2])
             boxes[a, 2:] = np.maximum(boxes[a, 2:], boxes[b, 2:])
@@ -189,21 +197,16 @@ def _boxes(seg: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.int64]:
 
 
 def _solidity(
-    seg: npt.NDArray[np.int32],
-    lut: npt.NDArray[np.int32],
-    boxes: npt.NDArray[np.int64],
-    a: int,
-    b: int,
-    known: dict[tuple[int, int], float],
+    current: npt.NDArray[np.int32], boxes: npt.NDArray[np.int64], a: int, b: int, known: dict[tuple[int, int], float]
 ) -> float:
-    """Area of segments ``a`` and ``b`` (ids of ``lut[seg]``) together, holes filled, over the area of their
+    """Area of segments ``a`` and ``b`` (ids of ``current``) together, holes filled, over the area of their
     convex hull; remembered in ``known``."""
     if (a, b) in known:
         return known[a, b]
     r0, c0 = np.minimum(boxes[a, :2], boxes[b, :2])
     r1, c1 = np.maximum(boxes[a, 2:], boxes[b, 2:])
-    crop = lut[seg[r0:r1, c0:c1]]
-    union = ((crop == a) | (crop == b)).astype(np.uint8)
+    crop = current[r0:r1, c0:c1]
+    union = (crop == a).view(np.uint8) if a == b else ((crop == a) | (crop == b)).view(np.uint8)
     outlines, _ = cv2.findContours(union, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     filled = cv2.drawContours(np.zeros_like(union), outlines, -1, 1, thickness=cv2.FILLED)  # holes filled
     hull = cv2.convexHull(np.concatenate(outlines))  # the outlines' hull is the pixels' hull
@@ -312,18 +315,18 @@ def _separators(
     obstacle pixels nearest to ``a`` and to ``b``) on walls within ``wall_px`` of both, and on ``furniture``."""
     blocked = (seg == 0).astype(np.uint8)
     dist, label = cv2.distanceTransformWithLabels(blocked, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
-    owners = seg.ravel()[np.flatnonzero(seg.ravel() > 0)]
-    nearest = np.zeros(label.shape, dtype=np.int64)
-    on = blocked > 0
-    nearest[on] = owners[label[on] - 1]
+    owners = seg.ravel()[np.flatnonzero(seg.ravel() > 0)]  # per label (pixel of a segment): its segment, > 0
+    nearest = owners[label - 1]  # a segment's own pixels too: they are left out by ``on``
+    on = blocked.view(bool)
     h, w = seg.shape
     wall = np.zeros(codes.size)
     furn = np.zeros(codes.size)
     for dy, dx in ((0, 1), (1, 0)):
         a, b = nearest[: h - dy, : w - dx], nearest[dy:, dx:]
-        both = on[: h - dy, : w - dx] & on[dy:, dx:] & (a != b) & (a > 0) & (b > 0)
+        both = on[: h - dy, : w - dx] & on[dy:, dx:] & (a != b)
         rows, cols = np.nonzero(both)
-        key = np.minimum(a[rows, cols], b[rows, cols]) * n + np.maximum(a[rows, cols], b[rows, cols])
+        p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
+        key = np.minimum(p, q) * n + np.maximum(p, q)
         at = np.minimum(np.searchsorted(codes, key), codes.size - 1)
         known = codes[at] == key
         d = np.maximum(dist[rows, cols], dist[rows + dy, cols + dx])

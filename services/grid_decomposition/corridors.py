@@ -32,7 +32,15 @@ def _coordinates(
     x = np.arange(left, left + shape[1], dtype=np.float32)[None, :]
     y = np.arange(top, top + shape[0], dtype=np.float32)[:, None]
     s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
-    return np.rint(-s * x + c * y).astype(np.int32), np.rint(c * x + s * y).astype(np.int32)
+    return _across(shape, top, left, angle_rad), np.rint(c * x + s * y).astype(np.int32)
+
+
+def _across(shape: tuple[int, int], top: int, left: int, angle_rad: float) -> npt.NDArray[np.int32]:
+    """The across coordinate ``u`` of :func:`_coordinates` alone."""
+    x = np.arange(left, left + shape[1], dtype=np.float32)[None, :]
+    y = np.arange(top, top + shape[0], dtype=np.float32)[:, None]
+    s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
+    return np.rint(-s * x + c * y).astype(np.int32)
 
 
 def _runs(flags: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -100,6 +108,8 @@ def corridor_bands(
                 total = every_c[hi] - every_c[lo]
                 clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
                 length = max(round(min_length_m / resolution_m), round(min_length_widths * width))
+                if np.count_nonzero(clear) < length:  # no clear run long enough
+                    continue
                 for s, e in zip(*_runs(clear), strict=True):
                     if e - s < length:
                         continue
@@ -232,7 +242,7 @@ def _join_along(
     along = np.zeros(n, dtype=bool)
     shape = (segments.shape[0], segments.shape[1])
     for band in bands:
-        u, _ = _coordinates(shape, 0, 0, band.angle_rad)
+        u = _across(shape, 0, 0, band.angle_rad)
         strip = (u >= band.offset_a_px - tolerance_px) & (u <= band.offset_b_px + tolerance_px)
         held = np.bincount(segments[strip], minlength=n)
         along |= (held >= min_share * size) & (held >= (band.offset_b_px - band.offset_a_px) ** 2)
