@@ -92,7 +92,8 @@ def join_room_pieces(
         # a pair that only reaches the second test, of two convex pieces, cannot join: its union is not looked at
         solid = np.zeros(len(candidates))
         for k, (a, b) in enumerate(candidates.tolist()):
-            if high[k] or min(_solidity(current, boxes, a, a, solidity), _solidity(current, boxes, b, b, solidity)) < min_solidity:
+            convex = not high[k] and min(_solidity(current, boxes, v, v, solidity) for v in (a, b)) >= min_solidity
+            if not convex:
                 solid[k] = _solidity(current, boxes, a, b, solidity)
         joins = high & (solid >= min_solidity)
         # a room cut in two: its union no less convex than its more convex piece (a room and a corridor: a T or
