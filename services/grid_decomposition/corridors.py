@@ -97,25 +97,23 @@ def corridor_bands(
         offsets = sorted(
             {round(ln.offset_px) - u0 for ln in lines if round(ln.angle_rad, 4) == angle} & set(range(nu))
         )
-        for i, a in enumerate(offsets):
-            for b in offsets[i + 1 :]:
-                width = b - a
-                if width < min_w:
+        pairs = [(a, b) for i, a in enumerate(offsets) for b in offsets[i + 1 :] if min_w <= b - a <= max_w]
+        if not pairs:
+            continue
+        ends = np.array(pairs)
+        lo, hi = ends[:, 0] + tolerance_px + 1, ends[:, 1] - tolerance_px
+        total = every_c[hi] - every_c[lo]  # per pair of lines and t: the strip's pixels, and of them in the region
+        clears = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
+        for (a, b), clear, n_clear in zip(pairs, clears, np.count_nonzero(clears, axis=1).tolist(), strict=True):
+            length = max(round(min_length_m / resolution_m), round(min_length_widths * (b - a)))
+            if n_clear < length:  # no clear run long enough
+                continue
+            for s, e in zip(*_runs(clear), strict=True):
+                if e - s < length:
                     continue
-                if width > max_w:
-                    break
-                lo, hi = a + tolerance_px + 1, b - tolerance_px
-                total = every_c[hi] - every_c[lo]
-                clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
-                length = max(round(min_length_m / resolution_m), round(min_length_widths * width))
-                if np.count_nonzero(clear) < length:  # no clear run long enough
-                    continue
-                for s, e in zip(*_runs(clear), strict=True):
-                    if e - s < length:
-                        continue
-                    side_a, side_b = walls[a, s:e].mean(), walls[b, s:e].mean()
-                    if min(side_a, side_b) >= min_side_wall and (side_a + side_b) / 2 >= min_wall:
-                        found.append(((side_a + side_b) / 2, Band(angle, a + u0, b + u0, int(s) + t0, int(e) - 1 + t0)))
+                side_a, side_b = walls[a, s:e].mean(), walls[b, s:e].mean()
+                if min(side_a, side_b) >= min_side_wall and (side_a + side_b) / 2 >= min_wall:
+                    found.append(((side_a + side_b) / 2, Band(angle, a + u0, b + u0, int(s) + t0, int(e) - 1 + t0)))
     bands: list[Band] = []
     taken = np.zeros(shape, dtype=bool)
     for _, band in sorted(found, key=lambda f: -f[0]):
