@@ -73,7 +73,8 @@ def join_room_pieces(
     clearance = np.asarray(cv2.distanceTransform(floor, cv2.DIST_L2, 5), dtype=np.float32)
     reach = max(1, round(furniture_reach_m / resolution_m))
     peak = np.zeros(n, dtype=np.float32)
-    np.maximum.at(peak, seg.ravel(), clearance.ravel())
+    on = clearance.ravel() > 0  # off the floor a segment's peak stays 0
+    np.maximum.at(peak, seg.ravel()[on], clearance.ravel()[on])
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
     frozen[0] = True
     pairs, saddle, furnished = _saddles(seg, clearance, furniture, reach)
