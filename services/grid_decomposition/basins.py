@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import cv2
 import numpy as np
 import numpy.typing as npt
@@ -78,10 +80,8 @@ def join_room_pieces(
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
     frozen[0] = True
     pairs, saddle, furnished = _saddles(seg, clearance, furniture, reach)
-    boxes = _boxes(seg, n)
+    pieces = _Pieces(seg.copy(), _boxes(seg, n))
     lut = np.arange(n, dtype=np.int32)  # segment id -> the id of the segment it has joined
-    current = seg.copy()  # lut[seg], kept up to date join by join within the joined segment's box
-    solidity: dict[tuple[int, int], float] = {}
     while True:
         keep = furnished & ~frozen[pairs[:, 0]] & ~frozen[pairs[:, 1]]
         lower = np.minimum(peak[pairs[:, 0]], peak[pairs[:, 1]])
@@ -92,16 +92,15 @@ def join_room_pieces(
             break
         # a pair that only reaches the second test, of two convex pieces, cannot join: its union is not looked at
         solid = np.zeros(len(candidates))
-        for k, (a, b) in enumerate(candidates.tolist()):
-            convex = not high[k] and min(_solidity(current, boxes, v, v, solidity) for v in (a, b)) >= min_solidity
-            if not convex:
-                solid[k] = _solidity(current, boxes, a, b, solidity)
+        for i, (a, b) in enumerate(candidates.tolist()):
+            if high[i] or min(pieces.solidity(a, a), pieces.solidity(b, b)) < min_solidity:
+                solid[i] = pieces.solidity(a, b)
         joins = high & (solid >= min_solidity)
         # a room cut in two: its union no less convex than its more convex piece (a room and a corridor: a T or
         # L), when a piece is not convex itself (two convex rooms side by side make a convex union too)
         for k in np.flatnonzero(low & ~joins):
             a, b = (int(v) for v in candidates[k])
-            sa, sb = sorted((_solidity(current, boxes, a, a, solidity), _solidity(current, boxes, b, b, solidity)))
+            sa, sb = sorted((pieces.solidity(a, a), pieces.solidity(b, b)))
             joins[k] = sa < min_solidity and solid[k] >= min_relative_solidity * sb
         order = np.argsort(-solid, kind="stable")
         used = np.zeros(n, dtype=bool)
@@ -111,17 +110,13 @@ def join_room_pieces(
                 continue
             used[a] = used[b] = True
             lut[lut == b] = a
-            r0, c0, r1, c1 = (int(v) for v in boxes[b])
-            box = current[r0:r1, c0:c1]
-            box[box == b] = a
+            pieces.join(a, b)
             peak[a] = max(peak[a], peak[b])
-            boxes[a, :2] = np.minimum(boxes[a, :2], boxes[b, :2])
-            boxes[a, 2:] = np.maximum(boxes[a, 2:], boxes[b, 2:])
         if not used.any():
             break
-        solidity = {ab: s for ab, s in solidity.items() if not (used[ab[0]] or used[ab[1]])}
+        pieces.known = {ab: s for ab, s in pieces.known.items() if not (used[ab[0]] or used[ab[1]])}
         pairs, saddle, furnished = _merge_pairs(lut[pairs].astype(np.int64), saddle, furnished, n)
-    return renumber(lut[seg])
+    return renumber(pieces.current)
 
 
 def _saddles(
@@ -198,24 +193,55 @@ def _boxes(seg: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.int64]:
     return boxes
 
 
-def _solidity(
-    current: npt.NDArray[np.int32], boxes: npt.NDArray[np.int64], a: int, b: int, known: dict[tuple[int, int], float]
-) -> float:
-    """Area of segments ``a`` and ``b`` (ids of ``current``) together, holes filled, over the area of their
-    convex hull; remembered in ``known``."""
-    if (a, b) in known:
-        return known[a, b]
-    r0, c0 = np.minimum(boxes[a, :2], boxes[b, :2])
-    r1, c1 = np.maximum(boxes[a, 2:], boxes[b, 2:])
-    crop = current[r0:r1, c0:c1]
-    union = (crop == a).view(np.uint8) if a == b else ((crop == a) | (crop == b)).view(np.uint8)
-    outlines, _ = cv2.findContours(union, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    filled = cv2.drawContours(np.zeros_like(union), outlines, -1, 1, thickness=cv2.FILLED)  # holes filled
-    hull = cv2.convexHull(np.concatenate(outlines))  # the outlines' hull is the pixels' hull
-    # pixel centres span the hull: half a pixel all round is still the union's area
-    hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
-    known[a, b] = float(np.count_nonzero(filled) / hull_area)
-    return known[a, b]
+@dataclass
+class _Pieces:
+    """The segments of :func:`join_room_pieces` while they join: their ids per pixel (``lut[seg]``), boxes
+    (:func:`_boxes`), convex hulls (image coordinates, found when first asked for) and the solidities known."""
+
+    current: npt.NDArray[np.int32]
+    boxes: npt.NDArray[np.int64]
+    hulls: dict[int, npt.NDArray[np.int32]] = field(default_factory=dict)
+    known: dict[tuple[int, int], float] = field(default_factory=dict)
+
+    def hull(self, a: int) -> npt.NDArray[np.int32]:
+        """Convex hull of segment ``a`` (the hull of its outlines is the hull of its pixels)."""
+        if a not in self.hulls:
+            r0, c0, r1, c1 = (int(v) for v in self.boxes[a])
+            piece = (self.current[r0:r1, c0:c1] == a).view(np.uint8)
+            outlines, _ = cv2.findContours(piece, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE, offset=(c0, r0))
+            self.hulls[a] = np.asarray(cv2.convexHull(np.concatenate(outlines)), dtype=np.int32)
+        return self.hulls[a]
+
+    def solidity(self, a: int, b: int) -> float:
+        """Area of segments ``a`` and ``b`` together, holes filled, over the area of their convex hull."""
+        if (a, b) in self.known:
+            return self.known[a, b]
+        r0, c0 = np.minimum(self.boxes[a, :2], self.boxes[b, :2])
+        r1, c1 = np.maximum(self.boxes[a, 2:], self.boxes[b, 2:])
+        crop = self.current[r0:r1, c0:c1]
+        union = (crop == a).view(np.uint8) if a == b else ((crop == a) | (crop == b)).view(np.uint8)
+        # holes filled: every pixel but the background reached from round the box
+        padded = cv2.copyMakeBorder(union, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+        filled = padded.size - cv2.floodFill(padded, None, (0, 0), 2)[0]
+        # the hull of the union is the hull of the pieces' hulls
+        hull = self.hull(a) if a == b else cv2.convexHull(np.concatenate([self.hull(a), self.hull(b)]))
+        # pixel centres span the hull: half a pixel all round is still the union's area
+        hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
+        self.known[a, b] = float(filled / hull_area)
+        return self.known[a, b]
+
+    def join(self, a: int, b: int) -> None:
+        """Segment ``b`` joins ``a``."""
+        r0, c0, r1, c1 = (int(v) for v in self.boxes[b])
+        box = self.current[r0:r1, c0:c1]
+        box[box == b] = a
+        self.boxes[a, :2] = np.minimum(self.boxes[a, :2], self.boxes[b, :2])
+        self.boxes[a, 2:] = np.maximum(self.boxes[a, 2:], self.boxes[b, 2:])
+        if a in self.hulls and b in self.hulls:
+            self.hulls[a] = np.asarray(cv2.convexHull(np.concatenate([self.hulls[a], self.hulls[b]])), dtype=np.int32)
+        else:
+            self.hulls.pop(a, None)
+        self.hulls.pop(b, None)
 
 
 def join_furnished_groups(
