@@ -315,12 +315,14 @@ def join_furnished_groups(
     if doors is not None:  # a doorway between two walls stays one, whatever stands beside it
         made[run[doors.ravel()[pixel]]] = False
     linked = np.bincount(pair, weights=~made[run], minlength=codes.size) == 0
-    through_wall, through_furniture = _separators(seg, furniture, codes, n, wall_reach_px)
-    linked &= through_wall <= through_furniture
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
     frozen[0] = True
     a, b = codes // n, codes % n
     linked &= ~frozen[a] & ~frozen[b]
+    if not linked.any():  # no separator looked at
+        return renumber(seg)
+    through_wall, through_furniture = _separators(seg, furniture, codes, n, wall_reach_px)
+    linked &= through_wall <= through_furniture
     if not linked.any():
         return renumber(seg)
     graph = sparse.coo_matrix((np.ones(int(linked.sum())), (a[linked], b[linked])), shape=(n, n))
