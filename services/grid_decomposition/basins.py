@@ -343,6 +343,15 @@ def _separators(
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Per pair ``codes`` (``a * n + b``): pixels of their Voronoi border inside the obstacles (neighbouring
     obstacle pixels nearest to ``a`` and to ``b``) on walls within ``wall_px`` of both, and on ``furniture``."""
+    # only the box round the segments and the furniture holds such pixels (a wall beyond it is farther)
+    margin = int(np.ceil(wall_px)) + 2
+    present = (seg > 0) | furniture
+    rows, cols = np.flatnonzero(present.any(axis=1)), np.flatnonzero(present.any(axis=0))
+    box = (
+        slice(max(int(rows[0]) - margin, 0), int(rows[-1]) + 1 + margin),
+        slice(max(int(cols[0]) - margin, 0), int(cols[-1]) + 1 + margin),
+    )
+    seg, furniture = seg[box], furniture[box]
     blocked = (seg == 0).astype(np.uint8)
     dist, label = cv2.distanceTransformWithLabels(blocked, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
     owners = seg.ravel()[np.flatnonzero(seg.ravel() > 0)]  # per label (pixel of a segment): its segment, > 0
