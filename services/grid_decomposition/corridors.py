@@ -97,23 +97,23 @@ def corridor_bands(
         offsets = sorted(
             {round(ln.offset_px) - u0 for ln in lines if round(ln.angle_rad, 4) == angle} & set(range(nu))
         )
-        pairs = [(a, b) for i, a in enumerate(offsets) for b in offsets[i + 1 :] if min_w <= b - a <= max_w]
-        if not pairs:
-            continue
-        ends = np.array(pairs)
-        lo, hi = ends[:, 0] + tolerance_px + 1, ends[:, 1] - tolerance_px
-        total = every_c[hi] - every_c[lo]  # per pair of lines and t: the strip's pixels, and of them in the region
-        clears = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
-        for (a, b), clear, n_clear in zip(pairs, clears, np.count_nonzero(clears, axis=1).tolist(), strict=True):
-            length = max(round(min_length_m / resolution_m), round(min_length_widths * (b - a)))
-            if n_clear < length:  # no clear run long enough
-                continue
-            for s, e in zip(*_runs(clear), strict=True):
-                if e - s < length:
+        for i, a in enumerate(offsets):
+            for b in offsets[i + 1 :]:
+                width = b - a
+                if width < min_w:
                     continue
-                side_a, side_b = walls[a, s:e].mean(), walls[b, s:e].mean()
-                if min(side_a, side_b) >= min_side_wall and (side_a + side_b) / 2 >= min_wall:
-                    found.append(((side_a + side_b) / 2, Band(angle, a + u0, b + u0, int(s) + t0, int(e) - 1 + t0)))
+                if width > max_w:
+                    break
+                lo, hi = a + tolerance_px + 1, b - tolerance_px
+                total = every_c[hi] - every_c[lo]
+                clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
+                length = max(round(min_length_m / resolution_m), round(min_length_widths * width))
+                for s, e in zip(*_runs(clear), strict=True):
+                    if e - s < length:
+                        continue
+                    side_a, side_b = walls[a, s:e].mean(), walls[b, s:e].mean()
+                    if min(side_a, side_b) >= min_side_wall and (side_a + side_b) / 2 >= min_wall:
+                        found.append(((side_a + side_b) / 2, Band(angle, a + u0, b + u0, int(s) + t0, int(e) - 1 + t0)))
     bands: list[Band] = []
     taken = np.zeros(shape, dtype=bool)
     for _, band in sorted(found, key=lambda f: -f[0]):
@@ -236,17 +236,24 @@ def _join_along(
     part holds a square of the band's width.
     """
     n = int(segments.max()) + 1
-    size = np.bincount(segments.ravel(), minlength=n)
+    offered = np.zeros(n, dtype=bool)  # the rooms parted just now (ids past ``joinable``) never join
+    offered[: joinable.size] = joinable[:n]
+    offered[[0, k]] = False
+    if not offered.any():
+        return segments
+    # only the box round the regions that may join is looked at: it holds all their pixels
+    inside = offered[segments]
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    top, left = int(rows[0]), int(cols[0])
+    window = segments[top : int(rows[-1]) + 1, left : int(cols[-1]) + 1]
+    size = np.bincount(window.ravel(), minlength=n)
     along = np.zeros(n, dtype=bool)
-    shape = (segments.shape[0], segments.shape[1])
     for band in bands:
-        u = _across(shape, 0, 0, band.angle_rad)
+        u = _across((window.shape[0], window.shape[1]), top, left, band.angle_rad)
         strip = (u >= band.offset_a_px - tolerance_px) & (u <= band.offset_b_px + tolerance_px)
-        held = np.bincount(segments[strip], minlength=n)
+        held = np.bincount(window[strip], minlength=n)
         along |= (held >= min_share * size) & (held >= (band.offset_b_px - band.offset_a_px) ** 2)
-    along[: joinable.size] &= joinable[:n]
-    along[joinable.size :] = False  # the rooms parted just now
-    along[[0, k]] = False
+    along &= offered
     if not along.any():
         return segments
     corridor = segments == k
