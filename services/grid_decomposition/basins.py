@@ -125,14 +125,12 @@ def _saddles(
     """Touching segment pairs (a < b), the highest clearance along their border, and whether furniture is
     within ``reach`` (the elliptic disc of that radius) of it."""
     n = int(seg.max()) + 1
-    h, w = seg.shape
+    w = seg.shape[1]
     keys: list[npt.NDArray[np.int64]] = []
     heights: list[npt.NDArray[np.float32]] = []
     sides: list[npt.NDArray[np.int64]] = []
-    for dy, dx in ((0, 1), (1, 0)):
-        a, b = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        rows, cols = np.nonzero((a != b) & (a > 0) & (b > 0))
-        p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
+    for dy, dx, rows, cols in _touching(seg):
+        p, q = seg[rows, cols].astype(np.int64), seg[rows + dy, cols + dx].astype(np.int64)
         keys.append(np.minimum(p, q) * n + np.maximum(p, q))
         heights.append(np.minimum(clearance[rows, cols], clearance[rows + dy, cols + dx]))
         sides.append(rows.astype(np.int64) * w + cols)
@@ -141,6 +139,22 @@ def _saddles(
     half = sides[0].size, sides[0].size + sides[1].size, sides[0].size + sides[1].size + sides[2].size
     nears = np.concatenate([near[: half[0]] | near[half[0] : half[1]], near[half[1] : half[2]] | near[half[2] :]])
     return _merge_pairs_keys(np.concatenate(keys), np.concatenate(heights), nears, n)
+
+
+def _touching(seg: npt.NDArray[np.int32]) -> list[tuple[int, int, npt.NDArray[np.intp], npt.NDArray[np.intp]]]:
+    """Per step (``dy``, ``dx``) right and down: rows and columns of the pixels whose neighbour that step away is
+    in another segment (both ids > 0; raster order), looked for within the box round the segments (there are some)."""
+    inside = seg > 0
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    r0, c0 = int(rows[0]), int(cols[0])
+    box = seg[r0 : int(rows[-1]) + 1, c0 : int(cols[-1]) + 1]
+    h, w = box.shape
+    found = []
+    for dy, dx in ((0, 1), (1, 0)):
+        a, b = box[: h - dy, : w - dx], box[dy:, dx:]
+        r, c = np.nonzero((a != b) & (a > 0) & (b > 0))
+        found.append((dy, dx, r + r0, c + c0))
+    return found
 
 
 def _near(furniture: npt.NDArray[np.bool_], pixels: npt.NDArray[np.int64], reach: int) -> npt.NDArray[np.bool_]:
@@ -295,10 +309,8 @@ def join_furnished_groups(
     h, w = seg.shape
     keys: list[npt.NDArray[np.int64]] = []
     sides: list[npt.NDArray[np.int64]] = []
-    for dy, dx in ((0, 1), (1, 0)):
-        a, b = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        rows, cols = np.nonzero((a != b) & (a > 0) & (b > 0))
-        p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
+    for dy, dx, rows, cols in _touching(seg):
+        p, q = seg[rows, cols].astype(np.int64), seg[rows + dy, cols + dx].astype(np.int64)
         key = np.minimum(p, q) * n + np.maximum(p, q)
         keys += [key, key]
         sides += [rows.astype(np.int64) * w + cols, (rows.astype(np.int64) + dy) * w + cols + dx]
