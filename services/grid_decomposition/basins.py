@@ -144,10 +144,9 @@ def _saddles(
 def _touching(seg: npt.NDArray[np.int32]) -> list[tuple[int, int, npt.NDArray[np.intp], npt.NDArray[np.intp]]]:
     """Per step (``dy``, ``dx``) right and down: rows and columns of the pixels whose neighbour that step away is
     in another segment (both ids > 0; raster order), looked for within the box round the segments (there are some)."""
-    inside = seg > 0
-    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
-    r0, c0 = int(rows[0]), int(cols[0])
-    box = seg[r0 : int(rows[-1]) + 1, c0 : int(cols[-1]) + 1]
+    rows, cols = _segment_box(seg)
+    r0, c0 = rows.start, cols.start
+    box = seg[rows, cols]
     h, w = box.shape
     found = []
     for dy, dx in ((0, 1), (1, 0)):
@@ -198,12 +197,21 @@ def _merge_pairs_keys(
     return np.stack([codes // n, codes % n], axis=1), top, furnished
 
 
+def _segment_box(seg: npt.NDArray[np.int32]) -> tuple[slice, slice]:
+    """Rows and columns of the box round the segments (there are some)."""
+    inside = seg > 0
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    return slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1)
+
+
 def _boxes(seg: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.int64]:
     """(n, 4) bounding box (row0, col0, row1, col1) of every segment id (zeros where it has no pixel)."""
     boxes = np.zeros((n, 4), dtype=np.int64)
-    for i, box in enumerate(ndimage.find_objects(seg), start=1):
+    rows, cols = _segment_box(seg)
+    r0, c0 = rows.start, cols.start
+    for i, box in enumerate(ndimage.find_objects(seg[rows, cols]), start=1):
         if box is not None:
-            boxes[i] = box[0].start, box[1].start, box[0].stop, box[1].stop
+            boxes[i] = box[0].start + r0, box[1].start + c0, box[0].stop + r0, box[1].stop + c0
     return boxes
 
 
