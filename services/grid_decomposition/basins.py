@@ -374,7 +374,7 @@ def _separators(
     seg, furniture = seg[box], furniture[box]
     blocked = (seg == 0).astype(np.uint8)
     dist, label = cv2.distanceTransformWithLabels(blocked, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
-    owners = seg.ravel()[np.flatnonzero(seg.ravel() > 0)]  # per label (pixel of a segment): its segment, > 0
+    owners = seg[seg > 0]  # per label (pixel of a segment): its segment, > 0
     nearest = owners[label - 1]  # a segment's own pixels too: they are left out by ``on``
     on = blocked.view(bool)
     h, w = seg.shape
