@@ -241,11 +241,14 @@ def _join_along(
     offered[[0, k]] = False
     if not offered.any():
         return segments
-    # only the box round the regions that may join is looked at: it holds all their pixels
-    inside = offered[segments]
+    # only the box round ``k`` and the regions that may join (and the tolerance round them) is looked at
+    looked = offered.copy()
+    looked[k] = True
+    inside = looked[segments]
     rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
-    top, left = int(rows[0]), int(cols[0])
-    window = segments[top : int(rows[-1]) + 1, left : int(cols[-1]) + 1]
+    top, left = max(int(rows[0]) - tolerance_px, 0), max(int(cols[0]) - tolerance_px, 0)
+    box = slice(top, int(rows[-1]) + 1 + tolerance_px), slice(left, int(cols[-1]) + 1 + tolerance_px)
+    window = segments[box]
     size = np.bincount(window.ravel(), minlength=n)
     along = np.zeros(n, dtype=bool)
     for band in bands:
@@ -256,12 +259,14 @@ def _join_along(
     along &= offered
     if not along.any():
         return segments
-    corridor = segments == k
+    corridor = window == k
     ring = np.ones((2 * tolerance_px + 1, 2 * tolerance_px + 1), np.uint8)
     while True:
-        touching = np.bincount(segments[cv2.dilate(corridor.view(np.uint8), ring).view(bool)], minlength=n) > 0
+        touching = np.bincount(window[cv2.dilate(corridor.view(np.uint8), ring).view(bool)], minlength=n) > 0
         new = touching & along
         if not new.any():
-            return np.where(corridor, k, segments).astype(np.int32)
+            joined = segments.copy()
+            joined[box] = np.where(corridor, k, window)
+            return joined
         along &= ~new
-        corridor |= new[segments]
+        corridor |= new[window]
