@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import cv2
 import numpy as np
 import numpy.typing as npt
@@ -73,13 +75,13 @@ def join_room_pieces(
     clearance = np.asarray(cv2.distanceTransform(floor, cv2.DIST_L2, 5), dtype=np.float32)
     reach = max(1, round(furniture_reach_m / resolution_m))
     peak = np.zeros(n, dtype=np.float32)
-    np.maximum.at(peak, seg.ravel(), clearance.ravel())
+    on = clearance.ravel() > 0  # off the floor a segment's peak stays 0
+    np.maximum.at(peak, seg.ravel()[on], clearance.ravel()[on])
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
     frozen[0] = True
     pairs, saddle, furnished = _saddles(seg, clearance, furniture, reach)
-    boxes = _boxes(seg, n)
+    pieces = _Pieces(seg.copy(), _boxes(seg, n))
     lut = np.arange(n, dtype=np.int32)  # segment id -> the id of the segment it has joined
-    solidity: dict[tuple[int, int], float] = {}
     while True:
         keep = furnished & ~frozen[pairs[:, 0]] & ~frozen[pairs[:, 1]]
         lower = np.minimum(peak[pairs[:, 0]], peak[pairs[:, 1]])
@@ -88,13 +90,17 @@ def join_room_pieces(
         candidates, high, low = pairs[keep], high[keep], low[keep]
         if candidates.size == 0:
             break
-        solid = np.array([_solidity(seg, lut, boxes, int(a), int(b), solidity) for a, b in candidates])
+        # a pair that only reaches the second test, of two convex pieces, cannot join: its union is not looked at
+        solid = np.zeros(len(candidates))
+        for i, (a, b) in enumerate(candidates.tolist()):
+            if high[i] or min(pieces.solidity(a, a), pieces.solidity(b, b)) < min_solidity:
+                solid[i] = pieces.solidity(a, b)
         joins = high & (solid >= min_solidity)
         # a room cut in two: its union no less convex than its more convex piece (a room and a corridor: a T or
         # L), when a piece is not convex itself (two convex rooms side by side make a convex union too)
         for k in np.flatnonzero(low & ~joins):
             a, b = (int(v) for v in candidates[k])
-            sa, sb = sorted((_solidity(seg, lut, boxes, a, a, solidity), _solidity(seg, lut, boxes, b, b, solidity)))
+            sa, sb = sorted((pieces.solidity(a, a), pieces.solidity(b, b)))
             joins[k] = sa < min_solidity and solid[k] >= min_relative_solidity * sb
         order = np.argsort(-solid, kind="stable")
         used = np.zeros(n, dtype=bool)
@@ -104,14 +110,13 @@ def join_room_pieces(
                 continue
             used[a] = used[b] = True
             lut[lut == b] = a
+            pieces.join(a, b)
             peak[a] = max(peak[a], peak[b])
-            boxes[a, :2] = np.minimum(boxes[a, :2], boxes[b, :2])
-            boxes[a, 2:] = np.maximum(boxes[a, 2:], boxes[b, 2:])
         if not used.any():
             break
-        solidity = {ab: s for ab, s in solidity.items() if not (used[ab[0]] or used[ab[1]])}
+        pieces.known = {ab: s for ab, s in pieces.known.items() if not (used[ab[0]] or used[ab[1]])}
         pairs, saddle, furnished = _merge_pairs(lut[pairs].astype(np.int64), saddle, furnished, n)
-    return renumber(lut[seg])
+    return renumber(pieces.current)
 
 
 def _saddles(
@@ -120,14 +125,12 @@ def _saddles(
     """Touching segment pairs (a < b), the highest clearance along their border, and whether furniture is
     within ``reach`` (the elliptic disc of that radius) of it."""
     n = int(seg.max()) + 1
-    h, w = seg.shape
+    w = seg.shape[1]
     keys: list[npt.NDArray[np.int64]] = []
     heights: list[npt.NDArray[np.float32]] = []
     sides: list[npt.NDArray[np.int64]] = []
-    for dy, dx in ((0, 1), (1, 0)):
-        a, b = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        rows, cols = np.nonzero((a != b) & (a > 0) & (b > 0))
-        p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
+    for dy, dx, rows, cols in _touching(seg):
+        p, q = seg[rows, cols].astype(np.int64), seg[rows + dy, cols + dx].astype(np.int64)
         keys.append(np.minimum(p, q) * n + np.maximum(p, q))
         heights.append(np.minimum(clearance[rows, cols], clearance[rows + dy, cols + dx]))
         sides.append(rows.astype(np.int64) * w + cols)
@@ -136,6 +139,21 @@ def _saddles(
     half = sides[0].size, sides[0].size + sides[1].size, sides[0].size + sides[1].size + sides[2].size
     nears = np.concatenate([near[: half[0]] | near[half[0] : half[1]], near[half[1] : half[2]] | near[half[2] :]])
     return _merge_pairs_keys(np.concatenate(keys), np.concatenate(heights), nears, n)
+
+
+def _touching(seg: npt.NDArray[np.int32]) -> list[tuple[int, int, npt.NDArray[np.intp], npt.NDArray[np.intp]]]:
+    """Per step (``dy``, ``dx``) right and down: rows and columns of the pixels whose neighbour that step away is
+    in another segment (both ids > 0; raster order), looked for within the box round the segments (there are some)."""
+    rows, cols = _segment_box(seg)
+    r0, c0 = rows.start, cols.start
+    box = seg[rows, cols]
+    h, w = box.shape
+    found = []
+    for dy, dx in ((0, 1), (1, 0)):
+        a, b = box[: h - dy, : w - dx], box[dy:, dx:]
+        r, c = np.nonzero((a != b) & (a > 0) & (b > 0))
+        found.append((dy, dx, r + r0, c + c0))
+    return found
 
 
 def _near(furniture: npt.NDArray[np.bool_], pixels: npt.NDArray[np.int64], reach: int) -> npt.NDArray[np.bool_]:
@@ -179,38 +197,73 @@ def _merge_pairs_keys(
     return np.stack([codes // n, codes % n], axis=1), top, furnished
 
 
+def _segment_box(seg: npt.NDArray[np.int32]) -> tuple[slice, slice]:
+    """Rows and columns of the box round the segments (there are some)."""
+    inside = seg > 0
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    return slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1)
+
+
 def _boxes(seg: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.int64]:
     """(n, 4) bounding box (row0, col0, row1, col1) of every segment id (zeros where it has no pixel)."""
     boxes = np.zeros((n, 4), dtype=np.int64)
-    for i, box in enumerate(ndimage.find_objects(seg), start=1):
+    rows, cols = _segment_box(seg)
+    r0, c0 = rows.start, cols.start
+    for i, box in enumerate(ndimage.find_objects(seg[rows, cols]), start=1):
         if box is not None:
-            boxes[i] = box[0].start, box[1].start, box[0].stop, box[1].stop
+            boxes[i] = box[0].start + r0, box[1].start + c0, box[0].stop + r0, box[1].stop + c0
     return boxes
 
 
-def _solidity(
-    seg: npt.NDArray[np.int32],
-    lut: npt.NDArray[np.int32],
-    boxes: npt.NDArray[np.int64],
-    a: int,
-    b: int,
-    known: dict[tuple[int, int], float],
-) -> float:
-    """Area of segments ``a`` and ``b`` (ids of ``lut[seg]``) together, holes filled, over the area of their
-    convex hull; remembered in ``known``."""
-    if (a, b) in known:
-        return known[a, b]
-    r0, c0 = np.minimum(boxes[a, :2], boxes[b, :2])
-    r1, c1 = np.maximum(boxes[a, 2:], boxes[b, 2:])
-    crop = lut[seg[r0:r1, c0:c1]]
-    union = ((crop == a) | (crop == b)).astype(np.uint8)
-    outlines, _ = cv2.findContours(union, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    filled = cv2.drawContours(np.zeros_like(union), outlines, -1, 1, thickness=cv2.FILLED)  # holes filled
-    hull = cv2.convexHull(np.concatenate(outlines))  # the outlines' hull is the pixels' hull
-    # pixel centres span the hull: half a pixel all round is still the union's area
-    hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
-    known[a, b] = float(np.count_nonzero(filled) / hull_area)
-    return known[a, b]
+@dataclass
+class _Pieces:
+    """The segments of :func:`join_room_pieces` while they join: their ids per pixel (``lut[seg]``), boxes
+    (:func:`_boxes`), convex hulls (image coordinates, found when first asked for) and the solidities known."""
+
+    current: npt.NDArray[np.int32]
+    boxes: npt.NDArray[np.int64]
+    hulls: dict[int, npt.NDArray[np.int32]] = field(default_factory=dict)
+    known: dict[tuple[int, int], float] = field(default_factory=dict)
+
+    def hull(self, a: int) -> npt.NDArray[np.int32]:
+        """Convex hull of segment ``a`` (the hull of its outlines is the hull of its pixels)."""
+        if a not in self.hulls:
+            r0, c0, r1, c1 = (int(v) for v in self.boxes[a])
+            piece = (self.current[r0:r1, c0:c1] == a).view(np.uint8)
+            outlines, _ = cv2.findContours(piece, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE, offset=(c0, r0))
+            self.hulls[a] = np.asarray(cv2.convexHull(np.concatenate(outlines)), dtype=np.int32)
+        return self.hulls[a]
+
+    def solidity(self, a: int, b: int) -> float:
+        """Area of segments ``a`` and ``b`` together, holes filled, over the area of their convex hull."""
+        if (a, b) in self.known:
+            return self.known[a, b]
+        r0, c0 = np.minimum(self.boxes[a, :2], self.boxes[b, :2])
+        r1, c1 = np.maximum(self.boxes[a, 2:], self.boxes[b, 2:])
+        crop = self.current[r0:r1, c0:c1]
+        union = (crop == a).view(np.uint8) if a == b else ((crop == a) | (crop == b)).view(np.uint8)
+        # holes filled: every pixel but the background reached from round the box
+        padded = cv2.copyMakeBorder(union, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+        filled = padded.size - cv2.floodFill(padded, None, (0, 0), 2)[0]
+        # the hull of the union is the hull of the pieces' hulls
+        hull = self.hull(a) if a == b else cv2.convexHull(np.concatenate([self.hull(a), self.hull(b)]))
+        # pixel centres span the hull: half a pixel all round is still the union's area
+        hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
+        self.known[a, b] = float(filled / hull_area)
+        return self.known[a, b]
+
+    def join(self, a: int, b: int) -> None:
+        """Segment ``b`` joins ``a``."""
+        r0, c0, r1, c1 = (int(v) for v in self.boxes[b])
+        box = self.current[r0:r1, c0:c1]
+        box[box == b] = a
+        self.boxes[a, :2] = np.minimum(self.boxes[a, :2], self.boxes[b, :2])
+        self.boxes[a, 2:] = np.maximum(self.boxes[a, 2:], self.boxes[b, 2:])
+        if a in self.hulls and b in self.hulls:
+            self.hulls[a] = np.asarray(cv2.convexHull(np.concatenate([self.hulls[a], self.hulls[b]])), dtype=np.int32)
+        else:
+            self.hulls.pop(a, None)
+        self.hulls.pop(b, None)
 
 
 def join_furnished_groups(
@@ -264,10 +317,8 @@ def join_furnished_groups(
     h, w = seg.shape
     keys: list[npt.NDArray[np.int64]] = []
     sides: list[npt.NDArray[np.int64]] = []
-    for dy, dx in ((0, 1), (1, 0)):
-        a, b = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        rows, cols = np.nonzero((a != b) & (a > 0) & (b > 0))
-        p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
+    for dy, dx, rows, cols in _touching(seg):
+        p, q = seg[rows, cols].astype(np.int64), seg[rows + dy, cols + dx].astype(np.int64)
         key = np.minimum(p, q) * n + np.maximum(p, q)
         keys += [key, key]
         sides += [rows.astype(np.int64) * w + cols, (rows.astype(np.int64) + dy) * w + cols + dx]
@@ -284,12 +335,14 @@ def join_furnished_groups(
     if doors is not None:  # a doorway between two walls stays one, whatever stands beside it
         made[run[doors.ravel()[pixel]]] = False
     linked = np.bincount(pair, weights=~made[run], minlength=codes.size) == 0
-    through_wall, through_furniture = _separators(seg, furniture, codes, n, wall_reach_px)
-    linked &= through_wall <= through_furniture
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
     frozen[0] = True
     a, b = codes // n, codes % n
     linked &= ~frozen[a] & ~frozen[b]
+    if not linked.any():  # no separator looked at
+        return renumber(seg)
+    through_wall, through_furniture = _separators(seg, furniture, codes, n, wall_reach_px)
+    linked &= through_wall <= through_furniture
     if not linked.any():
         return renumber(seg)
     graph = sparse.coo_matrix((np.ones(int(linked.sum())), (a[linked], b[linked])), shape=(n, n))
@@ -310,20 +363,29 @@ def _separators(
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Per pair ``codes`` (``a * n + b``): pixels of their Voronoi border inside the obstacles (neighbouring
     obstacle pixels nearest to ``a`` and to ``b``) on walls within ``wall_px`` of both, and on ``furniture``."""
+    # only the box round the segments and the furniture holds such pixels (a wall beyond it is farther)
+    margin = int(np.ceil(wall_px)) + 2
+    present = (seg > 0) | furniture
+    rows, cols = np.flatnonzero(present.any(axis=1)), np.flatnonzero(present.any(axis=0))
+    box = (
+        slice(max(int(rows[0]) - margin, 0), int(rows[-1]) + 1 + margin),
+        slice(max(int(cols[0]) - margin, 0), int(cols[-1]) + 1 + margin),
+    )
+    seg, furniture = seg[box], furniture[box]
     blocked = (seg == 0).astype(np.uint8)
     dist, label = cv2.distanceTransformWithLabels(blocked, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
-    owners = seg.ravel()[np.flatnonzero(seg.ravel() > 0)]
-    nearest = np.zeros(label.shape, dtype=np.int64)
-    on = blocked > 0
-    nearest[on] = owners[label[on] - 1]
+    owners = seg[seg > 0]  # per label (pixel of a segment): its segment, > 0
+    nearest = owners[label - 1]  # a segment's own pixels too: they are left out by ``on``
+    on = blocked.view(bool)
     h, w = seg.shape
     wall = np.zeros(codes.size)
     furn = np.zeros(codes.size)
     for dy, dx in ((0, 1), (1, 0)):
         a, b = nearest[: h - dy, : w - dx], nearest[dy:, dx:]
-        both = on[: h - dy, : w - dx] & on[dy:, dx:] & (a != b) & (a > 0) & (b > 0)
+        both = on[: h - dy, : w - dx] & on[dy:, dx:] & (a != b)
         rows, cols = np.nonzero(both)
-        key = np.minimum(a[rows, cols], b[rows, cols]) * n + np.maximum(a[rows, cols], b[rows, cols])
+        p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
+        key = np.minimum(p, q) * n + np.maximum(p, q)
         at = np.minimum(np.searchsorted(codes, key), codes.size - 1)
         known = codes[at] == key
         d = np.maximum(dist[rows, cols], dist[rows + dy, cols + dx])

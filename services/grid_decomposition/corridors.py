@@ -32,7 +32,15 @@ def _coordinates(
     x = np.arange(left, left + shape[1], dtype=np.float32)[None, :]
     y = np.arange(top, top + shape[0], dtype=np.float32)[:, None]
     s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
-    return np.rint(-s * x + c * y).astype(np.int32), np.rint(c * x + s * y).astype(np.int32)
+    return _across(shape, top, left, angle_rad), np.rint(c * x + s * y).astype(np.int32)
+
+
+def _across(shape: tuple[int, int], top: int, left: int, angle_rad: float) -> npt.NDArray[np.int32]:
+    """The across coordinate ``u`` of :func:`_coordinates` alone."""
+    x = np.arange(left, left + shape[1], dtype=np.float32)[None, :]
+    y = np.arange(top, top + shape[0], dtype=np.float32)[:, None]
+    s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
+    return np.rint(-s * x + c * y).astype(np.int32)
 
 
 def _runs(flags: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -228,25 +236,37 @@ def _join_along(
     part holds a square of the band's width.
     """
     n = int(segments.max()) + 1
-    size = np.bincount(segments.ravel(), minlength=n)
+    offered = np.zeros(n, dtype=bool)  # the rooms parted just now (ids past ``joinable``) never join
+    offered[: joinable.size] = joinable[:n]
+    offered[[0, k]] = False
+    if not offered.any():
+        return segments
+    # only the box round ``k`` and the regions that may join (and the tolerance round them) is looked at
+    looked = offered.copy()
+    looked[k] = True
+    inside = looked[segments]
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    top, left = max(int(rows[0]) - tolerance_px, 0), max(int(cols[0]) - tolerance_px, 0)
+    box = slice(top, int(rows[-1]) + 1 + tolerance_px), slice(left, int(cols[-1]) + 1 + tolerance_px)
+    window = segments[box]
+    size = np.bincount(window.ravel(), minlength=n)
     along = np.zeros(n, dtype=bool)
-    shape = (segments.shape[0], segments.shape[1])
     for band in bands:
-        u, _ = _coordinates(shape, 0, 0, band.angle_rad)
+        u = _across((window.shape[0], window.shape[1]), top, left, band.angle_rad)
         strip = (u >= band.offset_a_px - tolerance_px) & (u <= band.offset_b_px + tolerance_px)
-        held = np.bincount(segments[strip], minlength=n)
+        held = np.bincount(window[strip], minlength=n)
         along |= (held >= min_share * size) & (held >= (band.offset_b_px - band.offset_a_px) ** 2)
-    along[: joinable.size] &= joinable[:n]
-    along[joinable.size :] = False  # the rooms parted just now
-    along[[0, k]] = False
+    along &= offered
     if not along.any():
         return segments
-    corridor = segments == k
+    corridor = window == k
     ring = np.ones((2 * tolerance_px + 1, 2 * tolerance_px + 1), np.uint8)
     while True:
-        touching = np.bincount(segments[cv2.dilate(corridor.view(np.uint8), ring).view(bool)], minlength=n) > 0
+        touching = np.bincount(window[cv2.dilate(corridor.view(np.uint8), ring).view(bool)], minlength=n) > 0
         new = touching & along
         if not new.any():
-            return np.where(corridor, k, segments).astype(np.int32)
+            joined = segments.copy()
+            joined[box] = np.where(corridor, k, window)
+            return joined
         along &= ~new
-        corridor |= new[segments]
+        corridor |= new[window]

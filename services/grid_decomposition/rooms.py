@@ -392,6 +392,18 @@ def desk_clusters(
     longer than ``compact_from_px``, compact (their minimum-area rectangle at most
     ``max_elongation`` times as long as wide: a row of cupboards along a corridor is long).
     """
+    # an island has free pixels all round it: only the box round the free pixels (and a pixel more) is labelled,
+    # whose border no island touches (as none touches the map's)
+    free = ~blocked
+    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
+    out = np.zeros(blocked.shape, dtype=bool)
+    if rows.size == 0:
+        return out
+    box = (
+        slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2),
+        slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2),
+    )
+    blocked = blocked[box]
     labelled = components(blocked)
     keep = islands(blocked, max_extent_px=max_extent_px, labelled=labelled)
     parts, stats = labelled.labels, labelled.stats
@@ -411,7 +423,8 @@ def desk_clusters(
         rows, cols = np.nonzero(parts[y : y + bh, x : x + bw] == k)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         ok[k] = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
-    return np.asarray(keep & ok[parts], dtype=bool)
+    out[box] = keep & ok[parts]
+    return out
 
 
 def free_standing(

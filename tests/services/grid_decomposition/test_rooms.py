@@ -7,7 +7,7 @@ import numpy as np
 
 from services.grid_decomposition import Connection, decompose
 from services.grid_decomposition.arrays import components
-from services.grid_decomposition.rooms import free_standing, furniture, segment_rooms
+from services.grid_decomposition.rooms import desk_clusters, free_standing, furniture, segment_rooms
 
 RES = 0.05
 
@@ -70,6 +70,19 @@ def test_a_desk_block_is_furniture_a_bent_or_long_piece_of_wall_is_not() -> None
     slab = canvas.copy()
     slab[40:50, 40:100] = True  # 3 x 0.5 m: a thick piece of wall, not a desk
     assert not furniture(slab, resolution_m=RES)[45, 70]
+
+
+def test_a_desk_cluster_is_found_wherever_its_room_lies_in_the_map() -> None:
+    floor = np.zeros((120, 200), dtype=bool)
+    floor[:, :120] = True  # a room reaching the map's top, left and bottom edges
+    floor[50:66, 40:72] = False  # a 1.6 x 0.8 m desk block standing free in it
+    floor[0:10, 100:110] = False  # a cupboard at the map's edge: not free-standing
+    rule = {"max_extent_px": 60.0, "compact_from_px": 40.0, "max_elongation": 3.0, "min_thickness_px": 8.0}
+    found = desk_clusters(~floor, **rule)
+    assert found[58, 56] and found.sum() == 16 * 32
+    framed = np.zeros((160, 260), dtype=bool)
+    framed[20:140, 30:230] = floor  # the same room inside unknown space
+    assert np.array_equal(desk_clusters(~framed, **rule)[20:140, 30:230], found)
 
 
 def test_a_corridor_and_its_offices_are_one_region_each_linked_by_doors() -> None:
