@@ -59,6 +59,7 @@ from services.grid_decomposition.rooms import (
 )
 from services.grid_decomposition.segments import fill_from_neighbours, segment_image
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
+from services.grid_decomposition.short_walls import split_at_short_walls
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
 from shared.vocabulary import PlaceLabel
@@ -297,6 +298,7 @@ def decompose(
     prior: RegionPrior | None = None,
     settled_max_changed_share: float = 0.2,
     corridor_min_region_m2: float = 100.0,
+    short_wall_min_m: float = 3.0,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -556,6 +558,14 @@ def decompose(
                 segments = part_rooms_from_corridors(
                     segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m,
                     joinable=on_floor == 0,
+                )
+            if short_wall_min_m > 0:  # two rooms one region where the wall between them stops short
+                size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+                candidates = (size >= corridor_min_region_m2 / resolution_m**2) & (on_floor == 0)
+                candidates[0] = False
+                segments = split_at_short_walls(
+                    segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m,
+                    wall_min_m=short_wall_min_m,
                 )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)
