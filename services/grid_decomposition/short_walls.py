@@ -112,7 +112,6 @@ def _stretch(
     other = np.bincount(t[on & (window > 0) & (window != k)], minlength=span) > 0
     reach = int(np.ceil(longest))
     at = end + step
-    first = at
     while 0 <= at < span and not mine[at] and abs(at - end) <= 3:  # the wall's last pixels, its thickness
         at += step
     if not (0 <= at < span) or not mine[at]:
@@ -158,7 +157,7 @@ def _two_rooms(
     min_solidity: float,
 ) -> npt.NDArray[np.bool_] | None:
     """The smaller of two room-like 4-connected pieces ``region`` falls into without ``cut``, or None."""
-    n, labels, stats, _ = cv2.connectedComponentsWithStats((region & ~cut).astype(np.uint8), connectivity=4)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats((region & ~cut).astype(np.uint8), connectivity=4)
     big = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_area_m2 / resolution_m**2) + 1
     if big.size != 2:
         return None
