@@ -144,8 +144,9 @@ def _flank(
         beside = piece & (np.abs(u) <= reach_px) & (t >= start) & (t < end)
         if np.unique(t[beside]).size < min_share * (end - start):
             return False
-        sides.append(np.sign(np.mean(u[beside])))
-    return bool(sides[0] != sides[1])
+        if beside.any():  # (none beside when no share is asked: the test is off)
+            sides.append(np.sign(np.mean(u[beside])))
+    return len(sides) < 2 or bool(sides[0] != sides[1])
 
 
 def _two_rooms(
