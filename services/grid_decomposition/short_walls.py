@@ -5,6 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 
 from services.grid_decomposition.corridors import _coordinates, _runs
 from services.grid_decomposition.radiogram import Line
@@ -54,63 +55,88 @@ def split_at_short_walls(
     out = segments.copy()
     next_id = int(segments.max()) + 1
     wall_min, gap_max, bridge = wall_min_m / resolution_m, gap_max_m / resolution_m, wall_gap_m / resolution_m
-    flank_px = flank_m / resolution_m
-    for k in np.flatnonzero(candidates).tolist():
-        rows, cols = np.nonzero(out == k)
-        if rows.size == 0:
+    flank_px = round(flank_m / resolution_m)
+    boxes = ndimage.find_objects(segments)
+    for k in np.flatnonzero(candidates[: len(boxes) + 1]).tolist():
+        box = boxes[k - 1]
+        if box is None:
             continue
-        top, left = max(0, int(rows.min()) - margin_px), max(0, int(cols.min()) - margin_px)
-        bottom, right = int(rows.max()) + 1 + margin_px, int(cols.max()) + 1 + margin_px
+        top, left = max(0, box[0].start - margin_px), max(0, box[1].start - margin_px)
+        bottom, right = box[0].stop + margin_px, box[1].stop + margin_px
         window = out[top:bottom, left:right]
-        walls = occupied[top:bottom, left:right]
+        wall_rows, wall_cols = np.nonzero(occupied[top:bottom, left:right])
+        free_rows, free_cols = np.nonzero(window == k)
         for angle in sorted({ln.angle_rad for ln in lines}):
-            u, t = _coordinates(window.shape, top, left, angle)
-            t0 = int(t.min())
-            span = int(t.max()) - t0 + 1
+            wall_u, wall_t = _project(wall_rows, wall_cols, top, left, angle)
+            free_u, free_t = _project(free_rows, free_cols, top, left, angle)
+            every_u, every_t = np.r_[wall_u, free_u], np.r_[wall_t, free_t]
+            u0, t0 = int(every_u.min()), int(every_t.min())
+            shape = (int(every_u.max()) - u0 + 1, int(every_t.max()) - t0 + 1)
+            wall_u, wall_t, free_u, free_t = wall_u - u0, wall_t - t0, free_u - u0, free_t - t0
+            wall_at = _raster(wall_u, wall_t, shape)  # (across, along): a pixel of it at each place
+            mine_at = _raster(free_u, free_t, shape)
             for line in (ln for ln in lines if ln.angle_rad == angle):
-                offset = round(line.offset_px)
-                near = np.abs(u - offset) <= tolerance_px
-                wall_t = np.bincount(t[near & walls] - t0, minlength=span) > 0
-                if not wall_t.any():
+                offset = round(line.offset_px) - u0
+                if not 0 <= offset < shape[0]:
                     continue
-                on = u == offset
-                starts, ends = _runs(wall_t)
+                near = wall_at[max(offset - tolerance_px, 0) : offset + tolerance_px + 1]
+                starts, ends = _runs(np.asarray(near.any(axis=0), dtype=bool))
+                if starts.size == 0:
+                    continue
                 keep = np.r_[True, starts[1:] - ends[:-1] > bridge]  # bridge short gaps in the wall
                 run_starts = starts[keep]
                 run_ends = np.r_[ends[np.flatnonzero(keep)[1:] - 1], ends[-1]]
-                for s, e in zip(run_starts.tolist(), run_ends.tolist(), strict=True):
-                    if e - s < wall_min:
-                        continue
-                    for end, step in ((e - 1, 1), (s, -1)):
-                        stretch = _stretch(window, on, t - t0, k, end, step, min(gap_max, gap_max_ratio * (e - s)))
-                        if stretch is None:
+                pairs = zip(run_starts.tolist(), run_ends.tolist(), strict=True)
+                runs = [(a, b) for a, b in pairs if b - a >= wall_min]
+                if not runs:
+                    continue
+                bands = (slice(max(offset - flank_px, 0), offset), slice(offset + 1, offset + 1 + flank_px))
+                sides = [np.asarray(mine_at[band].any(axis=0), dtype=bool) for band in bands]
+                for a, b in runs:
+                    if any(side[a:b].sum() < min_flank_share * (b - a) for side in sides):
+                        continue  # the region lies along one side of the wall only
+                    for end_t, step in ((b - 1, 1), (a, -1)):
+                        stretch = _stretch(mine_at[offset], end_t, step, min(gap_max, gap_max_ratio * (b - a)))
+                        if stretch is None or not _another_region(window, k, angle, offset + u0, stretch[2] + t0,
+                                                                  top, left):
                             continue
-                        lo, hi = stretch
-                        cut = (window == k) & (np.abs(u - offset) <= 1) & (t - t0 >= lo) & (t - t0 <= hi)
-                        part = _two_rooms(window == k, cut, resolution_m, room_min_area_m2, room_min_radius_m,
+                        region = window == k
+                        u, t = _coordinates(window.shape, top, left, angle)
+                        u, t = u - u0, t - t0
+                        cut = region & (np.abs(u - offset) <= 1) & (t >= stretch[0]) & (t <= stretch[1])
+                        part = _two_rooms(region, cut, resolution_m, room_min_area_m2, room_min_radius_m,
                                           room_min_solidity)
-                        if part is not None and _flank(part, (window == k) & ~cut & ~part, u - offset, t - t0, s, e,
+                        if part is not None and _flank(part, region & ~cut & ~part, u - offset, t, a, b,
                                                        flank_px, min_flank_share):
                             window[part] = next_id
                             next_id += 1
+                            still = window[free_rows, free_cols] == k
+                            mine_at = _raster(free_u[still], free_t[still], shape)
     return out
 
 
-def _stretch(
-    window: npt.NDArray[np.int32],
-    on: npt.NDArray[np.bool_],
-    t: npt.NDArray[np.int32],
-    k: int,
-    end: int,
-    step: int,
-    longest: float,
-) -> tuple[int, int] | None:
-    """Along-line range (inclusive) of the region ``k``'s free stretch beyond a wall's ``end`` (going ``step``),
-    when it leaves the region into another region within ``longest`` pixels; else None."""
-    span = int(t.max()) + 1
-    mine = np.bincount(t[on & (window == k)], minlength=span) > 0
-    other = np.bincount(t[on & (window > 0) & (window != k)], minlength=span) > 0
-    reach = int(np.ceil(longest))
+def _project(
+    rows: npt.NDArray[np.intp], cols: npt.NDArray[np.intp], top: int, left: int, angle_rad: float
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    """Across and along coordinates of window pixels, as :func:`~services.grid_decomposition.corridors.
+    _coordinates` gives them for the whole window."""
+    x, y = (cols + left).astype(np.float32), (rows + top).astype(np.float32)
+    s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
+    return np.rint(-s * x + c * y).astype(np.int32), np.rint(c * x + s * y).astype(np.int32)
+
+
+def _raster(u: npt.NDArray[np.int32], t: npt.NDArray[np.int32], shape: tuple[int, int]) -> npt.NDArray[np.bool_]:
+    """Where pixels at across ``u``, along ``t`` lie, as an (across, along) raster."""
+    out = np.zeros(shape, dtype=bool)
+    out[u, t] = True
+    return out
+
+
+def _stretch(mine: npt.NDArray[np.bool_], end: int, step: int, longest: float) -> tuple[int, int, int] | None:
+    """The region's free stretch (``mine``, per along-line pixel of the line) beyond a wall's ``end`` (going
+    ``step``) when it ends within ``longest`` pixels: its along-line range (inclusive) and the pixel beyond it;
+    else None."""
+    span = mine.size
     at = end + step
     while 0 <= at < span and not mine[at] and abs(at - end) <= 3:  # the wall's last pixels, its thickness
         at += step
@@ -119,12 +145,21 @@ def _stretch(
     first = at
     while 0 <= at < span and mine[at]:
         at += step
-        if abs(at - first) > reach:
+        if abs(at - first) > longest:
             return None
-    if not (0 <= at < span) or not other[at]:
-        return None
     last = at - step
-    return (min(first, last), max(first, last))
+    return min(first, last), max(first, last), at
+
+
+def _another_region(
+    window: npt.NDArray[np.int32], k: int, angle_rad: float, u: int, t: int, top: int, left: int
+) -> bool:
+    """Whether the pixel at across ``u``, along ``t`` lies in a region other than ``k`` (not on a wall)."""
+    s, c = np.sin(angle_rad), np.cos(angle_rad)
+    col, row = round(c * t - s * u) - left, round(s * t + c * u) - top
+    if not (0 <= row < window.shape[0] and 0 <= col < window.shape[1]):
+        return False
+    return bool(window[row, col] > 0 and window[row, col] != k)
 
 
 def _flank(
