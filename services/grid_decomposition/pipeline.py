@@ -370,6 +370,11 @@ def decompose(
     fan_max_neck_m : float
         A fan of rays leaving a room region through a neck at most this wide is a room of its own
         (:func:`~services.grid_decomposition.fans.split_fans`); 0 turns it off.
+    short_wall_min_m : float
+        After the rooms are parted from their corridors, a room region of at least
+        ``corridor_min_region_m2`` parts along a wall at least this long that stops short of the
+        region's edge (:func:`~services.grid_decomposition.short_walls.split_at_short_walls`: two rooms
+        the map's partial wall leaves one region); 0 turns it off.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from services.grid_decomposition import decompose
 from services.grid_decomposition.radiogram import Line
 from services.grid_decomposition.short_walls import split_at_short_walls
 
@@ -86,3 +87,29 @@ def test_the_corridor_in_front_of_two_rooms_is_not_cut_on_the_line_of_their_wall
         segments, walls, lines, candidates, resolution_m=RESOLUTION_M, gap_max_m=3.5, min_flank_share=0.0
     )
     assert len(set(np.unique(cut[150:214, 10:290]).tolist())) == 2
+
+
+def _offices_on_a_corridor() -> tuple[np.ndarray, tuple[int, int], tuple[int, int], tuple[int, int]]:
+    """Occupancy of a 24 m x 10.5 m building: a 2.5 m corridor along its lower wall, two 12 m x 8 m offices
+    above it open onto it over 3 m each (its upper wall not drawn 9-15 m along), and the wall between the
+    offices drawn from the far wall to 2 m before the corridor. A point in each office and in the corridor."""
+    def px(m: float) -> int:
+        return round(m / RESOLUTION_M)
+
+    occ = np.full((px(12.5), px(26)), -1, dtype=np.int8)
+    x0, y0, width, depth, t = px(1), px(1), px(24), px(10.5), 4
+    occ[y0 - t : y0 + depth + t, x0 - t : x0 + width + t] = 100
+    occ[y0 : y0 + depth, x0 : x0 + width] = 0
+    side = y0 + px(2.5)  # the corridor's upper side
+    occ[side : side + t, x0 : x0 + px(9)] = occ[side : side + t, x0 + px(15) : x0 + width] = 100
+    middle = x0 + px(12)
+    occ[side + t + px(2.0) : y0 + depth, middle - t // 2 : middle + t // 2] = 100
+    return occ, (y0 + px(7), x0 + px(6)), (y0 + px(7), x0 + px(18)), (y0 + px(1.2), middle)
+
+
+def test_offices_whose_wall_stops_short_of_their_corridor_are_two_regions() -> None:
+    occupancy, left, right, corridor = _offices_on_a_corridor()
+    seg = decompose(occupancy, resolution_m=RESOLUTION_M).segments
+    assert len({int(seg[left]), int(seg[right]), int(seg[corridor])}) == 3
+    off = decompose(occupancy, resolution_m=RESOLUTION_M, short_wall_min_m=0).segments
+    assert off[left] == off[right] != off[corridor]
