@@ -153,6 +153,7 @@ def segment_rooms(
     desk_small_m2: float = 0.25,
     desk_small_extent_m: float = 0.7,
     desk_wall_reach_m: float = 0.5,
+    table_min_thickness_m: float = 0.3,
     line_doors: npt.NDArray[np.bool_] | None = None,
     rays: npt.NDArray[np.bool_] | None = None,
     occupied: npt.NDArray[np.bool_] | None = None,
@@ -170,7 +171,12 @@ def segment_rooms(
     3. Rooms joined through a neck are split (:func:`split_at_necks`, when
        ``neck_half_width_m`` > 0), and doorways found from the free space itself
        (:func:`find_doorways`) cut rooms apart; a cut across a corridor, which goes on for
-       ``corridor_length_m`` on both sides about as wide as the cut, is no doorway.
+       ``corridor_length_m`` on both sides about as wide as the cut, is no doorway; nor is a cut
+       with an end on a table (when ``table_min_thickness_m`` > 0): an obstacle island the laser
+       hit, at most ``island_max_extent_m`` across, of which at least 0.3 survives an opening
+       with a disc ``table_min_thickness_m`` wide (a dash of wall is thinner), compact (its
+       minimum-area rectangle at most ``desk_max_elongation`` times as long as wide). A doorway
+       is an opening in a wall; the gap between a table and a wall is a passage round the table.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
@@ -234,6 +240,15 @@ def segment_rooms(
             max_depth_m=door_max_depth_m,
             corridor_length_m=corridor_length_m,
         )
+        if table_min_thickness_m > 0 and cuts.size:  # passing a table is no doorway: a cut ending on one is dropped
+            tables = desk_clusters(
+                seg == 0,
+                max_extent_px=island_max_extent_m / resolution_m,
+                compact_from_px=0.0,
+                max_elongation=desk_max_elongation,
+                min_thickness_px=table_min_thickness_m / resolution_m,
+            )
+            cuts = cuts[~ending_on(cuts, tables if occupied is None else _seen(tables, occupied), reach_px=2)]
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
     widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)  # clearance >= 0: a max per segment
@@ -268,12 +283,8 @@ def segment_rooms(
             small_extent_px=desk_small_extent_m / resolution_m,
         )
         standing = clutter | desks
-        if occupied is not None:  # furniture is something the laser hit, not unknown space between rays
-            parts = components(standing).labels
-            seen = np.zeros(int(parts.max()) + 1, dtype=bool)
-            seen[parts[occupied]] = True
-            seen[0] = False
-            standing = seen[parts]
+        if occupied is not None:
+            standing = _seen(standing, occupied)
         rooms = join_furnished_groups(
             rooms,
             standing,
@@ -283,6 +294,27 @@ def segment_rooms(
             min_solidity=join_solidity,
         )
     return rooms, cut
+
+
+def _seen(standing: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """The parts of ``standing`` holding an ``occupied`` cell: furniture is something the laser hit, not unknown
+    space between rays."""
+    parts = components(standing).labels
+    seen = np.zeros(int(parts.max()) + 1, dtype=bool)
+    seen[parts[occupied]] = True
+    seen[0] = False
+    return np.asarray(seen[parts], dtype=bool)
+
+
+def ending_on(cuts: npt.NDArray[np.float64], mask: npt.NDArray[np.bool_], *, reach_px: int) -> npt.NDArray[np.bool_]:
+    """Per cut ((G, 2, 2): two (x, y) ends): whether an end lies within ``reach_px`` of ``mask``."""
+    if cuts.size == 0 or not mask.any():
+        return np.zeros(len(cuts), dtype=bool)
+    near = cv2.dilate(mask.astype(np.uint8), np.ones((2 * reach_px + 1, 2 * reach_px + 1), np.uint8)).astype(bool)
+    h, w = mask.shape
+    x = np.clip(np.rint(cuts[..., 0]).astype(np.int64), 0, w - 1)
+    y = np.clip(np.rint(cuts[..., 1]).astype(np.int64), 0, h - 1)
+    return np.asarray(near[y, x].any(axis=1), dtype=bool)
 
 
 def _wall_doors(
