@@ -7,7 +7,7 @@ import numpy as np
 
 from services.grid_decomposition import Connection, decompose
 from services.grid_decomposition.arrays import components
-from services.grid_decomposition.rooms import desk_clusters, free_standing, furniture, segment_rooms
+from services.grid_decomposition.rooms import desk_clusters, ending_on, free_standing, furniture, segment_rooms
 
 RES = 0.05
 
@@ -284,3 +284,42 @@ def test_an_open_plan_office_with_desk_clusters_is_one_room_and_the_office_behin
     # without joining what only furniture separates, the cuts from the clusters to the walls cut it up
     old = decompose(occ, resolution_m=RES, desk_max_extent_m=0.0)
     assert np.unique(old.segments[hall]).size > 1
+
+
+def _two_rooms_and_a_table() -> np.ndarray:
+    """9 x 4 m at 5 cm: room A (4.2 x 3.7 m) with a 1.5 x 1.5 m table standing 1.1 m from its walls, and
+    room B beside it behind a 0.15 m wall with a 0.9 m door; unknown all round."""
+    occ = np.full((100, 200), -1, dtype=np.int8)
+    occ[10:90, 10:190] = 100
+    occ[13:87, 13:97] = 0  # room A
+    occ[13:87, 100:187] = 0  # room B
+    occ[40:58, 97:100] = 0  # the door
+    occ[35:65, 40:70] = 100  # the table
+    return occ
+
+
+def test_a_room_is_not_cut_at_the_gaps_beside_its_table_its_door_stays() -> None:
+    occ = _two_rooms_and_a_table()
+    free = occ == 0
+    none = np.zeros(occ.shape, dtype=bool)
+
+    def rooms(table_min_thickness_m: float) -> np.ndarray:
+        seg, _ = segment_rooms(
+            free.astype(np.int32), none, none, none, resolution_m=RES, occupied=occ == 100, rays=none,
+            table_min_thickness_m=table_min_thickness_m, join_saddle_ratio=0.0, desk_max_extent_m=0.0,
+        )  # the joins of furnished pieces off: the cuts alone decide
+        return seg
+
+    seg = rooms(0.3)
+    room_a, room_b = np.unique(seg[13:87, 13:97][free[13:87, 13:97]]), np.unique(seg[13:87, 100:187])
+    assert room_a.size == 1 and room_b.size == 1 and room_a[0] != room_b[0]  # A whole, B behind its door
+    # taken for a wall, the table makes the gaps between it and the walls doorways that cut room A
+    old = rooms(0.0)
+    assert np.unique(old[13:87, 13:97][free[13:87, 13:97]]).size > 1
+
+
+def test_a_cut_ending_beside_a_table_is_found_one_between_walls_is_not() -> None:
+    table = np.zeros((40, 60), dtype=bool)
+    table[15:25, 20:30] = True
+    cuts = np.array([[[5.0, 20.0], [18.0, 20.0]], [[40.0, 2.0], [40.0, 30.0]]])  # (x, y) ends
+    assert ending_on(cuts, table, reach_px=2).tolist() == [True, False]
