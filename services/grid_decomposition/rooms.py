@@ -241,14 +241,16 @@ def segment_rooms(
             corridor_length_m=corridor_length_m,
         )
         if table_min_thickness_m > 0 and cuts.size:  # passing a table is no doorway: a cut ending on one is dropped
-            tables = desk_clusters(
-                seg == 0,
-                max_extent_px=island_max_extent_m / resolution_m,
-                compact_from_px=0.0,
-                max_elongation=desk_max_elongation,
-                min_thickness_px=table_min_thickness_m / resolution_m,
-            )
-            cuts = cuts[~ending_on(cuts, tables if occupied is None else _seen(tables, occupied), reach_px=2)]
+            cuts = cuts[
+                ~ends_on_tables(
+                    cuts,
+                    seg == 0,
+                    occupied,
+                    max_extent_px=island_max_extent_m / resolution_m,
+                    min_thickness_px=table_min_thickness_m / resolution_m,
+                    max_elongation=desk_max_elongation,
+                )
+            ]
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
     widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)  # clearance >= 0: a max per segment
@@ -283,8 +285,12 @@ def segment_rooms(
             small_extent_px=desk_small_extent_m / resolution_m,
         )
         standing = clutter | desks
-        if occupied is not None:
-            standing = _seen(standing, occupied)
+        if occupied is not None:  # furniture is something the laser hit, not unknown space between rays
+            parts = components(standing).labels
+            seen = np.zeros(int(parts.max()) + 1, dtype=bool)
+            seen[parts[occupied]] = True
+            seen[0] = False
+            standing = seen[parts]
         rooms = join_furnished_groups(
             rooms,
             standing,
@@ -296,25 +302,51 @@ def segment_rooms(
     return rooms, cut
 
 
-def _seen(standing: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-    """The parts of ``standing`` holding an ``occupied`` cell: furniture is something the laser hit, not unknown
-    space between rays."""
-    parts = components(standing).labels
-    seen = np.zeros(int(parts.max()) + 1, dtype=bool)
-    seen[parts[occupied]] = True
-    seen[0] = False
-    return np.asarray(seen[parts], dtype=bool)
+def ends_on_tables(
+    cuts: npt.NDArray[np.float64],
+    blocked: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_] | None,
+    *,
+    max_extent_px: float,
+    min_thickness_px: float,
+    max_elongation: float,
+    min_solid: float = 0.3,
+    reach_px: int = 2,
+) -> npt.NDArray[np.bool_]:
+    """Per cut ((G, 2, 2): two (x, y) ends): whether an end lies within ``reach_px`` of a table.
 
-
-def ending_on(cuts: npt.NDArray[np.float64], mask: npt.NDArray[np.bool_], *, reach_px: int) -> npt.NDArray[np.bool_]:
-    """Per cut ((G, 2, 2): two (x, y) ends): whether an end lies within ``reach_px`` of ``mask``."""
-    if cuts.size == 0 or not mask.any():
-        return np.zeros(len(cuts), dtype=bool)
-    near = cv2.dilate(mask.astype(np.uint8), np.ones((2 * reach_px + 1, 2 * reach_px + 1), np.uint8)).astype(bool)
-    h, w = mask.shape
-    x = np.clip(np.rint(cuts[..., 0]).astype(np.int64), 0, w - 1)
-    y = np.clip(np.rint(cuts[..., 1]).astype(np.int64), 0, h - 1)
-    return np.asarray(near[y, x].any(axis=1), dtype=bool)
+    A table is an 8-connected part of ``blocked`` standing free (:func:`islands`: off the map border, at
+    most ``max_extent_px`` across) that holds an ``occupied`` cell (the laser hit it: not unknown space
+    between rays), is solid (at least ``min_solid`` of it survives an opening with a disc
+    ``min_thickness_px`` wide: a dash of wall is thinner) and compact (its minimum-area rectangle at most
+    ``max_elongation`` times as long as wide). Only the parts the cuts end at are looked at.
+    """
+    flags = np.zeros(len(cuts), dtype=bool)
+    if cuts.size == 0:
+        return flags
+    labelled = components(blocked)
+    parts, stats = labelled.labels, labelled.stats
+    h, w = blocked.shape
+    offsets = np.arange(-reach_px, reach_px + 1)
+    x = np.clip(np.rint(cuts[..., 0]).astype(np.int64)[..., None, None] + offsets[None, :], 0, w - 1)
+    y = np.clip(np.rint(cuts[..., 1]).astype(np.int64)[..., None, None] + offsets[:, None], 0, h - 1)
+    at = parts[y, x].reshape(len(cuts), -1)  # the parts within reach of either end
+    standing = np.zeros(len(stats), dtype=bool)
+    standing[np.unique(at)] = True
+    standing &= islands(blocked, max_extent_px=max_extent_px, labelled=labelled, flags=True)
+    radius = max(1, round(min_thickness_px / 2))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    for k in np.flatnonzero(standing).tolist():
+        left, top, bw, bh = (int(v) for v in stats[k, :4])
+        box = (slice(top, top + bh), slice(left, left + bw))
+        part = parts[box] == k
+        seen = occupied is None or bool(occupied[box][part].any())
+        solid = cv2.morphologyEx(np.pad(part, radius).astype(np.uint8), cv2.MORPH_OPEN, disc)
+        rows, cols = np.nonzero(part)
+        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+        compact = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
+        standing[k] = seen and compact and np.count_nonzero(solid) >= min_solid * rows.size
+    return np.asarray(standing[at].any(axis=1), dtype=bool)
 
 
 def _wall_doors(
@@ -387,12 +419,13 @@ def open_share(
 
 
 def islands(
-    blocked: npt.NDArray[np.bool_], *, max_extent_px: float, labelled: Components | None = None
+    blocked: npt.NDArray[np.bool_], *, max_extent_px: float, labelled: Components | None = None, flags: bool = False
 ) -> npt.NDArray[np.bool_]:
     """Parts of ``blocked`` standing free: 8-connected, off the map border, at most ``max_extent_px`` across.
 
     Chairs, tables and clutter the furniture rule left as obstacles (a cluster of chairs, a large
-    table); walls reach farther or touch the map border (the unknown outside).
+    table); walls reach farther or touch the map border (the unknown outside). With ``flags``, one flag
+    per part of ``labelled`` (or of ``blocked``) instead of the mask.
     """
     labelled = components(blocked) if labelled is None else labelled
     parts, stats = labelled.labels, labelled.stats
@@ -401,7 +434,7 @@ def islands(
     bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
     keep = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (np.maximum(bw, bh) <= max_extent_px)
     keep[0] = False
-    return np.asarray(keep[parts], dtype=bool)
+    return np.asarray(keep if flags else keep[parts], dtype=bool)
 
 
 def desk_clusters(

@@ -7,7 +7,7 @@ import numpy as np
 
 from services.grid_decomposition import Connection, decompose
 from services.grid_decomposition.arrays import components
-from services.grid_decomposition.rooms import desk_clusters, ending_on, free_standing, furniture, segment_rooms
+from services.grid_decomposition.rooms import desk_clusters, ends_on_tables, free_standing, furniture, segment_rooms
 
 RES = 0.05
 
@@ -318,8 +318,23 @@ def test_a_room_is_not_cut_at_the_gaps_beside_its_table_its_door_stays() -> None
     assert np.unique(old[13:87, 13:97][free[13:87, 13:97]]).size > 1
 
 
-def test_a_cut_ending_beside_a_table_is_found_one_between_walls_is_not() -> None:
-    table = np.zeros((40, 60), dtype=bool)
-    table[15:25, 20:30] = True
-    cuts = np.array([[[5.0, 20.0], [18.0, 20.0]], [[40.0, 2.0], [40.0, 30.0]]])  # (x, y) ends
-    assert ending_on(cuts, table, reach_px=2).tolist() == [True, False]
+def test_a_cut_ending_beside_a_table_counts_one_beside_a_dash_of_wall_or_between_walls_does_not() -> None:
+    blocked = np.zeros((60, 80), dtype=bool)
+    blocked[:, :3] = blocked[:, -3:] = True  # walls
+    blocked[15:27, 20:32] = True  # a 0.6 m table
+    blocked[40:44, 30:60] = True  # a dash of wall, 1.5 m x 0.2 m
+    occupied = blocked.copy()
+    cuts = np.array([
+        [[3.0, 20.0], [18.0, 20.0]],  # wall to table
+        [[3.0, 42.0], [29.0, 42.0]],  # wall to the dash
+        [[3.0, 52.0], [76.0, 52.0]],  # wall to wall
+    ])  # (x, y) ends
+
+    def tables(seen: np.ndarray, c: np.ndarray) -> list[bool]:
+        flags = ends_on_tables(c, blocked, seen, max_extent_px=60.0, min_thickness_px=6.0, max_elongation=2.5)
+        return [bool(f) for f in flags]
+
+    assert tables(occupied, cuts) == [True, False, False]
+    unseen = occupied.copy()
+    unseen[15:27, 20:32] = False  # unknown space between rays, not a table the laser hit
+    assert tables(unseen, cuts[:1]) == [False]
