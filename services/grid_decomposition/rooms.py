@@ -322,14 +322,20 @@ def ends_on_tables(
     ``max_elongation`` times as long as wide). Only the parts the cuts end at are looked at.
     """
     flags = np.zeros(len(cuts), dtype=bool)
-    if cuts.size == 0:
+    rows, cols = np.flatnonzero(~blocked.all(axis=1)), np.flatnonzero(~blocked.all(axis=0))
+    if cuts.size == 0 or rows.size == 0:
         return flags
+    # an island has free pixels all round it: only the box round the free pixels (and a pixel more) is labelled
+    top, left = max(int(rows[0]) - 1, 0), max(int(cols[0]) - 1, 0)
+    box = (slice(top, int(rows[-1]) + 2), slice(left, int(cols[-1]) + 2))
+    blocked = blocked[box]
+    occupied = None if occupied is None else occupied[box]
     labelled = components(blocked)
     parts, stats = labelled.labels, labelled.stats
     h, w = blocked.shape
     offsets = np.arange(-reach_px, reach_px + 1)
-    x = np.clip(np.rint(cuts[..., 0]).astype(np.int64)[..., None, None] + offsets[None, :], 0, w - 1)
-    y = np.clip(np.rint(cuts[..., 1]).astype(np.int64)[..., None, None] + offsets[:, None], 0, h - 1)
+    x = np.clip(np.rint(cuts[..., 0]).astype(np.int64)[..., None, None] - left + offsets[None, :], 0, w - 1)
+    y = np.clip(np.rint(cuts[..., 1]).astype(np.int64)[..., None, None] - top + offsets[:, None], 0, h - 1)
     at = parts[y, x].reshape(len(cuts), -1)  # the parts within reach of either end
     standing = np.zeros(len(stats), dtype=bool)
     standing[np.unique(at)] = True
@@ -337,10 +343,10 @@ def ends_on_tables(
     radius = max(1, round(min_thickness_px / 2))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     for k in np.flatnonzero(standing).tolist():
-        left, top, bw, bh = (int(v) for v in stats[k, :4])
-        box = (slice(top, top + bh), slice(left, left + bw))
-        part = parts[box] == k
-        seen = occupied is None or bool(occupied[box][part].any())
+        x0, y0, bw, bh = (int(v) for v in stats[k, :4])
+        own = (slice(y0, y0 + bh), slice(x0, x0 + bw))
+        part = parts[own] == k
+        seen = occupied is None or bool(occupied[own][part].any())
         solid = cv2.morphologyEx(np.pad(part, radius).astype(np.uint8), cv2.MORPH_OPEN, disc)
         rows, cols = np.nonzero(part)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
