@@ -154,6 +154,7 @@ def segment_rooms(
     desk_small_extent_m: float = 0.7,
     desk_wall_reach_m: float = 0.5,
     table_min_thickness_m: float = 0.3,
+    table_clearance_m: float = 0.8,
     line_doors: npt.NDArray[np.bool_] | None = None,
     rays: npt.NDArray[np.bool_] | None = None,
     occupied: npt.NDArray[np.bool_] | None = None,
@@ -175,8 +176,9 @@ def segment_rooms(
        with an end on a table (when ``table_min_thickness_m`` > 0): an obstacle island the laser
        hit, at most ``island_max_extent_m`` across, of which at least 0.3 survives an opening
        with a disc ``table_min_thickness_m`` wide (a dash of wall is thinner), compact (its
-       minimum-area rectangle at most ``desk_max_elongation`` times as long as wide). A doorway
-       is an opening in a wall; the gap between a table and a wall is a passage round the table.
+       minimum-area rectangle at most ``desk_max_elongation`` times as long as wide), with floor
+       all round it within ``table_clearance_m`` (an obstacle standing in a doorway is not). A
+       doorway is an opening in a wall; the gap between a table and a wall is a passage round it.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
@@ -249,6 +251,7 @@ def segment_rooms(
                     max_extent_px=island_max_extent_m / resolution_m,
                     min_thickness_px=table_min_thickness_m / resolution_m,
                     max_elongation=desk_max_elongation,
+                    clearance_px=round(table_clearance_m / resolution_m),
                 )
             ]
         cut = draw_cuts(cuts, seg.shape) & space
@@ -312,6 +315,8 @@ def ends_on_tables(
     max_elongation: float,
     min_solid: float = 0.3,
     reach_px: int = 2,
+    clearance_px: int,
+    min_open: float = 0.9,
 ) -> npt.NDArray[np.bool_]:
     """Per cut ((G, 2, 2): two (x, y) ends): whether an end lies within ``reach_px`` of a table.
 
@@ -319,7 +324,8 @@ def ends_on_tables(
     most ``max_extent_px`` across) that holds an ``occupied`` cell (the laser hit it: not unknown space
     between rays), is solid (at least ``min_solid`` of it survives an opening with a disc
     ``min_thickness_px`` wide: a dash of wall is thinner) and compact (its minimum-area rectangle at most
-    ``max_elongation`` times as long as wide). Only the parts the cuts end at are looked at.
+    ``max_elongation`` times as long as wide) and stands in a room, not in a doorway: at least ``min_open`` of
+    the ring ``clearance_px`` round it is free (not ``blocked``). Only the parts the cuts end at are looked at.
     """
     flags = np.zeros(len(cuts), dtype=bool)
     rows, cols = np.flatnonzero(~blocked.all(axis=1)), np.flatnonzero(~blocked.all(axis=0))
@@ -342,6 +348,7 @@ def ends_on_tables(
     standing &= islands(blocked, max_extent_px=max_extent_px, labelled=labelled, flags=True)
     radius = max(1, round(min_thickness_px / 2))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    ring_disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * clearance_px + 1, 2 * clearance_px + 1))
     for k in np.flatnonzero(standing).tolist():
         x0, y0, bw, bh = (int(v) for v in stats[k, :4])
         own = (slice(y0, y0 + bh), slice(x0, x0 + bw))
@@ -351,7 +358,14 @@ def ends_on_tables(
         rows, cols = np.nonzero(part)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         compact = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
-        standing[k] = seen and compact and np.count_nonzero(solid) >= min_solid * rows.size
+        # floor all round it: not an obstacle standing in a doorway
+        y1, x1 = max(y0 - clearance_px, 0), max(x0 - clearance_px, 0)
+        around = (slice(y1, y0 + bh + clearance_px), slice(x1, x0 + bw + clearance_px))
+        mine = np.zeros(parts[around].shape, dtype=np.uint8)
+        mine[y0 - y1 : y0 - y1 + bh, x0 - x1 : x0 - x1 + bw] = part
+        ring = cv2.dilate(mine, ring_disc).astype(bool) & ~mine.astype(bool)
+        open_all_round = np.count_nonzero(ring & ~blocked[around]) >= min_open * np.count_nonzero(ring)
+        standing[k] = seen and compact and open_all_round and np.count_nonzero(solid) >= min_solid * rows.size
     return np.asarray(standing[at].any(axis=1), dtype=bool)
 
 

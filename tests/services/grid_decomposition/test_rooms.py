@@ -331,10 +331,13 @@ def test_a_cut_ending_beside_a_table_counts_one_beside_a_dash_of_wall_or_between
     ])  # (x, y) ends
 
     def tables(seen: np.ndarray, c: np.ndarray) -> list[bool]:
-        flags = ends_on_tables(c, blocked, seen, max_extent_px=60.0, min_thickness_px=6.0, max_elongation=2.5)
+        flags = ends_on_tables(
+            c, blocked, seen, max_extent_px=60.0, min_thickness_px=6.0, max_elongation=2.5, clearance_px=8
+        )
         return [bool(f) for f in flags]
 
     assert tables(occupied, cuts) == [True, False, False]
     unseen = occupied.copy()
     unseen[15:27, 20:32] = False  # unknown space between rays, not a table the laser hit
     assert tables(unseen, cuts[:1]) == [False]
+
