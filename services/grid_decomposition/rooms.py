@@ -177,7 +177,8 @@ def segment_rooms(
        hit, at most ``island_max_extent_m`` across, of which at least 0.3 survives an opening
        with a disc ``table_min_thickness_m`` wide (a dash of wall is thinner), compact (its
        minimum-area rectangle at most ``desk_max_elongation`` times as long as wide), with floor
-       all round it within ``table_clearance_m`` (an obstacle standing in a doorway is not). A
+       all round it within ``table_clearance_m`` and no obstacles there on two opposite sides (an
+       obstacle standing in a doorway, between its jambs, is no table). A
        doorway is an opening in a wall; the gap between a table and a wall is a passage round it.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
@@ -325,7 +326,8 @@ def ends_on_tables(
     between rays), is solid (at least ``min_solid`` of it survives an opening with a disc
     ``min_thickness_px`` wide: a dash of wall is thinner) and compact (its minimum-area rectangle at most
     ``max_elongation`` times as long as wide) and stands in a room, not in a doorway: at least ``min_open`` of
-    the ring ``clearance_px`` round it is free (not ``blocked``). Only the parts the cuts end at are looked at.
+    the ring ``clearance_px`` round it is free (not ``blocked``), and what is not free in the ring does not lie
+    on two opposite sides of it (jambs; sectors of 30 degrees). Only the parts the cuts end at are looked at.
     """
     flags = np.zeros(len(cuts), dtype=bool)
     rows, cols = np.flatnonzero(~blocked.all(axis=1)), np.flatnonzero(~blocked.all(axis=0))
@@ -364,7 +366,12 @@ def ends_on_tables(
         mine = np.zeros(parts[around].shape, dtype=np.uint8)
         mine[y0 - y1 : y0 - y1 + bh, x0 - x1 : x0 - x1 + bw] = part
         ring = cv2.dilate(mine, ring_disc).astype(bool) & ~mine.astype(bool)
-        open_all_round = np.count_nonzero(ring & ~blocked[around]) >= min_open * np.count_nonzero(ring)
+        open_all_round = bool(np.count_nonzero(ring & ~blocked[around]) >= min_open * np.count_nonzero(ring))
+        # nor between two jambs: obstacles in the ring on opposite sides of it (sectors of 30 degrees)
+        ry, rx = np.nonzero(ring & blocked[around])
+        angle = np.arctan2(ry - rows.mean() - (y0 - y1), rx - cols.mean() - (x0 - x1))
+        hit = np.bincount(np.floor((angle + np.pi) / (np.pi / 6)).astype(np.int64) % 12, minlength=12) > 0
+        open_all_round = open_all_round and not bool((hit & np.roll(hit, 6)).any())
         standing[k] = seen and compact and open_all_round and np.count_nonzero(solid) >= min_solid * rows.size
     return np.asarray(standing[at].any(axis=1), dtype=bool)
 

@@ -341,3 +341,18 @@ def test_a_cut_ending_beside_a_table_counts_one_beside_a_dash_of_wall_or_between
     unseen[15:27, 20:32] = False  # unknown space between rays, not a table the laser hit
     assert tables(unseen, cuts[:1]) == [False]
 
+
+
+def test_an_obstacle_standing_in_a_doorway_keeps_the_doorway() -> None:
+    occ = _two_rooms_and_a_table()
+    occ[35:65, 40:70] = 0  # no table
+    occ[40:68, 97:100] = 0  # a 1.4 m door with a 0.5 m bin in its middle: two 0.45 m gaps
+    occ[49:59, 95:102] = 100
+    free = occ == 0
+    none = np.zeros(occ.shape, dtype=bool)
+    seg, _ = segment_rooms(
+        free.astype(np.int32), none, none, none, resolution_m=RES, occupied=occ == 100, rays=none,
+        join_saddle_ratio=0.0, desk_max_extent_m=0.0,
+    )
+    room_a, room_b = np.unique(seg[13:87, 13:90]), np.unique(seg[13:87, 107:187])
+    assert room_a.size == 1 and room_b.size == 1 and room_a[0] != room_b[0]
