@@ -153,6 +153,8 @@ def segment_rooms(
     desk_small_m2: float = 0.25,
     desk_small_extent_m: float = 0.7,
     desk_wall_reach_m: float = 0.5,
+    table_min_thickness_m: float = 0.3,
+    table_clearance_m: float = 0.8,
     line_doors: npt.NDArray[np.bool_] | None = None,
     rays: npt.NDArray[np.bool_] | None = None,
     occupied: npt.NDArray[np.bool_] | None = None,
@@ -170,7 +172,14 @@ def segment_rooms(
     3. Rooms joined through a neck are split (:func:`split_at_necks`, when
        ``neck_half_width_m`` > 0), and doorways found from the free space itself
        (:func:`find_doorways`) cut rooms apart; a cut across a corridor, which goes on for
-       ``corridor_length_m`` on both sides about as wide as the cut, is no doorway.
+       ``corridor_length_m`` on both sides about as wide as the cut, is no doorway; nor is a cut
+       with an end on a table (when ``table_min_thickness_m`` > 0): an obstacle island the laser
+       hit, at most ``island_max_extent_m`` across, of which at least 0.3 survives an opening
+       with a disc ``table_min_thickness_m`` wide (a dash of wall is thinner), compact (its
+       minimum-area rectangle at most ``desk_max_elongation`` times as long as wide), with floor
+       all round it within ``table_clearance_m`` and no obstacles there on two opposite sides (an
+       obstacle standing in a doorway, between its jambs, is no table). A
+       doorway is an opening in a wall; the gap between a table and a wall is a passage round it.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
@@ -234,6 +243,18 @@ def segment_rooms(
             max_depth_m=door_max_depth_m,
             corridor_length_m=corridor_length_m,
         )
+        if table_min_thickness_m > 0 and cuts.size:  # passing a table is no doorway: a cut ending on one is dropped
+            cuts = cuts[
+                ~ends_on_tables(
+                    cuts,
+                    seg == 0,
+                    occupied,
+                    max_extent_px=island_max_extent_m / resolution_m,
+                    min_thickness_px=table_min_thickness_m / resolution_m,
+                    max_elongation=desk_max_elongation,
+                    clearance_px=round(table_clearance_m / resolution_m),
+                )
+            ]
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
     widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)  # clearance >= 0: a max per segment
@@ -283,6 +304,76 @@ def segment_rooms(
             min_solidity=join_solidity,
         )
     return rooms, cut
+
+
+def ends_on_tables(
+    cuts: npt.NDArray[np.float64],
+    blocked: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_] | None,
+    *,
+    max_extent_px: float,
+    min_thickness_px: float,
+    max_elongation: float,
+    min_solid: float = 0.3,
+    reach_px: int = 2,
+    clearance_px: int,
+    min_open: float = 0.9,
+) -> npt.NDArray[np.bool_]:
+    """Per cut ((G, 2, 2): two (x, y) ends): whether an end lies within ``reach_px`` of a table.
+
+    A table is an 8-connected part of ``blocked`` standing free (:func:`islands`: off the map border, at
+    most ``max_extent_px`` across) that holds an ``occupied`` cell (the laser hit it: not unknown space
+    between rays), is solid (at least ``min_solid`` of it survives an opening with a disc
+    ``min_thickness_px`` wide: a dash of wall is thinner) and compact (its minimum-area rectangle at most
+    ``max_elongation`` times as long as wide) and stands in a room, not in a doorway: at least ``min_open`` of
+    the ring ``clearance_px`` round it is free (not ``blocked``), and what is not free in the ring does not lie
+    on two opposite sides of it (jambs; sectors of 30 degrees). Only the parts the cuts end at are looked at.
+    """
+    flags = np.zeros(len(cuts), dtype=bool)
+    rows, cols = np.flatnonzero(~blocked.all(axis=1)), np.flatnonzero(~blocked.all(axis=0))
+    if cuts.size == 0 or rows.size == 0:
+        return flags
+    # an island has free pixels all round it: only the box round the free pixels (and a pixel more) is labelled
+    top, left = max(int(rows[0]) - 1, 0), max(int(cols[0]) - 1, 0)
+    box = (slice(top, int(rows[-1]) + 2), slice(left, int(cols[-1]) + 2))
+    blocked = blocked[box]
+    occupied = None if occupied is None else occupied[box]
+    labelled = components(blocked)
+    parts, stats = labelled.labels, labelled.stats
+    h, w = blocked.shape
+    offsets = np.arange(-reach_px, reach_px + 1)
+    x = np.clip(np.rint(cuts[..., 0]).astype(np.int64)[..., None, None] - left + offsets[None, :], 0, w - 1)
+    y = np.clip(np.rint(cuts[..., 1]).astype(np.int64)[..., None, None] - top + offsets[:, None], 0, h - 1)
+    at = parts[y, x].reshape(len(cuts), -1)  # the parts within reach of either end
+    standing = np.zeros(len(stats), dtype=bool)
+    standing[np.unique(at)] = True
+    standing &= islands(blocked, max_extent_px=max_extent_px, labelled=labelled, flags=True)
+    radius = max(1, round(min_thickness_px / 2))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    ring_disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * clearance_px + 1, 2 * clearance_px + 1))
+    for k in np.flatnonzero(standing).tolist():
+        x0, y0, bw, bh = (int(v) for v in stats[k, :4])
+        own = (slice(y0, y0 + bh), slice(x0, x0 + bw))
+        part = parts[own] == k
+        seen = occupied is None or bool(occupied[own][part].any())
+        solid = cv2.morphologyEx(np.pad(part, radius).astype(np.uint8), cv2.MORPH_OPEN, disc)
+        rows, cols = np.nonzero(part)
+        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+        compact = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
+        # floor all round it: not an obstacle standing in a doorway
+        y1, x1 = max(y0 - clearance_px, 0), max(x0 - clearance_px, 0)
+        around = (slice(y1, y0 + bh + clearance_px), slice(x1, x0 + bw + clearance_px))
+        mine = np.zeros(parts[around].shape, dtype=np.uint8)
+        mine[y0 - y1 : y0 - y1 + bh, x0 - x1 : x0 - x1 + bw] = part
+        ring = cv2.dilate(mine, ring_disc).astype(bool) & ~mine.astype(bool)
+        open_all_round = bool(np.count_nonzero(ring & ~blocked[around]) >= min_open * np.count_nonzero(ring))
+        # nor between two jambs: obstacles in the ring on opposite sides of it (sectors of 30 degrees)
+        ry, rx = np.nonzero(ring & blocked[around])
+        angle = np.arctan2(ry - rows.mean() - (y0 - y1), rx - cols.mean() - (x0 - x1))
+        hit = np.bincount(np.floor((angle + np.pi) / (np.pi / 6)).astype(np.int64) % 12, minlength=12) > 0
+        open_all_round = open_all_round and not bool((hit & np.roll(hit, 6)).any())
+        standing[k] = seen and compact and open_all_round and np.count_nonzero(solid) >= min_solid * rows.size
+    return np.asarray(standing[at].any(axis=1), dtype=bool)
 
 
 def _wall_doors(
@@ -355,12 +446,13 @@ def open_share(
 
 
 def islands(
-    blocked: npt.NDArray[np.bool_], *, max_extent_px: float, labelled: Components | None = None
+    blocked: npt.NDArray[np.bool_], *, max_extent_px: float, labelled: Components | None = None, flags: bool = False
 ) -> npt.NDArray[np.bool_]:
     """Parts of ``blocked`` standing free: 8-connected, off the map border, at most ``max_extent_px`` across.
 
     Chairs, tables and clutter the furniture rule left as obstacles (a cluster of chairs, a large
-    table); walls reach farther or touch the map border (the unknown outside).
+    table); walls reach farther or touch the map border (the unknown outside). With ``flags``, one flag
+    per part of ``labelled`` (or of ``blocked``) instead of the mask.
     """
     labelled = components(blocked) if labelled is None else labelled
     parts, stats = labelled.labels, labelled.stats
@@ -369,7 +461,7 @@ def islands(
     bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
     keep = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (np.maximum(bw, bh) <= max_extent_px)
     keep[0] = False
-    return np.asarray(keep[parts], dtype=bool)
+    return np.asarray(keep if flags else keep[parts], dtype=bool)
 
 
 def desk_clusters(

@@ -7,7 +7,7 @@ import numpy as np
 
 from services.grid_decomposition import Connection, decompose
 from services.grid_decomposition.arrays import components
-from services.grid_decomposition.rooms import desk_clusters, free_standing, furniture, segment_rooms
+from services.grid_decomposition.rooms import desk_clusters, ends_on_tables, free_standing, furniture, segment_rooms
 
 RES = 0.05
 
@@ -284,3 +284,75 @@ def test_an_open_plan_office_with_desk_clusters_is_one_room_and_the_office_behin
     # without joining what only furniture separates, the cuts from the clusters to the walls cut it up
     old = decompose(occ, resolution_m=RES, desk_max_extent_m=0.0)
     assert np.unique(old.segments[hall]).size > 1
+
+
+def _two_rooms_and_a_table() -> np.ndarray:
+    """9 x 4 m at 5 cm: room A (4.2 x 3.7 m) with a 1.5 x 1.5 m table standing 1.1 m from its walls, and
+    room B beside it behind a 0.15 m wall with a 0.9 m door; unknown all round."""
+    occ = np.full((100, 200), -1, dtype=np.int8)
+    occ[10:90, 10:190] = 100
+    occ[13:87, 13:97] = 0  # room A
+    occ[13:87, 100:187] = 0  # room B
+    occ[40:58, 97:100] = 0  # the door
+    occ[35:65, 40:70] = 100  # the table
+    return occ
+
+
+def test_a_room_is_not_cut_at_the_gaps_beside_its_table_its_door_stays() -> None:
+    occ = _two_rooms_and_a_table()
+    free = occ == 0
+    none = np.zeros(occ.shape, dtype=bool)
+
+    def rooms(table_min_thickness_m: float) -> np.ndarray:
+        seg, _ = segment_rooms(
+            free.astype(np.int32), none, none, none, resolution_m=RES, occupied=occ == 100, rays=none,
+            table_min_thickness_m=table_min_thickness_m, join_saddle_ratio=0.0, desk_max_extent_m=0.0,
+        )  # the joins of furnished pieces off: the cuts alone decide
+        return seg
+
+    seg = rooms(0.3)
+    room_a, room_b = np.unique(seg[13:87, 13:97][free[13:87, 13:97]]), np.unique(seg[13:87, 100:187])
+    assert room_a.size == 1 and room_b.size == 1 and room_a[0] != room_b[0]  # A whole, B behind its door
+    # taken for a wall, the table makes the gaps between it and the walls doorways that cut room A
+    old = rooms(0.0)
+    assert np.unique(old[13:87, 13:97][free[13:87, 13:97]]).size > 1
+
+
+def test_a_cut_ending_beside_a_table_counts_one_beside_a_dash_of_wall_or_between_walls_does_not() -> None:
+    blocked = np.zeros((60, 80), dtype=bool)
+    blocked[:, :3] = blocked[:, -3:] = True  # walls
+    blocked[15:27, 20:32] = True  # a 0.6 m table
+    blocked[40:44, 30:60] = True  # a dash of wall, 1.5 m x 0.2 m
+    occupied = blocked.copy()
+    cuts = np.array([
+        [[3.0, 20.0], [18.0, 20.0]],  # wall to table
+        [[3.0, 42.0], [29.0, 42.0]],  # wall to the dash
+        [[3.0, 52.0], [76.0, 52.0]],  # wall to wall
+    ])  # (x, y) ends
+
+    def tables(seen: np.ndarray, c: np.ndarray) -> list[bool]:
+        flags = ends_on_tables(
+            c, blocked, seen, max_extent_px=60.0, min_thickness_px=6.0, max_elongation=2.5, clearance_px=8
+        )
+        return [bool(f) for f in flags]
+
+    assert tables(occupied, cuts) == [True, False, False]
+    unseen = occupied.copy()
+    unseen[15:27, 20:32] = False  # unknown space between rays, not a table the laser hit
+    assert tables(unseen, cuts[:1]) == [False]
+
+
+
+def test_an_obstacle_standing_in_a_doorway_keeps_the_doorway() -> None:
+    occ = _two_rooms_and_a_table()
+    occ[35:65, 40:70] = 0  # no table
+    occ[40:68, 97:100] = 0  # a 1.4 m door with a 0.5 m bin in its middle: two 0.45 m gaps
+    occ[49:59, 95:102] = 100
+    free = occ == 0
+    none = np.zeros(occ.shape, dtype=bool)
+    seg, _ = segment_rooms(
+        free.astype(np.int32), none, none, none, resolution_m=RES, occupied=occ == 100, rays=none,
+        join_saddle_ratio=0.0, desk_max_extent_m=0.0,
+    )
+    room_a, room_b = np.unique(seg[13:87, 13:90]), np.unique(seg[13:87, 107:187])
+    assert room_a.size == 1 and room_b.size == 1 and room_a[0] != room_b[0]
