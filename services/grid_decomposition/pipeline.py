@@ -586,6 +586,7 @@ def decompose(
                 segments, RegionPrior(np.where(on_places, 0, prior.regions), prior.unchanged & ~on_places),
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+                join_min_border_px=round(door_max_width_m / resolution_m),
             )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)
