@@ -188,11 +188,14 @@ def joined_regions(
     touching = []  # (cell, region it touches) for cells of candidates next to another candidate of the same host
     flat = b.ravel()
     index = np.arange(flat.size).reshape(b.shape)
-    for own, other, cells in (
-        (b[1:], b[:-1], index[1:]), (b[:-1], b[1:], index[:-1]),
-        (b[:, 1:], b[:, :-1], index[:, 1:]), (b[:, :-1], b[:, 1:], index[:, :-1]),
+    hosts = np.where(candidate, host, 0)[b]  # the host of a candidate's cells, 0 elsewhere
+    for own, other, own_host, other_host, cells in (
+        (b[1:], b[:-1], hosts[1:], hosts[:-1], index[1:]),
+        (b[:-1], b[1:], hosts[:-1], hosts[1:], index[:-1]),
+        (b[:, 1:], b[:, :-1], hosts[:, 1:], hosts[:, :-1], index[:, 1:]),
+        (b[:, :-1], b[:, 1:], hosts[:, :-1], hosts[:, 1:], index[:, :-1]),
     ):
-        ok = (own != other) & candidate[own] & candidate[other] & (host[own] == host[other])
+        ok = (own_host > 0) & (own_host == other_host) & (own != other)
         touching.append(cells[ok] * n + other[ok])
     cell_other = np.unique(np.concatenate(touching))
     if cell_other.size == 0:
@@ -209,13 +212,14 @@ def joined_regions(
     if not join.any():
         return b
     graph = coo_matrix((np.ones(int(join.sum())), (lo[join], hi[join])), shape=(n, n))
-    _, group = connected_components(graph, directed=False)
-    largest = np.zeros(int(group.max()) + 1, dtype=np.int64)
+    component = np.asarray(connected_components(graph, directed=False)[1], dtype=np.int64)
+    largest = np.zeros(int(component.max()) + 1, dtype=np.int64)
     order = np.argsort(size, kind="stable")  # the largest member written last
-    largest[group[order]] = order
-    lut = largest[group]
+    largest[component[order]] = order
+    lut = largest[component]
     lut[0] = 0
-    return lut[b]
+    out: npt.NDArray[np.int64] = lut[b]
+    return out
 
 
 def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.NDArray[np.int32]:
