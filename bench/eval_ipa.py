@@ -17,7 +17,7 @@ Sets (``--sets``, all by default):
 
 Prints a Markdown table per set and ``name value unit`` summary lines. Run (one BLAS thread):
 ``PYTHONPATH=. .venv/bin/python bench/eval_ipa.py [--sets ipa rose2 partial] [--variants '' _furnitures]``.
-``--explain DIR`` adds, per ROSE² full map, what its scores are made of: per ground-truth room the
+``--explain DIR`` adds, per ROSE² full map and partial step, what its scores are made of: per ground-truth room the
 segment holding most of it, its recall and best IoU; per segment its purity (its precision term);
 and ``DIR/<map>_explain.png``: the rooms coloured by their best IoU over the segments coloured by
 their purity (red 0, green 1; white borders, room and segment numbers).
@@ -93,7 +93,7 @@ def main() -> None:
         if "rose2" in args.sets:
             _rose2_full(args.maps, args.explain)
         if "partial" in args.sets:
-            _partial()
+            _partial(args.explain)
     print(f"load average at end {os.getloadavg()[0]:.2f}")
 
 
@@ -264,7 +264,7 @@ def _borders(labels: npt.NDArray[np.int32]) -> npt.NDArray[np.bool_]:
     return edge
 
 
-def _partial() -> None:
+def _partial(explain: Path | None = None) -> None:
     """Each step decomposed and keyed as the live worker does it: the steps are placed in one map frame (the FFT
     alignment of their free masks gives each grid's origin), the previous step's segment layer and occupancy
     are the prior (:func:`~services.grid_decomposition.keys.region_prior`) and the keys are carried
@@ -293,6 +293,8 @@ def _partial() -> None:
                                            prior=prior), None if previous is None else previous[0])
         seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         segments, s, peer, free = _rose2_scores(folder, grey, np.ascontiguousarray(result.segments[::-1]))
+        if explain is not None:
+            _explain(folder, segments, free, explain)
         row = Row(s, seconds, cpu)
         step = int(folder.name[3:])
         _row("partial", folder.name, s, row.seconds, row.cpu)

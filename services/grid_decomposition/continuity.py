@@ -8,7 +8,9 @@ did not change (:func:`~services.grid_decomposition.change.unchanged_cells`, up 
 them) keeps its unchanged cells, and a new region that continues it (the one-to-one overlap match of
 :func:`match_regions`) is it, grown (:func:`keep_regions`). Regions over changed map are the new decomposition's,
 and so is a new region found mostly on ground no settled region keeps: kept cells inside it would leave both
-in ragged pieces.
+in ragged pieces. Two settled regions the new decomposition holds as one stay apart only across a doorway:
+where their border is wider than any door and not narrow for the smaller of them, they were one room cut where
+it was seen in part, and the join stands (:func:`joined_regions`).
 """
 
 from __future__ import annotations
@@ -90,6 +92,8 @@ def keep_regions(
     max_changed_share: float = 0.2,
     min_overlap: float = 0.5,
     min_area_px: int = 1,
+    join_min_border_px: int = 0,
+    join_min_width_share: float = 0.6,
 ) -> npt.NDArray[np.int32]:
     """``segments`` with the regions of ``prior`` kept where the map did not change.
 
@@ -99,7 +103,9 @@ def keep_regions(
     which at most ``min_overlap`` lies on those kept cells is a place found anew (a room seen through its door
     before, entered now) and stands whole; one lying mostly on them is a piece of them and gives way. Everything
     else is as ``segments`` has it. A region left in pieces keeps its largest; smaller pieces than
-    ``min_area_px`` join a neighbouring region.
+    ``min_area_px`` join a neighbouring region. Settled regions the new decomposition holds as one are one
+    previous region when their border allows it (:func:`joined_regions`, at ``join_min_border_px`` and
+    ``join_min_width_share``; a border of 0 cells keeps every previous border).
 
     Parameters
     ----------
@@ -123,6 +129,9 @@ def keep_regions(
     changed = np.bincount(before[~prior.unchanged], minlength=size.size)
     settled = (size > 0) & (changed <= max_changed_share * size)
     settled[0] = False
+    if join_min_border_px > 0:
+        before = joined_regions(before, seg, settled, min_border_px=join_min_border_px,
+                                min_width_share=join_min_width_share)
     base = int(seg.max(initial=0)) + 1  # settled region k is base + k; new ones keep their own numbers
     lut = np.arange(base, dtype=np.int64)
     matches = match_regions(before, seg, min_overlap=min_overlap)
@@ -142,6 +151,75 @@ def keep_regions(
     present = np.bincount(out.ravel()) > 0
     present[0] = False
     return _largest_pieces(np.where(present, np.cumsum(present), 0).astype(np.int32)[out], min_area_px)
+
+
+def joined_regions(
+    before: IdGrid,
+    after: IdGrid,
+    settled: npt.NDArray[np.bool_],
+    *,
+    min_border_px: int,
+    min_width_share: float,
+) -> npt.NDArray[np.int64]:
+    """``before`` with settled regions that ``after`` holds as one and that no doorway parts made one region.
+
+    Two settled previous regions (``settled`` per id) each lying mostly (over half) in the same region of
+    ``after`` are parted only by their border. It is no doorway when it is longer than ``min_border_px`` (the
+    widest door) and at least ``min_width_share`` of the smaller region's width (the square root of its area):
+    a wall stub or a frontier that cut one room, not a door between two. Such pairs, and the groups they chain
+    into, take the id of their largest member (which is settled, as they all are).
+
+    The border's length is the mean of the two regions' cells touching the other (4-connected): a straight
+    border of n cells is n long.
+    """
+    b = np.asarray(before, dtype=np.int64)
+    a = np.asarray(after, dtype=np.int64)
+    n = int(b.max(initial=0)) + 1
+    m = int(a.max(initial=0)) + 1
+    size = np.bincount(b.ravel(), minlength=n)
+    inside = b > 0
+    pair, count = np.unique(b[inside] * m + a[inside], return_counts=True)
+    host = np.zeros(n, dtype=np.int64)  # the region of ``after`` holding most (over half) of each previous one
+    most = 2 * count > size[pair // m]
+    host[pair[most] // m] = pair[most] % m
+    candidate = settled[:n] & (host > 0)
+    if np.count_nonzero(candidate) < 2:
+        return b
+    touching = []  # (cell, region it touches) for cells of candidates next to another candidate of the same host
+    flat = b.ravel()
+    index = np.arange(flat.size).reshape(b.shape)
+    hosts = np.where(candidate, host, 0)[b]  # the host of a candidate's cells, 0 elsewhere
+    for own, other, own_host, other_host, cells in (
+        (b[1:], b[:-1], hosts[1:], hosts[:-1], index[1:]),
+        (b[:-1], b[1:], hosts[:-1], hosts[1:], index[:-1]),
+        (b[:, 1:], b[:, :-1], hosts[:, 1:], hosts[:, :-1], index[:, 1:]),
+        (b[:, :-1], b[:, 1:], hosts[:, :-1], hosts[:, 1:], index[:, :-1]),
+    ):
+        ok = (own_host > 0) & (own_host == other_host) & (own != other)
+        touching.append(cells[ok] * n + other[ok])
+    cell_other = np.unique(np.concatenate(touching))
+    if cell_other.size == 0:
+        return b
+    own_other = flat[cell_other // n] * n + cell_other % n
+    edge, cells_touching = np.unique(own_other, return_counts=True)
+    first, second = edge // n, edge % n
+    key = np.minimum(first, second) * n + np.maximum(first, second)
+    pairs, inverse = np.unique(key, return_inverse=True)
+    border = np.bincount(inverse, weights=cells_touching) / 2
+    lo, hi = pairs // n, pairs % n
+    width = np.sqrt(np.minimum(size[lo], size[hi]))
+    join = (border > min_border_px) & (border >= min_width_share * width)
+    if not join.any():
+        return b
+    graph = coo_matrix((np.ones(int(join.sum())), (lo[join], hi[join])), shape=(n, n))
+    component = np.asarray(connected_components(graph, directed=False)[1], dtype=np.int64)
+    largest = np.zeros(int(component.max()) + 1, dtype=np.int64)
+    order = np.argsort(size, kind="stable")  # the largest member written last
+    largest[component[order]] = order
+    lut = largest[component]
+    lut[0] = 0
+    out: npt.NDArray[np.int64] = lut[b]
+    return out
 
 
 def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.NDArray[np.int32]:

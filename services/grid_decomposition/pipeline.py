@@ -385,8 +385,10 @@ def decompose(
         since (:func:`~services.grid_decomposition.keys.region_prior`): a previous region with at most
         ``settled_max_changed_share`` of its cells changed keeps its unchanged cells, and the new region that
         continues it grows it (:func:`~services.grid_decomposition.continuity.keep_regions`), so a growing
-        map's regions do not flicker where it did not change. Racks, aisles and warehouse floors are the new
-        decomposition's.
+        map's regions do not flicker where it did not change; settled regions this decomposition holds as one
+        join when their border is wider than ``door_max_width_m`` and not narrow for the smaller
+        (:func:`~services.grid_decomposition.continuity.joined_regions`). Racks, aisles and warehouse floors are
+        the new decomposition's.
     seed : int
         Seed of the clusterings.
 
@@ -601,6 +603,7 @@ def decompose(
                 segments, RegionPrior(np.where(on_places, 0, prior.regions), prior.unchanged & ~on_places),
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+                join_min_border_px=round(door_max_width_m / resolution_m),
             )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)

@@ -77,6 +77,40 @@ def test_pieces_a_kept_region_cuts_off_join_a_neighbour() -> None:
     assert _same_partition(out, expected)
 
 
+DOOR_PX = 40  # the widest door, 2 m at 0.05 m a cell (``decompose`` passes ``door_max_width_m``)
+
+
+def test_two_pieces_of_one_room_the_new_decomposition_joins_are_one_region() -> None:
+    # a 4 m x 2 m room cut in two down its middle when it was seen in part: nothing but free floor between the
+    # halves, a border 2 m long; the map did not change, and the new decomposition holds the room as one
+    before = _grid((4, slice(None), slice(0, 40)), (9, slice(None), slice(40, 80)), shape=(40, 80))
+    merged = _grid((1, slice(None), slice(0, 80)), shape=(40, 80))
+    unchanged = np.ones(before.shape, dtype=bool)
+    out = keep_regions(merged, RegionPrior(before, unchanged), join_min_border_px=DOOR_PX - 1)
+    assert _same_partition(out, merged)
+    # without the join (a border of 0 cells) the prior keeps the old cut
+    assert _same_partition(keep_regions(merged, RegionPrior(before, unchanged)), before)
+
+
+def test_two_offices_behind_a_door_stay_two_regions_when_the_new_decomposition_joins_them() -> None:
+    # two 2 m x 3 m offices, the wall between them open by a 0.9 m door; the map did not change
+    before = _grid((4, slice(None), slice(0, 40)), (9, slice(None), slice(41, 101)), shape=(60, 101))
+    before[10:28, 40] = 4  # the doorway's floor
+    merged = np.where(before > 0, 1, 0).astype(np.int32)
+    out = keep_regions(merged, RegionPrior(before, np.ones(before.shape, dtype=bool)), join_min_border_px=DOOR_PX)
+    assert _same_partition(out, before)
+
+
+def test_a_room_open_wider_than_a_door_but_narrow_for_its_size_stays_apart() -> None:
+    # a 6 m x 6 m room open to a 10 m x 8 m hall along 2.5 m of its side (wider than a door, under 0.6 of its
+    # width)
+    before = _grid((4, slice(0, 160), slice(None)), (9, slice(161, 281), slice(0, 120)), shape=(281, 200))
+    before[160, 40:90] = 4  # the opening's floor
+    merged = np.where(before > 0, 1, 0).astype(np.int32)
+    out = keep_regions(merged, RegionPrior(before, np.ones(before.shape, dtype=bool)), join_min_border_px=DOOR_PX)
+    assert _same_partition(out, before)
+
+
 def test_a_prior_on_another_grid_is_refused() -> None:
     with pytest.raises(DecompositionError, match="prior"):
         keep_regions(np.zeros((3, 3), np.int32), RegionPrior(np.zeros((3, 4), np.int32), np.ones((3, 4), bool)))
