@@ -29,6 +29,7 @@ from services.floor_plan.likelihood import (
     SEED_SENSOR_MODEL,
     Canvas,
     CellClass,
+    beam_traces,
     cell_prediction_rate,
     classify_map,
     enclosed_blocks,
@@ -55,6 +56,10 @@ class FloorPlanSettings:
     min_line_m: float = 0.8
     occupied_percent: int = 65
     free_percent: int = 25
+    trace_max_m: float | None = 0.15
+    """Free runs narrower than this beside unknown space (a laser beam's trace through a window or door into space the
+    map has not seen, :func:`~services.floor_plan.likelihood.beam_traces`) read as unknown in C_M (eq. 3.7); None:
+    every free cell of the occupancy is free."""
     sensor_model: tuple[tuple[float, ...], ...] = SEED_SENSOR_MODEL
     overlap_psi: float = 0.2
     obstacle_min_m: float = 0.3
@@ -228,6 +233,8 @@ def floor_plan(
     if not math.isfinite(resolution_m) or resolution_m <= 0:
         raise FloorPlanError(f"resolution must be a positive number of metres, got {resolution_m}")
     classes_map = classify_map(occupancy, occupied_percent=s.occupied_percent, free_percent=s.free_percent)
+    if s.trace_max_m is not None:
+        classes_map[beam_traces(classes_map, width_cells=_cells(s.trace_max_m, resolution_m))] = CellClass.UNKNOWN
     solid = _obstacles(classes_map, s, resolution_m)
     if s.wall_m is None:
         s = replace(s, wall_m=wall_thickness_cells(classes_map, obstacles=solid) * resolution_m)
