@@ -3,11 +3,11 @@
 The room level (:mod:`services.floor_plan.rooms`) cuts units along rows and columns, so a wall that runs at an
 angle to the frame (office_e's pentagon, explained along one of its five sides) cuts nothing, and the units on
 both sides of it each hold a piece of both rooms. Here a room's free space is cut along the straight wall lines of
-the map that run slanted (:func:`~services.floor_plan.detectors.wall_line_segments`, the same lines the slanted
-walls of :mod:`services.floor_plan.walls` are cut along; drawn by :func:`line_mask`). Where such a line splits a room into pieces of
-``slant_min_piece_m2`` or more, the room is no longer made of its rectangles: its free space is re-cut into the
-regions that the map's wall lines of every direction enclose, one room each (:func:`split_at_slanted_walls`). A
-room no slanted line splits keeps its parts as they are.
+the map that run slanted (:func:`~services.floor_plan.detectors.wall_line_segments`, the lines the slanted walls of
+:mod:`services.floor_plan.walls` are cut along too; drawn by :func:`line_mask`). Where such a line splits a room
+into pieces of ``slant_min_piece_m2`` or more, the room is no longer made of its rectangles: its free space is
+re-cut into the regions that the map's wall lines of every direction enclose, one room each
+(:func:`split_at_slanted_walls`). A room no slanted line splits keeps its parts as they are.
 """
 
 from __future__ import annotations
