@@ -84,24 +84,22 @@ def wall_lines(
     return WallLines(np.array(horizontal, np.int64).reshape(-1, 3), np.array(vertical, np.int64).reshape(-1, 3))
 
 
-_CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-
-
 def wall_line_segments(
     classes_map: npt.NDArray[np.uint8], *, min_length_cells: int, max_gap_cells: int, wall_share: float = 0.5,
-    min_free_cells: int = 1, min_angle_rad: float | None = None,
+    min_angle_rad: float | None = None,
 ) -> npt.NDArray[np.float64]:
     """The map's straight wall lines, in every direction or at an angle to the grid (one detector for every step
     that needs wall lines that are not the units' own: the slanted walls of :mod:`services.floor_plan.walls`, the
     room re-cut of :mod:`services.floor_plan.slanted`).
 
-    The outline of the free space (cells that are not free and share a side with a free cell of a region at least
-    ``min_free_cells`` wide, so walls drawn occupied or unknown count, the unknown outside does not, and neither do
-    the edges of free runs thinner than that: laser streaks through windows), OpenCV probabilistic Hough segments
-    on it (half-degree steps) at least ``min_length_cells`` long with gaps up to ``max_gap_cells`` bridged (dashed
-    walls, doorways), kept where at least ``wall_share`` of their cells lie on or beside the outline and (with
+    The outline of the free space (cells that are not free beside a free cell, so walls drawn occupied or unknown
+    count and the unknown outside does not; where laser beams' traces through windows read as unknown,
+    :func:`~services.floor_plan.likelihood.beam_traces`, their edges do not either), OpenCV probabilistic Hough
+    segments on it (one-degree steps) at least ``min_length_cells`` long with gaps up to ``max_gap_cells`` bridged
+    (dashed walls, doorways), kept where at least ``wall_share`` of their cells lie on or beside the outline and (with
     ``min_angle_rad``) at least that far from both axes, each refitted (``cv2.fitLine``, least squares) to the
-    outline cells within 1.5 cells of it. Returns (N, 4) ``x0, y0, x1, y1`` (x = column, y = row, cell centres):
+    outline cells within 1.5 cells of it that share a side with free space (a wall's face, not the unknown cells
+    diagonally past a one-cell wall's steps). Returns (N, 4) ``x0, y0, x1, y1`` (x = column, y = row, cell centres):
     the refitted line between the segment's ends projected onto it.
 
     >>> cm = np.full((40, 40), CellClass.FREE, np.uint8); rr = np.arange(5, 35)
@@ -111,10 +109,9 @@ def wall_line_segments(
     (True, True)
     """
     free = (classes_map == CellClass.FREE).astype(np.uint8)
-    if min_free_cells > 1:
-        free = cv2.morphologyEx(free, cv2.MORPH_OPEN, np.ones((min_free_cells, min_free_cells), np.uint8))
-    outline = ((classes_map != CellClass.FREE) & (cv2.dilate(free, _CROSS) > 0)).astype(np.uint8)
-    segs = cv2.HoughLinesP(outline * 255, 1, np.pi / 360, round(0.75 * min_length_cells),
+    box = np.ones((3, 3), np.uint8)
+    outline = ((classes_map != CellClass.FREE) & (cv2.dilate(free, box) > 0)).astype(np.uint8)
+    segs = cv2.HoughLinesP(outline * 255, 1, np.pi / 180, round(0.75 * min_length_cells),
                            minLineLength=min_length_cells, maxLineGap=max_gap_cells)
     if segs is None:
         return np.zeros((0, 4))
@@ -122,7 +119,8 @@ def wall_line_segments(
     if min_angle_rad is not None:
         angle = np.arctan2(segs[:, 3] - segs[:, 1], segs[:, 2] - segs[:, 0])
         segs = segs[np.abs((angle + np.pi / 4) % (np.pi / 2) - np.pi / 4) >= min_angle_rad]
-    near = cv2.dilate(outline, np.ones((3, 3), np.uint8)) > 0
+    near = cv2.dilate(outline, box) > 0
+    face = (outline > 0) & (cv2.dilate(free, cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))) > 0)
     out = []
     for x0, y0, x1, y1 in segs:
         d = np.array([x1 - x0, y1 - y0])
@@ -133,7 +131,7 @@ def wall_line_segments(
             continue
         u = d / length
         left, top = max(int(min(x0, x1)) - 2, 0), max(int(min(y0, y1)) - 2, 0)
-        ys, xs = np.nonzero(outline[top : int(max(y0, y1)) + 3, left : int(max(x0, x1)) + 3])
+        ys, xs = np.nonzero(face[top : int(max(y0, y1)) + 3, left : int(max(x0, x1)) + 3])
         points = np.stack([xs + left, ys + top], axis=1).astype(np.float64)
         rel = points - (x0, y0)
         along = rel @ u

@@ -56,10 +56,10 @@ class FloorPlanSettings:
     min_line_m: float = 0.8
     occupied_percent: int = 65
     free_percent: int = 25
-    trace_max_m: float | None = 0.15
+    trace_max_m: float | None = None
     """Free runs narrower than this beside unknown space (a laser beam's trace through a window or door into space the
-    map has not seen, :func:`~services.floor_plan.likelihood.beam_traces`) read as unknown in C_M (eq. 3.7); None:
-    every free cell of the occupancy is free."""
+    map has not seen, :func:`~services.floor_plan.likelihood.beam_traces`) read as unknown in C_M (eq. 3.7), e.g.
+    0.15; None (default: tried, not kept, docs/floor_plan.md): every free cell of the occupancy is free."""
     sensor_model: tuple[tuple[float, ...], ...] = SEED_SENSOR_MODEL
     overlap_psi: float = 0.2
     obstacle_min_m: float = 0.3
@@ -99,8 +99,6 @@ class FloorPlanSettings:
     are re-cut: a dashed wall whose last dash stops short of the wall it meets) ..."""
     slant_wall_share: float = 0.5
     """... lying on or beside the free space's outline over at least this share of their length ..."""
-    slant_free_m: float = 0.25
-    """... the outline of free space at least this wide (not the edges of laser streaks through windows)."""
     slant_min_angle_rad: float | None = math.radians(5.0)
     """Walls at an angle to the working grid (a second wall direction, :class:`~services.floor_plan.walls.Slant`):
     the wall lines at least this far from both axes may cut a unit, drawn with the fitted walls and at the same
@@ -317,8 +315,7 @@ def describe(
     classes_work = to_work(frame, classes_map, fill=CellClass.UNKNOWN)
     lines = np.zeros((0, 4)) if settings.slant_line_m is None else wall_line_segments(
         classes_work, min_length_cells=_cells(settings.slant_line_m, resolution_m),
-        max_gap_cells=round(settings.slant_gap_m / resolution_m), wall_share=settings.slant_wall_share,
-        min_free_cells=_cells(settings.slant_free_m, resolution_m))
+        max_gap_cells=round(settings.slant_gap_m / resolution_m), wall_share=settings.slant_wall_share)
     rooms, room_cells = split_at_slanted_walls(
         group_rooms(world, classes_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
                     resolution_m=resolution_m, settings=settings.rooms),

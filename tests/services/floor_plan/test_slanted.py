@@ -43,7 +43,7 @@ def _room_with_slanted_wall(*, dashed: bool, length_share: float = 1.0) -> npt.N
 
 def _lines(classes: npt.NDArray[np.uint8]) -> npt.NDArray[np.float64]:
     """The map's wall lines as the floor plan finds them (``FloorPlanSettings``' defaults at 0.05 m)."""
-    return wall_line_segments(classes, min_length_cells=20, max_gap_cells=25, min_free_cells=5)
+    return wall_line_segments(classes, min_length_cells=20, max_gap_cells=25)
 
 
 def _split(classes: npt.NDArray[np.uint8], settings: RoomSettings | None = None

@@ -141,7 +141,7 @@ def _slanted_room(shape: tuple[int, int] = (60, 80)) -> npt.NDArray[np.uint8]:
 def test_a_unit_over_a_slanted_wall_is_cut_along_it_and_gives_up_the_corner_beyond() -> None:
     cm = _slanted_room()
     world = World({1: Rect(10, 49, 10, 66)})  # the room's bounding box, as an axis-parallel unit stands over it
-    lines = wall_line_segments(cm, min_length_cells=20, max_gap_cells=25, min_free_cells=5, min_angle_rad=0.09)
+    lines = wall_line_segments(cm, min_length_cells=20, max_gap_cells=25, min_angle_rad=0.09)
     out = fit_walls(world, cm, TABLE, wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=3, max_thickness=4,
                     log_cost=10.0, segment_cells=5, lines=lines)
     seed = _fit(world, cm, t=1)
@@ -162,7 +162,7 @@ def test_a_unit_over_a_slanted_wall_is_cut_along_it_and_gives_up_the_corner_beyo
 def test_a_slanted_wall_keeps_the_units_door_and_pays_its_cost() -> None:
     cm = _slanted_room()
     world = World({1: Rect(10, 49, 10, 66)})
-    lines = wall_line_segments(cm, min_length_cells=20, max_gap_cells=25, min_free_cells=5, min_angle_rad=0.09)
+    lines = wall_line_segments(cm, min_length_cells=20, max_gap_cells=25, min_angle_rad=0.09)
     dear = fit_walls(world, cm, TABLE, wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=3, max_thickness=4,
                      log_cost=1e6, segment_cells=5, lines=lines)
     assert dear.slants == {1: ()}, "a cut that does not pay its cost is not drawn"
