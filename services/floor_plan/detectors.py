@@ -84,43 +84,61 @@ def wall_lines(
     return WallLines(np.array(horizontal, np.int64).reshape(-1, 3), np.array(vertical, np.int64).reshape(-1, 3))
 
 
-def slanted_lines(
-    classes_map: npt.NDArray[np.uint8], *, min_length_cells: int, max_gap_cells: int = 3,
-    min_angle_rad: float = 0.09,
+def wall_line_segments(
+    classes_map: npt.NDArray[np.uint8], *, min_length_cells: int, max_gap_cells: int, wall_share: float = 0.5,
+    min_angle_rad: float | None = None,
 ) -> npt.NDArray[np.float64]:
-    """Wall lines that run at an angle to the grid (a building whose walls run in more than one direction).
+    """The map's straight wall lines, in every direction or at an angle to the grid (one detector for every step
+    that needs wall lines that are not the units' own: the slanted walls of :mod:`services.floor_plan.walls`, the
+    room re-cut of :mod:`services.floor_plan.slanted`).
 
-    Hough line segments (OpenCV probabilistic Hough, half-degree steps) on the wall cells, kept when at least
-    ``min_angle_rad`` from both axes, each refitted (``cv2.fitLine``, least squares) to the wall cells within 1.5
-    cells of it. Returns (N, 4) ``x0, y0, x1, y1`` (x = column, y = row, cell centres), the refitted line between
-    the segment's ends projected onto it.
+    The outline of the free space (cells that are not free beside a free cell, so walls drawn occupied or unknown
+    count and the unknown outside does not; where laser beams' traces through windows read as unknown,
+    :func:`~services.floor_plan.likelihood.beam_traces`, their edges do not either), OpenCV probabilistic Hough
+    segments on it (one-degree steps) at least ``min_length_cells`` long with gaps up to ``max_gap_cells`` bridged
+    (dashed walls, doorways), kept where at least ``wall_share`` of their cells lie on or beside the outline and (with
+    ``min_angle_rad``) at least that far from both axes, each refitted (``cv2.fitLine``, least squares) to the
+    outline cells within 1.5 cells of it that share a side with free space (a wall's face, not the unknown cells
+    diagonally past a one-cell wall's steps). Returns (N, 4) ``x0, y0, x1, y1`` (x = column, y = row, cell centres):
+    the refitted line between the segment's ends projected onto it.
 
-    >>> cm = np.zeros((40, 40), np.uint8); rr = np.arange(5, 35)
+    >>> cm = np.full((40, 40), CellClass.FREE, np.uint8); rr = np.arange(5, 35)
     >>> cm[rr, rr // 2 + 5] = CellClass.WALL  # a wall leaning about 27 degrees off the columns
-    >>> lines = slanted_lines(cm, min_length_cells=20)
+    >>> lines = wall_line_segments(cm, min_length_cells=20, max_gap_cells=3, min_angle_rad=0.09)
     >>> len(lines) >= 1, bool(np.all(np.abs(np.diff(lines[:, 1::2], axis=1)) > 20))
     (True, True)
     """
-    walls = (classes_map == CellClass.WALL).astype(np.uint8)
-    segs = cv2.HoughLinesP(walls * 255, 1, np.pi / 360, threshold=max(min_length_cells // 2, 3),
+    free = (classes_map == CellClass.FREE).astype(np.uint8)
+    box = np.ones((3, 3), np.uint8)
+    outline = ((classes_map != CellClass.FREE) & (cv2.dilate(free, box) > 0)).astype(np.uint8)
+    segs = cv2.HoughLinesP(outline * 255, 1, np.pi / 180, round(0.75 * min_length_cells),
                            minLineLength=min_length_cells, maxLineGap=max_gap_cells)
     if segs is None:
         return np.zeros((0, 4))
     segs = segs.reshape(-1, 4).astype(np.float64)
-    angle = np.arctan2(segs[:, 3] - segs[:, 1], segs[:, 2] - segs[:, 0])
-    off_axis = np.abs((angle + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+    if min_angle_rad is not None:
+        angle = np.arctan2(segs[:, 3] - segs[:, 1], segs[:, 2] - segs[:, 0])
+        segs = segs[np.abs((angle + np.pi / 4) % (np.pi / 2) - np.pi / 4) >= min_angle_rad]
+    near = cv2.dilate(outline, box) > 0
+    face = (outline > 0) & (cv2.dilate(free, cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))) > 0)
     out = []
-    for x0, y0, x1, y1 in segs[off_axis >= min_angle_rad]:
+    for x0, y0, x1, y1 in segs:
         d = np.array([x1 - x0, y1 - y0])
         length = float(np.hypot(*d))
+        n = round(max(abs(d[0]), abs(d[1]))) + 1
+        if near[np.rint(np.linspace(y0, y1, n)).astype(np.int64), np.rint(np.linspace(x0, x1, n)).astype(np.int64)
+                ].mean() < wall_share:
+            continue
         u = d / length
-        left, top = int(min(x0, x1)) - 2, int(min(y0, y1)) - 2
-        ys, xs = np.nonzero(walls[max(top, 0) : int(max(y0, y1)) + 3, max(left, 0) : int(max(x0, x1)) + 3])
-        points = np.stack([xs + max(left, 0), ys + max(top, 0)], axis=1).astype(np.float64)
+        left, top = max(int(min(x0, x1)) - 2, 0), max(int(min(y0, y1)) - 2, 0)
+        ys, xs = np.nonzero(face[top : int(max(y0, y1)) + 3, left : int(max(x0, x1)) + 3])
+        points = np.stack([xs + left, ys + top], axis=1).astype(np.float64)
         rel = points - (x0, y0)
         along = rel @ u
-        near = (np.abs(rel @ np.array([-u[1], u[0]])) <= 1.5) & (along >= 0) & (along <= length)
-        vx, vy, cx, cy = cv2.fitLine(points[near].astype(np.float32), cv2.DIST_L2, 0, 0.01, 0.01).ravel()
+        fit = points[(np.abs(rel @ np.array([-u[1], u[0]])) <= 1.5) & (along >= 0) & (along <= length)]
+        if len(fit) < 2:
+            continue
+        vx, vy, cx, cy = cv2.fitLine(fit.astype(np.float32), cv2.DIST_L2, 0, 0.01, 0.01).ravel()
         v, c = np.array([vx, vy], np.float64), np.array([cx, cy], np.float64)
         a, b = (np.array([x0, y0]) - c) @ v, (np.array([x1, y1]) - c) @ v
         out.append((*(c + a * v), *(c + b * v)))

@@ -57,6 +57,25 @@ def classify_map(
     return out
 
 
+def beam_traces(classes: npt.NDArray[np.uint8], *, width_cells: int) -> npt.NDArray[np.bool_]:
+    """Free cells that are the traces of single laser beams through space the map has not seen (through a window or
+    a door into the unknown outside): free runs narrower than ``width_cells`` (in no square of that many free cells
+    a side) beside an unknown cell. Free space a robot saw, a room's floor, a doorway, is wider; a trace between
+    furniture drawn occupied has no unknown beside it.
+
+    >>> cm = np.full((9, 12), CellClass.UNKNOWN, np.uint8); cm[1:8, 1:6] = CellClass.FREE  # a room seen free
+    >>> cm[4, 6:12] = CellClass.FREE  # a beam from it into the unknown
+    >>> np.argwhere(beam_traces(cm, width_cells=3)).tolist()
+    [[4, 6], [4, 7], [4, 8], [4, 9], [4, 10], [4, 11]]
+    """
+    free = (classes == CellClass.FREE).astype(np.uint8)
+    seen = cv2.morphologyEx(free, cv2.MORPH_OPEN, np.ones((width_cells, width_cells), np.uint8),
+                            borderType=cv2.BORDER_REPLICATE)
+    unknown = (classes == CellClass.UNKNOWN).astype(np.uint8)
+    out: npt.NDArray[np.bool_] = (free > seen) & (cv2.dilate(unknown, np.ones((3, 3), np.uint8)) > 0)
+    return out
+
+
 def log_sensor_table(model: Sequence[Sequence[float]] = SEED_SENSOR_MODEL) -> npt.NDArray[np.float64]:
     """Log of a 3x3 sensor model ``p[C_W][C_M]``; rows are normalised to sum to one."""
     table = np.asarray(model, dtype=np.float64)

@@ -13,7 +13,7 @@ import numpy.typing as npt
 from services.floor_plan.chain import Chain, ChainSettings, run_chain
 from services.floor_plan.clutter import explain_clutter, explain_exterior
 from services.floor_plan.context import ContextPrior, ContextSettings
-from services.floor_plan.detectors import Evidence, slanted_lines, wall_lines, wbu_candidates
+from services.floor_plan.detectors import Evidence, wall_line_segments, wall_lines, wbu_candidates
 from services.floor_plan.errors import FloorPlanError
 from services.floor_plan.frame import (
     Frame,
@@ -29,6 +29,7 @@ from services.floor_plan.likelihood import (
     SEED_SENSOR_MODEL,
     Canvas,
     CellClass,
+    beam_traces,
     cell_prediction_rate,
     classify_map,
     enclosed_blocks,
@@ -38,7 +39,7 @@ from services.floor_plan.likelihood import (
     wall_thickness_cells,
 )
 from services.floor_plan.rooms import Room, RoomSettings, fill_free, group_rooms
-from services.floor_plan.slanted import split_at_slanted_walls
+from services.floor_plan.slanted import slanted, split_at_slanted_walls
 from services.floor_plan.walls import Segment, Slant, fit_walls
 from services.floor_plan.world import Rect, UnitType, World, shared_band
 
@@ -55,6 +56,10 @@ class FloorPlanSettings:
     min_line_m: float = 0.8
     occupied_percent: int = 65
     free_percent: int = 25
+    trace_max_m: float | None = None
+    """Free runs narrower than this beside unknown space (a laser beam's trace through a window or door into space the
+    map has not seen, :func:`~services.floor_plan.likelihood.beam_traces`) read as unknown in C_M (eq. 3.7), e.g.
+    0.15; None (default: tried, not kept, docs/floor_plan.md): every free cell of the occupancy is free."""
     sensor_model: tuple[tuple[float, ...], ...] = SEED_SENSOR_MODEL
     overlap_psi: float = 0.2
     obstacle_min_m: float = 0.3
@@ -86,9 +91,17 @@ class FloorPlanSettings:
     """Wall segments start and end on a grid of this length along each wall."""
     wall_log_cost: float = 10.0
     """The prior's cost of one wall segment other than the seed's band (nats)."""
-    slant_min_m: float | None = 1.0
+    slant_line_m: float | None = 1.0
+    """The map's straight wall lines at least this long (:func:`~services.floor_plan.detectors.wall_line_segments`),
+    found once for the slanted walls and the rooms' re-cut along them; None: neither (no lines)."""
+    slant_gap_m: float = 1.25
+    """... with gaps up to this long bridged (dashed walls, doorways; a line is prolonged by half of it where the rooms
+    are re-cut: a dashed wall whose last dash stops short of the wall it meets) ..."""
+    slant_wall_share: float = 0.5
+    """... lying on or beside the free space's outline over at least this share of their length ..."""
+    slant_min_angle_rad: float | None = math.radians(5.0)
     """Walls at an angle to the working grid (a second wall direction, :class:`~services.floor_plan.walls.Slant`):
-    wall lines at least this long that run at an angle may cut a unit, drawn with the fitted walls and at the same
+    the wall lines at least this far from both axes may cut a unit, drawn with the fitted walls and at the same
     cost per wall; None: no slanted walls."""
 
 
@@ -218,6 +231,8 @@ def floor_plan(
     if not math.isfinite(resolution_m) or resolution_m <= 0:
         raise FloorPlanError(f"resolution must be a positive number of metres, got {resolution_m}")
     classes_map = classify_map(occupancy, occupied_percent=s.occupied_percent, free_percent=s.free_percent)
+    if s.trace_max_m is not None:
+        classes_map[beam_traces(classes_map, width_cells=_cells(s.trace_max_m, resolution_m))] = CellClass.UNKNOWN
     solid = _obstacles(classes_map, s, resolution_m)
     if s.wall_m is None:
         s = replace(s, wall_m=wall_thickness_cells(classes_map, obstacles=solid) * resolution_m)
@@ -298,10 +313,14 @@ def describe(
             width = d.cols * resolution_m
         doors.append(Door(d, seg, (holders[0], holders[1]), width))
     classes_work = to_work(frame, classes_map, fill=CellClass.UNKNOWN)
+    lines = np.zeros((0, 4)) if settings.slant_line_m is None else wall_line_segments(
+        classes_work, min_length_cells=_cells(settings.slant_line_m, resolution_m),
+        max_gap_cells=round(settings.slant_gap_m / resolution_m), wall_share=settings.slant_wall_share)
     rooms, room_cells = split_at_slanted_walls(
         group_rooms(world, classes_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
                     resolution_m=resolution_m, settings=settings.rooms),
-        world, classes_work, resolution_m=resolution_m, settings=settings.rooms)
+        world, classes_work, lines, resolution_m=resolution_m, reach_m=0.5 * settings.slant_gap_m,
+        settings=settings.rooms)
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
@@ -319,8 +338,8 @@ def describe(
                            max_shift=round(settings.wall_shift_m / resolution_m),
                            max_thickness=t + round(settings.wall_extra_m / resolution_m),
                            log_cost=settings.wall_log_cost, segment_cells=_cells(settings.wall_segment_m, resolution_m),
-                           lines=None if settings.slant_min_m is None else slanted_lines(
-                               classes_work, min_length_cells=_cells(settings.slant_min_m, resolution_m)))
+                           lines=None if settings.slant_min_angle_rad is None else slanted(
+                               lines, settings.slant_min_angle_rad))
         cw = to_map(frame, fitted.classes_world, fill=CellClass.UNKNOWN)
         walls, wall_segments = fitted.segments, fitted.fitted
         slants = {uid: cuts for uid, cuts in fitted.slants.items() if cuts}

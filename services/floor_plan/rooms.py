@@ -72,15 +72,10 @@ class RoomSettings:
     min_room_m2: float | None = 0.5
     """A room of parts smaller than this (a sliver between units, a doorway's corner) joins the neighbouring room it
     shares the longest open length with; None: no such joins."""
-    slant_line_m: float | None = 1.0
-    """Wall lines at least this long that run slanted through the frame split rooms
-    (:mod:`services.floor_plan.slanted`); None: rooms are made of rectangles only."""
-    slant_gap_m: float = 1.25
-    """... with gaps up to this long bridged (dashed walls, doorways) ..."""
-    slant_wall_share: float = 0.5
-    """... lying on or beside the free space's outline over at least this share of their length ..."""
-    slant_min_angle_rad: float = math.radians(15.0)
-    """... and at least this far from both axes of the frame (axis-parallel walls cut the units already)."""
+    slant_min_angle_rad: float | None = math.radians(15.0)
+    """The map's wall lines (``FloorPlanSettings.slant_line_m``, :mod:`services.floor_plan.slanted`) at least this far
+    from both axes of the frame split rooms (axis-parallel walls cut the units already); None: rooms are made of
+    rectangles only."""
     slant_min_piece_m2: float = 1.0
     """A room is re-cut where a slanted line splits it into pieces at least this large."""
 

@@ -3,11 +3,11 @@
 The room level (:mod:`services.floor_plan.rooms`) cuts units along rows and columns, so a wall that runs at an
 angle to the frame (office_e's pentagon, explained along one of its five sides) cuts nothing, and the units on
 both sides of it each hold a piece of both rooms. Here a room's free space is cut along the straight wall lines of
-the map that run slanted (Hough segments on the outline of the free space, dashes and doorways bridged, lying on
-wall over most of their length; :func:`wall_line_mask`). Where such a line splits a room into pieces of
-``slant_min_piece_m2`` or more, the room is no longer made of its rectangles: its free space is re-cut into the
-regions that the map's wall lines of every direction enclose, one room each (:func:`split_at_slanted_walls`). A
-room no slanted line splits keeps its parts as they are.
+the map that run slanted (:func:`~services.floor_plan.detectors.wall_line_segments`, the lines the slanted walls of
+:mod:`services.floor_plan.walls` are cut along too; drawn by :func:`line_mask`). Where such a line splits a room
+into pieces of ``slant_min_piece_m2`` or more, the room is no longer made of its rectangles: its free space is
+re-cut into the regions that the map's wall lines of every direction enclose, one room each
+(:func:`split_at_slanted_walls`). A room no slanted line splits keeps its parts as they are.
 """
 
 from __future__ import annotations
@@ -37,47 +37,21 @@ def room_cells(rooms: list[Room], shape: tuple[int, int]) -> npt.NDArray[np.int3
     return out
 
 
-def wall_line_mask(
-    classes: npt.NDArray[np.uint8], *, resolution_m: float, settings: RoomSettings, min_angle_rad: float | None,
-) -> npt.NDArray[np.bool_]:
-    """The map's straight wall lines drawn as cells (``_LINE_CELLS`` wide).
+def slanted(lines: npt.NDArray[np.float64], min_angle_rad: float) -> npt.NDArray[np.float64]:
+    """The lines (``x0, y0, x1, y1``) at least ``min_angle_rad`` from both axes of the frame."""
+    angle = np.arctan2(lines[:, 3] - lines[:, 1], lines[:, 2] - lines[:, 0])
+    out: npt.NDArray[np.float64] = lines[np.abs((angle + np.pi / 4) % (np.pi / 2) - np.pi / 4) >= min_angle_rad]
+    return out
 
-    Lines are OpenCV ``HoughLinesP`` segments on the outline of the free space (cells that are not free beside a
-    free one, so unknown space drawn as wall counts and the unknown outside does not), at least ``slant_line_m``
-    long, with gaps up to ``slant_gap_m`` bridged (dashed walls, doorways), kept where at least
-    ``slant_wall_share`` of their cells lie on or beside that outline, and drawn prolonged by half that gap at
-    both ends (a dashed wall whose last dash stops short of the wall it meets).
 
-    Parameters
-    ----------
-    classes : (H, W) uint8
-        C_M in the working frame.
-    min_angle_rad : float or None
-        Keep only lines at least this far from both axes of the frame (slanted walls); None: every direction.
-    """
-    if settings.slant_line_m is None:
-        return np.zeros(classes.shape, np.bool_)
-    blocked = classes != CellClass.FREE
-    outline = blocked & (cv2.dilate((~blocked).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
-    length = max(2, round(settings.slant_line_m / resolution_m))
-    found = cv2.HoughLinesP(outline.astype(np.uint8) * 255, 1, math.pi / 180, round(0.75 * length),
-                            minLineLength=length, maxLineGap=round(settings.slant_gap_m / resolution_m))
-    out = np.zeros(classes.shape, np.uint8)
-    if found is None:
-        return out.astype(np.bool_)
-    near = cv2.dilate(outline.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    reach = 0.5 * settings.slant_gap_m / resolution_m  # a line runs on by half the gap it bridges
-    for x0, y0, x1, y1 in found.reshape(-1, 4).tolist():
-        angle = math.atan2(y1 - y0, x1 - x0) % (math.pi / 2)
-        if min_angle_rad is not None and min(angle, math.pi / 2 - angle) < min_angle_rad:
-            continue
-        n = max(abs(x1 - x0), abs(y1 - y0)) + 1
-        cols = np.rint(np.linspace(x0, x1, n)).astype(np.int64)
-        rows = np.rint(np.linspace(y0, y1, n)).astype(np.int64)
-        if near[rows, cols].mean() >= settings.slant_wall_share:
-            d = reach / max(math.hypot(x1 - x0, y1 - y0), 1.0)
-            ex, ey = round((x1 - x0) * d), round((y1 - y0) * d)
-            cv2.line(out, (x0 - ex, y0 - ey), (x1 + ex, y1 + ey), 1, _LINE_CELLS)
+def line_mask(lines: npt.NDArray[np.float64], shape: tuple[int, int], *, reach_cells: float) -> npt.NDArray[np.bool_]:
+    """``lines`` (``x0, y0, x1, y1``) drawn ``_LINE_CELLS`` wide and prolonged by ``reach_cells`` at both ends (a
+    dashed wall whose last dash stops short of the wall it meets)."""
+    out = np.zeros(shape, np.uint8)
+    for x0, y0, x1, y1 in lines.tolist():
+        d = reach_cells / max(math.hypot(x1 - x0, y1 - y0), 1.0)
+        ex, ey = (x1 - x0) * d, (y1 - y0) * d
+        cv2.line(out, (round(x0 - ex), round(y0 - ey)), (round(x1 + ex), round(y1 + ey)), 1, _LINE_CELLS)
     return out.astype(np.bool_)
 
 
@@ -97,8 +71,8 @@ def _split(painted: npt.NDArray[np.int32], free: npt.NDArray[np.bool_], lines: n
 
 
 def split_at_slanted_walls(
-    rooms: list[Room], world: World, classes: npt.NDArray[np.uint8], *, resolution_m: float,
-    settings: RoomSettings,
+    rooms: list[Room], world: World, classes: npt.NDArray[np.uint8], lines: npt.NDArray[np.float64], *,
+    resolution_m: float, reach_m: float, settings: RoomSettings,
 ) -> tuple[list[Room], npt.NDArray[np.int32]]:
     """Rooms that a slanted wall line splits, re-cut along the map's wall lines (see the module docstring).
 
@@ -110,6 +84,9 @@ def split_at_slanted_walls(
         The units, cells of ``classes``' frame.
     classes : (H, W) uint8
         C_M in the working frame.
+    lines : (N, 4) float
+        The map's wall lines in every direction (:func:`~services.floor_plan.detectors.wall_line_segments`,
+        ``x0, y0, x1, y1``, cells of ``classes``), drawn prolonged by ``reach_m`` at both ends.
 
     Returns
     -------
@@ -121,14 +98,15 @@ def split_at_slanted_walls(
     free = classes == CellClass.FREE
     painted = room_cells(rooms, classes.shape)
     cells = np.where(free, painted, 0).astype(np.int32)
-    slanted = wall_line_mask(classes, resolution_m=resolution_m, settings=settings,
-                             min_angle_rad=settings.slant_min_angle_rad)
+    if settings.slant_min_angle_rad is None:
+        return rooms, cells
+    reach = reach_m / resolution_m
+    across = slanted(lines, settings.slant_min_angle_rad)
     least = max(1, round(settings.slant_min_piece_m2 / resolution_m**2))
-    split = _split(painted, free, slanted, least) if slanted.any() else []
+    split = _split(painted, free, line_mask(across, classes.shape, reach_cells=reach), least) if len(across) else []
     if not split:
         return rooms, cells
-    lines = slanted | wall_line_mask(classes, resolution_m=resolution_m, settings=settings, min_angle_rad=None)
-    region, _ = ndimage.label(free & ~lines)
+    region, _ = ndimage.label(free & ~line_mask(lines, classes.shape, reach_cells=reach))
     size = np.bincount(region.ravel())
     size[0] = 0
     recut = np.isin(cells, split)

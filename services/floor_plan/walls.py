@@ -178,10 +178,10 @@ def fit_walls(
     passes : int
         At most this many rounds over all walls (coordinate ascent stops earlier when no wall changes).
     lines : (N, 4) float, optional
-        Wall lines at an angle to the grid (:func:`~services.floor_plan.detectors.slanted_lines`, ``x0, y0, x1, y1``
-        cell centres). After the walls, a unit a line runs through may be cut along it (:class:`Slant`): the part
-        beyond the line given up, a wall drawn along it, where that beats ``log_cost``; the unit's centre and doors
-        stay. At most ``max_slants`` per unit, best first.
+        Wall lines at an angle to the grid (:func:`~services.floor_plan.detectors.wall_line_segments`,
+        ``x0, y0, x1, y1`` cell centres). After the walls, a unit a line runs through may be cut along it
+        (:class:`Slant`): the part beyond the line given up, a wall drawn along it, where that beats ``log_cost``;
+        the unit's centre and doors stay. At most ``max_slants`` per unit, best first.
 
     >>> from services.floor_plan.likelihood import log_sensor_table
     >>> cm = np.full((12, 14), CellClass.UNKNOWN, np.uint8); cm[2:10, 2:12] = CellClass.WALL

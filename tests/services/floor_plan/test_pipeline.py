@@ -270,3 +270,34 @@ def test_walls_drawn_light_grey_are_walls_of_the_floor_plan_and_no_room_lies_on_
     assert not rooms[drawn == 100].any()
     assert len(np.unique(rooms[20:60, 15:55])) == len(np.unique(rooms[20:60, 65:105])) == 1
     assert rooms[40, 30] != rooms[40, 80]
+
+
+def _room_with_beams_through_a_window() -> npt.NDArray[np.int8]:
+    """A 4 m x 6 m room seen from inside, a window 1.5 m wide in its bottom wall, and the laser's beams through it:
+    a cell wide, 4 m into the unknown outside; two desks 0.1 m apart inside (drawn occupied)."""
+    occ = np.full((200, 160), -1, np.int8)
+    _box(occ, 10, 90, 20, 140)
+    occ[89:91, 65:95] = 0
+    rays = np.zeros(occ.shape, np.uint8)
+    for degrees in range(40, 141, 10):
+        a = np.radians(degrees)
+        cv2.line(rays, (80, 80), (80 + round(110 * np.cos(a)), 80 + round(110 * np.sin(a))), 1, 1)
+    occ[(rays > 0) & (occ == -1)] = 0
+    occ[30:50, 40:60] = 100  # two desks with a gap two cells wide between them
+    occ[30:50, 62:82] = 100
+    return occ
+
+
+def test_laser_beams_through_a_window_read_unknown_and_the_rooms_free_space_stays_free() -> None:
+    occ = _room_with_beams_through_a_window()
+    plan = floor_plan(occ, resolution_m=RES, settings=replace(_settings(), trace_max_m=0.15))
+    seen = floor_plan(occ, resolution_m=RES, settings=_settings())
+    outside = np.zeros(occ.shape, bool)
+    outside[115:, :] = True  # beyond the fan by the window, where the beams have drawn apart
+    beams = outside & (occ == 0)
+    assert np.all(seen.classes_map[beams] == CellClass.FREE)
+    assert np.mean(plan.classes_map[beams] == CellClass.UNKNOWN) > 0.9, "a beam's trace is not space seen free"
+    inside = occ[12:89, 22:139] == 0
+    assert np.array_equal(plan.classes_map[12:89, 22:139][inside], seen.classes_map[12:89, 22:139][inside]), \
+        "the room's floor, the window and the gap between the desks stay free"
+    assert plan.k > seen.k

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import cv2
 import numpy as np
@@ -17,7 +18,8 @@ from services.floor_plan import (
     group_rooms,
     split_at_slanted_walls,
 )
-from services.floor_plan.slanted import wall_line_mask
+from services.floor_plan.detectors import wall_line_segments
+from services.floor_plan.slanted import slanted
 
 RES = 0.05
 T = 2  # wall cells
@@ -39,13 +41,19 @@ def _room_with_slanted_wall(*, dashed: bool, length_share: float = 1.0) -> npt.N
     return classes
 
 
+def _lines(classes: npt.NDArray[np.uint8]) -> npt.NDArray[np.float64]:
+    """The map's wall lines as the floor plan finds them (``FloorPlanSettings``' defaults at 0.05 m)."""
+    return wall_line_segments(classes, min_length_cells=20, max_gap_cells=25)
+
+
 def _split(classes: npt.NDArray[np.uint8], settings: RoomSettings | None = None
            ) -> tuple[int, npt.NDArray[np.int32]]:
     s = settings or RoomSettings()
     world = World({1: BOX}, set(), 2)
     rooms = group_rooms(world, classes, {1: UnitType.ROOM}, wall_cells=T, resolution_m=RES, settings=s)
     assert len(rooms) == 1, "rectangles alone do not cut a unit along a slanted wall"
-    out, cells = split_at_slanted_walls(rooms, world, classes, resolution_m=RES, settings=s)
+    out, cells = split_at_slanted_walls(rooms, world, classes, _lines(classes), resolution_m=RES, reach_m=0.6,
+                                        settings=s)
     assert all(room.units == (1,) and room.room_type is UnitType.ROOM for room in out)
     return len(out), cells
 
@@ -74,10 +82,9 @@ def test_a_room_without_slanted_walls_keeps_its_rectangles() -> None:
     classes[T:-T, T:-T] = CellClass.FREE
     classes[T:-T, 69:71] = CellClass.WALL  # a straight wall along the frame: the units' own cut, not this one
     classes[40:60, 69:71] = CellClass.FREE  # with a door
-    assert not wall_line_mask(classes, resolution_m=RES, settings=RoomSettings(),
-                              min_angle_rad=RoomSettings().slant_min_angle_rad).any()
+    assert not len(slanted(_lines(classes), math.radians(15.0)))
 
 
 def test_slanted_cuts_can_be_turned_off() -> None:
-    n, _ = _split(_room_with_slanted_wall(dashed=False), dataclasses.replace(RoomSettings(), slant_line_m=None))
+    n, _ = _split(_room_with_slanted_wall(dashed=False), dataclasses.replace(RoomSettings(), slant_min_angle_rad=None))
     assert n == 1

@@ -11,7 +11,7 @@ from pydantic import ValidationError
 
 from services.floor_plan import CellClass, ChainSettings, FloorPlanSettings, Rect, World, floor_plan, render
 from services.floor_plan.clutter import explain_exterior
-from services.floor_plan.detectors import slanted_lines
+from services.floor_plan.detectors import wall_line_segments
 from services.floor_plan.likelihood import log_sensor_table
 from services.floor_plan.walls import Walls, fit_walls
 from shared.settings import FloorPlanStageSettings
@@ -141,7 +141,7 @@ def _slanted_room(shape: tuple[int, int] = (60, 80)) -> npt.NDArray[np.uint8]:
 def test_a_unit_over_a_slanted_wall_is_cut_along_it_and_gives_up_the_corner_beyond() -> None:
     cm = _slanted_room()
     world = World({1: Rect(10, 49, 10, 66)})  # the room's bounding box, as an axis-parallel unit stands over it
-    lines = slanted_lines(cm, min_length_cells=20)
+    lines = wall_line_segments(cm, min_length_cells=20, max_gap_cells=25, min_angle_rad=0.09)
     out = fit_walls(world, cm, TABLE, wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=3, max_thickness=4,
                     log_cost=10.0, segment_cells=5, lines=lines)
     seed = _fit(world, cm, t=1)
@@ -162,7 +162,7 @@ def test_a_unit_over_a_slanted_wall_is_cut_along_it_and_gives_up_the_corner_beyo
 def test_a_slanted_wall_keeps_the_units_door_and_pays_its_cost() -> None:
     cm = _slanted_room()
     world = World({1: Rect(10, 49, 10, 66)})
-    lines = slanted_lines(cm, min_length_cells=20)
+    lines = wall_line_segments(cm, min_length_cells=20, max_gap_cells=25, min_angle_rad=0.09)
     dear = fit_walls(world, cm, TABLE, wall_cells=1, fixed=np.zeros(cm.shape, bool), max_shift=3, max_thickness=4,
                      log_cost=1e6, segment_cells=5, lines=lines)
     assert dear.slants == {1: ()}, "a cut that does not pay its cost is not drawn"
@@ -183,7 +183,7 @@ def test_a_plan_of_a_slanted_room_draws_the_slanted_wall_and_leaves_the_units_al
     occ = np.where(_slanted_room() == CellClass.FREE, 0, np.where(_slanted_room() == CellClass.WALL, 100, -1))
     settings = FloorPlanSettings(chain=ChainSettings(iterations=1500, seed=1))
     plan = floor_plan(occ.astype(np.int8), resolution_m=RES, settings=settings)
-    flat = floor_plan(occ.astype(np.int8), resolution_m=RES, settings=replace(settings, slant_min_m=None))
+    flat = floor_plan(occ.astype(np.int8), resolution_m=RES, settings=replace(settings, slant_min_angle_rad=None))
     assert plan.world == flat.world and plan.rooms == flat.rooms and plan.k_units == flat.k_units
     assert flat.slanted_walls == 0 and plan.slanted_walls >= 1
     assert plan.k > flat.k
