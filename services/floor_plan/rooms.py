@@ -69,10 +69,6 @@ class RoomSettings:
     corridor_room_depth: float = 2.5
     """... and at least this many corridor widths deep: a room or hall the corridor opens into, not a corridor
     it turns into (those are about as deep as it is wide). The two are not one room, however open."""
-    max_door_m: float | None = 2.5
-    """An opening at most this wide ...; None: no doors."""
-    min_jamb_m: float = 0.5
-    """... with wall beside it over at least this length is a door, however open the boundary."""
     min_room_m2: float | None = 0.5
     """A room of parts smaller than this (a sliver between units, a doorway's corner) joins the neighbouring room it
     shares the longest open length with; None: no such joins."""
@@ -105,10 +101,6 @@ class Boundary(NamedTuple):
     (its own room lies behind that wall) has little."""
     corridor_end: bool = False
     """One part is a corridor that ends here at a much wider and deeper part (:func:`corridor_end`)."""
-    opening_m: float = 0.0
-    """The longest open stretch along the boundary (a door's width, where it is one)."""
-    closed_m: float = 0.0
-    """The length of the boundary that a barrier closes (the wall beside an opening)."""
 
 
 class Part(NamedTuple):
@@ -233,7 +225,7 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
             length = min(a.r1, b.r1) - max(a.r0, b.r0) + 1
             abutting = _abut(a, b)
             out.append(Boundary((int(i), int(j)), length * resolution_m, 1.0, 1.0,
-                                abutting is not None and corridor_end(*abutting, settings), length * resolution_m))
+                                abutting is not None and corridor_end(*abutting, settings)))
             continue
         vertical = bool(stacked[i, j])  # the cross lines run along rows
         # walls between stacked parts run along rows; beside in the map is stacked in the transpose
@@ -251,16 +243,8 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
             depth = min(float(up.mean()) / top.rows, float(down.mean()) / bottom.rows)
         side = min(a.c1 - a.c0, b.c1 - b.c0) + 1
         out.append(Boundary((int(i), int(j)), open_.size * resolution_m, float(open_.sum()) / side, depth,
-                            corridor_end(a, b, settings), _longest_run(open_) * resolution_m,
-                            float(open_.size - open_.sum()) * resolution_m))
+                            corridor_end(a, b, settings)))
     return out
-
-
-def is_door(b: Boundary, settings: RoomSettings) -> bool:
-    """Whether a boundary's opening is a door: at most ``max_door_m`` wide, in a wall that closes at least
-    ``min_jamb_m`` of the boundary beside it."""
-    return (settings.max_door_m is not None and b.opening_m <= settings.max_door_m
-            and b.closed_m >= settings.min_jamb_m)
 
 
 def corridor_end(a: Rect, b: Rect, settings: RoomSettings) -> bool:
@@ -296,12 +280,6 @@ def _abut(a: Rect, b: Rect) -> tuple[Rect, Rect] | None:
     if stacked:
         return p, q
     return Rect(p.c0, p.c1, p.r0, p.r1), Rect(q.c0, q.c1, q.r0, q.r1)
-
-
-def _longest_run(flags: npt.NDArray[np.bool_]) -> int:
-    """The longest run of True in a 1-D array."""
-    edges = np.flatnonzero(np.diff(np.r_[False, flags, False].astype(np.int8)))
-    return int((edges[1::2] - edges[::2]).max()) if edges.size else 0
 
 
 def _free_run(walls: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
@@ -341,7 +319,7 @@ def group_rooms(
     found = boundaries(parts, blocked, resolution_m=resolution_m, settings=settings)
     for b in found:
         if (b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share
-                and not b.corridor_end and not is_door(b, settings)):
+                and not b.corridor_end):
             joined.append(b.units)
     edges = np.array(joined, np.int64).reshape(-1, 2)
     n = len(parts)
