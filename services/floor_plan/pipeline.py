@@ -91,6 +91,8 @@ class FloorPlanSettings:
     (an image's grey edge along a wall, drawn by antialiasing; cells a live map saw free fewer times) within this of a
     cell that is not free, joined to it through such cells (:func:`~services.floor_plan.rooms.wall_fringe`); None:
     every free cell is labelled. C_M and K(W,M) do not change."""
+    fringe_wall_m2: float = 1.0
+    """... of a wall: a connected piece of cells that are not free at least this large (furniture is no wall)."""
     slant_min_m: float | None = 1.0
     """Walls at an angle to the working grid (a second wall direction, :class:`~services.floor_plan.walls.Slant`):
     wall lines at least this long that run at an angle may cut a unit, drawn with the fitted walls and at the same
@@ -256,7 +258,8 @@ def floor_plan(
         positions = np.unique(np.floor(points_to_work(frame, rc)).astype(np.int64), axis=0)
     result = run_chain(chain, classes, s.chain, first_iteration=first, positions_rc=positions)
     fringe = (np.zeros(classes_map.shape, np.bool_) if s.fringe_m is None else
-              wall_fringe(occupancy, classes_map == CellClass.FREE, depth_cells=_cells(s.fringe_m, resolution_m)))
+              wall_fringe(occupancy, classes_map == CellClass.FREE, depth_cells=_cells(s.fringe_m, resolution_m),
+                          min_wall_cells=max(1, round(s.fringe_wall_m2 / resolution_m**2))))
     return describe(result.world, classes_map, frame=frame, settings=s, fringe=fringe,
                     log_posterior=result.log_posterior, iterations=result.iterations, accepted=result.accepted,
                     seconds=result.seconds, cpu_seconds=result.cpu_seconds)

@@ -158,3 +158,7 @@ def test_the_wall_fringe_of_a_live_map_is_the_less_seen_free_space_against_a_wal
     assert not fringe[10:15, 20:25].any(), "less seen floor away from walls is floor"
     assert fringe[20:25, 4].all() and not fringe[20:25, 5].any(), "no deeper than the setting"
     assert not fringe[occ == 12].any() and not fringe[occ == 100].any()
+    occ[5:7, 30:32] = 100  # a chair leg
+    occ[4:8, 29:33][occ[4:8, 29:33] == 12] = 18  # seen free less often around it
+    assert not wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[4:8, 29:33].any(), "furniture is no wall"
+    assert wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[:, 2:4].all()
