@@ -31,7 +31,9 @@ def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.
     are unknown (:func:`shared.mapfiles.unknown_greys`), so that a map drawing unknown space light grey (230) or
     speckled with light grey inside rooms is not read as free there; and walls drawn light grey (a grey mode
     map_server reads as free, in long thin lines, with their outline) are occupied
-    (:func:`shared.mapfiles.grey_walls`), so that no unit's free space lies on them.
+    (:func:`shared.mapfiles.grey_walls`), so that no unit's free space lies on them. Free cells keep their darkness in
+    percent (0..19; C_M reads them free all the same), so the grey edge along the walls can be told from clear floor
+    (:func:`~services.floor_plan.rooms.wall_fringe`).
 
     Raises
     ------
@@ -39,7 +41,8 @@ def read_map(map_path: Path, *, resolution_m: float | None = None) -> tuple[npt.
         Missing or unreadable files, malformed YAML, a bare image without a resolution.
     """
     try:
-        image = read_map_file(Path(map_path), resolution_m=resolution_m, free_from_modes=True)
+        image = read_map_file(Path(map_path), resolution_m=resolution_m, free_from_modes=True,
+                              free_darkness=True)
     except MapFileError as err:
         raise FloorPlanError(str(err)) from err
     return image.occupancy, image.resolution_m, (image.origin_x_m, image.origin_y_m)

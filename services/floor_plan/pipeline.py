@@ -38,7 +38,7 @@ from services.floor_plan.likelihood import (
     solid_obstacles,
     wall_thickness_cells,
 )
-from services.floor_plan.rooms import Room, RoomSettings, fill_free, group_rooms
+from services.floor_plan.rooms import Room, RoomSettings, fill_free, group_rooms, wall_fringe
 from services.floor_plan.slanted import slanted, split_at_slanted_walls
 from services.floor_plan.walls import Segment, Slant, fit_walls
 from services.floor_plan.world import Rect, UnitType, World, shared_band
@@ -91,6 +91,13 @@ class FloorPlanSettings:
     """Wall segments start and end on a grid of this length along each wall."""
     wall_log_cost: float = 10.0
     """The prior's cost of one wall segment other than the seed's band (nats)."""
+    fringe_m: float | None = 0.1
+    """The label images (``units.png``, ``rooms.png``) leave out the wall fringe: free cells that are not clearly free
+    (an image's grey edge along a wall, drawn by antialiasing; cells a live map saw free fewer times) within this of a
+    cell that is not free, joined to it through such cells (:func:`~services.floor_plan.rooms.wall_fringe`); None:
+    every free cell is labelled. C_M and K(W,M) do not change."""
+    fringe_wall_m2: float = 1.0
+    """... of a wall: a connected piece of cells that are not free at least this large (furniture is no wall)."""
     slant_line_m: float | None = 1.0
     """The map's straight wall lines at least this long (:func:`~services.floor_plan.detectors.wall_line_segments`),
     found once for the slanted walls and the rooms' re-cut along them; None: neither (no lines)."""
@@ -167,6 +174,8 @@ class FloorPlan(NamedTuple):
     resolution_m: float
     origin_xy_m: tuple[float, float]
     frame: Frame
+    fringe: npt.NDArray[np.bool_]
+    """The wall fringe (map cells, GridLayer order): free cells the label images leave out (``fringe_m``)."""
 
     @property
     def slanted_walls(self) -> int:
@@ -263,17 +272,21 @@ def floor_plan(
         rc = np.stack([(xy[:, 1] - origin_xy_m[1]) / resolution_m, (xy[:, 0] - origin_xy_m[0]) / resolution_m], axis=1)
         positions = np.unique(np.floor(points_to_work(frame, rc)).astype(np.int64), axis=0)
     result = run_chain(chain, classes, s.chain, first_iteration=first, positions_rc=positions)
-    return describe(result.world, classes_map, frame=frame, settings=s,
+    fringe = (np.zeros(classes_map.shape, np.bool_) if s.fringe_m is None else
+              wall_fringe(occupancy, classes_map == CellClass.FREE, depth_cells=_cells(s.fringe_m, resolution_m),
+                          min_wall_cells=max(1, round(s.fringe_wall_m2 / resolution_m**2))))
+    return describe(result.world, classes_map, frame=frame, settings=s, fringe=fringe,
                     log_posterior=result.log_posterior, iterations=result.iterations, accepted=result.accepted,
                     seconds=result.seconds, cpu_seconds=result.cpu_seconds)
 
 
 def describe(
     world: World, classes_map: npt.NDArray[np.uint8], *, frame: Frame, settings: FloorPlanSettings,
-    log_posterior: float = float("nan"), iterations: int = 0, accepted: int = 0, seconds: float = 0.0,
-    cpu_seconds: float = 0.0,
+    fringe: npt.NDArray[np.bool_] | None = None, log_posterior: float = float("nan"), iterations: int = 0,
+    accepted: int = 0, seconds: float = 0.0, cpu_seconds: float = 0.0,
 ) -> FloorPlan:
-    """A world (cells of ``frame``) as units, doors, types and K(W,M) in map coordinates."""
+    """A world (cells of ``frame``) as units, doors, types and K(W,M) in map coordinates; ``fringe`` (map cells) is
+    left out of the label images (none by default)."""
     resolution_m, origin_xy_m = frame.resolution_m, frame.origin_xy_m
     t = kernel_settings(settings, resolution_m).wall_cells
     ox, oy = origin_xy_m
@@ -373,7 +386,8 @@ def describe(
     return FloorPlan(world, units, doors, adjacency, rooms, room_cells, rings, standing, classes_map, cw,
                      cell_prediction_rate(classes_map, cw), k_units, clutter, walls, wall_segments, slants, exterior,
                      log_posterior, iterations, accepted,
-                     seconds, cpu_seconds, resolution_m, origin_xy_m, frame)
+                     seconds, cpu_seconds, resolution_m, origin_xy_m, frame,
+                     np.zeros(classes_map.shape, np.bool_) if fringe is None else fringe)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
@@ -389,7 +403,9 @@ def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
     """A label image like :func:`unit_labels` with one id per room (1..R in the order of ``plan.rooms``): each
     room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds."""
     cells = to_map(plan.frame, plan.room_cells.astype(np.float32), fill=0.0).astype(np.int32)
-    return fill_free(cells, plan.classes_map == CellClass.FREE)
+    out = fill_free(cells, plan.classes_map == CellClass.FREE)
+    out[plan.fringe] = 0
+    return out
 
 
 def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.int32]:
@@ -399,4 +415,6 @@ def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.in
     for r, k in items:
         work[r.r0 : r.r1 + 1, r.c0 : r.c1 + 1] = k
     free = plan.classes_map == CellClass.FREE
-    return fill_free(to_map(plan.frame, work, fill=0.0).astype(np.int32), free)
+    out = fill_free(to_map(plan.frame, work, fill=0.0).astype(np.int32), free)
+    out[plan.fringe] = 0
+    return out

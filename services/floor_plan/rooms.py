@@ -369,6 +369,45 @@ def room_keys(rooms: list[Room]) -> list[str]:
     return keys
 
 
+def wall_fringe(occupancy: npt.NDArray[np.integer], free: npt.NDArray[np.bool_], *, depth_cells: int,
+                min_wall_cells: int = 1) -> npt.NDArray[np.bool_]:
+    """The wall fringe: free cells that are not clearly free, within ``depth_cells`` of a wall and joined to it
+    through such cells (8-connected).
+
+    Not clearly free is more than 1 percent above the map's clearest free cell: an image's grey edge along its walls
+    (antialiasing), a live map's cells seen free fewer times than its clamp. A wall is a connected piece of cells
+    that are not free of at least ``min_wall_cells``: a room's walls, not a desk, bin or chair leg standing in it
+    (a furnished map's furniture drawn grey keeps its labels). The ipa ground truth leaves that edge out of every
+    room, and the grid decomposition never labels it (its cleaning turns it to wall, the same rule).
+
+    Parameters
+    ----------
+    occupancy : (H, W) integer
+        -1 unknown, 0..100 percent (a bare image's free cells keep their darkness, :func:`read_map`).
+    free : (H, W) bool
+        The free cells of C_M.
+    """
+    occ = np.asarray(occupancy)
+    if not free.any():
+        return np.zeros(free.shape, np.bool_)
+    unclear = free & (occ > int(occ[free].min()) + 1)
+    _, pieces, stats, _ = cv2.connectedComponentsWithStats((~free).astype(np.uint8), connectivity=8)
+    big = stats[:, cv2.CC_STAT_AREA] >= min_wall_cells
+    big[0] = False
+    wall = big[pieces].astype(np.uint8)
+    size = 2 * max(1, depth_cells) + 1
+    near = cv2.dilate(wall, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))) > 0
+    candidate = unclear & near
+    if not candidate.any():
+        return np.zeros(free.shape, np.bool_)
+    n, parts = cv2.connectedComponents(candidate.astype(np.uint8), connectivity=8)
+    touching = np.zeros(n, np.bool_)
+    touching[np.unique(parts[candidate & (cv2.dilate(wall, np.ones((3, 3), np.uint8)) > 0)])] = True
+    touching[0] = False
+    out: npt.NDArray[np.bool_] = touching[parts]
+    return out
+
+
 def fill_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
     """Labels grown through free space: every free cell takes the label nearest to it through free cells.
 

@@ -301,3 +301,39 @@ def test_laser_beams_through_a_window_read_unknown_and_the_rooms_free_space_stay
     assert np.array_equal(plan.classes_map[12:89, 22:139][inside], seen.classes_map[12:89, 22:139][inside]), \
         "the room's floor, the window and the gap between the desks stay free"
     assert plan.k > seen.k
+def _grey_edged(tmp_path: Path) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.bool_]]:
+    """The two rooms drawn as an image whose walls have a one-pixel light-grey edge on the room side (antialiasing),
+    and a light-grey patch in the middle of the left room; read back, with the edge (GridLayer order)."""
+    from PIL import Image
+
+    occ = _two_rooms()
+    free = occ == 0
+    wall = cv2.dilate((occ == 100).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    edge = free & wall
+    grey = np.full(occ.shape, 180, np.uint8)
+    grey[free] = 255
+    grey[edge] = 235
+    grey[35:45, 30:40] = 240  # floor seen free less often, away from every wall
+    grey[occ == 100] = 0
+    Image.fromarray(grey[::-1].copy()).save(tmp_path / "map.png")
+    read, _, _ = read_map(tmp_path / "map.png", resolution_m=RES)
+    return read, edge
+
+
+def test_the_label_images_leave_out_the_grey_edge_along_walls_and_keep_the_floor(tmp_path: Path) -> None:
+    read, edge = _grey_edged(tmp_path)
+    plan = floor_plan(read, resolution_m=RES, settings=_settings())
+    assert np.array_equal(plan.classes_map == CellClass.FREE, _two_rooms() == 0), "the edge still reads free"
+    for labels in (unit_labels(plan), room_labels(plan)):
+        assert not labels[edge].any(), "the grey edge of a wall is no room's (the ipa ground truth's convention)"
+        assert labels[(_two_rooms() == 0) & ~edge].all(), "clear floor and a grey patch away from walls are labelled"
+    assert room_labels(plan)[40, 35] == room_labels(plan)[20, 20], "the grey patch belongs to its room"
+
+
+def test_the_wall_edge_changes_no_unit_and_no_k_and_can_be_turned_off(tmp_path: Path) -> None:
+    read, _ = _grey_edged(tmp_path)
+    plain = floor_plan(_two_rooms(), resolution_m=RES, settings=_settings())
+    edged = floor_plan(read, resolution_m=RES, settings=_settings())
+    assert edged.world.units == plain.world.units and edged.k == plain.k
+    every = floor_plan(read, resolution_m=RES, settings=replace(_settings(), fringe_m=None))
+    assert room_labels(every)[_two_rooms() == 0].all(), "with the setting off every free cell is labelled"

@@ -7,7 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.floor_plan import CellClass, Rect, RoomSettings, UnitType, World, group_rooms, room_keys
-from services.floor_plan.rooms import fill_free
+from services.floor_plan.rooms import fill_free, wall_fringe
 
 RES = 0.05
 T = 2  # wall cells
@@ -145,3 +145,20 @@ def test_small_rooms_stay_apart_when_the_setting_is_off() -> None:
     groups = group_rooms(world, classes, dict.fromkeys(world.units, UnitType.ROOM), wall_cells=T, resolution_m=RES,
                          settings=RoomSettings(min_room_m2=None))
     assert [room.units for room in groups] == [(1,), (2,)]
+
+
+def test_the_wall_fringe_of_a_live_map_is_the_less_seen_free_space_against_a_wall_only() -> None:
+    occ = np.full((30, 40), 12, np.int8)  # a live map: its clearest free cells read the clamp, 12 %
+    occ[:, :2] = 100  # a wall
+    occ[:, 2:4] = 18  # seen free fewer times against it
+    occ[10:15, 20:25] = 18  # the same, in the open
+    occ[20:25, 4:6] = 18  # joined to the wall only through the fringe, 3 and 4 cells from it
+    fringe = wall_fringe(occ, occ <= 25, depth_cells=3)
+    assert fringe[:, 2:4].all()
+    assert not fringe[10:15, 20:25].any(), "less seen floor away from walls is floor"
+    assert fringe[20:25, 4].all() and not fringe[20:25, 5].any(), "no deeper than the setting"
+    assert not fringe[occ == 12].any() and not fringe[occ == 100].any()
+    occ[5:7, 30:32] = 100  # a chair leg
+    occ[4:8, 29:33][occ[4:8, 29:33] == 12] = 18  # seen free less often around it
+    assert not wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[4:8, 29:33].any(), "furniture is no wall"
+    assert wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[:, 2:4].all()
