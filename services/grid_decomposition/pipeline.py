@@ -26,6 +26,7 @@ from services.grid_decomposition.arrays import (
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.continuity import RegionPrior, keep_regions
+from services.grid_decomposition.corridor_pieces import join_corridor_pieces
 from services.grid_decomposition.corridors import part_rooms_from_corridors
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
@@ -297,6 +298,7 @@ def decompose(
     prior: RegionPrior | None = None,
     settled_max_changed_share: float = 0.2,
     corridor_min_region_m2: float = 100.0,
+    corridor_pieces: bool = True,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -380,6 +382,10 @@ def decompose(
         continues it grows it (:func:`~services.grid_decomposition.continuity.keep_regions`), so a growing
         map's regions do not flicker where it did not change. Racks, aisles and warehouse floors are the new
         decomposition's.
+    corridor_pieces : bool
+        A corridor band (parallel lines with walls on both sides) that the room stage cut in pieces is one
+        region again, and the rooms that leak into its strip part from it
+        (:func:`~services.grid_decomposition.corridor_pieces.join_corridor_pieces`).
     seed : int
         Seed of the clusterings.
 
@@ -557,6 +563,11 @@ def decompose(
                     segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m,
                     joinable=on_floor == 0,
                 )
+        if corridor_pieces:  # a corridor cut where rooms open onto it is one region again
+            on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)[1]
+            segments = join_corridor_pieces(
+                segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m
+            )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)
         grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
