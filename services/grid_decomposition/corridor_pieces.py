@@ -2,23 +2,56 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.corridors import _coordinates, band_mask, corridor_bands
+from services.grid_decomposition.corridors import Band, _coordinates, _runs, band_mask, corridor_bands
 from services.grid_decomposition.radiogram import Line
 
 
-def _room_like(piece: npt.NDArray[np.bool_], *, min_area_px: float, min_radius_px: float, min_solidity: float) -> bool:
-    """At least ``min_area_px``, a disc of ``min_radius_px`` fits, area at least ``min_solidity`` of its hull."""
-    area = int(np.count_nonzero(piece))
-    if area < min_area_px:
+def _room_like(piece: npt.NDArray[np.bool_], *, min_area_px: float, min_radius_px: float) -> bool:
+    """At least ``min_area_px`` and a disc of ``min_radius_px`` fits in it."""
+    if np.count_nonzero(piece) < min_area_px:
         return False
-    if cv2.distanceTransform(np.pad(piece, 1).astype(np.uint8), cv2.DIST_L2, 5).max() < min_radius_px:
-        return False
-    outline, _ = cv2.findContours(piece.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    return area >= min_solidity * cv2.contourArea(cv2.convexHull(np.concatenate(outline)))
+    return bool(cv2.distanceTransform(np.pad(piece, 1).astype(np.uint8), cv2.DIST_L2, 5).max() >= min_radius_px)
+
+
+def _walled_parts(
+    band: Band,
+    walls: npt.NDArray[np.bool_],
+    u: npt.NDArray[np.int32],
+    t: npt.NDArray[np.int32],
+    *,
+    tolerance_px: int,
+    max_open_px: int,
+    min_length_px: int,
+    min_length_widths: float,
+) -> list[Band]:
+    """The parts of a band between the places where both its sides are open over more than ``max_open_px``.
+
+    A side is walled at ``t`` where a wall pixel lies within ``tolerance_px`` of its line. Where both sides are
+    open the corridor meets a hall or crosses another corridor: it is no corridor there. Parts shorter than
+    ``min_length_px`` and ``min_length_widths`` widths are left out.
+    """
+    along = (t >= band.t0_px) & (t <= band.t1_px) & walls
+    n = band.t1_px - band.t0_px + 1
+    side_a = np.bincount(t[along & (np.abs(u - band.offset_a_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
+    side_b = np.bincount(t[along & (np.abs(u - band.offset_b_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
+    open_both = ~side_a & ~side_b
+    starts, ends = _runs(open_both)
+    wide = ends - starts > max_open_px
+    cuts = np.zeros(n, dtype=bool)
+    for s, e in zip(starts[wide], ends[wide], strict=True):
+        cuts[s:e] = True
+    length = max(min_length_px, round(min_length_widths * (band.offset_b_px - band.offset_a_px)))
+    return [
+        replace(band, t0_px=band.t0_px + int(s), t1_px=band.t0_px + int(e) - 1)
+        for s, e in zip(*_runs(~cuts), strict=True)
+        if e - s >= length
+    ]
 
 
 def join_corridor_pieces(
@@ -31,7 +64,10 @@ def join_corridor_pieces(
     min_pieces_share: float = 0.5,
     room_min_area_m2: float = 8.0,
     room_min_radius_m: float = 1.0,
-    room_min_solidity: float = 0.6,
+    max_open_m: float = 2.0,
+    min_length_m: float = 6.0,
+    min_length_widths: float = 3.0,
+    tolerance_px: int = 2,
     margin_px: int = 4,
 ) -> npt.NDArray[np.int32]:
     """Make every corridor band that the room stage cut in pieces one region; part the rooms leaking into it.
@@ -61,21 +97,35 @@ def join_corridor_pieces(
     box = slice(top, int(rows[-1]) + 1 + margin_px), slice(left, int(cols[-1]) + 1 + margin_px)
     window = segments[box]
     inside = region[box]
-    bands = corridor_bands(inside, window == 0, lines, top=top, left=left, resolution_m=resolution_m)
-    if not bands:
+    walls = window == 0
+    found = corridor_bands(
+        inside, walls, lines, top=top, left=left, resolution_m=resolution_m, min_length_m=min_length_m,
+        min_length_widths=min_length_widths, tolerance_px=tolerance_px,
+    )
+    if not found:
         return segments
     shape = (window.shape[0], window.shape[1])
-    coordinates = {a: _coordinates(shape, top, left, a) for a in {band.angle_rad for band in bands}}
+    coordinates = {a: _coordinates(shape, top, left, a) for a in {band.angle_rad for band in found}}
+    bands = [
+        part
+        for band in found
+        for part in _walled_parts(
+            band, walls, *coordinates[band.angle_rad], tolerance_px=tolerance_px,
+            max_open_px=round(max_open_m / resolution_m), min_length_px=round(min_length_m / resolution_m),
+            min_length_widths=min_length_widths,
+        )
+    ]
     out = window.copy()
     next_id = int(segments.max()) + 1
     taken = np.zeros(shape, dtype=bool)
+    parted_from: dict[int, int] = {}  # the rooms parted from a corridor's own region
     limits = {
         "min_area_px": room_min_area_m2 / resolution_m**2,
         "min_radius_px": room_min_radius_m / resolution_m,
-        "min_solidity": room_min_solidity,
     }
     for band in bands:
-        strip = band_mask(band, *coordinates[band.angle_rad]) & inside & ~taken
+        whole = band_mask(band, *coordinates[band.angle_rad]) & inside
+        strip = whole & ~taken
         n = int(out.max()) + 1
         size = np.bincount(out.ravel(), minlength=n)
         held = np.bincount(out[strip], minlength=n)
@@ -83,7 +133,13 @@ def join_corridor_pieces(
         pieces = held >= min_piece_share * np.maximum(size, 1)
         if held[pieces].sum() < min_pieces_share * np.count_nonzero(strip):
             continue
+        # an arm of a corridor made before (an L, a T; or the rest of its region that was parted from it where
+        # it turns): the same corridor
+        width = band.offset_b_px - band.offset_a_px
+        met = np.bincount(out[whole & taken], minlength=n)
         corridor_id = int(np.argmax(held))
+        arm = 2 * met.max() >= width**2 or corridor_id in parted_from
+        corridor_id = int(np.argmax(met)) if 2 * met.max() >= width**2 else parted_from.get(corridor_id, corridor_id)
         crossed = np.flatnonzero(held)
         corridor = strip.copy()
         for k in crossed.tolist():
@@ -94,7 +150,7 @@ def join_corridor_pieces(
             areas[0] = 0
             no_room = np.ones(n_parts, dtype=bool)
             no_room[0] = False
-            keeps = k != corridor_id  # the largest room-like piece keeps the region's id
+            keeps = arm or k != corridor_id  # the largest room-like piece keeps the region's id
             for p in np.argsort(-areas)[: np.count_nonzero(areas >= limits["min_area_px"])].tolist():
                 x, y, w, h = stats[p, :4]
                 part = parts[y : y + h, x : x + w] == p
@@ -105,6 +161,8 @@ def join_corridor_pieces(
                     keeps = False
                 else:
                     out[y : y + h, x : x + w][part] = next_id
+                    if k == corridor_id:
+                        parted_from[next_id] = corridor_id
                     next_id += 1
             corridor |= no_room[parts]
         # the pieces that are no room join the corridor only where they touch it

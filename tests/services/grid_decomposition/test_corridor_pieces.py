@@ -1,0 +1,58 @@
+"""A corridor the room stage cut in pieces is one region again; the rooms that leaked into it part from it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from services.grid_decomposition.corridor_pieces import join_corridor_pieces
+from services.grid_decomposition.radiogram import Line
+
+RESOLUTION_M = 0.05
+
+
+def _corridor_with_open_room() -> tuple[np.ndarray, list[Line]]:
+    """Segments of a 33 m x 2.5 m corridor (rows 100..149) and a 6 m x 5 m room above it (rows 152..250,
+    columns 300..420) open onto the corridor over its whole width, as a room stage cut them: the corridor in
+    three pieces, the middle one holding the room's lower half too. Walls are the pixels in no region; the
+    lines are the walls' (as the decomposition's line search finds them)."""
+    segments = np.zeros((260, 700), dtype=np.int32)
+    segments[100:150, 20:300] = 1
+    segments[100:150, 300:421] = 2
+    segments[150:200, 300:421] = 2  # the room's lower half leaked into the corridor's piece
+    segments[200:251, 300:421] = 3
+    segments[100:150, 421:680] = 4
+    segments[150:152, 300:421] = 2  # no wall drawn across the room's opening
+    horizontal = [Line(0.0, float(y), 30.0, 0.1, True) for y in (99, 150, 251)]
+    vertical = [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (299, 421)]
+    return segments, horizontal + vertical
+
+
+def test_a_corridor_cut_in_pieces_is_one_region_and_the_room_open_onto_it_is_not_in_it() -> None:
+    segments, lines = _corridor_with_open_room()
+    out = join_corridor_pieces(segments, lines, np.ones(5, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:149, 21:679])
+    assert corridor.size == 1 and corridor[0] > 0, "the corridor is one region from end to end"
+    room = np.unique(out[155:245, 305:415])
+    assert corridor[0] not in room, "the room open onto the corridor does not leak into it"
+    assert np.array_equal(out > 0, segments > 0), "every pixel stays in a region"
+
+
+def test_regions_that_may_not_join_are_left_alone() -> None:
+    segments, lines = _corridor_with_open_room()
+    out = join_corridor_pieces(segments, lines, np.zeros(5, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out, segments)
+
+
+def test_an_aisle_beside_a_row_of_desks_in_an_open_office_stays_in_the_office() -> None:
+    # a 20 m x 8 m office, one region, with a 1.5 m aisle along its lower wall beside a row of desks (pairs of
+    # 1.6 m desks with 0.8 m gaps): the aisle is a walled band, but a small part of the office's region
+    segments = np.zeros((180, 420), dtype=np.int32)
+    segments[10:170, 10:410] = 1
+    for x in range(20, 400, 48):
+        segments[40:56, x : x + 32] = 0  # a desk
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (9, 40, 56, 170)]
+    lines += [Line(math.pi / 2, -float(x), 8.0, 0.1, True) for x in (9, 410)]
+    out = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out, segments)
