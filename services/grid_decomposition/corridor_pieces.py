@@ -19,6 +19,18 @@ def _room_like(piece: npt.NDArray[np.bool_], *, min_area_px: float, min_radius_p
     return bool(cv2.distanceTransform(np.pad(piece, 1).astype(np.uint8), cv2.DIST_L2, 5).max() >= min_radius_px)
 
 
+def _long_runs(flags: npt.NDArray[np.bool_], min_length: int, *, inner: bool = False) -> npt.NDArray[np.bool_]:
+    """The runs of True longer than ``min_length``; with ``inner`` only those with False on both ends."""
+    starts, ends = _runs(flags)
+    wide = ends - starts > min_length
+    if inner:
+        wide &= (starts > 0) & (ends < flags.size)
+    marks = np.zeros(flags.size + 1, dtype=np.int32)
+    np.add.at(marks, starts[wide], 1)
+    np.add.at(marks, ends[wide], -1)
+    return np.cumsum(marks[:-1]) > 0
+
+
 def _walled_parts(
     band: Band,
     walls: npt.NDArray[np.bool_],
@@ -27,31 +39,32 @@ def _walled_parts(
     *,
     tolerance_px: int,
     max_open_px: int,
+    max_side_open_px: int,
     min_length_px: int,
     min_length_widths: float,
 ) -> list[Band]:
-    """The parts of a band between the places where both its sides are open over more than ``max_open_px``.
+    """The parts of a band between its junctions and the halls open onto it.
 
     A side is walled at ``t`` where a wall pixel lies within ``tolerance_px`` of its line. Where both sides are
-    open the corridor meets a hall or crosses another corridor: it is no corridor there. Parts shorter than
-    ``min_length_px`` and ``min_length_widths`` widths are left out.
+    open over more than ``max_open_px`` the corridor meets a hall or crosses another corridor; where one side
+    is open over more than ``max_side_open_px`` between two walled stretches of it a hall lies along it (wider
+    than an office's open front): it is no corridor there. Parts shorter than ``min_length_px`` and ``min_length_widths`` widths are left out.
     """
     along = (t >= band.t0_px) & (t <= band.t1_px) & walls
     n = band.t1_px - band.t0_px + 1
     side_a = np.bincount(t[along & (np.abs(u - band.offset_a_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
     side_b = np.bincount(t[along & (np.abs(u - band.offset_b_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
-    open_both = ~side_a & ~side_b
-    starts, ends = _runs(open_both)
-    wide = ends - starts > max_open_px
-    cuts = np.zeros(n, dtype=bool)
-    for s, e in zip(starts[wide], ends[wide], strict=True):
-        cuts[s:e] = True
     length = max(min_length_px, round(min_length_widths * (band.offset_b_px - band.offset_a_px)))
-    return [
-        replace(band, t0_px=band.t0_px + int(s), t1_px=band.t0_px + int(e) - 1)
-        for s, e in zip(*_runs(~cuts), strict=True)
-        if e - s >= length
-    ]
+    parts = []
+    for s0, e0 in zip(*_runs(~_long_runs(~side_a & ~side_b, max_open_px)), strict=True):
+        a, b = side_a[s0:e0], side_b[s0:e0]
+        cuts = _long_runs(~a, max_side_open_px, inner=True) | _long_runs(~b, max_side_open_px, inner=True)
+        parts += [
+            replace(band, t0_px=band.t0_px + int(s0 + s), t1_px=band.t0_px + int(s0 + e) - 1)
+            for s, e in zip(*_runs(~cuts), strict=True)
+            if e - s >= length
+        ]
+    return parts
 
 
 def join_corridor_pieces(
@@ -65,6 +78,7 @@ def join_corridor_pieces(
     room_min_area_m2: float = 8.0,
     room_min_radius_m: float = 1.0,
     max_open_m: float = 2.0,
+    max_side_open_m: float = 6.0,
     min_length_m: float = 6.0,
     min_length_widths: float = 3.0,
     tolerance_px: int = 2,
@@ -111,7 +125,8 @@ def join_corridor_pieces(
         for band in found
         for part in _walled_parts(
             band, walls, *coordinates[band.angle_rad], tolerance_px=tolerance_px,
-            max_open_px=round(max_open_m / resolution_m), min_length_px=round(min_length_m / resolution_m),
+            max_open_px=round(max_open_m / resolution_m), max_side_open_px=round(max_side_open_m / resolution_m),
+            min_length_px=round(min_length_m / resolution_m),
             min_length_widths=min_length_widths,
         )
     ]

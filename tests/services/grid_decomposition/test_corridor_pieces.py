@@ -56,3 +56,19 @@ def test_an_aisle_beside_a_row_of_desks_in_an_open_office_stays_in_the_office() 
     lines += [Line(math.pi / 2, -float(x), 8.0, 0.1, True) for x in (9, 410)]
     out = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
     assert np.array_equal(out, segments)
+
+
+def test_a_corridor_entering_a_hall_does_not_cut_the_hall() -> None:
+    # a 20 m x 2 m corridor (rows 100..139, columns 20..419) in two pieces, entering a 12 m x 10 m hall (rows
+    # 20..219, columns 420..659): the corridor's lines go on across the hall, whose floor is clear between them
+    segments = np.zeros((240, 680), dtype=np.int32)
+    segments[100:140, 20:220] = 1
+    segments[100:140, 220:420] = 2
+    segments[20:220, 420:660] = 3
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (19, 99, 140, 220)]
+    lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 419, 660)]
+    out = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:139, 21:419])
+    assert corridor.size == 1, "the corridor is one region"
+    hall = np.unique(out[21:219, 425:659])
+    assert hall.size == 1 and hall[0] != corridor[0], "the hall is one region of its own"
