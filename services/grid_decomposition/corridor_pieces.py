@@ -13,10 +13,12 @@ from services.grid_decomposition.radiogram import Line
 
 
 def _room_like(piece: npt.NDArray[np.bool_], *, min_area_px: float, min_radius_px: float) -> bool:
-    """At least ``min_area_px`` and a disc of ``min_radius_px`` fits in it."""
+    """At least ``min_area_px``, and a disc of ``min_radius_px`` fits in it with its holes (furniture) filled."""
     if np.count_nonzero(piece) < min_area_px:
         return False
-    return bool(cv2.distanceTransform(np.pad(piece, 1).astype(np.uint8), cv2.DIST_L2, 5).max() >= min_radius_px)
+    outline, _ = cv2.findContours(np.pad(piece, 1).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    filled = cv2.drawContours(np.zeros((piece.shape[0] + 2, piece.shape[1] + 2), np.uint8), outline, -1, 1, -1)
+    return bool(cv2.distanceTransform(filled, cv2.DIST_L2, 5).max() >= min_radius_px)
 
 
 def _long_runs(flags: npt.NDArray[np.bool_], min_length: int, *, inner: bool = False) -> npt.NDArray[np.bool_]:
@@ -148,13 +150,10 @@ def join_corridor_pieces(
         pieces = held >= min_piece_share * np.maximum(size, 1)
         if held[pieces].sum() < min_pieces_share * np.count_nonzero(strip):
             continue
-        # an arm of a corridor made before (an L, a T; or the rest of its region that was parted from it where
-        # it turns): the same corridor
-        width = band.offset_b_px - band.offset_a_px
-        met = np.bincount(out[whole & taken], minlength=n)
+        # the rest of a corridor's region parted from it where the corridor turns (an L) is its other arm
         corridor_id = int(np.argmax(held))
-        arm = 2 * met.max() >= width**2 or corridor_id in parted_from
-        corridor_id = int(np.argmax(met)) if 2 * met.max() >= width**2 else parted_from.get(corridor_id, corridor_id)
+        arm = corridor_id in parted_from
+        corridor_id = parted_from.get(corridor_id, corridor_id)
         crossed = np.flatnonzero(held)
         corridor = strip.copy()
         for k in crossed.tolist():

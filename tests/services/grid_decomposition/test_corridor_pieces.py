@@ -13,19 +13,18 @@ RESOLUTION_M = 0.05
 
 
 def _corridor_with_open_room() -> tuple[np.ndarray, list[Line]]:
-    """Segments of a 33 m x 2.5 m corridor (rows 100..149) and a 6 m x 5 m room above it (rows 152..250,
-    columns 300..420) open onto the corridor over its whole width, as a room stage cut them: the corridor in
+    """Segments of a 33 m x 2.5 m corridor (rows 100..149) and a 5 m x 5 m room above it (rows 152..250,
+    columns 300..399) open onto the corridor over its whole width, as a room stage cut them: the corridor in
     three pieces, the middle one holding the room's lower half too. Walls are the pixels in no region; the
     lines are the walls' (as the decomposition's line search finds them)."""
     segments = np.zeros((260, 700), dtype=np.int32)
     segments[100:150, 20:300] = 1
-    segments[100:150, 300:421] = 2
-    segments[150:200, 300:421] = 2  # the room's lower half leaked into the corridor's piece
-    segments[200:251, 300:421] = 3
-    segments[100:150, 421:680] = 4
-    segments[150:152, 300:421] = 2  # no wall drawn across the room's opening
+    segments[100:150, 300:400] = 2
+    segments[150:200, 300:400] = 2  # the room's lower half leaked into the corridor's piece, no wall drawn
+    segments[200:251, 300:400] = 3
+    segments[100:150, 400:680] = 4
     horizontal = [Line(0.0, float(y), 30.0, 0.1, True) for y in (99, 150, 251)]
-    vertical = [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (299, 421)]
+    vertical = [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (299, 400)]
     return segments, horizontal + vertical
 
 
@@ -34,7 +33,7 @@ def test_a_corridor_cut_in_pieces_is_one_region_and_the_room_open_onto_it_is_not
     out = join_corridor_pieces(segments, lines, np.ones(5, dtype=bool), resolution_m=RESOLUTION_M)
     corridor = np.unique(out[101:149, 21:679])
     assert corridor.size == 1 and corridor[0] > 0, "the corridor is one region from end to end"
-    room = np.unique(out[155:245, 305:415])
+    room = np.unique(out[155:245, 305:395])
     assert corridor[0] not in room, "the room open onto the corridor does not leak into it"
     assert np.array_equal(out > 0, segments > 0), "every pixel stays in a region"
 
