@@ -50,7 +50,8 @@ def _walled_parts(
     A side is walled at ``t`` where a wall pixel lies within ``tolerance_px`` of its line. Where both sides are
     open over more than ``max_open_px`` the corridor meets a hall or crosses another corridor; where one side
     is open over more than ``max_side_open_px`` between two walled stretches of it a hall lies along it (wider
-    than an office's open front): it is no corridor there. Parts shorter than ``min_length_px`` and ``min_length_widths`` widths are left out.
+    than an office's open front): it is no corridor there. Parts shorter than ``min_length_px`` and
+    ``min_length_widths`` widths are left out.
     """
     along = (t >= band.t0_px) & (t <= band.t1_px) & walls
     n = band.t1_px - band.t0_px + 1
@@ -136,11 +137,15 @@ def join_corridor_pieces(
     next_id = int(segments.max()) + 1
     taken = np.zeros(shape, dtype=bool)
     parted_from: dict[int, int] = {}  # the rooms parted from a corridor's own region
+    made: list[Band] = []
     limits = {
         "min_area_px": room_min_area_m2 / resolution_m**2,
         "min_radius_px": room_min_radius_m / resolution_m,
     }
-    for band in bands:
+    # a band that does not qualify may after another band parted its region (the other arm of an L): two passes
+    for band in bands + bands:
+        if band in made:
+            continue
         whole = band_mask(band, *coordinates[band.angle_rad]) & inside
         strip = whole & ~taken
         n = int(out.max()) + 1
@@ -165,7 +170,11 @@ def join_corridor_pieces(
             no_room = np.ones(n_parts, dtype=bool)
             no_room[0] = False
             keeps = arm or k != corridor_id  # the largest room-like piece keeps the region's id
+            if keeps and not pieces[k] and n_parts > 1:  # a room the strip only clipped keeps its rest, however small
+                no_room[int(np.argmax(areas))] = keeps = False
             for p in np.argsort(-areas)[: np.count_nonzero(areas >= limits["min_area_px"])].tolist():
+                if not no_room[p]:
+                    continue
                 x, y, w, h = stats[p, :4]
                 part = parts[y : y + h, x : x + w] == p
                 if not _room_like(part, **limits):
@@ -185,6 +194,7 @@ def join_corridor_pieces(
         corridor = np.isin(parts, touching[touching > 0])
         out[corridor] = corridor_id
         taken |= corridor
+        made.append(band)
     result = segments.copy()
     result[box] = out
     return result

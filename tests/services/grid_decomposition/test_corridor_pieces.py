@@ -71,3 +71,33 @@ def test_a_corridor_entering_a_hall_does_not_cut_the_hall() -> None:
     assert corridor.size == 1, "the corridor is one region"
     hall = np.unique(out[21:219, 425:659])
     assert hall.size == 1 and hall[0] != corridor[0], "the hall is one region of its own"
+
+
+def test_an_l_shaped_corridor_stays_one_region() -> None:
+    # a 30 m x 2.4 m corridor (rows 100..147, columns 20..619) turning down into a 12 m x 2.8 m arm (rows
+    # 148..387, columns 564..619) at its end, one region, with a 5 m x 5 m room open onto it (rows 0..99,
+    # columns 200..299)
+    segments = np.zeros((400, 640), dtype=np.int32)
+    segments[100:148, 20:620] = 1
+    segments[148:388, 564:620] = 1
+    segments[0:100, 200:300] = 1
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (99, 148, 388)]
+    lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 199, 300, 563, 620)]
+    out = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(np.r_[out[101:147, 21:619].ravel(), out[149:387, 565:619].ravel()])
+    assert corridor.size == 1, "both arms of the corridor are one region"
+    room = np.unique(out[5:95, 205:295])
+    assert room.size == 1 and room[0] != corridor[0], "the room open onto it is a region of its own"
+
+
+def test_a_hall_open_along_the_corridor_keeps_the_corridor_in_front_of_it() -> None:
+    # a 40 m x 2 m corridor (rows 100..139) in two pieces; along its middle an 8 m x 8 m hall (rows 140..299,
+    # columns 300..459) lies open onto it, and the room stage gave the hall the corridor's stretch in front of it
+    segments = np.zeros((320, 840), dtype=np.int32)
+    segments[100:140, 20:300] = 1
+    segments[100:140, 460:820] = 2
+    segments[100:300, 300:460] = 3
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (99, 140, 300)]
+    lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 299, 460, 820)]
+    out = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out == out[200, 380], segments == 3), "the hall stays as it was, with its front"
