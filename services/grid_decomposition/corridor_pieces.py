@@ -7,6 +7,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 
 from services.grid_decomposition.corridors import Band, _coordinates, _runs, band_mask, corridor_bands
 from services.grid_decomposition.radiogram import Line
@@ -137,19 +138,19 @@ def join_corridor_pieces(
     next_id = int(segments.max()) + 1
     taken = np.zeros(shape, dtype=bool)
     parted_from: dict[int, int] = {}  # the rooms parted from a corridor's own region
-    made: list[Band] = []
+    made: set[int] = set()
     limits = {
         "min_area_px": room_min_area_m2 / resolution_m**2,
         "min_radius_px": room_min_radius_m / resolution_m,
     }
     # a band that does not qualify may after another band parted its region (the other arm of an L): two passes
-    for band in bands + bands:
-        if band in made:
+    wholes = [band_mask(band, *coordinates[band.angle_rad]) & inside for band in bands]
+    size = np.bincount(out.ravel())
+    for i in list(range(len(bands))) * 2:
+        if i in made:
             continue
-        whole = band_mask(band, *coordinates[band.angle_rad]) & inside
-        strip = whole & ~taken
-        n = int(out.max()) + 1
-        size = np.bincount(out.ravel(), minlength=n)
+        strip = wholes[i] & ~taken
+        n = size.size
         held = np.bincount(out[strip], minlength=n)
         held[0] = 0
         pieces = held >= min_piece_share * np.maximum(size, 1)
@@ -161,9 +162,12 @@ def join_corridor_pieces(
         corridor_id = parted_from.get(corridor_id, corridor_id)
         crossed = np.flatnonzero(held)
         corridor = strip.copy()
+        boxes = ndimage.find_objects(out)
         for k in crossed.tolist():
+            own = boxes[k - 1]
+            assert own is not None  # k holds pixels of the strip
             n_parts, parts, stats, _ = cv2.connectedComponentsWithStats(
-                ((out == k) & ~strip).astype(np.uint8), connectivity=4
+                ((out[own] == k) & ~strip[own]).astype(np.uint8), connectivity=4
             )
             areas = stats[:, cv2.CC_STAT_AREA].copy()
             areas[0] = 0
@@ -183,18 +187,19 @@ def join_corridor_pieces(
                 if keeps:
                     keeps = False
                 else:
-                    out[y : y + h, x : x + w][part] = next_id
+                    out[own][y : y + h, x : x + w][part] = next_id
                     if k == corridor_id:
                         parted_from[next_id] = corridor_id
                     next_id += 1
-            corridor |= no_room[parts]
+            corridor[own] |= no_room[parts]
         # the pieces that are no room join the corridor only where they touch it
         n_parts, parts = cv2.connectedComponents(corridor.astype(np.uint8), connectivity=4)
         touching = np.unique(parts[strip])
         corridor = np.isin(parts, touching[touching > 0])
         out[corridor] = corridor_id
         taken |= corridor
-        made.append(band)
+        made.add(i)
+        size = np.bincount(out.ravel())
     result = segments.copy()
     result[box] = out
     return result
