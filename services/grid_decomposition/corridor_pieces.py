@@ -79,7 +79,7 @@ def join_corridor_pieces(
     resolution_m: float,
     min_piece_share: float = 0.5,
     min_pieces_share: float = 0.5,
-    room_min_area_m2: float = 8.0,
+    room_min_area_m2: float = 4.0,
     room_min_radius_m: float = 1.0,
     max_open_m: float = 2.0,
     max_side_open_m: float = 6.0,
@@ -92,14 +92,19 @@ def join_corridor_pieces(
 
     The bands (:func:`~services.grid_decomposition.corridors.corridor_bands`) are looked for in the union
     of the ``joinable`` regions (per region id: a room region, no warehouse floor), with every pixel in no
-    region as wall: a corridor's walls are often drawn as a grey band with few occupied cells. A band is a
-    corridor cut in pieces when the regions lying at least ``min_piece_share`` inside its strip hold at
+    region as wall: a corridor's walls are often drawn as a grey band with few occupied cells. A band ends
+    where both its sides are open over more than ``max_open_m`` (a junction, a hall it enters) and where
+    one side is open over more than ``max_side_open_m`` between walled stretches (a hall along it). A band is
+    a corridor cut in pieces when the regions lying at least ``min_piece_share`` inside its strip hold at
     least ``min_pieces_share`` of the strip: a band through the middle of a room (an aisle beside desks)
     is a small part of the room's region and is left alone. The strip of such a band becomes one region;
-    what each region it crossed keeps outside the strip splits into 4-connected pieces, of which the
-    room-like ones (at least ``room_min_area_m2``, a ``room_min_radius_m`` disc fits, area at least
-    ``room_min_solidity`` of the convex hull) stay regions (the largest keeps the region's id) and the
-    others (a door's niche, a sliver along the wall) join the corridor when they touch it.
+    what each region it crossed keeps outside the strip splits into 4-connected parts. A region the strip
+    only clipped (less than ``min_piece_share`` inside) keeps its largest part; other parts stay regions
+    when room-like (at least ``room_min_area_m2``, a ``room_min_radius_m`` disc fits with its furniture
+    holes filled), the largest keeping the region's id, and the rest (a door's niche, a sliver along the
+    wall) joins the corridor where it touches it. The rest of the corridor's own region parted off where
+    the corridor turns is its other arm when that arm's band is taken too (an L); the bands are passed
+    twice, so the order they are found in does not matter.
 
     Returns
     -------
