@@ -26,6 +26,7 @@ from services.grid_decomposition.arrays import (
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
 from services.grid_decomposition.continuity import RegionPrior, keep_regions
+from services.grid_decomposition.corridor_pieces import join_corridor_pieces
 from services.grid_decomposition.corridors import part_rooms_from_corridors
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
@@ -299,6 +300,7 @@ def decompose(
     settled_max_changed_share: float = 0.2,
     corridor_min_region_m2: float = 100.0,
     short_wall_min_m: float = 3.0,
+    corridor_pieces: bool = True,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -375,6 +377,10 @@ def decompose(
         ``corridor_min_region_m2`` parts along a wall at least this long that stops short of the
         region's edge (:func:`~services.grid_decomposition.short_walls.split_at_short_walls`: two rooms
         the map's partial wall leaves one region); 0 turns it off.
+    corridor_pieces : bool
+        A corridor band (parallel lines with walls on both sides) that the room stage cut in pieces is one
+        region again, and the rooms that leak into its strip part from it
+        (:func:`~services.grid_decomposition.corridor_pieces.join_corridor_pieces`).
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -574,6 +580,11 @@ def decompose(
                     segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m,
                     wall_min_m=short_wall_min_m,
                 )
+        if corridor_pieces:  # a corridor cut where rooms open onto it is one region again
+            on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)[1]
+            segments = join_corridor_pieces(
+                segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m
+            )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)
         grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)

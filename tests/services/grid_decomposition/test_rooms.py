@@ -245,9 +245,20 @@ def test_a_corridor_is_not_cut_beside_the_doors_of_its_offices() -> None:
     assert len({int(corridor[0]), *rooms}) == len(rooms) + 1  # every office and the hall a region of their own
     for room in rooms:
         assert d.topology.edges[int(corridor[0]), room]["connection"] == Connection.DOOR.value
-    # without the rule the lines along the partitions close the corridor where its doors make it "widen"
-    old = decompose(occ, resolution_m=RES, corridor_length_m=0.0)
+    # without the rule (and without joining a corridor's pieces) the lines along the partitions close the
+    # corridor where its doors make it "widen"
+    old = decompose(occ, resolution_m=RES, corridor_length_m=0.0, corridor_pieces=False)
     assert np.unique(old.segments[corridor_rows[0] : corridor_rows[-1] + 1, 25:301]).size > 1
+
+
+def test_a_corridor_cut_beside_the_doors_of_its_offices_joins_again_and_its_offices_stay_apart() -> None:
+    occ, office_cols, corridor_rows = _corridor_with_offices()
+    # the room stage cuts the corridor (the rule above off): its pieces lie along one walled band and join
+    d = decompose(occ, resolution_m=RES, corridor_length_m=0.0)
+    corridor = np.unique(d.segments[corridor_rows[0] : corridor_rows[-1] + 1, 25:301])
+    assert corridor.size == 1 and corridor[0] > 0
+    rooms = [int(d.segments[100, x]) for x in office_cols] + [int(d.segments[100, 360])]
+    assert len({int(corridor[0]), *rooms}) == len(rooms) + 1  # every office and the hall a region of their own
 
 
 def _open_plan_office() -> np.ndarray:

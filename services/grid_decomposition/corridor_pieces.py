@@ -1,0 +1,210 @@
+"""A corridor the room stage cut in pieces is one region again, and the rooms that leak into it part from it."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+from services.grid_decomposition.corridors import Band, _coordinates, _runs, band_mask, corridor_bands
+from services.grid_decomposition.radiogram import Line
+
+
+def _room_like(piece: npt.NDArray[np.bool_], *, min_area_px: float, min_radius_px: float) -> bool:
+    """At least ``min_area_px``, and a disc of ``min_radius_px`` fits in it with its holes (furniture) filled."""
+    if np.count_nonzero(piece) < min_area_px:
+        return False
+    outline, _ = cv2.findContours(np.pad(piece, 1).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    filled = cv2.drawContours(np.zeros((piece.shape[0] + 2, piece.shape[1] + 2), np.uint8), outline, -1, 1, -1)
+    return bool(cv2.distanceTransform(filled, cv2.DIST_L2, 5).max() >= min_radius_px)
+
+
+def _long_runs(flags: npt.NDArray[np.bool_], min_length: int, *, inner: bool = False) -> npt.NDArray[np.bool_]:
+    """The runs of True longer than ``min_length``; with ``inner`` only those with False on both ends."""
+    starts, ends = _runs(flags)
+    wide = ends - starts > min_length
+    if inner:
+        wide &= (starts > 0) & (ends < flags.size)
+    marks = np.zeros(flags.size + 1, dtype=np.int32)
+    np.add.at(marks, starts[wide], 1)
+    np.add.at(marks, ends[wide], -1)
+    return np.cumsum(marks[:-1]) > 0
+
+
+def _walled_parts(
+    band: Band,
+    walls: npt.NDArray[np.bool_],
+    u: npt.NDArray[np.int32],
+    t: npt.NDArray[np.int32],
+    *,
+    tolerance_px: int,
+    max_open_px: int,
+    max_side_open_px: int,
+    min_length_px: int,
+    min_length_widths: float,
+) -> list[Band]:
+    """The parts of a band between its junctions and the halls open onto it.
+
+    A side is walled at ``t`` where a wall pixel lies within ``tolerance_px`` of its line. Where both sides are
+    open over more than ``max_open_px`` the corridor meets a hall or crosses another corridor; where one side
+    is open over more than ``max_side_open_px`` between two walled stretches of it a hall lies along it (wider
+    than an office's open front): it is no corridor there. Parts shorter than ``min_length_px`` and
+    ``min_length_widths`` widths are left out.
+    """
+    along = (t >= band.t0_px) & (t <= band.t1_px) & walls
+    n = band.t1_px - band.t0_px + 1
+    side_a = np.bincount(t[along & (np.abs(u - band.offset_a_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
+    side_b = np.bincount(t[along & (np.abs(u - band.offset_b_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
+    length = max(min_length_px, round(min_length_widths * (band.offset_b_px - band.offset_a_px)))
+    parts = []
+    for s0, e0 in zip(*_runs(~_long_runs(~side_a & ~side_b, max_open_px)), strict=True):
+        a, b = side_a[s0:e0], side_b[s0:e0]
+        cuts = _long_runs(~a, max_side_open_px, inner=True) | _long_runs(~b, max_side_open_px, inner=True)
+        parts += [
+            replace(band, t0_px=band.t0_px + int(s0 + s), t1_px=band.t0_px + int(s0 + e) - 1)
+            for s, e in zip(*_runs(~cuts), strict=True)
+            if e - s >= length
+        ]
+    return parts
+
+
+def join_corridor_pieces(
+    segments: npt.NDArray[np.int32],
+    lines: list[Line],
+    joinable: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    min_piece_share: float = 0.5,
+    min_pieces_share: float = 0.5,
+    room_min_area_m2: float = 4.0,
+    room_min_radius_m: float = 1.0,
+    max_open_m: float = 2.0,
+    max_side_open_m: float = 6.0,
+    min_length_m: float = 6.0,
+    min_length_widths: float = 3.0,
+    tolerance_px: int = 2,
+    margin_px: int = 4,
+) -> npt.NDArray[np.int32]:
+    """Make every corridor band that the room stage cut in pieces one region; part the rooms leaking into it.
+
+    The bands (:func:`~services.grid_decomposition.corridors.corridor_bands`) are looked for in the union
+    of the ``joinable`` regions (per region id: a room region, no warehouse floor), with every pixel in no
+    region as wall: a corridor's walls are often drawn as a grey band with few occupied cells. A band ends
+    where both its sides are open over more than ``max_open_m`` (a junction, a hall it enters) and where
+    one side is open over more than ``max_side_open_m`` between walled stretches (a hall along it). A band is
+    a corridor cut in pieces when the regions lying at least ``min_piece_share`` inside its strip hold at
+    least ``min_pieces_share`` of the strip: a band through the middle of a room (an aisle beside desks)
+    is a small part of the room's region and is left alone. The strip of such a band becomes one region;
+    what each region it crossed keeps outside the strip splits into 4-connected parts. A region the strip
+    only clipped (less than ``min_piece_share`` inside) keeps its largest part; other parts stay regions
+    when room-like (at least ``room_min_area_m2``, a ``room_min_radius_m`` disc fits with its furniture
+    holes filled), the largest keeping the region's id, and the rest (a door's niche, a sliver along the
+    wall) joins the corridor where it touches it. The rest of the corridor's own region parted off where
+    the corridor turns is its other arm when that arm's band is taken too (an L); the bands are passed
+    twice, so the order they are found in does not matter.
+
+    Returns
+    -------
+    (H, W) int32
+        The segments; the corridor takes the id of the region that held most of its strip, parted
+        rooms beyond the first of a region are numbered after the existing ids.
+    """
+    region = (segments > 0) & joinable[segments]
+    if not region.any():
+        return segments
+    rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))
+    top, left = max(0, int(rows[0]) - margin_px), max(0, int(cols[0]) - margin_px)
+    box = slice(top, int(rows[-1]) + 1 + margin_px), slice(left, int(cols[-1]) + 1 + margin_px)
+    window = segments[box]
+    inside = region[box]
+    walls = window == 0
+    found = corridor_bands(
+        inside, walls, lines, top=top, left=left, resolution_m=resolution_m, min_length_m=min_length_m,
+        min_length_widths=min_length_widths, tolerance_px=tolerance_px,
+    )
+    if not found:
+        return segments
+    shape = (window.shape[0], window.shape[1])
+    coordinates = {a: _coordinates(shape, top, left, a) for a in {band.angle_rad for band in found}}
+    bands = [
+        part
+        for band in found
+        for part in _walled_parts(
+            band, walls, *coordinates[band.angle_rad], tolerance_px=tolerance_px,
+            max_open_px=round(max_open_m / resolution_m), max_side_open_px=round(max_side_open_m / resolution_m),
+            min_length_px=round(min_length_m / resolution_m),
+            min_length_widths=min_length_widths,
+        )
+    ]
+    out = window.copy()
+    next_id = int(segments.max()) + 1
+    taken = np.zeros(shape, dtype=bool)
+    parted_from: dict[int, int] = {}  # the rooms parted from a corridor's own region
+    made: set[int] = set()
+    limits = {
+        "min_area_px": room_min_area_m2 / resolution_m**2,
+        "min_radius_px": room_min_radius_m / resolution_m,
+    }
+    # a band that does not qualify may after another band parted its region (the other arm of an L): two passes
+    wholes = [band_mask(band, *coordinates[band.angle_rad]) & inside for band in bands]
+    size = np.bincount(out.ravel())
+    for i in list(range(len(bands))) * 2:
+        if i in made:
+            continue
+        strip = wholes[i] & ~taken
+        n = size.size
+        held = np.bincount(out[strip], minlength=n)
+        held[0] = 0
+        pieces = held >= min_piece_share * np.maximum(size, 1)
+        if held[pieces].sum() < min_pieces_share * np.count_nonzero(strip):
+            continue
+        # the rest of a corridor's region parted from it where the corridor turns (an L) is its other arm
+        corridor_id = int(np.argmax(held))
+        arm = corridor_id in parted_from
+        corridor_id = parted_from.get(corridor_id, corridor_id)
+        crossed = np.flatnonzero(held)
+        corridor = strip.copy()
+        boxes = ndimage.find_objects(out)
+        for k in crossed.tolist():
+            own = boxes[k - 1]
+            assert own is not None  # k holds pixels of the strip
+            n_parts, parts, stats, _ = cv2.connectedComponentsWithStats(
+                ((out[own] == k) & ~strip[own]).astype(np.uint8), connectivity=4
+            )
+            areas = stats[:, cv2.CC_STAT_AREA].copy()
+            areas[0] = 0
+            no_room = np.ones(n_parts, dtype=bool)
+            no_room[0] = False
+            keeps = arm or k != corridor_id  # the largest room-like piece keeps the region's id
+            if keeps and not pieces[k] and n_parts > 1:  # a room the strip only clipped keeps its rest, however small
+                no_room[int(np.argmax(areas))] = keeps = False
+            for p in np.argsort(-areas)[: np.count_nonzero(areas >= limits["min_area_px"])].tolist():
+                if not no_room[p]:
+                    continue
+                x, y, w, h = stats[p, :4]
+                part = parts[y : y + h, x : x + w] == p
+                if not _room_like(part, **limits):
+                    continue
+                no_room[p] = False
+                if keeps:
+                    keeps = False
+                else:
+                    out[own][y : y + h, x : x + w][part] = next_id
+                    if k == corridor_id:
+                        parted_from[next_id] = corridor_id
+                    next_id += 1
+            corridor[own] |= no_room[parts]
+        # the pieces that are no room join the corridor only where they touch it
+        n_parts, parts = cv2.connectedComponents(corridor.astype(np.uint8), connectivity=4)
+        touching = np.unique(parts[strip])
+        corridor = np.isin(parts, touching[touching > 0])
+        out[corridor] = corridor_id
+        taken |= corridor
+        made.add(i)
+        size = np.bincount(out.ravel())
+    result = segments.copy()
+    result[box] = out
+    return result

@@ -1,0 +1,103 @@
+"""A corridor the room stage cut in pieces is one region again; the rooms that leaked into it part from it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from services.grid_decomposition.corridor_pieces import join_corridor_pieces
+from services.grid_decomposition.radiogram import Line
+
+RESOLUTION_M = 0.05
+
+
+def _corridor_with_open_room() -> tuple[np.ndarray, list[Line]]:
+    """Segments of a 33 m x 2.5 m corridor (rows 100..149) and a 5 m x 5 m room above it (rows 152..250,
+    columns 300..399) open onto the corridor over its whole width, as a room stage cut them: the corridor in
+    three pieces, the middle one holding the room's lower half too. Walls are the pixels in no region; the
+    lines are the walls' (as the decomposition's line search finds them)."""
+    segments = np.zeros((260, 700), dtype=np.int32)
+    segments[100:150, 20:300] = 1
+    segments[100:150, 300:400] = 2
+    segments[150:200, 300:400] = 2  # the room's lower half leaked into the corridor's piece, no wall drawn
+    segments[200:251, 300:400] = 3
+    segments[100:150, 400:680] = 4
+    horizontal = [Line(0.0, float(y), 30.0, 0.1, True) for y in (99, 150, 251)]
+    vertical = [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (299, 400)]
+    return segments, horizontal + vertical
+
+
+def test_a_corridor_cut_in_pieces_is_one_region_and_the_room_open_onto_it_is_not_in_it() -> None:
+    segments, lines = _corridor_with_open_room()
+    out = join_corridor_pieces(segments, lines, np.ones(5, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:149, 21:679])
+    assert corridor.size == 1 and corridor[0] > 0, "the corridor is one region from end to end"
+    room = np.unique(out[155:245, 305:395])
+    assert corridor[0] not in room, "the room open onto the corridor does not leak into it"
+    assert np.array_equal(out > 0, segments > 0), "every pixel stays in a region"
+
+
+def test_regions_that_may_not_join_are_left_alone() -> None:
+    segments, lines = _corridor_with_open_room()
+    out = join_corridor_pieces(segments, lines, np.zeros(5, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out, segments)
+
+
+def test_an_aisle_beside_a_row_of_desks_in_an_open_office_stays_in_the_office() -> None:
+    # a 20 m x 8 m office, one region, with a 1.5 m aisle along its lower wall beside a row of desks (pairs of
+    # 1.6 m desks with 0.8 m gaps): the aisle is a walled band, but a small part of the office's region
+    segments = np.zeros((180, 420), dtype=np.int32)
+    segments[10:170, 10:410] = 1
+    for x in range(20, 400, 48):
+        segments[40:56, x : x + 32] = 0  # a desk
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (9, 40, 56, 170)]
+    lines += [Line(math.pi / 2, -float(x), 8.0, 0.1, True) for x in (9, 410)]
+    out = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out, segments)
+
+
+def test_a_corridor_entering_a_hall_does_not_cut_the_hall() -> None:
+    # a 20 m x 2 m corridor (rows 100..139, columns 20..419) in two pieces, entering a 12 m x 10 m hall (rows
+    # 20..219, columns 420..659): the corridor's lines go on across the hall, whose floor is clear between them
+    segments = np.zeros((240, 680), dtype=np.int32)
+    segments[100:140, 20:220] = 1
+    segments[100:140, 220:420] = 2
+    segments[20:220, 420:660] = 3
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (19, 99, 140, 220)]
+    lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 419, 660)]
+    out = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:139, 21:419])
+    assert corridor.size == 1, "the corridor is one region"
+    hall = np.unique(out[21:219, 425:659])
+    assert hall.size == 1 and hall[0] != corridor[0], "the hall is one region of its own"
+
+
+def test_an_l_shaped_corridor_stays_one_region() -> None:
+    # a 30 m x 2.4 m corridor (rows 100..147, columns 20..619) turning down into a 12 m x 2.8 m arm (rows
+    # 148..387, columns 564..619) at its end, one region, with a 5 m x 5 m room open onto it (rows 0..99,
+    # columns 200..299)
+    segments = np.zeros((400, 640), dtype=np.int32)
+    segments[100:148, 20:620] = 1
+    segments[148:388, 564:620] = 1
+    segments[0:100, 200:300] = 1
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (99, 148, 388)]
+    lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 199, 300, 563, 620)]
+    out = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(np.r_[out[101:147, 21:619].ravel(), out[149:387, 565:619].ravel()])
+    assert corridor.size == 1, "both arms of the corridor are one region"
+    room = np.unique(out[5:95, 205:295])
+    assert room.size == 1 and room[0] != corridor[0], "the room open onto it is a region of its own"
+
+
+def test_a_hall_open_along_the_corridor_keeps_the_corridor_in_front_of_it() -> None:
+    # a 40 m x 2 m corridor (rows 100..139) in two pieces; along its middle an 8 m x 8 m hall (rows 140..299,
+    # columns 300..459) lies open onto it, and the room stage gave the hall the corridor's stretch in front of it
+    segments = np.zeros((320, 840), dtype=np.int32)
+    segments[100:140, 20:300] = 1
+    segments[100:140, 460:820] = 2
+    segments[100:300, 300:460] = 3
+    lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (99, 140, 300)]
+    lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 299, 460, 820)]
+    out = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.array_equal(out == out[200, 380], segments == 3), "the hall stays as it was, with its front"
