@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import components_stats
 from services.grid_decomposition.radiogram import Line
 
 
@@ -194,7 +195,7 @@ def part_rooms_from_corridors(
         for band in bands:
             cut |= _side_cuts(band, *coordinates[band.angle_rad], cut_thickness_px)
         pieces = region & ~cut
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(pieces.astype(np.uint8), connectivity=4)
+        n, labels, stats = components_stats(pieces.astype(np.uint8), 4)
         offered = stats[:, cv2.CC_STAT_AREA] >= min_area
         offered[0] = False
         for band in bands:  # a band's piece holds a square of its strip, not only the end of a crossing band

@@ -7,6 +7,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
+from services.grid_decomposition.arrays import components_stats
 from services.grid_decomposition.rooms import open_share
 
 
@@ -71,12 +72,12 @@ def split_fans(
             continue
         # the opening by distances (a disc's erosion and dilation are thresholds of the distance transform)
         inner = cv2.distanceTransform(mine.astype(np.uint8), cv2.DIST_L2, 5) > radius
-        n, parts, stats, _ = cv2.connectedComponentsWithStats(inner.astype(np.uint8), connectivity=8)
+        n, parts, stats = components_stats(inner.astype(np.uint8), 8)
         if n < 2:
             continue
         largest = parts != 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
         core = mine & (cv2.distanceTransform(largest.astype(np.uint8), cv2.DIST_L2, 5) <= radius)
-        n, parts, stats, _ = cv2.connectedComponentsWithStats((mine & ~core).astype(np.uint8), connectivity=8)
+        n, parts, stats = components_stats((mine & ~core).astype(np.uint8), 8)
         big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_px)
         big = big[big > 0]
         if big.size == 0:

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import components_stats
 from services.grid_decomposition.segments import fill_from_neighbours, renumber
 
 
@@ -48,7 +49,7 @@ def split_at_necks(
         (padded[:-2, 1:-1] != seg) | (padded[2:, 1:-1] != seg) | (padded[1:-1, :-2] != seg) | (padded[1:-1, 2:] != seg)
     )
     core = (dist > neck_half_width_m / resolution_m) & (seg > 0) & ~border
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
+    n, parts, stats = components_stats(core.astype(np.uint8), 4)
     big = stats[:, cv2.CC_STAT_AREA] >= min_core_area_m2 / resolution_m**2
     big[0] = False
     # each core's segment, from the first pixel of each run of one core along the rows (a core lies in one segment)

@@ -33,14 +33,14 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import Components, components, label_counts, unique_inverse
+from services.grid_decomposition.arrays import Components, components, components_stats, label_counts, unique_inverse
 from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
 _OCCUPIED = 1
 _UNCERTAIN = 3  # an obstacle not surely occupied
-# what cv2.connectedComponentsWithStats returns: count, labels, stats, centroids
-_Labelled = tuple[int, cv2.typing.MatLike, cv2.typing.MatLike, cv2.typing.MatLike]
+# what components_stats returns: count, labels, stats
+_Labelled = tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]
 
 
 class RackLayout(NamedTuple):
@@ -144,10 +144,10 @@ def _reopen_cross_aisles(
     simulator's halls: 2.7 m bays, 3.0 m cross aisles). Bays share a pitch: a bridged gap more than ``off_pitch``
     times the median bridged gap of the image's bodies ``min_length_px`` long or longer is a cross aisle, and the
     body is cut there through its whole depth. Where every bay is loaded (only cross aisles bridged) nothing is
-    cut. ``labelled`` is ``cv2.connectedComponentsWithStats(body, connectivity=4)``; ``body`` itself is returned
+    cut. ``labelled`` is ``components_stats(body, 4)``; ``body`` itself is returned
     when nothing is cut.
     """
-    n, parts, stats, _ = labelled
+    n, parts, stats = labelled
     chosen = np.flatnonzero(stats[:, cv2.CC_STAT_WIDTH] >= min_length_px)
     chosen = chosen[chosen > 0]
     if chosen.size == 0:
@@ -197,10 +197,10 @@ def _racks(
     # bay holds an upright, an aisle or a cross aisle is wider
     closed = np.asarray(cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8)),
                         dtype=np.uint8)
-    labelled = cv2.connectedComponentsWithStats(closed, connectivity=4)
+    labelled = components_stats(closed, 4)
     body = _reopen_cross_aisles(closed, labelled, solid, gap_px=gap_px, min_length_px=min_length_px,
                                 off_pitch=off_pitch)
-    _, parts, stats, _ = labelled if body is closed else cv2.connectedComponentsWithStats(body, connectivity=4)
+    _, parts, stats = labelled if body is closed else components_stats(body, 4)
     w, h, area = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT], stats[:, cv2.CC_STAT_AREA]
     keep = np.flatnonzero((w >= min_length_px) & (h >= min_depth_px) & (area >= 0.3 * w * h))
     keep = keep[keep > 0]

@@ -7,7 +7,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
-from services.grid_decomposition.arrays import Components, components, label_counts
+from services.grid_decomposition.arrays import Components, components, components_stats, label_counts
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -123,7 +123,7 @@ def wall_furniture(
     radius = max(1, round(min_thickness_m / resolution_m / 2))
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     thick = cv2.morphologyEx(obstacle.astype(np.uint8), cv2.MORPH_OPEN, disk)
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(thick, connectivity=8)
+    n, parts, stats = components_stats(thick, 8)
     keep = stats[:, cv2.CC_STAT_AREA] <= max_area_m2 / resolution_m**2
     keep[0] = False
     keep[np.unique(np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]])] = False

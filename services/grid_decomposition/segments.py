@@ -9,7 +9,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import distinct, label_counts, unique_inverse
+from services.grid_decomposition.arrays import components_stats, distinct, label_counts, unique_inverse
 
 
 def fill_from_neighbours(
@@ -124,7 +124,7 @@ def segment_image(
         out = fill_from_neighbours(out, small)
         alone = small & (out == 0)
         if alone.any():
-            _n, pieces, stats, _ = cv2.connectedComponentsWithStats(alone.astype(np.uint8), connectivity=4)
+            _n, pieces, stats = components_stats(alone.astype(np.uint8), 4)
             keep = stats[:, cv2.CC_STAT_AREA] >= min_area_px // 2
             keep[0] = False
             ids = np.where(keep, np.cumsum(keep) + next_id - 1, 0)
