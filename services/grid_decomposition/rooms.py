@@ -7,7 +7,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
-from services.grid_decomposition.arrays import Components, components, components_stats, label_counts
+from services.grid_decomposition.arrays import Components, components, components_stats, label_counts, label_max
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -236,8 +236,7 @@ def segment_rooms(
         )
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
-    widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)  # clearance >= 0: a max per segment
-    np.maximum.at(widest, seg.ravel(), clearance.ravel())
+    widest = label_max(seg, clearance, int(seg.max()) + 1)[0]  # clearance >= 0: a max per segment
     narrow = widest * resolution_m < room_min_half_width_m
     rooms = merge_small_segments(
         seg,

@@ -110,7 +110,7 @@ def segment_image(
     seg = np.take(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
     seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
-    pieces, n_pieces, owner, area = _pieces(seg)
+    piece_of_run, length, n_pieces, owner, area = _piece_runs(seg)
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
     order = np.lexsort((np.arange(n_pieces + 1), owner))
     big = (area >= min_area_px) & (owner > 0)
@@ -118,8 +118,9 @@ def segment_image(
     kept = order[big[order]]
     lut[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
     next_id = kept.size + 1
-    out = np.take(lut, pieces)
-    small = np.take((owner > 0) & ~big, pieces)
+    # the lookups per run, then spread over the run's pixels: far fewer runs than pixels
+    out = np.repeat(lut[piece_of_run], length).reshape(seg.shape)
+    small = np.repeat(((owner > 0) & ~big)[piece_of_run], length).reshape(seg.shape)
     if small.any():
         out = fill_from_neighbours(out, small)
         alone = small & (out == 0)
@@ -140,15 +141,16 @@ def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32]
     joined runs are labelled as a graph, and pieces are numbered by their first pixel in raster
     order, as OpenCV numbers the components of an image.
     """
-    pieces, n, _, _ = _pieces(seg)
-    return pieces, n
+    piece_of_run, length, n, _, _ = _piece_runs(seg)
+    return np.repeat(piece_of_run, length).reshape(seg.shape), n
 
 
-def _pieces(
+def _piece_runs(
     seg: npt.NDArray[np.int32],
-) -> tuple[npt.NDArray[np.int32], int, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """:func:`same_value_pieces`, and each piece's value and pixel count (index 0: the zero pixels) from its runs."""
-    h, w = seg.shape
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64], int, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """:func:`same_value_pieces` by runs: the piece of each run of equal values along the rows (raster order)
+    and the run's length, the number of pieces, each piece's value and pixel count (index 0: the zero pixels)."""
+    w = seg.shape[1]
     flat = np.ascontiguousarray(seg, dtype=np.int32).ravel()
     start = np.empty(flat.size, dtype=bool)
     start[0] = True
@@ -178,7 +180,7 @@ def _pieces(
     owner = np.zeros(ids.size + 1, dtype=np.int64)
     owner[piece_of_run] = value  # a piece's runs share its value; piece 0's are 0
     area = np.bincount(piece_of_run, weights=length, minlength=ids.size + 1).astype(np.int64)
-    return np.repeat(piece_of_run, length).reshape(h, w), int(ids.size), owner, area
+    return piece_of_run, length, int(ids.size), owner, area
 
 
 def merge_small_segments(
@@ -264,20 +266,41 @@ def _relabel(
     return _apply(lut, seg)
 
 
-def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
-    """``lut[seg]``; a copy of ``seg`` when ``lut`` changes no id (most calls on a warehouse)."""
+def _value_runs(seg: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Value and length of each run of equal values of a non-empty image in raster order (runs may cross rows)."""
+    flat = np.ascontiguousarray(seg).ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    first = np.flatnonzero(start)
+    return flat[first].astype(np.int64, copy=False), np.diff(np.append(first, flat.size))
+
+
+def _apply(
+    lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32], runs: tuple[npt.NDArray[np.int64], ...] | None = None
+) -> npt.NDArray[np.int32]:
+    """``lut[seg]``; a copy of ``seg`` when ``lut`` changes no id (most calls on a warehouse).
+
+    Looked up once per run of equal ids (``runs``: :func:`_value_runs` of ``seg`` when known) and spread
+    over the run's pixels: a segment image has far fewer runs than pixels.
+    """
     if np.array_equal(lut, np.arange(lut.size)):
         return np.array(seg, dtype=np.int32, copy=True)
-    out: npt.NDArray[np.int32] = np.take(lut, seg)  # faster than lut[seg], the same values
-    return out
+    if seg.size == 0:
+        return np.zeros(seg.shape, dtype=lut.dtype)
+    value, length = _value_runs(seg) if runs is None else runs
+    return np.repeat(lut[value], length).reshape(seg.shape)
 
 
 def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     """Ids 1..N in the order of the old ids, 0 kept."""
-    present = label_counts(seg, int(seg.max(initial=0)) + 1)[0] > 0
+    if seg.size == 0:
+        return np.array(seg, dtype=np.int32, copy=True)
+    runs = _value_runs(seg)
+    present = np.bincount(runs[0]) > 0
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
-    return _apply(lut, seg)
+    return _apply(lut, seg, runs)
 
 
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
