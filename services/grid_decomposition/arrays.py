@@ -157,6 +157,32 @@ def label_max(
     return out, count
 
 
+def value_runs(image: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Value and length of each run of equal values of a non-empty image in raster order (runs cross rows)."""
+    flat = np.ascontiguousarray(image).ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    first = np.flatnonzero(start)
+    return flat[first].astype(np.int64, copy=False), np.diff(np.append(first, flat.size))
+
+
+def lookup(
+    lut: npt.NDArray[np.int32],
+    image: npt.NDArray[np.integer],
+    runs: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None,
+) -> npt.NDArray[np.int32]:
+    """``lut[image]`` (non-negative ids), looked up once per run of equal ids and spread over the run's pixels.
+
+    A label image has far fewer runs than pixels: on a 9 Mpx hall this is many times faster than the
+    gather of every pixel. ``runs`` is :func:`value_runs` of ``image``, when known.
+    """
+    if image.size == 0:
+        return np.zeros(image.shape, dtype=lut.dtype)
+    value, length = value_runs(image) if runs is None else runs
+    return np.repeat(lut[value], length).reshape(image.shape)
+
+
 def components_stats(
     mask: npt.NDArray[np.bool_] | npt.NDArray[np.uint8] | cv2.typing.MatLike, connectivity: int
 ) -> tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]:

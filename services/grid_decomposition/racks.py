@@ -33,7 +33,15 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import Components, components, components_stats, label_counts, unique_inverse
+from services.grid_decomposition.arrays import (
+    Components,
+    components,
+    components_stats,
+    label_counts,
+    lookup,
+    unique_inverse,
+    value_runs,
+)
 from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
@@ -914,10 +922,11 @@ def place_segments(
         largest[owner[order][first]] = order[first]
         target = np.where(size >= min_area_px, np.arange(size.size), largest[owner])
         out[cell] = n_old + layout.cell_labels.size + target[pieces]
-    present = label_counts(out, int(out.max()) + 1)[0] > 0
+    runs = value_runs(out)
+    present = np.bincount(runs[0]) > 0
     present[0] = True
     lut = (np.cumsum(present) - 1).astype(np.int32)
-    return lut[out], np.where(inside, place, 0).astype(np.int32, copy=False)
+    return lookup(lut, out, runs), np.where(inside, place, 0).astype(np.int32, copy=False)
 
 
 def floor_objects(

@@ -9,7 +9,14 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import components_stats, distinct, label_counts, unique_inverse
+from services.grid_decomposition.arrays import (
+    components_stats,
+    distinct,
+    label_counts,
+    lookup,
+    unique_inverse,
+    value_runs,
+)
 
 
 def fill_from_neighbours(
@@ -266,41 +273,24 @@ def _relabel(
     return _apply(lut, seg)
 
 
-def _value_runs(seg: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Value and length of each run of equal values of a non-empty image in raster order (runs may cross rows)."""
-    flat = np.ascontiguousarray(seg).ravel()
-    start = np.empty(flat.size, dtype=bool)
-    start[0] = True
-    np.not_equal(flat[1:], flat[:-1], out=start[1:])
-    first = np.flatnonzero(start)
-    return flat[first].astype(np.int64, copy=False), np.diff(np.append(first, flat.size))
-
-
-def _apply(
-    lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32], runs: tuple[npt.NDArray[np.int64], ...] | None = None
-) -> npt.NDArray[np.int32]:
-    """``lut[seg]``; a copy of ``seg`` when ``lut`` changes no id (most calls on a warehouse).
-
-    Looked up once per run of equal ids (``runs``: :func:`_value_runs` of ``seg`` when known) and spread
-    over the run's pixels: a segment image has far fewer runs than pixels.
-    """
+def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """``lut[seg]``; a copy of ``seg`` when ``lut`` changes no id (most calls on a warehouse)."""
     if np.array_equal(lut, np.arange(lut.size)):
         return np.array(seg, dtype=np.int32, copy=True)
-    if seg.size == 0:
-        return np.zeros(seg.shape, dtype=lut.dtype)
-    value, length = _value_runs(seg) if runs is None else runs
-    return np.repeat(lut[value], length).reshape(seg.shape)
+    return lookup(lut, seg)
 
 
 def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     """Ids 1..N in the order of the old ids, 0 kept."""
     if seg.size == 0:
         return np.array(seg, dtype=np.int32, copy=True)
-    runs = _value_runs(seg)
+    runs = value_runs(seg)
     present = np.bincount(runs[0]) > 0
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
-    return _apply(lut, seg, runs)
+    if np.array_equal(lut, np.arange(lut.size)):
+        return np.array(seg, dtype=np.int32, copy=True)
+    return lookup(lut, seg, runs)
 
 
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
@@ -333,9 +323,9 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
         n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=8)
         view = out[box]
         view[(seg[box] == sid) & barrier[box]] = 0
-        for k in range(2, n):
-            view[pieces == k] = next_id
-            next_id += 1
+        more = pieces >= 2  # piece 1 keeps the segment's id, piece k >= 2 gets the next id in turn
+        view[more] = pieces[more] + (next_id - 2)
+        next_id += max(n - 2, 0)
     return fill_from_neighbours(out, barrier & (seg > 0))
 
 
