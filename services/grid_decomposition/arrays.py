@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import TypeVar
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
 _DENSE_PER_VALUE = 4  # a count per id while the ids' range is at most this many times the values
+_Value = TypeVar("_Value", bound=np.generic)
 
 
 def distinct(values: npt.NDArray[np.int64], scratch: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
@@ -161,17 +163,17 @@ def value_runs(image: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64], n
     """Value and length of each run of equal values of a non-empty image in raster order (runs cross rows)."""
     flat = np.ascontiguousarray(image).ravel()
     start = np.empty(flat.size, dtype=bool)
-    start[0] = True
+    start[:1] = True
     np.not_equal(flat[1:], flat[:-1], out=start[1:])
     first = np.flatnonzero(start)
     return flat[first].astype(np.int64, copy=False), np.diff(np.append(first, flat.size))
 
 
 def lookup(
-    lut: npt.NDArray[np.int32],
+    lut: npt.NDArray[_Value],
     image: npt.NDArray[np.integer],
     runs: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None,
-) -> npt.NDArray[np.int32]:
+) -> npt.NDArray[_Value]:
     """``lut[image]`` (non-negative ids), looked up once per run of equal ids and spread over the run's pixels.
 
     A label image has far fewer runs than pixels: on a 9 Mpx hall this is many times faster than the

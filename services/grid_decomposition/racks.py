@@ -843,7 +843,7 @@ def face_places(
     n_lab = len(PlaceLabel)
     # free pixels per (face, place label), counted from the runs of equal keys along the rows
     dtype = np.dtype(np.int32 if (n_faces + 1) * n_lab < 2**31 else np.int64)
-    key = face_image.astype(dtype, copy=False) * n_lab + layout.cell_labels.astype(dtype)[layout.cells]
+    key = face_image.astype(dtype, copy=False) * n_lab + lookup(layout.cell_labels.astype(dtype), layout.cells)
     votes = label_counts(key, (n_faces + 1) * n_lab, free)[1].reshape(n_faces + 1, n_lab)
     best = votes[:, 1:].argmax(axis=1) + 1
     majority = votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1)
@@ -910,10 +910,14 @@ def place_segments(
     np.copyto(out, 0, where=in_cells & ~free)  # uprights and pallets in a rack place belong to no region
     np.add(place, n_old, out=out, where=inside)
     # a rack keeps the pallet cells the warehouse floor cut it into (a region per bay and side)
-    cell = inside & rack[place] & (segments > 0)
+    cell = inside & lookup(rack, place) & (segments > 0)
     if cell.any():
-        keys, pieces = unique_inverse(place[cell].astype(np.int64) * n_old + segments[cell])
-        size = np.bincount(pieces)
+        # the (place, segment) keys of the cell pixels from the runs of equal place, segment and cell along the
+        # rows: far fewer than the pixels (raster order, so the keys and their order are those of the pixels)
+        run_at, run_length = _joint_runs(place, segments, cell)
+        on = cell.ravel()[run_at]
+        keys, pieces = unique_inverse(place.ravel()[run_at[on]].astype(np.int64) * n_old + segments.ravel()[run_at[on]])
+        size = np.bincount(pieces, weights=run_length[on]).astype(np.int64)
         # a crumb joins the largest piece of its rack
         owner = keys // n_old
         order = np.lexsort((-size, owner))
@@ -921,12 +925,26 @@ def place_segments(
         largest = np.zeros(int(owner.max()) + 1, dtype=np.int64)
         largest[owner[order][first]] = order[first]
         target = np.where(size >= min_area_px, np.arange(size.size), largest[owner])
-        out[cell] = n_old + layout.cell_labels.size + target[pieces]
+        out[cell] = np.repeat(n_old + layout.cell_labels.size + target[pieces], run_length[on])
     runs = value_runs(out)
     present = np.bincount(runs[0]) > 0
     present[0] = True
     lut = (np.cumsum(present) - 1).astype(np.int32)
     return lookup(lut, out, runs), np.where(inside, place, 0).astype(np.int32, copy=False)
+
+
+def _joint_runs(
+    *images: npt.NDArray[np.generic],
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Flat index of the first pixel and length of each run along the rows over which every image is constant."""
+    w = images[0].shape[1]
+    start = np.zeros(images[0].size, dtype=bool)
+    start[::w] = True
+    for image in images:
+        flat = np.ascontiguousarray(image).ravel()
+        start[1:] |= flat[1:] != flat[:-1]
+    first = np.flatnonzero(start)
+    return first, np.diff(np.append(first, start.size))
 
 
 def floor_objects(

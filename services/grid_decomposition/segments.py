@@ -114,7 +114,7 @@ def segment_image(
     (H, W) int32
         Segment ids 1..N (consecutive), 0 off free space.
     """
-    seg = np.take(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
+    seg = lookup(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
     seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
     piece_of_run, length, n_pieces, owner, area = _piece_runs(seg)
