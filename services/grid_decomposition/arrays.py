@@ -185,6 +185,41 @@ def lookup(
     return np.repeat(lut[value], length).reshape(image.shape)
 
 
+def label_boxes(labels: npt.NDArray[np.integer], max_label: int = 0) -> list[tuple[slice, slice] | None]:
+    """``scipy.ndimage.find_objects(labels, max_label)`` of a 2-D label image (non-negative ids), from its runs.
+
+    The rows and columns each label spans, from the runs of equal labels along the rows: a label image of
+    large regions has far fewer runs than pixels. ``None`` for an id without a pixel; ``max_label`` 0: up to
+    the largest id.
+    """
+    h, w = labels.shape
+    if labels.size == 0:
+        return [None] * max_label
+    flat = np.ascontiguousarray(labels).ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    start[::w] = True
+    first = np.flatnonzero(start)
+    length = np.diff(np.append(first, flat.size))
+    label = flat[first].astype(np.intp)
+    n = (int(label.max(initial=0)) if max_label <= 0 else max_label) + 1
+    keep = (label > 0) & (label < n)
+    first, length, label = first[keep], length[keep], label[keep]
+    row = first // w
+    col = first - row * w
+    r0, c0 = np.full(n, h, dtype=np.int64), np.full(n, w, dtype=np.int64)
+    r1, c1 = np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64)
+    np.minimum.at(r0, label, row)
+    np.maximum.at(r1, label, row)
+    np.minimum.at(c0, label, col)
+    np.maximum.at(c1, label, col + length - 1)
+    return [
+        (slice(a, b + 1), slice(c, d + 1)) if b >= 0 else None
+        for a, b, c, d in zip(r0[1:].tolist(), r1[1:].tolist(), c0[1:].tolist(), c1[1:].tolist(), strict=True)
+    ]
+
+
 def components_stats(
     mask: npt.NDArray[np.bool_] | npt.NDArray[np.uint8] | cv2.typing.MatLike, connectivity: int
 ) -> tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]:

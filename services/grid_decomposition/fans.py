@@ -5,9 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
-from services.grid_decomposition.arrays import components_stats, near
+from services.grid_decomposition.arrays import components_stats, label_boxes, near
 from services.grid_decomposition.rooms import open_share
 
 
@@ -63,7 +62,7 @@ def split_fans(
     ring = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     next_id = int(segments.max()) + 1
     min_area_px = min_area_m2 / resolution_m**2
-    for k, found in enumerate(ndimage.find_objects(segments), start=1):
+    for k, found in enumerate(label_boxes(segments), start=1):
         if found is None or fixed[k]:
             continue
         box = tuple(slice(max(0, s.start - radius), s.stop + radius) for s in found)

@@ -29,7 +29,6 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -37,6 +36,7 @@ from services.grid_decomposition.arrays import (
     Components,
     components,
     components_stats,
+    label_boxes,
     label_counts,
     lookup,
     unique_inverse,
@@ -1012,11 +1012,12 @@ def pocket_merges(
     if not rooms:
         return merges
     area = label_counts(segments, max(int(segments.max()), *rooms) + 1)[0]
-    boxes = ndimage.find_objects(segments, max_label=max(rooms))
+    boxes = label_boxes(segments, max(rooms))
     for sid in rooms:
-        if area[sid] == 0 or (max_area_px is not None and area[sid] > max_area_px):
+        found = boxes[sid - 1]  # None without a pixel
+        if found is None or (max_area_px is not None and area[sid] > max_area_px):
             continue
-        rows, cols = boxes[sid - 1]
+        rows, cols = found
         r0, r1 = max(rows.start - 2, 0), min(rows.stop + 2, h)
         c0, c1 = max(cols.start - 2, 0), min(cols.stop + 2, w)
         mask = segments[r0:r1, c0:c1] == sid

@@ -5,9 +5,15 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
-from services.grid_decomposition.arrays import Components, components, components_stats, label_counts, label_max
+from services.grid_decomposition.arrays import (
+    Components,
+    components,
+    components_stats,
+    label_boxes,
+    label_counts,
+    label_max,
+)
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -323,7 +329,7 @@ def _outside_rays(
     out = narrow & (_share(seg, rays) > max_ray_share)
     ids = np.flatnonzero(out)
     if ids.size:
-        boxes = ndimage.find_objects(seg, max_label=int(ids.max()))
+        boxes = label_boxes(seg, int(ids.max()))
         middles = np.zeros((ids.size, 2), dtype=np.int64)
         for i, k in enumerate(ids.tolist()):
             box = boxes[k - 1]

@@ -5,13 +5,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from services.grid_decomposition.arrays import (
     components_stats,
     distinct,
+    label_boxes,
     label_counts,
     lookup,
     unique_inverse,
@@ -317,7 +317,7 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
     touched = np.zeros(next_id, dtype=bool)
     touched[seg[barrier]] = True
     touched[0] = False
-    for sid, box in enumerate(ndimage.find_objects(seg), start=1):  # a segment's box is its own pixels'
+    for sid, box in enumerate(label_boxes(seg), start=1):  # a segment's box is its own pixels'
         if box is None or not touched[sid]:
             continue
         n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=8)

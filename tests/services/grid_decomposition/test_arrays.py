@@ -5,10 +5,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from services.grid_decomposition.arrays import (
     components_stats,
     distinct,
+    label_boxes,
     label_counts,
     label_max,
     label_sums,
@@ -117,3 +119,14 @@ def test_lookup_by_runs_is_the_gather_of_every_pixel(seed: int) -> None:
     assert np.all(value[1:] != value[:-1])
     flags = rng.random(9) < 0.5
     assert np.array_equal(lookup(flags, image), flags[image])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_label_boxes_are_scipys_find_objects(seed: int) -> None:
+    """Missing ids give None, ``max_label`` cuts the list or pads it with None."""
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(1, 40, 2))
+    labels = np.repeat(rng.integers(0, int(rng.integers(1, 12)), (h, w)), 1 + seed % 3, axis=1).astype(np.int32)
+    assert label_boxes(labels) == ndimage.find_objects(labels)
+    for max_label in (1, 3, 20):
+        assert label_boxes(labels, max_label) == ndimage.find_objects(labels, max_label=max_label)
