@@ -77,24 +77,27 @@ def find_peaks_ricker(
     min_length = math.ceil(cwt.shape[0] / 4)
     peaks = []
     with np.errstate(divide="ignore", invalid="ignore"):
-        for rows, cols in ridges:
-            if len(rows) < min_length:
+        for length, row, col in ridges:
+            if length < min_length:
                 continue
-            snr = abs(cwt[rows[0], cols[0]] / noise[cols[0]])
+            snr = abs(cwt[row, col] / noise[col])
             if not snr < min_snr:
-                peaks.append(int(cols[0]))
+                peaks.append(col)
     return np.sort(np.asarray(peaks, dtype=np.int64))
 
 
 def _ridge_lines(
     maxima: npt.NDArray[np.bool_], max_distances: npt.NDArray[np.float64], gap_thresh: int
-) -> list[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]]:
-    """scipy's ``_identify_ridge_lines`` from the relative maxima of each row of the CWT (``maxima``).
+) -> list[tuple[int, int, int]]:
+    """Length and first (row, column) of each ridge scipy's ``_identify_ridge_lines`` finds, in its order.
 
-    The same ridges, built the same way row by row from the widest wavelet down: each maximum joins the
-    ridge whose last column is nearest (the first such ridge, within the row's distance) or starts a new
-    one, and a ridge ends after more than ``gap_thresh`` rows without a maximum. The distances of a row's
-    maxima to the ridges are found at once instead of one maximum at a time.
+    ``maxima``: the relative maxima of each row of the CWT. The same ridges, built the same way row by
+    row from the widest wavelet down: each maximum joins the ridge whose last column is nearest (the first
+    such ridge, within the row's distance) or starts a new one, and a ridge ends after more than
+    ``gap_thresh`` rows without a maximum. The distances of a row's maxima to the ridges are found at once
+    instead of one maximum at a time. scipy returns each ridge's rows and columns scattered by the
+    ``argsort`` of its rows; its first entry is that of the ridge's last row when no row repeats (rows are
+    added in falling order), and is found by the same ``argsort`` when one does.
     """
     has_max = np.flatnonzero(maxima.any(axis=1))
     if has_max.size == 0:
@@ -127,9 +130,10 @@ def _ridge_lines(
                 ended.append(ridges.pop(i))
     out = []
     for rows_of, cols_of, _ in ended + ridges:
-        order = np.argsort(rows_of)
-        rows, cols = np.zeros_like(order), np.zeros_like(order)
-        rows[order] = rows_of
-        cols[order] = cols_of
-        out.append((rows, cols))
+        if len(set(rows_of)) == len(rows_of):
+            out.append((len(rows_of), rows_of[-1], cols_of[-1]))
+        else:
+            order = np.argsort(rows_of)
+            first = int(np.flatnonzero(order == 0)[0])  # scipy's rows[order] = rows_of puts this entry first
+            out.append((len(rows_of), rows_of[first], cols_of[first]))
     return out
