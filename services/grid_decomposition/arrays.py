@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import TypeVar
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
 _DENSE_PER_VALUE = 4  # a count per id while the ids' range is at most this many times the values
+_Value = TypeVar("_Value", bound=np.generic)
 
 
 def distinct(values: npt.NDArray[np.int64], scratch: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
@@ -157,6 +159,117 @@ def label_max(
     return out, count
 
 
+def value_runs(image: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Value and length of each run of equal values of a non-empty image in raster order (runs cross rows)."""
+    flat = np.ascontiguousarray(image).ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[:1] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    first = np.flatnonzero(start)
+    return flat[first].astype(np.int64, copy=False), np.diff(np.append(first, flat.size))
+
+
+def lookup(
+    lut: npt.NDArray[_Value],
+    image: npt.NDArray[np.integer],
+    runs: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None,
+) -> npt.NDArray[_Value]:
+    """``lut[image]`` (non-negative ids), looked up once per run of equal ids and spread over the run's pixels.
+
+    A label image has far fewer runs than pixels: on a 9 Mpx hall this is many times faster than the
+    gather of every pixel. ``runs`` is :func:`value_runs` of ``image``, when known.
+    """
+    if image.size == 0:
+        return np.zeros(image.shape, dtype=lut.dtype)
+    value, length = value_runs(image) if runs is None else runs
+    return np.repeat(lut[value], length).reshape(image.shape)
+
+
+def label_boxes(labels: npt.NDArray[np.integer], max_label: int = 0) -> list[tuple[slice, slice] | None]:
+    """``scipy.ndimage.find_objects(labels, max_label)`` of a 2-D label image (non-negative ids), from its runs.
+
+    The rows and columns each label spans, from the runs of equal labels along the rows: a label image of
+    large regions has far fewer runs than pixels. ``None`` for an id without a pixel; ``max_label`` 0: up to
+    the largest id.
+    """
+    h, w = labels.shape
+    if labels.size == 0:
+        return [None] * max_label
+    flat = np.ascontiguousarray(labels).ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[0] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    start[::w] = True
+    first = np.flatnonzero(start)
+    length = np.diff(np.append(first, flat.size))
+    label = flat[first].astype(np.intp)
+    n = (int(label.max(initial=0)) if max_label <= 0 else max_label) + 1
+    keep = (label > 0) & (label < n)
+    first, length, label = first[keep], length[keep], label[keep]
+    row = first // w
+    col = first - row * w
+    r0, c0 = np.full(n, h, dtype=np.int64), np.full(n, w, dtype=np.int64)
+    r1, c1 = np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64)
+    np.minimum.at(r0, label, row)
+    np.maximum.at(r1, label, row)
+    np.minimum.at(c0, label, col)
+    np.maximum.at(c1, label, col + length - 1)
+    return [
+        (slice(a, b + 1), slice(c, d + 1)) if b >= 0 else None
+        for a, b, c, d in zip(r0[1:].tolist(), r1[1:].tolist(), c0[1:].tolist(), c1[1:].tolist(), strict=True)
+    ]
+
+
+def components_stats(
+    mask: npt.NDArray[np.bool_] | npt.NDArray[np.uint8] | cv2.typing.MatLike, connectivity: int
+) -> tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    """``cv2.connectedComponentsWithStats(mask, connectivity=connectivity)`` without the centroids, 3-5 times faster.
+
+    The labels are ``cv2.connectedComponents``' (the same labelling, without OpenCV's per-pixel statistics);
+    the left, top, width, height and area of every label, the background's included, come from the runs of
+    equal labels along the rows (whole numbers, exact in any order). Label 0 without a pixel gets OpenCV's
+    values for it, ``(-1, 2**31 - 1, 0, 0, 0)``.
+
+    Returns
+    -------
+    n : int
+        Labels, the background's included.
+    labels : (H, W) int32
+    stats : (n, 5) int32
+        ``cv2.CC_STAT_LEFT``, ``TOP``, ``WIDTH``, ``HEIGHT``, ``AREA`` per label.
+    """
+    image = np.asarray(mask)
+    bytes_ = np.asarray(image.view(np.uint8) if image.dtype == np.bool_ else image, dtype=np.uint8)
+    n, found = cv2.connectedComponents(bytes_, connectivity=connectivity, ltype=cv2.CV_32S)
+    labels = np.asarray(found, dtype=np.int32)
+    h, w = labels.shape
+    flat = labels.ravel()
+    start = np.empty(flat.size, dtype=bool)
+    start[:1] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    start[::w] = True
+    first = np.flatnonzero(start)
+    length = np.diff(np.append(first, flat.size))
+    label = flat[first].astype(np.intp)
+    row = first // w
+    col = first - row * w
+    left, top = np.full(n, w, dtype=np.int64), np.full(n, h, dtype=np.int64)
+    right, bottom = np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64)
+    np.minimum.at(left, label, col)
+    np.maximum.at(right, label, col + length - 1)
+    np.minimum.at(top, label, row)
+    np.maximum.at(bottom, label, row)
+    stats = np.empty((n, 5), dtype=np.int32)
+    stats[:, cv2.CC_STAT_LEFT] = left
+    stats[:, cv2.CC_STAT_TOP] = top
+    stats[:, cv2.CC_STAT_WIDTH] = right - left + 1
+    stats[:, cv2.CC_STAT_HEIGHT] = bottom - top + 1
+    stats[:, cv2.CC_STAT_AREA] = np.bincount(label, weights=length, minlength=n)
+    empty = stats[:, cv2.CC_STAT_AREA] == 0
+    stats[empty] = (-1, np.iinfo(np.int32).max, 0, 0, 0)
+    return n, labels, stats
+
+
 @dataclass(frozen=True)
 class Components:
     """The 8-connected components of a mask, as ``cv2.connectedComponentsWithStats`` gives them."""
@@ -171,8 +284,8 @@ def components(mask: npt.NDArray[np.bool_]) -> Components:
     The obstacles for the furniture, the line search's structure and the free-standing obstacles; the
     occupied cells for the shelf dashes and the floor objects.
     """
-    _n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
-    return Components(np.asarray(labels, dtype=np.int32), np.asarray(stats, dtype=np.int32))
+    _n, labels, stats = components_stats(mask, 8)
+    return Components(labels, stats)
 
 
 @functools.lru_cache(maxsize=32, typed=True)

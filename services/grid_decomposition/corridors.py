@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import components_stats
 from services.grid_decomposition.radiogram import Line
 
 
@@ -45,8 +46,10 @@ def _across(shape: tuple[int, int], top: int, left: int, angle_rad: float) -> np
 
 def _runs(flags: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Starts and ends (exclusive) of the runs of True."""
-    edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
-    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    padded = np.zeros(flags.size + 2, dtype=bool)
+    padded[1:-1] = flags
+    edges = np.flatnonzero(padded[1:] != padded[:-1])  # a start, then its end, and so on
+    return edges[0::2], edges[1::2]
 
 
 def corridor_bands(
@@ -92,8 +95,9 @@ def corridor_bands(
         walls = np.bincount(key[occupied], minlength=nu * nt).reshape(nu, nt) > 0
         # a wall along offset v: an occupied cell within the tolerance across
         walls = cv2.dilate(walls.astype(np.uint8), np.ones((2 * tolerance_px + 1, 1), np.uint8)).astype(bool)
-        every_c = np.vstack([np.zeros((1, nt), np.int64), np.cumsum(every, axis=0)])
-        inside_c = np.vstack([np.zeros((1, nt), np.int64), np.cumsum(inside, axis=0)])
+        every_c, inside_c = np.zeros((nu + 1, nt), np.int32), np.zeros((nu + 1, nt), np.int32)  # counts < 2**31
+        np.cumsum(every, axis=0, out=every_c[1:])
+        np.cumsum(inside, axis=0, out=inside_c[1:])
         offsets = sorted(
             {round(ln.offset_px) - u0 for ln in lines if round(ln.angle_rad, 4) == angle} & set(range(nu))
         )
@@ -108,9 +112,9 @@ def corridor_bands(
                 total = every_c[hi] - every_c[lo]
                 clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
                 length = max(round(min_length_m / resolution_m), round(min_length_widths * width))
-                for s, e in zip(*_runs(clear), strict=True):
-                    if e - s < length:
-                        continue
+                starts, ends = _runs(clear)
+                long = ends - starts >= length
+                for s, e in zip(starts[long], ends[long], strict=True):
                     side_a, side_b = walls[a, s:e].mean(), walls[b, s:e].mean()
                     if min(side_a, side_b) >= min_side_wall and (side_a + side_b) / 2 >= min_wall:
                         found.append(((side_a + side_b) / 2, Band(angle, a + u0, b + u0, int(s) + t0, int(e) - 1 + t0)))
@@ -194,7 +198,7 @@ def part_rooms_from_corridors(
         for band in bands:
             cut |= _side_cuts(band, *coordinates[band.angle_rad], cut_thickness_px)
         pieces = region & ~cut
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(pieces.astype(np.uint8), connectivity=4)
+        n, labels, stats = components_stats(pieces.astype(np.uint8), 4)
         offered = stats[:, cv2.CC_STAT_AREA] >= min_area
         offered[0] = False
         for band in bands:  # a band's piece holds a square of its strip, not only the end of a crossing band

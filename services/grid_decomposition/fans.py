@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
+from services.grid_decomposition.arrays import components_stats, label_boxes, near
 from services.grid_decomposition.rooms import open_share
 
 
@@ -62,27 +62,26 @@ def split_fans(
     ring = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     next_id = int(segments.max()) + 1
     min_area_px = min_area_m2 / resolution_m**2
-    for k, found in enumerate(ndimage.find_objects(segments), start=1):
+    for k, found in enumerate(label_boxes(segments), start=1):
         if found is None or fixed[k]:
             continue
         box = tuple(slice(max(0, s.start - radius), s.stop + radius) for s in found)
         mine = segments[box] == k
         if mine.sum() < min_segment_area_m2 / resolution_m**2:
             continue
-        # the opening by distances (a disc's erosion and dilation are thresholds of the distance transform)
-        inner = cv2.distanceTransform(mine.astype(np.uint8), cv2.DIST_L2, 5) > radius
-        n, parts, stats, _ = cv2.connectedComponentsWithStats(inner.astype(np.uint8), connectivity=8)
+        # the opening by distances (a disc's erosion and dilation are thresholds of the distance transform,
+        # each one dilation by the transform's own ball: ``near``)
+        inner = ~near(~mine, radius, 5)
+        n, parts, stats = components_stats(inner.astype(np.uint8), 8)
         if n < 2:
             continue
-        largest = parts != 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-        core = mine & (cv2.distanceTransform(largest.astype(np.uint8), cv2.DIST_L2, 5) <= radius)
-        n, parts, stats, _ = cv2.connectedComponentsWithStats((mine & ~core).astype(np.uint8), connectivity=8)
+        core = mine & near(parts == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA])), radius, 5)
+        n, parts, stats = components_stats((mine & ~core).astype(np.uint8), 8)
         big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_px)
         big = big[big > 0]
         if big.size == 0:
             continue
-        thin_share = np.bincount(parts.ravel(), weights=thin[box].ravel(), minlength=n) / np.maximum(
-            stats[:, cv2.CC_STAT_AREA], 1)
+        thin_share = np.bincount(parts[thin[box]], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
         neck = np.bincount(parts[cv2.dilate(core.astype(np.uint8), ring).astype(bool)], minlength=n)
         fans = [c for c in big if thin_share[c] >= min_thin_share and 0 < neck[c] * resolution_m <= max_neck_m]
         if fans:

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import components_stats
 from services.grid_decomposition.segments import fill_from_neighbours, renumber
 
 
@@ -48,7 +49,7 @@ def split_at_necks(
         (padded[:-2, 1:-1] != seg) | (padded[2:, 1:-1] != seg) | (padded[1:-1, :-2] != seg) | (padded[1:-1, 2:] != seg)
     )
     core = (dist > neck_half_width_m / resolution_m) & (seg > 0) & ~border
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
+    n, parts, stats = components_stats(core.astype(np.uint8), 4)
     big = stats[:, cv2.CC_STAT_AREA] >= min_core_area_m2 / resolution_m**2
     big[0] = False
     # each core's segment, from the first pixel of each run of one core along the rows (a core lies in one segment)
@@ -66,8 +67,13 @@ def split_at_necks(
     if not split.any():
         return renumber(seg)
     in_split = split[seg]
-    marker = np.where(in_split & big[parts], parts + n_seg, 0).astype(np.int32)
+    # within the box round the segments split: nothing outside it is marked or filled
+    rows, cols = np.flatnonzero(in_split.any(axis=1)), np.flatnonzero(in_split.any(axis=0))
+    box = (slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1))
+    inside, cores = in_split[box], parts[box]
+    marker = np.where(inside & big[cores], cores + n_seg, 0).astype(np.int32)
     # one fill: it stops by itself once every reachable pixel is taken
-    grown = fill_from_neighbours(marker, in_split, max_iterations=10 * max(1, round(max_growth_m / resolution_m / 10)))
-    out = np.where(in_split & (grown > 0), grown, seg)
+    grown = fill_from_neighbours(marker, inside, max_iterations=10 * max(1, round(max_growth_m / resolution_m / 10)))
+    out = seg.copy()
+    out[box] = np.where(inside & (grown > 0), grown, seg[box])
     return renumber(out)

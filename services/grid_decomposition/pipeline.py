@@ -21,6 +21,7 @@ from services.grid_decomposition.arrays import (
     label_counts,
     label_max,
     label_sums,
+    lookup,
     unique_inverse,
 )
 from services.grid_decomposition.cleaning import clean_occupancy
@@ -545,7 +546,7 @@ def decompose(
             sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
         )
         # the room stage leaves racks alone (a flag per face first: one gather of the face image)
-        floor_px = np.take(structured[component], sub.face_image) | (racks.cells > 0)
+        floor_px = lookup(structured[component], sub.face_image) | (racks.cells > 0)
         segments, cuts = segment_rooms(
             segments,
             clutter,
@@ -638,7 +639,7 @@ def decompose(
         if merges:
             lut = np.arange(int(segments.max()) + 1, dtype=np.int32)
             lut[list(merges)] = list(merges.values())
-            segments = np.take(lut[lut], segments)
+            segments = lookup(lut[lut], segments)
             grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)
             pairs = _pairs(segments, sub)
             regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked,
@@ -676,7 +677,7 @@ def decompose(
         region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
         for k, r in regions.items():
             region_label[k] = r.label.value
-        own = np.take(region_label, segments)  # np.take: a faster gather than indexing, the same values
+        own = lookup(region_label, segments)  # by runs: a faster gather than indexing, the same values
         loose = (labels == PlaceLabel.ROOM.value) | (labels == PlaceLabel.STORAGE.value) & ~floor_px & ~banks.storage
         loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
         labels = np.where(loose & (own > 0), own, labels)

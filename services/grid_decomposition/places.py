@@ -66,18 +66,19 @@ def cast_rays(
     ux, uy = np.tile(dx, n), np.tile(dy, n)
     t = np.zeros(n * n_beams, dtype=np.float32)
     active = np.arange(n * n_beams)
+    ta = t.copy()  # the active beams' own starts, directions and ranges, compacted as beams stop
     for _ in range(64):
         if active.size == 0:
             break
-        ta = t[active]
-        xi = np.rint(x0[active] + ta * ux[active]).astype(np.int64)
-        yi = np.rint(y0[active] + ta * uy[active]).astype(np.int64)
+        xi = np.rint(x0 + ta * ux).astype(np.int64)
+        yi = np.rint(y0 + ta * uy).astype(np.int64)
         at = yi * w + xi
         at[(xi.view(np.uint64) >= w) | (yi.view(np.uint64) >= h)] = off_map  # negative ones too
         d = np.take(flat, at)
         go = (d >= 1.0) & (ta < max_range_px)
-        active = active[go]
-        t[active] = ta[go] + np.maximum(d[go] - 0.5, 1.0)
+        active, x0, y0, ux, uy = active[go], x0[go], y0[go], ux[go], uy[go]
+        ta = ta[go] + np.maximum(d[go] - 0.5, 1.0)
+        t[active] = ta
     return np.minimum(t, max_range_px).reshape(n, n_beams).astype(np.float64)
 
 

@@ -29,18 +29,26 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import Components, components, label_counts, unique_inverse
+from services.grid_decomposition.arrays import (
+    Components,
+    components,
+    components_stats,
+    label_boxes,
+    label_counts,
+    lookup,
+    unique_inverse,
+    value_runs,
+)
 from shared.vocabulary import PlaceLabel
 
 _UNKNOWN = 2
 _OCCUPIED = 1
 _UNCERTAIN = 3  # an obstacle not surely occupied
-# what cv2.connectedComponentsWithStats returns: count, labels, stats, centroids
-_Labelled = tuple[int, cv2.typing.MatLike, cv2.typing.MatLike, cv2.typing.MatLike]
+# what components_stats returns: count, labels, stats
+_Labelled = tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]
 
 
 class RackLayout(NamedTuple):
@@ -144,10 +152,10 @@ def _reopen_cross_aisles(
     simulator's halls: 2.7 m bays, 3.0 m cross aisles). Bays share a pitch: a bridged gap more than ``off_pitch``
     times the median bridged gap of the image's bodies ``min_length_px`` long or longer is a cross aisle, and the
     body is cut there through its whole depth. Where every bay is loaded (only cross aisles bridged) nothing is
-    cut. ``labelled`` is ``cv2.connectedComponentsWithStats(body, connectivity=4)``; ``body`` itself is returned
+    cut. ``labelled`` is ``components_stats(body, 4)``; ``body`` itself is returned
     when nothing is cut.
     """
-    n, parts, stats, _ = labelled
+    n, parts, stats = labelled
     chosen = np.flatnonzero(stats[:, cv2.CC_STAT_WIDTH] >= min_length_px)
     chosen = chosen[chosen > 0]
     if chosen.size == 0:
@@ -197,10 +205,10 @@ def _racks(
     # bay holds an upright, an aisle or a cross aisle is wider
     closed = np.asarray(cv2.morphologyEx(obstacle, cv2.MORPH_CLOSE, np.ones((depth_gap_px, gap_px), np.uint8)),
                         dtype=np.uint8)
-    labelled = cv2.connectedComponentsWithStats(closed, connectivity=4)
+    labelled = components_stats(closed, 4)
     body = _reopen_cross_aisles(closed, labelled, solid, gap_px=gap_px, min_length_px=min_length_px,
                                 off_pitch=off_pitch)
-    _, parts, stats, _ = labelled if body is closed else cv2.connectedComponentsWithStats(body, connectivity=4)
+    _, parts, stats = labelled if body is closed else components_stats(body, 4)
     w, h, area = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT], stats[:, cv2.CC_STAT_AREA]
     keep = np.flatnonzero((w >= min_length_px) & (h >= min_depth_px) & (area >= 0.3 * w * h))
     keep = keep[keep > 0]
@@ -835,7 +843,7 @@ def face_places(
     n_lab = len(PlaceLabel)
     # free pixels per (face, place label), counted from the runs of equal keys along the rows
     dtype = np.dtype(np.int32 if (n_faces + 1) * n_lab < 2**31 else np.int64)
-    key = face_image.astype(dtype, copy=False) * n_lab + layout.cell_labels.astype(dtype)[layout.cells]
+    key = face_image.astype(dtype, copy=False) * n_lab + lookup(layout.cell_labels.astype(dtype), layout.cells)
     votes = label_counts(key, (n_faces + 1) * n_lab, free)[1].reshape(n_faces + 1, n_lab)
     best = votes[:, 1:].argmax(axis=1) + 1
     majority = votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1)
@@ -902,10 +910,14 @@ def place_segments(
     np.copyto(out, 0, where=in_cells & ~free)  # uprights and pallets in a rack place belong to no region
     np.add(place, n_old, out=out, where=inside)
     # a rack keeps the pallet cells the warehouse floor cut it into (a region per bay and side)
-    cell = inside & rack[place] & (segments > 0)
+    cell = inside & lookup(rack, place) & (segments > 0)
     if cell.any():
-        keys, pieces = unique_inverse(place[cell].astype(np.int64) * n_old + segments[cell])
-        size = np.bincount(pieces)
+        # the (place, segment) keys of the cell pixels from the runs of equal place, segment and cell along the
+        # rows: far fewer than the pixels (raster order, so the keys and their order are those of the pixels)
+        run_at, run_length = _joint_runs(place, segments, cell)
+        on = cell.ravel()[run_at]
+        keys, pieces = unique_inverse(place.ravel()[run_at[on]].astype(np.int64) * n_old + segments.ravel()[run_at[on]])
+        size = np.bincount(pieces, weights=run_length[on]).astype(np.int64)
         # a crumb joins the largest piece of its rack
         owner = keys // n_old
         order = np.lexsort((-size, owner))
@@ -913,11 +925,26 @@ def place_segments(
         largest = np.zeros(int(owner.max()) + 1, dtype=np.int64)
         largest[owner[order][first]] = order[first]
         target = np.where(size >= min_area_px, np.arange(size.size), largest[owner])
-        out[cell] = n_old + layout.cell_labels.size + target[pieces]
-    present = label_counts(out, int(out.max()) + 1)[0] > 0
+        out[cell] = np.repeat(n_old + layout.cell_labels.size + target[pieces], run_length[on])
+    runs = value_runs(out)
+    present = np.bincount(runs[0]) > 0
     present[0] = True
     lut = (np.cumsum(present) - 1).astype(np.int32)
-    return lut[out], np.where(inside, place, 0).astype(np.int32, copy=False)
+    return lookup(lut, out, runs), np.where(inside, place, 0).astype(np.int32, copy=False)
+
+
+def _joint_runs(
+    *images: npt.NDArray[np.generic],
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Flat index of the first pixel and length of each run along the rows over which every image is constant."""
+    w = images[0].shape[1]
+    start = np.zeros(images[0].size, dtype=bool)
+    start[::w] = True
+    for image in images:
+        flat = np.ascontiguousarray(image).ravel()
+        start[1:] |= flat[1:] != flat[:-1]
+    first = np.flatnonzero(start)
+    return first, np.diff(np.append(first, start.size))
 
 
 def floor_objects(
@@ -985,11 +1012,12 @@ def pocket_merges(
     if not rooms:
         return merges
     area = label_counts(segments, max(int(segments.max()), *rooms) + 1)[0]
-    boxes = ndimage.find_objects(segments, max_label=max(rooms))
+    boxes = label_boxes(segments, max(rooms))
     for sid in rooms:
-        if area[sid] == 0 or (max_area_px is not None and area[sid] > max_area_px):
+        found = boxes[sid - 1]  # None without a pixel
+        if found is None or (max_area_px is not None and area[sid] > max_area_px):
             continue
-        rows, cols = boxes[sid - 1]
+        rows, cols = found
         r0, r1 = max(rows.start - 2, 0), min(rows.stop + 2, h)
         c0, c1 = max(cols.start - 2, 0), min(cols.stop + 2, w)
         mask = segments[r0:r1, c0:c1] == sid

@@ -5,9 +5,15 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
-from services.grid_decomposition.arrays import Components, components, label_counts
+from services.grid_decomposition.arrays import (
+    Components,
+    components,
+    components_stats,
+    label_boxes,
+    label_counts,
+    label_max,
+)
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
 from services.grid_decomposition.necks import split_at_necks
@@ -123,7 +129,7 @@ def wall_furniture(
     radius = max(1, round(min_thickness_m / resolution_m / 2))
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     thick = cv2.morphologyEx(obstacle.astype(np.uint8), cv2.MORPH_OPEN, disk)
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(thick, connectivity=8)
+    n, parts, stats = components_stats(thick, 8)
     keep = stats[:, cv2.CC_STAT_AREA] <= max_area_m2 / resolution_m**2
     keep[0] = False
     keep[np.unique(np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]])] = False
@@ -257,8 +263,7 @@ def segment_rooms(
             ]
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
-    widest = np.zeros(int(seg.max()) + 1, dtype=np.float32)  # clearance >= 0: a max per segment
-    np.maximum.at(widest, seg.ravel(), clearance.ravel())
+    widest = label_max(seg, clearance, int(seg.max()) + 1)[0]  # clearance >= 0: a max per segment
     narrow = widest * resolution_m < room_min_half_width_m
     rooms = merge_small_segments(
         seg,
@@ -415,7 +420,7 @@ def _outside_rays(
     out = narrow & (_share(seg, rays) > max_ray_share)
     ids = np.flatnonzero(out)
     if ids.size:
-        boxes = ndimage.find_objects(seg, max_label=int(ids.max()))
+        boxes = label_boxes(seg, int(ids.max()))
         middles = np.zeros((ids.size, 2), dtype=np.int64)
         for i, k in enumerate(ids.tolist()):
             box = boxes[k - 1]

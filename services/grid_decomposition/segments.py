@@ -5,11 +5,18 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import distinct, label_counts, unique_inverse
+from services.grid_decomposition.arrays import (
+    components_stats,
+    distinct,
+    label_boxes,
+    label_counts,
+    lookup,
+    unique_inverse,
+    value_runs,
+)
 
 
 def fill_from_neighbours(
@@ -107,10 +114,10 @@ def segment_image(
     (H, W) int32
         Segment ids 1..N (consecutive), 0 off free space.
     """
-    seg = np.take(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
+    seg = lookup(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
     seg[~free] = 0
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
-    pieces, n_pieces, owner, area = _pieces(seg)
+    piece_of_run, length, n_pieces, owner, area = _piece_runs(seg)
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
     order = np.lexsort((np.arange(n_pieces + 1), owner))
     big = (area >= min_area_px) & (owner > 0)
@@ -118,13 +125,14 @@ def segment_image(
     kept = order[big[order]]
     lut[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
     next_id = kept.size + 1
-    out = np.take(lut, pieces)
-    small = np.take((owner > 0) & ~big, pieces)
+    # the lookups per run, then spread over the run's pixels: far fewer runs than pixels
+    out = np.repeat(lut[piece_of_run], length).reshape(seg.shape)
+    small = np.repeat(((owner > 0) & ~big)[piece_of_run], length).reshape(seg.shape)
     if small.any():
         out = fill_from_neighbours(out, small)
         alone = small & (out == 0)
         if alone.any():
-            _n, pieces, stats, _ = cv2.connectedComponentsWithStats(alone.astype(np.uint8), connectivity=4)
+            _n, pieces, stats = components_stats(alone.astype(np.uint8), 4)
             keep = stats[:, cv2.CC_STAT_AREA] >= min_area_px // 2
             keep[0] = False
             ids = np.where(keep, np.cumsum(keep) + next_id - 1, 0)
@@ -140,15 +148,16 @@ def same_value_pieces(seg: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32]
     joined runs are labelled as a graph, and pieces are numbered by their first pixel in raster
     order, as OpenCV numbers the components of an image.
     """
-    pieces, n, _, _ = _pieces(seg)
-    return pieces, n
+    piece_of_run, length, n, _, _ = _piece_runs(seg)
+    return np.repeat(piece_of_run, length).reshape(seg.shape), n
 
 
-def _pieces(
+def _piece_runs(
     seg: npt.NDArray[np.int32],
-) -> tuple[npt.NDArray[np.int32], int, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """:func:`same_value_pieces`, and each piece's value and pixel count (index 0: the zero pixels) from its runs."""
-    h, w = seg.shape
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64], int, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """:func:`same_value_pieces` by runs: the piece of each run of equal values along the rows (raster order)
+    and the run's length, the number of pieces, each piece's value and pixel count (index 0: the zero pixels)."""
+    w = seg.shape[1]
     flat = np.ascontiguousarray(seg, dtype=np.int32).ravel()
     start = np.empty(flat.size, dtype=bool)
     start[0] = True
@@ -178,7 +187,7 @@ def _pieces(
     owner = np.zeros(ids.size + 1, dtype=np.int64)
     owner[piece_of_run] = value  # a piece's runs share its value; piece 0's are 0
     area = np.bincount(piece_of_run, weights=length, minlength=ids.size + 1).astype(np.int64)
-    return np.repeat(piece_of_run, length).reshape(h, w), int(ids.size), owner, area
+    return piece_of_run, length, int(ids.size), owner, area
 
 
 def merge_small_segments(
@@ -268,16 +277,20 @@ def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArra
     """``lut[seg]``; a copy of ``seg`` when ``lut`` changes no id (most calls on a warehouse)."""
     if np.array_equal(lut, np.arange(lut.size)):
         return np.array(seg, dtype=np.int32, copy=True)
-    out: npt.NDArray[np.int32] = np.take(lut, seg)  # faster than lut[seg], the same values
-    return out
+    return lookup(lut, seg)
 
 
 def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     """Ids 1..N in the order of the old ids, 0 kept."""
-    present = label_counts(seg, int(seg.max(initial=0)) + 1)[0] > 0
+    if seg.size == 0:
+        return np.array(seg, dtype=np.int32, copy=True)
+    runs = value_runs(seg)
+    present = np.bincount(runs[0]) > 0
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
-    return _apply(lut, seg)
+    if np.array_equal(lut, np.arange(lut.size)):
+        return np.array(seg, dtype=np.int32, copy=True)
+    return lookup(lut, seg, runs)
 
 
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
@@ -304,15 +317,15 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
     touched = np.zeros(next_id, dtype=bool)
     touched[seg[barrier]] = True
     touched[0] = False
-    for sid, box in enumerate(ndimage.find_objects(seg), start=1):  # a segment's box is its own pixels'
+    for sid, box in enumerate(label_boxes(seg), start=1):  # a segment's box is its own pixels'
         if box is None or not touched[sid]:
             continue
         n, pieces = cv2.connectedComponents((cut[box] == sid).astype(np.uint8), connectivity=8)
         view = out[box]
         view[(seg[box] == sid) & barrier[box]] = 0
-        for k in range(2, n):
-            view[pieces == k] = next_id
-            next_id += 1
+        more = pieces >= 2  # piece 1 keeps the segment's id, piece k >= 2 gets the next id in turn
+        view[more] = pieces[more] + (next_id - 2)
+        next_id += max(n - 2, 0)
     return fill_from_neighbours(out, barrier & (seg > 0))
 
 

@@ -9,6 +9,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import distance_transform_edt
 
+from services.grid_decomposition.arrays import components_stats
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.places import CLUSTERING, one_thread
 
@@ -126,7 +127,7 @@ def _drop_islands(grid: npt.NDArray[np.uint8], n_regions: int, *, min_fraction: 
     out = grid.copy()
     keep = np.zeros(grid.shape, dtype=bool)
     for label in range(1, n_regions + 1):
-        _, parts, stats, _ = cv2.connectedComponentsWithStats((grid == label).astype(np.uint8), connectivity=4)
+        _, parts, stats = components_stats((grid == label).astype(np.uint8), 4)
         big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_fraction * grid.size)
         keep |= np.isin(parts, big[big > 0])
     if keep.any():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -65,21 +66,74 @@ def find_peaks_ricker(
     # scipy's ridge tracking is reused as is; only its per-point noise loop (a Python loop of one
     # scoreatpercentile per signal point, most of find_peaks_cwt's time on long radiograms) is
     # replaced. scipy.signal is imported when first needed (decompose loads it early).
-    from scipy.signal._peak_finding import _cwt, _identify_ridge_lines, _ricker
+    from scipy.signal._peak_finding import _boolrelextrema, _cwt, _ricker
 
     widths = np.atleast_1d(np.asarray(widths))
     cwt = _cwt(np.asarray(signal, dtype=np.float64), _ricker, widths)
-    ridges = _identify_ridge_lines(cwt, widths / 4.0, math.ceil(widths[0]))
+    ridges = _ridge_lines(_boolrelextrema(cwt, np.greater, axis=1, order=1), widths / 4.0, math.ceil(widths[0]))
     if not ridges:
         return np.zeros(0, dtype=np.int64)
     noise = _window_percentile(cwt[0], math.ceil(cwt.shape[1] / 20), noise_percent)
     min_length = math.ceil(cwt.shape[0] / 4)
     peaks = []
     with np.errstate(divide="ignore", invalid="ignore"):
-        for rows, cols in ridges:
-            if len(rows) < min_length:
+        for length, row, col in ridges:
+            if length < min_length:
                 continue
-            snr = abs(cwt[rows[0], cols[0]] / noise[cols[0]])
+            snr = abs(cwt[row, col] / noise[col])
             if not snr < min_snr:
-                peaks.append(int(cols[0]))
+                peaks.append(col)
     return np.sort(np.asarray(peaks, dtype=np.int64))
+
+
+def _ridge_lines(
+    maxima: npt.NDArray[np.bool_], max_distances: npt.NDArray[np.float64], gap_thresh: int
+) -> list[tuple[int, int, int]]:
+    """Length and first (row, column) of each ridge scipy's ``_identify_ridge_lines`` finds, in its order.
+
+    ``maxima``: the relative maxima of each row of the CWT. The same ridges, built the same way row by
+    row from the widest wavelet down: each maximum joins the ridge whose last column is nearest (the first
+    such ridge, within the row's distance) or starts a new one, and a ridge ends after more than
+    ``gap_thresh`` rows without a maximum. The distances of a row's maxima to the ridges are found at once
+    instead of one maximum at a time. scipy returns each ridge's rows and columns scattered by the
+    ``argsort`` of its rows; its first entry is that of the ridge's last row when no row repeats (rows are
+    added in falling order), and is found by the same ``argsort`` when one does.
+    """
+    has_max = np.flatnonzero(maxima.any(axis=1))
+    if has_max.size == 0:
+        return []
+    start_row = int(has_max[-1])
+    # a ridge: its rows, its columns, the rows since it last grew
+    ridges: list[list[Any]] = [[[start_row], [col], 0] for col in np.flatnonzero(maxima[start_row]).tolist()]
+    ended: list[list[Any]] = []
+    for row in range(start_row - 1, -1, -1):
+        cols = np.flatnonzero(maxima[row])
+        for ridge in ridges:
+            ridge[2] += 1
+        if ridges and cols.size:
+            diffs = np.abs(cols[:, None] - np.array([ridge[1][-1] for ridge in ridges])[None, :])
+            closest = np.argmin(diffs, axis=1)
+            joins = (diffs[np.arange(cols.size), closest] <= max_distances[row]).tolist()
+            closest_list = closest.tolist()
+        else:
+            joins, closest_list = [False] * cols.size, [0] * cols.size
+        for col, join, k in zip(cols.tolist(), joins, closest_list, strict=True):
+            if join:  # a ridge started in this row is no candidate: it is not among the distances
+                ridge = ridges[k]
+                ridge[1].append(col)
+                ridge[0].append(row)
+                ridge[2] = 0
+            else:
+                ridges.append([[row], [col], 0])
+        for i in range(len(ridges) - 1, -1, -1):
+            if ridges[i][2] > gap_thresh:
+                ended.append(ridges.pop(i))
+    out = []
+    for rows_of, cols_of, _ in ended + ridges:
+        if len(set(rows_of)) == len(rows_of):
+            out.append((len(rows_of), rows_of[-1], cols_of[-1]))
+        else:
+            order = np.argsort(rows_of)
+            first = int(np.flatnonzero(order == 0)[0])  # scipy's rows[order] = rows_of puts this entry first
+            out.append((len(rows_of), rows_of[first], cols_of[first]))
+    return out

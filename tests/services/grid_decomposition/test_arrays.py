@@ -5,14 +5,19 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from services.grid_decomposition.arrays import (
+    components_stats,
     distinct,
+    label_boxes,
     label_counts,
     label_max,
     label_sums,
+    lookup,
     near,
     unique_inverse,
+    value_runs,
 )
 
 
@@ -83,3 +88,45 @@ def test_label_max_gives_numpys_maximum_at_and_bincount(seed: int) -> None:
     largest, count = label_max(labels, values, 15)
     assert largest.dtype == np.float32 and np.array_equal(largest, expected)
     assert np.array_equal(count, np.bincount(labels.ravel(), minlength=15))
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+@pytest.mark.parametrize("seed", range(4))
+def test_components_stats_are_opencvs_labels_and_stats(connectivity: int, seed: int) -> None:
+    """Sparse, blobby and full masks as bool and as 0/255 bytes; the background's stats too (also when empty)."""
+    rng = np.random.default_rng(seed)
+    for density in (0.0, 0.03, 0.5, 1.0):
+        mask = rng.random((int(rng.integers(1, 70)), int(rng.integers(1, 70)))) < density
+        mask = cv2.dilate(mask.astype(np.uint8), np.ones((2, 2), np.uint8)).astype(bool) if seed % 2 else mask
+        for image in (mask, mask.astype(np.uint8) * 255):
+            n, labels, stats, _ = cv2.connectedComponentsWithStats(image.astype(np.uint8), connectivity=connectivity)
+            got_n, got_labels, got_stats = components_stats(image, connectivity)
+            assert got_n == n
+            assert got_labels.dtype == np.int32 and np.array_equal(got_labels, labels)
+            assert got_stats.dtype == np.int32 and np.array_equal(got_stats, stats)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_lookup_by_runs_is_the_gather_of_every_pixel(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(1, 50, 2))
+    image = np.repeat(rng.integers(0, 9, (h, (w + 4) // 5)), 5, axis=1)[:, :w].astype(np.int32)  # runs
+    lut = rng.integers(0, 1000, 9).astype(np.int32)
+    got = lookup(lut, image)
+    assert got.dtype == np.int32 and got.shape == image.shape and np.array_equal(got, lut[image])
+    value, length = value_runs(image)
+    assert int(length.sum()) == image.size and np.array_equal(np.repeat(value, length), image.ravel())
+    assert np.all(value[1:] != value[:-1])
+    flags = rng.random(9) < 0.5
+    assert np.array_equal(lookup(flags, image), flags[image])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_label_boxes_are_scipys_find_objects(seed: int) -> None:
+    """Missing ids give None, ``max_label`` cuts the list or pads it with None."""
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(1, 40, 2))
+    labels = np.repeat(rng.integers(0, int(rng.integers(1, 12)), (h, w)), 1 + seed % 3, axis=1).astype(np.int32)
+    assert label_boxes(labels) == ndimage.find_objects(labels)
+    for max_label in (1, 3, 20):
+        assert label_boxes(labels, max_label) == ndimage.find_objects(labels, max_label=max_label)
