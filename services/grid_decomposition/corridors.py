@@ -52,6 +52,16 @@ def _runs(flags: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDAr
     return edges[0::2], edges[1::2]
 
 
+def _row_runs(
+    flags: npt.NDArray[np.bool_],
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Row, start and end (exclusive) of the runs of True along every row, row by row and left to right."""
+    padded = np.zeros((flags.shape[0], flags.shape[1] + 2), dtype=bool)
+    padded[:, 1:-1] = flags
+    rows, edges = np.nonzero(padded[:, 1:] != padded[:, :-1])  # a start, then its end, and so on
+    return rows[0::2], edges[0::2], edges[1::2]
+
+
 def corridor_bands(
     region: npt.NDArray[np.bool_],
     occupied: npt.NDArray[np.bool_],
@@ -89,35 +99,51 @@ def corridor_bands(
     for angle, (u, t) in sorted(coordinates.items()):
         u0, t0 = int(u.min()), int(t.min())
         nu, nt = int(u.max()) - u0 + 1, int(t.max()) - t0 + 1
-        key = (u - u0) * nt + (t - t0)
-        every = np.bincount(key.ravel(), minlength=nu * nt).reshape(nu, nt)
-        inside = np.bincount(key[region], minlength=nu * nt).reshape(nu, nt)
-        walls = np.bincount(key[occupied], minlength=nu * nt).reshape(nu, nt) > 0
-        # a wall along offset v: an occupied cell within the tolerance across
-        walls = cv2.dilate(walls.astype(np.uint8), np.ones((2 * tolerance_px + 1, 1), np.uint8)).astype(bool)
-        every_c, inside_c = np.zeros((nu + 1, nt), np.int32), np.zeros((nu + 1, nt), np.int32)  # counts < 2**31
-        np.cumsum(every, axis=0, out=every_c[1:])
-        np.cumsum(inside, axis=0, out=inside_c[1:])
-        offsets = sorted(
-            {round(ln.offset_px) - u0 for ln in lines if round(ln.angle_rad, 4) == angle} & set(range(nu))
+        offsets = np.array(
+            sorted({round(ln.offset_px) - u0 for ln in lines if round(ln.angle_rad, 4) == angle} & set(range(nu))),
+            dtype=np.int64,
         )
-        for i, a in enumerate(offsets):
-            for b in offsets[i + 1 :]:
-                width = b - a
-                if width < min_w:
-                    continue
-                if width > max_w:
-                    break
-                lo, hi = a + tolerance_px + 1, b - tolerance_px
-                total = every_c[hi] - every_c[lo]
-                clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
-                length = max(round(min_length_m / resolution_m), round(min_length_widths * width))
-                starts, ends = _runs(clear)
-                long = ends - starts >= length
-                for s, e in zip(starts[long], ends[long], strict=True):
-                    side_a, side_b = walls[a, s:e].mean(), walls[b, s:e].mean()
-                    if min(side_a, side_b) >= min_side_wall and (side_a + side_b) / 2 >= min_wall:
-                        found.append(((side_a + side_b) / 2, Band(angle, a + u0, b + u0, int(s) + t0, int(e) - 1 + t0)))
+        # every pair of lines min_w to max_w apart at once, in the order (a, then b) a double loop takes them
+        first, second = np.triu_indices(offsets.size, 1)
+        a_px, b_px = offsets[first], offsets[second]
+        wide = (b_px - a_px >= min_w) & (b_px - a_px <= max_w)
+        a_px, b_px = a_px[wide], b_px[wide]
+        if a_px.size == 0:
+            continue
+        width = b_px - a_px
+        lo, hi = a_px + tolerance_px + 1, b_px - tolerance_px
+        # the counts below each strip's edges: per block of offsets between two edges, summed down the blocks
+        bounds = np.unique(np.concatenate([lo, hi]))
+        block = np.searchsorted(bounds, np.arange(nu), side="right")[u - u0] * nt + (t - t0)
+        every_c = np.cumsum(np.bincount(block.ravel(), minlength=(bounds.size + 1) * nt).reshape(-1, nt), axis=0)
+        inside_c = np.cumsum(np.bincount(block[region], minlength=(bounds.size + 1) * nt).reshape(-1, nt), axis=0)
+        lo, hi = np.searchsorted(bounds, lo), np.searchsorted(bounds, hi)
+        walls = np.zeros((nu, nt), dtype=np.uint8)
+        walls[u[occupied] - u0, t[occupied] - t0] = 1
+        # a wall along offset v: an occupied cell within the tolerance across
+        walls = cv2.dilate(walls, np.ones((2 * tolerance_px + 1, 1), np.uint8)).astype(bool)
+        total = every_c[hi] - every_c[lo]
+        clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
+        length = np.maximum(round(min_length_m / resolution_m), np.rint(min_length_widths * width).astype(np.int64))
+        pair, starts, ends = _row_runs(clear)
+        long = ends - starts >= length[pair]
+        pair, starts, ends = pair[long], starts[long], ends[long]
+        if pair.size == 0:
+            continue
+        # the share of a run walled along each line: prefix sums along the lines that bound a long run
+        rows, row_of = np.unique(np.concatenate([a_px[pair], b_px[pair]]), return_inverse=True)
+        walls_c = np.zeros((rows.size, nt + 1), np.int32)
+        np.cumsum(walls[rows], axis=1, out=walls_c[:, 1:])
+        row_a, row_b = row_of[: pair.size], row_of[pair.size :]
+        n_run = (ends - starts).astype(np.float64)
+        side_a = (walls_c[row_a, ends] - walls_c[row_a, starts]).astype(np.float64) / n_run
+        side_b = (walls_c[row_b, ends] - walls_c[row_b, starts]).astype(np.float64) / n_run
+        walled = (np.minimum(side_a, side_b) >= min_side_wall) & ((side_a + side_b) / 2 >= min_wall)
+        for p, s, e, score in zip(
+            pair[walled].tolist(), starts[walled].tolist(), ends[walled].tolist(),
+            ((side_a + side_b) / 2)[walled].tolist(), strict=True,
+        ):
+            found.append((score, Band(angle, int(a_px[p]) + u0, int(b_px[p]) + u0, s + t0, e - 1 + t0)))
     bands: list[Band] = []
     taken = np.zeros(shape, dtype=bool)
     for _, band in sorted(found, key=lambda f: -f[0]):
