@@ -7,9 +7,9 @@ from dataclasses import replace
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
-from services.grid_decomposition.corridors import Band, _coordinates, _runs, band_mask, corridor_bands
+from services.grid_decomposition.arrays import components_stats, label_boxes
+from services.grid_decomposition.corridors import Band, _runs, band_mask, corridor_bands, window_coordinates
 from services.grid_decomposition.radiogram import Line
 
 
@@ -121,14 +121,14 @@ def join_corridor_pieces(
     window = segments[box]
     inside = region[box]
     walls = window == 0
+    shape = (window.shape[0], window.shape[1])
+    coordinates = window_coordinates(shape, top, left, lines)
     found = corridor_bands(
         inside, walls, lines, top=top, left=left, resolution_m=resolution_m, min_length_m=min_length_m,
-        min_length_widths=min_length_widths, tolerance_px=tolerance_px,
+        min_length_widths=min_length_widths, tolerance_px=tolerance_px, coordinates=coordinates,
     )
     if not found:
         return segments
-    shape = (window.shape[0], window.shape[1])
-    coordinates = {a: _coordinates(shape, top, left, a) for a in {band.angle_rad for band in found}}
     bands = [
         part
         for band in found
@@ -167,13 +167,11 @@ def join_corridor_pieces(
         corridor_id = parted_from.get(corridor_id, corridor_id)
         crossed = np.flatnonzero(held)
         corridor = strip.copy()
-        boxes = ndimage.find_objects(out)
+        boxes = label_boxes(out)
         for k in crossed.tolist():
             own = boxes[k - 1]
             assert own is not None  # k holds pixels of the strip
-            n_parts, parts, stats, _ = cv2.connectedComponentsWithStats(
-                ((out[own] == k) & ~strip[own]).astype(np.uint8), connectivity=4
-            )
+            n_parts, parts, stats = components_stats(((out[own] == k) & ~strip[own]).astype(np.uint8), 4)
             areas = stats[:, cv2.CC_STAT_AREA].copy()
             areas[0] = 0
             no_room = np.ones(n_parts, dtype=bool)

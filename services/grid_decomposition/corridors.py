@@ -44,6 +44,13 @@ def _across(shape: tuple[int, int], top: int, left: int, angle_rad: float) -> np
     return np.rint(-s * x + c * y).astype(np.int32)
 
 
+def window_coordinates(
+    shape: tuple[int, int], top: int, left: int, lines: list[Line]
+) -> dict[float, tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]]:
+    """:func:`_coordinates` of a window for every angle of the lines (rounded as a band's ``angle_rad``)."""
+    return {angle: _coordinates(shape, top, left, angle) for angle in {round(ln.angle_rad, 4) for ln in lines}}
+
+
 def _runs(flags: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Starts and ends (exclusive) of the runs of True."""
     padded = np.zeros(flags.size + 2, dtype=bool)
@@ -78,6 +85,7 @@ def corridor_bands(
     min_side_wall: float = 0.3,
     min_wall: float = 0.35,
     tolerance_px: int = 2,
+    coordinates: dict[float, tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]] | None = None,
 ) -> list[Band]:
     """Corridor bands of one region: long clear strips between two parallel lines with walls on both.
 
@@ -90,12 +98,13 @@ def corridor_bands(
     narrower pair of lines inside a corridor).
 
     ``region`` and ``occupied`` are windows whose top-left pixel is (``top``, ``left``) of the image the
-    lines were drawn in.
+    lines were drawn in; ``coordinates`` are :func:`window_coordinates` of that window when the caller has them.
     """
     shape = (region.shape[0], region.shape[1])
     min_w, max_w = round(min_width_m / resolution_m), round(max_width_m / resolution_m)
     found: list[tuple[float, Band]] = []
-    coordinates = {angle: _coordinates(shape, top, left, angle) for angle in {round(ln.angle_rad, 4) for ln in lines}}
+    if coordinates is None:
+        coordinates = window_coordinates(shape, top, left, lines)
     for angle, (u, t) in sorted(coordinates.items()):
         u0, t0 = int(u.min()), int(t.min())
         nu, nt = int(u.max()) - u0 + 1, int(t.max()) - t0 + 1
@@ -213,13 +222,14 @@ def part_rooms_from_corridors(
         top, left = max(0, int(rows.min()) - margin_px), max(0, int(cols.min()) - margin_px)
         bottom, right = int(rows.max()) + 1 + margin_px, int(cols.max()) + 1 + margin_px
         region = segments[top:bottom, left:right] == k
+        shape = (region.shape[0], region.shape[1])
+        coordinates = window_coordinates(shape, top, left, lines)
         bands = corridor_bands(
-            region, occupied[top:bottom, left:right], lines, top=top, left=left, resolution_m=resolution_m
+            region, occupied[top:bottom, left:right], lines, top=top, left=left, resolution_m=resolution_m,
+            coordinates=coordinates,
         )
         if not bands:
             continue
-        shape = (region.shape[0], region.shape[1])
-        coordinates = {a: _coordinates(shape, top, left, a) for a in {band.angle_rad for band in bands}}
         cut = np.zeros(shape, dtype=bool)
         for band in bands:
             cut |= _side_cuts(band, *coordinates[band.angle_rad], cut_thickness_px)
