@@ -5,9 +5,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
-from services.grid_decomposition.corridors import _coordinates, _runs
+from services.grid_decomposition.arrays import components_stats, label_boxes
+from services.grid_decomposition.corridors import _coordinates, _row_runs
 from services.grid_decomposition.radiogram import Line
 
 
@@ -56,7 +56,7 @@ def split_at_short_walls(
     next_id = int(segments.max()) + 1
     wall_min, gap_max, bridge = wall_min_m / resolution_m, gap_max_m / resolution_m, wall_gap_m / resolution_m
     flank_px = round(flank_m / resolution_m)
-    boxes = ndimage.find_objects(segments)
+    boxes = label_boxes(segments)
     for k in np.flatnonzero(candidates[: len(boxes) + 1]).tolist():
         box = boxes[k - 1]
         if box is None:
@@ -75,21 +75,10 @@ def split_at_short_walls(
             wall_u, wall_t, free_u, free_t = wall_u - u0, wall_t - t0, free_u - u0, free_t - t0
             wall_at = _raster(wall_u, wall_t, shape)  # (across, along): a pixel of it at each place
             mine_at = _raster(free_u, free_t, shape)
-            for line in (ln for ln in lines if ln.angle_rad == angle):
-                offset = round(line.offset_px) - u0
-                if not 0 <= offset < shape[0]:
-                    continue
-                near = wall_at[max(offset - tolerance_px, 0) : offset + tolerance_px + 1]
-                starts, ends = _runs(np.asarray(near.any(axis=0), dtype=bool))
-                if starts.size == 0:
-                    continue
-                keep = np.r_[True, starts[1:] - ends[:-1] > bridge]  # bridge short gaps in the wall
-                run_starts = starts[keep]
-                run_ends = np.r_[ends[np.flatnonzero(keep)[1:] - 1], ends[-1]]
-                pairs = zip(run_starts.tolist(), run_ends.tolist(), strict=True)
-                runs = [(a, b) for a, b in pairs if b - a >= wall_min]
-                if not runs:
-                    continue
+            for offset, runs in _wall_runs(
+                wall_at, [round(ln.offset_px) - u0 for ln in lines if ln.angle_rad == angle],
+                tolerance_px=tolerance_px, bridge_px=bridge, min_length_px=wall_min,
+            ):
                 bands = (slice(max(offset - flank_px, 0), offset), slice(offset + 1, offset + 1 + flank_px))
                 sides = [np.asarray(mine_at[band].any(axis=0), dtype=bool) for band in bands]
                 for a, b in runs:
@@ -113,6 +102,36 @@ def split_at_short_walls(
                             still = window[free_rows, free_cols] == k
                             mine_at = _raster(free_u[still], free_t[still], shape)
     return out
+
+
+def _wall_runs(
+    wall_at: npt.NDArray[np.bool_],
+    offsets: list[int],
+    *,
+    tolerance_px: int,
+    bridge_px: float,
+    min_length_px: float,
+) -> list[tuple[int, list[tuple[int, int]]]]:
+    """Per line (across ``offsets`` into the (across, along) raster ``wall_at``, in their order), the wall runs
+    along it at least ``min_length_px`` long: along-line starts and ends (exclusive) of the places with a wall
+    pixel within ``tolerance_px`` across, gaps up to ``bridge_px`` bridged. Lines off the raster or without such
+    a run are left out."""
+    inside = [offset for offset in offsets if 0 <= offset < wall_at.shape[0]]
+    # a wall within the tolerance across, for every line at once
+    near = cv2.dilate(wall_at.view(np.uint8), np.ones((2 * tolerance_px + 1, 1), np.uint8)).view(bool)
+    line, starts, ends = _row_runs(near[inside])
+    if starts.size == 0:
+        return []
+    keep = np.ones(starts.size, dtype=bool)  # a line's first run, and a run after a gap too wide to bridge
+    keep[1:] = (line[1:] != line[:-1]) | (starts[1:] - ends[:-1] > bridge_px)
+    first = np.flatnonzero(keep)
+    last = np.append(first[1:] - 1, starts.size - 1)  # the bridged run ends where the next begins
+    line, starts, ends = line[first], starts[first], ends[last]
+    long = ends - starts >= min_length_px
+    runs: dict[int, list[tuple[int, int]]] = {}
+    for i, a, b in zip(line[long].tolist(), starts[long].tolist(), ends[long].tolist(), strict=True):
+        runs.setdefault(i, []).append((a, b))
+    return [(inside[i], found) for i, found in sorted(runs.items())]
 
 
 def _project(
@@ -193,7 +212,7 @@ def _two_rooms(
     min_solidity: float,
 ) -> npt.NDArray[np.bool_] | None:
     """The smaller of two room-like 4-connected pieces ``region`` falls into without ``cut``, or None."""
-    _, labels, stats, _ = cv2.connectedComponentsWithStats((region & ~cut).astype(np.uint8), connectivity=4)
+    _, labels, stats = components_stats((region & ~cut).astype(np.uint8), 4)
     big = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_area_m2 / resolution_m**2) + 1
     if big.size != 2:
         return None
