@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats
+from services.grid_decomposition.arrays import components_stats, label_boxes, lookup
 from services.grid_decomposition.radiogram import Line
 
 
@@ -33,7 +33,8 @@ def _coordinates(
     x = np.arange(left, left + shape[1], dtype=np.float32)[None, :]
     y = np.arange(top, top + shape[0], dtype=np.float32)[:, None]
     s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
-    return _across(shape, top, left, angle_rad), np.rint(c * x + s * y).astype(np.int32)
+    along = c * x + s * y
+    return _across(shape, top, left, angle_rad), np.rint(along, out=along).astype(np.int32)
 
 
 def _across(shape: tuple[int, int], top: int, left: int, angle_rad: float) -> npt.NDArray[np.int32]:
@@ -41,7 +42,8 @@ def _across(shape: tuple[int, int], top: int, left: int, angle_rad: float) -> np
     x = np.arange(left, left + shape[1], dtype=np.float32)[None, :]
     y = np.arange(top, top + shape[0], dtype=np.float32)[:, None]
     s, c = np.float32(np.sin(angle_rad)), np.float32(np.cos(angle_rad))
-    return np.rint(-s * x + c * y).astype(np.int32)
+    across = -s * x + c * y
+    return np.rint(across, out=across).astype(np.int32)
 
 
 def window_coordinates(
@@ -67,6 +69,34 @@ def _row_runs(
     padded[:, 1:-1] = flags
     rows, edges = np.nonzero(padded[:, 1:] != padded[:, :-1])  # a start, then its end, and so on
     return rows[0::2], edges[0::2], edges[1::2]
+
+
+def _walls_along(
+    across: npt.NDArray[np.intp],
+    along: npt.NDArray[np.int32],
+    occupied: npt.NDArray[np.bool_],
+    rows: npt.NDArray[np.int64],
+    n_along: int,
+    tolerance_px: int,
+) -> npt.NDArray[np.bool_]:
+    """Per offset in ``rows`` (sorted, distinct) and along place: an occupied pixel within ``tolerance_px`` across.
+
+    ``across`` and ``along`` are the pixels' offset and along-line place, from 0. Only the offsets within the
+    tolerance of ``rows`` are rastered (each such offset once, in order, so a row's neighbours are consecutive).
+    """
+    n_across = int(across.max()) + 1
+    lo, hi = np.maximum(rows - tolerance_px, 0), np.minimum(rows + tolerance_px + 1, n_across)
+    marks = np.zeros(n_across + 1, dtype=np.int32)
+    np.add.at(marks, lo, 1)
+    np.add.at(marks, hi, -1)
+    near = np.cumsum(marks[:-1]) > 0
+    compact = np.cumsum(near) - 1  # the raster row of a near offset
+    pick = occupied & near[across]
+    raster_c = np.zeros((int(compact[-1]) + 2, n_along), dtype=np.int32)
+    raster = np.zeros((int(compact[-1]) + 1, n_along), dtype=bool)
+    raster[compact[across[pick]], along[pick]] = True
+    np.cumsum(raster, axis=0, out=raster_c[1:])
+    return np.asarray(raster_c[compact[hi - 1] + 1] - raster_c[compact[lo]] > 0, dtype=bool)
 
 
 def corridor_bands(
@@ -123,14 +153,12 @@ def corridor_bands(
         lo, hi = a_px + tolerance_px + 1, b_px - tolerance_px
         # the counts below each strip's edges: per block of offsets between two edges, summed down the blocks
         bounds = np.unique(np.concatenate([lo, hi]))
-        block = np.searchsorted(bounds, np.arange(nu), side="right")[u - u0] * nt + (t - t0)
+        across = np.subtract(u, u0, dtype=np.intp)
+        block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, across)
+        block += t
         every_c = np.cumsum(np.bincount(block.ravel(), minlength=(bounds.size + 1) * nt).reshape(-1, nt), axis=0)
         inside_c = np.cumsum(np.bincount(block[region], minlength=(bounds.size + 1) * nt).reshape(-1, nt), axis=0)
         lo, hi = np.searchsorted(bounds, lo), np.searchsorted(bounds, hi)
-        walls = np.zeros((nu, nt), dtype=np.uint8)
-        walls[u[occupied] - u0, t[occupied] - t0] = 1
-        # a wall along offset v: an occupied cell within the tolerance across
-        walls = cv2.dilate(walls, np.ones((2 * tolerance_px + 1, 1), np.uint8)).astype(bool)
         total = every_c[hi] - every_c[lo]
         clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
         length = np.maximum(round(min_length_m / resolution_m), np.rint(min_length_widths * width).astype(np.int64))
@@ -142,7 +170,7 @@ def corridor_bands(
         # the share of a run walled along each line: prefix sums along the lines that bound a long run
         rows, row_of = np.unique(np.concatenate([a_px[pair], b_px[pair]]), return_inverse=True)
         walls_c = np.zeros((rows.size, nt + 1), np.int32)
-        np.cumsum(walls[rows], axis=1, out=walls_c[:, 1:])
+        np.cumsum(_walls_along(across, t - t0, occupied, rows, nt, tolerance_px), axis=1, out=walls_c[:, 1:])
         row_a, row_b = row_of[: pair.size], row_of[pair.size :]
         n_run = (ends - starts).astype(np.float64)
         side_a = (walls_c[row_a, ends] - walls_c[row_a, starts]).astype(np.float64) / n_run
@@ -214,13 +242,14 @@ def part_rooms_from_corridors(
     next_id = int(segments.max()) + 1
     min_area = room_min_area_m2 / resolution_m**2
     min_radius = room_min_radius_m / resolution_m
-    for k in np.flatnonzero(candidates):
-        rows, cols = np.nonzero(segments == k)
-        if rows.size == 0:
+    boxes = label_boxes(segments)
+    for k in np.flatnonzero(candidates).tolist():
+        own = boxes[k - 1] if 0 < k <= len(boxes) else None
+        if own is None:
             continue
         # the window holds the walls round the region too
-        top, left = max(0, int(rows.min()) - margin_px), max(0, int(cols.min()) - margin_px)
-        bottom, right = int(rows.max()) + 1 + margin_px, int(cols.max()) + 1 + margin_px
+        top, left = max(0, own[0].start - margin_px), max(0, own[1].start - margin_px)
+        bottom, right = own[0].stop + margin_px, own[1].stop + margin_px
         region = segments[top:bottom, left:right] == k
         shape = (region.shape[0], region.shape[1])
         coordinates = window_coordinates(shape, top, left, lines)
@@ -284,15 +313,16 @@ def _join_along(
     # only the box round ``k`` and the regions that may join (and the tolerance round them) is looked at
     looked = offered.copy()
     looked[k] = True
-    inside = looked[segments]
+    inside = lookup(looked, segments)
     rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
     top, left = max(int(rows[0]) - tolerance_px, 0), max(int(cols[0]) - tolerance_px, 0)
     box = slice(top, int(rows[-1]) + 1 + tolerance_px), slice(left, int(cols[-1]) + 1 + tolerance_px)
     window = segments[box]
     size = np.bincount(window.ravel(), minlength=n)
     along = np.zeros(n, dtype=bool)
+    across = {a: _across((window.shape[0], window.shape[1]), top, left, a) for a in {band.angle_rad for band in bands}}
     for band in bands:
-        u = _across((window.shape[0], window.shape[1]), top, left, band.angle_rad)
+        u = across[band.angle_rad]
         strip = (u >= band.offset_a_px - tolerance_px) & (u <= band.offset_b_px + tolerance_px)
         held = np.bincount(window[strip], minlength=n)
         along |= (held >= min_share * size) & (held >= (band.offset_b_px - band.offset_a_px) ** 2)
