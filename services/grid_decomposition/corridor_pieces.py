@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes
+from services.grid_decomposition.arrays import components_stats, label_boxes, lookup
 from services.grid_decomposition.corridors import Band, _runs, band_mask, corridor_bands, window_coordinates
 from services.grid_decomposition.radiogram import Line
 
@@ -112,7 +112,7 @@ def join_corridor_pieces(
         The segments; the corridor takes the id of the region that held most of its strip, parted
         rooms beyond the first of a region are numbered after the existing ids.
     """
-    region = (segments > 0) & joinable[segments]
+    region = lookup(np.r_[False, joinable[1:]], segments)  # a joinable region's pixels (a lookup per run)
     if not region.any():
         return segments
     rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))

@@ -4,9 +4,18 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
+import pytest
 
-from services.grid_decomposition.corridors import corridor_bands, part_rooms_from_corridors
+from services.grid_decomposition.corridors import (
+    _coordinates,
+    _row_runs,
+    _runs,
+    _walls_along,
+    corridor_bands,
+    part_rooms_from_corridors,
+)
 from services.grid_decomposition.radiogram import Line
 
 RESOLUTION_M = 0.05
@@ -103,3 +112,84 @@ def test_pieces_of_the_corridor_cut_apart_before_join_it_and_a_room_beside_it_do
     assert np.unique(out[160:200, 20:100]).tolist() == [3]
     room = np.unique(out[160:245, 305:415])
     assert room.size == 1 and room[0] not in (0, 3, out[120, 100])
+
+
+def _bands_pair_by_pair(
+    region: np.ndarray, occupied: np.ndarray, lines: list[Line], *, min_w: int = 20, max_w: int = 60, tol: int = 2
+) -> list[tuple[float, int, int, int, int]]:
+    """The band search one pair of lines at a time, with full-resolution counts (what the search did before
+    it took every pair at once): (angle, offsets, run) of every walled clear run, best walled first."""
+    found = []
+    for angle in sorted({round(ln.angle_rad, 4) for ln in lines}):
+        u, t = _coordinates(region.shape, 0, 0, angle)
+        u0, t0 = int(u.min()), int(t.min())
+        nu, nt = int(u.max()) - u0 + 1, int(t.max()) - t0 + 1
+        key = (u - u0) * nt + (t - t0)
+        every = np.cumsum(np.bincount(key.ravel(), minlength=nu * nt).reshape(nu, nt), axis=0)
+        inside = np.cumsum(np.bincount(key[region], minlength=nu * nt).reshape(nu, nt), axis=0)
+        walls = np.zeros((nu + 2 * tol, nt), dtype=bool)
+        for d in range(2 * tol + 1):  # an occupied cell within the tolerance across
+            np.logical_or.at(walls, (u[occupied] - u0 + d, t[occupied] - t0), True)
+        walls = walls[tol:-tol]
+        every, inside = np.vstack([np.zeros((1, nt), int), every]), np.vstack([np.zeros((1, nt), int), inside])
+        offsets = sorted({round(ln.offset_px) - u0 for ln in lines if round(ln.angle_rad, 4) == angle} & set(range(nu)))
+        for i, a in enumerate(offsets):
+            for b in (b for b in offsets[i + 1 :] if min_w <= b - a <= max_w):
+                lo, hi = a + tol + 1, b - tol
+                total = every[hi] - every[lo]
+                clear = (total > 0) & (inside[hi] - inside[lo] >= 0.9 * np.maximum(total, 1))
+                for s, e in zip(*_runs(clear), strict=True):
+                    side_a, side_b = walls[a, s:e].mean(), walls[b, s:e].mean()
+                    long = e - s >= max(120, round(3.0 * (b - a)))
+                    if long and min(side_a, side_b) >= 0.3 and (side_a + side_b) / 2 >= 0.35:
+                        found.append(((side_a + side_b) / 2, (angle, a + u0, b + u0, int(s) + t0, int(e) - 1 + t0)))
+    return [band for _, band in sorted(found, key=lambda f: -f[0])]
+
+
+@pytest.mark.parametrize("turn", [0.0, 0.3])
+def test_the_band_search_takes_the_bands_a_pair_by_pair_search_takes(turn: float) -> None:
+    """Corridors of several widths, some walls broken, the whole map turned: the bands found taking every pair
+    of lines at once are those a search pair by pair finds, in its order (no pair is narrower than another
+    band's strip here, so none is left out)."""
+    walls, lines = _corridor_and_room(12.0)
+    walls[20:22, 18:682] = True  # two more corridors, 2 m and 1.9 m wide, their wall between them broken
+    walls[60:62, 18:500] = True
+    walls[60:62, 100:140] = walls[60:62, 300:330] = False
+    lines += [Line(0.0, 21.0, 30.0, 0.1, True), Line(0.0, 61.0, 30.0, 0.1, True)]
+    if turn:
+        size = (walls.shape[1], walls.shape[0])
+        m = cv2.getRotationMatrix2D((0.0, 0.0), -math.degrees(turn), 1.0)
+        m[:, 2] = (0.0, 200.0)
+        walls = cv2.warpAffine(walls.astype(np.uint8), m, (size[0] + 200, size[1] + 500), flags=cv2.INTER_NEAREST) > 0
+        lines = [
+            Line(ln.angle_rad + turn, ln.offset_px + (200.0 * math.cos(ln.angle_rad + turn)), 30.0, 0.1, True)
+            for ln in lines
+        ]
+    region = ~walls
+    region[:, :5] = False
+    reference = _bands_pair_by_pair(region, walls, lines)
+    assert reference  # the test looks at bands
+    bands = corridor_bands(region, walls, lines, top=0, left=0, resolution_m=RESOLUTION_M, min_length_m=6.0)
+    taken = [(b.angle_rad, b.offset_a_px, b.offset_b_px, b.t0_px, b.t1_px) for b in bands]
+    assert taken == [band for band in reference if band in taken]
+    assert set(taken) <= set(reference)
+
+
+def test_row_runs_are_the_runs_of_every_row() -> None:
+    flags = np.random.default_rng(3).random((7, 40)) < 0.6
+    flags[2] = False
+    flags[4] = True
+    row, starts, ends = _row_runs(flags)
+    for r in range(flags.shape[0]):
+        s, e = _runs(flags[r])
+        assert np.array_equal(starts[row == r], s) and np.array_equal(ends[row == r], e)
+
+
+def test_walls_along_a_few_lines_are_the_dilated_raster_at_them() -> None:
+    rng = np.random.default_rng(5)
+    across, along = np.indices((60, 50))
+    along = along.astype(np.int32)
+    occupied = rng.random((60, 50)) < 0.05
+    rows = np.array([0, 3, 5, 30, 58, 59])
+    raster = cv2.dilate(occupied.astype(np.uint8), np.ones((5, 1), np.uint8)).astype(bool)
+    assert np.array_equal(_walls_along(across, along, occupied, rows, 50, 2), raster[rows])
