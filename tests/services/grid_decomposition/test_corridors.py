@@ -187,8 +187,8 @@ def test_row_runs_are_the_runs_of_every_row() -> None:
 
 def test_walls_along_a_few_lines_are_the_dilated_raster_at_them() -> None:
     rng = np.random.default_rng(5)
-    across, along = np.indices((60, 50))
-    along = along.astype(np.int32)
+    across = np.repeat(np.arange(60, dtype=np.intp)[:, None], 50, axis=1)
+    along = np.repeat(np.arange(50, dtype=np.int32)[None, :], 60, axis=0)
     occupied = rng.random((60, 50)) < 0.05
     rows = np.array([0, 3, 5, 30, 58, 59])
     raster = cv2.dilate(occupied.astype(np.uint8), np.ones((5, 1), np.uint8)).astype(bool)
