@@ -178,7 +178,12 @@ def joined_regions(
     m = int(a.max(initial=0)) + 1
     size = np.bincount(b.ravel(), minlength=n)
     inside = b > 0
-    pair, count = np.unique(b[inside] * m + a[inside], return_counts=True)
+    if n * m <= b.size:  # few enough pairs of ids: count them all
+        every = np.bincount(b[inside] * m + a[inside], minlength=n * m)
+        pair = np.flatnonzero(every)
+        count = every[pair]
+    else:
+        pair, count = np.unique(b[inside] * m + a[inside], return_counts=True)
     host = np.zeros(n, dtype=np.int64)  # the region of ``after`` holding most (over half) of each previous one
     most = 2 * count > size[pair // m]
     host[pair[most] // m] = pair[most] % m
@@ -187,16 +192,17 @@ def joined_regions(
         return b
     touching = []  # (cell, region it touches) for cells of candidates next to another candidate of the same host
     flat = b.ravel()
-    index = np.arange(flat.size).reshape(b.shape)
-    hosts = np.where(candidate, host, 0)[b]  # the host of a candidate's cells, 0 elsewhere
-    for own, other, own_host, other_host, cells in (
-        (b[1:], b[:-1], hosts[1:], hosts[:-1], index[1:]),
-        (b[:-1], b[1:], hosts[:-1], hosts[1:], index[:-1]),
-        (b[:, 1:], b[:, :-1], hosts[:, 1:], hosts[:, :-1], index[:, 1:]),
-        (b[:, :-1], b[:, 1:], hosts[:, :-1], hosts[:, 1:], index[:, :-1]),
-    ):
-        ok = (own_host > 0) & (own_host == other_host) & (own != other)
-        touching.append(cells[ok] * n + other[ok])
+    host_of = np.where(candidate, host, 0)  # a candidate's host, 0 for every other id
+    w = b.shape[1]
+    # the cells where the id changes to the next row's or column's (a pair of cells either way), then their hosts
+    down = np.flatnonzero(b[1:] != b[:-1])  # cell ``down`` and the one below it, ``down + w``
+    across = np.flatnonzero(b[:, 1:] != b[:, :-1])
+    across += across // max(w - 1, 1)  # cell ``across`` and the one right of it, ``across + 1``
+    for first, step in ((down, w), (across, 1)):
+        second = first + step
+        own_host = host_of[flat[first]]
+        pair = first[(own_host > 0) & (own_host == host_of[flat[second]])]
+        touching += [(pair + step) * n + flat[pair], pair * n + flat[pair + step]]
     cell_other = np.unique(np.concatenate(touching))
     if cell_other.size == 0:
         return b
