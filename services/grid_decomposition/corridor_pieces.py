@@ -9,7 +9,14 @@ import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.arrays import components_stats, label_boxes, lookup
-from services.grid_decomposition.corridors import Band, _runs, band_mask, corridor_bands, window_coordinates
+from services.grid_decomposition.corridors import (
+    Band,
+    _runs,
+    band_box,
+    band_mask,
+    corridor_bands,
+    window_coordinates,
+)
 from services.grid_decomposition.radiogram import Line
 
 
@@ -54,7 +61,9 @@ def _walled_parts(
     than an office's open front): it is no corridor there. Parts shorter than ``min_length_px`` and
     ``min_length_widths`` widths are left out.
     """
-    along = (t >= band.t0_px) & (t <= band.t1_px) & walls
+    box = band_box(u, t, (band.offset_a_px - tolerance_px, band.offset_b_px + tolerance_px), (band.t0_px, band.t1_px))
+    u, t = u[box], t[box]
+    along = (t >= band.t0_px) & (t <= band.t1_px) & walls[box]
     n = band.t1_px - band.t0_px + 1
     side_a = np.bincount(t[along & (np.abs(u - band.offset_a_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
     side_b = np.bincount(t[along & (np.abs(u - band.offset_b_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0

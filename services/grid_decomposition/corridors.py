@@ -191,19 +191,49 @@ def corridor_bands(
     return bands
 
 
+def band_box(
+    u: npt.NDArray[np.int32], t: npt.NDArray[np.int32], across: tuple[int, int], along: tuple[int, int]
+) -> tuple[slice, slice]:
+    """Rows and columns of a window that hold every pixel with ``u`` in ``across`` and ``t`` in ``along``
+    (inclusive ranges).
+
+    ``u`` and ``t`` (:func:`_coordinates`) run monotone along every row and every column (a rounded sum with
+    one term fixed), so a row or column holds such a pixel only where both its ranges, from end to end,
+    meet the wanted ones.
+    """
+
+    def meets(a: npt.NDArray[np.int32], b: npt.NDArray[np.int32], lo: int, hi: int) -> npt.NDArray[np.bool_]:
+        return np.asarray((np.maximum(a, b) >= lo) & (np.minimum(a, b) <= hi), dtype=bool)
+
+    rows = np.flatnonzero(meets(u[:, 0], u[:, -1], *across) & meets(t[:, 0], t[:, -1], *along))
+    cols = np.flatnonzero(meets(u[0], u[-1], *across) & meets(t[0], t[-1], *along))
+    if rows.size == 0 or cols.size == 0:
+        return slice(0, 0), slice(0, 0)
+    return slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1)
+
+
 def band_mask(band: Band, u: npt.NDArray[np.int32], t: npt.NDArray[np.int32]) -> npt.NDArray[np.bool_]:
     """The pixels between a band's lines and within its run (``u``, ``t``: the pixels' coordinates)."""
-    return (u >= band.offset_a_px) & (u <= band.offset_b_px) & (t >= band.t0_px) & (t <= band.t1_px)
+    out = np.zeros(u.shape, dtype=bool)
+    box = band_box(u, t, (band.offset_a_px, band.offset_b_px), (band.t0_px, band.t1_px))
+    ub, tb = u[box], t[box]
+    out[box] = (ub >= band.offset_a_px) & (ub <= band.offset_b_px) & (tb >= band.t0_px) & (tb <= band.t1_px)
+    return out
 
 
 def _side_cuts(
     band: Band, u: npt.NDArray[np.int32], t: npt.NDArray[np.int32], thickness_px: int
 ) -> npt.NDArray[np.bool_]:
     """Both side lines of a band over its run, ``thickness_px`` either side of each line."""
-    along = (t >= band.t0_px) & (t <= band.t1_px)
-    near_a = np.abs(u - band.offset_a_px) <= thickness_px
-    near_b = np.abs(u - band.offset_b_px) <= thickness_px
-    return along & (near_a | near_b)
+    out = np.zeros(u.shape, dtype=bool)
+    across = (band.offset_a_px - thickness_px, band.offset_b_px + thickness_px)
+    box = band_box(u, t, across, (band.t0_px, band.t1_px))
+    ub, tb = u[box], t[box]
+    along = (tb >= band.t0_px) & (tb <= band.t1_px)
+    near_a = np.abs(ub - band.offset_a_px) <= thickness_px
+    near_b = np.abs(ub - band.offset_b_px) <= thickness_px
+    out[box] = along & (near_a | near_b)
+    return out
 
 
 def part_rooms_from_corridors(

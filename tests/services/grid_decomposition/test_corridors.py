@@ -13,6 +13,7 @@ from services.grid_decomposition.corridors import (
     _row_runs,
     _runs,
     _walls_along,
+    band_box,
     corridor_bands,
     part_rooms_from_corridors,
 )
@@ -193,3 +194,15 @@ def test_walls_along_a_few_lines_are_the_dilated_raster_at_them() -> None:
     rows = np.array([0, 3, 5, 30, 58, 59])
     raster = cv2.dilate(occupied.astype(np.uint8), np.ones((5, 1), np.uint8)).astype(bool)
     assert np.array_equal(_walls_along(across, along, occupied, rows, 50, 2), raster[rows])
+
+
+@pytest.mark.parametrize("angle", [-0.0001, 0.3, 1.5707, 2.5, -1.2])
+def test_a_bands_box_holds_all_its_pixels(angle: float) -> None:
+    u, t = _coordinates((90, 130), 17, 40, angle)
+    rng = np.random.default_rng(round(abs(angle) * 1000))
+    for _ in range(20):
+        a, b = sorted(rng.integers(int(u.min()) - 5, int(u.max()) + 5, 2).tolist())
+        t0, t1 = sorted(rng.integers(int(t.min()) - 5, int(t.max()) + 5, 2).tolist())
+        everywhere = (u >= a) & (u <= b) & (t >= t0) & (t <= t1)
+        box = band_box(u, t, (a, b), (t0, t1))
+        assert np.count_nonzero(everywhere[box]) == np.count_nonzero(everywhere)
