@@ -49,7 +49,8 @@ class RoomSettings:
     at least this long, along rows or columns: a wall, drawn occupied or (as some maps draw them) unknown; not
     the unknown speckle and clutter dots of a real map's free space."""
     max_gap_m: float = 0.3
-    """Units whose free spaces are at most this far apart border each other (a shared wall is 0.1 m)."""
+    """Units whose free spaces are at most this far apart border each other (a shared wall is 0.1 m); two parts of one
+    unit border each other across the band of wall lines that cut them apart (at most ``max_wall_m``)."""
     min_contact_m: float = 0.5
     """Units border each other only where their free spaces face each other over at least this length."""
     margin_m: float = 0.1
@@ -202,7 +203,11 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
     if len(parts) < 2:
         return []
     inner = np.array([p.rect for p in parts], np.int64).reshape(-1, 4)  # r0, r1, c0, c1
-    gap = round(settings.max_gap_m / resolution_m)
+    # parts of one unit face each other across the band of wall lines that cut them apart (at most max_wall_m)
+    unit = np.array([p.unit for p in parts])
+    gap = np.where(unit[:, None] == unit[None, :], max(round(settings.max_gap_m / resolution_m),
+                                                       round(settings.max_wall_m / resolution_m)),
+                   round(settings.max_gap_m / resolution_m))
     contact = max(1, round(settings.min_contact_m / resolution_m))
     margin = round(settings.margin_m / resolution_m)
     r0, r1, c0, c1 = (inner[:, k] for k in range(4))
