@@ -207,9 +207,9 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
     inner = np.array([p.rect for p in parts], np.int64).reshape(-1, 4)  # r0, r1, c0, c1
     # parts of one unit face each other across the band of wall lines that cut them apart (at most max_wall_m)
     unit = np.array([p.unit for p in parts])
-    gap = np.where(unit[:, None] == unit[None, :], max(round(settings.max_gap_m / resolution_m),
-                                                       round(settings.max_wall_m / resolution_m)),
-                   round(settings.max_gap_m / resolution_m))
+    gap_cells = round(settings.max_gap_m / resolution_m)
+    gap = np.where(unit[:, None] == unit[None, :], max(gap_cells, round(settings.max_wall_m / resolution_m)),
+                   gap_cells)
     contact = max(1, round(settings.min_contact_m / resolution_m))
     margin = round(settings.margin_m / resolution_m)
     r0, r1, c0, c1 = (inner[:, k] for k in range(4))
