@@ -1,22 +1,24 @@
 """The room level of a floor plan: units joined through open boundaries are one room.
 
-A room (seed 003's sense, and the ipa ground truth's) is a connected set of space units linked by open
-boundaries: no wall and no door between them. A unit is a rectangle, so an L-shaped room, a corridor with
-bends or a hall with alcoves is several units. And a unit may stand over a wall: two rooms with a door
-between them that the world explains as one rectangle. So the room level works on **parts**: each unit's
-free space cut along the lines across it that are mostly wall (:func:`unit_parts`). Two parts border each
-other where their free spaces face each other across at most ``max_gap_m`` (a shared wall, a cut, a sliver
-the world leaves unexplained) over at least ``min_contact_m``; the boundary is **open** where no barrier of
-the map lies across it, position by position (:func:`boundaries`). A door is a short opening in a wall, so
-parts whose boundary is open over ``min_open_share`` of the shorter side, and from whose open part free
-space runs on into both (``min_depth_share``), are one room, unless the boundary is the end of a corridor at
-a room or hall much wider and deeper than the corridor (:func:`corridor_end`): the ground truth's rooms and a
-reader of a floor plan cut a corridor there, however open it is. Rooms are the connected components of the open
-boundaries (:func:`group_rooms`); a room smaller than ``min_room_m2`` (a sliver between units) joins the neighbour it
-shares the longest open length with. Walls running slanted through the frame cut no rectangle: the pipeline then
-re-cuts the rooms they split (:mod:`services.floor_plan.slanted`). Barriers are cells that are not free lying on
-a straight run along the wall's direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or
-unknown, not the unknown speckle, laser streaks and clutter dots of a real map's free space.
+A room (seed 003's sense, and the ipa ground truth's) is a connected set of space units linked by open boundaries:
+no wall and no door between them. A unit is a rectangle, so an L-shaped room, a corridor with bends or a hall with
+alcoves is several units. And a unit may stand over a wall: two rooms with a door between them that the world
+explains as one rectangle. So the room level works on **parts**: each unit's free space cut along the lines across
+it that are mostly wall (:func:`unit_parts`). Two parts border each other where their free spaces face each other
+across at most ``max_gap_m`` (a shared wall, a cut, a sliver the world leaves unexplained), or two parts of one unit
+across the band of wall lines that cut them apart (at most ``max_wall_m``: the cut runs across the whole unit, also
+where its free space runs on through the band, a corridor past the cross wall of the offices beside it), over at
+least ``min_contact_m``; the boundary is **open** where no barrier of the map lies across it, position by position
+(:func:`boundaries`). A door is a short opening in a wall, so parts whose boundary is open over ``min_open_share``
+of the shorter side, and from whose open part free space runs on into both (``min_depth_share``), are one room,
+unless the boundary is the end of a corridor at a room or hall much wider and deeper than the corridor
+(:func:`corridor_end`): the ground truth's rooms and a reader of a floor plan cut a corridor there, however open it
+is. Rooms are the connected components of the open boundaries (:func:`group_rooms`); a room smaller than
+``min_room_m2`` (a sliver between units) joins the neighbour it shares the longest open length with. Walls running
+slanted through the frame cut no rectangle: the pipeline then re-cuts the rooms they split
+(:mod:`services.floor_plan.slanted`). Barriers are cells that are not free lying on a straight run along the wall's
+direction at least ``barrier_m`` long (:func:`barriers`): walls drawn occupied or unknown, not the unknown speckle,
+laser streaks and clutter dots of a real map's free space.
 """
 
 from __future__ import annotations
@@ -49,7 +51,8 @@ class RoomSettings:
     at least this long, along rows or columns: a wall, drawn occupied or (as some maps draw them) unknown; not
     the unknown speckle and clutter dots of a real map's free space."""
     max_gap_m: float = 0.3
-    """Units whose free spaces are at most this far apart border each other (a shared wall is 0.1 m)."""
+    """Units whose free spaces are at most this far apart border each other (a shared wall is 0.1 m); two parts of one
+    unit border each other across the band of wall lines that cut them apart (at most ``max_wall_m``)."""
     min_contact_m: float = 0.5
     """Units border each other only where their free spaces face each other over at least this length."""
     margin_m: float = 0.1
@@ -202,7 +205,11 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
     if len(parts) < 2:
         return []
     inner = np.array([p.rect for p in parts], np.int64).reshape(-1, 4)  # r0, r1, c0, c1
-    gap = round(settings.max_gap_m / resolution_m)
+    # parts of one unit face each other across the band of wall lines that cut them apart (at most max_wall_m)
+    unit = np.array([p.unit for p in parts])
+    gap_cells = round(settings.max_gap_m / resolution_m)
+    gap = np.where(unit[:, None] == unit[None, :], max(gap_cells, round(settings.max_wall_m / resolution_m)),
+                   gap_cells)
     contact = max(1, round(settings.min_contact_m / resolution_m))
     margin = round(settings.margin_m / resolution_m)
     r0, r1, c0, c1 = (inner[:, k] for k in range(4))

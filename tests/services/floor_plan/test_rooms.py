@@ -162,3 +162,20 @@ def test_the_wall_fringe_of_a_live_map_is_the_less_seen_free_space_against_a_wal
     occ[4:8, 29:33][occ[4:8, 29:33] == 12] = 18  # seen free less often around it
     assert not wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[4:8, 29:33].any(), "furniture is no wall"
     assert wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[:, 2:4].all()
+
+
+def test_a_corridor_a_unit_stands_over_stays_one_room_across_the_offices_cross_wall() -> None:
+    # one unit explains four offices and the 1 m corridor between them; the 0.5 m wall between the offices
+    # cuts the unit across the corridor too, which runs on open through it
+    unit = Rect(0, 99, 0, 119)
+    classes = _walled((100, 120), unit)
+    classes[:, 48:50] = classes[:, 70:72] = CellClass.WALL  # the corridor's sides
+    classes[45:55, :50] = classes[45:55, 70:] = CellClass.WALL  # the offices' cross wall
+    classes[[0, 1, 98, 99], :] = CellClass.WALL
+    classes[:, [0, 1, 118, 119]] = CellClass.WALL
+    groups = group_rooms(World({1: unit}, set(), 2), classes, {1: UnitType.ROOM}, wall_cells=T, resolution_m=RES,
+                         settings=RoomSettings())
+    assert len(groups) == 5, "four offices and the corridor"
+    corridor = [room for room in groups if all(p.c0 >= 50 and p.c1 <= 69 for p in room.parts)]
+    assert len(corridor) == 1 and len(corridor[0].parts) == 2, "the corridor's two parts are one room"
+    assert min(p.r0 for p in corridor[0].parts) < 45 and max(p.r1 for p in corridor[0].parts) > 54
