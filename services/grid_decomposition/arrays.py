@@ -56,6 +56,18 @@ def unique_inverse(keys: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64]
     return np.flatnonzero(present), rank[flat]
 
 
+def _runs(flat: npt.NDArray[np.integer], row_length: int = 0) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """First index and length of each run of equal values of a flat image in raster order; with ``row_length``,
+    runs also end at the end of each row of that length."""
+    start = np.empty(flat.size, dtype=bool)
+    start[:1] = True
+    np.not_equal(flat[1:], flat[:-1], out=start[1:])
+    if row_length:
+        start[::row_length] = True
+    first = np.flatnonzero(start)
+    return first, np.diff(np.append(first, flat.size))
+
+
 def label_sums(
     labels: npt.NDArray[np.integer], n: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
@@ -80,12 +92,7 @@ def label_sums(
     flat = np.ascontiguousarray(labels).ravel()
     if flat.size == 0:
         return np.zeros(n, dtype=np.int64), np.zeros(n), np.zeros(n)
-    start = np.empty(flat.size, dtype=bool)
-    start[0] = True
-    np.not_equal(flat[1:], flat[:-1], out=start[1:])
-    start[::w] = True
-    first = np.flatnonzero(start)
-    length = np.diff(np.append(first, flat.size))
+    first, length = _runs(flat, w)
     label = flat[first]
     row = first // w
     col = first - row * w
@@ -149,24 +156,18 @@ def label_max(
     out = np.zeros(n, dtype=values.dtype)
     if flat.size == 0:
         return out, np.zeros(n, dtype=np.int64)
-    start = np.empty(flat.size, dtype=bool)
-    start[0] = True
-    np.not_equal(flat[1:], flat[:-1], out=start[1:])
-    first = np.flatnonzero(start)
+    first, length = _runs(flat)
     label = flat[first]
     np.maximum.at(out, label, np.maximum.reduceat(np.ascontiguousarray(values).ravel(), first))
-    count = np.bincount(label, weights=np.diff(np.append(first, flat.size)), minlength=n).astype(np.int64)
+    count = np.bincount(label, weights=length, minlength=n).astype(np.int64)
     return out, count
 
 
 def value_runs(image: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Value and length of each run of equal values of a non-empty image in raster order (runs cross rows)."""
     flat = np.ascontiguousarray(image).ravel()
-    start = np.empty(flat.size, dtype=bool)
-    start[:1] = True
-    np.not_equal(flat[1:], flat[:-1], out=start[1:])
-    first = np.flatnonzero(start)
-    return flat[first].astype(np.int64, copy=False), np.diff(np.append(first, flat.size))
+    first, length = _runs(flat)
+    return flat[first].astype(np.int64, copy=False), length
 
 
 def lookup(
@@ -196,12 +197,7 @@ def label_boxes(labels: npt.NDArray[np.integer], max_label: int = 0) -> list[tup
     if labels.size == 0:
         return [None] * max_label
     flat = np.ascontiguousarray(labels).ravel()
-    start = np.empty(flat.size, dtype=bool)
-    start[0] = True
-    np.not_equal(flat[1:], flat[:-1], out=start[1:])
-    start[::w] = True
-    first = np.flatnonzero(start)
-    length = np.diff(np.append(first, flat.size))
+    first, length = _runs(flat, w)
     label = flat[first].astype(np.intp)
     n = (int(label.max(initial=0)) if max_label <= 0 else max_label) + 1
     keep = (label > 0) & (label < n)
@@ -244,12 +240,7 @@ def components_stats(
     labels = np.asarray(found, dtype=np.int32)
     h, w = labels.shape
     flat = labels.ravel()
-    start = np.empty(flat.size, dtype=bool)
-    start[:1] = True
-    np.not_equal(flat[1:], flat[:-1], out=start[1:])
-    start[::w] = True
-    first = np.flatnonzero(start)
-    length = np.diff(np.append(first, flat.size))
+    first, length = _runs(flat, w)
     label = flat[first].astype(np.intp)
     row = first // w
     col = first - row * w
