@@ -56,6 +56,7 @@ from services.grid_decomposition.regions import (
 from services.grid_decomposition.rooms import (
     free_standing,
     furniture,
+    join_furnished_pieces,
     segment_rooms,
     wall_furniture,
 )
@@ -302,6 +303,7 @@ def decompose(
     corridor_min_region_m2: float = 100.0,
     short_wall_min_m: float = 3.0,
     corridor_pieces: bool = True,
+    rejoin_room_pieces: bool = True,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -382,6 +384,10 @@ def decompose(
         A corridor band (parallel lines with walls on both sides) that the room stage cut in pieces is one
         region again, and the rooms that leak into its strip part from it
         (:func:`~services.grid_decomposition.corridor_pieces.join_corridor_pieces`).
+    rejoin_room_pieces : bool
+        After the corridor steps, pieces of one furnished room join again as the room stage joins them
+        (:func:`~services.grid_decomposition.rooms.join_furnished_pieces`): pieces the room stage left apart because
+        the corridor was still in the region beside them (its union with them an L rather than a T).
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -586,6 +592,9 @@ def decompose(
             segments = join_corridor_pieces(
                 segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m
             )
+        if rejoin_room_pieces:  # pieces of one room that were pieces of the corridor's region when the room stage
+            # joined them: with the corridor parted from the rooms, its union with a room is a T, no longer their L
+            segments = join_furnished_pieces(segments, clutter, floor_px, resolution_m=resolution_m)
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)
         grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)

@@ -274,14 +274,14 @@ def segment_rooms(
                                    round(outside_reach_m / resolution_m)),
     )
     if join_saddle_ratio > 0:
-        standing = clutter | islands(rooms == 0, max_extent_px=island_max_extent_m / resolution_m)
-        rooms = join_room_pieces(
+        rooms = join_furnished_pieces(
             rooms,
-            standing,
+            clutter,
+            floor,
             resolution_m=resolution_m,
-            fixed=_share(rooms, floor) > 0.5,
-            min_saddle_ratio=join_saddle_ratio,
-            min_solidity=join_solidity,
+            island_max_extent_m=island_max_extent_m,
+            saddle_ratio=join_saddle_ratio,
+            solidity=join_solidity,
         )
     if desk_max_extent_m > 0:
         desks = desk_clusters(
@@ -309,6 +309,30 @@ def segment_rooms(
             min_solidity=join_solidity,
         )
     return rooms, cut
+
+
+def join_furnished_pieces(
+    segments: npt.NDArray[np.int32],
+    clutter: npt.NDArray[np.bool_],
+    floor: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    island_max_extent_m: float = 3.0,
+    saddle_ratio: float = 0.8,
+    solidity: float = 0.8,
+) -> npt.NDArray[np.int32]:
+    """Step 5 of :func:`segment_rooms`: :func:`join_room_pieces` with ``clutter`` and the obstacle islands at
+    most ``island_max_extent_m`` across (:func:`islands` of the pixels in no segment) as the furniture,
+    segments mostly on ``floor`` (warehouse floors) never joined. Ids 1..M (consecutive)."""
+    standing = clutter | islands(segments == 0, max_extent_px=island_max_extent_m / resolution_m)
+    return join_room_pieces(
+        segments,
+        standing,
+        resolution_m=resolution_m,
+        fixed=_share(segments, floor) > 0.5,
+        min_saddle_ratio=saddle_ratio,
+        min_solidity=solidity,
+    )
 
 
 def ends_on_tables(
