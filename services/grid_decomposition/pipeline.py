@@ -56,6 +56,7 @@ from services.grid_decomposition.regions import (
 from services.grid_decomposition.rooms import (
     free_standing,
     furniture,
+    inside_furniture,
     join_furnished_pieces,
     segment_rooms,
     wall_furniture,
@@ -304,6 +305,7 @@ def decompose(
     short_wall_min_m: float = 3.0,
     corridor_pieces: bool = True,
     rejoin_room_pieces: bool = True,
+    inside_furniture_max_m2: float = 1.5,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -388,6 +390,10 @@ def decompose(
         After the corridor steps, pieces of one furnished room join again as the room stage joins them
         (:func:`~services.grid_decomposition.rooms.join_furnished_pieces`): pieces the room stage left apart because
         the corridor was still in the region beside them (its union with them an L rather than a T).
+    inside_furniture_max_m2 : float
+        A region smaller than this that touches no other and that one obstacle island at most 3 m across encloses
+        (free space inside a cupboard or a hollow pillar) joins the region nearest to it within 1 m
+        (:func:`~services.grid_decomposition.rooms.inside_furniture`); 0 turns it off.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -607,6 +613,11 @@ def decompose(
             segments = split_fans(
                 segments, rays | streaks, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
+            )
+        if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
+            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            segments = inside_furniture(
+                segments, on_floor > 0.5 * size, resolution_m=resolution_m, max_area_m2=inside_furniture_max_m2
             )
         # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
         floor_space = free | streaks
