@@ -347,11 +347,11 @@ def inside_furniture(
     """Free space inside a piece of furniture is the floor of the room the furniture stands in.
 
     A segment smaller than ``max_area_m2`` that touches no other segment (8-connected) and that the
-    obstacles round it enclose as one island (:func:`islands`: the obstacle parts touching it, with it, off
-    the map border and at most ``island_max_extent_m`` across) is the inside of a cupboard or a hollow pillar
-    the laser saw into, not a room anyone enters: it joins the segment nearest to it within ``reach_m``.
-    A closet behind a room's wall (the wall reaches farther) keeps its segment; so do segments with
-    ``fixed`` (per id) and those with no segment within reach.
+    obstacles round it enclose as an island (the parts of the pixels in no segment that touch it, 8-connected,
+    with it: off the map border and at most ``island_max_extent_m`` across, as :func:`islands`) is the inside of
+    a cupboard or a hollow pillar the laser saw into, not a room anyone enters: it joins the segment nearest to
+    it within ``reach_m``. A closet behind a room's wall (the wall reaches farther) keeps its segment; so do
+    segments with ``fixed`` (per id) and those with no other segment within reach.
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
@@ -360,45 +360,44 @@ def inside_furniture(
     small[0] = False
     if not small.any():
         return seg
-    grown = cv2.dilate(seg.astype(np.float32), np.ones((3, 3), np.uint8))  # ids below 2**24: exact
-    shrunk = cv2.erode(np.where(seg > 0, seg, n).astype(np.float32), np.ones((3, 3), np.uint8))
-    touching = np.zeros(n + 1, dtype=bool)  # another segment among the 8 neighbours of a pixel of it
-    inside = seg > 0
-    touching[seg[inside & ((grown != seg) | ((shrunk != seg) & (shrunk < n)))]] = True
-    lone = small & ~touching[:n]
-    if not lone.any():
-        return seg
-    blocked = components(seg == 0)
     h, w = seg.shape
-    stats = blocked.stats
+    boxes = label_boxes(seg)
+    square = np.ones((3, 3), np.uint8)
+    rings: dict[int, tuple[tuple[slice, slice], npt.NDArray[np.bool_]]] = {}
+    for k in np.flatnonzero(small).tolist():  # alone: nothing but its own pixels and no segment round it
+        box = boxes[k - 1]
+        if box is None:  # (a small segment has pixels: never)
+            continue
+        near = (slice(max(0, box[0].start - 1), box[0].stop + 1), slice(max(0, box[1].start - 1), box[1].stop + 1))
+        piece = seg[near] == k
+        ring = cv2.dilate(piece.view(np.uint8), square).view(bool) & ~piece
+        if not np.any(seg[near][ring]):
+            rings[k] = near, ring
+    lone = np.zeros(n, dtype=bool)
+    lone[list(rings)] = True
+    extent = round(island_max_extent_m / resolution_m)
     reach = max(1, round(reach_m / resolution_m))
     out = seg.copy()
-    boxes = label_boxes(seg)
-    for k in np.flatnonzero(lone).tolist():
-        box = boxes[k - 1]
-        if box is None:
+    for k, (near, ring) in rings.items():
+        # the obstacle parts round it, labelled where an island round it can reach
+        top, left = max(0, near[0].start - extent), max(0, near[1].start - extent)
+        bottom, right = min(h, near[0].stop + extent), min(w, near[1].stop + extent)
+        _, parts, stats = components_stats((seg[top:bottom, left:right] == 0).view(np.uint8), 8)
+        at_piece = parts[near[0].start - top : near[0].stop - top, near[1].start - left : near[1].stop - left]
+        round_it = np.unique(at_piece[ring])
+        x0, y0 = stats[round_it, cv2.CC_STAT_LEFT], stats[round_it, cv2.CC_STAT_TOP]
+        x1, y1 = x0 + stats[round_it, cv2.CC_STAT_WIDTH], y0 + stats[round_it, cv2.CC_STAT_HEIGHT]
+        inner = (x0.min() > 0) and (y0.min() > 0) and (x1.max() < right - left) and (y1.max() < bottom - top)
+        # an edge of the labelled window is the map's border or more than the extent away
+        if not inner or max(x1.max() - x0.min(), y1.max() - y0.min()) > extent:
             continue
-        top, left = max(0, box[0].start - 1), max(0, box[1].start - 1)
-        bottom, right = min(h, box[0].stop + 1), min(w, box[1].stop + 1)
-        piece = seg[top:bottom, left:right] == k
-        ring = cv2.dilate(piece.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool) & ~piece
-        parts = np.unique(blocked.labels[top:bottom, left:right][ring])
-        parts = parts[parts > 0]
-        if parts.size == 0:
-            continue
-        x0 = min(int(stats[parts, cv2.CC_STAT_LEFT].min()), left)
-        y0 = min(int(stats[parts, cv2.CC_STAT_TOP].min()), top)
-        x1 = max(int((stats[parts, cv2.CC_STAT_LEFT] + stats[parts, cv2.CC_STAT_WIDTH]).max()), right)
-        y1 = max(int((stats[parts, cv2.CC_STAT_TOP] + stats[parts, cv2.CC_STAT_HEIGHT]).max()), bottom)
-        if x0 <= 0 or y0 <= 0 or x1 >= w or y1 >= h or max(x1 - x0, y1 - y0) > island_max_extent_m / resolution_m:
-            continue
-        near = (slice(max(0, box[0].start - reach), box[0].stop + reach),
-                slice(max(0, box[1].start - reach), box[1].stop + reach))
-        window = seg[near]
+        around = (slice(max(0, near[0].start - reach), near[0].stop + reach),
+                  slice(max(0, near[1].start - reach), near[1].stop + reach))
+        window = seg[around]
         away = cv2.distanceTransform((window != k).view(np.uint8), cv2.DIST_L2, 5)
         other = (window > 0) & ~lone[window] & (away <= reach)
         if other.any():
-            out[near][window == k] = window[other][np.argmin(away[other])]
+            out[around][window == k] = window[other][np.argmin(away[other])]
     return out
 
 

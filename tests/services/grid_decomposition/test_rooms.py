@@ -7,7 +7,15 @@ import numpy as np
 
 from services.grid_decomposition import Connection, decompose
 from services.grid_decomposition.arrays import components
-from services.grid_decomposition.rooms import desk_clusters, ends_on_tables, free_standing, furniture, segment_rooms
+from services.grid_decomposition.rooms import (
+    desk_clusters,
+    ends_on_tables,
+    free_standing,
+    furniture,
+    inside_furniture,
+    join_furnished_pieces,
+    segment_rooms,
+)
 
 RES = 0.05
 
@@ -367,3 +375,50 @@ def test_an_obstacle_standing_in_a_doorway_keeps_the_doorway() -> None:
     )
     room_a, room_b = np.unique(seg[13:87, 13:90]), np.unique(seg[13:87, 107:187])
     assert room_a.size == 1 and room_b.size == 1 and room_a[0] != room_b[0]
+
+
+def _room_with_a_hollow_cupboard() -> np.ndarray:
+    """Segments: an 8 x 6 m room (1) with a 1.2 x 0.8 m cupboard standing in it whose inside the laser saw (2), and
+    a 1 x 0.8 m closet (3) behind the room's 0.2 m right wall; everything else is wall and unknown (0)."""
+    seg = np.zeros((160, 220), dtype=np.int32)
+    seg[20:140, 20:180] = 1
+    seg[60:76, 80:104] = 0  # the cupboard's sides
+    seg[62:74, 82:102] = 2  # its inside
+    seg[60:80, 184:204] = 3  # the closet beyond the wall (columns 180..183)
+    return seg
+
+
+def test_the_inside_of_a_hollow_cupboard_is_its_rooms_floor_a_closet_behind_a_wall_is_not() -> None:
+    seg = _room_with_a_hollow_cupboard()
+    out = inside_furniture(seg, np.zeros(4, dtype=bool), resolution_m=RES)
+    assert out[68, 90] == out[100, 50] == 1  # the cupboard's inside joins the room round it
+    assert out[70, 194] == 3  # the closet keeps its own segment: the wall round it reaches the unknown outside
+    assert np.array_equal(out > 0, seg > 0)
+    fixed = np.array([False, False, True, False])
+    assert inside_furniture(seg, fixed, resolution_m=RES)[68, 90] == 2  # fixed segments stay
+
+
+def test_a_large_space_inside_a_block_stays_a_region() -> None:
+    """A 2 x 1.5 m store room inside a 2.4 x 1.9 m block standing in the hall is a room, not a cupboard's inside."""
+    seg = np.zeros((160, 220), dtype=np.int32)
+    seg[20:140, 20:180] = 1
+    seg[50:88, 70:118] = 0
+    seg[54:84, 74:114] = 2  # 3 m^2 inside
+    assert inside_furniture(seg, np.zeros(3, dtype=bool), resolution_m=RES)[70, 90] == 2
+
+
+def test_pieces_of_a_furnished_room_join_again_beside_a_corridor_that_stays_apart() -> None:
+    """A 6 x 4 m office cut in two along a gap between two desks, open along its top onto a 2 x 16 m corridor: the
+    pieces join (no neck, a convex union, desks at their border), the corridor (a T with them) stays apart."""
+    seg = np.zeros((160, 360), dtype=np.int32)
+    seg[10:50, 10:330] = 1  # the corridor
+    seg[50:130, 100:160] = 2
+    seg[50:130, 160:220] = 3
+    desks = np.zeros(seg.shape, dtype=bool)
+    desks[60:76, 150:158] = desks[104:120, 162:170] = True
+    seg[desks] = 0
+    floor = np.zeros(seg.shape, dtype=bool)
+    out = join_furnished_pieces(seg, desks, floor, resolution_m=RES)
+    assert out[90, 120] == out[90, 200] != out[30, 40]
+    # on a warehouse floor nothing joins
+    assert len(np.unique(join_furnished_pieces(seg, desks, seg == 2, resolution_m=RES))) == 4
