@@ -1,4 +1,4 @@
-"""Rooms seen from outside: fans of laser rays through a doorway, split off the region they enter from."""
+"""Rooms seen from outside: fans of laser rays (or floor) through a doorway, split off the region they enter from."""
 
 from __future__ import annotations
 
@@ -12,39 +12,35 @@ from services.grid_decomposition.rooms import open_share
 
 def split_fans(
     segments: npt.NDArray[np.int32],
-    thin: npt.NDArray[np.bool_],
     occupied: npt.NDArray[np.bool_],
     fixed: npt.NDArray[np.bool_],
     *,
     resolution_m: float,
-    core_half_width_m: float = 0.4,
     max_neck_m: float = 1.2,
     min_area_m2: float = 0.75,
     min_depth_m: float = 2.0,
-    min_thin_share: float = 0.3,
     min_segment_area_m2: float = 50.0,
     outside_reach_m: float = 6.0,
     max_open_share: float = 0.4,
 ) -> npt.NDArray[np.int32]:
-    """Give every fan of rays that leaves a segment through a doorway-wide neck a segment of its own.
+    """Give every room that leaves a segment through a doorway-wide neck a segment of its own.
 
     A robot passing a door sees the room behind it as a fan of rays bounded by unknown space and
-    walls. The fan is free space, so the region it grows from (a corridor) takes it; the room then
-    lies whole inside the corridor's segment. A segment's *core* is its largest part that survives
-    an opening with a disc ``2 * core_half_width_m`` wide; a part of the rest is a fan when it is at
-    least ``min_area_m2``, at least ``min_thin_share`` of it is ``thin`` (rays, streaks), it touches
-    the core along at most ``max_neck_m``, reaches at least ``min_depth_m`` beyond it and has walls
-    round it: less than ``max_open_share`` of 32 beams from its middle meet no ``occupied`` cell
-    within ``outside_reach_m`` (:func:`~services.grid_decomposition.rooms.open_share`; rays through
-    a gap in an outer wall have none beyond them). Only segments of at least
-    ``min_segment_area_m2`` (halls, corridors) lose fans.
+    walls, or as floor where the rays are dense. It is free space, so the region it grows from (a
+    corridor) takes it; the room then lies whole inside the corridor's segment. A segment's *core*
+    is its largest part that survives an opening with a disc ``max_neck_m`` wide (no such disc
+    passes the door, so the floor just behind it is no part of the core); a part of the rest is a
+    room when it is at least ``min_area_m2``, touches the core along at most ``max_neck_m``, reaches
+    at least ``min_depth_m`` beyond it and has walls round it: less than ``max_open_share`` of 32
+    beams from its middle meet no ``occupied`` cell within ``outside_reach_m``
+    (:func:`~services.grid_decomposition.rooms.open_share`; rays through a gap in an outer wall
+    have none beyond them). Only segments of at least ``min_segment_area_m2`` (halls, corridors)
+    lose rooms so.
 
     Parameters
     ----------
     segments : (H, W) int32
         Segment id per pixel, 0 off free space.
-    thin : (H, W) bool
-        Free space too thin to be floor (the cleaning's rays and streaks).
     occupied : (H, W) bool
         Walls and obstacles as mapped.
     fixed : (N + 1,) bool
@@ -55,10 +51,10 @@ def split_fans(
     Returns
     -------
     (H, W) int32
-        ``segments`` with each fan under a new id (above the largest one).
+        ``segments`` with each such room under a new id (above the largest one).
     """
     out = segments.copy()
-    radius = max(1, round(core_half_width_m / resolution_m))
+    radius = max(1, round(max_neck_m / 2 / resolution_m))
     ring = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     next_id = int(segments.max()) + 1
     min_area_px = min_area_m2 / resolution_m**2
@@ -81,9 +77,8 @@ def split_fans(
         big = big[big > 0]
         if big.size == 0:
             continue
-        thin_share = np.bincount(parts[thin[box]], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
         neck = np.bincount(parts[cv2.dilate(core.astype(np.uint8), ring).astype(bool)], minlength=n)
-        fans = [c for c in big if thin_share[c] >= min_thin_share and 0 < neck[c] * resolution_m <= max_neck_m]
+        fans = [c for c in big if 0 < neck[c] * resolution_m <= max_neck_m]
         if fans:
             depth = cv2.distanceTransform((~core).astype(np.uint8), cv2.DIST_L2, 5)
             fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]

@@ -375,8 +375,8 @@ def decompose(
     streak_reach_m : float
         See ``clean``.
     fan_max_neck_m : float
-        A fan of rays leaving a room region through a neck at most this wide is a room of its own
-        (:func:`~services.grid_decomposition.fans.split_fans`); 0 turns it off.
+        A room (a fan of rays, or floor) leaving a room region through a neck at most this wide is a
+        room of its own (:func:`~services.grid_decomposition.fans.split_fans`); 0 turns it off.
     short_wall_min_m : float
         After the rooms are parted from their corridors, a room region of at least
         ``corridor_min_region_m2`` parts along a wall at least this long that stops short of the
@@ -607,11 +607,11 @@ def decompose(
         segments = np.where(against_walls, grown, segments)
         # the streaks the cleaning took out are free space: they take the region they grow from
         segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
-        if fan_max_neck_m > 0:  # a room seen only through its door: a fan of rays, not the corridor's floor
+        if fan_max_neck_m > 0:  # a room seen only through its door (rays or floor), not the corridor's floor
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
             floors = on_floor > 0.5 * size
             segments = split_fans(
-                segments, rays | streaks, occupied, floors,
+                segments, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
             )
         if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
