@@ -176,6 +176,9 @@ class FloorPlan(NamedTuple):
     frame: Frame
     fringe: npt.NDArray[np.bool_]
     """The wall fringe (map cells, GridLayer order): free cells the label images leave out (``fringe_m``)."""
+    traces: npt.NDArray[np.bool_]
+    """Laser beams' traces (map cells, GridLayer order): free cells of the map ``classes_map`` reads unknown
+    (``trace_max_m``); the rooms and the label images count them free, as the map draws them."""
 
     @property
     def slanted_walls(self) -> int:
@@ -240,8 +243,12 @@ def floor_plan(
     if not math.isfinite(resolution_m) or resolution_m <= 0:
         raise FloorPlanError(f"resolution must be a positive number of metres, got {resolution_m}")
     classes_map = classify_map(occupancy, occupied_percent=s.occupied_percent, free_percent=s.free_percent)
-    if s.trace_max_m is not None:
-        classes_map[beam_traces(classes_map, width_cells=_cells(s.trace_max_m, resolution_m))] = CellClass.UNKNOWN
+    traces = (np.zeros(classes_map.shape, np.bool_) if s.trace_max_m is None else
+              beam_traces(classes_map, width_cells=_cells(s.trace_max_m, resolution_m)))
+    fringe = (np.zeros(classes_map.shape, np.bool_) if s.fringe_m is None else
+              wall_fringe(occupancy, classes_map == CellClass.FREE, depth_cells=_cells(s.fringe_m, resolution_m),
+                          min_wall_cells=max(1, round(s.fringe_wall_m2 / resolution_m**2))))
+    classes_map[traces] = CellClass.UNKNOWN
     solid = _obstacles(classes_map, s, resolution_m)
     if s.wall_m is None:
         s = replace(s, wall_m=wall_thickness_cells(classes_map, obstacles=solid) * resolution_m)
@@ -272,21 +279,20 @@ def floor_plan(
         rc = np.stack([(xy[:, 1] - origin_xy_m[1]) / resolution_m, (xy[:, 0] - origin_xy_m[0]) / resolution_m], axis=1)
         positions = np.unique(np.floor(points_to_work(frame, rc)).astype(np.int64), axis=0)
     result = run_chain(chain, classes, s.chain, first_iteration=first, positions_rc=positions)
-    fringe = (np.zeros(classes_map.shape, np.bool_) if s.fringe_m is None else
-              wall_fringe(occupancy, classes_map == CellClass.FREE, depth_cells=_cells(s.fringe_m, resolution_m),
-                          min_wall_cells=max(1, round(s.fringe_wall_m2 / resolution_m**2))))
-    return describe(result.world, classes_map, frame=frame, settings=s, fringe=fringe,
+    return describe(result.world, classes_map, frame=frame, settings=s, fringe=fringe, traces=traces,
                     log_posterior=result.log_posterior, iterations=result.iterations, accepted=result.accepted,
                     seconds=result.seconds, cpu_seconds=result.cpu_seconds)
 
 
 def describe(
     world: World, classes_map: npt.NDArray[np.uint8], *, frame: Frame, settings: FloorPlanSettings,
-    fringe: npt.NDArray[np.bool_] | None = None, log_posterior: float = float("nan"), iterations: int = 0,
-    accepted: int = 0, seconds: float = 0.0, cpu_seconds: float = 0.0,
+    fringe: npt.NDArray[np.bool_] | None = None, traces: npt.NDArray[np.bool_] | None = None,
+    log_posterior: float = float("nan"), iterations: int = 0, accepted: int = 0, seconds: float = 0.0,
+    cpu_seconds: float = 0.0,
 ) -> FloorPlan:
     """A world (cells of ``frame``) as units, doors, types and K(W,M) in map coordinates; ``fringe`` (map cells) is
-    left out of the label images (none by default)."""
+    left out of the label images (none by default); ``traces`` (map cells ``classes_map`` reads unknown, laser beams'
+    traces) are free to the rooms."""
     resolution_m, origin_xy_m = frame.resolution_m, frame.origin_xy_m
     t = kernel_settings(settings, resolution_m).wall_cells
     ox, oy = origin_xy_m
@@ -325,14 +331,16 @@ def describe(
             seg = (p, q)
             width = d.cols * resolution_m
         doors.append(Door(d, seg, (holders[0], holders[1]), width))
+    traces = np.zeros(classes_map.shape, np.bool_) if traces is None else traces
     classes_work = to_work(frame, classes_map, fill=CellClass.UNKNOWN)
+    seen_work = to_work(frame, np.where(traces, np.uint8(CellClass.FREE), classes_map), fill=CellClass.UNKNOWN)
     lines = np.zeros((0, 4)) if settings.slant_line_m is None else wall_line_segments(
         classes_work, min_length_cells=_cells(settings.slant_line_m, resolution_m),
         max_gap_cells=round(settings.slant_gap_m / resolution_m), wall_share=settings.slant_wall_share)
     rooms, room_cells = split_at_slanted_walls(
-        group_rooms(world, classes_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
+        group_rooms(world, seen_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
                     resolution_m=resolution_m, settings=settings.rooms),
-        world, classes_work, lines, resolution_m=resolution_m, reach_m=0.5 * settings.slant_gap_m,
+        world, seen_work, lines, resolution_m=resolution_m, reach_m=0.5 * settings.slant_gap_m,
         settings=settings.rooms)
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
@@ -387,7 +395,7 @@ def describe(
                      cell_prediction_rate(classes_map, cw), k_units, clutter, walls, wall_segments, slants, exterior,
                      log_posterior, iterations, accepted,
                      seconds, cpu_seconds, resolution_m, origin_xy_m, frame,
-                     np.zeros(classes_map.shape, np.bool_) if fringe is None else fringe)
+                     np.zeros(classes_map.shape, np.bool_) if fringe is None else fringe, traces)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
@@ -403,7 +411,7 @@ def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
     """A label image like :func:`unit_labels` with one id per room (1..R in the order of ``plan.rooms``): each
     room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds."""
     cells = to_map(plan.frame, plan.room_cells.astype(np.float32), fill=0.0).astype(np.int32)
-    out = fill_free(cells, plan.classes_map == CellClass.FREE)
+    out = fill_free(cells, (plan.classes_map == CellClass.FREE) | plan.traces)
     out[plan.fringe] = 0
     return out
 
@@ -414,7 +422,7 @@ def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.in
     work = np.zeros(plan.frame.shape, np.float32)  # ids as float32 (exact below 2**24) so OpenCV can turn them
     for r, k in items:
         work[r.r0 : r.r1 + 1, r.c0 : r.c1 + 1] = k
-    free = plan.classes_map == CellClass.FREE
+    free = (plan.classes_map == CellClass.FREE) | plan.traces
     out = fill_free(to_map(plan.frame, work, fill=0.0).astype(np.int32), free)
     out[plan.fringe] = 0
     return out

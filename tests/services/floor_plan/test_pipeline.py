@@ -301,6 +301,24 @@ def test_laser_beams_through_a_window_read_unknown_and_the_rooms_free_space_stay
     assert np.array_equal(plan.classes_map[12:89, 22:139][inside], seen.classes_map[12:89, 22:139][inside]), \
         "the room's floor, the window and the gap between the desks stay free"
     assert plan.k > seen.k
+
+
+def test_a_room_whose_floor_reads_as_beam_traces_in_part_stays_one_room_with_every_free_cell_labelled() -> None:
+    """A laser map's room with a band of clutter dots across its floor (unknown specks two cells apart: the free cells
+    between them are narrow runs beside unknown, as the traces of beams are): the traces' reading must not cut the
+    room at the band, and the room's label covers the band's free cells as the map draws them."""
+    occ = np.full((80, 120), -1, np.int8)
+    _box(occ, 10, 69, 10, 109)
+    band = np.zeros(occ.shape, bool)
+    band[38:43, 12:108] = True
+    dots = band & (np.arange(80)[:, None] % 2 == 0) & (np.arange(120)[None, :] % 2 == 0)
+    occ[dots] = -1
+    plan = floor_plan(occ, resolution_m=RES, settings=replace(_settings(), trace_max_m=0.15))
+    assert (plan.classes_map[band & (occ == 0)] == CellClass.UNKNOWN).mean() > 0.8, "the band reads as traces"
+    rooms = room_labels(plan)
+    assert len(plan.rooms) == 1
+    assert (rooms[band & (occ == 0)] > 0).all()
+    assert len(np.unique(rooms[occ == 0])) == 1
 def _grey_edged(tmp_path: Path) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.bool_]]:
     """The two rooms drawn as an image whose walls have a one-pixel light-grey edge on the room side (antialiasing),
     and a light-grey patch in the middle of the left room; read back, with the edge (GridLayer order)."""
