@@ -81,6 +81,7 @@ _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by 
 # at once can deadlock on its partly loaded modules
 _STEP_MODULES = (
     "networkx",
+    "scipy.ndimage",
     "scipy.optimize",
     "scipy.signal",
     "scipy.stats",
