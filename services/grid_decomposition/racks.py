@@ -461,12 +461,13 @@ class _Refine:
         """The edge near ``guess`` (pixel-centre coordinate across ``spans``): just outside the obstacles there."""
         coord = self.uv[:, 0] if along_x else self.uv[:, 1]
         other = self.uv[:, 1] if along_x else self.uv[:, 0]
-        near = np.abs(coord - guess) <= 1.0
+        near = np.flatnonzero(np.abs(coord - guess) <= 1.0)  # the spans are tested at these few points only
+        across = other[near]
         inside = np.zeros(near.shape, dtype=bool)
         for span, ok in zip(spans, use, strict=True):
             if ok:
-                inside |= (other >= span.lo) & (other <= span.hi - 1)
-        values = coord[near & inside]
+                inside |= (across >= span.lo) & (across <= span.hi - 1)
+        values = coord[near[inside]]
         if values.size < 4:
             return guess
         # a straight edge turned spreads its first obstacle centres evenly over one pixel: the
@@ -890,7 +891,7 @@ def place_segments(
     left[0] = False
     floor = left[segments] & ~in_cells & region if left.any() else np.zeros(free.shape, dtype=bool)
     crumbs = crumb[layout.cells] & free if crumb.any() else np.zeros(free.shape, dtype=bool)
-    place = cells.copy()
+    place = cells.astype(np.int32)  # a copy (ids stay far below 2**31)
     # a crumb joins the nearest place; a sliver of floor the nearest place that is no rack (floor is no storage)
     rack = layout.cell_labels == PlaceLabel.STORAGE.value
     for joining, off_racks in ((crumbs, False), (floor, True)):
@@ -930,7 +931,8 @@ def place_segments(
     present = np.bincount(runs[0]) > 0
     present[0] = True
     lut = (np.cumsum(present) - 1).astype(np.int32)
-    return lookup(lut, out, runs), np.where(inside, place, 0).astype(np.int32, copy=False)
+    np.multiply(place, inside, out=place)  # its own copy (int32): 0 off the free pixels in a place
+    return lookup(lut, out, runs), place
 
 
 def _joint_runs(

@@ -13,6 +13,7 @@ from services.grid_decomposition.arrays import (
     label_boxes,
     label_counts,
     label_max,
+    lookup,
 )
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
@@ -230,9 +231,9 @@ def segment_rooms(
     cut = np.zeros(seg.shape, dtype=bool)
     cuts = np.zeros((0, 2, 2))
     fixed = _share(seg, floor) > 0.5
-    spread = fill_from_neighbours(seg, clutter)
-    seg = np.where(clutter & fixed[spread], 0, spread).astype(np.int32)
-    space = (seg > 0) & ~fixed[seg]
+    seg = fill_from_neighbours(seg, clutter)  # its own copy: furniture on a fixed segment is cleared in place
+    np.copyto(seg, 0, where=clutter & lookup(fixed, seg))
+    space = (seg > 0) & ~lookup(fixed, seg)
     if not space.any():  # warehouse floors only (a rack hall): no room to split, cut or clean up
         return renumber(seg), cut
     clearance = np.asarray(cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)

@@ -150,7 +150,9 @@ def subdivide(
     idx = np.flatnonzero(line_image)
     r, c = np.divmod(idx, w)
     at = (r + 1) * (w + 2) + c + 1
-    nb = np.stack([padded[at - (w + 2)], padded[at + (w + 2)], padded[at - 1], padded[at + 1]]).astype(np.int64)
+    nb = np.empty((4, idx.size), dtype=np.int64)
+    for row, offset in zip(nb, (-(w + 2), w + 2, -1, 1), strict=True):
+        row[:] = padded[at + offset]
     keys: list[npt.NDArray[np.int64]] = []
     pix: list[npt.NDArray[np.int64]] = []
     n_labels64 = np.int64(n_labels)
