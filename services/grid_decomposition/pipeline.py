@@ -152,7 +152,7 @@ def _check(occupancy: npt.NDArray[np.integer], resolution_m: float) -> npt.NDArr
     occ16 = occ.astype(np.int16)
     if occ16.min() < -1 or occ16.max() > 100:
         raise DecompositionError(f"occupancy values must be -1 or 0..100, got {occ16.min()}..{occ16.max()}")
-    if not np.any((occ16 >= 0) & (occ16 < FREE_PERCENT)):
+    if not np.any(occ16.view(np.uint16) < FREE_PERCENT):  # 0 <= value < FREE_PERCENT (-1 is 65535 unsigned)
         raise DecompositionError("occupancy has no free cell: nothing to decompose")
     return occ16
 
@@ -214,7 +214,7 @@ def _structure(obstacle: Components, min_area_px: int) -> npt.NDArray[np.bool_]:
     """Pixels near obstacle components of at least ``min_area_px`` (walls, blocks), not furniture or uprights."""
     big = obstacle.stats[:, cv2.CC_STAT_AREA] >= min_area_px
     big[0] = False
-    return np.asarray(cv2.dilate(big[obstacle.labels].astype(np.uint8), np.ones((5, 5), np.uint8)), dtype=bool)
+    return np.asarray(cv2.dilate(lookup(big.view(np.uint8), obstacle.labels), np.ones((5, 5), np.uint8)), dtype=bool)
 
 
 def _texture_count(lines: dict[float, list[Line]]) -> int:

@@ -104,7 +104,7 @@ def furniture(
             keep[k] = False
         if block[k] and length > block_max_elongation * thickness:
             keep[k] = False
-    return np.asarray(keep[parts], dtype=bool)
+    return lookup(keep, parts)
 
 
 def wall_furniture(
@@ -134,7 +134,7 @@ def wall_furniture(
     keep = stats[:, cv2.CC_STAT_AREA] <= max_area_m2 / resolution_m**2
     keep[0] = False
     keep[np.unique(np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]])] = False
-    return np.asarray(keep[parts], dtype=bool) if n > 1 else np.zeros(obstacle.shape, dtype=bool)
+    return lookup(keep, parts) if n > 1 else np.zeros(obstacle.shape, dtype=bool)
 
 
 def segment_rooms(

@@ -121,7 +121,7 @@ def segment_image(
         Segment ids 1..N (consecutive), 0 off free space.
     """
     seg = lookup(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
-    seg[~free] = 0
+    np.multiply(seg, free, out=seg)  # 0 off free space, in place
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
     piece_of_run, length, n_pieces, owner, area = _piece_runs(seg)
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
