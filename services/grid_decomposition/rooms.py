@@ -235,7 +235,7 @@ def segment_rooms(
     np.copyto(seg, 0, where=clutter & lookup(fixed, seg))
     space = (seg > 0) & ~lookup(fixed, seg)
     if not space.any():  # warehouse floors only (a rack hall): no room to split, cut or clean up
-        return renumber(seg), cut
+        return renumber(seg, copy=False), cut  # seg is this function's own
     clearance = np.asarray(cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
     if neck_half_width_m > 0:
         seg = split_at_necks(

@@ -286,8 +286,8 @@ def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArra
     return lookup(lut, seg)
 
 
-def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
-    """Ids 1..N in the order of the old ids, 0 kept."""
+def renumber(seg: npt.NDArray[np.int32], *, copy: bool = True) -> npt.NDArray[np.int32]:
+    """Ids 1..N in the order of the old ids, 0 kept; ``seg`` itself when no id changes and ``copy`` is false."""
     if seg.size == 0:
         return np.array(seg, dtype=np.int32, copy=True)
     runs = value_runs(seg)
@@ -295,7 +295,7 @@ def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
     if np.array_equal(lut, np.arange(lut.size)):
-        return np.array(seg, dtype=np.int32, copy=True)
+        return np.array(seg, dtype=np.int32, copy=True) if copy else np.asarray(seg, dtype=np.int32)
     return lookup(lut, seg, runs)
 
 
