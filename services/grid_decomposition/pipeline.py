@@ -687,7 +687,7 @@ def decompose(
         if label_overrides:
             kept_place = kept_place & ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
         if kept_place.any():
-            labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
+            labels = np.where(kept_place, lookup(racks.cell_labels.astype(np.uint8), places), labels)  # below 256
         labels = np.where(floor_space, labels, 0).astype(np.uint8, copy=False)
         return Decomposition(
             labels=labels,

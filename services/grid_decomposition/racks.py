@@ -703,11 +703,11 @@ def find_racks(
                 border_rc = np.argwhere(border).astype(np.float64)
             refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
         for transpose, racks in found:
-            image = np.ascontiguousarray(turned.T) if transpose else turned
+            free = np.ascontiguousarray(turned.T == 0) if transpose else turned == 0  # once for all blocks
             for block in _blocks(racks, max_aisle_px=max_aisle_m * px):
                 grid = _grid(
                     block,
-                    image == 0,
+                    free,
                     refine.transposed() if transpose else refine,
                     double_px=double_m * px,
                     max_aisle_px=round(max_aisle_m * px),

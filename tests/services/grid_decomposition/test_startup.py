@@ -28,12 +28,22 @@ def test_importing_the_decomposition_loads_no_store_and_no_clustering_signal_or_
     assert out.strip() == "[]"
 
 
-def test_the_store_records_are_still_names_of_the_package() -> None:
+def test_importing_the_decomposition_loads_no_image_filters_and_no_map_file_reader() -> None:
+    # scipy.ndimage (and scikit-image, which loads it) come with the step libraries on decompose's second thread
     out = _fresh(
-        "from services.grid_decomposition import PLACE_LABELS, decomposition_features\n"
-        "print(PLACE_LABELS, decomposition_features.__name__)\n"
+        "import sys\n"
+        "import services.grid_decomposition\n"
+        "print(sorted(m for m in ('scipy.ndimage', 'skimage', 'PIL', 'yaml') if m in sys.modules))\n"
     )
-    assert out.split() == ["place_labels", "decomposition_features"]
+    assert out.strip() == "[]"
+
+
+def test_the_store_records_and_map_file_functions_are_still_names_of_the_package() -> None:
+    out = _fresh(
+        "from services.grid_decomposition import PLACE_LABELS, decomposition_features, read_map_file\n"
+        "print(PLACE_LABELS, decomposition_features.__name__, read_map_file.__name__)\n"
+    )
+    assert out.split() == ["place_labels", "decomposition_features", "read_map_file"]
 
 
 def test_a_first_decomposition_on_two_threads_at_once_gives_the_same_result_as_in_turn() -> None:
