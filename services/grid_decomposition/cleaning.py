@@ -53,7 +53,7 @@ def _specks(free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], max_ar
     occupied cell whose 8 neighbours on the map are all free: a 3 x 3 count of the cells not free, no labelling.
     """
     if max_area_px == 1:
-        not_free = cv2.boxFilter((~free).astype(np.uint8), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        not_free = cv2.boxFilter((~free).view(np.uint8), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
         speck: npt.NDArray[np.bool_] = occupied & (not_free == 1)
         return speck
     candidate = _small_components(occupied, max_area_px)
@@ -128,7 +128,7 @@ def clean_occupancy(
     Cleaning
         The masks of what changed.
     """
-    occ = np.asarray(occupancy).astype(np.int16)
+    occ = np.asarray(occupancy).astype(np.int16, copy=False)  # only read
     known = occ >= 0
     free = known & (occ < FREE_PERCENT)
     occupied = known & (occ > OCCUPIED_PERCENT)

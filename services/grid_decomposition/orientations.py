@@ -51,12 +51,15 @@ def oriented_gradients(obstacle: npt.NDArray[np.bool_]) -> Gradients:
     keep = magnitude > 0.05
     at, magnitude, phase = near[keep], magnitude[keep], phase[keep]
     rows, cols = np.divmod(at, mask.shape[1])
-    direction = phase.astype(np.float64) + math.pi / 2
-    direction = (direction + math.pi / 2) % math.pi - math.pi / 2
+    direction = phase.astype(np.float64)  # then (phase + pi/2 + pi/2) % pi - pi/2, step by step in place
+    direction += math.pi / 2
+    direction += math.pi / 2
+    direction %= math.pi
+    direction -= math.pi / 2
     return Gradients(
         (int(mask.shape[0]), int(mask.shape[1])),
-        rows.astype(np.int64),
-        cols.astype(np.int64),
+        rows.astype(np.int64, copy=False),  # flat indices divided: int64 already
+        cols.astype(np.int64, copy=False),
         magnitude.astype(np.float64),
         direction,
     )
