@@ -715,7 +715,7 @@ def find_racks(
                     dot_px=max(1, round(max_upright_m * px)),
                 )
                 placed, placed_labels, placed_rows = _rasterise(grid, matrix, transpose, shape, n_ids)
-                cells = np.where(cells == 0, placed, cells)
+                cells = placed if n_ids == 1 else np.where(cells == 0, placed, cells)  # no place yet: all 0 so far
                 labels.append(placed_labels)
                 rows += placed_rows
                 n_ids += placed_labels.size
