@@ -1,7 +1,8 @@
 """Grid decomposition: dominant orientations, radiogram lines, cells, place labels and regions.
 
-The store records (``records.py``: the map store's types, SQLAlchemy behind them) are imported when
-one of their names is first asked for: decomposing a map needs none of them.
+The store records (``records.py``: the map store's types, SQLAlchemy behind them) and the map files
+(``mapfile.py``: Pillow and YAML behind them) are imported when one of their names is first asked for:
+decomposing a map needs none of them.
 """
 
 from typing import TYPE_CHECKING
@@ -12,13 +13,6 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.evaluation import IpaScores, ground_truth_rooms, ipa_scores
 from services.grid_decomposition.faces import FaceGeometry, face_geometry
 from services.grid_decomposition.labelling import Evidence, FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.mapfile import (
-    decompose_map_file,
-    layout_features,
-    parse_label_overrides,
-    read_map_file,
-    write_outputs,
-)
 from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.overview import overview_image
@@ -37,6 +31,13 @@ from services.grid_decomposition.templates import Template, match_templates, tem
 from services.grid_decomposition.texture import gabor_features, segment_texture_regions
 
 if TYPE_CHECKING:
+    from services.grid_decomposition.mapfile import (
+        decompose_map_file,
+        layout_features,
+        parse_label_overrides,
+        read_map_file,
+        write_outputs,
+    )
     from services.grid_decomposition.records import (
         PLACE_LABELS,
         PLACE_SEGMENTS,
@@ -60,11 +61,20 @@ _RECORDS = frozenset(
 )
 
 
+_MAP_FILES = frozenset(
+    {"decompose_map_file", "layout_features", "parse_label_overrides", "read_map_file", "write_outputs"}
+)
+
+
 def __getattr__(name: str) -> object:
     if name in _RECORDS:
         from services.grid_decomposition import records
 
         return getattr(records, name)
+    if name in _MAP_FILES:
+        from services.grid_decomposition import mapfile
+
+        return getattr(mapfile, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage, sparse
+from scipy import sparse
 from scipy.sparse import csgraph
 
 from services.grid_decomposition.segments import renumber
@@ -207,6 +207,8 @@ def _segment_box(seg: npt.NDArray[np.int32]) -> tuple[slice, slice]:
 def _boxes(seg: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.int64]:
     """(n, 4) bounding box (row0, col0, row1, col1) of every segment id (zeros where it has no pixel)."""
     boxes = np.zeros((n, 4), dtype=np.int64)
+    from scipy import ndimage  # imported when first needed (decompose loads it early)
+
     rows, cols = _segment_box(seg)
     r0, c0 = rows.start, cols.start
     for i, box in enumerate(ndimage.find_objects(seg[rows, cols]), start=1):

@@ -53,7 +53,7 @@ def _specks(free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], max_ar
     occupied cell whose 8 neighbours on the map are all free: a 3 x 3 count of the cells not free, no labelling.
     """
     if max_area_px == 1:
-        not_free = cv2.boxFilter((~free).astype(np.uint8), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        not_free = cv2.boxFilter((~free).view(np.uint8), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
         speck: npt.NDArray[np.bool_] = occupied & (not_free == 1)
         return speck
     candidate = _small_components(occupied, max_area_px)
@@ -128,13 +128,14 @@ def clean_occupancy(
     Cleaning
         The masks of what changed.
     """
-    occ = np.asarray(occupancy).astype(np.int16)
+    occ = np.asarray(occupancy).astype(np.int16, copy=False)  # only read
     known = occ >= 0
     free = known & (occ < FREE_PERCENT)
     occupied = known & (occ > OCCUPIED_PERCENT)
     px = resolution_m**2
 
-    clearest = int(occ[free].min()) if free.any() else 0  # 0 in an image; a live map's clamp (12 % by default)
+    # 0 in an image; a live map's clamp (12 % by default)
+    clearest = int(np.min(occ, where=free, initial=np.iinfo(np.int16).max)) if free.any() else 0
     fringe = _fringe(free, free & (occ > clearest + clear_free_percent),
                      max(1, round(fringe_depth_m / resolution_m)))
     free &= ~fringe
@@ -147,18 +148,19 @@ def clean_occupancy(
     unknown = ~free & ~occupied
     gap = max(1, round(fan_gap_m / resolution_m))
     width = max(1, round(streak_width_m / resolution_m / 2))
-    # rays: free space too thin for the opening; a fan of them closes into a body
-    rays = free & ~cv2.morphologyEx(free.astype(np.uint8), cv2.MORPH_OPEN, _disk(width)).astype(bool)
-    closed = cv2.morphologyEx(free.astype(np.uint8), cv2.MORPH_CLOSE, _disk(gap)).astype(bool)
-    between_rays = cv2.morphologyEx(rays.astype(np.uint8), cv2.MORPH_CLOSE, _disk(gap)).astype(bool)
+    # rays: free space too thin for the opening; a fan of them closes into a body (the masks go to OpenCV and come
+    # back as 0/1 bytes viewed as bool: no copies)
+    rays = free & ~cv2.morphologyEx(free.view(np.uint8), cv2.MORPH_OPEN, _disk(width)).view(bool)
+    closed = cv2.morphologyEx(free.view(np.uint8), cv2.MORPH_CLOSE, _disk(gap)).view(bool)
+    between_rays = cv2.morphologyEx(rays.view(np.uint8), cv2.MORPH_CLOSE, _disk(gap)).view(bool)
     # never next to a wall: the unknown cells along a wall (its grey edge) are wall
     off_walls = ~near(occupied, gap)
     # only thin unknown (no disk of the gap's radius fits): the wedges between rays, not the
     # bays of a ragged border with a large unknown space behind it
-    thin = ~cv2.morphologyEx(unknown.astype(np.uint8), cv2.MORPH_OPEN, _disk(gap)).astype(bool)
+    thin = ~cv2.morphologyEx(unknown.view(np.uint8), cv2.MORPH_OPEN, _disk(gap)).view(bool)
     filled = closed & unknown & off_walls & thin & between_rays
     body = free | filled
-    opened = cv2.morphologyEx(body.astype(np.uint8), cv2.MORPH_OPEN, _disk(width)).astype(bool)
+    opened = cv2.morphologyEx(body.view(np.uint8), cv2.MORPH_OPEN, _disk(width)).view(bool)
     kept = opened & ~_small_components(opened, max(1, round(min_free_area_m2 / px)))
     # thin free space near the body (gaps between furniture legs, corners) stays
     reach = ~near(kept, streak_reach_m / resolution_m)

@@ -21,7 +21,6 @@ import numpy as np
 import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from skimage.measure import label as connected_labels
 
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.segments import fill_from_neighbours
@@ -230,6 +229,8 @@ def joined_regions(
 
 def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.NDArray[np.int32]:
     """Each region's pieces (4-connected) other than its largest: smaller than ``min_area_px``, to a neighbour."""
+    from skimage.measure import label as connected_labels  # imported when first needed (it loads scipy.ndimage)
+
     pieces = np.asarray(connected_labels(segments, background=0, connectivity=1))  # type: ignore[no-untyped-call]
     area = np.bincount(pieces.ravel())
     owner = np.zeros(area.size, dtype=np.int64)

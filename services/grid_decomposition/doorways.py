@@ -7,7 +7,6 @@ import math
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 
 def _centre_runs(
@@ -370,6 +369,8 @@ def _nearest_walls(
             for c in range(0, w, tile_px)
             if space[r : r + tile_px, c : c + tile_px].any()
         ]
+    from scipy import ndimage  # imported when first needed (decompose loads it early)
+
     if tiles == [(0, h, 0, w)]:
         fy, fx = ndimage.distance_transform_edt(space, return_distances=False, return_indices=True)
     else:

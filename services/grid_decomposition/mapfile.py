@@ -13,7 +13,6 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 from PIL import Image
-from scipy import ndimage
 
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.overview import overview_image
@@ -80,6 +79,8 @@ def _to_metres(points_px: npt.NDArray[np.float64], decomposition: Decomposition)
 
 def layout_features(decomposition: Decomposition) -> dict[str, Any]:
     """GeoJSON FeatureCollection of regions (polygons), walls (cogent edges) and decomposition lines."""
+    from scipy import ndimage  # imported when first needed
+
     features: list[dict[str, Any]] = []
     seg = decomposition.segments
     for sid, box in enumerate(ndimage.find_objects(seg), start=1):

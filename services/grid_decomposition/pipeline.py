@@ -6,8 +6,11 @@ import enum
 import importlib
 import logging
 import math
-from collections.abc import Mapping
+import sys
+import threading
+from collections.abc import Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -83,6 +86,7 @@ _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by 
 # at once can deadlock on its partly loaded modules
 _STEP_MODULES = (
     "networkx",
+    "scipy.ndimage",
     "scipy.optimize",
     "scipy.signal",
     "scipy.stats",
@@ -142,6 +146,37 @@ class Decomposition:
     rack_rows_px: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4, 2)))
 
 
+# While a decomposition runs its two threads hand the GIL to each other often: the calling thread mostly waits in
+# long numpy and OpenCV calls that release it, and on each return it waited up to the interpreter's switch interval
+# (5 ms) for the other thread (importing, clustering, drawing) to let it go. A shorter interval for that time only.
+class _QuickSwitches:
+    """The interpreter's switch interval at most ``interval_s`` while any decomposition runs, then as it was."""
+
+    def __init__(self, interval_s: float) -> None:
+        self.interval_s = interval_s
+        self._lock = threading.Lock()
+        self._users = 0
+        self._before = 0.0
+
+    @contextmanager
+    def held(self) -> Iterator[None]:
+        with self._lock:
+            if self._users == 0:
+                self._before = sys.getswitchinterval()
+                sys.setswitchinterval(min(self._before, self.interval_s))
+            self._users += 1
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._users -= 1
+                if self._users == 0:
+                    sys.setswitchinterval(self._before)
+
+
+_QUICK_SWITCHES = _QuickSwitches(0.0005)
+
+
 def _check(occupancy: npt.NDArray[np.integer], resolution_m: float) -> npt.NDArray[np.int16]:
     occ = np.asarray(occupancy)
     if occ.ndim != 2 or min(occ.shape, default=0) < 2:
@@ -153,7 +188,7 @@ def _check(occupancy: npt.NDArray[np.integer], resolution_m: float) -> npt.NDArr
     occ16 = occ.astype(np.int16)
     if occ16.min() < -1 or occ16.max() > 100:
         raise DecompositionError(f"occupancy values must be -1 or 0..100, got {occ16.min()}..{occ16.max()}")
-    if not np.any((occ16 >= 0) & (occ16 < FREE_PERCENT)):
+    if not np.any(occ16.view(np.uint16) < FREE_PERCENT):  # 0 <= value < FREE_PERCENT (-1 is 65535 unsigned)
         raise DecompositionError("occupancy has no free cell: nothing to decompose")
     return occ16
 
@@ -215,7 +250,7 @@ def _structure(obstacle: Components, min_area_px: int) -> npt.NDArray[np.bool_]:
     """Pixels near obstacle components of at least ``min_area_px`` (walls, blocks), not furniture or uprights."""
     big = obstacle.stats[:, cv2.CC_STAT_AREA] >= min_area_px
     big[0] = False
-    return np.asarray(cv2.dilate(big[obstacle.labels].astype(np.uint8), np.ones((5, 5), np.uint8)), dtype=bool)
+    return np.asarray(cv2.dilate(lookup(big.view(np.uint8), obstacle.labels), np.ones((5, 5), np.uint8)), dtype=bool)
 
 
 def _texture_count(lines: dict[float, list[Line]]) -> int:
@@ -429,7 +464,7 @@ def decompose(
     # runs steps beside the line search (place categories, furniture against walls, free-standing
     # obstacles), the rack search and the cogency that do not need their results, and the region
     # graph beside the label image; each step gives the same result as run in turn
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
+    with _QUICK_SWITCHES.held(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
         loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
         streaks = rays = np.zeros(occ.shape, dtype=bool)
         if clean:
@@ -706,7 +741,7 @@ def decompose(
         if label_overrides:
             kept_place = kept_place & ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
         if kept_place.any():
-            labels = np.where(kept_place, racks.cell_labels.astype(np.uint8)[places], labels)  # labels are below 256
+            labels = np.where(kept_place, lookup(racks.cell_labels.astype(np.uint8), places), labels)  # below 256
         labels = np.where(floor_space, labels, 0).astype(np.uint8, copy=False)
         return Decomposition(
             labels=labels,

@@ -461,12 +461,13 @@ class _Refine:
         """The edge near ``guess`` (pixel-centre coordinate across ``spans``): just outside the obstacles there."""
         coord = self.uv[:, 0] if along_x else self.uv[:, 1]
         other = self.uv[:, 1] if along_x else self.uv[:, 0]
-        near = np.abs(coord - guess) <= 1.0
+        near = np.flatnonzero(np.abs(coord - guess) <= 1.0)  # the spans are tested at these few points only
+        across = other[near]
         inside = np.zeros(near.shape, dtype=bool)
         for span, ok in zip(spans, use, strict=True):
             if ok:
-                inside |= (other >= span.lo) & (other <= span.hi - 1)
-        values = coord[near & inside]
+                inside |= (across >= span.lo) & (across <= span.hi - 1)
+        values = coord[near[inside]]
         if values.size < 4:
             return guess
         # a straight edge turned spreads its first obstacle centres evenly over one pixel: the
@@ -702,11 +703,11 @@ def find_racks(
                 border_rc = np.argwhere(border).astype(np.float64)
             refine = _Refine(border_rc[:, ::-1] @ matrix[:, :2].T + matrix[:, 2])
         for transpose, racks in found:
-            image = np.ascontiguousarray(turned.T) if transpose else turned
+            free = np.ascontiguousarray(turned.T == 0) if transpose else turned == 0  # once for all blocks
             for block in _blocks(racks, max_aisle_px=max_aisle_m * px):
                 grid = _grid(
                     block,
-                    image == 0,
+                    free,
                     refine.transposed() if transpose else refine,
                     double_px=double_m * px,
                     max_aisle_px=round(max_aisle_m * px),
@@ -714,7 +715,7 @@ def find_racks(
                     dot_px=max(1, round(max_upright_m * px)),
                 )
                 placed, placed_labels, placed_rows = _rasterise(grid, matrix, transpose, shape, n_ids)
-                cells = np.where(cells == 0, placed, cells)
+                cells = placed if n_ids == 1 else np.where(cells == 0, placed, cells)  # no place yet: all 0 so far
                 labels.append(placed_labels)
                 rows += placed_rows
                 n_ids += placed_labels.size
@@ -843,7 +844,8 @@ def face_places(
     n_lab = len(PlaceLabel)
     # free pixels per (face, place label), counted from the runs of equal keys along the rows
     dtype = np.dtype(np.int32 if (n_faces + 1) * n_lab < 2**31 else np.int64)
-    key = face_image.astype(dtype, copy=False) * n_lab + lookup(layout.cell_labels.astype(dtype), layout.cells)
+    key = np.multiply(face_image, n_lab, dtype=dtype)
+    key += lookup(layout.cell_labels.astype(dtype), layout.cells)  # in place: one fresh whole-image array fewer
     votes = label_counts(key, (n_faces + 1) * n_lab, free)[1].reshape(n_faces + 1, n_lab)
     best = votes[:, 1:].argmax(axis=1) + 1
     majority = votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1)
@@ -890,7 +892,7 @@ def place_segments(
     left[0] = False
     floor = left[segments] & ~in_cells & region if left.any() else np.zeros(free.shape, dtype=bool)
     crumbs = crumb[layout.cells] & free if crumb.any() else np.zeros(free.shape, dtype=bool)
-    place = cells.copy()
+    place = cells.astype(np.int32)  # a copy (ids stay far below 2**31)
     # a crumb joins the nearest place; a sliver of floor the nearest place that is no rack (floor is no storage)
     rack = layout.cell_labels == PlaceLabel.STORAGE.value
     for joining, off_racks in ((crumbs, False), (floor, True)):
@@ -930,7 +932,8 @@ def place_segments(
     present = np.bincount(runs[0]) > 0
     present[0] = True
     lut = (np.cumsum(present) - 1).astype(np.int32)
-    return lookup(lut, out, runs), np.where(inside, place, 0).astype(np.int32, copy=False)
+    np.multiply(place, inside, out=place)  # its own copy (int32): 0 off the free pixels in a place
+    return lookup(lut, out, runs), place
 
 
 def _joint_runs(

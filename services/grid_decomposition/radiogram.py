@@ -9,7 +9,6 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from scipy.ndimage import gaussian_filter1d
 
 from services.grid_decomposition.orientations import Gradients
 from services.grid_decomposition.wavelets import find_peaks_ricker
@@ -104,7 +103,8 @@ def line_offsets(
     most ``coarse_max_width_m`` (diffuse clutter gives wide, low peaks). Of peaks closer than
     ``min_line_gap_m`` only the best supported is kept.
     """
-    from scipy.signal import find_peaks, peak_widths  # imported when first needed (decompose loads it early)
+    from scipy.ndimage import gaussian_filter1d  # imported when first needed (decompose loads it early)
+    from scipy.signal import find_peaks, peak_widths
 
     signal = gram.signal
     if signal.size < 3 or not np.any(signal > 0):

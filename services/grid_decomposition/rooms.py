@@ -13,6 +13,7 @@ from services.grid_decomposition.arrays import (
     label_boxes,
     label_counts,
     label_max,
+    lookup,
 )
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
@@ -103,7 +104,7 @@ def furniture(
             keep[k] = False
         if block[k] and length > block_max_elongation * thickness:
             keep[k] = False
-    return np.asarray(keep[parts], dtype=bool)
+    return lookup(keep, parts)
 
 
 def wall_furniture(
@@ -133,7 +134,7 @@ def wall_furniture(
     keep = stats[:, cv2.CC_STAT_AREA] <= max_area_m2 / resolution_m**2
     keep[0] = False
     keep[np.unique(np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]])] = False
-    return np.asarray(keep[parts], dtype=bool) if n > 1 else np.zeros(obstacle.shape, dtype=bool)
+    return lookup(keep, parts) if n > 1 else np.zeros(obstacle.shape, dtype=bool)
 
 
 def segment_rooms(
@@ -230,11 +231,11 @@ def segment_rooms(
     cut = np.zeros(seg.shape, dtype=bool)
     cuts = np.zeros((0, 2, 2))
     fixed = _share(seg, floor) > 0.5
-    spread = fill_from_neighbours(seg, clutter)
-    seg = np.where(clutter & fixed[spread], 0, spread).astype(np.int32)
-    space = (seg > 0) & ~fixed[seg]
+    seg = fill_from_neighbours(seg, clutter)  # its own copy: furniture on a fixed segment is cleared in place
+    np.copyto(seg, 0, where=clutter & lookup(fixed, seg))
+    space = (seg > 0) & ~lookup(fixed, seg)
     if not space.any():  # warehouse floors only (a rack hall): no room to split, cut or clean up
-        return renumber(seg), cut
+        return renumber(seg, copy=False), cut  # seg is this function's own
     clearance = np.asarray(cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
     if neck_half_width_m > 0:
         seg = split_at_necks(

@@ -28,18 +28,21 @@ def fill_from_neighbours(
     8-neighbours (a grey dilation restricted to the holes). Only the front moves: the work is
     proportional to the pixels filled, not to the image (a few streak pixels on a 9 Mpx hall).
     """
-    out = np.array(segments, dtype=np.int32, copy=True)
-    hole = target & (out == 0)
+    segments = np.asarray(segments)
+    hole = target & (segments == 0)
     rows = np.flatnonzero(hole.any(axis=1))
     if rows.size == 0:
-        return out
+        return segments.astype(np.int32)  # a copy
     cols = np.flatnonzero(hole.any(axis=0))
     # the holes' bounding box and one pixel around it: every labelled pixel next to a hole
-    r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, out.shape[0])
-    c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, out.shape[1])
-    crop = out[r0:r1, c0:c1]
-    w = crop.shape[1]
-    lab = cv2.copyMakeBorder(crop, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    height, width = segments.shape
+    r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, height)
+    c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, width)
+    # the box framed by zeros is the working copy (the image's own copy only when the box is not all of it)
+    lab = cv2.copyMakeBorder(
+        segments[r0:r1, c0:c1].astype(np.int32, copy=False), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0
+    )
+    w = c1 - c0
     open_ = cv2.copyMakeBorder(hole[r0:r1, c0:c1].view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0).view(bool)
     lab_flat, open_flat = lab.ravel(), open_.ravel()
     stride = w + 2
@@ -83,7 +86,10 @@ def fill_from_neighbours(
         # the next front: each filled pixel once (the order of a front does not matter)
         front = distinct(np.concatenate(filled), seen)
         open_flat[front] = False
-    crop[:] = lab[1:-1, 1:-1]
+    if (r1 - r0, c1 - c0) == (height, width):
+        return np.ascontiguousarray(lab[1:-1, 1:-1])
+    out = segments.astype(np.int32)  # a copy
+    out[r0:r1, c0:c1] = lab[1:-1, 1:-1]
     return out
 
 
@@ -115,7 +121,7 @@ def segment_image(
         Segment ids 1..N (consecutive), 0 off free space.
     """
     seg = lookup(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
-    seg[~free] = 0
+    np.multiply(seg, free, out=seg)  # 0 off free space, in place
     seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
     piece_of_run, length, n_pieces, owner, area = _piece_runs(seg)
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
@@ -280,8 +286,8 @@ def _apply(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArra
     return lookup(lut, seg)
 
 
-def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
-    """Ids 1..N in the order of the old ids, 0 kept."""
+def renumber(seg: npt.NDArray[np.int32], *, copy: bool = True) -> npt.NDArray[np.int32]:
+    """Ids 1..N in the order of the old ids, 0 kept; ``seg`` itself when no id changes and ``copy`` is false."""
     if seg.size == 0:
         return np.array(seg, dtype=np.int32, copy=True)
     runs = value_runs(seg)
@@ -289,7 +295,7 @@ def renumber(seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     present[0] = False
     lut = np.where(present, np.cumsum(present), 0).astype(np.int32)
     if np.array_equal(lut, np.arange(lut.size)):
-        return np.array(seg, dtype=np.int32, copy=True)
+        return np.array(seg, dtype=np.int32, copy=True) if copy else np.asarray(seg, dtype=np.int32)
     return lookup(lut, seg, runs)
 
 

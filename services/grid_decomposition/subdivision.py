@@ -145,12 +145,16 @@ def subdivide(
     inside = ~line_image if domain is None else ~line_image & domain
     n_labels, labels = cv2.connectedComponents(inside.astype(np.uint8), connectivity=4, ltype=cv2.CV_32S)
     face_image = np.asarray(labels, dtype=np.int32)
-    # the 4 neighbours of every line pixel, by flat index into the face image with a frame of zeros
-    padded = cv2.copyMakeBorder(face_image, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0).ravel()
+    # the 4 neighbours of every line pixel (0 off the image), by flat index into the face image: an index
+    # past the image's edge is clipped and its neighbour set to 0 (no framed copy of the whole image)
+    flat = face_image.ravel()
     idx = np.flatnonzero(line_image)
     r, c = np.divmod(idx, w)
-    at = (r + 1) * (w + 2) + c + 1
-    nb = np.stack([padded[at - (w + 2)], padded[at + (w + 2)], padded[at - 1], padded[at + 1]]).astype(np.int64)
+    nb = np.empty((4, idx.size), dtype=np.int64)
+    off_image = (r == 0, r == shape[0] - 1, c == 0, c == w - 1)
+    for row, offset, off in zip(nb, (-w, w, -1, 1), off_image, strict=True):
+        row[:] = np.take(flat, idx + offset, mode="clip")
+        row[off] = 0
     keys: list[npt.NDArray[np.int64]] = []
     pix: list[npt.NDArray[np.int64]] = []
     n_labels64 = np.int64(n_labels)

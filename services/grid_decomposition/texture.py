@@ -7,7 +7,6 @@ import math
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy.ndimage import distance_transform_edt
 
 from services.grid_decomposition.arrays import components_stats
 from services.grid_decomposition.errors import DecompositionError
@@ -118,6 +117,8 @@ def segment_texture_regions(
 
 
 def _nearest(mask: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+    from scipy.ndimage import distance_transform_edt  # imported when first needed (decompose loads it early)
+
     dist, idx = distance_transform_edt(~mask, return_indices=True)
     return dist, idx
 

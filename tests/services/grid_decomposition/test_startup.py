@@ -28,17 +28,30 @@ def test_importing_the_decomposition_loads_no_store_and_no_clustering_signal_or_
     assert out.strip() == "[]"
 
 
-def test_the_store_records_are_still_names_of_the_package() -> None:
+def test_importing_the_decomposition_loads_no_image_filters_and_no_map_file_reader() -> None:
+    # scipy.ndimage (and scikit-image, which loads it) come with the step libraries on decompose's second thread
     out = _fresh(
-        "from services.grid_decomposition import PLACE_LABELS, decomposition_features\n"
-        "print(PLACE_LABELS, decomposition_features.__name__)\n"
+        "import sys\n"
+        "import services.grid_decomposition\n"
+        "print(sorted(m for m in ('scipy.ndimage', 'skimage', 'PIL', 'yaml') if m in sys.modules))\n"
     )
-    assert out.split() == ["place_labels", "decomposition_features"]
+    assert out.strip() == "[]"
+
+
+def test_the_store_records_and_map_file_functions_are_still_names_of_the_package() -> None:
+    out = _fresh(
+        "from services.grid_decomposition import PLACE_LABELS, decomposition_features, read_map_file\n"
+        "print(PLACE_LABELS, decomposition_features.__name__, read_map_file.__name__)\n"
+    )
+    assert out.split() == ["place_labels", "decomposition_features", "read_map_file"]
 
 
 def test_a_first_decomposition_on_two_threads_at_once_gives_the_same_result_as_in_turn() -> None:
-    # both threads import the lazily loaded libraries at the same moment (a deadlock risk)
+    # both threads import the lazily loaded libraries at the same moment (a deadlock risk); the interpreter's
+    # switch interval, shortened while a decomposition runs, is as it was once both are done
     out = _fresh(
+        "import sys\n"
+        "sys.setswitchinterval(0.004)\n"
         "from concurrent.futures import ThreadPoolExecutor\n"
         "import numpy as np\n"
         "from services.grid_decomposition import decompose\n"
@@ -52,6 +65,6 @@ def test_a_first_decomposition_on_two_threads_at_once_gives_the_same_result_as_i
         "    both = [job.result(timeout=240) for job in jobs]\n"
         "alone = decompose(occ, resolution_m=0.05)\n"
         "print(all(np.array_equal(d.segments, alone.segments) and np.array_equal(d.labels, alone.labels)\n"
-        "          and d.regions == alone.regions for d in both), len(alone.regions))\n"
+        "          and d.regions == alone.regions for d in both), len(alone.regions), sys.getswitchinterval())\n"
     )
-    assert out.split() == ["True", "2"]
+    assert out.split() == ["True", "2", "0.004"]
