@@ -6,11 +6,8 @@ import enum
 import importlib
 import logging
 import math
-import sys
-import threading
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -144,37 +141,6 @@ class Decomposition:
     resolution_m: float
     origin_xy_m: tuple[float, float]
     rack_rows_px: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4, 2)))
-
-
-# While a decomposition runs its two threads hand the GIL to each other often: the calling thread mostly waits in
-# long numpy and OpenCV calls that release it, and on each return it waited up to the interpreter's switch interval
-# (5 ms) for the other thread (importing, clustering, drawing) to let it go. A shorter interval for that time only.
-class _QuickSwitches:
-    """The interpreter's switch interval at most ``interval_s`` while any decomposition runs, then as it was."""
-
-    def __init__(self, interval_s: float) -> None:
-        self.interval_s = interval_s
-        self._lock = threading.Lock()
-        self._users = 0
-        self._before = 0.0
-
-    @contextmanager
-    def held(self) -> Iterator[None]:
-        with self._lock:
-            if self._users == 0:
-                self._before = sys.getswitchinterval()
-                sys.setswitchinterval(min(self._before, self.interval_s))
-            self._users += 1
-        try:
-            yield
-        finally:
-            with self._lock:
-                self._users -= 1
-                if self._users == 0:
-                    sys.setswitchinterval(self._before)
-
-
-_QUICK_SWITCHES = _QuickSwitches(0.0005)
 
 
 def _check(occupancy: npt.NDArray[np.integer], resolution_m: float) -> npt.NDArray[np.int16]:
@@ -464,7 +430,7 @@ def decompose(
     # runs steps beside the line search (place categories, furniture against walls, free-standing
     # obstacles), the rack search and the cogency that do not need their results, and the region
     # graph beside the label image; each step gives the same result as run in turn
-    with _QUICK_SWITCHES.held(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
         loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
         streaks = rays = np.zeros(occ.shape, dtype=bool)
         if clean:
