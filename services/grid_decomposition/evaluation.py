@@ -61,6 +61,7 @@ def _drop_small(labels: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.int32]:
 
 class _Overlap(NamedTuple):
     segment_ids: npt.NDArray[np.int64]  # (S,) the segmentation's own id of each scored segment
+    room_ids: npt.NDArray[np.int64]  # (R,) the ground truth's id of each scored room
     pixels: npt.NDArray[np.int64]  # (S, R) pixels of segment i in room j
     segment_px: npt.NDArray[np.float64]  # (S,)
     room_px: npt.NDArray[np.float64]  # (R,)
@@ -74,19 +75,23 @@ def _overlap(segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]) ->
     shift = 0 if values[0] == 0 else 1
     dense = inverse.reshape(seg.shape).astype(np.int32) + np.int32(shift)
     seg_ids = _drop_small(dense, int(dense.max()) + 1)
-    n_seg, n_room = int(seg_ids.max()), int(rooms.max())
-    if n_room == 0:
+    n_seg, n_room = int(seg_ids.max()), int(max(rooms.max(), 0))
+    # rooms of at most 100 scored pixels are dropped as segments are (ids kept): a ROSE2 room with a
+    # single free pixel is no room on the free pixels the scores count
+    room_size = np.bincount(np.maximum(rooms, 0).ravel(), minlength=n_room + 1)[1:].astype(np.float64)
+    scored = room_size > MIN_AREA_PX
+    if not scored.any():
         raise DecompositionError("ground truth has no room larger than 100 px")
     both = (seg_ids > 0) & (rooms > 0)
     overlap = np.zeros((n_seg + 1, n_room + 1), dtype=np.int64)
     np.add.at(overlap, (seg_ids[both], rooms[both]), 1)
     seg_size = np.bincount(seg_ids.ravel(), minlength=n_seg + 1)[1:].astype(np.float64)
-    room_size = np.bincount(rooms.ravel(), minlength=n_room + 1)[1:].astype(np.float64)
     # the dense id each scored segment had before the small ones were dropped, and its own id
     first = np.zeros(n_seg + 1, dtype=np.int64)
     first[seg_ids.ravel()] = dense.ravel()
     own = values[np.maximum(first[1:] - shift, 0)].astype(np.int64)
-    return _Overlap(own, overlap[1:, 1:], seg_size, room_size)
+    room_ids = np.flatnonzero(scored).astype(np.int64) + 1
+    return _Overlap(own, room_ids, overlap[1:, 1:][:, scored], seg_size, room_size[scored])
 
 
 def ipa_scores(segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]) -> IpaScores:
@@ -97,7 +102,9 @@ def ipa_scores(segments: npt.NDArray[np.integer], rooms: npt.NDArray[np.int32]) 
     segments : (H, W) integer
         Segment id per pixel, 0 ignored; segments of at most 100 px are dropped.
     rooms : (H, W) int32
-        From :func:`ground_truth_rooms`.
+        From :func:`ground_truth_rooms` (or :func:`colour_rooms` kept on the free pixels, :func:`on_free`);
+        rooms of at most 100 px are dropped, as the segments are: on the free pixels a ROSE² room may
+        keep only a few.
     """
     ov = _overlap(segments, rooms)
     seg_size, room_size = ov.segment_px, ov.room_px
@@ -149,23 +156,22 @@ def matches(
     ov = _overlap(segments, rooms)
     o = ov.pixels.astype(np.float64)
     if ov.segment_px.size == 0:
-        return [RoomMatch(j + 1, int(p), 0, 0.0, 0.0) for j, p in enumerate(ov.room_px) if p > 0], []
+        return [RoomMatch(int(r), int(p), 0, 0.0, 0.0) for r, p in zip(ov.room_ids, ov.room_px, strict=True)], []
     iou = o / (ov.segment_px[:, None] + ov.room_px[None, :] - o)
     best_segment = o.argmax(axis=0)
     best_room = o.argmax(axis=1)
     room_rows = [
         RoomMatch(
-            j + 1, int(ov.room_px[j]),
+            int(ov.room_ids[j]), int(ov.room_px[j]),
             int(ov.segment_ids[best_segment[j]]) if o[best_segment[j], j] > 0 else 0,
             float(o[best_segment[j], j] / ov.room_px[j]), float(iou[:, j].max()),
         )
         for j in range(ov.room_px.size)
-        if ov.room_px[j] > 0
     ]
     segment_rows = [
         SegmentMatch(
             int(ov.segment_ids[i]), int(ov.segment_px[i]),
-            int(best_room[i]) + 1 if o[i, best_room[i]] > 0 else 0,
+            int(ov.room_ids[best_room[i]]) if o[i, best_room[i]] > 0 else 0,
             float(o[i, best_room[i]] / ov.segment_px[i]),
         )
         for i in range(ov.segment_px.size)

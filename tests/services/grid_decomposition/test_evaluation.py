@@ -103,6 +103,20 @@ def test_scores_on_free_pixels_ignore_segments_off_the_map() -> None:
     assert (s.recall, s.precision, s.n_segments) == (1.0, 1.0, 2)
 
 
+def test_a_room_with_a_few_free_pixels_is_not_scored() -> None:
+    rgb = np.zeros((20, 40, 3), dtype=np.uint8)
+    rgb[:, :20] = (200, 10, 10)
+    rgb[:, 20:] = (10, 200, 10)  # a second room the map saw only a sliver of
+    free = np.zeros((20, 40), dtype=np.bool_)
+    free[:, :20] = True
+    free[0, 20] = True
+    rooms = on_free(colour_rooms(rgb), free)
+    s = ipa_scores(on_free(np.ones((20, 40), np.int32), free), rooms)
+    assert (s.recall, s.n_rooms) == (1.0, 1)
+    room_rows, _ = matches(on_free(np.ones((20, 40), np.int32), free), rooms)
+    assert [r.room for r in room_rows] == [int(rooms[0, 0])]
+
+
 def test_align_offset_finds_where_a_map_grew() -> None:
     rng = np.random.default_rng(0)
     after = rng.random((60, 90)) > 0.5
