@@ -6,10 +6,10 @@ import enum
 import importlib
 import logging
 import math
-from collections.abc import Mapping
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple, TypeVar
 
 import cv2
 import numpy as np
@@ -72,6 +72,7 @@ if TYPE_CHECKING:  # networkx is imported by the steps that build graphs, when f
     import networkx as nx
 
 logger = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
@@ -80,9 +81,9 @@ _POCKET_MAX_M2 = 6.0  # a room this small among pallets, open to an open area, i
 _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by their pixels
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
-# at once can deadlock on its partly loaded modules
+# at once can deadlock on its partly loaded modules. networkx (only the region graph, at the end,
+# needs it) is loaded on that thread later, where it would wait
 _STEP_MODULES = (
-    "networkx",
     "scipy.ndimage",
     "scipy.optimize",
     "scipy.signal",
@@ -441,19 +442,29 @@ def decompose(
         known = occ >= 0
         obstacle = ~free
         occupied = known & (occ > OCCUPIED_PERCENT)
+
+        def soon(fn: Callable[..., _T], *args: object, **kwargs: object) -> Future[_T]:
+            """A step that needs no step library: on the other thread, or on this one (done) while that one is
+            still loading the libraries (the first call in a process: this thread would wait for it)."""
+            if loaded.done():
+                return beside.submit(fn, *args, **kwargs)
+            here: Future[_T] = Future()
+            here.set_result(fn(*args, **kwargs))
+            return here
+
         # the distance to obstacles, for the rays and the elongation (on the other thread, in turn)
-        clearance_job = beside.submit(_clearance, free)
+        clearance_job = soon(_clearance, free)
         places_job = beside.submit(
             lambda: categorize_places(
                 obstacle, free, resolution_m=resolution_m, n_categories=n_categories, seed=seed,
                 distance=clearance_job.result(),
             )
         )
-        occupancy01_job = beside.submit(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
-        against_walls_job = beside.submit(wall_furniture, obstacle, resolution_m=resolution_m)
+        occupancy01_job = soon(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
+        against_walls_job = soon(wall_furniture, obstacle, resolution_m=resolution_m)
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
         standing_job = (
-            beside.submit(
+            soon(
                 free_standing,
                 obstacle,
                 resolution_m=resolution_m,
@@ -537,6 +548,7 @@ def decompose(
         elongation = _elongation(component, sub.face_image, clearance_job.result(), resolution_m)
         rack_place = face_places(sub.face_image, sub.n_faces, racks, free)  # while the other thread finds geometry
         geometry = geometry_job.result()
+        beside.submit(importlib.import_module, "networkx")  # for the region graph, while the other thread waits
         found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
         evidence = found.label.copy()
         # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)

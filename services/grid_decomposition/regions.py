@@ -178,14 +178,15 @@ def region_topology(
     ra, rb = face_region[sub.edge_faces[:, 0]], face_region[sub.edge_faces[:, 1]]
     ok = (ra > 0) & (rb > 0) & (ra != rb)
     pairs: dict[tuple[int, int], list[int]] = {}
-    for e in np.flatnonzero(ok):
-        key = (int(min(ra[e], rb[e])), int(max(ra[e], rb[e])))
-        pairs.setdefault(key, []).append(int(e))
+    at = np.flatnonzero(ok)
+    for e, lo, hi in zip(at.tolist(), np.minimum(ra, rb)[at].tolist(), np.maximum(ra, rb)[at].tolist(), strict=True):
+        pairs.setdefault((lo, hi), []).append(e)
+    cogent, door_edge = cogency.cogent, cogency.door  # (a property: computed once, not per pair)
     for (p, q), edges in pairs.items():
         if p not in regions or q not in regions:
             continue
-        open_edges = [e for e in edges if not cogency.cogent[e]]
-        door = bool(cogency.door[edges].any())
+        open_edges = [e for e in edges if not cogent[e]]
+        door = bool(door_edge[edges].any())
         conn = link_connection(regions[p].label, regions[q].label, cogent=not open_edges, door=door)
         graph.add_edge(p, q, connection=conn.value)
     if segments is not None and doorways is not None:

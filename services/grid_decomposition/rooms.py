@@ -324,13 +324,17 @@ def join_furnished_pieces(
 ) -> npt.NDArray[np.int32]:
     """Step 5 of :func:`segment_rooms`: :func:`join_room_pieces` with ``clutter`` and the obstacle islands at
     most ``island_max_extent_m`` across (:func:`islands` of the pixels in no segment) as the furniture,
-    segments mostly on ``floor`` (warehouse floors) never joined. Ids 1..M (consecutive)."""
+    segments mostly on ``floor`` (warehouse floors) never joined. Ids 1..M (consecutive); ``segments`` itself when
+    fewer than two segments may join (a rack hall: every segment on a warehouse floor) and its ids are 1..M already."""
+    fixed = _share(segments, floor) > 0.5
+    if np.count_nonzero(~fixed[1:]) < 2:  # no pair to join: the clearance and the islands are not needed
+        return renumber(np.asarray(segments, dtype=np.int32), copy=False)
     standing = clutter | islands(segments == 0, max_extent_px=island_max_extent_m / resolution_m)
     return join_room_pieces(
         segments,
         standing,
         resolution_m=resolution_m,
-        fixed=_share(segments, floor) > 0.5,
+        fixed=fixed,
         min_saddle_ratio=saddle_ratio,
         min_solidity=solidity,
     )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from services.grid_decomposition import Connection, decompose
 from services.grid_decomposition.arrays import components
@@ -407,9 +408,9 @@ def test_a_large_space_inside_a_block_stays_a_region() -> None:
     assert inside_furniture(seg, np.zeros(3, dtype=bool), resolution_m=RES)[70, 90] == 2
 
 
-def test_pieces_of_a_furnished_room_join_again_beside_a_corridor_that_stays_apart() -> None:
-    """A 6 x 4 m office cut in two along a gap between two desks, open along its top onto a 2 x 16 m corridor: the
-    pieces join (no neck, a convex union, desks at their border), the corridor (a T with them) stays apart."""
+def _office_cut_beside_a_corridor() -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
+    """A 6 x 4 m office cut in two (segments 2, 3) along a gap between two desks, open along its top onto a
+    2 x 16 m corridor (segment 1); the segments and the desks."""
     seg = np.zeros((160, 360), dtype=np.int32)
     seg[10:50, 10:330] = 1  # the corridor
     seg[50:130, 100:160] = 2
@@ -417,8 +418,22 @@ def test_pieces_of_a_furnished_room_join_again_beside_a_corridor_that_stays_apar
     desks = np.zeros(seg.shape, dtype=bool)
     desks[60:76, 150:158] = desks[104:120, 162:170] = True
     seg[desks] = 0
+    return seg, desks
+
+
+def test_pieces_of_a_furnished_room_join_again_beside_a_corridor_that_stays_apart() -> None:
+    """The office's pieces join (no neck, a convex union, desks at their border), the corridor (a T with them)
+    stays apart."""
+    seg, desks = _office_cut_beside_a_corridor()
     floor = np.zeros(seg.shape, dtype=bool)
     out = join_furnished_pieces(seg, desks, floor, resolution_m=RES)
     assert out[90, 120] == out[90, 200] != out[30, 40]
     # on a warehouse floor nothing joins
     assert len(np.unique(join_furnished_pieces(seg, desks, seg == 2, resolution_m=RES))) == 4
+
+
+def test_segments_on_warehouse_floors_stay_as_they_are() -> None:
+    """The same pieces all on a warehouse floor, or all but the corridor: every segment keeps its pixels and id."""
+    seg, desks = _office_cut_beside_a_corridor()
+    for floor in (seg > 0, seg >= 2):
+        assert np.array_equal(join_furnished_pieces(seg, desks, floor, resolution_m=RES), seg)
