@@ -31,7 +31,7 @@ from services.grid_decomposition.corridor_pieces import join_corridor_pieces
 from services.grid_decomposition.corridors import part_rooms_from_corridors
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
-from services.grid_decomposition.fans import split_fans
+from services.grid_decomposition.fans import FAN_MIN_SEGMENT_M2, split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -378,7 +378,8 @@ def decompose(
         See ``clean``.
     fan_max_neck_m : float
         A room (a fan of rays, or floor) leaving a room region through a neck at most this wide is a
-        room of its own (:func:`~services.grid_decomposition.fans.split_fans`); 0 turns it off.
+        room of its own (:func:`~services.grid_decomposition.fans.split_fans`), in the new decomposition and again
+        in the regions the ``prior`` kept; 0 turns it off.
     short_wall_min_m : float
         After the rooms are parted from their corridors, a room region of at least
         ``corridor_min_region_m2`` parts along a wall at least this long that stops short of the
@@ -409,7 +410,8 @@ def decompose(
         map's regions do not flicker where it did not change; settled regions this decomposition holds as one
         join when their border is wider than ``door_max_width_m`` and not narrow for the smaller
         (:func:`~services.grid_decomposition.continuity.joined_regions`). Racks, aisles and warehouse floors are
-        the new decomposition's.
+        the new decomposition's. A room behind a door that a kept region holds is parted from it as from a new one
+        (``fan_max_neck_m``).
     seed : int
         Seed of the clusterings.
 
@@ -649,7 +651,15 @@ def decompose(
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
                 join_min_border_px=round(door_max_width_m / resolution_m),
+                door_min_host_px=round(FAN_MIN_SEGMENT_M2 / resolution_m**2) if fan_max_neck_m > 0 else 0,
             )
+            if fan_max_neck_m > 0:  # a settled region holds a room seen through its door as it held it before the
+                # room's walls were seen: the rooms behind doors are parted from the regions as kept, too
+                size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px | on_places)
+                segments = split_fans(
+                    segments, occupied, on_floor > 0.5 * size,
+                    resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
+                )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)
         racked = floor_px | banks.storage | on_places  # the only floor a storage region may stand on

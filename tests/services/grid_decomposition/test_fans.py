@@ -6,6 +6,8 @@ import numpy as np
 from skimage.draw import line
 
 from services.grid_decomposition import decompose
+from services.grid_decomposition.change import unchanged_cells
+from services.grid_decomposition.continuity import RegionPrior
 from services.grid_decomposition.fans import split_fans
 
 RESOLUTION_M = 0.05
@@ -85,3 +87,21 @@ def test_split_fans_parts_a_room_behind_a_neck_and_leaves_rays_out_of_the_buildi
     assert len(np.unique(fan[130:170, 134:146])) == 1 and fan[150, 140] != 1
     assert np.array_equal(split(hall), segments)  # no walls beyond: rays out of the building
     assert np.array_equal(split(room, np.array([False, True])), segments)  # a warehouse floor
+
+
+def test_a_room_the_previous_decomposition_left_in_the_hall_parts_once_its_walls_are_seen() -> None:
+    """A growing map: first the robot saw the rays through the door but none of the room's walls (they could be
+    rays out of the building), so the room was the hall's; then it saw the walls, and nothing else changed. With the
+    previous decomposition as the prior the hall keeps its unchanged cells, yet the room is a region of its own."""
+    after, fan = _hall_and_fan()
+    before = after.copy()
+    before[172:174, 100:176] = before[122:174, [100, 101, 174, 175]] = -1  # the room's walls not seen yet
+    first = decompose(before, resolution_m=RESOLUTION_M).segments
+    hall = np.bincount(first[50:100, 40:240].ravel()).argmax()
+    assert np.mean(first[fan] == hall) > 0.8  # no walls: the rays are the hall's
+    unchanged = unchanged_cells(before, after, resolution_m=RESOLUTION_M)
+    segments = decompose(after, resolution_m=RESOLUTION_M, prior=RegionPrior(first, unchanged)).segments
+    hall = np.bincount(segments[50:100, 40:240].ravel()).argmax()
+    on_fan = segments[fan & (segments > 0)]
+    assert np.mean(on_fan != hall) > 0.8
+    assert len(np.unique(segments[50:100, 40:240])) == 1  # the hall is one region as before
