@@ -22,7 +22,6 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import label_boxes
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.segments import fill_from_neighbours
 
@@ -94,7 +93,6 @@ def keep_regions(
     min_area_px: int = 1,
     join_min_border_px: int = 0,
     join_min_width_share: float = 0.6,
-    door_min_host_px: int = 0,
 ) -> npt.NDArray[np.int32]:
     """``segments`` with the regions of ``prior`` kept where the map did not change.
 
@@ -106,10 +104,7 @@ def keep_regions(
     else is as ``segments`` has it. A region left in pieces keeps its largest; smaller pieces than
     ``min_area_px`` join a neighbouring region. Settled regions the new decomposition holds as one are one
     previous region when their border allows it (:func:`joined_regions`, at ``join_min_border_px`` and
-    ``join_min_width_share``; a border of 0 cells keeps every previous border). The other way round, a new region
-    lying on the kept cells of a settled region that continues as a region of at least ``door_min_host_px`` cells
-    (a hall, a corridor) and parted from that region by a border :func:`joined_regions` would keep (a doorway) is
-    a room found behind its door and stands whole, as a place found anew (0 cells turns this off).
+    ``join_min_width_share``; a border of 0 cells keeps every previous border).
 
     Parameters
     ----------
@@ -150,11 +145,6 @@ def keep_regions(
     continues[list(matches)] = True
     on_kept = np.bincount(seg[keep], minlength=base)
     anew = ~continues & (on_kept <= min_overlap * np.bincount(seg.ravel(), minlength=base))
-    if join_min_border_px > 0 and door_min_host_px > 0:  # a room the new decomposition parts off a settled hall
-        # or corridor through a doorway
-        anew |= _parted_through_doors(seg, before, keep, matches, ~continues & ~anew, settled,
-                                      min_host_px=door_min_host_px, min_border_px=join_min_border_px,
-                                      min_width_share=join_min_width_share)
     keep &= ~anew[seg]
     out[keep] = base + before[keep]
     present = np.bincount(out.ravel()) > 0
@@ -234,55 +224,6 @@ def joined_regions(
     lut = largest[component]
     lut[0] = 0
     out: npt.NDArray[np.int64] = lut[b]
-    return out
-
-
-def _parted_through_doors(
-    seg: npt.NDArray[np.int64],
-    before: npt.NDArray[np.int64],
-    keep: npt.NDArray[np.bool_],
-    matches: dict[int, int],
-    candidate: npt.NDArray[np.bool_],
-    settled: npt.NDArray[np.bool_],
-    *,
-    min_host_px: int,
-    min_border_px: int,
-    min_width_share: float,
-) -> npt.NDArray[np.bool_]:
-    """New regions (``candidate`` per id of ``seg``) lying on the kept cells of one settled region whose continuation
-    in ``seg`` (``matches``) holds at least ``min_host_px`` cells (a hall or a corridor) and parts from it across a
-    doorway: their border is one :func:`joined_regions` would keep (at most ``min_border_px`` or under
-    ``min_width_share`` of the smaller's width)."""
-    out = np.zeros(candidate.size, dtype=bool)
-    continuation = {old: new for new, old in matches.items() if settled[old]}
-    boxes = label_boxes(seg)
-    size = np.bincount(seg.ravel(), minlength=candidate.size)
-    for k in np.flatnonzero(candidate[1:]) + 1:
-        found = boxes[k - 1] if k - 1 < len(boxes) else None
-        if found is None:
-            continue
-        box = tuple(slice(max(0, s.start - 1), s.stop + 1) for s in found)
-        mine = seg[box] == k
-        held = before[box][mine & keep[box]]
-        if held.size == 0:
-            continue
-        host = continuation.get(int(np.bincount(held).argmax()))
-        if host is None or size[host] < min_host_px:
-            continue
-        other = seg[box] == host
-        border = (np.count_nonzero(mine & _touching(other)) + np.count_nonzero(other & _touching(mine))) / 2
-        width = np.sqrt(min(size[k], size[host]))
-        out[k] = border > 0 and not (border > min_border_px and border >= min_width_share * width)
-    return out
-
-
-def _touching(mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-    """Cells 4-adjacent to ``mask``."""
-    out = np.zeros_like(mask)
-    out[1:] |= mask[:-1]
-    out[:-1] |= mask[1:]
-    out[:, 1:] |= mask[:, :-1]
-    out[:, :-1] |= mask[:, 1:]
     return out
 
 

@@ -9,8 +9,6 @@ import numpy.typing as npt
 from services.grid_decomposition.arrays import components_stats, label_boxes, near
 from services.grid_decomposition.rooms import open_share
 
-FAN_MIN_SEGMENT_M2 = 50.0  # only halls and corridors lose rooms behind their doors (m²)
-
 
 def split_fans(
     segments: npt.NDArray[np.int32],
@@ -21,7 +19,7 @@ def split_fans(
     max_neck_m: float = 1.2,
     min_area_m2: float = 0.75,
     min_depth_m: float = 2.0,
-    min_segment_area_m2: float = FAN_MIN_SEGMENT_M2,
+    min_segment_area_m2: float = 50.0,
     outside_reach_m: float = 6.0,
     max_open_share: float = 0.4,
 ) -> npt.NDArray[np.int32]:

@@ -31,7 +31,7 @@ from services.grid_decomposition.corridor_pieces import join_corridor_pieces
 from services.grid_decomposition.corridors import part_rooms_from_corridors
 from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
-from services.grid_decomposition.fans import FAN_MIN_SEGMENT_M2, split_fans
+from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -651,7 +651,6 @@ def decompose(
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
                 join_min_border_px=round(door_max_width_m / resolution_m),
-                door_min_host_px=round(FAN_MIN_SEGMENT_M2 / resolution_m**2) if fan_max_neck_m > 0 else 0,
             )
             if fan_max_neck_m > 0:  # a settled region holds a room seen through its door as it held it before the
                 # room's walls were seen: the rooms behind doors are parted from the regions as kept, too

@@ -111,34 +111,6 @@ def test_a_room_open_wider_than_a_door_but_narrow_for_its_size_stays_apart() -> 
     assert _same_partition(out, before)
 
 
-HALL_PX = 20000  # a hall or a corridor, 50 m² (``decompose`` passes the fan rule's segment floor)
-
-
-def test_a_room_the_new_decomposition_parts_off_a_settled_hall_through_its_door_stands_whole() -> None:
-    # a 12 m x 5 m hall and, through a 1 m door in its top wall, a 2 m x 2 m room that the previous decomposition
-    # gave the hall (seen through the door only); the map did not change, the new decomposition parts the room off
-    hall = _grid((4, slice(0, 100), slice(0, 240)), shape=(141, 240))
-    hall[100, 100:120] = hall[101:141, 90:130] = 4  # the door and the room, the hall's then
-    parted = np.where(hall > 0, 1, 0).astype(np.int32)
-    parted[101:141, 90:130] = 2
-    unchanged = np.ones(hall.shape, dtype=bool)
-    out = keep_regions(parted, RegionPrior(hall, unchanged), join_min_border_px=DOOR_PX, door_min_host_px=HALL_PX)
-    assert _same_partition(out, parted)
-    # without the rule the settled hall takes it back
-    assert _same_partition(keep_regions(parted, RegionPrior(hall, unchanged), join_min_border_px=DOOR_PX), hall)
-
-
-def test_a_settled_office_the_new_decomposition_cuts_at_a_neck_stays_whole() -> None:
-    # a 4 m x 2 m office that the new decomposition cuts in two across its middle (a border no wider than a door):
-    # it is no hall or corridor, so the settled office stays whole
-    office = _grid((4, slice(0, 40), slice(0, 80)), shape=(40, 80))
-    cut = office.copy()
-    cut[:, 40:] = 2
-    unchanged = np.ones(office.shape, dtype=bool)
-    out = keep_regions(cut, RegionPrior(office, unchanged), join_min_border_px=DOOR_PX, door_min_host_px=HALL_PX)
-    assert _same_partition(out, office)
-
-
 def test_a_prior_on_another_grid_is_refused() -> None:
     with pytest.raises(DecompositionError, match="prior"):
         keep_regions(np.zeros((3, 3), np.int32), RegionPrior(np.zeros((3, 4), np.int32), np.ones((3, 4), bool)))
