@@ -23,7 +23,12 @@ CPU time (``time.process_time``) with the load average, since the machine may be
   of units of map k that keep their id in map k+1 (same rectangle after the map's shift, or the unit
   with the most overlap), and the seconds of each warm update.
 
-Run: ``PYTHONPATH=. .venv/bin/python bench/bench_floor_plan.py [--sets rose2 ipa partial] [--iterations N]``.
+``--seeds`` runs every map once per chain seed (``ChainSettings.seed``, 0 by default) and prints, besides each seed's
+figures (``..._seed<S>_...``), their mean over the seeds and the range of the seeds' means (``..._seeds_...``);
+``--trace-max-m`` sets ``FloorPlanSettings.trace_max_m`` (``none``: every free cell is free).
+
+Run: ``PYTHONPATH=. .venv/bin/python bench/bench_floor_plan.py [--sets rose2 ipa partial] [--iterations N]
+[--seeds 0 1 2 3] [--trace-max-m none|0.15]``.
 """
 
 from __future__ import annotations
@@ -72,6 +77,14 @@ OCCUPIED_GREY = 89
 WHITE = ((0, 0, 0), (255, 255, 255))
 
 
+class Run(NamedTuple):
+    """What every floor plan of a bench run shares: chain length, seed and the traces' reading."""
+
+    iterations: int
+    seed: int
+    trace_max_m: float | None
+
+
 class Row(NamedTuple):
     k: float
     k_fixed: float  # K(W,M) of the same world against the map read with fixed thresholds
@@ -104,9 +117,10 @@ def rose2_occupancy(grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int8]:
     return occ[::-1].copy()
 
 
-def _plan(occ: npt.NDArray[np.int8], iterations: int, start: World | None = None,
+def _plan(occ: npt.NDArray[np.int8], run: Run, start: World | None = None,
           angle_rad: float | None = None) -> tuple[FloorPlan, float, float]:
-    settings = FloorPlanSettings(chain=ChainSettings(iterations=iterations, max_seconds=600.0, seed=0))
+    settings = FloorPlanSettings(chain=ChainSettings(iterations=run.iterations, max_seconds=600.0, seed=run.seed),
+                                 trace_max_m=run.trace_max_m)
     t0, c0 = time.perf_counter(), time.process_time()
     plan = floor_plan(occ, resolution_m=RES, settings=settings, start=start, angle_rad=angle_rad)
     return plan, time.perf_counter() - t0, time.process_time() - c0
@@ -160,20 +174,52 @@ def _row(tag: str, name: str, plan: FloorPlan, r: Row) -> None:
           f"{r.seconds:.1f} | {r.cpu:.1f} |")
 
 
+FIELDS = ("k", "k_fixed", "k_units", "k_known", "recall", "precision", "room_recall", "room_precision")
+
+
+def _seed_tag(tag: str, seed: int, seeds: list[int]) -> str:
+    """Tags of one seed's figures: as before with a single seed, ``<tag>_seed<S>`` with several."""
+    return tag if len(seeds) == 1 else f"{tag}_seed{seed}"
+
+
+def _over_seeds(tag: str, by_seed: dict[int, list[Row]]) -> None:
+    """Each figure's mean over the maps, as the mean over the seeds and the range of the seeds' values."""
+    if len(by_seed) < 2 or not all(by_seed.values()):
+        return
+    for field in FIELDS:
+        for stat, reduce in (("mean", statistics.fmean), ("min", min)):
+            values = [reduce(getattr(r, field) for r in rows) for rows in by_seed.values()]
+            print(f"{tag}_seeds_{field}_{stat} {100 * statistics.fmean(values):.2f} % "
+                  f"(seeds {100 * min(values):.2f}..{100 * max(values):.2f})")
+
+
 def _summary(tag: str, rows: list[Row]) -> None:
     if not rows:
         return
-    for field, unit in (("k", "%"), ("k_fixed", "%"), ("k_units", "%"), ("k_known", "%"), ("recall", "%"),
-                        ("precision", "%"), ("room_recall", "%"), ("room_precision", "%")):
+    for field in FIELDS:
         values = [getattr(r, field) for r in rows]
-        print(f"{tag}_{field}_mean {100 * statistics.fmean(values):.2f} {unit}")
-        print(f"{tag}_{field}_min {100 * min(values):.2f} {unit}")
+        print(f"{tag}_{field}_mean {100 * statistics.fmean(values):.2f} %")
+        print(f"{tag}_{field}_min {100 * min(values):.2f} %")
     print(f"{tag}_iterations_per_second_median {statistics.median(r.rate for r in rows):.0f} 1/s")
     print(f"{tag}_iterations_per_cpu_second_median {statistics.median(r.cpu_rate for r in rows):.0f} 1/s")
     print(f"{tag}_cpu_seconds_median {statistics.median(r.cpu for r in rows):.2f} s")
 
 
-def _rose2(iterations: int, only: list[str] | None) -> None:
+def _rose2(run: Run, only: list[str] | None, seeds: list[int]) -> None:
+    by_seed: dict[int, list[Row]] = {}
+    by_map: dict[str, list[Row]] = {}
+    for seed in seeds:
+        by_seed[seed] = _rose2_seed(run._replace(seed=seed), only, _seed_tag("rose2", seed, seeds), by_map)
+    _over_seeds("rose2", by_seed)
+    if len(seeds) > 1:
+        for name, rows in by_map.items():
+            for field in ("k", "room_recall", "room_precision"):
+                values = [100 * getattr(r, field) for r in rows]
+                print(f"rose2_{name}_seeds_{field} {statistics.fmean(values):.2f} % (seeds "
+                      + " ".join(f"{v:.2f}" for v in values) + ")")
+
+
+def _rose2_seed(run: Run, only: list[str] | None, tag: str, by_map: dict[str, list[Row]]) -> list[Row]:
     _header()
     rows: list[Row] = []
     peers = []
@@ -182,7 +228,7 @@ def _rose2(iterations: int, only: list[str] | None) -> None:
             continue
         grey = _grey(folder / "map.png")
         occ, _, _ = read_map(folder / "map.png", resolution_m=RES)
-        plan, seconds, cpu = _plan(occ, iterations)
+        plan, seconds, cpu = _plan(occ, run)
         units = np.ascontiguousarray(unit_labels(plan)[::-1])
         cut, gt, theirs, ours, ours_rooms = _common(grey, _rgb(folder / "gt.png"), _rgb(folder / "rose2_rooms.png"),
                                                     units, np.ascontiguousarray(room_labels(plan)[::-1]))
@@ -199,45 +245,56 @@ def _rose2(iterations: int, only: list[str] | None) -> None:
               f"truth's rooms {100 * in_rooms:.1f} % | | | | | | |")
         r = _result(plan, rose2_occupancy(grey), (s.recall, s.precision), (sr.recall, sr.precision), seconds, cpu)
         rows.append(r)
-        _row("rose2", folder.name, plan, r)
+        by_map.setdefault(folder.name, []).append(r)
+        _row(tag, folder.name, plan, r)
         print(f"| rose2_peer | {folder.name} | | | | | | | {100 * peer.recall:.1f} | {100 * peer.precision:.1f} "
               "| | | | | | | |")
-    _summary("rose2", rows)
+    _summary(tag, rows)
     if peers:
         print(f"rose2_peer_recall_mean {100 * statistics.fmean(p.recall for p in peers):.2f} %")
         print(f"rose2_peer_precision_mean {100 * statistics.fmean(p.precision for p in peers):.2f} %")
+    return rows
 
 
-def _ipa(iterations: int, only: list[str] | None, variants: list[str]) -> None:
+def _ipa(run: Run, only: list[str] | None, variants: list[str], seeds: list[int]) -> None:
+    by_seed: dict[str, dict[int, list[Row]]] = {variant: {} for variant in variants}
+    for seed in seeds:  # every variant at one seed before the next seed: a run cut short has whole seeds
+        for variant in variants:
+            tag = _seed_tag(f"ipa_{variant.strip('_') or 'plain'}", seed, seeds)
+            by_seed[variant][seed] = _ipa_seed(run._replace(seed=seed), only, variant, tag)
+    for variant in variants:
+        _over_seeds(f"ipa_{variant.strip('_') or 'plain'}", by_seed[variant])
+
+
+def _ipa_seed(run: Run, only: list[str] | None, variant: str, tag: str) -> list[Row]:
     names = sorted(p.name[: -len("_gt_segmentation.png")] for p in IPA.glob("*_gt_segmentation.png"))
     tuning = set(names[0::2])
     _header()
-    for variant in variants:
-        tag = f"ipa_{variant.strip('_') or 'plain'}"
-        rows: dict[str, list[Row]] = {"tuning": [], "held_out": []}
-        for name in names:
-            path = IPA / f"{name}{variant}.png"
-            if (only and name not in only) or not path.exists():
-                continue
-            truth = ground_truth_rooms(_grey(IPA / f"{name}_gt_segmentation.png"))
-            occ, _, _ = read_map(path, resolution_m=RES)
-            if occ.shape != truth.shape:
-                continue
-            plan, seconds, cpu = _plan(occ, iterations)
-            s = ipa_scores(np.ascontiguousarray(unit_labels(plan)[::-1]), truth)
-            sr = ipa_scores(np.ascontiguousarray(room_labels(plan)[::-1]), truth)
-            fixed = read_map_file(path, resolution_m=RES).occupancy
-            r = _result(plan, fixed, (s.recall, s.precision), (sr.recall, sr.precision), seconds, cpu)
-            rows["tuning" if name in tuning else "held_out"].append(r)
-            _row(tag, name, plan, r)
-        _summary(tag, rows["tuning"] + rows["held_out"])
-        for half, part in rows.items():
-            for field in ("room_recall", "room_precision"):
-                if part:
-                    print(f"{tag}_{half}_{field}_mean {100 * statistics.fmean(getattr(r, field) for r in part):.2f} %")
+    rows: dict[str, list[Row]] = {"tuning": [], "held_out": []}
+    for name in names:
+        path = IPA / f"{name}{variant}.png"
+        if (only and name not in only) or not path.exists():
+            continue
+        truth = ground_truth_rooms(_grey(IPA / f"{name}_gt_segmentation.png"))
+        occ, _, _ = read_map(path, resolution_m=RES)
+        if occ.shape != truth.shape:
+            continue
+        plan, seconds, cpu = _plan(occ, run)
+        s = ipa_scores(np.ascontiguousarray(unit_labels(plan)[::-1]), truth)
+        sr = ipa_scores(np.ascontiguousarray(room_labels(plan)[::-1]), truth)
+        fixed = read_map_file(path, resolution_m=RES).occupancy
+        r = _result(plan, fixed, (s.recall, s.precision), (sr.recall, sr.precision), seconds, cpu)
+        rows["tuning" if name in tuning else "held_out"].append(r)
+        _row(tag, name, plan, r)
+    _summary(tag, rows["tuning"] + rows["held_out"])
+    for half, part in rows.items():
+        for field in ("room_recall", "room_precision"):
+            if part:
+                print(f"{tag}_{half}_{field}_mean {100 * statistics.fmean(getattr(r, field) for r in part):.2f} %")
+    return rows["tuning"] + rows["held_out"]
 
 
-def _partial(iterations: int, warm_iterations: int) -> None:
+def _partial(run: Run, warm_iterations: int) -> None:
     steps = sorted((p for p in (ROSE2 / "partial_ubremen").iterdir() if p.is_dir()), key=lambda p: int(p.name[3:]))
     _header()
     previous: tuple[FloorPlan, npt.NDArray[np.bool_]] | None = None
@@ -259,7 +316,8 @@ def _partial(iterations: int, warm_iterations: int) -> None:
             new = make_frame(occ.shape, angle_rad=angle, origin_xy_m=(-dc * RES, -lr * RES), resolution_m=RES)
             carried = carry(previous[0].world, old, new)
             start = World(carried.units, set(), carried.next_id)
-        plan, seconds, cpu = _plan(occ, iterations if start is None else warm_iterations, start, angle)
+        warm = run if start is None else run._replace(iterations=warm_iterations)
+        plan, seconds, cpu = _plan(occ, warm, start, angle)
         unscored = (float("nan"), float("nan"))
         r = _result(plan, rose2_occupancy(grey), unscored, unscored, seconds, cpu)
         _row("partial", folder.name, plan, r)
@@ -274,6 +332,10 @@ def _partial(iterations: int, warm_iterations: int) -> None:
         print(f"partial_warm_update_cpu_seconds_median {statistics.median(updates):.2f} s")
 
 
+def _metres_or_none(text: str) -> float | None:
+    return None if text.lower() == "none" else float(text)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sets", nargs="*", default=["rose2", "ipa", "partial"], choices=["rose2", "ipa", "partial"])
@@ -281,18 +343,24 @@ def main() -> None:
     parser.add_argument("--warm-iterations", type=int, default=2000, help="iterations of each warm update (partial)")
     parser.add_argument("--maps", nargs="*", default=None, help="only these map names")
     parser.add_argument("--variants", nargs="*", default=[""], help="ipa suffixes, '' = plain, e.g. _furnitures")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0],
+                        help="chain seeds (rose2, ipa; partial: the first)")
+    parser.add_argument("--trace-max-m", type=_metres_or_none, default=FloorPlanSettings().trace_max_m,
+                        help="FloorPlanSettings.trace_max_m: a number of metres or 'none' (default: the setting's)")
     args = parser.parse_args()
+    run = Run(args.iterations, args.seeds[0], args.trace_max_m)
+    print(f"trace_max_m {args.trace_max_m}, seeds {' '.join(map(str, args.seeds))}")
     if not MAPS.is_dir():
         print(f"skipped: {MAPS} is absent")
         return
     print(f"load average at start {os.getloadavg()[0]:.2f}")
     with threadpool_limits(1):
         if "rose2" in args.sets:
-            _rose2(args.iterations, args.maps)
+            _rose2(run, args.maps, args.seeds)
         if "ipa" in args.sets:
-            _ipa(args.iterations, args.maps, args.variants)
+            _ipa(run, args.maps, args.variants, args.seeds)
         if "partial" in args.sets:
-            _partial(args.iterations, args.warm_iterations)
+            _partial(run, args.warm_iterations)
     print(f"load average at end {os.getloadavg()[0]:.2f}")
 
 
