@@ -56,10 +56,11 @@ class FloorPlanSettings:
     min_line_m: float = 0.8
     occupied_percent: int = 65
     free_percent: int = 25
-    trace_max_m: float | None = None
+    trace_max_m: float | None = 0.15
     """Free runs narrower than this beside unknown space (a laser beam's trace through a window or door into space the
-    map has not seen, :func:`~services.floor_plan.likelihood.beam_traces`) read as unknown in C_M (eq. 3.7), e.g.
-    0.15; None (default: tried, not kept, docs/floor_plan.md): every free cell of the occupancy is free."""
+    map has not seen, :func:`~services.floor_plan.likelihood.beam_traces`) read as unknown in C_M (eq. 3.7: the chain,
+    the walls' fit, the clutter obstacles, K); the rooms and the label images still read them free. None: every free
+    cell of the occupancy is free in C_M too (docs/floor_plan.md, branch ``fpseed``: the two over four chain seeds)."""
     sensor_model: tuple[tuple[float, ...], ...] = SEED_SENSOR_MODEL
     overlap_psi: float = 0.2
     obstacle_min_m: float = 0.3
