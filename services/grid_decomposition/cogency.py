@@ -52,6 +52,7 @@ def close_doorways(
     min_wall_px: int,
     max_door_px: int,
     posts: npt.NDArray[np.bool_] | None = None,
+    post_wall_px: int = 0,
     first: npt.NDArray[np.int64] | None = None,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Wall runs of a 1-D occupancy profile and the doorway-sized gaps between them.
@@ -60,7 +61,10 @@ def close_doorways(
     most ``max_door_px`` between two wall runs are candidate doorways. With ``posts`` (small
     obstacles on the line, no wall runs), a wider gap of at most ``2 * max_door_px`` is one too
     when posts in it leave no free stretch wider than ``max_door_px``: two doors side by side
-    with a post or door frame between them (a real map draws the post as a speck, no wall).
+    with a post or door frame between them (a real map draws the post as a speck, no wall), in a
+    wall: both wall runs beside such a gap are at least ``post_wall_px`` long. A run across a line
+    no longer than a wall is thick is a wall crossing it, not one along it: a line from wall to wall
+    across a room through its furniture is no row of doors.
     ``first`` (ascending) is where each profile begins when several lines' profiles come one
     after the other: runs and gaps never cross from one line to the next.
 
@@ -112,7 +116,8 @@ def close_doorways(
             stretches = np.bincount(gap_of, minlength=wide.size)
             widest = np.zeros(wide.size, dtype=np.int64)
             np.maximum.at(widest, gap_of, run_end - run_start)
-            small[wide] = (stretches > 1) & (widest <= max_door_px)
+            walled = np.minimum(ends[wide] - starts[wide], ends[wide + 1] - starts[wide + 1]) >= post_wall_px
+            small[wide] = (stretches > 1) & (widest <= max_door_px) & walled
     return wall, ends[:-1][small].astype(np.int64), starts[1:][small].astype(np.int64)
 
 
@@ -167,6 +172,7 @@ def wall_evidence(
     widening_px: int,
     max_depth_px: int,
     posts: npt.NDArray[np.bool_] | None = None,
+    post_wall_px: int = 0,
     corridor_length_px: int = 0,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
@@ -188,6 +194,8 @@ def wall_evidence(
         Pixels.
     posts : (H, W) bool, optional
         Free-standing obstacles (furniture, specks): posts between doors (:func:`close_doorways`).
+    post_wall_px : int
+        The wall runs beside doors split by posts are at least this long (:func:`close_doorways`).
     corridor_length_px : int
         See :func:`~services.grid_decomposition.doorways.across_a_corridor`; 0 turns it off.
 
@@ -217,7 +225,7 @@ def wall_evidence(
     first = np.flatnonzero(np.r_[True, of[1:] != of[:-1]]) if of.size else of
     on_wall, g0, g1 = close_doorways(
         near[ys, xs], min_wall_px=min_wall_px, max_door_px=max_door_px,
-        posts=None if near_post is None else near_post[ys, xs], first=first,
+        posts=None if near_post is None else near_post[ys, xs], post_wall_px=post_wall_px, first=first,
     )
     wall[ys[on_wall], xs[on_wall]] = True
     if g0.size:  # every line's gaps in one call: each gap's answer is its own

@@ -61,7 +61,7 @@ from services.grid_decomposition.rooms import (
     segment_rooms,
     wall_furniture,
 )
-from services.grid_decomposition.segments import fill_from_neighbours, segment_image
+from services.grid_decomposition.segments import fill_from_neighbours, merge_passages, segment_image
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.short_walls import split_at_short_walls
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -79,6 +79,11 @@ OCCUPIED_PERCENT = 65
 _REGION_CORE_M = 1.0
 _POCKET_MAX_M2 = 6.0  # a room this small among pallets, open to an open area, is floor between them
 _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by their pixels
+# doors side by side with posts between them lie in a wall: the runs beside them are longer than a wall crossing the
+# line is thick (read with the lines' 0.1 m tolerance each side, a 0.5 m thick wall is a 0.7 m run)
+_POST_WALL_M = 0.75
+_PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
+_PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules. networkx (only the region graph, at the end,
@@ -308,6 +313,7 @@ def decompose(
     corridor_pieces: bool = True,
     rejoin_room_pieces: bool = True,
     inside_furniture_max_m2: float = 1.5,
+    passage_max_m2: float = 3.0,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -397,6 +403,11 @@ def decompose(
         A region smaller than this that touches no other and that one obstacle island at most 3 m across encloses
         (free space inside a cupboard or a hollow pillar) joins the region nearest to it within 1 m
         (:func:`~services.grid_decomposition.rooms.inside_furniture`); 0 turns it off.
+    passage_max_m2 : float
+        A region smaller than this and nowhere wider than 1 m that borders two or more others over at least 0.5 m
+        each, along a third of its outline or more (the strip between two cuts across a room, its long sides on the
+        cuts), joins the one it shares the longest border with
+        (:func:`~services.grid_decomposition.segments.merge_passages`); 0 turns it off.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -515,6 +526,7 @@ def decompose(
             widening_px=max(1, round(door_widening_m / resolution_m)),
             max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
             posts=clutter,
+            post_wall_px=round(_POST_WALL_M / resolution_m),
             corridor_length_px=round(corridor_length_m / resolution_m),
         )
         known_obstacle = obstacle & known
@@ -633,6 +645,13 @@ def decompose(
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
             segments = inside_furniture(
                 segments, on_floor > 0.5 * size, resolution_m=resolution_m, max_area_m2=inside_furniture_max_m2
+            )
+        if passage_max_m2 > 0:  # a strip between two cuts is no room: it joins the piece it borders most
+            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            segments = merge_passages(
+                segments, max_area_px=round(passage_max_m2 / resolution_m**2),
+                max_width_px=_PASSAGE_MAX_WIDTH_M / resolution_m,
+                min_border_px=round(_PASSAGE_MIN_BORDER_M / resolution_m), fixed=on_floor > 0.5 * size,
             )
         # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
         floor_space = free | streaks

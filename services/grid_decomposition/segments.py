@@ -13,6 +13,7 @@ from services.grid_decomposition.arrays import (
     distinct,
     label_boxes,
     label_counts,
+    label_max,
     lookup,
     unique_inverse,
     value_runs,
@@ -264,6 +265,86 @@ def merge_small_segments(
             break
         root = nxt
     return _relabel(seg, root, (area > 0) & ~dropped[root])
+
+
+def merge_passages(
+    segments: npt.NDArray[np.int32],
+    *,
+    max_area_px: int,
+    max_width_px: float,
+    min_border_px: int,
+    min_border_share: float = 1 / 3,
+    fixed: npt.NDArray[np.bool_] | None = None,
+) -> npt.NDArray[np.int32]:
+    """Merge every strip between segments into the one it shares the longest border with.
+
+    A strip is a piece smaller than ``max_area_px`` and nowhere wider than ``max_width_px`` (the widest disc inside
+    it) that borders at least two other segments over ``min_border_px`` each and whose borders with other segments
+    make up at least ``min_border_share`` of its outline: the floor left between two cuts across a room (a line and a
+    free-space cut side by side, the two lines of one doorway), its long sides on the cuts, too narrow for a room.
+    A piece of a corridor between two cuts has its long sides on walls, and a small room behind a door borders one
+    segment only: both stay, and so does a strip once the pieces merged into it leave it bordering one segment.
+    Smallest first; borders add up as in :func:`merge_small_segments`. ``fixed`` (per segment id) pieces stay, and a
+    strip bordering a fixed one (a warehouse floor) too. Ids 1..M (consecutive).
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max()) + 1
+    area = label_counts(seg, n)[0]
+    still = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
+    still[0] = True
+    inner = seg > 0  # the pixels with the same segment on all four sides: the widest disc from the rest
+    inner[1:] &= seg[1:] == seg[:-1]
+    inner[:-1] &= seg[:-1] == seg[1:]
+    inner[:, 1:] &= seg[:, 1:] == seg[:, :-1]
+    inner[:, :-1] &= seg[:, :-1] == seg[:, 1:]
+    inner[[0, -1]] = False
+    inner[:, [0, -1]] = False
+    depth = np.asarray(cv2.distanceTransform(inner.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
+    width = 2 * label_max(seg, depth, n)[0] + 1
+    candidate = (area > 0) & (area < max_area_px) & (width <= max_width_px) & ~still
+    if not candidate.any():
+        return _relabel(seg, np.arange(n), area > 0)
+    pairs, border, _ = border_closure(seg, None)
+    outline = np.zeros(n, dtype=np.int64)  # 4-neighbour pixel pairs of another id (0 too), the image's edge
+    for a, b in ((seg[:, :-1], seg[:, 1:]), (seg[:-1], seg[1:])):
+        differ = a != b
+        outline += np.bincount(a[differ], minlength=n) + np.bincount(b[differ], minlength=n)
+    for edge in (seg[0], seg[-1], seg[:, 0], seg[:, -1]):
+        outline += np.bincount(edge, minlength=n)
+    shared = np.bincount(pairs.ravel(), weights=np.repeat(border, 2), minlength=n)
+    candidate &= shared >= min_border_share * outline
+    neighbours: list[dict[int, int]] = [{} for _ in range(n)]
+    for (p, q), c in zip(pairs.tolist(), border.tolist(), strict=True):
+        neighbours[p][q] = c
+        neighbours[q][p] = c
+    parent = np.arange(n)
+    while True:
+        between = [
+            s
+            for s in np.flatnonzero(candidate).tolist()
+            if sum(c >= min_border_px for c in neighbours[s].values()) >= 2 and not any(still[k] for k in neighbours[s])
+        ]
+        if not between:
+            break
+        s = min(between, key=lambda i: area[i])
+        t = max(neighbours[s], key=lambda k: neighbours[s][k])
+        parent[s] = t
+        area[t] += area[s]
+        candidate[s] = False
+        candidate[t] &= area[t] < max_area_px
+        for k, c in neighbours[s].items():
+            del neighbours[k][s]
+            if k != t:
+                neighbours[t][k] = neighbours[t].get(k, 0) + c
+                neighbours[k][t] = neighbours[k].get(t, 0) + c
+        neighbours[s] = {}
+    root = parent.copy()
+    while True:
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            break
+        root = nxt
+    return _relabel(seg, root, area > 0)
 
 
 def _relabel(

@@ -37,6 +37,26 @@ def test_close_doorways_bridges_two_doors_split_by_a_post_but_not_an_open_side()
     assert g0.size == 0
 
 
+def test_a_line_across_a_room_through_its_furniture_is_no_row_of_doors() -> None:
+    # a line from a wall along it to a wall crossing it (its run only as long as the wall is thick), 36 cells between
+    # them split by a piece of furniture into two door-wide stretches: doors in a wall, unless that wall only crosses
+    profile = np.zeros(100, dtype=bool)
+    profile[0:20] = True  # a wall along the line
+    profile[56:64] = True  # a wall crossing it: 8 cells thick
+    posts = np.zeros(100, dtype=bool)
+    posts[37:39] = True
+    _, g0, g1 = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=posts)
+    assert (g0.tolist(), g1.tolist()) == ([20], [56])
+    _, g0, _ = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=posts, post_wall_px=10)
+    assert g0.size == 0
+    profile[56:70] = True  # the wall goes on along the line: two doors again
+    _, g0, g1 = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=posts, post_wall_px=10)
+    assert (g0.tolist(), g1.tolist()) == ([20], [56])
+    profile[34:37] = True  # a pier between two ordinary doorways (no posts needed): not concerned
+    _, g0, _ = close_doorways(profile, min_wall_px=2, max_door_px=20, post_wall_px=30)
+    assert g0.tolist() == [20, 37]
+
+
 def test_close_doorways_of_several_lines_at_once_closes_each_line_alone() -> None:
     """Profiles one after the other: a wall ending one line and a wall starting the next are two runs with no
     doorway between them, a short run split by the change of line is no wall, and each line's own doors and posts

@@ -11,6 +11,7 @@ from services.grid_decomposition.segments import (
     border_closure,
     fill_from_neighbours,
     merge_open_segments,
+    merge_passages,
     merge_small_segments,
     same_value_pieces,
     segment_image,
@@ -178,3 +179,34 @@ def test_fill_from_neighbours_grows_a_step_at_a_time_through_lines_and_wide_gaps
     target[66:70, 10:20] = True
     filled = fill_from_neighbours(seg, target, max_iterations=steps)
     assert np.array_equal(filled, _grown_step_by_step(seg, target, steps))
+
+
+def test_a_strip_between_two_cuts_joins_a_room_and_a_small_room_behind_a_door_stays() -> None:
+    # 0.05 m cells: a 4 m wide room cut twice across 0.8 m apart (a strip of 3.2 m²: no room), the lower cut 0.2 m
+    # shorter, and a 1.5 m x 1.5 m store room behind a door off the upper part (borders one region only)
+    seg = np.zeros((200, 140), dtype=np.int32)
+    seg[0:90, 0:80] = 1
+    seg[90:106, 0:80] = 2
+    seg[106:200, 0:80] = 3
+    seg[106:200, 76:80] = 0  # the lower part a little narrower: the strip borders the upper part most
+    seg[20:50, 80:110] = 4
+    seg[20:30, 80] = 1  # the store room's door wall ...
+    seg[40:50, 80] = 1  # ... around a 0.5 m door
+    out = merge_passages(seg, max_area_px=1500, max_width_px=20, min_border_px=10)
+    assert out[95, 40] == out[50, 40] != out[150, 40]  # the strip is part of the upper room
+    assert out[35, 95] not in (out[50, 40], out[150, 40])  # the store room stays a region
+    assert sorted(np.unique(out).tolist()) == [0, 1, 2, 3]
+    fixed = np.zeros(5, dtype=bool)
+    fixed[3] = True  # beside a warehouse floor's region nothing joins
+    kept = merge_passages(seg, max_area_px=1500, max_width_px=20, min_border_px=10, fixed=fixed)
+    assert len(np.unique(kept)) == 5
+
+
+def test_a_piece_of_a_corridor_between_two_cuts_stays_between_its_rooms() -> None:
+    # a 1 m wide, 3 m long corridor piece (walls along its long sides) between two rooms: it may be a room of its own
+    seg = np.zeros((120, 200), dtype=np.int32)
+    seg[0:120, 0:70] = 1
+    seg[50:70, 70:130] = 2
+    seg[0:120, 130:200] = 3
+    out = merge_passages(seg, max_area_px=1500, max_width_px=20, min_border_px=10)
+    assert sorted(np.unique(out).tolist()) == [0, 1, 2, 3]
