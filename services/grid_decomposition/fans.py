@@ -22,6 +22,9 @@ def split_fans(
     min_segment_area_m2: float = 50.0,
     outside_reach_m: float = 6.0,
     max_open_share: float = 0.4,
+    thin: npt.NDArray[np.bool_] | None = None,
+    min_room_area_m2: float = 15.0,
+    min_thin_share: float = 0.2,
 ) -> npt.NDArray[np.int32]:
     """Give every room that leaves a segment through a doorway-wide neck a segment of its own.
 
@@ -35,7 +38,10 @@ def split_fans(
     beams from its middle meet no ``occupied`` cell within ``outside_reach_m``
     (:func:`~services.grid_decomposition.rooms.open_share`; rays through a gap in an outer wall
     have none beyond them). Only segments of at least ``min_segment_area_m2`` (halls, corridors)
-    lose rooms so.
+    lose rooms so, and, when ``thin`` is given, smaller ones of at least ``min_room_area_m2`` (a room
+    or a corridor's piece) lose such parts of which at least ``min_thin_share`` is ``thin``: a room
+    seen from inside another only through its door is a fan of rays, while a part of a room's own
+    floor beyond a neck (an alcove, a bay between cupboards) is dense floor.
 
     Parameters
     ----------
@@ -47,6 +53,9 @@ def split_fans(
         Segments left alone (warehouse floors, roads).
     resolution_m : float
         Metres per pixel.
+    thin : (H, W) bool, optional
+        Free space too thin to be floor (the cleaning's rays and streaks); without it only segments of
+        at least ``min_segment_area_m2`` lose rooms.
 
     Returns
     -------
@@ -63,7 +72,8 @@ def split_fans(
             continue
         box = tuple(slice(max(0, s.start - radius), s.stop + radius) for s in found)
         mine = segments[box] == k
-        if mine.sum() < min_segment_area_m2 / resolution_m**2:
+        area = mine.sum() * resolution_m**2
+        if area < (min_segment_area_m2 if thin is None else min(min_segment_area_m2, min_room_area_m2)):
             continue
         # the opening by distances (a disc's erosion and dilation are thresholds of the distance transform,
         # each one dilation by the transform's own ball: ``near``)
@@ -79,6 +89,9 @@ def split_fans(
             continue
         neck = np.bincount(parts[cv2.dilate(core.astype(np.uint8), ring).astype(bool)], minlength=n)
         fans = [c for c in big if 0 < neck[c] * resolution_m <= max_neck_m]
+        if fans and thin is not None and area < min_segment_area_m2:  # a room's own floor stays: only rays leave
+            thin_share = np.bincount(parts[thin[box]], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
+            fans = [c for c in fans if thin_share[c] >= min_thin_share]
         if fans:
             depth = cv2.distanceTransform((~core).astype(np.uint8), cv2.DIST_L2, 5)
             fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]

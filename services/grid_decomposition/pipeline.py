@@ -385,7 +385,8 @@ def decompose(
     fan_max_neck_m : float
         A room (a fan of rays, or floor) leaving a room region through a neck at most this wide is a
         room of its own (:func:`~services.grid_decomposition.fans.split_fans`), in the new decomposition and again
-        in the regions the ``prior`` kept; 0 turns it off.
+        in the regions the ``prior`` kept; a region under a hall's size loses only fans of laser rays (the
+        cleaning's rays and streaks), never its own floor beyond a neck; 0 turns it off.
     short_wall_min_m : float
         After the rooms are parted from their corridors, a room region of at least
         ``corridor_min_region_m2`` parts along a wall at least this long that stops short of the
@@ -639,7 +640,7 @@ def decompose(
             floors = on_floor > 0.5 * size
             segments = split_fans(
                 segments, occupied, floors,
-                resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
+                resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
             )
         if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
@@ -676,7 +677,7 @@ def decompose(
                 size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px | on_places)
                 segments = split_fans(
                     segments, occupied, on_floor > 0.5 * size,
-                    resolution_m=resolution_m, max_neck_m=fan_max_neck_m,
+                    resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
                 )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)

@@ -105,3 +105,26 @@ def test_a_room_the_previous_decomposition_left_in_the_hall_parts_once_its_walls
     on_fan = segments[fan & (segments > 0)]
     assert np.mean(on_fan != hall) > 0.8
     assert len(np.unique(segments[50:100, 40:240])) == 1  # the hall is one region as before
+
+
+def test_a_room_loses_a_fan_of_rays_behind_its_door_but_not_its_own_floor_beyond_a_neck() -> None:
+    """A 25 m² room (under the hall floor) with a 0.6 m opening in its top wall and a walled space 2.5 m deep behind
+    it: the space is a room of its own when the robot saw it only as rays from inside the first room, and the first
+    room's own alcove when it is dense floor."""
+    segments = np.zeros((200, 300), dtype=np.int32)
+    segments[22:120, 80:180] = 1
+    segments[120:170, 124:136] = 1
+    occupied = np.zeros(segments.shape, dtype=bool)
+    occupied[[20, 121], 78:182] = occupied[20:122, [78, 181]] = True
+    occupied[170, 100:160] = occupied[120:170, [100, 160]] = True
+    rays = np.zeros(segments.shape, dtype=bool)
+    rays[120:170, 124:136:2] = True  # every other column of the space behind the opening: laser rays
+
+    def split(thin: np.ndarray | None) -> np.ndarray:
+        return split_fans(segments, occupied, np.zeros(2, dtype=bool), resolution_m=RESOLUTION_M, thin=thin)
+
+    fan = split(rays)
+    assert len(np.unique(fan[130:170, 124:136])) == 1 and fan[150, 130] != 1
+    assert np.all(fan[22:120, 80:180] == 1)
+    assert np.array_equal(split(np.zeros(segments.shape, dtype=bool)), segments)  # the room's own floor
+    assert np.array_equal(split(None), segments)  # without the rays only halls and corridors lose rooms
