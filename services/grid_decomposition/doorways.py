@@ -31,12 +31,16 @@ def _centre_runs(
     t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
     x = np.rint(points[..., 0, None] + t * direction[..., 0, None]).astype(np.int64)
     y = np.rint(points[..., 1, None] + t * direction[..., 1, None]).astype(np.int64)
-    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-    stop = ~inside | blocked[np.clip(y, 0, h - 1), np.clip(x, 0, w - 1)]
-    end = np.ones((*stop.shape[:-1], 1), dtype=bool)
-    ahead = np.concatenate([stop[..., reach_px:], end], axis=-1)
-    behind = np.concatenate([stop[..., reach_px::-1], end], axis=-1)
-    run: npt.NDArray[np.int64] = np.argmax(ahead, axis=-1) + np.argmax(behind, axis=-1) - 1
+    outside = (x.view(np.uint64) >= w) | (y.view(np.uint64) >= h)  # negative ones too
+    at = np.multiply(y, w, out=y)  # the flat index of each sample: one gather of the raveled image
+    at += x  # off the image a sample is a stop whatever it reads: the index is only kept in the image
+    # a stop at every sample, framed by a stop before the first and after the last (a run ends there)
+    stop = np.ones((*at.shape[:-1], t.size + 2), dtype=bool)
+    np.take(np.ascontiguousarray(blocked).ravel(), at, out=stop[..., 1:-1], mode="clip")
+    stop[..., 1:-1] |= outside
+    run: npt.NDArray[np.int64] = np.argmax(stop[..., reach_px + 1 :], axis=-1) + np.argmax(
+        stop[..., reach_px + 1 :: -1], axis=-1
+    ) - 1
     return np.maximum(run, 0)
 
 
