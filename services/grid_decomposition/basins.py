@@ -360,7 +360,7 @@ def join_furnished_groups(
         ids = np.flatnonzero(group == g)
         if _group_solidity(seg, ids, boxes, standing, n) >= min_solidity:
             lut[ids] = ids[0]
-    return renumber(lut[seg])
+    return renumber(np.take(lut, seg))
 
 
 def _separators(

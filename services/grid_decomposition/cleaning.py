@@ -62,7 +62,7 @@ def _specks(free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], max_ar
     touched = np.zeros(n, dtype=bool)
     touched[np.unique(parts[other & candidate])] = True
     touched[0] = True
-    return np.asarray(~touched[parts], dtype=bool)
+    return np.asarray(~np.take(touched, parts), dtype=bool)
 
 
 def _fringe(
@@ -78,7 +78,7 @@ def _fringe(
     grown = cv2.dilate((~free).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     touching[np.unique(parts[grown & candidate])] = True
     touching[0] = False
-    return np.asarray(touching[parts], dtype=bool)
+    return np.asarray(np.take(touching, parts), dtype=bool)
 
 
 def clean_occupancy(

@@ -66,7 +66,7 @@ def split_at_necks(
     split[0] = False
     if not split.any():
         return renumber(seg)
-    in_split = split[seg]
+    in_split = np.take(split, seg)
     # within the box round the segments split: nothing outside it is marked or filled
     rows, cols = np.flatnonzero(in_split.any(axis=1)), np.flatnonzero(in_split.any(axis=0))
     box = (slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1))

@@ -794,7 +794,7 @@ def _grown_face_labels(
     """Each segment pixel's face label; line pixels take a neighbour's (0 where none reaches)."""
     inside = segments > 0
     # gathered as bytes (labels are below 256); the fill works on its own int32 copy
-    return fill_from_neighbours(np.where(inside, face_labels.label.astype(np.uint8)[face_image], 0), inside)
+    return fill_from_neighbours(np.where(inside, np.take(face_labels.label.astype(np.uint8), face_image), 0), inside)
 
 
 def _region_records(

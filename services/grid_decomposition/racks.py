@@ -890,7 +890,7 @@ def place_segments(
     before = count if known is None else label_counts(segments, n_old, ~known)[1]
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
-    floor = left[segments] & ~in_cells & region if left.any() else np.zeros(free.shape, dtype=bool)
+    floor = np.take(left, segments) & ~in_cells & region if left.any() else np.zeros(free.shape, dtype=bool)
     crumbs = crumb[layout.cells] & free if crumb.any() else np.zeros(free.shape, dtype=bool)
     place = cells.astype(np.int32)  # a copy (ids stay far below 2**31)
     # a crumb joins the nearest place; a sliver of floor the nearest place that is no rack (floor is no storage)
@@ -988,7 +988,7 @@ def floor_objects(
         (_, _), (rw, rh), _ = cv2.minAreaRect(np.column_stack([cols, rows]).astype(np.float32))
         thick = (min(rw, rh) + 1) * resolution_m
         keep[k] = thick >= min_thickness_m and rows.size >= min_fill * (rw + 1) * (rh + 1)
-    out: npt.NDArray[np.bool_] = keep[parts]
+    out: npt.NDArray[np.bool_] = np.take(keep, parts)
     return out
 
 

@@ -232,8 +232,9 @@ def segment_rooms(
     cuts = np.zeros((0, 2, 2))
     fixed = _share(seg, floor) > 0.5
     seg = fill_from_neighbours(seg, clutter)  # its own copy: furniture on a fixed segment is cleared in place
-    np.copyto(seg, 0, where=clutter & lookup(fixed, seg))
-    space = (seg > 0) & ~lookup(fixed, seg)
+    on_fixed = lookup(fixed, seg)
+    np.copyto(seg, 0, where=clutter & on_fixed)
+    space = (seg > 0) & ~on_fixed  # a pixel cleared here is no space either way
     if not space.any():  # warehouse floors only (a rack hall): no room to split, cut or clean up
         return renumber(seg, copy=False), cut  # seg is this function's own
     clearance = np.asarray(cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
@@ -300,7 +301,7 @@ def segment_rooms(
             seen = np.zeros(int(parts.max()) + 1, dtype=bool)
             seen[parts[occupied]] = True
             seen[0] = False
-            standing = seen[parts]
+            standing = np.take(seen, parts)
         rooms = join_furnished_groups(
             rooms,
             standing,
@@ -561,7 +562,7 @@ def islands(
     bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
     keep = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (np.maximum(bw, bh) <= max_extent_px)
     keep[0] = False
-    return np.asarray(keep if flags else keep[parts], dtype=bool)
+    return np.asarray(keep if flags else np.take(keep, parts), dtype=bool)
 
 
 def desk_clusters(
@@ -615,7 +616,7 @@ def desk_clusters(
         rows, cols = np.nonzero(parts[y : y + bh, x : x + bw] == k)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         ok[k] = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
-    out[box] = keep & ok[parts]
+    out[box] = keep & np.take(ok, parts)
     return out
 
 
@@ -661,7 +662,7 @@ def free_standing(
     np.minimum.at(nearest, parts[isl], gap[isl])
     keep = nearest * resolution_m >= min_clearance_m
     keep[0] = False
-    return np.asarray(keep[parts] & isl, dtype=bool)
+    return np.asarray(np.take(keep, parts) & isl, dtype=bool)
 
 
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
