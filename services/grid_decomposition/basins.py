@@ -10,7 +10,7 @@ import numpy.typing as npt
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from services.grid_decomposition.arrays import label_boxes, label_max
+from services.grid_decomposition.arrays import label_boxes, label_max, nonzero_rc
 from services.grid_decomposition.segments import renumber
 
 
@@ -154,7 +154,7 @@ def _touching(seg: npt.NDArray[np.int32]) -> list[tuple[int, int, npt.NDArray[np
         differ = a != b
         differ &= inside[: h - dy, : w - dx]
         differ &= inside[dy:, dx:]
-        r, c = np.nonzero(differ)
+        r, c = nonzero_rc(differ)
         found.append((dy, dx, r + r0, c + c0))
     return found
 
@@ -353,6 +353,8 @@ def join_furnished_groups(
     graph = sparse.coo_matrix((np.ones(int(linked.sum())), (a[linked], b[linked])), shape=(n, n))
     _, group = csgraph.connected_components(graph, directed=False)
     members = np.bincount(group, minlength=n)
+    if not (members >= 2).any():  # no group to look at: the furniture is not labelled
+        return renumber(seg)
     lut = np.arange(n, dtype=np.int32)
     standing = np.asarray(cv2.connectedComponents(furniture.astype(np.uint8), connectivity=8)[1], dtype=np.int32)
     boxes = _boxes(seg, n)
@@ -380,7 +382,9 @@ def _separators(
     blocked = (seg == 0).astype(np.uint8)
     dist, label = cv2.distanceTransformWithLabels(blocked, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
     owners = seg[seg > 0]  # per label (pixel of a segment): its segment, > 0
-    nearest = owners[label - 1]  # a segment's own pixels too: they are left out by ``on``
+    index = np.asarray(label, dtype=np.int32)
+    index -= 1
+    nearest = np.take(owners, index)  # a segment's own pixels too: they are left out by ``on``
     on = blocked.view(bool)
     h, w = seg.shape
     wall = np.zeros(codes.size)
@@ -388,7 +392,7 @@ def _separators(
     for dy, dx in ((0, 1), (1, 0)):
         a, b = nearest[: h - dy, : w - dx], nearest[dy:, dx:]
         both = on[: h - dy, : w - dx] & on[dy:, dx:] & (a != b)
-        rows, cols = np.nonzero(both)
+        rows, cols = nonzero_rc(both)
         p, q = a[rows, cols].astype(np.int64), b[rows, cols].astype(np.int64)
         key = np.minimum(p, q) * n + np.maximum(p, q)
         at = np.minimum(np.searchsorted(codes, key), codes.size - 1)

@@ -8,6 +8,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import nonzero_rc
+
 
 def _centre_runs(
     blocked: npt.NDArray[np.bool_],
@@ -313,7 +315,7 @@ def _find_doorways(
     band = space & (dist >= lo / 2 - 1) & (dist <= hi / 2 + 1)
     cuts: list[npt.NDArray[np.float64]] = []
     for dy, dx in ((0, 1), (1, 0)):
-        rows, cols = np.nonzero(band[: h - dy, : w - dx] & space[dy:, dx:])
+        rows, cols = nonzero_rc(band[: h - dy, : w - dx] & space[dy:, dx:])
         at, next_at = rows * w + cols, (rows + dy) * w + cols + dx
         span_x, span_y = wall_x[at] - wall_x[next_at], wall_y[at] - wall_y[next_at]
         # whole-pixel squared lengths a unit off the bounds cannot pass them: only the others are measured
@@ -388,7 +390,8 @@ def _nearest_walls(
             fx[r0:r1, c0:c1] = ix[core] + b0
     off_y = fy - np.arange(h, dtype=np.int32)[:, None]
     off_x = fx - np.arange(w, dtype=np.int32)[None, :]
-    squared = off_y * off_y + off_x * off_x
+    squared = np.multiply(off_y, off_y, out=off_y)  # the offsets are spent: squared in place
+    squared += np.multiply(off_x, off_x, out=off_x)
     # scipy's distance is the float64 square root; rounded to float32 it is the float32 square root of
     # the same whole number when float32 holds that exactly (square roots round once, 53 >= 2 * 24 + 2)
     exact = np.float32 if h * h + w * w < 2**24 else np.float64

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import label_sums
+from services.grid_decomposition.arrays import label_sums, nonzero_rc
 from services.grid_decomposition.errors import DecompositionError
 
 
@@ -86,7 +86,7 @@ def face_geometry(
     safe = np.maximum(count.astype(np.float64), 1.0)
     centroid = np.stack([sum_x / safe, sum_y / safe], axis=1)
     centroid[0] = 0.0
-    oy, ox = np.nonzero(edge)
+    oy, ox = nonzero_rc(edge)
     of = face_image[oy, ox].astype(np.int64)
     c, s = np.cos(angle), np.sin(angle)
     u = ox * c[of] + oy * s[of]

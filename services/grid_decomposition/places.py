@@ -12,6 +12,8 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import ThreadpoolController
 
+from services.grid_decomposition.arrays import nonzero_rc
+
 N_FEATURES = 13
 CLUSTERING = threading.Lock()
 """Held by each clustering under one-thread limits: threadpoolctl's limits are the process's, restored on exit."""
@@ -186,7 +188,7 @@ def categorize_places(
     """
     spacing_m = max(sample_spacing_m, math.sqrt(float(np.count_nonzero(free)) / max(max_samples, 1)) * resolution_m)
     step = max(1, round(spacing_m / resolution_m))
-    rows, cols = np.nonzero(free[step // 2 :: step, step // 2 :: step])  # the grid's free pixels, in raster order
+    rows, cols = nonzero_rc(free[step // 2 :: step, step // 2 :: step])  # the grid's free pixels, in raster order
     rows, cols = rows * step + step // 2, cols * step + step // 2
     if rows.size == 0:
         return rows.astype(np.int64), cols.astype(np.int64), np.zeros(0, np.int64)

@@ -14,6 +14,7 @@ from services.grid_decomposition.arrays import (
     label_counts,
     label_max,
     lookup,
+    nonzero_rc,
 )
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
@@ -97,7 +98,7 @@ def furniture(
     keep = small | block
     for k in np.flatnonzero(keep & (np.hypot(bw, bh) * resolution_m >= wall_min_length_m)):
         box = parts[y[k] : y[k] + bh[k], x[k] : x[k] + bw[k]] == k
-        rows, cols = np.nonzero(box)
+        rows, cols = nonzero_rc(box)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         length, thickness = (max(side_a, side_b) + 1) * resolution_m, (min(side_a, side_b) + 1) * resolution_m
         if small[k] and length >= wall_min_length_m and thickness <= wall_max_thickness_m:
@@ -458,7 +459,7 @@ def ends_on_tables(
         part = parts[own] == k
         seen = occupied is None or bool(occupied[own][part].any())
         solid = cv2.morphologyEx(np.pad(part, radius).astype(np.uint8), cv2.MORPH_OPEN, disc)
-        rows, cols = np.nonzero(part)
+        rows, cols = nonzero_rc(part)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         compact = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
         # floor all round it: not an obstacle standing in a doorway
@@ -469,7 +470,7 @@ def ends_on_tables(
         ring = cv2.dilate(mine, ring_disc).astype(bool) & ~mine.astype(bool)
         open_all_round = bool(np.count_nonzero(ring & ~blocked[around]) >= min_open * np.count_nonzero(ring))
         # nor between two jambs: obstacles in the ring on opposite sides of it (sectors of 30 degrees)
-        ry, rx = np.nonzero(ring & blocked[around])
+        ry, rx = nonzero_rc(ring & blocked[around])
         angle = np.arctan2(ry - rows.mean() - (y0 - y1), rx - cols.mean() - (x0 - x1))
         hit = np.bincount(np.floor((angle + np.pi) / (np.pi / 6)).astype(np.int64) % 12, minlength=12) > 0
         open_all_round = open_all_round and not bool((hit & np.roll(hit, 6)).any())
@@ -521,7 +522,7 @@ def _outside_rays(
         for i, k in enumerate(ids.tolist()):
             box = boxes[k - 1]
             assert box is not None  # a narrow segment has pixels
-            rows, cols = np.nonzero(seg[box] == k)
+            rows, cols = nonzero_rc(seg[box] == k)
             j = np.argmin((rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2)  # its pixel nearest its centroid
             middles[i] = rows[j] + box[0].start, cols[j] + box[1].start
         out[ids] = open_share(occupied, middles, reach_px=reach_px) >= min_open_share
@@ -613,7 +614,7 @@ def desk_clusters(
     large &= ok & (np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]) > compact_from_px)
     for k in np.flatnonzero(large).tolist():
         x, y, bw, bh = (int(v) for v in stats[k, :4])
-        rows, cols = np.nonzero(parts[y : y + bh, x : x + bw] == k)
+        rows, cols = nonzero_rc(parts[y : y + bh, x : x + bw] == k)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         ok[k] = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
     out[box] = keep & np.take(ok, parts)
