@@ -30,19 +30,33 @@ def _centre_runs(
         Runs are counted up to this many pixels each way.
     """
     h, w = blocked.shape
-    t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
-    x = np.rint(points[..., 0, None] + t * direction[..., 0, None]).astype(np.int64)
-    y = np.rint(points[..., 1, None] + t * direction[..., 1, None]).astype(np.int64)
-    outside = (x.view(np.uint64) >= w) | (y.view(np.uint64) >= h)  # negative ones too
-    at = np.multiply(y, w, out=y)  # the flat index of each sample: one gather of the raveled image
-    at += x  # off the image a sample is a stop whatever it reads: the index is only kept in the image
-    # a stop at every sample, framed by a stop before the first and after the last (a run ends there)
-    stop = np.ones((*at.shape[:-1], t.size + 2), dtype=bool)
-    np.take(np.ascontiguousarray(blocked).ravel(), at, out=stop[..., 1:-1], mode="clip")
-    stop[..., 1:-1] |= outside
-    run: npt.NDArray[np.int64] = np.argmax(stop[..., reach_px + 1 :], axis=-1) + np.argmax(
-        stop[..., reach_px + 1 :: -1], axis=-1
-    ) - 1
+    flat = np.ascontiguousarray(blocked).ravel()
+    shape = np.broadcast_shapes(points.shape, direction.shape)[:-1]
+    px, py = (np.broadcast_to(points[..., i], shape).ravel() for i in (0, 1))
+    dx, dy = (np.broadcast_to(direction[..., i], shape).ravel() for i in (0, 1))
+    run = np.full(px.size, -1, dtype=np.int64)
+    # each way from the point, the first stop (a blocked or off-image sample) at 0, 1, 2, ... steps, else
+    # reach_px + 1: looked for in ever longer stretches, only for the points not stopped yet (the samples are the
+    # same floats as along the whole reach at once)
+    for sign in (1.0, -1.0):
+        first = np.full(px.size, reach_px + 1, dtype=np.int64)
+        todo = np.arange(px.size)
+        begin, length = 0, 8
+        while todo.size and begin <= reach_px:
+            t = sign * np.arange(begin, min(begin + length, reach_px + 1), dtype=np.float64)
+            x = np.rint(px[todo, None] + t * dx[todo, None]).astype(np.int64)
+            y = np.rint(py[todo, None] + t * dy[todo, None]).astype(np.int64)
+            outside = (x.view(np.uint64) >= w) | (y.view(np.uint64) >= h)  # negative ones too
+            at = np.multiply(y, w, out=y)
+            at += x  # off the image a sample is a stop whatever it reads: the index is only kept in the image
+            stop = np.take(flat, at, mode="clip")
+            stop |= outside
+            hit = stop.any(axis=1)
+            first[todo[hit]] = begin + np.argmax(stop[hit], axis=1)
+            todo = todo[~hit]
+            begin, length = begin + t.size, 2 * length
+        run += first
+    run = run.reshape(shape)
     return np.maximum(run, 0)
 
 
