@@ -56,8 +56,8 @@ def _centre_runs(
             todo = todo[~hit]
             begin, length = begin + t.size, 2 * length
         run += first
-    run = run.reshape(shape)
-    return np.maximum(run, 0)
+    out: npt.NDArray[np.int64] = np.maximum(run, 0).reshape(shape)
+    return out
 
 
 def _gap_frame(
