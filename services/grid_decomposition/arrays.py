@@ -68,6 +68,20 @@ def _runs(flat: npt.NDArray[np.integer], row_length: int = 0) -> tuple[npt.NDArr
     return first, np.diff(np.append(first, flat.size))
 
 
+def nonzero_rc(array: npt.NDArray[np.generic]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """``np.nonzero`` of a 2-D array: the rows and columns of its non-zero entries, in raster order.
+
+    From the flat indices (one pass over the array, then a division of the entries found): numpy's 2-D
+    ``nonzero`` walks a multi-index, 3-10 times slower on an image.
+    """
+    width = array.shape[1]
+    if width == 0:
+        rows, cols = np.nonzero(array)
+        return rows, cols
+    rows, cols = np.divmod(np.flatnonzero(array), width)
+    return rows, cols
+
+
 def label_sums(
     labels: npt.NDArray[np.integer], n: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:

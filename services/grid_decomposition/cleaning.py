@@ -62,7 +62,8 @@ def _specks(free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], max_ar
     touched = np.zeros(n, dtype=bool)
     touched[np.unique(parts[other & candidate])] = True
     touched[0] = True
-    return np.asarray(~touched[parts], dtype=bool)
+    untouched: npt.NDArray[np.bool_] = ~np.take(touched, np.asarray(parts))
+    return untouched
 
 
 def _fringe(
@@ -78,7 +79,8 @@ def _fringe(
     grown = cv2.dilate((~free).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     touching[np.unique(parts[grown & candidate])] = True
     touching[0] = False
-    return np.asarray(touching[parts], dtype=bool)
+    fringe: npt.NDArray[np.bool_] = np.take(touching, np.asarray(parts))
+    return fringe
 
 
 def clean_occupancy(

@@ -137,7 +137,7 @@ def keep_regions(
     for new, old in matches.items():
         if settled[old]:
             lut[new] = base + old
-    out = lut[seg]
+    out = np.take(lut, seg)
     keep = settled[before] & prior.unchanged & (seg > 0)
     # a new region that continues no previous one and lies mostly on ground the settled regions do not hold is
     # a place found anew (a room seen through its door before, now entered): it stands whole
@@ -145,7 +145,7 @@ def keep_regions(
     continues[list(matches)] = True
     on_kept = np.bincount(seg[keep], minlength=base)
     anew = ~continues & (on_kept <= min_overlap * np.bincount(seg.ravel(), minlength=base))
-    keep &= ~anew[seg]
+    keep &= ~np.take(anew, seg)
     out[keep] = base + before[keep]
     present = np.bincount(out.ravel()) > 0
     present[0] = False
@@ -239,7 +239,7 @@ def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.ND
     first = np.r_[True, owner[order][1:] != owner[order][:-1]]
     small = np.zeros(area.size, dtype=bool)
     small[order[~first]] = area[order[~first]] < min_area_px
-    drop = small[pieces]
+    drop = np.take(small, pieces)
     if not drop.any():
         return segments
     return fill_from_neighbours(np.where(drop, 0, segments), drop)

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes, lookup
+from services.grid_decomposition.arrays import components_stats, label_boxes, lookup, nonzero_rc
 from services.grid_decomposition.radiogram import Line
 
 
@@ -67,7 +67,7 @@ def _row_runs(
     """Row, start and end (exclusive) of the runs of True along every row, row by row and left to right."""
     padded = np.zeros((flags.shape[0], flags.shape[1] + 2), dtype=bool)
     padded[:, 1:-1] = flags
-    rows, edges = np.nonzero(padded[:, 1:] != padded[:, :-1])  # a start, then its end, and so on
+    rows, edges = nonzero_rc(padded[:, 1:] != padded[:, :-1])  # a start, then its end, and so on
     return rows[0::2], edges[0::2], edges[1::2]
 
 

@@ -8,6 +8,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from services.grid_decomposition.arrays import nonzero_rc
+
 
 def _centre_runs(
     blocked: npt.NDArray[np.bool_],
@@ -28,16 +30,34 @@ def _centre_runs(
         Runs are counted up to this many pixels each way.
     """
     h, w = blocked.shape
-    t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
-    x = np.rint(points[..., 0, None] + t * direction[..., 0, None]).astype(np.int64)
-    y = np.rint(points[..., 1, None] + t * direction[..., 1, None]).astype(np.int64)
-    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-    stop = ~inside | blocked[np.clip(y, 0, h - 1), np.clip(x, 0, w - 1)]
-    end = np.ones((*stop.shape[:-1], 1), dtype=bool)
-    ahead = np.concatenate([stop[..., reach_px:], end], axis=-1)
-    behind = np.concatenate([stop[..., reach_px::-1], end], axis=-1)
-    run: npt.NDArray[np.int64] = np.argmax(ahead, axis=-1) + np.argmax(behind, axis=-1) - 1
-    return np.maximum(run, 0)
+    flat = np.ascontiguousarray(blocked).ravel()
+    shape = np.broadcast_shapes(points.shape, direction.shape)[:-1]
+    px, py = (np.broadcast_to(points[..., i], shape).ravel() for i in (0, 1))
+    dx, dy = (np.broadcast_to(direction[..., i], shape).ravel() for i in (0, 1))
+    run = np.full(px.size, -1, dtype=np.int64)
+    # each way from the point, the first stop (a blocked or off-image sample) at 0, 1, 2, ... steps, else
+    # reach_px + 1: looked for in ever longer stretches, only for the points not stopped yet (the samples are the
+    # same floats as along the whole reach at once)
+    for sign in (1.0, -1.0):
+        first = np.full(px.size, reach_px + 1, dtype=np.int64)
+        todo = np.arange(px.size)
+        begin, length = 0, 8
+        while todo.size and begin <= reach_px:
+            t = sign * np.arange(begin, min(begin + length, reach_px + 1), dtype=np.float64)
+            x = np.rint(px[todo, None] + t * dx[todo, None]).astype(np.int64)
+            y = np.rint(py[todo, None] + t * dy[todo, None]).astype(np.int64)
+            outside = (x.view(np.uint64) >= w) | (y.view(np.uint64) >= h)  # negative ones too
+            at = np.multiply(y, w, out=y)
+            at += x  # off the image a sample is a stop whatever it reads: the index is only kept in the image
+            stop = np.take(flat, at, mode="clip")
+            stop |= outside
+            hit = stop.any(axis=1)
+            first[todo[hit]] = begin + np.argmax(stop[hit], axis=1)
+            todo = todo[~hit]
+            begin, length = begin + t.size, 2 * length
+        run += first
+    out: npt.NDArray[np.int64] = np.maximum(run, 0).reshape(shape)
+    return out
 
 
 def _gap_frame(
@@ -309,7 +329,7 @@ def _find_doorways(
     band = space & (dist >= lo / 2 - 1) & (dist <= hi / 2 + 1)
     cuts: list[npt.NDArray[np.float64]] = []
     for dy, dx in ((0, 1), (1, 0)):
-        rows, cols = np.nonzero(band[: h - dy, : w - dx] & space[dy:, dx:])
+        rows, cols = nonzero_rc(band[: h - dy, : w - dx] & space[dy:, dx:])
         at, next_at = rows * w + cols, (rows + dy) * w + cols + dx
         span_x, span_y = wall_x[at] - wall_x[next_at], wall_y[at] - wall_y[next_at]
         # whole-pixel squared lengths a unit off the bounds cannot pass them: only the others are measured
@@ -384,7 +404,8 @@ def _nearest_walls(
             fx[r0:r1, c0:c1] = ix[core] + b0
     off_y = fy - np.arange(h, dtype=np.int32)[:, None]
     off_x = fx - np.arange(w, dtype=np.int32)[None, :]
-    squared = off_y * off_y + off_x * off_x
+    squared = np.multiply(off_y, off_y, out=off_y)  # the offsets are spent: squared in place
+    squared += np.multiply(off_x, off_x, out=off_x)
     # scipy's distance is the float64 square root; rounded to float32 it is the float32 square root of
     # the same whole number when float32 holds that exactly (square roots round once, 53 >= 2 * 24 + 2)
     exact = np.float32 if h * h + w * w < 2**24 else np.float64

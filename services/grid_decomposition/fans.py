@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes, near
+from services.grid_decomposition.arrays import components_stats, label_boxes, near, nonzero_rc
 from services.grid_decomposition.rooms import open_share
 
 
@@ -110,6 +110,6 @@ def split_fans(
 
 def _middle(mask: npt.NDArray[np.bool_]) -> tuple[int, int]:
     """(row, col) of the pixel of ``mask`` nearest its centroid."""
-    rows, cols = np.nonzero(mask)
+    rows, cols = nonzero_rc(mask)
     j = int(np.argmin((rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2))
     return int(rows[j]), int(cols[j])

@@ -44,10 +44,14 @@ def split_at_necks(
     """
     seg = np.asarray(segments, dtype=np.int32)
     dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 5) if distance is None else distance
-    padded = cv2.copyMakeBorder(seg, 1, 1, 1, 1, cv2.BORDER_REPLICATE)  # numpy's "edge" padding
-    border = (
-        (padded[:-2, 1:-1] != seg) | (padded[2:, 1:-1] != seg) | (padded[1:-1, :-2] != seg) | (padded[1:-1, 2:] != seg)
-    )
+    # a 4-neighbour in another segment (none off the image); each pair of neighbours compared once
+    border = np.zeros(seg.shape, dtype=bool)
+    across = seg[:, 1:] != seg[:, :-1]
+    border[:, 1:] |= across
+    border[:, :-1] |= across
+    down = seg[1:] != seg[:-1]
+    border[1:] |= down
+    border[:-1] |= down
     core = (dist > neck_half_width_m / resolution_m) & (seg > 0) & ~border
     n, parts, stats = components_stats(core.astype(np.uint8), 4)
     big = stats[:, cv2.CC_STAT_AREA] >= min_core_area_m2 / resolution_m**2
@@ -66,7 +70,7 @@ def split_at_necks(
     split[0] = False
     if not split.any():
         return renumber(seg)
-    in_split = split[seg]
+    in_split = np.take(split, seg)
     # within the box round the segments split: nothing outside it is marked or filled
     rows, cols = np.flatnonzero(in_split.any(axis=1)), np.flatnonzero(in_split.any(axis=0))
     box = (slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1))

@@ -218,6 +218,13 @@ def _core(mask: npt.NDArray[np.bool_], depth_px: int) -> npt.NDArray[np.bool_]:
     return inner if inner.any() else mask
 
 
+def _occupancy01(occ: npt.NDArray[np.int16], known: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
+    """``np.where(known, occ / 100.0, 1.0)``: the quotients written over in place (one float image, not two)."""
+    out: npt.NDArray[np.float64] = np.divide(occ, 100.0)
+    np.copyto(out, 1.0, where=~known)
+    return out
+
+
 def _structure(obstacle: Components, min_area_px: int) -> npt.NDArray[np.bool_]:
     """Pixels near obstacle components of at least ``min_area_px`` (walls, blocks), not furniture or uprights."""
     big = obstacle.stats[:, cv2.CC_STAT_AREA] >= min_area_px
@@ -450,12 +457,12 @@ def decompose(
         streaks = rays = np.zeros(occ.shape, dtype=bool)
         if clean:
             cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
-            if np.any((cleaned >= 0) & (cleaned < FREE_PERCENT)):
+            if np.any(cleaned.view(np.uint16) < FREE_PERCENT):  # a free cell left (-1 is 65535 unsigned)
                 occ, streaks, rays = cleaned, cleaning.streaks, cleaning.rays
-        free = (occ >= 0) & (occ < FREE_PERCENT)
+        free = occ.view(np.uint16) < FREE_PERCENT  # int16 -1..100: 0 <= value < FREE_PERCENT in one comparison
         known = occ >= 0
         obstacle = ~free
-        occupied = known & (occ > OCCUPIED_PERCENT)
+        occupied = occ > OCCUPIED_PERCENT  # -1 (unknown) is never above it
 
         def soon(fn: Callable[..., _T], *args: object, **kwargs: object) -> Future[_T]:
             """A step that needs no step library: on the other thread, or on this one (done) while that one is
@@ -474,7 +481,7 @@ def decompose(
                 distance=clearance_job.result(),
             )
         )
-        occupancy01_job = soon(lambda: np.where(known, occ / 100.0, 1.0))  # for the cogency
+        occupancy01_job = soon(_occupancy01, occ, known)  # for the cogency
         against_walls_job = soon(wall_furniture, obstacle, resolution_m=resolution_m)
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
         standing_job = (
@@ -814,7 +821,7 @@ def _grown_face_labels(
     """Each segment pixel's face label; line pixels take a neighbour's (0 where none reaches)."""
     inside = segments > 0
     # gathered as bytes (labels are below 256); the fill works on its own int32 copy
-    return fill_from_neighbours(np.where(inside, face_labels.label.astype(np.uint8)[face_image], 0), inside)
+    return fill_from_neighbours(np.where(inside, np.take(face_labels.label.astype(np.uint8), face_image), 0), inside)
 
 
 def _region_records(

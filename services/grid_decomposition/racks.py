@@ -39,6 +39,7 @@ from services.grid_decomposition.arrays import (
     label_boxes,
     label_counts,
     lookup,
+    nonzero_rc,
     unique_inverse,
     value_runs,
 )
@@ -164,7 +165,7 @@ def _reopen_cross_aisles(
     long[chosen] = np.arange(1, chosen.size + 1)
     width = body.shape[1]
     hit = np.zeros((chosen.size + 1, width), dtype=bool)  # (body, column): a solid cell of the body there
-    rows, cols = np.nonzero(solid)
+    rows, cols = nonzero_rc(solid)
     hit[long[parts[rows, cols]], cols] = True
     at = np.flatnonzero(hit[1:])
     which, col = at // width, at % width
@@ -752,7 +753,7 @@ def structure_angles(
     found: list[tuple[float, float]] = []  # (angle mod 90 degrees in radians, length)
     for k in long[long > 0]:
         x, y, w, h = stats[k, :4]
-        rows, cols = np.nonzero(parts[y : y + h, x : x + w] == k)
+        rows, cols = nonzero_rc(parts[y : y + h, x : x + w] == k)
         (_, _), (rw, rh), angle = cv2.minAreaRect(np.column_stack([cols + x, rows + y]).astype(np.float32))
         theta = math.radians(angle) + (0.0 if rw >= rh else math.pi / 2)
         found.append((theta % (math.pi / 2), max(rw, rh)))
@@ -890,7 +891,7 @@ def place_segments(
     before = count if known is None else label_counts(segments, n_old, ~known)[1]
     left = (after > 0) & ((after < min_area_px) | (after < 0.5 * before))
     left[0] = False
-    floor = left[segments] & ~in_cells & region if left.any() else np.zeros(free.shape, dtype=bool)
+    floor = np.take(left, segments) & ~in_cells & region if left.any() else np.zeros(free.shape, dtype=bool)
     crumbs = crumb[layout.cells] & free if crumb.any() else np.zeros(free.shape, dtype=bool)
     place = cells.astype(np.int32)  # a copy (ids stay far below 2**31)
     # a crumb joins the nearest place; a sliver of floor the nearest place that is no rack (floor is no storage)
@@ -984,11 +985,11 @@ def floor_objects(
     keep[0] = False
     for k in np.flatnonzero(keep):  # a block (a pallet, a box stack), not a piece of wall
         x, y, w, h = stats[k, :4]
-        rows, cols = np.nonzero(parts[y : y + h, x : x + w] == k)
+        rows, cols = nonzero_rc(parts[y : y + h, x : x + w] == k)
         (_, _), (rw, rh), _ = cv2.minAreaRect(np.column_stack([cols, rows]).astype(np.float32))
         thick = (min(rw, rh) + 1) * resolution_m
         keep[k] = thick >= min_thickness_m and rows.size >= min_fill * (rw + 1) * (rh + 1)
-    out: npt.NDArray[np.bool_] = keep[parts]
+    out: npt.NDArray[np.bool_] = np.take(keep, parts)
     return out
 
 

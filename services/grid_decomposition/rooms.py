@@ -14,6 +14,7 @@ from services.grid_decomposition.arrays import (
     label_counts,
     label_max,
     lookup,
+    nonzero_rc,
 )
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
@@ -97,7 +98,7 @@ def furniture(
     keep = small | block
     for k in np.flatnonzero(keep & (np.hypot(bw, bh) * resolution_m >= wall_min_length_m)):
         box = parts[y[k] : y[k] + bh[k], x[k] : x[k] + bw[k]] == k
-        rows, cols = np.nonzero(box)
+        rows, cols = nonzero_rc(box)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         length, thickness = (max(side_a, side_b) + 1) * resolution_m, (min(side_a, side_b) + 1) * resolution_m
         if small[k] and length >= wall_min_length_m and thickness <= wall_max_thickness_m:
@@ -232,8 +233,9 @@ def segment_rooms(
     cuts = np.zeros((0, 2, 2))
     fixed = _share(seg, floor) > 0.5
     seg = fill_from_neighbours(seg, clutter)  # its own copy: furniture on a fixed segment is cleared in place
-    np.copyto(seg, 0, where=clutter & lookup(fixed, seg))
-    space = (seg > 0) & ~lookup(fixed, seg)
+    on_fixed = lookup(fixed, seg)
+    np.copyto(seg, 0, where=clutter & on_fixed)
+    space = (seg > 0) & ~on_fixed  # a pixel cleared here is no space either way
     if not space.any():  # warehouse floors only (a rack hall): no room to split, cut or clean up
         return renumber(seg, copy=False), cut  # seg is this function's own
     clearance = np.asarray(cv2.distanceTransform(space.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
@@ -300,7 +302,7 @@ def segment_rooms(
             seen = np.zeros(int(parts.max()) + 1, dtype=bool)
             seen[parts[occupied]] = True
             seen[0] = False
-            standing = seen[parts]
+            standing = np.take(seen, parts)
         rooms = join_furnished_groups(
             rooms,
             standing,
@@ -457,7 +459,7 @@ def ends_on_tables(
         part = parts[own] == k
         seen = occupied is None or bool(occupied[own][part].any())
         solid = cv2.morphologyEx(np.pad(part, radius).astype(np.uint8), cv2.MORPH_OPEN, disc)
-        rows, cols = np.nonzero(part)
+        rows, cols = nonzero_rc(part)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         compact = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
         # floor all round it: not an obstacle standing in a doorway
@@ -468,7 +470,7 @@ def ends_on_tables(
         ring = cv2.dilate(mine, ring_disc).astype(bool) & ~mine.astype(bool)
         open_all_round = bool(np.count_nonzero(ring & ~blocked[around]) >= min_open * np.count_nonzero(ring))
         # nor between two jambs: obstacles in the ring on opposite sides of it (sectors of 30 degrees)
-        ry, rx = np.nonzero(ring & blocked[around])
+        ry, rx = nonzero_rc(ring & blocked[around])
         angle = np.arctan2(ry - rows.mean() - (y0 - y1), rx - cols.mean() - (x0 - x1))
         hit = np.bincount(np.floor((angle + np.pi) / (np.pi / 6)).astype(np.int64) % 12, minlength=12) > 0
         open_all_round = open_all_round and not bool((hit & np.roll(hit, 6)).any())
@@ -520,7 +522,7 @@ def _outside_rays(
         for i, k in enumerate(ids.tolist()):
             box = boxes[k - 1]
             assert box is not None  # a narrow segment has pixels
-            rows, cols = np.nonzero(seg[box] == k)
+            rows, cols = nonzero_rc(seg[box] == k)
             j = np.argmin((rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2)  # its pixel nearest its centroid
             middles[i] = rows[j] + box[0].start, cols[j] + box[1].start
         out[ids] = open_share(occupied, middles, reach_px=reach_px) >= min_open_share
@@ -561,7 +563,7 @@ def islands(
     bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
     keep = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (np.maximum(bw, bh) <= max_extent_px)
     keep[0] = False
-    return np.asarray(keep if flags else keep[parts], dtype=bool)
+    return np.asarray(keep if flags else np.take(keep, parts), dtype=bool)
 
 
 def desk_clusters(
@@ -612,10 +614,10 @@ def desk_clusters(
     large &= ok & (np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]) > compact_from_px)
     for k in np.flatnonzero(large).tolist():
         x, y, bw, bh = (int(v) for v in stats[k, :4])
-        rows, cols = np.nonzero(parts[y : y + bh, x : x + bw] == k)
+        rows, cols = nonzero_rc(parts[y : y + bh, x : x + bw] == k)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         ok[k] = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
-    out[box] = keep & ok[parts]
+    out[box] = keep & np.take(ok, parts)
     return out
 
 
@@ -661,7 +663,7 @@ def free_standing(
     np.minimum.at(nearest, parts[isl], gap[isl])
     keep = nearest * resolution_m >= min_clearance_m
     keep[0] = False
-    return np.asarray(keep[parts] & isl, dtype=bool)
+    return np.asarray(np.take(keep, parts) & isl, dtype=bool)
 
 
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:

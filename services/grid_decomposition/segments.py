@@ -76,16 +76,14 @@ def fill_from_neighbours(
     for _ in range(steps):
         if front.size == 0:
             break
-        value = lab_flat[front]
-        filled = []
-        for offset in offsets:  # one offset's targets are distinct: a plain max-assignment each
-            cand = front + offset
-            ok = open_flat[cand]
-            cand = cand[ok]
-            lab_flat[cand] = np.maximum(lab_flat[cand], value[ok])
-            filled.append(cand)
+        # every offset at once: a hole takes the largest id of its front neighbours (a hole is never on the front,
+        # so the ids read are the step's own)
+        cand = (front[:, None] + offsets).ravel()
+        ok = open_flat[cand]
+        cand = cand[ok]
+        np.maximum.at(lab_flat, cand, np.repeat(lab_flat[front], offsets.size)[ok])
         # the next front: each filled pixel once (the order of a front does not matter)
-        front = distinct(np.concatenate(filled), seen)
+        front = distinct(cand, seen)
         open_flat[front] = False
     if (r1 - r0, c1 - c0) == (height, width):
         return np.ascontiguousarray(lab[1:-1, 1:-1])

@@ -24,7 +24,7 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import Components, components
+from services.grid_decomposition.arrays import Components, components, nonzero_rc
 
 
 class ShelfBanks(NamedTuple):
@@ -66,7 +66,7 @@ def _dashes(
     centers, directions, lengths, corners = [], [], [], []
     for i in candidates[candidates > 0]:
         x, y, w, h = stats[i, :4]
-        rows, cols = np.nonzero(parts[y : y + h, x : x + w] == i)
+        rows, cols = nonzero_rc(parts[y : y + h, x : x + w] == i)
         rect = cv2.minAreaRect(np.column_stack([cols + x, rows + y]).astype(np.float32))
         (cx, cy), (rw, rh), angle = rect
         length, thick = max(rw, rh) + 1.0, min(rw, rh) + 1.0

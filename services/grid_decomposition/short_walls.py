@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes
+from services.grid_decomposition.arrays import components_stats, label_boxes, nonzero_rc
 from services.grid_decomposition.corridors import _coordinates, _row_runs
 from services.grid_decomposition.radiogram import Line
 
@@ -64,8 +64,8 @@ def split_at_short_walls(
         top, left = max(0, box[0].start - margin_px), max(0, box[1].start - margin_px)
         bottom, right = box[0].stop + margin_px, box[1].stop + margin_px
         window = out[top:bottom, left:right]
-        wall_rows, wall_cols = np.nonzero(occupied[top:bottom, left:right])
-        free_rows, free_cols = np.nonzero(window == k)
+        wall_rows, wall_cols = nonzero_rc(occupied[top:bottom, left:right])
+        free_rows, free_cols = nonzero_rc(window == k)
         for angle in sorted({ln.angle_rad for ln in lines}):
             wall_u, wall_t = _project(wall_rows, wall_cols, top, left, angle)
             free_u, free_t = _project(free_rows, free_cols, top, left, angle)

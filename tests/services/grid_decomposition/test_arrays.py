@@ -16,6 +16,7 @@ from services.grid_decomposition.arrays import (
     label_sums,
     lookup,
     near,
+    nonzero_rc,
     unique_inverse,
     value_runs,
 )
@@ -130,3 +131,14 @@ def test_label_boxes_are_scipys_find_objects(seed: int) -> None:
     assert label_boxes(labels) == ndimage.find_objects(labels)
     for max_label in (1, 3, 20):
         assert label_boxes(labels, max_label) == ndimage.find_objects(labels, max_label=max_label)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_nonzero_rc_is_numpys_nonzero_of_an_image(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    image = rng.integers(0, 3, (int(rng.integers(1, 60)), int(rng.integers(1, 80)))) * (rng.random() < 0.9)
+    for array in (image, image > 1, image[::2, 1::3], (image > 0)[:, ::-1], np.zeros((5, 0), dtype=bool)):
+        rows, cols = nonzero_rc(array)
+        expected_rows, expected_cols = np.nonzero(array)
+        assert rows.dtype == expected_rows.dtype and cols.dtype == expected_cols.dtype
+        assert np.array_equal(rows, expected_rows) and np.array_equal(cols, expected_cols)

@@ -6,9 +6,17 @@ import math
 
 import cv2
 import numpy as np
+import pytest
 from scipy import ndimage
 
-from services.grid_decomposition.doorways import _nearest_walls, across_a_corridor, draw_cuts, find_doorways, widens
+from services.grid_decomposition.doorways import (
+    _centre_runs,
+    _nearest_walls,
+    across_a_corridor,
+    draw_cuts,
+    find_doorways,
+    widens,
+)
 
 RES = 0.05
 
@@ -114,3 +122,36 @@ def test_distances_to_walls_are_scipys_exact_ones() -> None:
         assert np.array_equal(dist, expected)
         rows, cols = np.indices(space.shape)
         assert np.array_equal(np.hypot(wall_x - cols.ravel(), wall_y - rows.ravel()).astype(np.float32), dist.ravel())
+
+
+def _plain_centre_runs(blocked: np.ndarray, points: np.ndarray, direction: np.ndarray, reach_px: int) -> np.ndarray:
+    """The run through each point, walked out one step at a time each way (off the image is blocked)."""
+    h, w = blocked.shape
+    direction = np.broadcast_to(direction, points.shape)
+    out = np.zeros(points.shape[:-1], dtype=np.int64)
+    for index in np.ndindex(*points.shape[:-1]):
+        (px, py), (dx, dy) = points[index], direction[index]
+
+        def stop(t: float, px: float = px, py: float = py, dx: float = dx, dy: float = dy) -> bool:
+            x, y = int(np.rint(px + t * dx)), int(np.rint(py + t * dy))
+            return not (0 <= x < w and 0 <= y < h) or bool(blocked[y, x])
+
+        ahead = next((k for k in range(reach_px + 1) if stop(float(k))), reach_px + 1)
+        behind = next((k for k in range(reach_px + 1) if stop(float(-k))), reach_px + 1)
+        out[index] = max(ahead + behind - 1, 0)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_centre_runs_are_the_runs_walked_out_from_each_point(seed: int) -> None:
+    """Runs along any direction, through points inside, on the edge of and off the image, blocked or not."""
+    rng = np.random.default_rng(seed)
+    blocked = rng.random((int(rng.integers(3, 30)), int(rng.integers(3, 30)))) < rng.uniform(0.05, 0.5)
+    h, w = blocked.shape
+    points = np.stack([rng.uniform(-3, w + 3, (7, 3)), rng.uniform(-3, h + 3, (7, 3))], axis=-1)
+    angle = rng.uniform(0, 2 * math.pi, (7, 1))
+    direction = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # one direction per row, broadcast
+    reach = int(rng.integers(1, 12))
+    runs = _centre_runs(blocked, points, direction, reach)
+    assert runs.dtype == np.int64
+    assert np.array_equal(runs, _plain_centre_runs(blocked, points, direction, reach))
