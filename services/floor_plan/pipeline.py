@@ -334,15 +334,9 @@ def describe(
         doors.append(Door(d, seg, (holders[0], holders[1]), width))
     traces = np.zeros(classes_map.shape, np.bool_) if traces is None else traces
     classes_work = to_work(frame, classes_map, fill=CellClass.UNKNOWN)
-    seen_work = to_work(frame, np.where(traces, np.uint8(CellClass.FREE), classes_map), fill=CellClass.UNKNOWN)
-    lines = np.zeros((0, 4)) if settings.slant_line_m is None else wall_line_segments(
-        classes_work, min_length_cells=_cells(settings.slant_line_m, resolution_m),
-        max_gap_cells=round(settings.slant_gap_m / resolution_m), wall_share=settings.slant_wall_share)
-    rooms, room_cells = split_at_slanted_walls(
-        group_rooms(world, seen_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
-                    resolution_m=resolution_m, settings=settings.rooms),
-        world, seen_work, lines, resolution_m=resolution_m, reach_m=0.5 * settings.slant_gap_m,
-        settings=settings.rooms)
+    lines = _slant_lines(classes_work, settings, resolution_m)
+    rooms, room_cells = _rooms(world, classes_map, traces, lines, {u: m.unit_type for u, m in sem.items()},
+                               frame=frame, settings=settings, wall_cells=t)
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
@@ -397,6 +391,28 @@ def describe(
                      log_posterior, iterations, accepted,
                      seconds, cpu_seconds, resolution_m, origin_xy_m, frame,
                      np.zeros(classes_map.shape, np.bool_) if fringe is None else fringe, traces)
+
+
+def _slant_lines(classes_work: npt.NDArray[np.uint8], settings: FloorPlanSettings,
+                 resolution_m: float) -> npt.NDArray[np.float64]:
+    """The map's straight wall lines (cells of the working frame) the slanted walls and the rooms' re-cut use."""
+    if settings.slant_line_m is None:
+        return np.zeros((0, 4))
+    return wall_line_segments(classes_work, min_length_cells=_cells(settings.slant_line_m, resolution_m),
+                              max_gap_cells=round(settings.slant_gap_m / resolution_m),
+                              wall_share=settings.slant_wall_share)
+
+
+def _rooms(world: World, classes_map: npt.NDArray[np.uint8], traces: npt.NDArray[np.bool_],
+           lines: npt.NDArray[np.float64], types: dict[int, UnitType], *, frame: Frame, settings: FloorPlanSettings,
+           wall_cells: int) -> tuple[list[Room], npt.NDArray[np.int32]]:
+    """The room level of a world (:mod:`services.floor_plan.rooms`, re-cut along slanted walls) and its cells."""
+    seen_work = to_work(frame, np.where(traces, np.uint8(CellClass.FREE), classes_map), fill=CellClass.UNKNOWN)
+    return split_at_slanted_walls(
+        group_rooms(world, seen_work, types, wall_cells=wall_cells, resolution_m=frame.resolution_m,
+                    settings=settings.rooms),
+        world, seen_work, lines, resolution_m=frame.resolution_m, reach_m=0.5 * settings.slant_gap_m,
+        settings=settings.rooms)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
