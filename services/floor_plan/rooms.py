@@ -81,6 +81,12 @@ class RoomSettings:
     rectangles only."""
     slant_min_piece_m2: float = 1.0
     """A room is re-cut where a slanted line splits it into pieces at least this large."""
+    filled_share: float | None = 0.9
+    """Along a boundary, the positions where a part at most ``filled_max_m`` deep (whose neighbour is deeper) is not
+    free over at least this share of its depth (a cupboard filling a strip of a room that the world explains as a unit
+    of its own) are no wall between two free spaces: the open share leaves them out, and such a part joins one
+    neighbour so at most (a strip running past a wall links no two rooms). None: every barrier closes a boundary."""
+    filled_max_m: float = 1.0
 
 
 class Boundary(NamedTuple):
@@ -99,6 +105,9 @@ class Boundary(NamedTuple):
     (its own room lies behind that wall) has little."""
     corridor_end: bool = False
     """One part is a corridor that ends here at a much wider and deeper part (:func:`corridor_end`)."""
+    filled: int = -1
+    """The part (index) filled by furniture along the boundary where it does not close the boundary (``filled_share``;
+    the shares above leave those positions out), -1 where no position is."""
 
 
 class Part(NamedTuple):
@@ -186,7 +195,7 @@ def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, most: int, shar
 
 
 def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
-               settings: RoomSettings) -> list[Boundary]:
+               settings: RoomSettings, solid: npt.NDArray[np.bool_] | None = None) -> list[Boundary]:
     """Every pair of parts whose free spaces face each other, with how open the map is between them.
 
     Parameters
@@ -195,6 +204,8 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
         From :func:`unit_parts`.
     barrier : Barriers
         :func:`barriers` of C_M in the world's frame.
+    solid : (H, W) bool, optional
+        The cells of C_M that are not free (``filled_share``); without it no position is filled.
 
     Returns
     -------
@@ -238,14 +249,28 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
         cols = slice(max(a.c0, b.c0), min(a.c1, b.c1) + 1)
         rows = slice(max(top.r1 + 1 - margin, top.r0), min(bottom.r0 - 1 + margin, bottom.r1) + 1)
         open_ = ~w[rows, cols].any(axis=0)
+        through = open_  # open positions between free spaces (not filled)
+        filled = np.zeros(open_.shape, np.bool_)
+        which = -1
+        if solid is not None and settings.filled_share is not None:
+            x = solid if vertical else solid.T
+            thin = round(settings.filled_max_m / resolution_m)
+            for k, p, q in ((int(i), a, b), (int(j), b, a)):
+                full = x[p.r0 : p.r1 + 1, cols].mean(axis=0) >= settings.filled_share
+                if p.rows <= thin < q.rows and full.any() and not open_[full].all():
+                    filled |= full
+                    which = k
+            through = through & ~filled
         depth = 0.0
-        if open_.any():
-            up = _free_run(w[top.r0 : top.r1 + 1, cols][::-1, open_])
-            down = _free_run(w[bottom.r0 : bottom.r1 + 1, cols][:, open_])
+        if through.any():
+            up = _free_run(w[top.r0 : top.r1 + 1, cols][::-1, through])
+            down = _free_run(w[bottom.r0 : bottom.r1 + 1, cols][:, through])
             depth = min(float(up.mean()) / top.rows, float(down.mean()) / bottom.rows)
         side = min(a.c1 - a.c0, b.c1 - b.c0) + 1
-        out.append(Boundary((int(i), int(j)), open_.size * resolution_m, float(open_.sum()) / side, depth,
-                            corridor_end(a, b, settings)))
+        if filled.any():
+            side = max(side - int(filled.sum()), 1)
+        out.append(Boundary((int(i), int(j)), open_.size * resolution_m, float(through.sum()) / side, depth,
+                            corridor_end(a, b, settings), which if filled.any() else -1))
     return out
 
 
@@ -313,16 +338,22 @@ def group_rooms(
     list of Room
         Sorted by their units; every part of every unit is in exactly one room.
     """
-    blocked = barriers(classes != CellClass.FREE, run_cells=round(settings.barrier_m / resolution_m))
+    wall = classes != CellClass.FREE
+    blocked = barriers(wall, run_cells=round(settings.barrier_m / resolution_m))
     parts = unit_parts(world, blocked, wall_cells=wall_cells, resolution_m=resolution_m, settings=settings)
     if not parts:
         return []
     joined = []
-    found = boundaries(parts, blocked, resolution_m=resolution_m, settings=settings)
+    found = boundaries(parts, blocked, resolution_m=resolution_m, settings=settings, solid=wall)
+    best: dict[int, Boundary] = {}
     for b in found:
         if (b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share
                 and not b.corridor_end):
-            joined.append(b.units)
+            if b.filled < 0:
+                joined.append(b.units)
+            elif b.filled not in best or _open_m(b) > _open_m(best[b.filled]):
+                best[b.filled] = b  # a strip filled by furniture joins its longest open neighbour only
+    joined.extend(b.units for b in best.values())
     edges = np.array(joined, np.int64).reshape(-1, 2)
     n = len(parts)
     _, component = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
@@ -340,6 +371,10 @@ def group_rooms(
         rooms.append(Room(tuple(sorted({m.unit for m in members})), tuple(m.rect for m in members), room_type,
                           sum(area)))
     return sorted(rooms)
+
+
+def _open_m(b: Boundary) -> float:
+    return b.length_m * b.open_share
 
 
 def _absorb_small(component: npt.NDArray[np.int32], parts: list[Part], found: list[Boundary], *, least_m2: float,
