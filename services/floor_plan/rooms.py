@@ -256,7 +256,7 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
             x = solid if vertical else solid.T
             thin = round(settings.filled_max_m / resolution_m)
             for k, p, q in ((int(i), a, b), (int(j), b, a)):
-                full = x[p.r0 : p.r1 + 1, cols].mean(axis=0) >= settings.filled_share
+                full: npt.NDArray[np.bool_] = x[p.r0 : p.r1 + 1, cols].mean(axis=0) >= settings.filled_share
                 if p.rows <= thin < q.rows and full.any() and not open_[full].all():
                     filled |= full
                     which = k
