@@ -248,7 +248,7 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
         top, bottom = (a, b) if a.r1 < b.r0 else (b, a)
         cols = slice(max(a.c0, b.c0), min(a.c1, b.c1) + 1)
         rows = slice(max(top.r1 + 1 - margin, top.r0), min(bottom.r0 - 1 + margin, bottom.r1) + 1)
-        open_ = ~w[rows, cols].any(axis=0)
+        open_ = np.asarray(~w[rows, cols].any(axis=0), np.bool_)
         through = open_  # open positions between free spaces (not filled)
         filled = np.zeros(open_.shape, np.bool_)
         which = -1
@@ -256,7 +256,7 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
             x = solid if vertical else solid.T
             thin = round(settings.filled_max_m / resolution_m)
             for k, p, q in ((int(i), a, b), (int(j), b, a)):
-                full: npt.NDArray[np.bool_] = x[p.r0 : p.r1 + 1, cols].mean(axis=0) >= settings.filled_share
+                full = np.asarray(x[p.r0 : p.r1 + 1, cols].mean(axis=0) >= settings.filled_share, np.bool_)
                 if p.rows <= thin < q.rows and full.any() and not open_[full].all():
                     filled |= full
                     which = k
