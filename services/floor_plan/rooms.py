@@ -261,17 +261,30 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
                     filled |= full
                     which = k
             through = through & ~filled
-        depth = 0.0
-        if through.any():
-            up = _free_run(w[top.r0 : top.r1 + 1, cols][::-1, through])
-            down = _free_run(w[bottom.r0 : bottom.r1 + 1, cols][:, through])
-            depth = min(float(up.mean()) / top.rows, float(down.mean()) / bottom.rows)
         side = min(a.c1 - a.c0, b.c1 - b.c0) + 1
-        if filled.any():
-            side = max(side - int(filled.sum()), 1)
-        out.append(Boundary((int(i), int(j)), open_.size * resolution_m, float(through.sum()) / side, depth,
-                            corridor_end(a, b, settings), which if filled.any() else -1))
+        plain = Boundary((int(i), int(j)), open_.size * resolution_m, float(open_.sum()) / side,
+                         _depth(w, top, bottom, cols, open_), corridor_end(a, b, settings))
+        if filled.any() and not _joins(plain, settings):
+            out.append(plain._replace(open_share=float(through.sum()) / max(side - int(filled.sum()), 1),
+                                      depth_share=_depth(w, top, bottom, cols, through), filled=which))
+        else:
+            out.append(plain)
     return out
+
+
+def _depth(w: npt.NDArray[np.bool_], top: Rect, bottom: Rect, cols: slice, open_: npt.NDArray[np.bool_]) -> float:
+    """How far free space runs into both stacked parts from the ``open_`` positions of their boundary (a share of
+    the shallower's depth; 0 where none is open)."""
+    if not open_.any():
+        return 0.0
+    up = _free_run(w[top.r0 : top.r1 + 1, cols][::-1, open_])
+    down = _free_run(w[bottom.r0 : bottom.r1 + 1, cols][:, open_])
+    return min(float(up.mean()) / top.rows, float(down.mean()) / bottom.rows)
+
+
+def _joins(b: Boundary, settings: RoomSettings) -> bool:
+    """Whether a boundary makes its two parts one room (open enough, deep enough, no corridor's end)."""
+    return b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share and not b.corridor_end
 
 
 def corridor_end(a: Rect, b: Rect, settings: RoomSettings) -> bool:
@@ -347,13 +360,16 @@ def group_rooms(
     found = boundaries(parts, blocked, resolution_m=resolution_m, settings=settings, solid=wall)
     best: dict[int, Boundary] = {}
     for b in found:
-        if (b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share
-                and not b.corridor_end):
-            if b.filled < 0:
-                joined.append(b.units)
-            elif b.filled not in best or _open_m(b) > _open_m(best[b.filled]):
-                best[b.filled] = b  # a strip filled by furniture joins its longest open neighbour only
-    joined.extend(b.units for b in best.values())
+        if not _joins(b, settings):
+            continue
+        if b.filled < 0:
+            joined.append(b.units)
+        elif b.filled not in best or _open_m(b) > _open_m(best[b.filled]):
+            best[b.filled] = b
+    linked = {u for pair in joined for u in pair}
+    # a strip filled by furniture joins its longest open neighbour, and only when nothing else joins it: it links no
+    # two rooms
+    joined.extend(b.units for k, b in best.items() if k not in linked)
     edges = np.array(joined, np.int64).reshape(-1, 2)
     n = len(parts)
     _, component = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
