@@ -81,12 +81,6 @@ class RoomSettings:
     rectangles only."""
     slant_min_piece_m2: float = 1.0
     """A room is re-cut where a slanted line splits it into pieces at least this large."""
-    filled_share: float | None = 0.9
-    """Along a boundary, the positions where a part at most ``filled_max_m`` deep (whose neighbour is deeper) is not
-    free over at least this share of its depth (a cupboard filling a strip of a room that the world explains as a unit
-    of its own) are no wall between two free spaces: the open share leaves them out, and such a part joins one
-    neighbour so at most (a strip running past a wall links no two rooms). None: every barrier closes a boundary."""
-    filled_max_m: float = 1.0
 
 
 class Boundary(NamedTuple):
@@ -105,9 +99,6 @@ class Boundary(NamedTuple):
     (its own room lies behind that wall) has little."""
     corridor_end: bool = False
     """One part is a corridor that ends here at a much wider and deeper part (:func:`corridor_end`)."""
-    filled: int = -1
-    """The part (index) filled by furniture along the boundary where it does not close the boundary (``filled_share``;
-    the shares above leave those positions out), -1 where no position is."""
 
 
 class Part(NamedTuple):
@@ -195,7 +186,7 @@ def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, most: int, shar
 
 
 def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
-               settings: RoomSettings, solid: npt.NDArray[np.bool_] | None = None) -> list[Boundary]:
+               settings: RoomSettings) -> list[Boundary]:
     """Every pair of parts whose free spaces face each other, with how open the map is between them.
 
     Parameters
@@ -204,8 +195,6 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
         From :func:`unit_parts`.
     barrier : Barriers
         :func:`barriers` of C_M in the world's frame.
-    solid : (H, W) bool, optional
-        The cells of C_M that are not free (``filled_share``); without it no position is filled.
 
     Returns
     -------
@@ -248,43 +237,16 @@ def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,
         top, bottom = (a, b) if a.r1 < b.r0 else (b, a)
         cols = slice(max(a.c0, b.c0), min(a.c1, b.c1) + 1)
         rows = slice(max(top.r1 + 1 - margin, top.r0), min(bottom.r0 - 1 + margin, bottom.r1) + 1)
-        open_ = np.asarray(~w[rows, cols].any(axis=0), np.bool_)
-        through = open_  # open positions between free spaces (not filled)
-        filled = np.zeros(open_.shape, np.bool_)
-        which = -1
-        if solid is not None and settings.filled_share is not None:
-            x = solid if vertical else solid.T
-            thin = round(settings.filled_max_m / resolution_m)
-            for k, p, q in ((int(i), a, b), (int(j), b, a)):
-                full = np.asarray(x[p.r0 : p.r1 + 1, cols].mean(axis=0) >= settings.filled_share, np.bool_)
-                if p.rows <= thin < q.rows and full.any() and not open_[full].all():
-                    filled |= full
-                    which = k
-            through = through & ~filled
+        open_ = ~w[rows, cols].any(axis=0)
+        depth = 0.0
+        if open_.any():
+            up = _free_run(w[top.r0 : top.r1 + 1, cols][::-1, open_])
+            down = _free_run(w[bottom.r0 : bottom.r1 + 1, cols][:, open_])
+            depth = min(float(up.mean()) / top.rows, float(down.mean()) / bottom.rows)
         side = min(a.c1 - a.c0, b.c1 - b.c0) + 1
-        plain = Boundary((int(i), int(j)), open_.size * resolution_m, float(open_.sum()) / side,
-                         _depth(w, top, bottom, cols, open_), corridor_end(a, b, settings))
-        if filled.any() and not _joins(plain, settings):
-            out.append(plain._replace(open_share=float(through.sum()) / max(side - int(filled.sum()), 1),
-                                      depth_share=_depth(w, top, bottom, cols, through), filled=which))
-        else:
-            out.append(plain)
+        out.append(Boundary((int(i), int(j)), open_.size * resolution_m, float(open_.sum()) / side, depth,
+                            corridor_end(a, b, settings)))
     return out
-
-
-def _depth(w: npt.NDArray[np.bool_], top: Rect, bottom: Rect, cols: slice, open_: npt.NDArray[np.bool_]) -> float:
-    """How far free space runs into both stacked parts from the ``open_`` positions of their boundary (a share of
-    the shallower's depth; 0 where none is open)."""
-    if not open_.any():
-        return 0.0
-    up = _free_run(w[top.r0 : top.r1 + 1, cols][::-1, open_])
-    down = _free_run(w[bottom.r0 : bottom.r1 + 1, cols][:, open_])
-    return min(float(up.mean()) / top.rows, float(down.mean()) / bottom.rows)
-
-
-def _joins(b: Boundary, settings: RoomSettings) -> bool:
-    """Whether a boundary makes its two parts one room (open enough, deep enough, no corridor's end)."""
-    return b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share and not b.corridor_end
 
 
 def corridor_end(a: Rect, b: Rect, settings: RoomSettings) -> bool:
@@ -351,25 +313,16 @@ def group_rooms(
     list of Room
         Sorted by their units; every part of every unit is in exactly one room.
     """
-    wall = classes != CellClass.FREE
-    blocked = barriers(wall, run_cells=round(settings.barrier_m / resolution_m))
+    blocked = barriers(classes != CellClass.FREE, run_cells=round(settings.barrier_m / resolution_m))
     parts = unit_parts(world, blocked, wall_cells=wall_cells, resolution_m=resolution_m, settings=settings)
     if not parts:
         return []
     joined = []
-    found = boundaries(parts, blocked, resolution_m=resolution_m, settings=settings, solid=wall)
-    best: dict[int, Boundary] = {}
+    found = boundaries(parts, blocked, resolution_m=resolution_m, settings=settings)
     for b in found:
-        if not _joins(b, settings):
-            continue
-        if b.filled < 0:
+        if (b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share
+                and not b.corridor_end):
             joined.append(b.units)
-        elif b.filled not in best or _open_m(b) > _open_m(best[b.filled]):
-            best[b.filled] = b
-    linked = {u for pair in joined for u in pair}
-    # a strip filled by furniture joins its longest open neighbour, and only when nothing else joins it: it links no
-    # two rooms
-    joined.extend(b.units for k, b in best.items() if k not in linked)
     edges = np.array(joined, np.int64).reshape(-1, 2)
     n = len(parts)
     _, component = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
@@ -387,10 +340,6 @@ def group_rooms(
         rooms.append(Room(tuple(sorted({m.unit for m in members})), tuple(m.rect for m in members), room_type,
                           sum(area)))
     return sorted(rooms)
-
-
-def _open_m(b: Boundary) -> float:
-    return b.length_m * b.open_share
 
 
 def _absorb_small(component: npt.NDArray[np.int32], parts: list[Part], found: list[Boundary], *, least_m2: float,

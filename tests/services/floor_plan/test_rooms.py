@@ -181,35 +181,6 @@ def test_a_corridor_a_unit_stands_over_stays_one_room_across_the_offices_cross_w
     assert min(p.r0 for p in corridor[0].parts) < 45 and max(p.r1 for p in corridor[0].parts) > 54
 
 
-def _office_with_a_cupboard_strip() -> tuple[World, npt.NDArray[np.uint8]]:
-    """A 3 m x 4 m office explained as two units: a 0.8 m strip along its top wall, a cupboard filling 2.4 m of it
-    (its face 0.8 m from the wall), and the rest of the room."""
-    strip, rest = Rect(0, 19, 0, 79), Rect(18, 61, 0, 79)  # they share the band of rows 18-19
-    classes = _walled((62, 80), Rect(0, 61, 0, 79))
-    classes[2:20, 10:58] = CellClass.WALL  # the cupboard, its face on the units' shared band
-    return World({1: strip, 2: rest}, set(), 3), classes
-
-
-def test_a_strip_of_a_room_filled_by_a_cupboard_is_part_of_the_room() -> None:
-    world, classes = _office_with_a_cupboard_strip()
-    assert _rooms(world, classes) == [(1, 2)]
-    types = dict.fromkeys(world.units, UnitType.ROOM)
-    apart = group_rooms(world, classes, types, wall_cells=T, resolution_m=RES, settings=RoomSettings(filled_share=None))
-    assert [room.units for room in apart] == [(1,), (2,)], "the cupboard's face closes the boundary without the rule"
-
-
-def test_a_strip_filled_by_cupboards_along_two_offices_links_no_two_offices() -> None:
-    # two offices side by side with a wall between them; one strip unit runs along both their top walls
-    left, right = Rect(18, 61, 0, 41), Rect(18, 61, 40, 79)
-    classes = _walled((62, 80), Rect(0, 61, 0, 41), Rect(0, 61, 40, 79))
-    classes[2:20, 10:40] = CellClass.WALL  # a cupboard in each office against the wall between them: the band of
-    classes[2:20, 42:70] = CellClass.WALL  # cupboards and wall is too thick to cut the strip there
-    world = World({1: Rect(0, 19, 0, 79), 2: left, 3: right}, set(), 4)
-    rooms = _rooms(world, classes)
-    assert not any({2, 3} <= set(r) for r in rooms), "the strip joins one office at most"
-    assert any({1, 2} <= set(r) or {1, 3} <= set(r) for r in rooms)
-
-
 def test_furniture_in_a_room_takes_its_label_and_a_dotted_wall_stays_unlabelled() -> None:
     classes = _walled((60, 100), Rect(0, 59, 0, 99))
     classes[2:58, 50] = CellClass.FREE  # a dotted wall across the room: dots of 2 cells, gaps of 3
