@@ -30,7 +30,7 @@ from services.floor_plan.pipeline import (
     room_labels,
     unit_labels,
 )
-from services.floor_plan.rooms import Room, RoomSettings, group_rooms, room_keys
+from services.floor_plan.rooms import FurnitureSettings, Room, RoomSettings, group_rooms, room_keys
 from services.floor_plan.slanted import split_at_slanted_walls
 from services.floor_plan.walls import Segment, Slant, Walls, fit_walls
 from services.floor_plan.world import Rect, Side, UnitType, World
@@ -51,6 +51,7 @@ __all__ = [
     "FloorPlanError",
     "FloorPlanSettings",
     "Frame",
+    "FurnitureSettings",
     "Kernel",
     "KernelSettings",
     "Move",

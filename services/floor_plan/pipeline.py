@@ -38,7 +38,16 @@ from services.floor_plan.likelihood import (
     solid_obstacles,
     wall_thickness_cells,
 )
-from services.floor_plan.rooms import Room, RoomSettings, fill_free, group_rooms, wall_fringe
+from services.floor_plan.rooms import (
+    FurnitureSettings,
+    Room,
+    RoomSettings,
+    fill_free,
+    furniture,
+    group_rooms,
+    label_furniture,
+    wall_fringe,
+)
 from services.floor_plan.slanted import slanted, split_at_slanted_walls
 from services.floor_plan.walls import Segment, Slant, fit_walls
 from services.floor_plan.world import Rect, UnitType, World, shared_band
@@ -76,6 +85,9 @@ class FloorPlanSettings:
     """A map whose dominant walls are further than this from the grid's axes is explained turned to them."""
     rooms: RoomSettings = field(default_factory=RoomSettings)
     """When units are one room (:mod:`services.floor_plan.rooms`)."""
+    furniture: FurnitureSettings | None = field(default_factory=FurnitureSettings)
+    """The map's non-free pieces that are furniture standing on a room's floor (:func:`~services.floor_plan.rooms.
+    furniture`): ``rooms.png`` gives each the label of the room round it (``FloorPlan.furniture``); None: none."""
     clutter_max_m2: float | None = 4.0
     """The largest blob of non-free cells inside the units drawn as an obstacle (furniture, the unseen space behind
     it: :mod:`services.floor_plan.clutter`); None: no clutter obstacles, C_W is the seed's world alone."""
@@ -180,6 +192,9 @@ class FloorPlan(NamedTuple):
     traces: npt.NDArray[np.bool_]
     """Laser beams' traces (map cells, GridLayer order): free cells of the map ``classes_map`` reads unknown
     (``trace_max_m``); the rooms and the label images count them free, as the map draws them."""
+    furniture: npt.NDArray[np.bool_] | None = None
+    """Furniture (map cells, GridLayer order): non-free pieces of the map that ``rooms.png`` labels with the room round
+    them (``FloorPlanSettings.furniture``); None: none."""
 
     @property
     def slanted_walls(self) -> int:
@@ -334,15 +349,9 @@ def describe(
         doors.append(Door(d, seg, (holders[0], holders[1]), width))
     traces = np.zeros(classes_map.shape, np.bool_) if traces is None else traces
     classes_work = to_work(frame, classes_map, fill=CellClass.UNKNOWN)
-    seen_work = to_work(frame, np.where(traces, np.uint8(CellClass.FREE), classes_map), fill=CellClass.UNKNOWN)
-    lines = np.zeros((0, 4)) if settings.slant_line_m is None else wall_line_segments(
-        classes_work, min_length_cells=_cells(settings.slant_line_m, resolution_m),
-        max_gap_cells=round(settings.slant_gap_m / resolution_m), wall_share=settings.slant_wall_share)
-    rooms, room_cells = split_at_slanted_walls(
-        group_rooms(world, seen_work, {u: m.unit_type for u, m in sem.items()}, wall_cells=t,
-                    resolution_m=resolution_m, settings=settings.rooms),
-        world, seen_work, lines, resolution_m=resolution_m, reach_m=0.5 * settings.slant_gap_m,
-        settings=settings.rooms)
+    lines = _slant_lines(classes_work, settings, resolution_m)
+    rooms, room_cells = _rooms(world, classes_map, traces, lines, {u: m.unit_type for u, m in sem.items()},
+                               frame=frame, settings=settings, wall_cells=t)
     ids = sorted(world.units)
     adjacency = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                  if shared_band(world.units[a], world.units[b], t) is not None]
@@ -396,7 +405,32 @@ def describe(
                      cell_prediction_rate(classes_map, cw), k_units, clutter, walls, wall_segments, slants, exterior,
                      log_posterior, iterations, accepted,
                      seconds, cpu_seconds, resolution_m, origin_xy_m, frame,
-                     np.zeros(classes_map.shape, np.bool_) if fringe is None else fringe, traces)
+                     np.zeros(classes_map.shape, np.bool_) if fringe is None else fringe, traces,
+                     None if settings.furniture is None else furniture(
+                         (classes_map != CellClass.FREE) & ~traces, resolution_m=resolution_m,
+                         settings=settings.furniture))
+
+
+def _slant_lines(classes_work: npt.NDArray[np.uint8], settings: FloorPlanSettings,
+                 resolution_m: float) -> npt.NDArray[np.float64]:
+    """The map's straight wall lines (cells of the working frame) the slanted walls and the rooms' re-cut use."""
+    if settings.slant_line_m is None:
+        return np.zeros((0, 4))
+    return wall_line_segments(classes_work, min_length_cells=_cells(settings.slant_line_m, resolution_m),
+                              max_gap_cells=round(settings.slant_gap_m / resolution_m),
+                              wall_share=settings.slant_wall_share)
+
+
+def _rooms(world: World, classes_map: npt.NDArray[np.uint8], traces: npt.NDArray[np.bool_],
+           lines: npt.NDArray[np.float64], types: dict[int, UnitType], *, frame: Frame, settings: FloorPlanSettings,
+           wall_cells: int) -> tuple[list[Room], npt.NDArray[np.int32]]:
+    """The room level of a world (:mod:`services.floor_plan.rooms`, re-cut along slanted walls) and its cells."""
+    seen_work = to_work(frame, np.where(traces, np.uint8(CellClass.FREE), classes_map), fill=CellClass.UNKNOWN)
+    return split_at_slanted_walls(
+        group_rooms(world, seen_work, types, wall_cells=wall_cells, resolution_m=frame.resolution_m,
+                    settings=settings.rooms),
+        world, seen_work, lines, resolution_m=frame.resolution_m, reach_m=0.5 * settings.slant_gap_m,
+        settings=settings.rooms)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
@@ -410,11 +444,12 @@ def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
 
 def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
     """A label image like :func:`unit_labels` with one id per room (1..R in the order of ``plan.rooms``): each
-    room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds."""
+    room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds, and the
+    furniture standing in it (``plan.furniture``)."""
     cells = to_map(plan.frame, plan.room_cells.astype(np.float32), fill=0.0).astype(np.int32)
     out = fill_free(cells, (plan.classes_map == CellClass.FREE) | plan.traces)
     out[plan.fringe] = 0
-    return out
+    return out if plan.furniture is None else label_furniture(out, plan.furniture)
 
 
 def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.int32]:

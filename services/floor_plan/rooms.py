@@ -415,6 +415,86 @@ def wall_fringe(occupancy: npt.NDArray[np.integer], free: npt.NDArray[np.bool_],
     return out
 
 
+@dataclass(frozen=True)
+class FurnitureSettings:
+    """What non-free pieces of a map are furniture standing on a room's floor (the grid decomposition's rule,
+    ``grid_decomposition.rooms.furniture``, with its numbers); lengths in metres."""
+
+    max_m2: float = 1.0
+    """A small piece: at most this large and ``max_extent_m`` long (chairs, bins, a desk) ..."""
+    max_extent_m: float = 1.2
+    wall_min_length_m: float = 0.5
+    """... unless it is a piece of wall: at least this long and at most ``wall_max_thickness_m`` thick."""
+    wall_max_thickness_m: float = 0.35
+    block_max_m2: float = 1.7
+    """A block: at most this large and ``block_max_extent_m`` long, solid (``block_min_solid`` of it survives an
+    opening by a disc ``block_min_thickness_m`` wide), at most ``block_max_elongation`` times as long as thick."""
+    block_max_extent_m: float = 3.0
+    block_min_thickness_m: float = 0.4
+    block_max_elongation: float = 3.0
+    block_min_solid: float = 0.3
+    dots_gap_m: float = 0.35
+    """A piece on a dotted wall is no furniture: pieces that, with gaps up to this long closed along rows or columns,
+    make a line at least ``dots_line_m`` long."""
+    dots_line_m: float = 1.0
+
+
+def furniture(cells: npt.NDArray[np.bool_], *, resolution_m: float,
+              settings: FurnitureSettings) -> npt.NDArray[np.bool_]:
+    """The 8-connected pieces of ``cells`` (non-free cells) that are furniture (:class:`FurnitureSettings`), off the
+    map's border."""
+    mask = np.asarray(cells, np.uint8)
+    n, parts, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    h, w = mask.shape
+    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
+    inner = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h)
+    area = stats[:, cv2.CC_STAT_AREA] * resolution_m**2
+    extent = np.maximum(bw, bh) * resolution_m
+    small = inner & (area <= settings.max_m2) & (extent <= settings.max_extent_m)
+    block = inner & ~small & (area <= settings.block_max_m2) & (extent <= settings.block_max_extent_m)
+    small[0] = block[0] = False
+    if block.any():
+        size = 2 * max(1, round(settings.block_min_thickness_m / resolution_m / 2)) + 1
+        thick = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))) > 0
+        solid = np.bincount(parts[thick], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
+        block &= solid >= settings.block_min_solid
+    keep = small | block
+    for k in np.flatnonzero(keep & (np.hypot(bw, bh) * resolution_m >= settings.wall_min_length_m)).tolist():
+        rows, cols = np.nonzero(parts[y[k] : y[k] + bh[k], x[k] : x[k] + bw[k]] == k)
+        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+        length, thickness = (max(side_a, side_b) + 1) * resolution_m, (min(side_a, side_b) + 1) * resolution_m
+        if small[k] and length >= settings.wall_min_length_m and thickness <= settings.wall_max_thickness_m:
+            keep[k] = False
+        if block[k] and length > settings.block_max_elongation * thickness:
+            keep[k] = False
+    gap, run = max(1, round(settings.dots_gap_m / resolution_m)), max(1, round(settings.dots_line_m / resolution_m))
+    for close, line in ((np.ones((1, gap), np.uint8), np.ones((1, run), np.uint8)),
+                        (np.ones((gap, 1), np.uint8), np.ones((run, 1), np.uint8))):
+        dotted = cv2.morphologyEx(cv2.morphologyEx(mask, cv2.MORPH_CLOSE, close), cv2.MORPH_OPEN, line) > 0
+        keep[np.unique(parts[dotted & (mask > 0)])] = False
+    keep[0] = False
+    out: npt.NDArray[np.bool_] = keep[parts]
+    return out
+
+
+def label_furniture(labels: npt.NDArray[np.integer], pieces: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
+    """``labels`` with each 8-connected piece of ``pieces`` given the label of the cells round it, where they hold one
+    label only (furniture standing in one room; a piece between two rooms keeps none)."""
+    out = np.asarray(labels, np.int32).copy()
+    n, parts = cv2.connectedComponents(pieces.astype(np.uint8), connectivity=8)
+    if n < 2:
+        return out
+    ring = cv2.dilate(parts.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int64)  # ids exact in float32
+    near = (ring > 0) & (parts == 0) & (out > 0)
+    pairs = np.unique(np.stack([ring[near], out[near].astype(np.int64)], axis=1), axis=0)
+    label = np.zeros(n, np.int64)
+    label[pairs[:, 0]] = pairs[:, 1]
+    label[np.bincount(pairs[:, 0], minlength=n) != 1] = 0
+    label[0] = 0
+    return np.where(parts > 0, label[parts], out).astype(np.int32)
+
+
 def fill_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
     """Labels grown through free space: every free cell takes the label nearest to it through free cells.
 

@@ -7,7 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.floor_plan import CellClass, Rect, RoomSettings, UnitType, World, group_rooms, room_keys
-from services.floor_plan.rooms import fill_free, wall_fringe
+from services.floor_plan.rooms import FurnitureSettings, fill_free, furniture, label_furniture, wall_fringe
 
 RES = 0.05
 T = 2  # wall cells
@@ -179,3 +179,33 @@ def test_a_corridor_a_unit_stands_over_stays_one_room_across_the_offices_cross_w
     corridor = [room for room in groups if all(p.c0 >= 50 and p.c1 <= 69 for p in room.parts)]
     assert len(corridor) == 1 and len(corridor[0].parts) == 2, "the corridor's two parts are one room"
     assert min(p.r0 for p in corridor[0].parts) < 45 and max(p.r1 for p in corridor[0].parts) > 54
+
+
+def test_furniture_in_a_room_takes_its_label_and_a_dotted_wall_stays_unlabelled() -> None:
+    classes = _walled((60, 100), Rect(0, 59, 0, 99))
+    classes[2:58, 50] = CellClass.FREE  # a dotted wall across the room: dots of 2 cells, gaps of 3
+    for r in range(2, 58, 5):
+        classes[r : r + 2, 50] = CellClass.WALL
+    classes[20:32, 15:27] = CellClass.WALL  # a 0.6 m x 0.6 m desk in the left room
+    classes[40:43, 70:73] = CellClass.WALL  # a bin in the right room
+    blocked = classes != CellClass.FREE
+    found = furniture(blocked, resolution_m=RES, settings=FurnitureSettings())
+    assert found[25, 20] and found[41, 71], "the desk and the bin are furniture"
+    assert not found[2:58, 50].any(), "a dotted wall's dots are no furniture"
+    assert not found[0].any(), "nor is the room's wall"
+    labels = np.zeros(classes.shape, np.int32)
+    labels[2:58, 2:50] = 1
+    labels[2:58, 51:98] = 2
+    labels[~(classes == CellClass.FREE)] = 0
+    out = label_furniture(labels, found)
+    assert (out[20:32, 15:27] == 1).all() and (out[40:43, 70:73] == 2).all()
+    assert (out[classes == CellClass.FREE] == labels[classes == CellClass.FREE]).all()
+
+
+def test_a_piece_between_two_rooms_takes_no_label() -> None:
+    labels = np.zeros((20, 20), np.int32)
+    labels[:, :9] = 1
+    labels[:, 11:] = 2
+    piece = np.zeros((20, 20), np.bool_)
+    piece[8:12, 9:11] = True
+    assert (label_furniture(labels, piece)[piece] == 0).all()
