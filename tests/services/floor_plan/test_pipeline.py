@@ -15,11 +15,13 @@ from services.floor_plan import (
     SEED_SCHEDULE,
     CellClass,
     ChainSettings,
+    FloorPlan,
     FloorPlanError,
     FloorPlanSettings,
     Phase,
     Rect,
     UnitType,
+    World,
     floor_plan,
     room_labels,
     unit_labels,
@@ -149,6 +151,19 @@ def test_a_warm_start_keeps_the_ids_of_units_that_still_exist() -> None:
     kept = [u for u in second.units if u.rect in before]
     assert kept and all(before[u.rect] == u.id for u in kept)
     assert len(second.units) >= 3
+
+
+def test_independent_chains_keep_the_world_of_the_highest_posterior() -> None:
+    def fit(restarts: int, start: World | None = None) -> FloorPlan:
+        settings = _settings(400)
+        settings = replace(settings, chain=replace(settings.chain, restarts=restarts))
+        return floor_plan(_two_rooms(), resolution_m=RES, settings=settings, start=start)
+
+    one, three = fit(1), fit(3)
+    assert three.iterations == 3 * one.iterations  # the first chain is the one chain of restarts=1
+    assert three.log_posterior >= one.log_posterior
+    # a warm start carries its world on in one chain
+    assert fit(3, start=three.world).iterations == 400
 
 
 def test_the_chain_stops_at_its_iteration_and_time_bounds() -> None:
