@@ -56,9 +56,10 @@ class ChainSettings:
     fsu_every: int = 200
     seed: int = 0
     kernels: tuple[Kernel, ...] = field(default_factory=lambda: tuple(Kernel))
-    restarts: int = 1
+    restarts: int = 2
     """Independent chains of ``iterations`` each from an empty world (a cold start; a warm start runs one): the world
-    of the highest log posterior is kept. Chain 0 draws from ``seed``, chain i from the stream ``(seed, i)``."""
+    of the highest log posterior is kept. Chain 0 draws from ``seed``, chain i from the stream ``(seed, i)``; 1: the
+    one chain of table 3.2 (docs/floor_plan.md, branch ``fpchain``: the chain seed's spread on ipa)."""
 
 
 def phase_at(schedule: tuple[Phase, ...], iteration: int) -> Phase:

@@ -290,11 +290,16 @@ def floor_plan(
                     seconds=result.seconds, cpu_seconds=result.cpu_seconds)
 
 
+_TIE_NATS = 1e-6
+"""Log posteriors closer than this are equal (the chain's score is a sum of many increments)."""
+
+
 def _best_of_chains(chain_from: Callable[[World], Chain], world: World, classes: npt.NDArray[np.uint8],
                     settings: ChainSettings, *, first_iteration: int, positions_rc: npt.NDArray[np.int64] | None,
                     restarts: int) -> ChainResult:
-    """``restarts`` independent chains from ``world``; the result of the highest log posterior. ``settings.max_seconds``
-    bounds them all together; iterations and seconds add up."""
+    """``restarts`` independent chains from ``world``; the result of the highest log posterior (an earlier chain's on a
+    tie to the rounding of the incremental score). ``settings.max_seconds`` bounds them all together; iterations and
+    seconds add up."""
     if restarts < 1:
         raise FloorPlanError(f"need at least one chain, got restarts {restarts}")
     runs: list[ChainResult] = []
@@ -306,7 +311,10 @@ def _best_of_chains(chain_from: Callable[[World], Chain], world: World, classes:
                               replace(settings, max_seconds=settings.max_seconds - spent),
                               first_iteration=first_iteration, positions_rc=positions_rc, stream=stream))
         spent += runs[-1].seconds
-    best = max(runs, key=lambda r: r.log_posterior)
+    best = runs[0]
+    for run in runs[1:]:
+        if run.log_posterior > best.log_posterior + _TIE_NATS:
+            best = run
     return ChainResult(best.world, best.log_posterior, sum(r.iterations for r in runs), sum(r.accepted for r in runs),
                        sum(r.seconds for r in runs), sum(r.cpu_seconds for r in runs))
 
