@@ -26,9 +26,10 @@ CPU time (``time.process_time``) with the load average, since the machine may be
 ``--seeds`` runs every map once per chain seed (``ChainSettings.seed``, 0 by default) and prints, besides each seed's
 figures (``..._seed<S>_...``), their mean over the seeds and the range of the seeds' means (``..._seeds_...``);
 ``--trace-max-m`` sets ``FloorPlanSettings.trace_max_m`` (``none``: every free cell is free).
+``--restarts`` sets ``ChainSettings.restarts`` (independent chains of a cold fit, the highest posterior kept).
 
 Run: ``PYTHONPATH=. .venv/bin/python bench/bench_floor_plan.py [--sets rose2 ipa partial] [--iterations N]
-[--seeds 0 1 2 3] [--trace-max-m none|0.15]``.
+[--seeds 0 1 2 3] [--trace-max-m none|0.15] [--restarts N]``.
 """
 
 from __future__ import annotations
