@@ -26,9 +26,10 @@ CPU time (``time.process_time``) with the load average, since the machine may be
 ``--seeds`` runs every map once per chain seed (``ChainSettings.seed``, 0 by default) and prints, besides each seed's
 figures (``..._seed<S>_...``), their mean over the seeds and the range of the seeds' means (``..._seeds_...``);
 ``--trace-max-m`` sets ``FloorPlanSettings.trace_max_m`` (``none``: every free cell is free).
+``--restarts`` sets ``ChainSettings.restarts`` (independent chains of a cold fit, the highest posterior kept).
 
 Run: ``PYTHONPATH=. .venv/bin/python bench/bench_floor_plan.py [--sets rose2 ipa partial] [--iterations N]
-[--seeds 0 1 2 3] [--trace-max-m none|0.15]``.
+[--seeds 0 1 2 3] [--trace-max-m none|0.15] [--restarts N]``.
 """
 
 from __future__ import annotations
@@ -83,6 +84,7 @@ class Run(NamedTuple):
     iterations: int
     seed: int
     trace_max_m: float | None
+    restarts: int
 
 
 class Row(NamedTuple):
@@ -119,7 +121,8 @@ def rose2_occupancy(grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int8]:
 
 def _plan(occ: npt.NDArray[np.int8], run: Run, start: World | None = None,
           angle_rad: float | None = None) -> tuple[FloorPlan, float, float]:
-    settings = FloorPlanSettings(chain=ChainSettings(iterations=run.iterations, max_seconds=600.0, seed=run.seed),
+    settings = FloorPlanSettings(chain=ChainSettings(iterations=run.iterations, max_seconds=600.0, seed=run.seed,
+                                                     restarts=run.restarts),
                                  trace_max_m=run.trace_max_m)
     t0, c0 = time.perf_counter(), time.process_time()
     plan = floor_plan(occ, resolution_m=RES, settings=settings, start=start, angle_rad=angle_rad)
@@ -347,9 +350,11 @@ def main() -> None:
                         help="chain seeds (rose2, ipa; partial: the first)")
     parser.add_argument("--trace-max-m", type=_metres_or_none, default=FloorPlanSettings().trace_max_m,
                         help="FloorPlanSettings.trace_max_m: a number of metres or 'none' (default: the setting's)")
+    parser.add_argument("--restarts", type=int, default=ChainSettings().restarts,
+                        help="ChainSettings.restarts: independent chains of a cold start (default: the setting's)")
     args = parser.parse_args()
-    run = Run(args.iterations, args.seeds[0], args.trace_max_m)
-    print(f"trace_max_m {args.trace_max_m}, seeds {' '.join(map(str, args.seeds))}")
+    run = Run(args.iterations, args.seeds[0], args.trace_max_m, args.restarts)
+    print(f"trace_max_m {args.trace_max_m}, seeds {' '.join(map(str, args.seeds))}, restarts {args.restarts}")
     if not MAPS.is_dir():
         print(f"skipped: {MAPS} is absent")
         return

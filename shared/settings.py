@@ -269,7 +269,9 @@ class FloorPlanStageSettings(BaseModel):
     safety_poll_period_s: float = Field(30.0, gt=0.0, description="How often the store is checked without events.")
     iterations: int = Field(20000, ge=1, description="Metropolis-Hastings iterations of a fresh chain.")
     warm_iterations: int = Field(2000, ge=1, description="Iterations of a chain warm-started from the last world.")
-    max_seconds: float = Field(30.0, gt=0.0, description="Wall-time bound of one chain.")
+    restarts: int = Field(2, ge=1, description=(
+        "Independent chains of a fresh fit (not of a warm start); the world of the highest posterior is kept."))
+    max_seconds: float = Field(30.0, gt=0.0, description="Wall-time bound of one fit (all its chains).")
     wall_m: float = Field(0.1, gt=0.0, description="Wall thickness of a unit.")
     hall_area_m2: float = Field(120.0, gt=0.0, description="Units at least this large are hall-like (table 3.6).")
     corridor_ratio: float = Field(3.0, gt=1.0, description="Length/width from which a unit is corridor-like.")

@@ -56,6 +56,10 @@ class ChainSettings:
     fsu_every: int = 200
     seed: int = 0
     kernels: tuple[Kernel, ...] = field(default_factory=lambda: tuple(Kernel))
+    restarts: int = 2
+    """Independent chains of ``iterations`` each from an empty world (a cold start; a warm start runs one): the world
+    of the highest log posterior is kept. Chain 0 draws from ``seed``, chain i from the stream ``(seed, i)``; 1: the
+    one chain of table 3.2 (docs/floor_plan.md, branch ``fpchain``: the chain seed's spread on ipa)."""
 
 
 def phase_at(schedule: tuple[Phase, ...], iteration: int) -> Phase:
@@ -138,13 +142,15 @@ class ChainResult(NamedTuple):
 
 
 def run_chain(chain: Chain, classes_map: npt.NDArray[np.uint8], settings: ChainSettings, *,
-              first_iteration: int = 1, positions_rc: npt.NDArray[np.int64] | None = None) -> ChainResult:
+              first_iteration: int = 1, positions_rc: npt.NDArray[np.int64] | None = None,
+              stream: int = 0) -> ChainResult:
     """Run Metropolis-Hastings from ``chain``'s world; stop after ``settings.iterations`` or ``max_seconds``.
 
     ``first_iteration`` > 1 starts inside the schedule (a warm start skips the initial ADD phase).
-    ``positions_rc`` ((N, 2) cells) are where robots were: seeds of the free-space detector.
+    ``positions_rc`` ((N, 2) cells) are where robots were: seeds of the free-space detector. ``stream`` > 0 draws
+    from the random stream ``(settings.seed, stream)`` (an independent chain).
     """
-    rng = np.random.default_rng(settings.seed)
+    rng = np.random.default_rng([settings.seed, stream] if stream else settings.seed)
     chooser = RandomChooser(rng)
     allowed = set(settings.kernels)
     start, cpu_start = time.perf_counter(), time.process_time()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
@@ -10,7 +11,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.floor_plan.chain import Chain, ChainSettings, run_chain
+from services.floor_plan.chain import Chain, ChainResult, ChainSettings, run_chain
 from services.floor_plan.clutter import explain_clutter, explain_exterior
 from services.floor_plan.context import ContextPrior, ContextSettings
 from services.floor_plan.detectors import Evidence, wall_line_segments, wall_lines, wbu_candidates
@@ -277,27 +278,60 @@ def floor_plan(
     lines = wall_lines(classes, wall_cells=ks.wall_cells, min_length_cells=_cells(s.min_line_m, resolution_m))
     candidates = wbu_candidates(lines, evidence, wall_cells=ks.wall_cells, min_inner_cells=ks.min_inner_cells)
     proposer = Proposer(evidence, lines, ks, candidates)
-    canvas = Canvas(classes, log_sensor_table(s.sensor_model), wall_cells=ks.wall_cells,
-                    log_overlap=math.log(s.overlap_psi),
-                    obstacles=to_work(frame, solid.astype(np.uint8), fill=0).astype(bool),
-                    blocks=to_work(frame, enclosed_blocks(solid).astype(np.uint8), fill=0).astype(bool))
+    obstacles = to_work(frame, solid.astype(np.uint8), fill=0).astype(bool)
+    blocks = to_work(frame, enclosed_blocks(solid).astype(np.uint8), fill=0).astype(bool)
     prior = ContextPrior(resolution_m=resolution_m, wall_cells=ks.wall_cells, settings=s.context)
+
+    def chain_from(world: World) -> Chain:
+        canvas = Canvas(classes, log_sensor_table(s.sensor_model), wall_cells=ks.wall_cells,
+                        log_overlap=math.log(s.overlap_psi), obstacles=obstacles, blocks=blocks)
+        return Chain(world, canvas, proposer, prior)
+
     first = 1
     world = World()
     if start is not None and start.units:
         world = World({u: r for u, r in start.units.items() if proposer.valid(r)}, set(), start.next_id)
         world.doors = {d for d in start.doors if len(world.door_units(d, ks.wall_cells)) == 2}
         first = s.warm_start_iteration
-    chain = Chain(world, canvas, proposer, prior)
     positions = None
     if trajectory_xy_m is not None and len(trajectory_xy_m):
         xy = np.asarray(trajectory_xy_m, np.float64).reshape(-1, 2)
         rc = np.stack([(xy[:, 1] - origin_xy_m[1]) / resolution_m, (xy[:, 0] - origin_xy_m[0]) / resolution_m], axis=1)
         positions = np.unique(np.floor(points_to_work(frame, rc)).astype(np.int64), axis=0)
-    result = run_chain(chain, classes, s.chain, first_iteration=first, positions_rc=positions)
+    result = _best_of_chains(chain_from, world, classes, s.chain, first_iteration=first, positions_rc=positions,
+                             restarts=s.chain.restarts if first == 1 else 1)
     return describe(result.world, classes_map, frame=frame, settings=s, fringe=fringe, traces=traces,
                     log_posterior=result.log_posterior, iterations=result.iterations, accepted=result.accepted,
                     seconds=result.seconds, cpu_seconds=result.cpu_seconds)
+
+
+_TIE_NATS = 1e-6
+"""Log posteriors closer than this are equal (the chain's score is a sum of many increments)."""
+
+
+def _best_of_chains(chain_from: Callable[[World], Chain], world: World, classes: npt.NDArray[np.uint8],
+                    settings: ChainSettings, *, first_iteration: int, positions_rc: npt.NDArray[np.int64] | None,
+                    restarts: int) -> ChainResult:
+    """``restarts`` independent chains from ``world``; the result of the highest log posterior (an earlier chain's on a
+    tie to the rounding of the incremental score). ``settings.max_seconds`` bounds them all together; iterations and
+    seconds add up."""
+    if restarts < 1:
+        raise FloorPlanError(f"need at least one chain, got restarts {restarts}")
+    runs: list[ChainResult] = []
+    spent = 0.0
+    for stream in range(restarts):
+        if runs and spent >= settings.max_seconds:
+            break
+        runs.append(run_chain(chain_from(world.copy()), classes,
+                              replace(settings, max_seconds=settings.max_seconds - spent),
+                              first_iteration=first_iteration, positions_rc=positions_rc, stream=stream))
+        spent += runs[-1].seconds
+    best = runs[0]
+    for run in runs[1:]:
+        if run.log_posterior > best.log_posterior + _TIE_NATS:
+            best = run
+    return ChainResult(best.world, best.log_posterior, sum(r.iterations for r in runs), sum(r.accepted for r in runs),
+                       sum(r.seconds for r in runs), sum(r.cpu_seconds for r in runs))
 
 
 def describe(

@@ -119,7 +119,8 @@ class FloorPlanStage:
         self._hear_robots()
         settings = FloorPlanSettings(
             wall_m=s.wall_m,
-            chain=ChainSettings(iterations=s.warm_iterations if start else s.iterations, max_seconds=s.max_seconds),
+            chain=ChainSettings(iterations=s.warm_iterations if start else s.iterations, max_seconds=s.max_seconds,
+                                restarts=s.restarts),
             context=ContextSettings(hall_area_m2=s.hall_area_m2, corridor_ratio=s.corridor_ratio,
                                     type_rule_weight=s.type_rule_weight,
                                     same_length_rule_weight=s.same_length_rule_weight,

@@ -15,11 +15,13 @@ from services.floor_plan import (
     SEED_SCHEDULE,
     CellClass,
     ChainSettings,
+    FloorPlan,
     FloorPlanError,
     FloorPlanSettings,
     Phase,
     Rect,
     UnitType,
+    World,
     floor_plan,
     room_labels,
     unit_labels,
@@ -151,9 +153,22 @@ def test_a_warm_start_keeps_the_ids_of_units_that_still_exist() -> None:
     assert len(second.units) >= 3
 
 
+def test_independent_chains_keep_the_world_of_the_highest_posterior() -> None:
+    def fit(restarts: int, start: World | None = None) -> FloorPlan:
+        settings = _settings(400)
+        settings = replace(settings, chain=replace(settings.chain, restarts=restarts))
+        return floor_plan(_two_rooms(), resolution_m=RES, settings=settings, start=start)
+
+    one, three = fit(1), fit(3)
+    assert three.iterations == 3 * one.iterations  # the first chain is the one chain of restarts=1
+    assert three.log_posterior >= one.log_posterior
+    # a warm start carries its world on in one chain
+    assert fit(3, start=three.world).iterations == 400
+
+
 def test_the_chain_stops_at_its_iteration_and_time_bounds() -> None:
     plan = floor_plan(_two_rooms(), resolution_m=RES, settings=_settings(iterations=40))
-    assert plan.iterations == 40
+    assert plan.iterations == 40 * ChainSettings().restarts  # every chain of a cold start
     timed = FloorPlanSettings(chain=ChainSettings(iterations=10**9, max_seconds=0.2))
     assert floor_plan(_two_rooms(), resolution_m=RES, settings=timed).iterations < 10**9
 
