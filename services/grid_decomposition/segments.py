@@ -247,21 +247,8 @@ def merge_small_segments(
             if not neighbours[s] and lone_dropped is not None and lone_dropped[s]:
                 dropped[s] = True
             continue
-        t = max(neighbours[s], key=lambda k: neighbours[s][k])
-        parent[s] = t
-        area[t] += area[s]
-        for k, c in neighbours[s].items():
-            del neighbours[k][s]
-            if k != t:
-                neighbours[t][k] = neighbours[t].get(k, 0) + c
-                neighbours[k][t] = neighbours[k].get(t, 0) + c
-        neighbours[s] = {}
-    root = parent.copy()
-    while True:
-        nxt = root[root]
-        if np.array_equal(nxt, root):
-            break
-        root = nxt
+        _absorb(s, max(neighbours[s], key=lambda k: neighbours[s][k]), parent, area, neighbours)
+    root = _roots(parent)
     return _relabel(seg, root, (area > 0) & ~dropped[root])
 
 
@@ -326,23 +313,38 @@ def merge_passages(
             break
         s = min(between, key=lambda i: area[i])
         t = max(neighbours[s], key=lambda k: neighbours[s][k])
-        parent[s] = t
-        area[t] += area[s]
+        _absorb(s, t, parent, area, neighbours)
         candidate[s] = False
         candidate[t] &= area[t] < max_area_px
-        for k, c in neighbours[s].items():
-            del neighbours[k][s]
-            if k != t:
-                neighbours[t][k] = neighbours[t].get(k, 0) + c
-                neighbours[k][t] = neighbours[k].get(t, 0) + c
-        neighbours[s] = {}
+    return _relabel(seg, _roots(parent), area > 0)
+
+
+def _absorb(
+    s: int,
+    t: int,
+    parent: npt.NDArray[np.int64],
+    area: npt.NDArray[np.int64],
+    neighbours: list[dict[int, int]],
+) -> None:
+    """Segment ``s`` joins segment ``t``: its area and its borders (pixel counts by neighbour) become ``t``'s."""
+    parent[s] = t
+    area[t] += area[s]
+    for k, c in neighbours[s].items():
+        del neighbours[k][s]
+        if k != t:
+            neighbours[t][k] = neighbours[t].get(k, 0) + c
+            neighbours[k][t] = neighbours[k].get(t, 0) + c
+    neighbours[s] = {}
+
+
+def _roots(parent: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    """The segment each segment finally joined, following ``parent`` to its end."""
     root = parent.copy()
     while True:
         nxt = root[root]
         if np.array_equal(nxt, root):
-            break
+            return root
         root = nxt
-    return _relabel(seg, root, area > 0)
 
 
 def _relabel(
