@@ -648,6 +648,7 @@ def decompose(
             segments = split_fans(
                 segments, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
+                wide_neck_m=door_max_width_m,
             )
         if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
@@ -685,6 +686,7 @@ def decompose(
                 segments = split_fans(
                     segments, occupied, on_floor > 0.5 * size,
                     resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
+                    wide_neck_m=door_max_width_m,
                 )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)
