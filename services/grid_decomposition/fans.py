@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes, near, nonzero_rc
+from services.grid_decomposition.arrays import components_stats, label_boxes, nonzero_rc
 from services.grid_decomposition.rooms import open_share
 
 _RING = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
@@ -106,16 +106,17 @@ def split_fans(
             continue
         thin_here = None if thin is None else thin[box]
         offset = (box[0].start, box[1].start)
+        inside = cv2.distanceTransform(mine.view(np.uint8), cv2.DIST_L2, 5)
         rooms: list[npt.NDArray[np.bool_]] = []
         if thin_here is not None and wide_radius > radius and area >= min_segment_area_m2:
             # a door wider than the disc: a disc wider than the door stops at its line and bulges through it
             # (the room takes the floor between that bulge and its chord); only rays leave so, since a corridor
             # narrower than that disc is dense floor
-            parts, core, fans = _beyond_core(mine, wide_radius, wide_neck_m, offset, tests, thin_here)
+            parts, core, fans = _beyond_core(mine, inside, wide_radius, wide_neck_m, offset, tests, thin_here)
             rooms = [(parts == c) | _door_lens(parts == c, core) for c in fans]
         # a room's own floor beyond a neck stays in a small segment: only rays leave it
         small = thin_here if area < min_segment_area_m2 else None
-        parts, _, fans = _beyond_core(mine, radius, max_neck_m, offset, tests, small)
+        parts, _, fans = _beyond_core(mine, inside, radius, max_neck_m, offset, tests, small)
         rooms += [parts == c for c in fans]  # a room behind a narrow door inside one behind a wide door: its own
         for room in rooms:
             out[box][room] = next_id
@@ -125,6 +126,7 @@ def split_fans(
 
 def _beyond_core(
     mine: npt.NDArray[np.bool_],
+    inside: npt.NDArray[np.float32],
     radius: int,
     max_neck_m: float,
     offset: tuple[int, int],
@@ -132,15 +134,17 @@ def _beyond_core(
     thin: npt.NDArray[np.bool_] | None,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], list[int]]:
     """The parts of ``mine`` beyond its core (what a disc of ``radius`` sweeps), the core, and the parts that pass
-    the fan tests of :func:`split_fans` (``offset``: ``mine``'s top-left corner in ``tests.occupied``)."""
+    the fan tests of :func:`split_fans` (``inside``: the distance transform of ``mine``; ``offset``: its top-left
+    corner in ``tests.occupied``)."""
     occupied, resolution_m, min_area_m2, min_depth_m, outside_reach_m, max_open_share, min_thin_share = tests
-    # the opening by distances (a disc's erosion and dilation are thresholds of the distance transform,
-    # each one dilation by the transform's own ball: ``near``)
-    inner = ~near(~mine, radius, 5)
-    n, parts, stats = components_stats(inner.astype(np.uint8), 8)
+    # the opening by distances: a disc's erosion and dilation are thresholds of the distance transform (``near``
+    # by one transform each: a dilation by a ball as wide as a door is slower)
+    inner = inside > radius
+    n, parts, stats = components_stats(inner.view(np.uint8), 8)
     if n < 2:
         return parts, mine, []
-    core = mine & near(parts == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA])), radius, 5)
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    core = mine & (cv2.distanceTransform((parts != largest).view(np.uint8), cv2.DIST_L2, 5) <= radius)
     n, parts, stats = components_stats((mine & ~core).astype(np.uint8), 8)
     big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_m2 / resolution_m**2)
     big = big[big > 0]
