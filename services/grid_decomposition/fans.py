@@ -2,12 +2,28 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes, near, nonzero_rc
+from services.grid_decomposition.arrays import components_stats, label_boxes, nonzero_rc
 from services.grid_decomposition.rooms import open_share
+
+_RING = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+
+
+class _FanTests(NamedTuple):
+    """What a part beyond a core must pass to be a room (see :func:`split_fans`)."""
+
+    occupied: npt.NDArray[np.bool_]
+    resolution_m: float
+    min_area_m2: float
+    min_depth_m: float
+    outside_reach_m: float
+    max_open_share: float
+    min_thin_share: float
 
 
 def split_fans(
@@ -25,6 +41,7 @@ def split_fans(
     thin: npt.NDArray[np.bool_] | None = None,
     min_room_area_m2: float = 15.0,
     min_thin_share: float = 0.2,
+    wide_neck_m: float = 0.0,
 ) -> npt.NDArray[np.int32]:
     """Give every room that leaves a segment through a doorway-wide neck a segment of its own.
 
@@ -43,6 +60,14 @@ def split_fans(
     seen from inside another only through its door is a fan of rays, while a part of a room's own
     floor beyond a neck (an alcove, a bay between cupboards) is dense floor.
 
+    A door wider than ``max_neck_m`` lets that disc through, so the room behind it stays in the core. With
+    ``thin``, a segment of at least ``min_segment_area_m2`` is also opened with a disc ``wide_neck_m`` wide (the
+    widest door): such a disc stops at the door's line, bulging through it, and a part beyond it that passes the
+    same tests with ``wide_neck_m`` for the neck, and of which at least ``min_thin_share`` is ``thin``, is a room,
+    with the core's floor between its border and that border's chord (the bulge through the door). Only rays
+    leave so: a corridor or a bay narrower than that disc is dense floor. A room found by the narrow disc inside
+    such a room is a room of its own.
+
     Parameters
     ----------
     segments : (H, W) int32
@@ -56,6 +81,8 @@ def split_fans(
     thin : (H, W) bool, optional
         Free space too thin to be floor (the cleaning's rays and streaks); without it only segments of
         at least ``min_segment_area_m2`` lose rooms.
+    wide_neck_m : float
+        The widest door, for rooms of rays behind doors wider than ``max_neck_m``; 0 (or without ``thin``): none.
 
     Returns
     -------
@@ -64,48 +91,88 @@ def split_fans(
     """
     out = segments.copy()
     radius = max(1, round(max_neck_m / 2 / resolution_m))
-    ring = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    wide_radius = round(wide_neck_m / 2 / resolution_m)
     next_id = int(segments.max()) + 1
-    min_area_px = min_area_m2 / resolution_m**2
+    floor_m2 = min_segment_area_m2 if thin is None else min(min_segment_area_m2, min_room_area_m2)
+    tests = _FanTests(occupied, resolution_m, min_area_m2, min_depth_m, outside_reach_m, max_open_share, min_thin_share)
     for k, found in enumerate(label_boxes(segments), start=1):
         if found is None or fixed[k]:
             continue
-        box = tuple(slice(max(0, s.start - radius), s.stop + radius) for s in found)
+        pad = max(radius, wide_radius)
+        box = tuple(slice(max(0, s.start - pad), s.stop + pad) for s in found)
         mine = segments[box] == k
         area = mine.sum() * resolution_m**2
-        if area < (min_segment_area_m2 if thin is None else min(min_segment_area_m2, min_room_area_m2)):
+        if area < floor_m2:
             continue
-        # the opening by distances (a disc's erosion and dilation are thresholds of the distance transform,
-        # each one dilation by the transform's own ball: ``near``)
-        inner = ~near(~mine, radius, 5)
-        n, parts, stats = components_stats(inner.astype(np.uint8), 8)
-        if n < 2:
-            continue
-        core = mine & near(parts == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA])), radius, 5)
-        n, parts, stats = components_stats((mine & ~core).astype(np.uint8), 8)
-        big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_px)
-        big = big[big > 0]
-        if big.size == 0:
-            continue
-        neck = np.bincount(parts[cv2.dilate(core.astype(np.uint8), ring).astype(bool)], minlength=n)
-        fans = [c for c in big if 0 < neck[c] * resolution_m <= max_neck_m]
-        if fans and thin is not None and area < min_segment_area_m2:  # a room's own floor stays: only rays leave
-            thin_share = np.bincount(parts[thin[box]], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
-            fans = [c for c in fans if thin_share[c] >= min_thin_share]
-        if fans:
-            depth = cv2.distanceTransform((~core).astype(np.uint8), cv2.DIST_L2, 5)
-            fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]
-        if fans:
-            fans = [c for c, share in zip(fans, open_share(
-                occupied, np.array([_middle(parts == c) for c in fans]) + np.array([box[0].start, box[1].start]),
-                reach_px=round(outside_reach_m / resolution_m)), strict=True) if share < max_open_share]
-        if not fans:
-            continue
-        lut = np.zeros(n, dtype=np.int32)
-        lut[fans] = np.arange(next_id, next_id + len(fans))
-        next_id += len(fans)
-        out[box] = np.where(lut[parts] > 0, lut[parts], out[box])
+        thin_here = None if thin is None else thin[box]
+        offset = (box[0].start, box[1].start)
+        inside = cv2.distanceTransform(mine.view(np.uint8), cv2.DIST_L2, 5)
+        rooms: list[npt.NDArray[np.bool_]] = []
+        if thin_here is not None and wide_radius > radius and area >= min_segment_area_m2:
+            # a door wider than the disc: a disc wider than the door stops at its line and bulges through it
+            # (the room takes the floor between that bulge and its chord); only rays leave so, since a corridor
+            # narrower than that disc is dense floor
+            parts, core, fans = _beyond_core(mine, inside, wide_radius, wide_neck_m, offset, tests, thin_here)
+            rooms = [(parts == c) | _door_lens(parts == c, core) for c in fans]
+        # a room's own floor beyond a neck stays in a small segment: only rays leave it
+        small = thin_here if area < min_segment_area_m2 else None
+        parts, _, fans = _beyond_core(mine, inside, radius, max_neck_m, offset, tests, small)
+        rooms += [parts == c for c in fans]  # a room behind a narrow door inside one behind a wide door: its own
+        for room in rooms:
+            out[box][room] = next_id
+            next_id += 1
     return out
+
+
+def _beyond_core(
+    mine: npt.NDArray[np.bool_],
+    inside: npt.NDArray[np.float32],
+    radius: int,
+    max_neck_m: float,
+    offset: tuple[int, int],
+    tests: _FanTests,
+    thin: npt.NDArray[np.bool_] | None,
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], list[int]]:
+    """The parts of ``mine`` beyond its core (what a disc of ``radius`` sweeps), the core, and the parts that pass
+    the fan tests of :func:`split_fans` (``inside``: the distance transform of ``mine``; ``offset``: its top-left
+    corner in ``tests.occupied``)."""
+    occupied, resolution_m, min_area_m2, min_depth_m, outside_reach_m, max_open_share, min_thin_share = tests
+    # the opening by distances: a disc's erosion and dilation are thresholds of the distance transform (``near``
+    # by one transform each: a dilation by a ball as wide as a door is slower)
+    inner = inside > radius
+    n, parts, stats = components_stats(inner.view(np.uint8), 8)
+    if n < 2:
+        return parts, mine, []
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    core = mine & (cv2.distanceTransform((parts != largest).view(np.uint8), cv2.DIST_L2, 5) <= radius)
+    n, parts, stats = components_stats((mine & ~core).astype(np.uint8), 8)
+    big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_m2 / resolution_m**2)
+    big = big[big > 0]
+    if big.size == 0:
+        return parts, core, []
+    neck = np.bincount(parts[cv2.dilate(core.astype(np.uint8), _RING).astype(bool)], minlength=n)
+    fans = [int(c) for c in big if 0 < neck[c] * resolution_m <= max_neck_m]
+    if fans and thin is not None:
+        thin_share = np.bincount(parts[thin], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
+        fans = [c for c in fans if thin_share[c] >= min_thin_share]
+    if fans:
+        depth = cv2.distanceTransform((~core).astype(np.uint8), cv2.DIST_L2, 5)
+        fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]
+    if fans:
+        fans = [c for c, share in zip(fans, open_share(
+            occupied, np.array([_middle(parts == c) for c in fans]) + np.array(offset),
+            reach_px=round(outside_reach_m / resolution_m)), strict=True) if share < max_open_share]
+    return parts, core, fans
+
+
+def _door_lens(room: npt.NDArray[np.bool_], core: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """The core's pixels inside the convex hull of its border with ``room``: where a disc wider than the door bulged
+    through it, between that border and its chord (the door's line)."""
+    rows, cols = nonzero_rc(core & cv2.dilate(room.astype(np.uint8), _RING).astype(bool))
+    hull = np.zeros(room.shape, dtype=np.uint8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(np.stack([cols, rows], axis=1).astype(np.int32)), 1)
+    lens: npt.NDArray[np.bool_] = core & hull.astype(bool)
+    return lens
 
 
 def _middle(mask: npt.NDArray[np.bool_]) -> tuple[int, int]:

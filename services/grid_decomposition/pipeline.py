@@ -393,7 +393,8 @@ def decompose(
         A room (a fan of rays, or floor) leaving a room region through a neck at most this wide is a
         room of its own (:func:`~services.grid_decomposition.fans.split_fans`), in the new decomposition and again
         in the regions the ``prior`` kept; a region under a hall's size loses only fans of laser rays (the
-        cleaning's rays and streaks), never its own floor beyond a neck; 0 turns it off.
+        cleaning's rays and streaks), never its own floor beyond a neck; a hall also loses a room of rays behind a
+        door up to ``door_max_width_m`` wide, cut at the door's line; 0 turns it off.
     short_wall_min_m : float
         After the rooms are parted from their corridors, a room region of at least
         ``corridor_min_region_m2`` parts along a wall at least this long that stops short of the
@@ -648,6 +649,7 @@ def decompose(
             segments = split_fans(
                 segments, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
+                wide_neck_m=door_max_width_m,
             )
         if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
@@ -685,6 +687,7 @@ def decompose(
                 segments = split_fans(
                     segments, occupied, on_floor > 0.5 * size,
                     resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
+                    wide_neck_m=door_max_width_m,
                 )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)

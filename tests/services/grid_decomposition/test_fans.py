@@ -13,14 +13,14 @@ from services.grid_decomposition.fans import split_fans
 RESOLUTION_M = 0.05
 
 
-def _hall_and_fan() -> tuple[np.ndarray, np.ndarray]:
-    """Occupancy (-1 unknown, 0 free, 100 wall) of a 12 m x 5 m hall with a 0.9 m door in its top wall, and the
-    fan of laser rays a robot in the hall saw through the door into the small room behind it (2.5 m deep, 3.8 m
-    wide, walls round it, unknown but for the rays)."""
+def _hall_and_fan(door: tuple[int, int] = (130, 148)) -> tuple[np.ndarray, np.ndarray]:
+    """Occupancy (-1 unknown, 0 free, 100 wall) of a 12 m x 5 m hall with a door in its top wall (columns ``door``,
+    0.9 m by default), and the fan of laser rays a robot in the hall saw through the door into the small room
+    behind it (2.5 m deep, 3.8 m wide, walls round it, unknown but for the rays)."""
     occ = np.full((200, 300), -1, dtype=np.int16)
     occ[20:122, 20:262] = 100
     occ[22:120, 22:260] = 0  # the hall, rows 22..119
-    occ[120:122, 130:148] = 0  # the door in its top wall
+    occ[120:122, door[0] : door[1]] = 0  # the door in its top wall
     occ[172:174, 100:176] = occ[122:174, [100, 101, 174, 175]] = 100  # the room's walls
     fan = np.zeros(occ.shape, dtype=bool)
     eye = (100, 139)  # the robot, 1 m below the door
@@ -28,7 +28,7 @@ def _hall_and_fan() -> tuple[np.ndarray, np.ndarray]:
         rows, cols = line(*eye, 172, end_col)  # type: ignore[no-untyped-call]  # skimage is untyped
         # a ray passes the door and goes on into the room: above the wall only if it went through the gap
         through = (rows >= 120) & (rows <= 121)
-        if not np.all((cols[through] >= 130) & (cols[through] < 148)):
+        if not np.all((cols[through] >= door[0]) & (cols[through] < door[1])):
             continue
         beyond = (rows >= 122) & (rows < 172)
         occ[rows[beyond], cols[beyond]] = 0
@@ -43,6 +43,14 @@ def test_a_fan_of_rays_through_a_door_is_a_region_apart_from_the_hall() -> None:
     hall = np.bincount(segments[50:100, 40:240].ravel()).argmax()
     on_fan = segments[fan & (segments > 0)]
     assert np.mean(on_fan != hall) > 0.8
+
+
+def test_a_fan_of_rays_through_a_door_wider_than_the_fan_disc_is_a_region_apart_from_the_hall() -> None:
+    """The same room behind a 1.5 m door: the 1.2 m disc passes it, and the room stayed the hall's."""
+    occ, fan = _hall_and_fan(door=(124, 154))
+    segments = decompose(occ, resolution_m=RESOLUTION_M).segments
+    hall = np.bincount(segments[50:100, 40:240].ravel()).argmax()
+    assert np.mean(segments[fan & (segments > 0)] != hall) > 0.8
 
 
 def test_a_hall_without_rays_keeps_its_region_whole() -> None:
@@ -128,3 +136,31 @@ def test_a_room_loses_a_fan_of_rays_behind_its_door_but_not_its_own_floor_beyond
     assert np.all(fan[22:120, 80:180] == 1)
     assert np.array_equal(split(np.zeros(segments.shape, dtype=bool)), segments)  # the room's own floor
     assert np.array_equal(split(None), segments)  # without the rays only halls and corridors lose rooms
+
+
+def test_a_room_of_rays_behind_a_door_wider_than_the_disc_parts_from_the_hall_at_the_door_line() -> None:
+    """A 1.5 m door (wider than the 1.2 m disc, under the 2 m widest door) in a 12 m x 5 m hall's top wall, and a
+    room 1.5 m wide and 2.5 m deep behind it, walled: the 1.2 m disc passes the door, so the room stays in the
+    hall's core. Seen only as rays it is a room of its own with the wide disc, cut at the door's line (its floor
+    by the door with it, the hall whole); as dense floor (a bay of the hall) it stays the hall's."""
+    segments = np.zeros((200, 300), dtype=np.int32)
+    segments[22:120, 22:260] = 1
+    segments[120:170, 125:155] = 1  # the door and the room behind it, as wide as the door
+    occupied = np.zeros(segments.shape, dtype=bool)
+    occupied[20, 20:262] = occupied[20:122, [20, 261]] = True
+    occupied[121, 20:125] = occupied[121, 155:262] = True  # the hall's top wall, with the door in it
+    occupied[170, 123:157] = occupied[121:171, [123, 156]] = True  # the room's walls
+    rays = np.zeros(segments.shape, dtype=bool)
+    rays[120:170, 125:155:2] = True  # every other column of the room: laser rays through the door
+
+    def split(thin: np.ndarray | None, wide_neck_m: float = 2.0) -> np.ndarray:
+        return split_fans(segments, occupied, np.zeros(2, dtype=bool), resolution_m=RESOLUTION_M, thin=thin,
+                          wide_neck_m=wide_neck_m)
+
+    parted = split(rays)
+    room = parted[150, 140]
+    # the whole room from the door line: the wide disc bulges 0.35 m through the door, and that floor is the room's
+    assert room != 1 and np.mean(parted[120:170, 125:155] == room) > 0.98
+    assert np.all(parted[22:120, 22:260] == 1)  # the hall keeps all its floor
+    assert np.array_equal(split(rays, wide_neck_m=0.0), segments)  # the 1.2 m disc alone passes the door
+    assert np.array_equal(split(np.zeros(segments.shape, dtype=bool)), segments)  # dense floor: a bay of the hall
