@@ -239,8 +239,6 @@ def find_doorways(
     neck_tolerance_m: float = 0.05,
     room_margin_m: float = 0.0,
     corridor_length_m: float = 2.0,
-    seen: npt.NDArray[np.bool_] | None = None,
-    min_seen_m: float = 0.0,
 ) -> npt.NDArray[np.float64]:
     """Doorways of a floor: cuts across the narrow passages between walls, independent of any line.
 
@@ -278,11 +276,6 @@ def find_doorways(
     corridor_length_m : float
         A cut across a corridor, whose space goes on as a band about as wide as the cut for this
         long on both sides, is no doorway (:func:`across_a_corridor`); 0 turns it off.
-    seen, min_seen_m : (H, W) bool, float
-        The wall a doorway continues is one the laser hit: in the ``wall_run_m`` beyond that end (and
-        two pixels to either side of it) ``seen`` cells (occupied) add up to at least ``min_seen_m`` of
-        wall. Unknown space beyond a cut's end (the rim of what the laser saw, the dark between the rays
-        of a room seen through its door) frames no door. 0 turns it off.
 
     Returns
     -------
@@ -309,8 +302,6 @@ def find_doorways(
         neck_tolerance_m=neck_tolerance_m,
         room_margin_m=room_margin_m,
         corridor_length_m=corridor_length_m,
-        seen=None if seen is None or min_seen_m <= 0 else seen[r0 : int(rows[-1]) + 2, c0 : int(cols[-1]) + 2],
-        min_seen_px=round(min_seen_m / resolution_m),
     ) + np.array([c0, r0], dtype=np.float64)
 
 
@@ -330,8 +321,6 @@ def _find_doorways(
     neck_tolerance_m: float,
     room_margin_m: float,
     corridor_length_m: float,
-    seen: npt.NDArray[np.bool_] | None = None,
-    min_seen_px: int = 0,
 ) -> npt.NDArray[np.float64]:
     """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
     dist, wall_x, wall_y = _nearest_walls(space, reach_px=math.ceil(max_width_m / resolution_m) + 2)
@@ -364,8 +353,7 @@ def _find_doorways(
     walls = ~space
     pairs = pairs[_is_neck(dist, pairs, round(neck_reach_m / resolution_m), neck_tolerance_m / resolution_m)]
     keep = _extends_a_wall(
-        walls, pairs, round(wall_run_m / resolution_m), wall_share, round(max_wall_thickness_m / resolution_m),
-        seen=seen, min_seen_px=min_seen_px,
+        walls, pairs, round(wall_run_m / resolution_m), wall_share, round(max_wall_thickness_m / resolution_m)
     )
     pairs = pairs[keep]
     keep = widens(
@@ -443,22 +431,13 @@ def _is_neck(
 
 
 def _extends_a_wall(
-    walls: npt.NDArray[np.bool_],
-    cuts: npt.NDArray[np.float64],
-    run_px: int,
-    share: float,
-    max_thickness_px: int,
-    *,
-    seen: npt.NDArray[np.bool_] | None = None,
-    min_seen_px: int = 0,
+    walls: npt.NDArray[np.bool_], cuts: npt.NDArray[np.float64], run_px: int, share: float, max_thickness_px: int
 ) -> npt.NDArray[np.bool_]:
     """(K,) bool: beyond one end of the cut, along it, a thin wall goes on.
 
     ``share`` of the next ``run_px`` pixels along the cut are wall, and across the cut that wall
     is at most ``max_thickness_px`` thick somewhere (a wall, not a cabinet or a block; a wall
-    meeting another one is thick only where they meet). With ``seen``, at least ``min_seen_px`` of
-    the pixels of those ``run_px`` and of the two lines of pixels on either side of them are
-    ``seen`` (a wall the laser hit, not unknown space).
+    meeting another one is thick only where they meet).
     """
     if len(cuts) == 0 or run_px < 1:
         return np.ones(len(cuts), dtype=bool)
@@ -476,14 +455,7 @@ def _extends_a_wall(
         along = cuts[:, end, None, :] + sign * np.array([0.2, 0.35, 0.5])[None, :, None] * run_px * u[:, None, :]
         across = np.broadcast_to(normal[:, None, :], along.shape)
         thickness = _centre_runs(~walls, along, across, max_thickness_px + 1).min(axis=1)
-        ok = on_wall & (thickness <= max_thickness_px)
-        if seen is not None and min_seen_px > 0:
-            side = np.arange(-2, 3, dtype=np.float64)
-            band = pts[:, None, :, :] + side[None, :, None, None] * normal[:, None, None, :]
-            bx = np.clip(np.rint(band[..., 0]).astype(np.int64), 0, w - 1)
-            by = np.clip(np.rint(band[..., 1]).astype(np.int64), 0, h - 1)
-            ok &= seen[by, bx].sum(axis=(1, 2)) >= min_seen_px
-        out |= ok
+        out |= on_wall & (thickness <= max_thickness_px)
     return out
 
 

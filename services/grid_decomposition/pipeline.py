@@ -299,7 +299,6 @@ def decompose(
     door_widening_m: float = 0.3,
     door_max_depth_m: float = 1.0,
     corridor_length_m: float = 2.0,
-    door_min_seen_m: float = 0.3,
     wall_tolerance_m: float = 0.1,
     island_max_extent_m: float = 2.0,
     island_min_clearance_m: float = 0.3,
@@ -358,10 +357,6 @@ def decompose(
         for this long on both sides as a band about as wide as the gap: beside an office door
         the corridor seems to widen (:func:`~services.grid_decomposition.doorways.across_a_corridor`);
         0 turns it off.
-    door_min_seen_m : float
-        Off the lines, a doorway continues a wall the laser hit: its occupied cells beyond the cut's end add up
-        to this much (:func:`~services.grid_decomposition.doorways.find_doorways`). Unknown space (the dark
-        between the rays of a room seen through its door, the rim of what was seen) frames no door; 0 turns it off.
     island_max_extent_m, island_min_clearance_m : float
         Obstacles standing free in a room (off the map border, at most ``island_max_extent_m``
         across, at least ``island_min_clearance_m`` from every other obstacle: a desk cluster, a
@@ -609,7 +604,6 @@ def decompose(
             door_widening_m=door_widening_m,
             door_max_depth_m=door_max_depth_m,
             corridor_length_m=corridor_length_m,
-            door_min_seen_m=door_min_seen_m,
             room_min_area_m2=room_min_area_m2,
             neck_half_width_m=neck_half_width_m,
             rays=rays,

@@ -163,7 +163,6 @@ def segment_rooms(
     desk_wall_reach_m: float = 0.5,
     table_min_thickness_m: float = 0.3,
     table_clearance_m: float = 0.8,
-    door_min_seen_m: float = 0.0,
     line_doors: npt.NDArray[np.bool_] | None = None,
     rays: npt.NDArray[np.bool_] | None = None,
     occupied: npt.NDArray[np.bool_] | None = None,
@@ -189,8 +188,6 @@ def segment_rooms(
        all round it within ``table_clearance_m`` and no obstacles there on two opposite sides (an
        obstacle standing in a doorway, between its jambs, is no table). A
        doorway is an opening in a wall; the gap between a table and a wall is a passage round it.
-       A doorway continues a wall the laser hit (``door_min_seen_m`` of ``occupied`` cells beyond
-       the cut's end, :func:`find_doorways`; 0 turns it off): unknown space is no jamb.
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
@@ -254,8 +251,6 @@ def segment_rooms(
             widening_m=door_widening_m,
             max_depth_m=door_max_depth_m,
             corridor_length_m=corridor_length_m,
-            seen=occupied,
-            min_seen_m=door_min_seen_m,
         )
         if table_min_thickness_m > 0 and cuts.size:  # passing a table is no doorway: a cut ending on one is dropped
             cuts = cuts[

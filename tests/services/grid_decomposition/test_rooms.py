@@ -437,32 +437,3 @@ def test_segments_on_warehouse_floors_stay_as_they_are() -> None:
     seg, desks = _office_cut_beside_a_corridor()
     for floor in (seg > 0, seg >= 2):
         assert np.array_equal(join_furnished_pieces(seg, desks, floor, resolution_m=RES), seg)
-
-
-def test_a_gap_beside_unknown_space_is_no_doorway_beside_a_wall_the_laser_hit_it_is() -> None:
-    """8 x 3.5 m below a corridor: a 0.15 m partition rises from the bottom wall to 0.9 m below the top wall."""
-    occ = np.full((120, 180), -1, dtype=np.int8)
-    occ[7:113, 7:173] = 100
-    occ[10:110, 10:170] = 0
-    occ[37:40, 10:170] = 100  # the wall between a corridor (rows 10..36) and the room
-    occ[58:110, 88:91] = 100  # the partition; a 0.9 m door between its end and the top wall
-    none = np.zeros(occ.shape, dtype=bool)
-
-    def rooms(grid: np.ndarray, door_min_seen_m: float) -> np.ndarray:
-        free = grid == 0
-        seg, _ = segment_rooms(
-            free.astype(np.int32), none, none, none, resolution_m=RES, occupied=grid == 100, rays=none,
-            door_min_seen_m=door_min_seen_m, join_saddle_ratio=0.0, desk_max_extent_m=0.0,
-        )  # the joins of furnished pieces off: the cuts alone decide
-        return seg
-
-    left, right = (slice(40, 110), slice(10, 85)), (slice(40, 110), slice(94, 170))
-    seg = rooms(occ, 0.3)  # a partition the laser hit: two rooms and a door between them
-    assert np.unique(seg[left]).size == 1 and np.unique(seg[right]).size == 1
-    assert seg[80, 40] != seg[80, 130]
-    unseen = occ.copy()
-    unseen[58:110, 88:91] = -1  # the same shape never hit: the dark between laser rays, the rim of what was seen
-    seg = rooms(unseen, 0.3)
-    assert seg[80, 40] == seg[80, 130] > 0  # no door ends on it: one room
-    without = rooms(unseen, 0.0)
-    assert without[80, 40] != without[80, 130]  # without the test it frames a door
