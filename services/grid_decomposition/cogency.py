@@ -225,9 +225,9 @@ def wall_evidence(
     near = cv2.dilate(occupied.astype(np.uint8), disk) > 0
     # posts within a round disc of the tolerance: the 5 x 5 "ellipse" reaches 2 px across a line over 3 samples on
     # two of its sides and over 1 on the other two, a round disc over 1 on all four (a rim the line only grazes)
-    near_post = (
-        None if posts is None else cv2.distanceTransform((~posts).astype(np.uint8), cv2.DIST_L2, 5) <= tolerance_px
-    )
+    across, along = np.mgrid[-tolerance_px : tolerance_px + 1, -tolerance_px : tolerance_px + 1]
+    round_disk = (across * across + along * along <= tolerance_px * tolerance_px).astype(np.uint8)
+    near_post = None if posts is None else cv2.dilate(posts.astype(np.uint8), round_disk) > 0
     wall = np.zeros((h, w), dtype=bool)
     door = np.zeros((h, w), dtype=bool)
     # every line's pixels at once (lines in order, each from one end to the other), each line clipped to its
