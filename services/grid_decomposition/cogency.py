@@ -53,6 +53,7 @@ def close_doorways(
     max_door_px: int,
     posts: npt.NDArray[np.bool_] | None = None,
     post_wall_px: int = 0,
+    post_min_px: int = 1,
     first: npt.NDArray[np.int64] | None = None,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Wall runs of a 1-D occupancy profile and the doorway-sized gaps between them.
@@ -64,7 +65,9 @@ def close_doorways(
     with a post or door frame between them (a real map draws the post as a speck, no wall), in a
     wall: both wall runs beside such a gap are at least ``post_wall_px`` long. A run across a line
     no longer than a wall is thick is a wall crossing it, not one along it: a line from wall to wall
-    across a room through its furniture is no row of doors.
+    across a room through its furniture is no row of doors. A post is one the line passes through: a
+    run of at least ``post_min_px`` samples (a line that only grazes the rim of a post's tolerance
+    disc, one sample, passes beside it).
     ``first`` (ascending) is where each profile begins when several lines' profiles come one
     after the other: runs and gaps never cross from one line to the next.
 
@@ -109,7 +112,16 @@ def close_doorways(
             span = np.zeros(size + 1, dtype=np.int64)
             np.add.at(span, lo, 1)
             np.add.at(span, hi, -1)
-            free = ~np.asarray(posts, dtype=bool) & (np.cumsum(span)[:-1] > 0)
+            post = np.asarray(posts, dtype=bool)
+            if post_min_px > 1:  # posts the line passes through, not ones it grazes (a gap lies within one line)
+                p_edge = np.diff(np.r_[0, post.astype(np.int8), 0])
+                p_starts, p_ends = np.flatnonzero(p_edge == 1), np.flatnonzero(p_edge == -1)
+                short = (p_ends - p_starts) < post_min_px
+                grazed = np.zeros(size + 1, dtype=np.int64)
+                np.add.at(grazed, p_starts[short], 1)
+                np.add.at(grazed, p_ends[short], -1)
+                post = post & ~(np.cumsum(grazed)[:-1] > 0)
+            free = ~post & (np.cumsum(span)[:-1] > 0)
             edge = np.diff(np.r_[0, free.astype(np.int8), 0])
             run_start, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
             gap_of = np.searchsorted(lo, run_start, side="right") - 1
@@ -173,6 +185,7 @@ def wall_evidence(
     max_depth_px: int,
     posts: npt.NDArray[np.bool_] | None = None,
     post_wall_px: int = 0,
+    post_min_px: int = 1,
     corridor_length_px: int = 0,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
@@ -196,6 +209,8 @@ def wall_evidence(
         Free-standing obstacles (furniture, specks): posts between doors (:func:`close_doorways`).
     post_wall_px : int
         The wall runs beside doors split by posts are at least this long (:func:`close_doorways`).
+    post_min_px : int
+        A post splits a gap when the line runs through it for at least this many samples (:func:`close_doorways`).
     corridor_length_px : int
         See :func:`~services.grid_decomposition.doorways.across_a_corridor`; 0 turns it off.
 
@@ -208,7 +223,11 @@ def wall_evidence(
     k = 2 * tolerance_px + 1
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
     near = cv2.dilate(occupied.astype(np.uint8), disk) > 0
-    near_post = None if posts is None else cv2.dilate(posts.astype(np.uint8), disk) > 0
+    # posts within a round disc of the tolerance: the 5 x 5 "ellipse" reaches 2 px across a line over 3 samples on
+    # two of its sides and over 1 on the other two, a round disc over 1 on all four (a rim the line only grazes)
+    across, along = np.mgrid[-tolerance_px : tolerance_px + 1, -tolerance_px : tolerance_px + 1]
+    round_disk = (across * across + along * along <= tolerance_px * tolerance_px).astype(np.uint8)
+    near_post = None if posts is None else cv2.dilate(posts.astype(np.uint8), round_disk) > 0
     wall = np.zeros((h, w), dtype=bool)
     door = np.zeros((h, w), dtype=bool)
     # every line's pixels at once (lines in order, each from one end to the other), each line clipped to its
@@ -225,7 +244,8 @@ def wall_evidence(
     first = np.flatnonzero(np.r_[True, of[1:] != of[:-1]]) if of.size else of
     on_wall, g0, g1 = close_doorways(
         near[ys, xs], min_wall_px=min_wall_px, max_door_px=max_door_px,
-        posts=None if near_post is None else near_post[ys, xs], post_wall_px=post_wall_px, first=first,
+        posts=None if near_post is None else near_post[ys, xs], post_wall_px=post_wall_px, post_min_px=post_min_px,
+        first=first,
     )
     wall[ys[on_wall], xs[on_wall]] = True
     if g0.size:  # every line's gaps in one call: each gap's answer is its own

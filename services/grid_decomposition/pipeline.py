@@ -82,6 +82,8 @@ _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by 
 # doors side by side with posts between them lie in a wall: the runs beside them are longer than a wall crossing the
 # line is thick (read with the lines' 0.1 m tolerance each side, a 0.5 m thick wall is a 0.7 m run)
 _POST_WALL_M = 0.75
+# ... and a post is one the line passes through, not the rim of its tolerance disc (one sample at the line's 0.1 m)
+_POST_MIN_RUN_M = 0.1
 _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
@@ -536,6 +538,7 @@ def decompose(
             max_depth_px=max(1, round(door_max_depth_m / resolution_m)),
             posts=clutter,
             post_wall_px=round(_POST_WALL_M / resolution_m),
+            post_min_px=max(1, round(_POST_MIN_RUN_M / resolution_m)),
             corridor_length_px=round(corridor_length_m / resolution_m),
         )
         known_obstacle = obstacle & known

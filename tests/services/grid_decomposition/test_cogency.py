@@ -57,6 +57,21 @@ def test_a_line_across_a_room_through_its_furniture_is_no_row_of_doors() -> None
     assert g0.tolist() == [20, 37]
 
 
+def test_a_post_the_line_only_grazes_splits_no_gap_into_doors() -> None:
+    # two walls along the line, 36 cells apart: a post in the middle of the gap makes two door-wide stretches when
+    # the line passes through it; a post whose tolerance disc the line only touches (one sample) leaves one opening
+    profile = np.zeros(100, dtype=bool)
+    profile[0:20] = profile[56:80] = True
+    through, grazed = np.zeros(100, dtype=bool), np.zeros(100, dtype=bool)
+    through[36:40] = True
+    grazed[38] = True
+    for posts, doors in ((through, [20]), (grazed, [])):
+        _, g0, _ = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=posts, post_min_px=2)
+        assert g0.tolist() == doors
+    _, g0, _ = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=grazed)  # as before: any sample counts
+    assert g0.tolist() == [20]
+
+
 def test_close_doorways_of_several_lines_at_once_closes_each_line_alone() -> None:
     """Profiles one after the other: a wall ending one line and a wall starting the next are two runs with no
     doorway between them, a short run split by the change of line is no wall, and each line's own doors and posts
@@ -128,6 +143,27 @@ def test_the_doorways_of_several_lines_are_each_lines_own() -> None:
     assert door[20:30, 30].all() and door[50:72, 70].all()
     assert np.array_equal(wall, alone[0][0] | alone[1][0])
     assert np.array_equal(door, alone[0][1] | alone[1][1])
+
+
+def test_a_speck_beside_a_line_is_no_post_between_two_doors_one_on_it_is() -> None:
+    # a wall along x = 50 with a 1.8 m gap (36 px at 5 cm); a speck of furniture 1 px off the line is a post between
+    # two 0.85 m doors (the gap is closed); 2 px off, the line only touches the rim of its 0.1 m tolerance disc
+    occ = np.zeros((100, 100), dtype=bool)
+    occ[5:95, 49:52] = True
+    occ[32:68, 49:52] = False
+    line = [LineGroup((Line(math.pi / 2, -50.0, 5.0, 0.1, True),), None)]
+
+    def closed(speck_col: int) -> bool:
+        posts = np.zeros(occ.shape, dtype=bool)
+        posts[50, speck_col] = True
+        _, door = wall_evidence(
+            occ, line, tolerance_px=2, min_wall_px=5, max_door_px=20, widening_px=6, max_depth_px=20, posts=posts,
+            post_min_px=2,
+        )
+        return bool(door[40, 50] and door[60, 50])
+
+    assert closed(51)
+    assert not closed(52)
 
 
 def test_face_occupancy_is_the_mean_of_its_pixels_as_summed_in_raster_order() -> None:
