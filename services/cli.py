@@ -216,15 +216,14 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
                     _demo_labelling_model(settings)
                     settings = _demo_camera_mount(settings)
             _check_stages(settings, stages)
-            with runtime.stop_on_signals(stop):
-                runtime.run(settings, stages=stages, api=True, stop=stop, extra=extra, compact=True)
+            _until_signal(stop, partial(runtime.run, settings, stages=stages, api=True, stop=stop, extra=extra,
+                                        compact=True))
         case "worker":
             _check_stages(settings, [args.stage])
-            with runtime.stop_on_signals(stop):
-                runtime.run(settings, stages=[args.stage], api=False, stop=stop)
+            _until_signal(stop, partial(runtime.run, settings, stages=[args.stage], api=False, stop=stop))
         case "serve":
-            with runtime.stop_on_signals(stop):
-                runtime.run(settings, stages=[], api=True, stop=stop, expected_workers=settings.stages)
+            _until_signal(stop, partial(runtime.run, settings, stages=[], api=True, stop=stop,
+                                        expected_workers=settings.stages))
         case "db":
             return _db(args, settings)
         case "settings":
@@ -264,6 +263,17 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
         case "export":
             return _export(args, settings)
     return 0
+
+
+def _until_signal(stop: threading.Event, run: Callable[[], list[str]]) -> None:
+    """``run`` (:func:`services.runtime.run` with ``stop``) until SIGINT or SIGTERM sets ``stop``; the process ends
+    at once if it left threads busy (``settings.shutdown_grace_s`` is over: their work in progress is dropped)."""
+    from services import runtime
+
+    with runtime.stop_on_signals(stop):
+        busy = run()
+    if busy:
+        runtime.exit_now(0)
 
 
 def _floor_plan(args: argparse.Namespace) -> None:

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import logging
+import os
 import signal
+import sys
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from types import FrameType
+from typing import NoReturn
 
 from shared.bus import Bus
 from shared.settings import STAGES, Settings
@@ -111,8 +115,13 @@ def run(
     extra: Sequence[Callable[[Bus, threading.Event], None]] = (),
     compact: bool = False,
     expected_workers: Sequence[str] | None = None,
-) -> None:
+) -> list[str]:
     """Run ``stages`` (and the API if ``api``) until ``stop`` is set; then shut down cleanly.
+
+    After ``stop`` every thread gets ``settings.shutdown_grace_s`` to finish (a stage stores what it has, the API
+    cuts open event streams after :data:`STREAMS_CUT_AFTER_S`); the names of those still running then are
+    returned, after the store has let the writes under way finish and refuses later ones
+    (:meth:`MapStore.stop_writes`): a caller about to exit leaves them with :func:`exit_now`.
 
     ``extra`` callables run in their own threads with the bus (e.g. a bag replay); ``compact`` also thins old
     revisions now and then (:func:`compact_periodically`). The API's health check is degraded while a worker of
@@ -130,7 +139,8 @@ def run(
                              kwargs={"bus": bus, "store": store, "settings": settings, "stop": stop})
             for name in stages
         ]
-        threads += [threading.Thread(target=job, args=(bus, stop), name=getattr(job, "__name__", "job"))
+        threads += [threading.Thread(target=job, args=(bus, stop),
+                                     name=getattr(getattr(job, "func", job), "__name__", "job"))  # a partial's own
                     for job in extra]
         if compact:
             threads.append(threading.Thread(target=compact_periodically, args=(store, settings, stop),
@@ -168,7 +178,28 @@ def run(
             stop.set()
             if server is not None:
                 server.should_exit = True
-            for thread in threads:
-                thread.join()
+            busy = join_until(threads, time.monotonic() + settings.shutdown_grace_s)
+            if busy:
+                store.stop_writes()
+                log.warning("%s still busy %.1f s after the stop: stopping without their work in progress (no "
+                            "write under way)", ", ".join(busy), settings.shutdown_grace_s)
     store.close()
-    log.info("stopped cleanly")
+    if not busy:
+        log.info("stopped cleanly")
+    return busy
+
+
+def join_until(threads: Sequence[threading.Thread], deadline: float) -> list[str]:
+    """Join ``threads`` until monotonic time ``deadline``; the names of those still running then."""
+    for thread in threads:
+        thread.join(timeout=max(0.0, deadline - time.monotonic()))
+    return [thread.name for thread in threads if thread.is_alive()]
+
+
+def exit_now(code: int = 0) -> NoReturn:
+    """End the process at once with ``code``, its log flushed: threads that :func:`run` left busy (a stage in the
+    middle of a long computation) would otherwise hold the interpreter's exit until they finish."""
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)

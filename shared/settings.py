@@ -337,6 +337,10 @@ class Settings(BaseSettings):
         2, ge=1, le=1000, description="Views a bin needs before `GET …/wms-stock/discrepancies` reports it (agreeing "
         "or not): a bin the robots saw fewer times is left unchecked.")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    shutdown_grace_s: float = Field(
+        5.0, ge=0, le=600, description="After SIGINT or SIGTERM, how long the stages get to finish and store their "
+        "work in progress, seconds; a process whose stages are still busy then exits without that work (every "
+        "revision is stored whole or not at all).")
     layer_history: int = Field(20, ge=1, description="Versions of each grid layer kept in the store.")
     retention: RetentionSettings = Field(default_factory=RetentionSettings)
     occupancy: OccupancySettings = Field(default_factory=OccupancySettings)

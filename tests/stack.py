@@ -21,11 +21,14 @@ seldom enough to leave the CPU to the stages it waits on (a read of the bins or 
 
 
 @contextmanager
-def aisle_run(tmp_path: Path, *args: str) -> Iterator[httpx.Client]:
-    """``aisle run ARGS`` on free ports with its own data folder; stopped with SIGINT, which must be clean."""
+def aisle_run(tmp_path: Path, *args: str, stop_signal: signal.Signals = signal.SIGINT,
+              env: dict[str, str] | None = None) -> Iterator[httpx.Client]:
+    """``aisle run ARGS`` on free ports with its own data folder (and ``env``, ``AISLE_*`` variables); stopped with
+    ``stop_signal``, which must be clean (exit code 0)."""
     port = free_port()
     env = {**os.environ, "AISLE_DATA_DIR": str(tmp_path / "var"), "AISLE_API_PORT": str(port),
-           "AISLE_ZENOH__LISTEN": f'["tcp/127.0.0.1:{free_port()}"]', "AISLE_OCCUPANCY__STORE_PERIOD_S": "1"}
+           "AISLE_ZENOH__LISTEN": f'["tcp/127.0.0.1:{free_port()}"]', "AISLE_OCCUPANCY__STORE_PERIOD_S": "1",
+           **(env or {})}
     log = (tmp_path / "aisle.log").open("w")
     process = subprocess.Popen([sys.executable, "-m", "services.cli", "run", *args], env=env, stdout=log,
                                stderr=subprocess.STDOUT)
@@ -33,7 +36,7 @@ def aisle_run(tmp_path: Path, *args: str) -> Iterator[httpx.Client]:
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=5.0) as client:
             wait_for(lambda: answers(client), timeout_s=60, what="the API to answer")
             yield client
-        process.send_signal(signal.SIGINT)
+        process.send_signal(stop_signal)
         assert process.wait(timeout=60) == 0, (tmp_path / "aisle.log").read_text()[-3000:]
     finally:
         if process.poll() is None:

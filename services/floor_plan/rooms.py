@@ -36,6 +36,7 @@ from scipy.sparse.csgraph import connected_components
 
 from services.floor_plan.likelihood import CellClass
 from services.floor_plan.world import Rect, UnitType, World
+from shared.furniture import FurnitureRule, furniture_pieces
 
 
 @dataclass(frozen=True)
@@ -416,23 +417,10 @@ def wall_fringe(occupancy: npt.NDArray[np.integer], free: npt.NDArray[np.bool_],
 
 
 @dataclass(frozen=True)
-class FurnitureSettings:
-    """What non-free pieces of a map are furniture standing on a room's floor (the grid decomposition's rule,
-    ``grid_decomposition.rooms.furniture``, with its numbers); lengths in metres."""
+class FurnitureSettings(FurnitureRule):
+    """What non-free pieces of a map are furniture standing on a room's floor: the grid decomposition's rule
+    (:class:`shared.furniture.FurnitureRule`, with its numbers), and no piece of a dotted wall; lengths in metres."""
 
-    max_m2: float = 1.0
-    """A small piece: at most this large and ``max_extent_m`` long (chairs, bins, a desk) ..."""
-    max_extent_m: float = 1.2
-    wall_min_length_m: float = 0.5
-    """... unless it is a piece of wall: at least this long and at most ``wall_max_thickness_m`` thick."""
-    wall_max_thickness_m: float = 0.35
-    block_max_m2: float = 1.7
-    """A block: at most this large and ``block_max_extent_m`` long, solid (``block_min_solid`` of it survives an
-    opening by a disc ``block_min_thickness_m`` wide), at most ``block_max_elongation`` times as long as thick."""
-    block_max_extent_m: float = 3.0
-    block_min_thickness_m: float = 0.4
-    block_max_elongation: float = 3.0
-    block_min_solid: float = 0.3
     dots_gap_m: float = 0.35
     """A piece on a dotted wall is no furniture: pieces that, with gaps up to this long closed along rows or columns,
     make a line at least ``dots_line_m`` long."""
@@ -444,30 +432,9 @@ def furniture(cells: npt.NDArray[np.bool_], *, resolution_m: float,
     """The 8-connected pieces of ``cells`` (non-free cells) that are furniture (:class:`FurnitureSettings`), off the
     map's border."""
     mask = np.asarray(cells, np.uint8)
-    n, parts, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    h, w = mask.shape
-    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
-    bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
-    inner = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h)
-    area = stats[:, cv2.CC_STAT_AREA] * resolution_m**2
-    extent = np.maximum(bw, bh) * resolution_m
-    small = inner & (area <= settings.max_m2) & (extent <= settings.max_extent_m)
-    block = inner & ~small & (area <= settings.block_max_m2) & (extent <= settings.block_max_extent_m)
-    small[0] = block[0] = False
-    if block.any():
-        size = 2 * max(1, round(settings.block_min_thickness_m / resolution_m / 2)) + 1
-        thick = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))) > 0
-        solid = np.bincount(parts[thick], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
-        block &= solid >= settings.block_min_solid
-    keep = small | block
-    for k in np.flatnonzero(keep & (np.hypot(bw, bh) * resolution_m >= settings.wall_min_length_m)).tolist():
-        rows, cols = np.nonzero(parts[y[k] : y[k] + bh[k], x[k] : x[k] + bw[k]] == k)
-        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
-        length, thickness = (max(side_a, side_b) + 1) * resolution_m, (min(side_a, side_b) + 1) * resolution_m
-        if small[k] and length >= settings.wall_min_length_m and thickness <= settings.wall_max_thickness_m:
-            keep[k] = False
-        if block[k] and length > settings.block_max_elongation * thickness:
-            keep[k] = False
+    _, found, found_stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    parts, stats = np.asarray(found, np.int32), np.asarray(found_stats, np.int32)
+    keep = furniture_pieces(mask, parts, stats, resolution_m=resolution_m, rule=settings)
     gap, run = max(1, round(settings.dots_gap_m / resolution_m)), max(1, round(settings.dots_line_m / resolution_m))
     for close, line in ((np.ones((1, gap), np.uint8), np.ones((1, run), np.uint8)),
                         (np.ones((gap, 1), np.uint8), np.ones((run, 1), np.uint8))):

@@ -26,43 +26,20 @@ from services.grid_decomposition.segments import (
     renumber,
     split_along,
 )
+from shared.furniture import FurnitureRule, furniture_pieces
 
 
 def furniture(
     obstacle: npt.NDArray[np.bool_],
     *,
     resolution_m: float,
-    max_area_m2: float = 1.0,
-    max_extent_m: float = 1.2,
-    wall_min_length_m: float = 0.5,
-    wall_max_thickness_m: float = 0.35,
-    block_max_area_m2: float = 1.7,
-    block_max_extent_m: float = 3.0,
-    block_min_thickness_m: float = 0.4,
-    block_max_elongation: float = 3.0,
-    block_min_solid: float = 0.3,
     labelled: Components | None = None,
 ) -> npt.NDArray[np.bool_]:
     """Free-standing obstacles: furniture, bins, pillars, table legs, clutter, desks and cabinets.
 
-    An 8-connected obstacle component not touching the map border is furniture when
-
-    * it is small: at most ``max_area_m2`` and at most ``max_extent_m`` on the longer side of its
-      bounding box, unless it is a piece of wall: at least ``wall_min_length_m`` long and at most
-      ``wall_max_thickness_m`` thick (its minimum-area rectangle), as the dashes of a wall with
-      many doors; or
-    * it is a block: at most ``block_max_area_m2`` and ``block_max_extent_m``, solid (at least
-      ``block_min_solid`` of it survives an opening with a disc ``block_min_thickness_m`` wide)
-      and its minimum-area rectangle at most ``block_max_elongation`` times as long as wide. A
-      desk or a cabinet standing in a real office is seen as such a block (ROSE\u00b2's offices:
-      as walls they closed doorways between desks and cut the rooms apart); a free-standing
-      piece of wall, however bent (an L or a T of thin walls, a pillar on it), is mostly thin,
-      and a long thick one is elongated. The area limit keeps larger blocks as obstacles: the
-      meeting tables with chairs of ipa's furnished offices (about 1.9 m\u00b2) then closed the doorways
-      the ipa ground truth has (at 4 m\u00b2, ipa furnished precision fell 0.4 points).
-
-    Longer walls are kept anyway; furniture pushed against a wall is part of the wall's
-    component and stays.
+    The 8-connected obstacle components that are furniture by :func:`shared.furniture.furniture_pieces` with its
+    default numbers (small pieces that are no piece of wall, solid blocks that are not elongated, off the map
+    border): the floor plan's rule too, without its dotted-wall step.
 
     Parameters
     ----------
@@ -79,33 +56,9 @@ def furniture(
         The furniture cells (a subset of ``obstacle``).
     """
     labelled = components(obstacle) if labelled is None else labelled
-    parts, stats = labelled.labels, labelled.stats
-    h, w = obstacle.shape
-    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
-    bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
-    inner = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h)
-    area_m2 = stats[:, cv2.CC_STAT_AREA] * resolution_m**2
-    extent_m = np.maximum(bw, bh) * resolution_m
-    small = inner & (area_m2 <= max_area_m2) & (extent_m <= max_extent_m)
-    block = inner & ~small & (area_m2 <= block_max_area_m2) & (extent_m <= block_max_extent_m)
-    small[0] = block[0] = False
-    if block.any():  # solid: most of it survives an opening with a disc as wide as the thickness
-        radius = max(1, round(block_min_thickness_m / resolution_m / 2))
-        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-        thick = cv2.morphologyEx(obstacle.astype(np.uint8), cv2.MORPH_OPEN, disc).astype(bool)
-        solid = np.bincount(parts[thick], minlength=len(stats)) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
-        block &= solid >= block_min_solid
-    keep = small | block
-    for k in np.flatnonzero(keep & (np.hypot(bw, bh) * resolution_m >= wall_min_length_m)):
-        box = parts[y[k] : y[k] + bh[k], x[k] : x[k] + bw[k]] == k
-        rows, cols = nonzero_rc(box)
-        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
-        length, thickness = (max(side_a, side_b) + 1) * resolution_m, (min(side_a, side_b) + 1) * resolution_m
-        if small[k] and length >= wall_min_length_m and thickness <= wall_max_thickness_m:
-            keep[k] = False
-        if block[k] and length > block_max_elongation * thickness:
-            keep[k] = False
-    return lookup(keep, parts)
+    keep = furniture_pieces(obstacle, labelled.labels, labelled.stats, resolution_m=resolution_m,
+                            rule=FurnitureRule())
+    return lookup(keep, labelled.labels)
 
 
 def wall_furniture(

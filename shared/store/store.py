@@ -13,6 +13,7 @@ import json
 import logging
 import os
 import socket
+import threading
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -144,9 +145,20 @@ class MapStore:
         self.url = url
         self.engine = create_store_engine(url)
         self.layer_history = layer_history
+        self._writes = threading.Condition()  # guards the two below
+        self._writing = 0  # transactions under way
+        self._writes_stopped = False
 
     def close(self) -> None:
         self.engine.dispose()
+
+    def stop_writes(self) -> None:
+        """Wait for the transactions under way to commit (or roll back) and refuse every later one with
+        :class:`StoreUnavailableError`: a process that exits while its workers are still busy then leaves each
+        revision stored whole or not at all, and no write starts as it goes."""
+        with self._writes:
+            self._writes_stopped = True
+            self._writes.wait_for(lambda: self._writing == 0)
 
     # -- schema ---------------------------------------------------------------------------
     def upgrade(self) -> bool:
@@ -182,6 +194,10 @@ class MapStore:
 
     @contextmanager
     def _begin(self) -> Iterator[Connection]:
+        with self._writes:
+            if self._writes_stopped:
+                raise StoreUnavailableError("the store takes no more writes: the process is stopping")
+            self._writing += 1
         try:
             with self.engine.begin() as connection:
                 yield connection
@@ -189,6 +205,10 @@ class MapStore:
             raise StoreUnavailableError(f"database unavailable: {err.orig}") from err
         except sa.exc.InterfaceError as err:
             raise StoreUnavailableError(f"database unavailable: {err.orig}") from err
+        finally:
+            with self._writes:
+                self._writing -= 1
+                self._writes.notify_all()
 
     @contextmanager
     def _read(self) -> Iterator[Connection]:

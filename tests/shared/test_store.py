@@ -20,6 +20,7 @@ from shared.store import (
     TopologyNode,
     WmsBin,
 )
+from tests.helpers import wait_for
 
 
 def _bin(key: str, x: float, y: float) -> Feature:
@@ -184,6 +185,30 @@ def test_readers_are_not_blocked_by_a_writer(store: MapStore) -> None:
         release.set()
         transaction.rollback()
     assert reader_result and reader_result[0] is not None
+
+
+def test_stop_writes_lets_the_write_under_way_commit_and_refuses_later_ones(store: MapStore) -> None:
+    site = store.ensure_map("site")
+    with store.engine.connect() as other:  # another writer holds the map: the write waits inside its transaction
+        transaction = other.begin()
+        other.execute(sa.text("UPDATE maps SET frame_id = 'held' WHERE id = :id"), {"id": site.id})
+        written: list[object] = []
+        writer = threading.Thread(target=lambda: written.append(
+            store.write_revision(site.id, RevisionWrite("occ", layers=[_grid(1)]))))
+        writer.start()
+        wait_for(lambda: store._writing == 1, what="the write under way")
+        stopper = threading.Thread(target=store.stop_writes)
+        stopper.start()
+        stopper.join(timeout=0.5)
+        assert stopper.is_alive()  # waits for the write under way
+        transaction.commit()
+    writer.join(timeout=30)
+    stopper.join(timeout=30)
+    assert not stopper.is_alive() and len(written) == 1  # the write under way was committed whole
+    with pytest.raises(StoreUnavailableError, match="no more writes"):
+        store.write_revision(site.id, RevisionWrite("occ", layers=[_grid(2)]))
+    stored = store.layer(site.id, "occupancy")
+    assert stored is not None and (stored.layer.data == 1).all()
 
 
 def test_unreachable_database_is_reported_as_unavailable() -> None:
