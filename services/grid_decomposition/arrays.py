@@ -248,6 +248,14 @@ def components_stats(
     stats : (n, 5) int32
         ``cv2.CC_STAT_LEFT``, ``TOP``, ``WIDTH``, ``HEIGHT``, ``AREA`` per label.
     """
+    n, labels, stats, _ = components_stats_runs(mask, connectivity)
+    return n, labels, stats
+
+
+def components_stats_runs(
+    mask: npt.NDArray[np.bool_] | npt.NDArray[np.uint8] | cv2.typing.MatLike, connectivity: int
+) -> tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]]:
+    """:func:`components_stats` and the runs of equal labels along the rows it counted them from (label, length)."""
     image = np.asarray(mask)
     bytes_ = np.asarray(image.view(np.uint8) if image.dtype == np.bool_ else image, dtype=np.uint8)
     n, found = cv2.connectedComponents(bytes_, connectivity=connectivity, ltype=cv2.CV_32S)
@@ -272,7 +280,7 @@ def components_stats(
     stats[:, cv2.CC_STAT_AREA] = np.bincount(label, weights=length, minlength=n)
     empty = stats[:, cv2.CC_STAT_AREA] == 0
     stats[empty] = (-1, np.iinfo(np.int32).max, 0, 0, 0)
-    return n, labels, stats
+    return n, labels, stats, (label.astype(np.int64, copy=False), length.astype(np.int64, copy=False))
 
 
 @dataclass(frozen=True)
@@ -281,6 +289,13 @@ class Components:
 
     labels: npt.NDArray[np.int32]  # (H, W) component id per pixel, 0 off the mask
     stats: npt.NDArray[np.int32]  # (N + 1, 5) left, top, width, height, area per id
+    # the runs of equal ids along the rows (id, length; raster order): ``lookup(table, labels, runs)`` spreads a
+    # per-id table over the image without reading the labels again
+    runs: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]
+
+    def spread(self, table: npt.NDArray[_Value]) -> npt.NDArray[_Value]:
+        """``table[labels]`` (one entry per id), from the runs."""
+        return lookup(table, self.labels, self.runs)
 
 
 def components(mask: npt.NDArray[np.bool_]) -> Components:
@@ -289,8 +304,8 @@ def components(mask: npt.NDArray[np.bool_]) -> Components:
     The obstacles for the furniture, the line search's structure and the free-standing obstacles; the
     occupied cells for the shelf dashes and the floor objects.
     """
-    _n, labels, stats = components_stats(mask, 8)
-    return Components(labels, stats)
+    _n, labels, stats, runs = components_stats_runs(mask, 8)
+    return Components(labels, stats, runs)
 
 
 @functools.lru_cache(maxsize=32, typed=True)

@@ -8,7 +8,9 @@ import pytest
 from scipy import ndimage
 
 from services.grid_decomposition.arrays import (
+    components,
     components_stats,
+    components_stats_runs,
     distinct,
     label_boxes,
     label_counts,
@@ -105,6 +107,25 @@ def test_components_stats_are_opencvs_labels_and_stats(connectivity: int, seed: 
             assert got_n == n
             assert got_labels.dtype == np.int32 and np.array_equal(got_labels, labels)
             assert got_stats.dtype == np.int32 and np.array_equal(got_stats, stats)
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+@pytest.mark.parametrize("seed", range(4))
+def test_components_runs_spread_a_table_as_the_gather_of_every_pixel(connectivity: int, seed: int) -> None:
+    """The runs the statistics came from cover the labels in raster order; a table spread by them is the gather."""
+    rng = np.random.default_rng(seed)
+    for density in (0.0, 0.03, 0.5, 1.0):
+        mask = rng.random((int(rng.integers(1, 70)), int(rng.integers(1, 70)))) < density
+        n, labels, stats, (label, length) = components_stats_runs(mask, connectivity)
+        assert (n, labels.tolist(), stats.tolist()) == tuple(
+            v.tolist() if isinstance(v, np.ndarray) else v for v in components_stats(mask, connectivity)
+        )
+        assert np.array_equal(np.repeat(label, length), labels.ravel())
+        table = rng.random(n) < 0.5
+        assert np.array_equal(lookup(table, labels, (label, length)), table[labels])
+        if connectivity == 8:
+            parts = components(mask)
+            assert np.array_equal(parts.spread(table), table[parts.labels])
 
 
 @pytest.mark.parametrize("seed", range(4))
