@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -331,3 +331,32 @@ def near(mask: npt.NDArray[np.bool_], radius_px: float, mask_size: int = 3) -> n
     transform's own ball. A dilation by a small ball is a few times faster than the transform.
     """
     return np.asarray(cv2.dilate(mask.astype(np.uint8), _chamfer_ball(radius_px, mask_size)), dtype=bool)
+
+
+@functools.lru_cache(maxsize=32, typed=True)
+def _short_of_ball(
+    scale: float | np.floating[Any], limit: float | np.floating[Any], mask_size: int
+) -> npt.NDArray[np.uint8]:
+    """The offsets whose ``cv2.distanceTransform(..., cv2.DIST_L2, mask_size)`` distance ``d`` has not
+    ``d * scale >= limit``, measured by the transform itself from one zero pixel and compared as the caller compares
+    (typed cache: a Python and a numpy float scale compare differently with the float32 distances)."""
+    reach = max(int(limit / scale / 0.95), 0) + 2  # each step of the chamfer masks is at least 0.955 px
+    image = np.ones((2 * reach + 1, 2 * reach + 1), dtype=np.uint8)
+    image[reach, reach] = 0
+    inside = ~(cv2.distanceTransform(image, cv2.DIST_L2, mask_size) * scale >= limit)
+    if not inside.any():  # even the pixel itself reaches the limit: an empty ball
+        return np.zeros((1, 1), dtype=np.uint8)
+    r = reach - int(np.flatnonzero(inside.any(axis=1))[0])
+    return np.ascontiguousarray(inside[reach - r : reach + r + 1, reach - r : reach + r + 1], dtype=np.uint8)
+
+
+def short_of(
+    mask: npt.NDArray[np.bool_], scale: float | np.floating[Any], limit: float | np.floating[Any], mask_size: int = 5
+) -> npt.NDArray[np.bool_]:
+    """``~(cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, mask_size) * scale >= limit)`` for
+    ``scale > 0``, by one dilation (as :func:`near`): the pixels whose distance to ``mask``, scaled, falls short of
+    ``limit``. ``d * scale`` rises with ``d``, so the least distance falls short when some mask pixel's does."""
+    ball = _short_of_ball(scale, limit, mask_size)
+    if not ball.any():
+        return np.zeros(mask.shape, dtype=bool)
+    return np.asarray(cv2.dilate(mask.view(np.uint8), ball), dtype=bool)

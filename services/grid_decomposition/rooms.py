@@ -16,6 +16,7 @@ from services.grid_decomposition.arrays import (
     label_max,
     lookup,
     nonzero_rc,
+    short_of,
 )
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
@@ -657,12 +658,12 @@ def free_standing(
     isl = islands(obstacle, max_extent_px=max_extent_m / resolution_m, labelled=labelled)
     if not isl.any():
         return isl
-    rest = obstacle & ~isl
-    gap = cv2.distanceTransform((~rest).astype(np.uint8), cv2.DIST_L2, 5)
-    parts = labelled.labels  # an island is a whole component of the obstacles
-    nearest = np.full(len(labelled.stats), np.inf, dtype=np.float32)
-    np.minimum.at(nearest, parts[isl], gap[isl])
-    keep = nearest * resolution_m >= min_clearance_m
+    # an island is kept when its least distance to the other obstacles, in metres, reaches the clearance: when
+    # none of its pixels falls short of it (the distance transform read only at the islands, as one dilation)
+    short = short_of(obstacle & ~isl, resolution_m, min_clearance_m)
+    short &= isl
+    keep = np.ones(len(labelled.stats), dtype=bool)
+    keep[labelled.labels.ravel()[np.flatnonzero(short)]] = False  # an island is a whole component of the obstacles
     keep[0] = False
     return np.asarray(labelled.spread(keep) & isl, dtype=bool)
 
