@@ -380,6 +380,19 @@ def renumber(seg: npt.NDArray[np.int32], *, copy: bool = True) -> npt.NDArray[np
     return lookup(lut, seg, runs)
 
 
+def renumber_mapped(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """``renumber(np.take(lut, seg))`` from the runs of ``seg``: the ids ``lut`` gives the runs, renumbered, spread
+    once (no image of the mapped ids in between)."""
+    if seg.size == 0:
+        return np.take(lut, seg).astype(np.int32)
+    value, length = value_runs(seg)
+    mapped = lut[value]
+    present = np.bincount(mapped) > 0
+    present[0] = False
+    new = np.where(present, np.cumsum(present), 0).astype(np.int32)
+    return np.repeat(new[mapped], length).reshape(seg.shape)
+
+
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
     """Split every segment into the 8-connected pieces it falls into once ``barrier`` pixels are taken out.
 
