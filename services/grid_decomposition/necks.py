@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats_runs
+from services.grid_decomposition.arrays import components_stats_runs, lookup
 from services.grid_decomposition.segments import fill_from_neighbours, renumber
 
 
@@ -66,7 +66,7 @@ def split_at_necks(
     split[0] = False
     if not split.any():
         return renumber(seg)
-    in_split = np.take(split, seg)
+    in_split = lookup(split, seg)
     # within the box round the segments split: nothing outside it is marked or filled
     rows, cols = np.flatnonzero(in_split.any(axis=1)), np.flatnonzero(in_split.any(axis=0))
     box = (slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1))
