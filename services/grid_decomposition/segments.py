@@ -39,18 +39,35 @@ def fill_from_neighbours(
     height, width = segments.shape
     r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, height)
     c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, width)
+    framed_size = (r1 - r0 + 2) * (c1 - c0 + 2)
+    if min(rows[0], cols[0]) >= 2 and rows[-1] < height - 2 and cols[-1] < width - 2 and 2 * framed_size >= hole.size:
+        # holes two pixels or more inside the image, their box most of it: the copy returned is the working image
+        # (the front is a pixel or more inside it, so its neighbours' flat indices never leave it or wrap a row)
+        out = segments.astype(np.int32)  # a copy
+        _grow(out, hole, width, framed_size, int(out[r0:r1, c0:c1].max()), max_iterations)
+        return out
     # the box framed by zeros is the working copy (the image's own copy only when the box is not all of it)
-    lab = cv2.copyMakeBorder(
+    lab: npt.NDArray[np.int32] = np.asarray(cv2.copyMakeBorder(
         segments[r0:r1, c0:c1].astype(np.int32, copy=False), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0
-    )
-    w = c1 - c0
+    ), dtype=np.int32)
     open_ = cv2.copyMakeBorder(hole[r0:r1, c0:c1].view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0).view(bool)
+    _grow(lab, open_, c1 - c0 + 2, framed_size, int(lab.max()), max_iterations)
+    if (r1 - r0, c1 - c0) == (height, width):
+        return np.ascontiguousarray(lab[1:-1, 1:-1])
+    out = segments.astype(np.int32)  # a copy
+    out[r0:r1, c0:c1] = lab[1:-1, 1:-1]
+    return out
+
+
+def _grow(
+    lab: npt.NDArray[np.int32], open_: npt.NDArray[np.bool_], stride: int, framed_size: int, top: int, steps: int
+) -> None:
+    """:func:`fill_from_neighbours` in place on ``lab``, whose holes are ``open_`` (taken as they fill): images
+    ``stride`` wide in which every neighbour of a pixel next to a hole lies (a frame of zeros, or a margin);
+    ``framed_size`` is the framed box's pixels and ``top`` the largest id in it (they choose the first step)."""
     lab_flat, open_flat = lab.ravel(), open_.ravel()
-    stride = w + 2
     offsets = np.array([-stride - 1, -stride, -stride + 1, -1, 1, stride - 1, stride, stride + 1], dtype=np.int64)
-    steps = max_iterations
-    top = int(lab.max())
-    if steps > 0 and np.count_nonzero(open_) * 32 >= open_.size and top < 2**24:
+    if steps > 0 and np.count_nonzero(open_) * 32 >= framed_size and top < 2**24:
         # many holes (the lines through a map): the first step at once, as a grey dilation of the
         # box (ids below 2**8 in uint8, below 2**16 in uint16, below 2**24 exact in float32)
         dtype = np.uint8 if top < 2**8 else np.uint16 if top < 2**16 else np.float32
@@ -64,7 +81,7 @@ def fill_from_neighbours(
         if left.size < front.size:
             filled_now = np.zeros(lab_flat.size, dtype=bool)
             filled_now[front] = True
-            around = (left[:, None] + offsets).ravel()  # in the box: its border is never a hole
+            around = (left[:, None] + offsets).ravel()  # in the image: a hole's neighbours are
             front = around[filled_now[around]]
             filled_now[:] = False
             front = distinct(front, filled_now)
@@ -85,11 +102,6 @@ def fill_from_neighbours(
         # the next front: each filled pixel once (the order of a front does not matter)
         front = distinct(cand, seen)
         open_flat[front] = False
-    if (r1 - r0, c1 - c0) == (height, width):
-        return np.ascontiguousarray(lab[1:-1, 1:-1])
-    out = segments.astype(np.int32)  # a copy
-    out[r0:r1, c0:c1] = lab[1:-1, 1:-1]
-    return out
 
 
 def segment_image(

@@ -181,6 +181,12 @@ def test_fill_from_neighbours_grows_a_step_at_a_time_through_lines_and_wide_gaps
     target[66:70, 10:20] = True
     filled = fill_from_neighbours(seg, target, max_iterations=steps)
     assert np.array_equal(filled, _grown_step_by_step(seg, target, steps))
+    # the same inside a labelled margin: the holes two pixels or more from the image's edge (no frame is needed)
+    for margin in (2, 3):
+        inner = np.pad(seg, margin, constant_values=1)
+        inside = np.pad(target, margin, constant_values=False)
+        filled = fill_from_neighbours(inner, inside, max_iterations=steps)
+        assert filled.dtype == np.int32 and np.array_equal(filled, _grown_step_by_step(inner, inside, steps))
 
 
 def test_a_strip_between_two_cuts_joins_a_room_and_a_small_room_behind_a_door_stays() -> None:
