@@ -289,16 +289,26 @@ def merge_passages(
     area = label_counts(seg, n)[0]
     still = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
     still[0] = True
-    inner = seg > 0  # the pixels with the same segment on all four sides: the widest disc from the rest
-    inner[1:] &= seg[1:] == seg[:-1]
-    inner[:-1] &= seg[:-1] == seg[1:]
-    inner[:, 1:] &= seg[:, 1:] == seg[:, :-1]
-    inner[:, :-1] &= seg[:, :-1] == seg[:, 1:]
-    inner[[0, -1]] = False
+    candidate = (area > 0) & (area < max_area_px) & ~still
+    if not candidate.any():
+        return _relabel(seg, np.arange(n), area > 0)
+    # their widths, within the box round them and a pixel more: a segment's widest disc lies in its own box
+    at = lookup(candidate, seg)
+    rows, cols = np.flatnonzero(at.any(axis=1)), np.flatnonzero(at.any(axis=0))
+    h, w = seg.shape
+    r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, h)
+    c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, w)
+    box = seg[r0:r1, c0:c1]
+    inner = box > 0  # the pixels with the same segment on all four sides: the widest disc from the rest
+    inner[1:] &= box[1:] == box[:-1]
+    inner[:-1] &= box[:-1] == box[1:]
+    inner[:, 1:] &= box[:, 1:] == box[:, :-1]
+    inner[:, :-1] &= box[:, :-1] == box[:, 1:]
+    inner[[0, -1]] = False  # the image's edge, or a pixel beside the segments looked at
     inner[:, [0, -1]] = False
-    depth = np.asarray(cv2.distanceTransform(inner.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
-    width = 2 * label_max(seg, depth, n)[0] + 1
-    candidate = (area > 0) & (area < max_area_px) & (width <= max_width_px) & ~still
+    depth = np.asarray(cv2.distanceTransform(inner.view(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
+    width = 2 * label_max(box, depth, n)[0] + 1
+    candidate &= width <= max_width_px
     if not candidate.any():
         return _relabel(seg, np.arange(n), area > 0)
     pairs, border, _ = border_closure(seg, None)
