@@ -330,7 +330,8 @@ def near(mask: npt.NDArray[np.bool_], radius_px: float, mask_size: int = 3) -> n
     each, and its float sums do not depend on where the pixel lies: so it is the dilation of ``mask`` by the
     transform's own ball. A dilation by a small ball is a few times faster than the transform.
     """
-    return np.asarray(cv2.dilate(mask.astype(np.uint8), _chamfer_ball(radius_px, mask_size)), dtype=bool)
+    flags = np.ascontiguousarray(mask, dtype=bool).view(np.uint8)  # 0/1 bytes, no copy: the dilation is 0/1 too
+    return np.asarray(cv2.dilate(flags, _chamfer_ball(radius_px, mask_size))).view(bool)
 
 
 @functools.lru_cache(maxsize=32, typed=True)
@@ -359,4 +360,4 @@ def short_of(
     ball = _short_of_ball(scale, limit, mask_size)
     if not ball.any():
         return np.zeros(mask.shape, dtype=bool)
-    return np.asarray(cv2.dilate(mask.view(np.uint8), ball), dtype=bool)
+    return np.asarray(cv2.dilate(np.ascontiguousarray(mask, dtype=bool).view(np.uint8), ball)).view(bool)
