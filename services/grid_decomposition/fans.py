@@ -78,11 +78,11 @@ def split_fans(
         # the opening by distances (a disc's erosion and dilation are thresholds of the distance transform,
         # each one dilation by the transform's own ball: ``near``)
         inner = ~near(~mine, radius, 5)
-        n, parts, stats = components_stats(inner, 8)
+        n, parts, stats = components_stats(inner.astype(np.uint8), 8)
         if n < 2:
             continue
         core = mine & near(parts == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA])), radius, 5)
-        n, parts, stats = components_stats(mine & ~core, 8)
+        n, parts, stats = components_stats((mine & ~core).astype(np.uint8), 8)
         big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_px)
         big = big[big > 0]
         if big.size == 0:
