@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -248,6 +248,14 @@ def components_stats(
     stats : (n, 5) int32
         ``cv2.CC_STAT_LEFT``, ``TOP``, ``WIDTH``, ``HEIGHT``, ``AREA`` per label.
     """
+    n, labels, stats, _ = components_stats_runs(mask, connectivity)
+    return n, labels, stats
+
+
+def components_stats_runs(
+    mask: npt.NDArray[np.bool_] | npt.NDArray[np.uint8] | cv2.typing.MatLike, connectivity: int
+) -> tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]]:
+    """:func:`components_stats` and the runs of equal labels along the rows it counted them from (label, length)."""
     image = np.asarray(mask)
     bytes_ = np.asarray(image.view(np.uint8) if image.dtype == np.bool_ else image, dtype=np.uint8)
     n, found = cv2.connectedComponents(bytes_, connectivity=connectivity, ltype=cv2.CV_32S)
@@ -272,7 +280,7 @@ def components_stats(
     stats[:, cv2.CC_STAT_AREA] = np.bincount(label, weights=length, minlength=n)
     empty = stats[:, cv2.CC_STAT_AREA] == 0
     stats[empty] = (-1, np.iinfo(np.int32).max, 0, 0, 0)
-    return n, labels, stats
+    return n, labels, stats, (label.astype(np.int64, copy=False), length.astype(np.int64, copy=False))
 
 
 @dataclass(frozen=True)
@@ -281,6 +289,13 @@ class Components:
 
     labels: npt.NDArray[np.int32]  # (H, W) component id per pixel, 0 off the mask
     stats: npt.NDArray[np.int32]  # (N + 1, 5) left, top, width, height, area per id
+    # the runs of equal ids along the rows (id, length; raster order): ``lookup(table, labels, runs)`` spreads a
+    # per-id table over the image without reading the labels again
+    runs: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]
+
+    def spread(self, table: npt.NDArray[_Value]) -> npt.NDArray[_Value]:
+        """``table[labels]`` (one entry per id), from the runs."""
+        return lookup(table, self.labels, self.runs)
 
 
 def components(mask: npt.NDArray[np.bool_]) -> Components:
@@ -289,8 +304,8 @@ def components(mask: npt.NDArray[np.bool_]) -> Components:
     The obstacles for the furniture, the line search's structure and the free-standing obstacles; the
     occupied cells for the shelf dashes and the floor objects.
     """
-    _n, labels, stats = components_stats(mask, 8)
-    return Components(labels, stats)
+    _n, labels, stats, runs = components_stats_runs(mask, 8)
+    return Components(labels, stats, runs)
 
 
 @functools.lru_cache(maxsize=32, typed=True)
@@ -315,4 +330,34 @@ def near(mask: npt.NDArray[np.bool_], radius_px: float, mask_size: int = 3) -> n
     each, and its float sums do not depend on where the pixel lies: so it is the dilation of ``mask`` by the
     transform's own ball. A dilation by a small ball is a few times faster than the transform.
     """
-    return np.asarray(cv2.dilate(mask.astype(np.uint8), _chamfer_ball(radius_px, mask_size)), dtype=bool)
+    flags = np.ascontiguousarray(mask, dtype=bool).view(np.uint8)  # 0/1 bytes, no copy: the dilation is 0/1 too
+    return np.asarray(cv2.dilate(flags, _chamfer_ball(radius_px, mask_size))).view(bool)
+
+
+@functools.lru_cache(maxsize=32, typed=True)
+def _short_of_ball(
+    scale: float | np.floating[Any], limit: float | np.floating[Any], mask_size: int
+) -> npt.NDArray[np.uint8]:
+    """The offsets whose ``cv2.distanceTransform(..., cv2.DIST_L2, mask_size)`` distance ``d`` has not
+    ``d * scale >= limit``, measured by the transform itself from one zero pixel and compared as the caller compares
+    (typed cache: a Python and a numpy float scale compare differently with the float32 distances)."""
+    reach = max(int(limit / scale / 0.95), 0) + 2  # each step of the chamfer masks is at least 0.955 px
+    image = np.ones((2 * reach + 1, 2 * reach + 1), dtype=np.uint8)
+    image[reach, reach] = 0
+    inside = ~(cv2.distanceTransform(image, cv2.DIST_L2, mask_size) * scale >= limit)
+    if not inside.any():  # even the pixel itself reaches the limit: an empty ball
+        return np.zeros((1, 1), dtype=np.uint8)
+    r = reach - int(np.flatnonzero(inside.any(axis=1))[0])
+    return np.ascontiguousarray(inside[reach - r : reach + r + 1, reach - r : reach + r + 1], dtype=np.uint8)
+
+
+def short_of(
+    mask: npt.NDArray[np.bool_], scale: float | np.floating[Any], limit: float | np.floating[Any], mask_size: int = 5
+) -> npt.NDArray[np.bool_]:
+    """``~(cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, mask_size) * scale >= limit)`` for
+    ``scale > 0``, by one dilation (as :func:`near`): the pixels whose distance to ``mask``, scaled, falls short of
+    ``limit``. ``d * scale`` rises with ``d``, so the least distance falls short when some mask pixel's does."""
+    ball = _short_of_ball(scale, limit, mask_size)
+    if not ball.any():
+        return np.zeros(mask.shape, dtype=bool)
+    return np.asarray(cv2.dilate(np.ascontiguousarray(mask, dtype=bool).view(np.uint8), ball)).view(bool)

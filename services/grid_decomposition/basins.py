@@ -11,7 +11,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from services.grid_decomposition.arrays import label_boxes, label_max, nonzero_rc
-from services.grid_decomposition.segments import renumber
+from services.grid_decomposition.segments import renumber, renumber_mapped
 
 
 def join_room_pieces(
@@ -333,7 +333,8 @@ def join_furnished_groups(
     codes, pair = np.unique(key, return_inverse=True)
     pair = pair.ravel()
     size = 2 * reach_px + 1
-    near = cv2.dilate(furniture.astype(np.uint8), np.ones((size, size), np.uint8)).ravel().astype(bool)
+    standing_bytes = np.ascontiguousarray(furniture, dtype=bool).view(np.uint8)  # OpenCV reads the flags as 0/1
+    near = np.asarray(cv2.dilate(standing_bytes, np.ones((size, size), np.uint8))).view(bool).ravel()
     run, n_runs = _runs(pixel, pair, h, w)
     made = np.zeros(n_runs, dtype=bool)
     made[run[near[pixel]]] = True
@@ -356,13 +357,13 @@ def join_furnished_groups(
     if not (members >= 2).any():  # no group to look at: the furniture is not labelled
         return renumber(seg)
     lut = np.arange(n, dtype=np.int32)
-    standing = np.asarray(cv2.connectedComponents(furniture.astype(np.uint8), connectivity=8)[1], dtype=np.int32)
+    standing = np.asarray(cv2.connectedComponents(standing_bytes, connectivity=8)[1], dtype=np.int32)
     boxes = _boxes(seg, n)
     for g in np.flatnonzero(members >= 2).tolist():
         ids = np.flatnonzero(group == g)
         if _group_solidity(seg, ids, boxes, standing, n) >= min_solidity:
             lut[ids] = ids[0]
-    return renumber(np.take(lut, seg))
+    return renumber_mapped(lut, seg)
 
 
 def _separators(

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, lookup, near
+from services.grid_decomposition.arrays import components_stats_runs, lookup, near
 
 FREE_PERCENT = 25
 OCCUPIED_PERCENT = 65
@@ -39,10 +39,10 @@ def _disk(radius_px: int) -> npt.NDArray[np.uint8]:
 
 def _small_components(mask: npt.NDArray[np.bool_], max_area_px: int) -> npt.NDArray[np.bool_]:
     """Pixels of 8-connected components of ``mask`` of at most ``max_area_px`` pixels."""
-    n, parts, stats = components_stats(mask.astype(np.uint8), 8)
+    n, parts, stats, runs = components_stats_runs(mask, 8)
     small = stats[:, cv2.CC_STAT_AREA] <= max_area_px
     small[0] = False
-    out: npt.NDArray[np.bool_] = lookup(small, parts) if n > 1 else np.zeros(mask.shape, dtype=bool)
+    out: npt.NDArray[np.bool_] = lookup(small, parts, runs) if n > 1 else np.zeros(mask.shape, dtype=bool)
     return out
 
 

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats
+from services.grid_decomposition.arrays import components_stats_runs, lookup
 from services.grid_decomposition.segments import fill_from_neighbours, renumber
 
 
@@ -53,24 +53,20 @@ def split_at_necks(
     border[1:] |= down
     border[:-1] |= down
     core = (dist > neck_half_width_m / resolution_m) & (seg > 0) & ~border
-    n, parts, stats = components_stats(core.astype(np.uint8), 4)
+    n, parts, stats, (label, length) = components_stats_runs(core.view(np.uint8), 4)
     big = stats[:, cv2.CC_STAT_AREA] >= min_core_area_m2 / resolution_m**2
     big[0] = False
     # each core's segment, from the first pixel of each run of one core along the rows (a core lies in one segment)
-    flat = parts.ravel()
-    start = np.empty(flat.size, dtype=bool)
-    start[0] = True
-    np.not_equal(flat[1:], flat[:-1], out=start[1:])
-    first = np.flatnonzero(start)
+    first = np.cumsum(length) - length
     owner = np.zeros(n, dtype=np.int64)
-    owner[flat[first]] = seg.ravel()[first]
+    owner[label] = seg.ravel()[first]
     n_seg = int(seg.max()) + 1
     cores_per_seg = np.bincount(owner[big], minlength=n_seg)
     split = cores_per_seg >= 2
     split[0] = False
     if not split.any():
         return renumber(seg)
-    in_split = np.take(split, seg)
+    in_split = lookup(split, seg)
     # within the box round the segments split: nothing outside it is marked or filled
     rows, cols = np.flatnonzero(in_split.any(axis=1)), np.flatnonzero(in_split.any(axis=0))
     box = (slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1))

@@ -199,12 +199,16 @@ def _logsumexp(array: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
 
 def _sharpness(angle_rad: float, rows: npt.NDArray[np.float64], cols: npt.NDArray[np.float64]) -> float:
     """Sum of squares of the points' projection across lines of ``angle_rad`` (1 px bins): high when they line up."""
-    s = -math.sin(angle_rad) * cols + math.cos(angle_rad) * rows
+    s = -math.sin(angle_rad) * cols
+    s += math.cos(angle_rad) * rows
     s -= s.min()
-    whole = np.floor(s).astype(np.int64)
+    whole = s.astype(np.int64)  # s >= 0: truncation is the floor
     part = s - whole
-    # each point split linearly between its two bins: no rounding luck at tiny angles
-    hist = np.bincount(whole, 1.0 - part, whole.max() + 2) + np.bincount(whole + 1, part, whole.max() + 2)
+    # each point split linearly between its two bins: no rounding luck at tiny angles (a point's share of the
+    # next bin is the count of its own bin one bin on: the same sums added in the same order)
+    size = int(whole.max()) + 2
+    hist = np.bincount(whole, 1.0 - part, size)
+    hist[1:] += np.bincount(whole, part, size - 1)
     return float(np.dot(hist, hist))
 
 

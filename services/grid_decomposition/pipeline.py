@@ -231,7 +231,7 @@ def _structure(obstacle: Components, min_area_px: int) -> npt.NDArray[np.bool_]:
     """Pixels near obstacle components of at least ``min_area_px`` (walls, blocks), not furniture or uprights."""
     big = obstacle.stats[:, cv2.CC_STAT_AREA] >= min_area_px
     big[0] = False
-    return np.asarray(cv2.dilate(lookup(big.view(np.uint8), obstacle.labels), np.ones((5, 5), np.uint8)), dtype=bool)
+    return np.asarray(cv2.dilate(obstacle.spread(big.view(np.uint8)), np.ones((5, 5), np.uint8)), dtype=bool)
 
 
 def _texture_count(lines: dict[float, list[Line]]) -> int:

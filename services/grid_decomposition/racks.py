@@ -989,7 +989,7 @@ def floor_objects(
         (_, _), (rw, rh), _ = cv2.minAreaRect(np.column_stack([cols, rows]).astype(np.float32))
         thick = (min(rw, rh) + 1) * resolution_m
         keep[k] = thick >= min_thickness_m and rows.size >= min_fill * (rw + 1) * (rh + 1)
-    out: npt.NDArray[np.bool_] = np.take(keep, parts)
+    out: npt.NDArray[np.bool_] = labelled.spread(keep)
     return out
 
 

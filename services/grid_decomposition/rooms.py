@@ -10,11 +10,13 @@ from services.grid_decomposition.arrays import (
     Components,
     components,
     components_stats,
+    components_stats_runs,
     label_boxes,
     label_counts,
     label_max,
     lookup,
     nonzero_rc,
+    short_of,
 )
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
 from services.grid_decomposition.doorways import draw_cuts, find_doorways
@@ -58,7 +60,7 @@ def furniture(
     labelled = components(obstacle) if labelled is None else labelled
     keep = furniture_pieces(obstacle, labelled.labels, labelled.stats, resolution_m=resolution_m,
                             rule=FurnitureRule())
-    return lookup(keep, labelled.labels)
+    return labelled.spread(keep)
 
 
 def wall_furniture(
@@ -84,11 +86,11 @@ def wall_furniture(
     radius = max(1, round(min_thickness_m / resolution_m / 2))
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     thick = cv2.morphologyEx(obstacle.astype(np.uint8), cv2.MORPH_OPEN, disk)
-    n, parts, stats = components_stats(thick, 8)
+    n, parts, stats, runs = components_stats_runs(thick, 8)
     keep = stats[:, cv2.CC_STAT_AREA] <= max_area_m2 / resolution_m**2
     keep[0] = False
     keep[np.unique(np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]])] = False
-    return lookup(keep, parts) if n > 1 else np.zeros(obstacle.shape, dtype=bool)
+    return lookup(keep, parts, runs) if n > 1 else np.zeros(obstacle.shape, dtype=bool)
 
 
 def segment_rooms(
@@ -251,11 +253,11 @@ def segment_rooms(
         )
         standing = clutter | desks
         if occupied is not None:  # furniture is something the laser hit, not unknown space between rays
-            parts = components(standing).labels
-            seen = np.zeros(int(parts.max()) + 1, dtype=bool)
-            seen[parts[occupied]] = True
+            parts = components(standing)
+            seen = np.zeros(len(parts.stats), dtype=bool)
+            seen[parts.labels.ravel()[np.flatnonzero(occupied & standing)]] = True
             seen[0] = False
-            standing = np.take(seen, parts)
+            standing = parts.spread(seen)
         rooms = join_furnished_groups(
             rooms,
             standing,
@@ -510,13 +512,13 @@ def islands(
     per part of ``labelled`` (or of ``blocked``) instead of the mask.
     """
     labelled = components(blocked) if labelled is None else labelled
-    parts, stats = labelled.labels, labelled.stats
+    stats = labelled.stats
     h, w = blocked.shape
     x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
     bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
     keep = (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (np.maximum(bw, bh) <= max_extent_px)
     keep[0] = False
-    return np.asarray(keep if flags else np.take(keep, parts), dtype=bool)
+    return np.asarray(keep if flags else labelled.spread(keep), dtype=bool)
 
 
 def desk_clusters(
@@ -570,7 +572,7 @@ def desk_clusters(
         rows, cols = nonzero_rc(parts[y : y + bh, x : x + bw] == k)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
         ok[k] = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
-    out[box] = keep & np.take(ok, parts)
+    out[box] = keep & labelled.spread(ok)
     return out
 
 
@@ -609,14 +611,14 @@ def free_standing(
     isl = islands(obstacle, max_extent_px=max_extent_m / resolution_m, labelled=labelled)
     if not isl.any():
         return isl
-    rest = obstacle & ~isl
-    gap = cv2.distanceTransform((~rest).astype(np.uint8), cv2.DIST_L2, 5)
-    parts = labelled.labels  # an island is a whole component of the obstacles
-    nearest = np.full(len(labelled.stats), np.inf, dtype=np.float32)
-    np.minimum.at(nearest, parts[isl], gap[isl])
-    keep = nearest * resolution_m >= min_clearance_m
+    # an island is kept when its least distance to the other obstacles, in metres, reaches the clearance: when
+    # none of its pixels falls short of it (the distance transform read only at the islands, as one dilation)
+    short = short_of(obstacle & ~isl, resolution_m, min_clearance_m)
+    short &= isl
+    keep = np.ones(len(labelled.stats), dtype=bool)
+    keep[labelled.labels.ravel()[np.flatnonzero(short)]] = False  # an island is a whole component of the obstacles
     keep[0] = False
-    return np.asarray(np.take(keep, parts) & isl, dtype=bool)
+    return np.asarray(labelled.spread(keep) & isl, dtype=bool)
 
 
 def _share(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:

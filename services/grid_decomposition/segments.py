@@ -39,18 +39,35 @@ def fill_from_neighbours(
     height, width = segments.shape
     r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, height)
     c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, width)
+    framed_size = (r1 - r0 + 2) * (c1 - c0 + 2)
+    if min(rows[0], cols[0]) >= 2 and rows[-1] < height - 2 and cols[-1] < width - 2 and 2 * framed_size >= hole.size:
+        # holes two pixels or more inside the image, their box most of it: the copy returned is the working image
+        # (the front is a pixel or more inside it, so its neighbours' flat indices never leave it or wrap a row)
+        out = segments.astype(np.int32)  # a copy
+        _grow(out, hole, width, framed_size, int(out[r0:r1, c0:c1].max()), max_iterations)
+        return out
     # the box framed by zeros is the working copy (the image's own copy only when the box is not all of it)
-    lab = cv2.copyMakeBorder(
+    lab: npt.NDArray[np.int32] = np.asarray(cv2.copyMakeBorder(
         segments[r0:r1, c0:c1].astype(np.int32, copy=False), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0
-    )
-    w = c1 - c0
+    ), dtype=np.int32)
     open_ = cv2.copyMakeBorder(hole[r0:r1, c0:c1].view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0).view(bool)
+    _grow(lab, open_, c1 - c0 + 2, framed_size, int(lab.max()), max_iterations)
+    if (r1 - r0, c1 - c0) == (height, width):
+        return np.ascontiguousarray(lab[1:-1, 1:-1])
+    out = segments.astype(np.int32)  # a copy
+    out[r0:r1, c0:c1] = lab[1:-1, 1:-1]
+    return out
+
+
+def _grow(
+    lab: npt.NDArray[np.int32], open_: npt.NDArray[np.bool_], stride: int, framed_size: int, top: int, steps: int
+) -> None:
+    """:func:`fill_from_neighbours` in place on ``lab``, whose holes are ``open_`` (taken as they fill): images
+    ``stride`` wide in which every neighbour of a pixel next to a hole lies (a frame of zeros, or a margin);
+    ``framed_size`` is the framed box's pixels and ``top`` the largest id in it (they choose the first step)."""
     lab_flat, open_flat = lab.ravel(), open_.ravel()
-    stride = w + 2
     offsets = np.array([-stride - 1, -stride, -stride + 1, -1, 1, stride - 1, stride, stride + 1], dtype=np.int64)
-    steps = max_iterations
-    top = int(lab.max())
-    if steps > 0 and np.count_nonzero(open_) * 32 >= open_.size and top < 2**24:
+    if steps > 0 and np.count_nonzero(open_) * 32 >= framed_size and top < 2**24:
         # many holes (the lines through a map): the first step at once, as a grey dilation of the
         # box (ids below 2**8 in uint8, below 2**16 in uint16, below 2**24 exact in float32)
         dtype = np.uint8 if top < 2**8 else np.uint16 if top < 2**16 else np.float32
@@ -64,7 +81,7 @@ def fill_from_neighbours(
         if left.size < front.size:
             filled_now = np.zeros(lab_flat.size, dtype=bool)
             filled_now[front] = True
-            around = (left[:, None] + offsets).ravel()  # in the box: its border is never a hole
+            around = (left[:, None] + offsets).ravel()  # in the image: a hole's neighbours are
             front = around[filled_now[around]]
             filled_now[:] = False
             front = distinct(front, filled_now)
@@ -85,11 +102,6 @@ def fill_from_neighbours(
         # the next front: each filled pixel once (the order of a front does not matter)
         front = distinct(cand, seen)
         open_flat[front] = False
-    if (r1 - r0, c1 - c0) == (height, width):
-        return np.ascontiguousarray(lab[1:-1, 1:-1])
-    out = segments.astype(np.int32)  # a copy
-    out[r0:r1, c0:c1] = lab[1:-1, 1:-1]
-    return out
 
 
 def segment_image(
@@ -277,16 +289,26 @@ def merge_passages(
     area = label_counts(seg, n)[0]
     still = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed[:n], dtype=bool).copy()
     still[0] = True
-    inner = seg > 0  # the pixels with the same segment on all four sides: the widest disc from the rest
-    inner[1:] &= seg[1:] == seg[:-1]
-    inner[:-1] &= seg[:-1] == seg[1:]
-    inner[:, 1:] &= seg[:, 1:] == seg[:, :-1]
-    inner[:, :-1] &= seg[:, :-1] == seg[:, 1:]
-    inner[[0, -1]] = False
+    candidate = (area > 0) & (area < max_area_px) & ~still
+    if not candidate.any():
+        return _relabel(seg, np.arange(n), area > 0)
+    # their widths, within the box round them and a pixel more: a segment's widest disc lies in its own box
+    at = lookup(candidate, seg)
+    rows, cols = np.flatnonzero(at.any(axis=1)), np.flatnonzero(at.any(axis=0))
+    h, w = seg.shape
+    r0, r1 = max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, h)
+    c0, c1 = max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, w)
+    box = seg[r0:r1, c0:c1]
+    inner = box > 0  # the pixels with the same segment on all four sides: the widest disc from the rest
+    inner[1:] &= box[1:] == box[:-1]
+    inner[:-1] &= box[:-1] == box[1:]
+    inner[:, 1:] &= box[:, 1:] == box[:, :-1]
+    inner[:, :-1] &= box[:, :-1] == box[:, 1:]
+    inner[[0, -1]] = False  # the image's edge, or a pixel beside the segments looked at
     inner[:, [0, -1]] = False
-    depth = np.asarray(cv2.distanceTransform(inner.astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
-    width = 2 * label_max(seg, depth, n)[0] + 1
-    candidate = (area > 0) & (area < max_area_px) & (width <= max_width_px) & ~still
+    depth = np.asarray(cv2.distanceTransform(inner.view(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
+    width = 2 * label_max(box, depth, n)[0] + 1
+    candidate &= width <= max_width_px
     if not candidate.any():
         return _relabel(seg, np.arange(n), area > 0)
     pairs, border, _ = border_closure(seg, None)
@@ -378,6 +400,19 @@ def renumber(seg: npt.NDArray[np.int32], *, copy: bool = True) -> npt.NDArray[np
     if np.array_equal(lut, np.arange(lut.size)):
         return np.array(seg, dtype=np.int32, copy=True) if copy else np.asarray(seg, dtype=np.int32)
     return lookup(lut, seg, runs)
+
+
+def renumber_mapped(lut: npt.NDArray[np.int32], seg: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """``renumber(np.take(lut, seg))`` from the runs of ``seg``: the ids ``lut`` gives the runs, renumbered, spread
+    once (no image of the mapped ids in between)."""
+    if seg.size == 0:
+        return np.take(lut, seg).astype(np.int32)
+    value, length = value_runs(seg)
+    mapped = lut[value]
+    present = np.bincount(mapped) > 0
+    present[0] = False
+    new = np.where(present, np.cumsum(present), 0).astype(np.int32)
+    return np.repeat(new[mapped], length).reshape(seg.shape)
 
 
 def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:

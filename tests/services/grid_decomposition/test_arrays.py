@@ -8,7 +8,9 @@ import pytest
 from scipy import ndimage
 
 from services.grid_decomposition.arrays import (
+    components,
     components_stats,
+    components_stats_runs,
     distinct,
     label_boxes,
     label_counts,
@@ -17,6 +19,7 @@ from services.grid_decomposition.arrays import (
     lookup,
     near,
     nonzero_rc,
+    short_of,
     unique_inverse,
     value_runs,
 )
@@ -107,6 +110,25 @@ def test_components_stats_are_opencvs_labels_and_stats(connectivity: int, seed: 
             assert got_stats.dtype == np.int32 and np.array_equal(got_stats, stats)
 
 
+@pytest.mark.parametrize("connectivity", [4, 8])
+@pytest.mark.parametrize("seed", range(4))
+def test_components_runs_spread_a_table_as_the_gather_of_every_pixel(connectivity: int, seed: int) -> None:
+    """The runs the statistics came from cover the labels in raster order; a table spread by them is the gather."""
+    rng = np.random.default_rng(seed)
+    for density in (0.0, 0.03, 0.5, 1.0):
+        mask = rng.random((int(rng.integers(1, 70)), int(rng.integers(1, 70)))) < density
+        n, labels, stats, (label, length) = components_stats_runs(mask, connectivity)
+        assert (n, labels.tolist(), stats.tolist()) == tuple(
+            v.tolist() if isinstance(v, np.ndarray) else v for v in components_stats(mask, connectivity)
+        )
+        assert np.array_equal(np.repeat(label, length), labels.ravel())
+        table = rng.random(n) < 0.5
+        assert np.array_equal(lookup(table, labels, (label, length)), table[labels])
+        if connectivity == 8:
+            parts = components(mask)
+            assert np.array_equal(parts.spread(table), table[parts.labels])
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_lookup_by_runs_is_the_gather_of_every_pixel(seed: int) -> None:
     rng = np.random.default_rng(seed)
@@ -142,3 +164,17 @@ def test_nonzero_rc_is_numpys_nonzero_of_an_image(seed: int) -> None:
         expected_rows, expected_cols = np.nonzero(array)
         assert rows.dtype == expected_rows.dtype and cols.dtype == expected_cols.dtype
         assert np.array_equal(rows, expected_rows) and np.array_equal(cols, expected_cols)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_short_of_is_the_scaled_distance_transform_compared(seed: int) -> None:
+    """Masks sparse to full, scales and limits as Python, float64 and float32 numbers (each compares in its own
+    precision), limits at or below zero (nothing falls short), the map border."""
+    rng = np.random.default_rng(seed)
+    for density in (0.0, 0.002, 0.05, 0.5, 1.0):
+        mask = rng.random((int(rng.integers(1, 90)), int(rng.integers(1, 90)))) < density
+        distance = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, 5)
+        for scale, limit in ((0.05, 0.3), (np.float64(0.05), 0.3), (np.float32(0.05), np.float32(0.3)),
+                             (0.1, float(rng.uniform(0.0, 1.5))), (0.05, 0.0), (0.05, -1.0)):
+            got = short_of(mask, scale, limit)
+            assert got.dtype == np.bool_ and np.array_equal(got, ~(distance * scale >= limit))

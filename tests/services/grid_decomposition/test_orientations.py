@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import dominant_orientations, oriented_gradients
-from services.grid_decomposition.orientations import _gmm_smooth
+from services.grid_decomposition.orientations import _gmm_smooth, _sharpness
 
 
 def _angle_error(a: float, b: float) -> float:
@@ -81,3 +81,19 @@ def test_orientation_histogram_mixture_is_scikit_learns(seed: int) -> None:
     for centre in rng.integers(0, 180, 1 + seed):
         hist += rng.uniform(10, 100) * np.exp(-0.5 * ((bins - centre) / rng.uniform(0.5, 5.0)) ** 2)
     assert np.array_equal(_gmm_smooth(hist, 4), _sklearn_smooth(hist, 4))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sharpness_is_the_sum_of_squares_of_the_linearly_split_histogram(seed: int) -> None:
+    """Bit for bit the two-histogram form (floor, a point's weight to its bin and the next), at any angle."""
+    rng = np.random.default_rng(seed)
+    for angle in (0.0, math.pi / 2, math.pi / 4, 1e-9, float(rng.uniform(-math.pi, math.pi))):
+        n = int(rng.integers(1, 3000))
+        rows, cols = rng.integers(0, 2000, n).astype(np.float64), rng.integers(0, 2000, n).astype(np.float64)
+        s = -math.sin(angle) * cols + math.cos(angle) * rows
+        s -= s.min()
+        whole = np.floor(s).astype(np.int64)
+        part = s - whole
+        size = int(whole.max()) + 2
+        hist = np.bincount(whole, 1.0 - part, size) + np.bincount(whole + 1, part, size)
+        assert _sharpness(angle, rows, cols) == float(np.dot(hist, hist))

@@ -13,6 +13,8 @@ from services.grid_decomposition.segments import (
     merge_open_segments,
     merge_passages,
     merge_small_segments,
+    renumber,
+    renumber_mapped,
     same_value_pieces,
     segment_image,
     split_along,
@@ -179,6 +181,12 @@ def test_fill_from_neighbours_grows_a_step_at_a_time_through_lines_and_wide_gaps
     target[66:70, 10:20] = True
     filled = fill_from_neighbours(seg, target, max_iterations=steps)
     assert np.array_equal(filled, _grown_step_by_step(seg, target, steps))
+    # the same inside a labelled margin: the holes two pixels or more from the image's edge (no frame is needed)
+    for margin in (2, 3):
+        inner = np.pad(seg, margin, constant_values=1)
+        inside = np.pad(target, margin, constant_values=False)
+        filled = fill_from_neighbours(inner, inside, max_iterations=steps)
+        assert filled.dtype == np.int32 and np.array_equal(filled, _grown_step_by_step(inner, inside, steps))
 
 
 def test_a_strip_between_two_cuts_joins_a_room_and_a_small_room_behind_a_door_stays() -> None:
@@ -210,3 +218,18 @@ def test_a_piece_of_a_corridor_between_two_cuts_stays_between_its_rooms() -> Non
     seg[0:120, 130:200] = 3
     out = merge_passages(seg, max_area_px=1500, max_width_px=20, min_border_px=10)
     assert sorted(np.unique(out).tolist()) == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_renumber_mapped_is_the_renumbered_lookup(seed: int) -> None:
+    """Ids joined by a table (some to 0, some to one another, gaps left) then numbered 1..N: as in two steps."""
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(1, 40, 2))
+    seg = np.repeat(rng.integers(0, 12, (h, (w + 2) // 3)), 3, axis=1)[:, :w].astype(np.int32)
+    for lut in (np.arange(12, dtype=np.int32), rng.integers(0, 15, 12).astype(np.int32)):
+        lut[0] = 0
+        expected = renumber(np.take(lut, seg))
+        got = renumber_mapped(lut, seg)
+        assert got.dtype == np.int32 and got.shape == seg.shape and np.array_equal(got, expected)
+    empty = np.zeros((0, 3), dtype=np.int32)
+    assert renumber_mapped(np.arange(4, dtype=np.int32), empty).shape == (0, 3)
