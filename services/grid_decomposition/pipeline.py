@@ -33,6 +33,7 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
+from services.grid_decomposition.openings import join_unseen_openings
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.racks import (
@@ -323,6 +324,7 @@ def decompose(
     rejoin_room_pieces: bool = True,
     inside_furniture_max_m2: float = 1.5,
     passage_max_m2: float = 3.0,
+    unseen_opening_m: float = 0.75,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -419,6 +421,11 @@ def decompose(
         each, along a third of its outline or more (the strip between two cuts across a room, its long sides on the
         cuts), joins the one it shares the longest border with
         (:func:`~services.grid_decomposition.segments.merge_passages`); 0 turns it off.
+    unseen_opening_m : float
+        Two regions whose border is one straight cut at most ``cut_max_width_m`` long with no occupied cell within
+        this distance of either end (from unknown space to unknown space: across a strip of laser rays, no doorway
+        in a wall the laser saw) join (:func:`~services.grid_decomposition.openings.join_unseen_openings`); 0 turns
+        it off.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -665,6 +672,12 @@ def decompose(
                 segments, max_area_px=round(passage_max_m2 / resolution_m**2),
                 max_width_px=_PASSAGE_MAX_WIDTH_M / resolution_m,
                 min_border_px=round(_PASSAGE_MIN_BORDER_M / resolution_m), fixed=on_floor > 0.5 * size,
+            )
+        if unseen_opening_m > 0:  # a cut from unknown space to unknown space parts nothing the laser saw
+            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            segments = join_unseen_openings(
+                segments, obstacle, occupied, resolution_m=resolution_m, fixed=on_floor > 0.5 * size,
+                max_width_m=cut_max_width_m, unseen_m=unseen_opening_m,
             )
         # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
         floor_space = free | streaks
