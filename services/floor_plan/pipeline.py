@@ -112,6 +112,12 @@ class FloorPlanSettings:
     every free cell is labelled. C_M and K(W,M) do not change."""
     fringe_wall_m2: float = 1.0
     """... of a wall: a connected piece of cells that are not free at least this large (furniture is no wall)."""
+    fringe_inside_m2: float = 1.5
+    """... and not the inside of a piece of furniture: free space enclosed by cells that are not free, at most this
+    large and at least ``fringe_inside_depth_m`` from them somewhere (a cupboard drawn as an outline filled light
+    grey, :func:`~services.floor_plan.rooms.furniture_insides`; the grid decomposition's ``inside_furniture`` joins
+    such space, up to 1.5 m², to its room); 0: every fringe cell is left out."""
+    fringe_inside_depth_m: float = 0.1
     slant_line_m: float | None = 1.0
     """The map's straight wall lines at least this long (:func:`~services.floor_plan.detectors.wall_line_segments`),
     found once for the slanted walls and the rooms' re-cut along them; None: neither (no lines)."""
@@ -264,7 +270,9 @@ def floor_plan(
               beam_traces(classes_map, width_cells=_cells(s.trace_max_m, resolution_m)))
     fringe = (np.zeros(classes_map.shape, np.bool_) if s.fringe_m is None else
               wall_fringe(occupancy, classes_map == CellClass.FREE, depth_cells=_cells(s.fringe_m, resolution_m),
-                          min_wall_cells=max(1, round(s.fringe_wall_m2 / resolution_m**2))))
+                          min_wall_cells=max(1, round(s.fringe_wall_m2 / resolution_m**2)),
+                          inside_max_cells=round(s.fringe_inside_m2 / resolution_m**2),
+                          inside_min_depth_cells=max(1, round(s.fringe_inside_depth_m / resolution_m))))
     classes_map[traces] = CellClass.UNKNOWN
     solid = _obstacles(classes_map, s, resolution_m)
     if s.wall_m is None:

@@ -377,15 +377,19 @@ def room_keys(rooms: list[Room]) -> list[str]:
 
 
 def wall_fringe(occupancy: npt.NDArray[np.integer], free: npt.NDArray[np.bool_], *, depth_cells: int,
-                min_wall_cells: int = 1) -> npt.NDArray[np.bool_]:
+                min_wall_cells: int = 1, inside_max_cells: int = 0,
+                inside_min_depth_cells: int = 2) -> npt.NDArray[np.bool_]:
     """The wall fringe: free cells that are not clearly free, within ``depth_cells`` of a wall and joined to it
-    through such cells (8-connected).
+    through such cells (8-connected), but not the inside of a piece of furniture (:func:`furniture_insides` with
+    ``inside_max_cells`` and ``inside_min_depth_cells``; 0: none is).
 
     Not clearly free is more than 1 percent above the map's clearest free cell: an image's grey edge along its walls
     (antialiasing), a live map's cells seen free fewer times than its clamp. A wall is a connected piece of cells
     that are not free of at least ``min_wall_cells``: a room's walls, not a desk, bin or chair leg standing in it
     (a furnished map's furniture drawn grey keeps its labels). The ipa ground truth leaves that edge out of every
-    room, and the grid decomposition never labels it (its cleaning turns it to wall, the same rule).
+    room, and the grid decomposition never labels it (its cleaning turns it to wall, the same rule). A cupboard
+    drawn as a dark outline filled light grey against a wall is one piece with the wall, and its light inside reads
+    free but not clearly free: it is the room's floor under the cupboard (the ground truth counts it), no edge.
 
     Parameters
     ----------
@@ -412,6 +416,26 @@ def wall_fringe(occupancy: npt.NDArray[np.integer], free: npt.NDArray[np.bool_],
     touching[np.unique(parts[candidate & (cv2.dilate(wall, np.ones((3, 3), np.uint8)) > 0)])] = True
     touching[0] = False
     out: npt.NDArray[np.bool_] = touching[parts]
+    if inside_max_cells > 0:
+        out &= ~furniture_insides(free, max_cells=inside_max_cells, min_depth_cells=inside_min_depth_cells)
+    return out
+
+
+def furniture_insides(free: npt.NDArray[np.bool_], *, max_cells: int, min_depth_cells: int) -> npt.NDArray[np.bool_]:
+    """The free space enclosed in a piece of furniture: 8-connected pieces of ``free`` of at most ``max_cells``, off
+    the map's border, holding a cell at least ``min_depth_cells`` from every cell that is not free (the light inside
+    of a cupboard drawn as an outline; not the one-cell light line along a wall drawn grey, nor a speck)."""
+    mask = np.asarray(free, np.uint8)
+    n, parts, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] <= max_cells
+    keep[0] = False
+    keep[np.unique(np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]])] = False
+    if not keep.any():
+        return np.zeros(mask.shape, np.bool_)
+    depth = cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    deep = np.zeros(n, np.bool_)
+    deep[np.unique(parts[depth >= min_depth_cells])] = True
+    out: npt.NDArray[np.bool_] = (keep & deep)[parts]
     return out
 
 

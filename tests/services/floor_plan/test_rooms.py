@@ -164,6 +164,22 @@ def test_the_wall_fringe_of_a_live_map_is_the_less_seen_free_space_against_a_wal
     assert wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[:, 2:4].all()
 
 
+def test_the_inside_of_a_cupboard_drawn_against_a_wall_is_floor_not_fringe() -> None:
+    occ = np.zeros((40, 50), np.int8)  # an image's room: clear free cells read 0 %
+    occ[:, :2] = occ[:2, :] = occ[:, 48:] = 100  # walls
+    occ[2:10, 2:22] = 100  # a cupboard against the walls, drawn as a dark outline ...
+    occ[4:8, 4:20] = 18  # ... filled light grey: free, not clearly free
+    occ[35:40, 2:48] = -1  # a wall drawn grey, with dark edges ...
+    occ[[35, 37], 2:48] = 100
+    occ[36, 2:48] = 18  # ... and a light line along it, one cell wide
+    free = (occ >= 0) & (occ <= 25)
+    fringe = wall_fringe(occ, free, depth_cells=2, inside_max_cells=600)
+    assert not fringe[4:8, 4:20].any(), "the cupboard's inside is the room's floor"
+    assert fringe[36, 2:48].all(), "the light line inside the grey wall is no furniture's inside"
+    assert wall_fringe(occ, free, depth_cells=2)[4:8, 4:20].all(), "without the rule: an edge of the walls"
+    assert wall_fringe(occ, free, depth_cells=2, inside_max_cells=50)[4:8, 4:20].all(), "larger: not furniture"
+
+
 def test_a_corridor_a_unit_stands_over_stays_one_room_across_the_offices_cross_wall() -> None:
     # one unit explains four offices and the 1 m corridor between them; the 0.5 m wall between the offices
     # cuts the unit across the corridor too, which runs on open through it
