@@ -502,6 +502,35 @@ def furniture(cells: npt.NDArray[np.bool_], *, resolution_m: float,
     return out
 
 
+def furniture_reach(insides: npt.NDArray[np.bool_], blocked: npt.NDArray[np.bool_], *,
+                    reach_cells: int) -> npt.NDArray[np.uint8]:
+    """Where the insides of furniture (:func:`furniture_insides`) look for their room: 2 on an inside, 1 on the cells
+    of ``blocked`` (not free) within ``reach_cells`` of one, 0 elsewhere (:func:`join_insides`)."""
+    size = 2 * max(1, reach_cells) + 1
+    near = cv2.dilate(insides.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))) > 0
+    out: npt.NDArray[np.uint8] = np.where(insides, 2, near & blocked).astype(np.uint8)
+    return out
+
+
+def join_insides(labels: npt.NDArray[np.integer], reach: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
+    """``labels`` with each label found on the insides of furniture only (``reach`` 2, :func:`furniture_reach`: a
+    cupboard's inside the world explains as a room of its own) replaced there by the label nearest to it through the
+    furniture round it (``reach`` 1): the room the cupboard stands in (the grid decomposition's ``inside_furniture``).
+    Insides that share their label with other cells, and those no other label reaches, keep theirs."""
+    lab = np.asarray(labels, np.int32)
+    inside = reach == 2
+    n = int(lab.max()) + 1
+    total = np.bincount(lab.ravel(), minlength=n)
+    own = (total == np.bincount(lab[inside].ravel(), minlength=n)) & (total > 0)
+    own[0] = False
+    target = inside & own[lab]
+    if not target.any():
+        return lab
+    base = np.where(target, 0, lab).astype(np.int32)
+    grown = fill_free(base, (reach > 0) | (base > 0))
+    return np.where(target & (grown > 0), grown, lab).astype(np.int32)
+
+
 def label_furniture(labels: npt.NDArray[np.integer], pieces: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
     """``labels`` with each 8-connected piece of ``pieces`` given the label of the cells round it, where they hold one
     label only (furniture standing in one room; a piece between two rooms keeps none)."""
