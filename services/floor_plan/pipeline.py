@@ -45,7 +45,10 @@ from services.floor_plan.rooms import (
     RoomSettings,
     fill_free,
     furniture,
+    furniture_insides,
+    furniture_reach,
     group_rooms,
+    join_insides,
     label_furniture,
     wall_fringe,
 )
@@ -112,6 +115,15 @@ class FloorPlanSettings:
     every free cell is labelled. C_M and K(W,M) do not change."""
     fringe_wall_m2: float = 1.0
     """... of a wall: a connected piece of cells that are not free at least this large (furniture is no wall)."""
+    fringe_inside_m2: float = 1.5
+    """... and not the inside of a piece of furniture: free space enclosed by cells that are not free, at most this
+    large and at least ``fringe_inside_depth_m`` from them somewhere (a cupboard drawn as an outline filled light
+    grey, :func:`~services.floor_plan.rooms.furniture_insides`; the grid decomposition's ``inside_furniture`` joins
+    such space, up to 1.5 m², to its room); 0: every fringe cell is left out."""
+    fringe_inside_depth_m: float = 0.1
+    fringe_inside_reach_m: float = 0.5
+    """``rooms.png`` gives such an inside the room label nearest to it through the furniture round it, up to this far:
+    the room the cupboard stands in, not a room of its own (``FloorPlan.insides``)."""
     slant_line_m: float | None = 1.0
     """The map's straight wall lines at least this long (:func:`~services.floor_plan.detectors.wall_line_segments`),
     found once for the slanted walls and the rooms' re-cut along them; None: neither (no lines)."""
@@ -196,6 +208,10 @@ class FloorPlan(NamedTuple):
     furniture: npt.NDArray[np.bool_] | None = None
     """Furniture (map cells, GridLayer order): non-free pieces of the map that ``rooms.png`` labels with the room round
     them (``FloorPlanSettings.furniture``); None: none."""
+    insides: npt.NDArray[np.uint8] | None = None
+    """The insides of furniture (map cells, GridLayer order; :func:`~services.floor_plan.rooms.furniture_reach`, 2 on
+    an inside, 1 on the furniture round it within ``fringe_inside_reach_m``): ``rooms.png`` gives each the room label
+    nearest to it through that furniture (``FloorPlanSettings.fringe_inside_m2``); None: none."""
 
     @property
     def slanted_walls(self) -> int:
@@ -264,7 +280,9 @@ def floor_plan(
               beam_traces(classes_map, width_cells=_cells(s.trace_max_m, resolution_m)))
     fringe = (np.zeros(classes_map.shape, np.bool_) if s.fringe_m is None else
               wall_fringe(occupancy, classes_map == CellClass.FREE, depth_cells=_cells(s.fringe_m, resolution_m),
-                          min_wall_cells=max(1, round(s.fringe_wall_m2 / resolution_m**2))))
+                          min_wall_cells=max(1, round(s.fringe_wall_m2 / resolution_m**2)),
+                          inside_max_cells=round(s.fringe_inside_m2 / resolution_m**2),
+                          inside_min_depth_cells=_cells(s.fringe_inside_depth_m, resolution_m)))
     classes_map[traces] = CellClass.UNKNOWN
     solid = _obstacles(classes_map, s, resolution_m)
     if s.wall_m is None:
@@ -442,7 +460,20 @@ def describe(
                      np.zeros(classes_map.shape, np.bool_) if fringe is None else fringe, traces,
                      None if settings.furniture is None else furniture(
                          (classes_map != CellClass.FREE) & ~traces, resolution_m=resolution_m,
-                         settings=settings.furniture))
+                         settings=settings.furniture), _insides(classes_map, traces, settings, resolution_m))
+
+
+def _insides(classes_map: npt.NDArray[np.uint8], traces: npt.NDArray[np.bool_], settings: FloorPlanSettings,
+             resolution_m: float) -> npt.NDArray[np.uint8] | None:
+    """The insides of furniture and the furniture round them (``FloorPlan.insides``), or None where there are none."""
+    if settings.fringe_inside_m2 <= 0:
+        return None
+    free = (classes_map == CellClass.FREE) | traces
+    inside = furniture_insides(free, max_cells=round(settings.fringe_inside_m2 / resolution_m**2),
+                               min_depth_cells=_cells(settings.fringe_inside_depth_m, resolution_m))
+    if not inside.any():
+        return None
+    return furniture_reach(inside, ~free, reach_cells=_cells(settings.fringe_inside_reach_m, resolution_m))
 
 
 def _slant_lines(classes_work: npt.NDArray[np.uint8], settings: FloorPlanSettings,
@@ -478,12 +509,14 @@ def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
 
 def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
     """A label image like :func:`unit_labels` with one id per room (1..R in the order of ``plan.rooms``): each
-    room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds, and the
-    furniture standing in it (``plan.furniture``)."""
+    room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds, the
+    furniture standing in it (``plan.furniture``) and the insides of furniture, with the room nearest to them through
+    the furniture (``plan.insides``)."""
     cells = to_map(plan.frame, plan.room_cells.astype(np.float32), fill=0.0).astype(np.int32)
     out = fill_free(cells, (plan.classes_map == CellClass.FREE) | plan.traces)
     out[plan.fringe] = 0
-    return out if plan.furniture is None else label_furniture(out, plan.furniture)
+    out = out if plan.furniture is None else label_furniture(out, plan.furniture)
+    return out if plan.insides is None else join_insides(out, plan.insides)
 
 
 def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.int32]:

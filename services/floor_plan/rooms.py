@@ -378,15 +378,19 @@ def room_keys(rooms: list[Room]) -> list[str]:
 
 
 def wall_fringe(occupancy: npt.NDArray[np.integer], free: npt.NDArray[np.bool_], *, depth_cells: int,
-                min_wall_cells: int = 1) -> npt.NDArray[np.bool_]:
+                min_wall_cells: int = 1, inside_max_cells: int = 0,
+                inside_min_depth_cells: int = 2) -> npt.NDArray[np.bool_]:
     """The wall fringe: free cells that are not clearly free, within ``depth_cells`` of a wall and joined to it
-    through such cells (8-connected).
+    through such cells (8-connected), but not the inside of a piece of furniture (:func:`furniture_insides` with
+    ``inside_max_cells`` and ``inside_min_depth_cells``; 0: none is).
 
     Not clearly free is more than 1 percent above the map's clearest free cell: an image's grey edge along its walls
     (antialiasing), a live map's cells seen free fewer times than its clamp. A wall is a connected piece of cells
     that are not free of at least ``min_wall_cells``: a room's walls, not a desk, bin or chair leg standing in it
     (a furnished map's furniture drawn grey keeps its labels). The ipa ground truth leaves that edge out of every
-    room, and the grid decomposition never labels it (its cleaning turns it to wall, the same rule).
+    room, and the grid decomposition never labels it (its cleaning turns it to wall, the same rule). A cupboard
+    drawn as a dark outline filled light grey against a wall is one piece with the wall, and its light inside reads
+    free but not clearly free: it is the room's floor under the cupboard (the ground truth counts it), no edge.
 
     Parameters
     ----------
@@ -413,6 +417,26 @@ def wall_fringe(occupancy: npt.NDArray[np.integer], free: npt.NDArray[np.bool_],
     touching[np.unique(parts[candidate & (cv2.dilate(wall, np.ones((3, 3), np.uint8)) > 0)])] = True
     touching[0] = False
     out: npt.NDArray[np.bool_] = touching[parts]
+    if inside_max_cells > 0:
+        out &= ~furniture_insides(free, max_cells=inside_max_cells, min_depth_cells=inside_min_depth_cells)
+    return out
+
+
+def furniture_insides(free: npt.NDArray[np.bool_], *, max_cells: int, min_depth_cells: int) -> npt.NDArray[np.bool_]:
+    """The free space enclosed in a piece of furniture: 8-connected pieces of ``free`` of at most ``max_cells``, off
+    the map's border, holding a cell at least ``min_depth_cells`` from every cell that is not free (the light inside
+    of a cupboard drawn as an outline; not the one-cell light line along a wall drawn grey, nor a speck)."""
+    mask = np.asarray(free, np.uint8)
+    n, parts, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] <= max_cells
+    keep[0] = False
+    keep[np.unique(np.r_[parts[0], parts[-1], parts[:, 0], parts[:, -1]])] = False
+    if not keep.any():
+        return np.zeros(mask.shape, np.bool_)
+    depth = cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    deep = np.zeros(n, np.bool_)
+    deep[np.unique(parts[depth >= min_depth_cells])] = True
+    out: npt.NDArray[np.bool_] = (keep & deep)[parts]
     return out
 
 
@@ -443,6 +467,35 @@ def furniture(cells: npt.NDArray[np.bool_], *, resolution_m: float,
     keep[0] = False
     out: npt.NDArray[np.bool_] = keep[parts]
     return out
+
+
+def furniture_reach(insides: npt.NDArray[np.bool_], blocked: npt.NDArray[np.bool_], *,
+                    reach_cells: int) -> npt.NDArray[np.uint8]:
+    """Where the insides of furniture (:func:`furniture_insides`) look for their room: 2 on an inside, 1 on the cells
+    of ``blocked`` (not free) within ``reach_cells`` of one, 0 elsewhere (:func:`join_insides`)."""
+    size = 2 * max(1, reach_cells) + 1
+    near = cv2.dilate(insides.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))) > 0
+    out: npt.NDArray[np.uint8] = np.where(insides, 2, near & blocked).astype(np.uint8)
+    return out
+
+
+def join_insides(labels: npt.NDArray[np.integer], reach: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
+    """``labels`` with each label found on the insides of furniture only (``reach`` 2, :func:`furniture_reach`: a
+    cupboard's inside the world explains as a room of its own) replaced there by the label nearest to it through the
+    furniture round it (``reach`` 1): the room the cupboard stands in (the grid decomposition's ``inside_furniture``).
+    Insides that share their label with other cells, and those no other label reaches, keep theirs."""
+    lab = np.asarray(labels, np.int32)
+    inside = reach == 2
+    n = int(lab.max()) + 1
+    total = np.bincount(lab.ravel(), minlength=n)
+    own = (total == np.bincount(lab[inside].ravel(), minlength=n)) & (total > 0)
+    own[0] = False
+    target = inside & own[lab]
+    if not target.any():
+        return lab
+    base = np.where(target, 0, lab).astype(np.int32)
+    grown = fill_free(base, (reach > 0) | (base > 0))
+    return np.where(target & (grown > 0), grown, lab).astype(np.int32)
 
 
 def label_furniture(labels: npt.NDArray[np.integer], pieces: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:

@@ -7,7 +7,16 @@ import numpy as np
 import numpy.typing as npt
 
 from services.floor_plan import CellClass, Rect, RoomSettings, UnitType, World, group_rooms, room_keys
-from services.floor_plan.rooms import FurnitureSettings, fill_free, furniture, label_furniture, wall_fringe
+from services.floor_plan.rooms import (
+    FurnitureSettings,
+    fill_free,
+    furniture,
+    furniture_insides,
+    furniture_reach,
+    join_insides,
+    label_furniture,
+    wall_fringe,
+)
 
 RES = 0.05
 T = 2  # wall cells
@@ -162,6 +171,42 @@ def test_the_wall_fringe_of_a_live_map_is_the_less_seen_free_space_against_a_wal
     occ[4:8, 29:33][occ[4:8, 29:33] == 12] = 18  # seen free less often around it
     assert not wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[4:8, 29:33].any(), "furniture is no wall"
     assert wall_fringe(occ, occ <= 25, depth_cells=3, min_wall_cells=20)[:, 2:4].all()
+
+
+def test_the_inside_of_a_cupboard_drawn_against_a_wall_is_floor_not_fringe() -> None:
+    occ = np.zeros((40, 50), np.int8)  # an image's room: clear free cells read 0 %
+    occ[:, :2] = occ[:2, :] = occ[:, 48:] = 100  # walls
+    occ[2:10, 2:22] = 100  # a cupboard against the walls, drawn as a dark outline ...
+    occ[4:8, 4:20] = 18  # ... filled light grey: free, not clearly free
+    occ[35:40, 2:48] = -1  # a wall drawn grey, with dark edges ...
+    occ[[35, 37], 2:48] = 100
+    occ[36, 2:48] = 18  # ... and a light line along it, one cell wide
+    free = (occ >= 0) & (occ <= 25)
+    fringe = wall_fringe(occ, free, depth_cells=2, inside_max_cells=600)
+    assert not fringe[4:8, 4:20].any(), "the cupboard's inside is the room's floor"
+    assert fringe[36, 2:48].all(), "the light line inside the grey wall is no furniture's inside"
+    assert wall_fringe(occ, free, depth_cells=2)[4:8, 4:20].all(), "without the rule: an edge of the walls"
+    assert wall_fringe(occ, free, depth_cells=2, inside_max_cells=50)[4:8, 4:20].all(), "larger: not furniture"
+
+
+def test_a_cupboards_inside_that_is_a_room_of_its_own_joins_the_room_it_stands_in() -> None:
+    free = np.ones((30, 60), np.bool_)
+    free[:, [0, 29, 59]] = free[[0, 29], :] = False  # two offices side by side
+    free[1:9, 1:13] = False  # a cupboard against the first office's walls ...
+    free[3:7, 3:11] = True  # ... whose inside the map shows free
+    labels = np.zeros(free.shape, np.int32)
+    labels[1:29, 1:29], labels[1:29, 30:59] = 1, 2
+    labels[3:7, 3:11] = 3  # the world explains the inside as a room of its own
+    labels[~free] = 0
+    inside = furniture_insides(free, max_cells=100, min_depth_cells=2)
+    assert inside[3:7, 3:11].all() and inside.sum() == 32, "the enclosed free space, nothing else"
+    joined = join_insides(labels, furniture_reach(inside, ~free, reach_cells=10))
+    assert (joined[3:7, 3:11] == 1).all(), "the office the cupboard stands in"
+    assert (joined[labels != 3] == labels[labels != 3]).all()
+    labels[3:7, 3:11] = 1
+    labels[10:12, 3:6] = 3  # the inside's label holds other cells too: a room, not an inside
+    labels[3:7, 3:11] = 3
+    assert (join_insides(labels, furniture_reach(inside, ~free, reach_cells=10)) == labels).all()
 
 
 def test_a_corridor_a_unit_stands_over_stays_one_room_across_the_offices_cross_wall() -> None:
