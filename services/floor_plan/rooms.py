@@ -145,10 +145,7 @@ def unit_parts(
     """Each unit's free space cut along the lines of cells across it that are mostly barrier running along the
     line (a wall the unit stands over: two rooms with a door between them that the world explains as one
     unit). A band of such lines thicker than ``max_wall_m`` is no wall but furniture or unexplored space, and
-    pieces thinner than ``min_part_m`` are not cut off. Rows first, then columns within each piece, then rows again
-    within those, until neither direction cuts a piece: a line's share of barrier is of the piece it crosses, so a
-    cubicle's front with a wide opening, too little wall across a unit that also stands over the space beside the
-    cubicle, cuts the piece the cubicle's side wall cuts off.
+    pieces thinner than ``min_part_m`` are not cut off. Rows first, then columns within each piece.
 
     Parameters
     ----------
@@ -162,13 +159,9 @@ def unit_parts(
         inner = rect.inner(wall_cells)
         if inner.r0 > inner.r1 or inner.c0 > inner.c1:
             continue
-        pieces, rows, still = [inner], True, 0
-        while still < 2:  # until a pass along rows and one along columns cut nothing
-            cut = [p for piece in pieces for p in _cut(barrier.along_rows if rows else barrier.along_cols, piece,
-                                                       least, most, settings.cut_share, rows=rows)]
-            still = still + 1 if len(cut) == len(pieces) else 1
-            pieces, rows = cut, not rows
-        out.extend(Part(uid, p) for p in pieces)
+        for piece in _cut(barrier.along_rows, inner, least, most, settings.cut_share, rows=True):
+            out.extend(Part(uid, p) for p in _cut(barrier.along_cols, piece, least, most, settings.cut_share,
+                                                  rows=False))
     return out
 
 

@@ -209,23 +209,3 @@ def test_a_piece_between_two_rooms_takes_no_label() -> None:
     piece = np.zeros((20, 20), np.bool_)
     piece[8:12, 9:11] = True
     assert (label_furniture(labels, piece)[piece] == 0).all()
-
-
-def test_a_cubicle_a_wide_unit_stands_over_is_cut_off_the_space_in_front_of_it() -> None:
-    # one unit explains a 3 m cubicle and the open space in front of it and beside it (7 m wide); the cubicle's
-    # front is a 2 m opening between two 0.5 m stubs: too little wall across the whole unit to cut it there, enough
-    # across the piece the cubicle's side wall cuts off
-    unit = Rect(0, 59, 0, 139)
-    classes = _walled((60, 140), unit)
-    classes[2:31, 59:61] = CellClass.WALL  # the cubicle's side wall
-    classes[29:31, 2:12] = classes[29:31, 50:61] = CellClass.WALL  # its front's stubs
-    groups = group_rooms(World({1: unit}, set(), 2), classes, {1: UnitType.ROOM}, wall_cells=T, resolution_m=RES,
-                         settings=RoomSettings())
-
-    def room_of(r: int, c: int) -> int:
-        return next(i for i, room in enumerate(groups)
-                    if any(p.r0 <= r <= p.r1 and p.c0 <= c <= p.c1 for p in room.parts))
-
-    assert len(groups) == 2
-    assert room_of(15, 30) != room_of(45, 30), "the cubicle is a room of its own"
-    assert room_of(45, 30) == room_of(45, 100) == room_of(15, 100), "the space in front of it and beside it is one"
