@@ -17,6 +17,7 @@ the global one. The chain does not see them.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple, TypeVar
 
 import numpy as np
@@ -108,6 +109,16 @@ class _Strip(NamedTuple):
 
     def view(self, grid: npt.NDArray[_T]) -> npt.NDArray[_T]:
         return _oriented(grid, self.side, self.face, self.k0, self.k1, self.j0, self.j1)
+
+
+def _box(strip: _Strip) -> tuple[int, int, int, int]:
+    """The cells a wall's strip covers (:meth:`_Strip.view`), as inclusive row and column bounds."""
+    lo, hi = strip.face + strip.k0, strip.face + strip.k1
+    if strip.side in (Side.BOTTOM, Side.RIGHT):
+        lo, hi = strip.face - strip.k1, strip.face - strip.k0
+    if strip.side in (Side.TOP, Side.BOTTOM):
+        return lo, hi, strip.j0, strip.j1
+    return strip.j0, strip.j1, lo, hi
 
 
 def _strips(rect: Rect, doors: list[Rect], shape: tuple[int, int], *, t: int, depth: int,
@@ -220,18 +231,31 @@ def fit_walls(
             n = strip.j1 - strip.j0 + 1
             drawn[uid, strip.side] = (np.zeros(n, np.int64), np.full(n, t, np.int64))
             _draw(counts, strip, *drawn[uid, strip.side], +1)
+    # a wall's best segments depend only on the counts in its strip: after the first pass, a wall is fitted again only
+    # when a wall whose strip overlaps its own has changed since (any other wall would come back as it is drawn)
+    keys = [(uid, strip.side) for uid in sorted(world.units) for strip in strips[uid]]
+    by_key = {(uid, strip.side): strip for uid in world.units for strip in strips[uid]}
+    boxes = np.array([_box(by_key[key]) for key in keys], np.int64).reshape(-1, 4)
+    overlaps = ((boxes[:, None, 0] <= boxes[None, :, 1]) & (boxes[None, :, 0] <= boxes[:, None, 1])
+                & (boxes[:, None, 2] <= boxes[None, :, 3]) & (boxes[None, :, 2] <= boxes[:, None, 3]))
+    np.fill_diagonal(overlaps, False)
+    dirty = np.ones(len(keys), bool)
     for _ in range(passes):
         changed = False
-        for uid in sorted(world.units):
-            for strip in strips[uid]:
-                old = drawn[uid, strip.side]
-                _draw(counts, strip, *old, -1)
-                new = _best(counts, ll, fixed, strip, t=t, max_shift=max_shift, max_thickness=max_thickness,
-                            log_cost=log_cost, segment_cells=segment_cells)
-                if not (np.array_equal(new[0], old[0]) and np.array_equal(new[1], old[1])):
-                    changed = True
-                    drawn[uid, strip.side] = new
-                _draw(counts, strip, *drawn[uid, strip.side], +1)
+        for i, key in enumerate(keys):
+            if not dirty[i]:
+                continue
+            dirty[i] = False
+            strip = by_key[key]
+            old = drawn[key]
+            _draw(counts, strip, *old, -1)
+            new = _best(counts, ll, fixed, strip, t=t, max_shift=max_shift, max_thickness=max_thickness,
+                        log_cost=log_cost, segment_cells=segment_cells)
+            if not (np.array_equal(new[0], old[0]) and np.array_equal(new[1], old[1])):
+                changed = True
+                drawn[key] = new
+                dirty |= overlaps[i]
+            _draw(counts, strip, *drawn[key], +1)
         if not changed:
             break
     segments = {uid: tuple(_segments(strip, *drawn[uid, strip.side]) for strip in strips[uid])
@@ -261,6 +285,24 @@ def _segments(strip: _Strip, shift: npt.NDArray[np.int64], thick: npt.NDArray[np
                  for a, b in zip(starts, ends, strict=True))
 
 
+@functools.lru_cache(maxsize=256)
+def _options(k0: int, k1: int, *, t: int, max_shift: int, max_thickness: int, log_cost: float) -> tuple[
+        npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64], int,
+        npt.NDArray[np.float64]]:
+    """A wall strip's options (``k0..k1`` as in :class:`_Strip`): each (shift, thickness), the rows before its band
+    and up to its band's end, the seed's band among them and each option's cost of entering it (read-only)."""
+    grid = np.meshgrid(np.arange(-max_shift, k1 + 2), np.arange(max_thickness + 1), indexing="ij")
+    ok = grid[0] - grid[1] >= k0  # the band's first row is in the strip
+    shift, thick = grid[0][ok], grid[1][ok]
+    a, b = shift - thick - k0, shift - k0  # rows before the band, rows up to the band's end
+    default = int(np.flatnonzero((shift == 0) & (thick == t))[0])
+    enter = np.full(len(shift), log_cost)  # a segment other than the seed's band costs log_cost
+    enter[default] = 0.0
+    for array in (shift, thick, a, b, enter):
+        array.flags.writeable = False
+    return shift, thick, a, b, default, enter
+
+
 def _best(
     counts: _Counts, ll: npt.NDArray[np.float64], fixed: npt.NDArray[np.bool_], strip: _Strip, *, t: int,
     max_shift: int, max_thickness: int, log_cost: float, segment_cells: int,
@@ -269,28 +311,24 @@ def _best(
     the wall its (shift, thickness)."""
     n_int, n_wall, n_door = (strip.view(c) for c in counts)
     fix = strip.view(fixed)
-    lls = strip.view(ll)
+    ll_free, ll_unknown, ll_wall = (strip.view(ll[k]) for k in (CellClass.FREE, CellClass.UNKNOWN, CellClass.WALL))
+    some_int, some_wall, some_door = n_int > 0, n_wall > 0, n_door > 0
 
-    def cumulative(n_i: npt.NDArray[np.integer], n_w: npt.NDArray[np.integer],
-                   n_d: npt.NDArray[np.integer]) -> npt.NDArray[np.float64]:
-        cls = _classes(n_i, n_w, n_d, fix)
-        cells = np.take_along_axis(lls, cls[None], axis=0)[0]
+    def cumulative(has_int: npt.NDArray[np.bool_], has_wall: npt.NDArray[np.bool_],
+                   has_door: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
+        wall = (has_wall & ~has_door) | fix  # as _classes draws it
+        cells = np.where(wall, ll_wall, np.where(has_int | has_door, ll_free, ll_unknown))
         return np.concatenate([np.zeros((1, cells.shape[1])), np.cumsum(cells, axis=0)])
 
-    none = cumulative(n_int, n_wall, n_door)
-    band = cumulative(n_int, n_wall + 1, n_door + strip.door)
-    inside = cumulative(n_int + strip.mid, n_wall, n_door)
-    grid = np.meshgrid(np.arange(-max_shift, strip.k1 + 2), np.arange(max_thickness + 1), indexing="ij")
-    ok = grid[0] - grid[1] >= strip.k0  # the band's first row is in the strip
-    shift, thick = grid[0][ok], grid[1][ok]
-    a, b = shift - thick - strip.k0, shift - strip.k0  # rows before the band, rows up to the band's end
+    none = cumulative(some_int, some_wall, some_door)
+    band = cumulative(some_int, n_wall >= 0, some_door | strip.door)  # n_wall + 1 > 0
+    inside = cumulative(some_int | strip.mid, some_wall, some_door)
+    shift, thick, a, b, default, enter = _options(strip.k0, strip.k1, t=t, max_shift=max_shift,
+                                                  max_thickness=max_thickness, log_cost=log_cost)
     per_cell = none[a] + band[b] - band[a] + inside[-1] - inside[b]  # (options, positions along)
     per_cell -= 1e-6 * thick[:, None]  # where the map cannot tell (a free cell drawn wall or unknown), less wall
     blocks = np.arange(0, per_cell.shape[1], segment_cells)
     score = np.add.reduceat(per_cell, blocks, axis=1)
-    default = int(np.flatnonzero((shift == 0) & (thick == t))[0])
-    enter = np.full(len(shift), log_cost)  # a segment other than the seed's band costs log_cost
-    enter[default] = 0.0
     value = score[:, 0] - enter
     back = np.zeros(score.shape, np.int64)
     for i in range(1, score.shape[1]):
