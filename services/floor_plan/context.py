@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from services.floor_plan.world import Rect, UnitType, World, in_wall, shared_band
+from services.floor_plan.world import Rect, UnitType, World, in_wall, shared_band, sharing
 
 
 @dataclass(frozen=True)
@@ -130,9 +130,13 @@ class ContextPrior:
                     if r0 <= d.r0 and d.r1 <= r1 and c0 <= d.c0 and d.c1 <= c1 and in_wall(rect, d, self.wall_cells))
         return geometry_evidence(rect, doors, resolution_m=self.resolution_m, settings=self.settings)
 
-    def _pair_term(self, world: World, p: int, q: int, band: Rect) -> float:
+    def _pair_term(self, world: World, p: int, q: int, band: Rect, evidence: dict[int, UnitEvidence]) -> float:
+        """The same-length term of adjacent units ``p`` and ``q``; ``evidence`` memoises :meth:`_evidence` by unit."""
         s = self.settings
-        if same_length_probability(self._evidence(world, p), self._evidence(world, q), s) <= s.same_length_threshold:
+        for u in (p, q):
+            if u not in evidence:
+                evidence[u] = self._evidence(world, u)
+        if same_length_probability(evidence[p], evidence[q], s) <= s.same_length_threshold:
             return 0.0
         a, b = world.units[p], world.units[q]
         along_rows = band.rows > band.cols
@@ -140,13 +144,21 @@ class ContextPrior:
         return -s.prior_weight * d * d / (2 * s.same_length_sigma_m**2)
 
     def neighbours(self, world: World, uid: int) -> list[tuple[int, Rect]]:
+        """The units sharing a wall with ``uid`` (in the world's order) and the band they share."""
+        ids = list(world.units)
+        return self._neighbours(world, uid, ids, np.array(list(world.units.values()), np.int64).reshape(-1, 4))
+
+    def _neighbours(self, world: World, uid: int, ids: list[int],
+                    boxes: npt.NDArray[np.int64]) -> list[tuple[int, Rect]]:
+        """:meth:`neighbours` given the world's ids and their rectangles as rows ``r0, r1, c0, c1``."""
         rect = world.units[uid]
         out = []
-        for other, r in world.units.items():
+        for k in np.flatnonzero(sharing(rect, boxes, self.wall_cells)):
+            other = ids[k]
             if other != uid:
-                band = shared_band(rect, r, self.wall_cells)
-                if band is not None:
-                    out.append((other, band))
+                band = shared_band(rect, world.units[other], self.wall_cells)
+                assert band is not None  # sharing() is shared_band's test
+                out.append((other, band))
         return out
 
     def local(self, world: World, ids: set[int]) -> float:
@@ -154,15 +166,18 @@ class ContextPrior:
         if self.settings.prior_weight == 0:
             return 0.0
         seen: set[tuple[int, int]] = set()
+        evidence: dict[int, UnitEvidence] = {}
         total = 0.0
+        order = list(world.units)
+        boxes = np.array(list(world.units.values()), np.int64).reshape(-1, 4)
         for uid in ids:
             if uid not in world.units:
                 continue
-            for other, band in self.neighbours(world, uid):
+            for other, band in self._neighbours(world, uid, order, boxes):
                 key = (min(uid, other), max(uid, other))
                 if key not in seen:
                     seen.add(key)
-                    total += self._pair_term(world, uid, other, band)
+                    total += self._pair_term(world, uid, other, band, evidence)
         return total
 
     def total(self, world: World) -> float:

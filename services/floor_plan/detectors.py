@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.floor_plan.likelihood import CellClass
-from services.floor_plan.world import Rect, Side, World, shared_band, wall_band
+from services.floor_plan.world import Rect, Side, World, shared_band, sharing, wall_band
 
 
 class Evidence:
@@ -345,6 +345,15 @@ def split_rect(rect: Rect, axis: int, position: int, wall_cells: int) -> tuple[R
     return rect._replace(c1=position + t - 1), rect._replace(c0=position)
 
 
+def _sharing(rects: list[Rect], wall_cells: int) -> npt.NDArray[np.int64]:
+    """The pairs ``(a, b)``, ``a < b`` in row-major order, of ``rects`` that share a wall
+    (:func:`~services.floor_plan.world.sharing`), all pairs tested at once."""
+    boxes = np.array(rects, np.int64).reshape(-1, 4)
+    column = Rect(*(boxes[:, None, k] for k in range(4)))  # type: ignore[arg-type]  # Rect of arrays: broadcasts
+    out: npt.NDArray[np.int64] = np.argwhere(np.triu(sharing(column, boxes[None], wall_cells), 1))
+    return out
+
+
 def door_candidates(
     world: World, evidence: Evidence, *, wall_cells: int, min_door_cells: int, min_free_share: float = 0.5
 ) -> list[Candidate]:
@@ -352,25 +361,23 @@ def door_candidates(
     t = wall_cells
     rects = list(world.units.values())
     out: list[Candidate] = []
-    for a in range(len(rects)):
-        for b in range(a + 1, len(rects)):
-            band = shared_band(rects[a], rects[b], t)
-            if band is None:
+    for a, b in _sharing(rects, t):
+        band = shared_band(rects[a], rects[b], t)
+        assert band is not None  # _sharing's pairs share a wall
+        along_rows = band.rows > band.cols  # a vertical wall: the door runs along rows
+        n = band.rows if along_rows else band.cols
+        idx = np.arange(n)
+        if along_rows:
+            free = _boxes(evidence._free, band.r0 + idx, band.r0 + idx, np.full(n, band.c0), np.full(n, band.c1))
+        else:
+            free = _boxes(evidence._free, np.full(n, band.r0), np.full(n, band.r1), band.c0 + idx, band.c0 + idx)
+        open_ = np.r_[False, free >= min_free_share * t, False]
+        edges = np.flatnonzero(np.diff(open_.astype(np.int8)))
+        for s, e in zip(edges[::2], edges[1::2], strict=True):
+            if e - s < min_door_cells:
                 continue
-            along_rows = band.rows > band.cols  # a vertical wall: the door runs along rows
-            n = band.rows if along_rows else band.cols
-            idx = np.arange(n)
-            if along_rows:
-                free = _boxes(evidence._free, band.r0 + idx, band.r0 + idx, np.full(n, band.c0), np.full(n, band.c1))
-            else:
-                free = _boxes(evidence._free, np.full(n, band.r0), np.full(n, band.r1), band.c0 + idx, band.c0 + idx)
-            open_ = np.r_[False, free >= min_free_share * t, False]
-            edges = np.flatnonzero(np.diff(open_.astype(np.int8)))
-            for s, e in zip(edges[::2], edges[1::2], strict=True):
-                if e - s < min_door_cells:
-                    continue
-                lo, hi = int(s), int(e) - 1
-                door = (Rect(band.r0 + lo, band.r0 + hi, band.c0, band.c1) if along_rows
-                        else Rect(band.r0, band.r1, band.c0 + lo, band.c0 + hi))
-                out.append(Candidate(door, evidence.free(door) / (door.rows * door.cols)))
+            lo, hi = int(s), int(e) - 1
+            door = (Rect(band.r0 + lo, band.r0 + hi, band.c0, band.c1) if along_rows
+                    else Rect(band.r0, band.r1, band.c0 + lo, band.c0 + hi))
+            out.append(Candidate(door, evidence.free(door) / (door.rows * door.cols)))
     return out

@@ -14,6 +14,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+import numpy as np
+import numpy.typing as npt
+
 
 class Rect(NamedTuple):
     """Inclusive cell bounds ``r0..r1`` (rows) and ``c0..c1`` (columns) of a unit or door."""
@@ -108,6 +111,19 @@ def shared_band(a: Rect, b: Rect, wall_cells: int) -> Rect | None:
         if hi >= lo:
             return Rect(lo, hi, left.c1 - t + 1, left.c1)
     return None
+
+
+def sharing(rect: Rect, boxes: npt.NDArray[np.int64], wall_cells: int) -> npt.NDArray[np.bool_]:
+    """Per row ``r0, r1, c0, c1`` of ``boxes`` (broadcast against ``rect``'s bounds, so ``rect`` may be arrays too):
+    whether it shares a wall with ``rect`` (:func:`shared_band` is not None), all at once."""
+    t = wall_cells
+    r0, r1, c0, c1 = boxes[..., 0], boxes[..., 1], boxes[..., 2], boxes[..., 3]
+    stacked = (rect.r1 - t + 1 == r0) | (r1 - t + 1 == rect.r0)
+    beside = (rect.c1 - t + 1 == c0) | (c1 - t + 1 == rect.c0)
+    cols = np.minimum(rect.c1, c1) - t >= np.maximum(rect.c0, c0) + t
+    rows = np.minimum(rect.r1, r1) - t >= np.maximum(rect.r0, r0) + t
+    out: npt.NDArray[np.bool_] = (stacked & cols) | (beside & rows)
+    return out
 
 
 class UnitType(enum.StrEnum):
