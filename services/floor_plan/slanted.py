@@ -63,11 +63,12 @@ def _split(painted: npt.NDArray[np.int32], free: npt.NDArray[np.bool_], lines: n
     whole, _ = ndimage.label(inside)
     pieces, _ = ndimage.label(inside & ~lines)
     at = (pieces > 0) & free
-    # every (room, whole component, piece) once, with the piece's free cells in that room
-    keys, size = np.unique(np.stack([painted[at], whole[at], pieces[at]]), axis=1, return_counts=True)
-    big = keys[:, size >= least]
-    rooms_of, count = np.unique(big[:2], axis=1, return_counts=True)
-    return sorted(set(rooms_of[0, count >= 2].tolist()))
+    # every (room, whole component, piece) once (as one integer), with the piece's free cells in that room
+    n_whole, n_pieces = int(whole.max()) + 1, int(pieces.max()) + 1
+    room, part, piece = (a[at].astype(np.int64) for a in (painted, whole, pieces))
+    keys, size = np.unique((room * n_whole + part) * n_pieces + piece, return_counts=True)
+    rooms_of, count = np.unique(keys[size >= least] // n_pieces, return_counts=True)  # (room, whole) of the big ones
+    return sorted(set((rooms_of[count >= 2] // n_whole).tolist()))
 
 
 def split_at_slanted_walls(
