@@ -1,4 +1,4 @@
-"""The map's straight wall lines: one detector for the slanted walls and the rooms' re-cut."""
+"""The map's straight wall lines (one detector for the slanted walls and the rooms' re-cut); units sharing walls."""
 
 from __future__ import annotations
 
@@ -8,8 +8,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.floor_plan.detectors import wall_line_segments
+from services.floor_plan.detectors import Evidence, door_candidates, wall_line_segments
 from services.floor_plan.likelihood import CellClass, beam_traces
+from services.floor_plan.world import Rect, World, shared_band, sharing
 
 # the floor plan's defaults at 0.05 m per cell: 1 m lines, 1.25 m gaps, free space 0.25 m wide
 LINES = {"min_length_cells": 20, "max_gap_cells": 25}
@@ -92,3 +93,25 @@ def test_the_edges_of_laser_streaks_through_a_window_are_no_wall_lines_where_bea
     assert len(wall_line_segments(read, **LINES, min_angle_rad=SLANTED)) == 0, "no beam's edge is a slanted wall"
     assert len(wall_line_segments(cm, **LINES, min_angle_rad=SLANTED)) >= 5, \
         "read free, the beams have an outline, and it runs straight"
+
+
+def test_units_share_a_wall_with_their_neighbours_in_a_row_or_column_and_not_across_a_corner() -> None:
+    t = 2  # a 3 x 3 block of rooms 20 cells a side sharing their walls, and one room standing apart
+    rooms = [Rect(18 * i, 18 * i + 19, 18 * j, 18 * j + 19) for i in range(3) for j in range(3)]
+    rooms.append(Rect(80, 99, 80, 99))
+    boxes = np.array(rooms, np.int64)
+    for k, rect in enumerate(rooms):
+        found = set(np.flatnonzero(sharing(rect, boxes, t)).tolist())
+        expected = {m for m, other in enumerate(rooms) if m != k and shared_band(rect, other, t) is not None}
+        assert found == expected
+        if k < 9:
+            i, j = divmod(k, 3)
+            assert found == {3 * a + b for a, b in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1))
+                             if 0 <= a < 3 and 0 <= b < 3}
+        else:
+            assert not found
+    # a map open everywhere: one door candidate along each of the 12 shared walls
+    doors = door_candidates(World(dict(enumerate(rooms, start=1))), Evidence(np.zeros((100, 100), np.uint8)),
+                            wall_cells=t, min_door_cells=4)
+    assert len(doors) == 12
+    assert all(sum(d.rect.intersects(r) for r in rooms) == 2 for d in doors)
