@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from services.floor_plan.world import Rect, UnitType, World, in_wall, shared_band, sharing
+from services.floor_plan.world import Rect, UnitType, World, in_wall, shared_band
 
 
 @dataclass(frozen=True)
@@ -144,21 +144,13 @@ class ContextPrior:
         return -s.prior_weight * d * d / (2 * s.same_length_sigma_m**2)
 
     def neighbours(self, world: World, uid: int) -> list[tuple[int, Rect]]:
-        """The units sharing a wall with ``uid`` (in the world's order) and the band they share."""
-        ids = list(world.units)
-        return self._neighbours(world, uid, ids, np.array(list(world.units.values()), np.int64).reshape(-1, 4))
-
-    def _neighbours(self, world: World, uid: int, ids: list[int],
-                    boxes: npt.NDArray[np.int64]) -> list[tuple[int, Rect]]:
-        """:meth:`neighbours` given the world's ids and their rectangles as rows ``r0, r1, c0, c1``."""
         rect = world.units[uid]
         out = []
-        for k in np.flatnonzero(sharing(rect, boxes, self.wall_cells)):
-            other = ids[k]
+        for other, r in world.units.items():
             if other != uid:
-                band = shared_band(rect, world.units[other], self.wall_cells)
-                assert band is not None  # sharing() is shared_band's test
-                out.append((other, band))
+                band = shared_band(rect, r, self.wall_cells)
+                if band is not None:
+                    out.append((other, band))
         return out
 
     def local(self, world: World, ids: set[int]) -> float:
@@ -168,12 +160,10 @@ class ContextPrior:
         seen: set[tuple[int, int]] = set()
         evidence: dict[int, UnitEvidence] = {}
         total = 0.0
-        order = list(world.units)
-        boxes = np.array(list(world.units.values()), np.int64).reshape(-1, 4)
         for uid in ids:
             if uid not in world.units:
                 continue
-            for other, band in self._neighbours(world, uid, order, boxes):
+            for other, band in self.neighbours(world, uid):
                 key = (min(uid, other), max(uid, other))
                 if key not in seen:
                     seen.add(key)
