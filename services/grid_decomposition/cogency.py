@@ -211,6 +211,9 @@ def wall_evidence(
     a gap that stays as narrow on one side is a corridor or a passage between blocks, left open,
     and so is a gap across a corridor that widens only through the doors in its side walls
     (with ``corridor_length_px`` > 0, :func:`~services.grid_decomposition.doorways.across_a_corridor`).
+    With both, a gap split by posts into doors side by side is left open when a part of it from
+    post to post lies across a corridor: doors side by side are doors of one wall, and a corridor's
+    width is no door (a line from a room's floor through its door and on across the corridor).
 
     Parameters
     ----------
