@@ -72,22 +72,6 @@ def test_a_post_the_line_only_grazes_splits_no_gap_into_doors() -> None:
     assert g0.tolist() == [20]
 
 
-def test_specks_a_hands_width_apart_on_a_floor_are_no_door_posts() -> None:
-    # a 36-cell gap between two walls along the line: one post in its middle makes two doors; specks 3 cells apart
-    # (a hand's width at 5 cm) leave an opening no one passes between them: no row of doors
-    profile = np.zeros(100, dtype=bool)
-    profile[0:20] = profile[56:80] = True
-    post = np.zeros(100, dtype=bool)
-    post[36:40] = True
-    specks = post.copy()
-    specks[43:45] = True  # 3 free cells between the post and a speck
-    for posts, doors in ((post, [20]), (specks, [])):
-        _, g0, _ = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=posts, min_door_px=10)
-        assert g0.tolist() == doors
-    _, g0, _ = close_doorways(profile, min_wall_px=5, max_door_px=20, posts=specks)  # as before: any opening counts
-    assert g0.tolist() == [20]
-
-
 def test_close_doorways_of_several_lines_at_once_closes_each_line_alone() -> None:
     """Profiles one after the other: a wall ending one line and a wall starting the next are two runs with no
     doorway between them, a short run split by the change of line is no wall, and each line's own doors and posts
