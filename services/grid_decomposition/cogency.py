@@ -83,7 +83,6 @@ def close_doorways(
     posts: npt.NDArray[np.bool_] | None = None,
     post_wall_px: int = 0,
     post_min_px: int = 1,
-    min_door_px: int = 1,
     first: npt.NDArray[np.int64] | None = None,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Wall runs of a 1-D occupancy profile and the doorway-sized gaps between them.
@@ -97,8 +96,7 @@ def close_doorways(
     no longer than a wall is thick is a wall crossing it, not one along it: a line from wall to wall
     across a room through its furniture is no row of doors. A post is one the line passes through: a
     run of at least ``post_min_px`` samples (a line that only grazes the rim of a post's tolerance
-    disc, one sample, passes beside it). Each stretch between posts is a door: at least ``min_door_px``
-    wide (specks a hand's width apart on a room's floor are no door posts).
+    disc, one sample, passes beside it).
     ``first`` (ascending) is where each profile begins when several lines' profiles come one
     after the other: runs and gaps never cross from one line to the next.
 
@@ -144,10 +142,8 @@ def close_doorways(
             stretches = np.bincount(gap_of, minlength=wide.size)
             widest = np.zeros(wide.size, dtype=np.int64)
             np.maximum.at(widest, gap_of, run_end - run_start)
-            narrowest = np.full(wide.size, size, dtype=np.int64)
-            np.minimum.at(narrowest, gap_of, run_end - run_start)
             walled = np.minimum(ends[wide] - starts[wide], ends[wide + 1] - starts[wide + 1]) >= post_wall_px
-            small[wide] = (stretches > 1) & (widest <= max_door_px) & (narrowest >= min_door_px) & walled
+            small[wide] = (stretches > 1) & (widest <= max_door_px) & walled
     return wall, ends[:-1][small].astype(np.int64), starts[1:][small].astype(np.int64)
 
 
@@ -204,7 +200,6 @@ def wall_evidence(
     posts: npt.NDArray[np.bool_] | None = None,
     post_wall_px: int = 0,
     post_min_px: int = 1,
-    min_door_px: int = 1,
     corridor_length_px: int = 0,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
@@ -233,8 +228,6 @@ def wall_evidence(
         The wall runs beside doors split by posts are at least this long (:func:`close_doorways`).
     post_min_px : int
         A post splits a gap when the line runs through it for at least this many samples (:func:`close_doorways`).
-    min_door_px : int
-        Every stretch between posts is at least this wide (:func:`close_doorways`).
     corridor_length_px : int
         See :func:`~services.grid_decomposition.doorways.across_a_corridor`; 0 turns it off.
 
@@ -269,8 +262,7 @@ def wall_evidence(
     post_profile = None if near_post is None else near_post[ys, xs]
     on_wall, g0, g1 = close_doorways(
         near[ys, xs], min_wall_px=min_wall_px, max_door_px=max_door_px,
-        posts=post_profile, post_wall_px=post_wall_px, post_min_px=post_min_px, min_door_px=min_door_px,
-        first=first,
+        posts=post_profile, post_wall_px=post_wall_px, post_min_px=post_min_px, first=first,
     )
     wall[ys[on_wall], xs[on_wall]] = True
     if g0.size:  # every line's gaps in one call: each gap's answer is its own

@@ -85,8 +85,6 @@ _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by 
 _POST_WALL_M = 0.75
 # ... and a post is one the line passes through, not the rim of its tolerance disc (one sample at the line's 0.1 m)
 _POST_MIN_RUN_M = 0.1
-# ... and each opening between the posts is a door a person passes (specks a hand's width apart are no door posts)
-_POST_DOOR_MIN_M = 0.5
 _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
@@ -548,7 +546,6 @@ def decompose(
             posts=clutter,
             post_wall_px=round(_POST_WALL_M / resolution_m),
             post_min_px=max(1, round(_POST_MIN_RUN_M / resolution_m)),
-            min_door_px=max(1, round(_POST_DOOR_MIN_M / resolution_m)),
             corridor_length_px=round(corridor_length_m / resolution_m),
         )
         known_obstacle = obstacle & known
