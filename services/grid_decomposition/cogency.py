@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.arrays import label_counts
-from services.grid_decomposition.doorways import widens
+from services.grid_decomposition.doorways import across_a_corridor, widens
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, line_endpoints
 
 DOOR_MIN_PX = 5
@@ -44,6 +44,35 @@ class EdgeCogency(NamedTuple):
     def door(self) -> npt.NDArray[np.bool_]:
         """(E,) bool: cogent edges holding a closed doorway of at least ``DOOR_MIN_PX`` pixels."""
         return self.cogent & (self.edge_door_px >= DOOR_MIN_PX)
+
+
+def post_stretches(
+    posts: npt.NDArray[np.bool_],
+    lo: npt.NDArray[np.int64],
+    hi: npt.NDArray[np.int64],
+    *,
+    post_min_px: int = 1,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """The free stretches ``[start, end)`` between the posts of each disjoint gap ``[lo, hi)`` of a profile, and the
+    gap of each (ascending). A post is a run of at least ``post_min_px`` samples of ``posts`` (a shorter one is the
+    rim of a post's tolerance disc that the line only grazes; a gap lies within one line)."""
+    size = posts.size
+    span = np.zeros(size + 1, dtype=np.int64)
+    np.add.at(span, lo, 1)
+    np.add.at(span, hi, -1)
+    post = np.asarray(posts, dtype=bool)
+    if post_min_px > 1:
+        p_edge = np.diff(np.r_[0, post.astype(np.int8), 0])
+        p_starts, p_ends = np.flatnonzero(p_edge == 1), np.flatnonzero(p_edge == -1)
+        short = (p_ends - p_starts) < post_min_px
+        grazed = np.zeros(size + 1, dtype=np.int64)
+        np.add.at(grazed, p_starts[short], 1)
+        np.add.at(grazed, p_ends[short], -1)
+        post = post & ~(np.cumsum(grazed)[:-1] > 0)
+    free = ~post & (np.cumsum(span)[:-1] > 0)
+    edge = np.diff(np.r_[0, free.astype(np.int8), 0])
+    run_start, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+    return run_start, run_end, np.searchsorted(lo, run_start, side="right") - 1
 
 
 def close_doorways(
@@ -109,22 +138,7 @@ def close_doorways(
         wide = np.flatnonzero(same & ~small & (gaps <= 2 * max_door_px))
         if wide.size:  # a wide gap split by posts: more than one free stretch, none wider than a door
             lo, hi = ends[wide], starts[wide + 1]  # disjoint: a wall run lies between two gaps
-            span = np.zeros(size + 1, dtype=np.int64)
-            np.add.at(span, lo, 1)
-            np.add.at(span, hi, -1)
-            post = np.asarray(posts, dtype=bool)
-            if post_min_px > 1:  # posts the line passes through, not ones it grazes (a gap lies within one line)
-                p_edge = np.diff(np.r_[0, post.astype(np.int8), 0])
-                p_starts, p_ends = np.flatnonzero(p_edge == 1), np.flatnonzero(p_edge == -1)
-                short = (p_ends - p_starts) < post_min_px
-                grazed = np.zeros(size + 1, dtype=np.int64)
-                np.add.at(grazed, p_starts[short], 1)
-                np.add.at(grazed, p_ends[short], -1)
-                post = post & ~(np.cumsum(grazed)[:-1] > 0)
-            free = ~post & (np.cumsum(span)[:-1] > 0)
-            edge = np.diff(np.r_[0, free.astype(np.int8), 0])
-            run_start, run_end = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
-            gap_of = np.searchsorted(lo, run_start, side="right") - 1
+            run_start, run_end, gap_of = post_stretches(posts, lo, hi, post_min_px=post_min_px)
             stretches = np.bincount(gap_of, minlength=wide.size)
             widest = np.zeros(wide.size, dtype=np.int64)
             np.maximum.at(widest, gap_of, run_end - run_start)
@@ -197,6 +211,9 @@ def wall_evidence(
     a gap that stays as narrow on one side is a corridor or a passage between blocks, left open,
     and so is a gap across a corridor that widens only through the doors in its side walls
     (with ``corridor_length_px`` > 0, :func:`~services.grid_decomposition.doorways.across_a_corridor`).
+    With both, a gap split by posts into doors side by side is left open when a part of it from
+    post to post lies across a corridor: doors side by side are doors of one wall, and a corridor's
+    width is no door (a line from a room's floor through its door and on across the corridor).
 
     Parameters
     ----------
@@ -242,10 +259,10 @@ def wall_evidence(
             keep[mine] = group.mask[ys[mine], xs[mine]]
     xs, ys, of = xs[keep], ys[keep], of[keep]
     first = np.flatnonzero(np.r_[True, of[1:] != of[:-1]]) if of.size else of
+    post_profile = None if near_post is None else near_post[ys, xs]
     on_wall, g0, g1 = close_doorways(
         near[ys, xs], min_wall_px=min_wall_px, max_door_px=max_door_px,
-        posts=None if near_post is None else near_post[ys, xs], post_wall_px=post_wall_px, post_min_px=post_min_px,
-        first=first,
+        posts=post_profile, post_wall_px=post_wall_px, post_min_px=post_min_px, first=first,
     )
     wall[ys[on_wall], xs[on_wall]] = True
     if g0.size:  # every line's gaps in one call: each gap's answer is its own
@@ -260,6 +277,19 @@ def wall_evidence(
             depth_step_px=max(1, max_depth_px // 4),
             corridor_length_px=corridor_length_px,
         )
+        split = np.flatnonzero(doorway & (g1 - g0 > max_door_px))
+        if post_profile is not None and corridor_length_px > 0 and split.size:
+            # doors side by side are doors of one wall: no part of the gap from post to post spans a corridor's
+            # width (a line from a room's floor through its door and across the corridor beyond, specks in it)
+            r0, r1, of_run = post_stretches(post_profile, g0[split], g1[split], post_min_px=post_min_px)
+            i, j = np.triu_indices(r0.size)
+            same = of_run[i] == of_run[j]
+            s0, s1, of_gap = r0[i[same]], r1[j[same]], of_run[i[same]]
+            stretch_ends = np.stack(
+                [np.stack([xs[s0], ys[s0]], axis=1), np.stack([xs[s1 - 1], ys[s1 - 1]], axis=1)], axis=1
+            ).astype(np.float64)
+            corridor = across_a_corridor(near, stretch_ends, widening_px=widening_px, length_px=corridor_length_px)
+            doorway[split[np.unique(of_gap[corridor])]] = False
         cover = np.zeros(xs.size + 1, dtype=np.int64)
         np.add.at(cover, g0[doorway], 1)
         np.add.at(cover, g1[doorway], -1)

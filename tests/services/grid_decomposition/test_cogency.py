@@ -182,3 +182,34 @@ def test_face_occupancy_is_the_mean_of_its_pixels_as_summed_in_raster_order() ->
     assert np.array_equal(cog.face_occupancy[1:], mean)  # the same bits
     assert np.array_equal(cog.face_free_px[1:], area[1:])
     assert cog.face_occupancy[0] == 1.0 and cog.face_free_px[0] == 0
+
+
+def test_a_line_through_a_door_and_across_the_corridor_beyond_is_no_row_of_doors() -> None:
+    # 5 cm pixels. A room (rows 10-67) above a 1.5 m corridor (rows 71-100), a 1.1 m door in the wall between them
+    # (x 40-62) with a speck in it; a pier hangs from the room's top wall down to row 30 and a block lies below the
+    # corridor. The vertical line x = 50 from the pier's foot to the block is a 3.5 m gap split by the speck into a
+    # stretch of the room's floor and one across the corridor: no two doors side by side.
+    occ = np.zeros((150, 200), dtype=bool)
+    occ[:10] = occ[101:] = True
+    occ[68:71] = True
+    occ[68:71, 40:63] = False
+    occ[10:31, 48:53] = True
+    posts = np.zeros(occ.shape, dtype=bool)
+    posts[64:68, 50] = True
+    line = [LineGroup((Line(math.pi / 2, -50.0, 5.0, 0.1, True),), None)]
+
+    def closed(grid: np.ndarray, corridor_length_px: int) -> bool:
+        _, door = wall_evidence(
+            grid, line, tolerance_px=2, min_wall_px=10, max_door_px=40, widening_px=6, max_depth_px=20, posts=posts,
+            post_wall_px=15, post_min_px=2, corridor_length_px=corridor_length_px,
+        )
+        return bool(door[40:60, 50].any() or door[75:98, 50].any())
+
+    assert closed(occ, 0)  # the posts rule alone: two "doors"
+    assert not closed(occ, 40)
+    # the same line between two rooms, the wall between them with a 3.5 m opening split by a post: two doors
+    rooms = np.zeros(occ.shape, dtype=bool)
+    rooms[:10] = rooms[140:] = True
+    rooms[:, 48:53] = True
+    rooms[31:101, 48:53] = False
+    assert closed(rooms, 40)
