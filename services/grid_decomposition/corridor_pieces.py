@@ -80,35 +80,6 @@ def _walled_parts(
     return parts
 
 
-def _to_corners(
-    band: Band,
-    parts: list[Band],
-    inside: npt.NDArray[np.bool_],
-    coordinates: tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]],
-    others: list[npt.NDArray[np.bool_]],
-    *,
-    min_share: float,
-) -> list[Band]:
-    """The parts of a band, the first and the last run on to the band's end where the stretch left out there
-    lies at least ``min_share`` inside another band's strip: the corner where two corridors meet (an L, a T)
-    is corridor, open on both sides as it is, not a hall the corridor enters (no band runs across a hall)."""
-    if not parts or not others or min_share <= 0:
-        return parts
-    out = list(parts)
-    ends = (
-        (0, replace(band, t1_px=parts[0].t0_px - 1), "t0_px"),
-        (-1, replace(band, t0_px=parts[-1].t1_px + 1), "t1_px"),
-    )
-    for k, stretch, field in ends:
-        if stretch.t1_px < stretch.t0_px:
-            continue
-        left_out = band_mask(stretch, *coordinates) & inside
-        n = np.count_nonzero(left_out)
-        if n and max(np.count_nonzero(left_out & other) for other in others) >= min_share * n:
-            out[k] = replace(out[k], **{field: getattr(band, field)})
-    return out
-
-
 def join_corridor_pieces(
     segments: npt.NDArray[np.int32],
     lines: list[Line],
@@ -125,7 +96,6 @@ def join_corridor_pieces(
     min_length_widths: float = 3.0,
     tolerance_px: int = 2,
     margin_px: int = 4,
-    min_corner_share: float = 0.5,
 ) -> npt.NDArray[np.int32]:
     """Make every corridor band that the room stage cut in pieces one region; part the rooms leaking into it.
 
@@ -168,20 +138,14 @@ def join_corridor_pieces(
     )
     if not found:
         return segments
-    strips = [band_mask(band, *coordinates[band.angle_rad]) & inside for band in found]
     bands = [
         part
-        for i, band in enumerate(found)
-        for part in _to_corners(
-            band,
-            _walled_parts(
-                band, walls, *coordinates[band.angle_rad], tolerance_px=tolerance_px,
-                max_open_px=round(max_open_m / resolution_m), max_side_open_px=round(max_side_open_m / resolution_m),
-                min_length_px=round(min_length_m / resolution_m),
-                min_length_widths=min_length_widths,
-            ),
-            inside, coordinates[band.angle_rad], [strip for j, strip in enumerate(strips) if j != i],
-            min_share=min_corner_share,
+        for band in found
+        for part in _walled_parts(
+            band, walls, *coordinates[band.angle_rad], tolerance_px=tolerance_px,
+            max_open_px=round(max_open_m / resolution_m), max_side_open_px=round(max_side_open_m / resolution_m),
+            min_length_px=round(min_length_m / resolution_m),
+            min_length_widths=min_length_widths,
         )
     ]
     out = window.copy()
