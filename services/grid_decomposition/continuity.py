@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse import coo_matrix
@@ -190,9 +189,29 @@ def joined_regions(
     candidate = settled[:n] & (host > 0)
     if np.count_nonzero(candidate) < 2:
         return b
-    lo, hi, border = _pair_borders(b, np.where(candidate, host, 0))
-    if lo.size == 0:
+    touching = []  # (cell, region it touches) for cells of candidates next to another candidate of the same host
+    flat = b.ravel()
+    host_of = np.where(candidate, host, 0)  # a candidate's host, 0 for every other id
+    w = b.shape[1]
+    # the cells where the id changes to the next row's or column's (a pair of cells either way), then their hosts
+    down = np.flatnonzero(b[1:] != b[:-1])  # cell ``down`` and the one below it, ``down + w``
+    across = np.flatnonzero(b[:, 1:] != b[:, :-1])
+    across += across // max(w - 1, 1)  # cell ``across`` and the one right of it, ``across + 1``
+    for first, step in ((down, w), (across, 1)):
+        second = first + step
+        own_host = host_of[flat[first]]
+        pair = first[(own_host > 0) & (own_host == host_of[flat[second]])]
+        touching += [(pair + step) * n + flat[pair], pair * n + flat[pair + step]]
+    cell_other = np.unique(np.concatenate(touching))
+    if cell_other.size == 0:
         return b
+    own_other = flat[cell_other // n] * n + cell_other % n
+    edge, cells_touching = np.unique(own_other, return_counts=True)
+    first, second = edge // n, edge % n
+    key = np.minimum(first, second) * n + np.maximum(first, second)
+    pairs, inverse = np.unique(key, return_inverse=True)
+    border = np.bincount(inverse, weights=cells_touching) / 2
+    lo, hi = pairs // n, pairs % n
     width = np.sqrt(np.minimum(size[lo], size[hi]))
     join = (border > min_border_px) & (border >= min_width_share * width)
     if not join.any():
@@ -206,37 +225,6 @@ def joined_regions(
     lut[0] = 0
     out: npt.NDArray[np.int64] = lut[b]
     return out
-
-
-def _pair_borders(
-    b: npt.NDArray[np.int64], group: npt.NDArray[np.int64]
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.float64]]:
-    """Pairs of touching regions of ``b`` in the same group (``group`` per id, 0 for none; lower id, higher id)
-    and their borders' lengths: the mean of the two regions' cells touching the other (4-connected)."""
-    n = group.size
-    touching = []  # (cell, region it touches) for cells of regions next to another region of the same group
-    flat = b.ravel()
-    w = b.shape[1]
-    # the cells where the id changes to the next row's or column's (a pair of cells either way), then their groups
-    down = np.flatnonzero(b[1:] != b[:-1])  # cell ``down`` and the one below it, ``down + w``
-    across = np.flatnonzero(b[:, 1:] != b[:, :-1])
-    across += across // max(w - 1, 1)  # cell ``across`` and the one right of it, ``across + 1``
-    for first, step in ((down, w), (across, 1)):
-        second = first + step
-        own_group = group[flat[first]]
-        pair = first[(own_group > 0) & (own_group == group[flat[second]])]
-        touching += [(pair + step) * n + flat[pair], pair * n + flat[pair + step]]
-    cell_other = np.unique(np.concatenate(touching))
-    if cell_other.size == 0:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty, np.zeros(0)
-    own_other = flat[cell_other // n] * n + cell_other % n
-    edge, cells_touching = np.unique(own_other, return_counts=True)
-    first, second = edge // n, edge % n
-    key = np.minimum(first, second) * n + np.maximum(first, second)
-    pairs, inverse = np.unique(key, return_inverse=True)
-    border = np.bincount(inverse, weights=cells_touching) / 2
-    return pairs // n, pairs % n, border
 
 
 def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.NDArray[np.int32]:
@@ -255,54 +243,3 @@ def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.ND
     if not drop.any():
         return segments
     return fill_from_neighbours(np.where(drop, 0, segments), drop)
-
-
-def join_corridor_cuts(
-    segments: IdGrid, *, max_border_px: int, depth_px: int, max_widening: float = 1.2
-) -> npt.NDArray[np.int32]:
-    """``segments`` with regions parted only by a cut across a corridor joined (the id of the larger).
-
-    A border at most ``max_border_px`` long (a door's width) is a doorway when the free space widens on at least
-    one side of it (a room or a corridor behind the door, the jambs narrower than either) and a cut across a
-    corridor when it does not: each of the two regions holds at most ``max_widening`` times a strip of the
-    border's width within ``depth_px`` of the border (cells of the region within that distance, not cells
-    reached round a wall), and at least ``2 - max_widening`` times it (the corridor goes on that far), and each
-    region is at least twice such a strip (a piece of corridor, not a niche the strip fills). Chains of such
-    pairs join too. The border's length is counted as in :func:`joined_regions`.
-    """
-    seg = np.asarray(segments, dtype=np.int32)
-    n = int(seg.max(initial=0)) + 1
-    size = np.bincount(seg.ravel(), minlength=n)
-    present = (size > 0).astype(np.int64)
-    present[0] = 0
-    lo, hi, border = _pair_borders(seg.astype(np.int64), present)
-    pick = (border <= max_border_px) & (np.minimum(size[lo], size[hi]) >= 2 * border * depth_px)
-    join = np.zeros(lo.size, dtype=bool)
-    h, w = seg.shape
-    ring = np.ones((3, 3), dtype=np.uint8)
-    for i in np.flatnonzero(pick).tolist():
-        p, q = int(lo[i]), int(hi[i])
-        mp, mq = seg == p, seg == q
-        # the border's cells, diagonal neighbours too (a staircase border is as long as its run)
-        cells = (mp & (cv2.dilate(mq.view(np.uint8), ring) > 0)) | (mq & (cv2.dilate(mp.view(np.uint8), ring) > 0))
-        strip = np.count_nonzero(cells) / 2 * depth_px
-        if np.count_nonzero(cells) > 2 * max_border_px or min(size[p], size[q]) < 2 * strip:
-            continue
-        rows, cols = np.nonzero(cells)
-        r0, r1 = max(int(rows.min()) - depth_px - 1, 0), min(int(rows.max()) + depth_px + 2, h)
-        c0, c1 = max(int(cols.min()) - depth_px - 1, 0), min(int(cols.max()) + depth_px + 2, w)
-        crop = seg[r0:r1, c0:c1]
-        near = cv2.distanceTransform((~cells[r0:r1, c0:c1]).view(np.uint8), cv2.DIST_L2, 5) <= depth_px
-        sides = np.array([np.count_nonzero(near & (crop == p)), np.count_nonzero(near & (crop == q))]) / strip
-        join[i] = bool(np.all((sides <= max_widening) & (sides >= 2 - max_widening)))
-    if not join.any():
-        return seg
-    graph = coo_matrix((np.ones(int(join.sum())), (lo[join], hi[join])), shape=(n, n))
-    component = np.asarray(connected_components(graph, directed=False)[1], dtype=np.int64)
-    largest = np.zeros(int(component.max()) + 1, dtype=np.int64)
-    order = np.argsort(size, kind="stable")  # the largest member written last
-    largest[component[order]] = order
-    lut = largest[component].astype(np.int32)
-    lut[0] = 0
-    out: npt.NDArray[np.int32] = lut[seg]
-    return out

@@ -26,7 +26,7 @@ from services.grid_decomposition.arrays import (
 )
 from services.grid_decomposition.cleaning import clean_occupancy
 from services.grid_decomposition.cogency import EdgeCogency, edge_cogency, wall_evidence
-from services.grid_decomposition.continuity import RegionPrior, join_corridor_cuts, keep_regions
+from services.grid_decomposition.continuity import RegionPrior, keep_regions
 from services.grid_decomposition.corridor_pieces import join_corridor_pieces
 from services.grid_decomposition.corridors import part_rooms_from_corridors
 from services.grid_decomposition.errors import DecompositionError
@@ -705,11 +705,6 @@ def decompose(
                     resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
                     wide_neck_m=door_max_width_m,
                 )
-            # a cut across a corridor that the room stage or an earlier step made and the prior kept is no doorway
-            segments = join_corridor_cuts(
-                segments, max_border_px=round(door_max_width_m / resolution_m),
-                depth_px=round(corridor_length_m / resolution_m),
-            )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         pairs = _pairs(segments, sub)
         racked = floor_px | banks.storage | on_places  # the only floor a storage region may stand on

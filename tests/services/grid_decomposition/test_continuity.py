@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import DecompositionError
-from services.grid_decomposition.continuity import RegionPrior, join_corridor_cuts, keep_regions
+from services.grid_decomposition.continuity import RegionPrior, keep_regions
 
 
 def _grid(*blocks: tuple[int, slice, slice], shape: tuple[int, int] = (10, 20)) -> np.ndarray:
@@ -77,7 +77,6 @@ def test_pieces_a_kept_region_cuts_off_join_a_neighbour() -> None:
     assert _same_partition(out, expected)
 
 
-CORRIDOR_PX = 40  # 2 m, the corridor length the pipeline passes
 DOOR_PX = 40  # the widest door, 2 m at 0.05 m a cell (``decompose`` passes ``door_max_width_m``)
 
 
@@ -110,30 +109,6 @@ def test_a_room_open_wider_than_a_door_but_narrow_for_its_size_stays_apart() -> 
     merged = np.where(before > 0, 1, 0).astype(np.int32)
     out = keep_regions(merged, RegionPrior(before, np.ones(before.shape, dtype=bool)), join_min_border_px=DOOR_PX)
     assert _same_partition(out, before)
-
-
-def test_a_corridor_cut_across_is_one_region() -> None:
-    # a corridor 1.6 m wide and 20 m long (0.05 m cells) cut across in its middle, walls on both sides unbroken
-    cut = _grid((4, slice(0, 32), slice(0, 200)), (9, slice(0, 32), slice(200, 400)), shape=(32, 400))
-    out = join_corridor_cuts(cut, max_border_px=DOOR_PX, depth_px=CORRIDOR_PX)
-    assert np.unique(out).size == 1
-
-
-def test_a_room_behind_a_door_off_a_corridor_stays_apart() -> None:
-    # a 5 m x 5 m office below a 1.6 m corridor, open to it by a 1 m door (the corridor's floor beyond the
-    # door's line widens the office's side from its wall on)
-    grid = _grid((4, slice(0, 32), slice(0, 400)), (9, slice(33, 133), slice(100, 200)), shape=(133, 400))
-    grid[32, 130:150] = 9  # the doorway's floor
-    out = join_corridor_cuts(grid, max_border_px=DOOR_PX, depth_px=CORRIDOR_PX)
-    assert _same_partition(out, grid)
-
-
-def test_a_corridor_cut_where_a_hall_opens_beside_it_stays_apart() -> None:
-    # the same corridor, a 10 m x 8 m hall open along its lower side from 1 m past the cut on
-    grid = _grid((4, slice(0, 32), slice(0, 200)), (9, slice(0, 32), slice(200, 400)), shape=(192, 400))
-    grid[32:192, 220:400] = 9
-    out = join_corridor_cuts(grid, max_border_px=DOOR_PX, depth_px=CORRIDOR_PX)
-    assert _same_partition(out, grid)
 
 
 def test_a_prior_on_another_grid_is_refused() -> None:
