@@ -91,10 +91,12 @@ def _walls_along(
     np.add.at(marks, hi, -1)
     near = np.cumsum(marks[:-1]) > 0
     compact = np.cumsum(near) - 1  # the raster row of a near offset
-    pick = occupied & near[across]
+    at = np.flatnonzero(occupied)  # the offsets looked up at the occupied pixels only
+    offset = np.take(across, at)
+    pick = near[offset]
     raster_c = np.zeros((int(compact[-1]) + 2, n_along), dtype=np.int32)
     raster = np.zeros((int(compact[-1]) + 1, n_along), dtype=bool)
-    raster[compact[across[pick]], along[pick]] = True
+    raster[compact[offset[pick]], np.take(along, at[pick])] = True
     np.cumsum(raster, axis=0, out=raster_c[1:])
     return np.asarray(raster_c[compact[hi - 1] + 1] - raster_c[compact[lo]] > 0, dtype=bool)
 
