@@ -286,7 +286,12 @@ def join_furnished_pieces(
     fixed = _share(segments, floor) > 0.5
     if np.count_nonzero(~fixed[1:]) < 2:  # no pair to join: the clearance and the islands are not needed
         return renumber(np.asarray(segments, dtype=np.int32), copy=False)
-    standing = clutter | islands(segments == 0, max_extent_px=island_max_extent_m / resolution_m)
+    # an island has segment pixels all round it: only the box round them (and a pixel more) is labelled
+    inside = segments > 0
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    box = (slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2), slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2))
+    standing = clutter.copy()
+    standing[box] |= islands(segments[box] == 0, max_extent_px=island_max_extent_m / resolution_m)
     return join_room_pieces(
         segments,
         standing,
