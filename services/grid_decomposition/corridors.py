@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes, lookup, nonzero_rc
+from services.grid_decomposition.arrays import components_stats, label_boxes, label_counts, lookup, nonzero_rc
 from services.grid_decomposition.radiogram import Line
 
 
@@ -350,7 +350,7 @@ def _join_along(
     top, left = max(int(rows[0]) - tolerance_px, 0), max(int(cols[0]) - tolerance_px, 0)
     box = slice(top, int(rows[-1]) + 1 + tolerance_px), slice(left, int(cols[-1]) + 1 + tolerance_px)
     window = segments[box]
-    size = np.bincount(window.ravel(), minlength=n)
+    size = label_counts(window, n)[0]  # from the runs
     along = np.zeros(n, dtype=bool)
     across = {a: _across((window.shape[0], window.shape[1]), top, left, a) for a in {band.angle_rad for band in bands}}
     for band in bands:
@@ -368,7 +368,7 @@ def _join_along(
         new = touching & along
         if not new.any():
             joined = segments.copy()
-            joined[box] = np.where(corridor, k, window)
+            joined[box][corridor] = k
             return joined
         along &= ~new
-        corridor |= new[window]
+        corridor |= lookup(new, window)
