@@ -73,6 +73,19 @@ def join_room_pieces(
     if n <= 2:
         return renumber(seg)
     floor = ((seg > 0) | furniture).astype(np.uint8)
+    # all that follows reads the floor and what lies near it: the box round the floor and a pixel of no floor
+    # round it holds the same clearance (the nearest pixel off the floor is that pixel or nearer), borders and
+    # furniture, and the ids keep their order
+    rows, cols = np.flatnonzero(floor.any(axis=1)), np.flatnonzero(floor.any(axis=0))
+    box = (slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2), slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2))
+    if floor[box].shape != floor.shape:
+        out = np.zeros(seg.shape, dtype=np.int32)
+        out[box] = join_room_pieces(
+            seg[box], furniture[box], resolution_m=resolution_m, furniture_reach_m=furniture_reach_m, fixed=fixed,
+            min_saddle_ratio=min_saddle_ratio, min_solidity=min_solidity, low_saddle_ratio=low_saddle_ratio,
+            min_relative_solidity=min_relative_solidity,
+        )
+        return out
     clearance = np.asarray(cv2.distanceTransform(floor, cv2.DIST_L2, 5), dtype=np.float32)
     reach = max(1, round(furniture_reach_m / resolution_m))
     peak = label_max(seg, clearance, n)[0]  # clearance >= 0: off the floor a segment's peak stays 0

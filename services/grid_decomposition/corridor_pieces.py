@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes, lookup
+from services.grid_decomposition.arrays import components_stats, label_boxes, label_counts, lookup
 from services.grid_decomposition.corridors import (
     Band,
     _runs,
@@ -159,7 +159,7 @@ def join_corridor_pieces(
     }
     # a band that does not qualify may after another band parted its region (the other arm of an L): two passes
     wholes = [band_mask(band, *coordinates[band.angle_rad]) & inside for band in bands]
-    size = np.bincount(out.ravel())
+    size = label_counts(out, int(out.max()) + 1)[0]  # np.bincount of every pixel, from the runs
     for i in list(range(len(bands))) * 2:
         if i in made:
             continue
@@ -203,15 +203,17 @@ def join_corridor_pieces(
                     if k == corridor_id:
                         parted_from[next_id] = corridor_id
                     next_id += 1
-            corridor[own] |= no_room[parts]
+            corridor[own] |= lookup(no_room, parts)
         # the pieces that are no room join the corridor only where they touch it
         n_parts, parts = cv2.connectedComponents(corridor.astype(np.uint8), connectivity=4)
-        touching = np.unique(parts[strip])
-        corridor = np.isin(parts, touching[touching > 0])
+        touching = np.zeros(n_parts, dtype=bool)
+        touching[parts[strip]] = True
+        touching[0] = False
+        corridor = lookup(touching, parts)
         out[corridor] = corridor_id
         taken |= corridor
         made.add(i)
-        size = np.bincount(out.ravel())
+        size = label_counts(out, int(out.max()) + 1)[0]
     result = segments.copy()
     result[box] = out
     return result

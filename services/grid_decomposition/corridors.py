@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes, lookup, nonzero_rc
+from services.grid_decomposition.arrays import components_stats, label_boxes, label_counts, lookup, nonzero_rc
 from services.grid_decomposition.radiogram import Line
 
 
@@ -91,10 +91,12 @@ def _walls_along(
     np.add.at(marks, hi, -1)
     near = np.cumsum(marks[:-1]) > 0
     compact = np.cumsum(near) - 1  # the raster row of a near offset
-    pick = occupied & near[across]
+    at = np.flatnonzero(occupied)  # the offsets looked up at the occupied pixels only
+    offset = np.take(across, at)
+    pick = near[offset]
     raster_c = np.zeros((int(compact[-1]) + 2, n_along), dtype=np.int32)
     raster = np.zeros((int(compact[-1]) + 1, n_along), dtype=bool)
-    raster[compact[across[pick]], along[pick]] = True
+    raster[compact[offset[pick]], np.take(along, at[pick])] = True
     np.cumsum(raster, axis=0, out=raster_c[1:])
     return np.asarray(raster_c[compact[hi - 1] + 1] - raster_c[compact[lo]] > 0, dtype=bool)
 
@@ -348,7 +350,7 @@ def _join_along(
     top, left = max(int(rows[0]) - tolerance_px, 0), max(int(cols[0]) - tolerance_px, 0)
     box = slice(top, int(rows[-1]) + 1 + tolerance_px), slice(left, int(cols[-1]) + 1 + tolerance_px)
     window = segments[box]
-    size = np.bincount(window.ravel(), minlength=n)
+    size = label_counts(window, n)[0]  # from the runs
     along = np.zeros(n, dtype=bool)
     across = {a: _across((window.shape[0], window.shape[1]), top, left, a) for a in {band.angle_rad for band in bands}}
     for band in bands:
@@ -366,7 +368,7 @@ def _join_along(
         new = touching & along
         if not new.any():
             joined = segments.copy()
-            joined[box] = np.where(corridor, k, window)
+            joined[box][corridor] = k
             return joined
         along &= ~new
-        corridor |= new[window]
+        corridor |= lookup(new, window)

@@ -286,7 +286,12 @@ def join_furnished_pieces(
     fixed = _share(segments, floor) > 0.5
     if np.count_nonzero(~fixed[1:]) < 2:  # no pair to join: the clearance and the islands are not needed
         return renumber(np.asarray(segments, dtype=np.int32), copy=False)
-    standing = clutter | islands(segments == 0, max_extent_px=island_max_extent_m / resolution_m)
+    # an island has segment pixels all round it: only the box round them (and a pixel more) is labelled
+    inside = segments > 0
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    box = (slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2), slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2))
+    standing = clutter.copy()
+    standing[box] |= islands(segments[box] == 0, max_extent_px=island_max_extent_m / resolution_m)
     return join_room_pieces(
         segments,
         standing,
@@ -408,28 +413,36 @@ def ends_on_tables(
     radius = max(1, round(min_thickness_px / 2))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     ring_disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * clearance_px + 1, 2 * clearance_px + 1))
-    for k in np.flatnonzero(standing).tolist():
+    for k in np.flatnonzero(standing).tolist():  # the tests in turn, each only for an island that passed the others
         x0, y0, bw, bh = (int(v) for v in stats[k, :4])
         own = (slice(y0, y0 + bh), slice(x0, x0 + bw))
         part = parts[own] == k
-        seen = occupied is None or bool(occupied[own][part].any())
-        solid = cv2.morphologyEx(np.pad(part, radius).astype(np.uint8), cv2.MORPH_OPEN, disc)
+        if occupied is not None and not occupied[own][part].any():  # not seen
+            standing[k] = False
+            continue
         rows, cols = nonzero_rc(part)
         _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
-        compact = max(side_a, side_b) + 1 <= max_elongation * (min(side_a, side_b) + 1)
+        if max(side_a, side_b) + 1 > max_elongation * (min(side_a, side_b) + 1):  # not compact
+            standing[k] = False
+            continue
+        solid = cv2.morphologyEx(np.pad(part, radius).astype(np.uint8), cv2.MORPH_OPEN, disc)
+        if np.count_nonzero(solid) < min_solid * rows.size:
+            standing[k] = False
+            continue
         # floor all round it: not an obstacle standing in a doorway
         y1, x1 = max(y0 - clearance_px, 0), max(x0 - clearance_px, 0)
         around = (slice(y1, y0 + bh + clearance_px), slice(x1, x0 + bw + clearance_px))
         mine = np.zeros(parts[around].shape, dtype=np.uint8)
         mine[y0 - y1 : y0 - y1 + bh, x0 - x1 : x0 - x1 + bw] = part
         ring = cv2.dilate(mine, ring_disc).astype(bool) & ~mine.astype(bool)
-        open_all_round = bool(np.count_nonzero(ring & ~blocked[around]) >= min_open * np.count_nonzero(ring))
+        if np.count_nonzero(ring & ~blocked[around]) < min_open * np.count_nonzero(ring):
+            standing[k] = False
+            continue
         # nor between two jambs: obstacles in the ring on opposite sides of it (sectors of 30 degrees)
         ry, rx = nonzero_rc(ring & blocked[around])
         angle = np.arctan2(ry - rows.mean() - (y0 - y1), rx - cols.mean() - (x0 - x1))
         hit = np.bincount(np.floor((angle + np.pi) / (np.pi / 6)).astype(np.int64) % 12, minlength=12) > 0
-        open_all_round = open_all_round and not bool((hit & np.roll(hit, 6)).any())
-        standing[k] = seen and compact and open_all_round and np.count_nonzero(solid) >= min_solid * rows.size
+        standing[k] = not bool((hit & np.roll(hit, 6)).any())
     return np.asarray(standing[at].any(axis=1), dtype=bool)
 
 
@@ -448,12 +461,14 @@ def _wall_doors(
     ends = np.rint(cuts).astype(np.int64)
     on = near[np.clip(ends[..., 1], 0, h - 1), np.clip(ends[..., 0], 0, w - 1)]
     raster = draw_cuts(cuts[~on.any(axis=1)], (h, w))
-    if line_doors is not None and line_doors.any():
-        gaps = components(line_doors).labels
-        beside = np.zeros(int(gaps.max()) + 1, dtype=bool)
-        beside[gaps[near]] = True
+    if line_doors is not None and line_doors.any():  # the gaps labelled in the box round them, spread by runs
+        rows, cols = np.flatnonzero(line_doors.any(axis=1)), np.flatnonzero(line_doors.any(axis=0))
+        box = (slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1))
+        gaps = components(line_doors[box])
+        beside = np.zeros(len(gaps.stats), dtype=bool)
+        beside[gaps.labels[near[box]]] = True
         beside[0] = True
-        raster |= ~beside[gaps]
+        raster[box] |= gaps.spread(~beside)
     return np.asarray(cv2.dilate(raster.astype(np.uint8), np.ones((3, 3), np.uint8)), dtype=bool)
 
 
