@@ -89,17 +89,11 @@ _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them alon
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
-# at once can deadlock on its partly loaded modules. networkx (only the region graph, at the end,
-# needs it) is loaded on that thread later, where it would wait
-_STEP_MODULES = (
-    "scipy.ndimage",
-    "scipy.optimize",
-    "scipy.signal",
-    "scipy.stats",
-    "sklearn.cluster",
-    "sklearn.decomposition",
-    "sklearn.preprocessing",
-)
+# at once can deadlock on its partly loaded modules. The line search needs the first batch; scikit-learn
+# (the place categories on that thread, the texture regions when a map has several) is loaded after it,
+# while the line search runs; networkx (only the region graph, at the end, needs it) later still
+_STEP_MODULES = ("scipy.ndimage", "scipy.optimize", "scipy.signal", "scipy.stats")
+_CLUSTERING_MODULES = ("sklearn.cluster", "sklearn.decomposition", "sklearn.preprocessing")
 
 
 class Resolution(enum.Enum):
@@ -464,6 +458,7 @@ def decompose(
     # graph beside the label image; each step gives the same result as run in turn
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
         loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
+        learned = beside.submit(lambda: [importlib.import_module(name) for name in _CLUSTERING_MODULES])
         streaks = rays = np.zeros(occ.shape, dtype=bool)
         if clean:
             cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
@@ -477,7 +472,7 @@ def decompose(
         def soon(fn: Callable[..., _T], *args: object, **kwargs: object) -> Future[_T]:
             """A step that needs no step library: on the other thread, or on this one (done) while that one is
             still loading the libraries (the first call in a process: this thread would wait for it)."""
-            if loaded.done():
+            if learned.done():
                 return beside.submit(fn, *args, **kwargs)
             here: Future[_T] = Future()
             here.set_result(fn(*args, **kwargs))
@@ -515,9 +510,11 @@ def decompose(
         structure = _masked(
             gradients, _structure(obstacle_parts, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
         )
-        loaded.result()  # the line search imports scipy.signal and scikit-learn
+        loaded.result()  # the line search imports scipy.signal and scipy.ndimage
         global_lines = _lines(gradients, structure, None, resolution_m)
         n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
+        if n_tex > 1:
+            learned.result()  # the texture regions are clustered by scikit-learn
         texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
         groups: list[LineGroup] = []
         for t in range(n_tex):
