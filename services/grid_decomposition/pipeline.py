@@ -62,7 +62,7 @@ from services.grid_decomposition.rooms import (
     segment_rooms,
     wall_furniture,
 )
-from services.grid_decomposition.segments import fill_from_neighbours, merge_passages, segment_image
+from services.grid_decomposition.segments import border_closure, fill_from_neighbours, merge_passages, segment_image
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.short_walls import split_at_short_walls
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -578,7 +578,6 @@ def decompose(
         elongation = _elongation(component, sub.face_image, clearance_job.result(), resolution_m)
         rack_place = face_places(sub.face_image, sub.n_faces, racks, free)  # while the other thread finds geometry
         geometry = geometry_job.result()
-        beside.submit(importlib.import_module, "networkx")  # for the region graph, while the other thread waits
         found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
         evidence = found.label.copy()
         # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)
@@ -597,6 +596,9 @@ def decompose(
         roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
         structured = warehouse_floors(component, cog.face_free_px, automatic.label) | roads
         region_of_face = face_regions(sub, cog, component, automatic.label, structured)
+        # for the region graph, on the other thread (idle till the pairs) while this one draws the segments in long
+        # numpy calls: the import holds the GIL, which the labelling steps before need between their short calls
+        beside.submit(importlib.import_module, "networkx")
         segments = segment_image(
             sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
         )
@@ -703,6 +705,8 @@ def decompose(
                     wide_neck_m=door_max_width_m,
                 )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
+        doorways = door | cuts
+        closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records
         pairs = _pairs(segments, sub)
         racked = floor_px | banks.storage | on_places  # the only floor a storage region may stand on
         regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked, resolution_m,
@@ -726,6 +730,7 @@ def decompose(
             lut[list(merges)] = list(merges.values())
             segments = lookup(lut[lut], segments)
             grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)
+            closure = beside.submit(border_closure, segments, doorways)
             pairs = _pairs(segments, sub)
             regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked,
                                               resolution_m, origin_xy_m)
@@ -749,15 +754,12 @@ def decompose(
                 k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
                 for k, r in regions.items()
             }
-        topology_job = beside.submit(
-            region_topology,
-            sub,
-            cog,
-            _final_face_regions(pairs, sub.n_faces),
-            regions,
-            segments=segments,
-            doorways=door | cuts,
-            min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
+        face_region = _final_face_regions(pairs, sub.n_faces)
+        topology_job = beside.submit(  # (none of these names is bound again below)
+            lambda: region_topology(
+                sub, cog, face_region, regions, segments=segments, doorways=doorways,
+                min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)), closure=closure.result(),
+            )
         )
         region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
         for k, r in regions.items():
