@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple, TypeVar
 
@@ -609,6 +610,15 @@ def _transposed(image: npt.NDArray[_Byte]) -> npt.NDArray[_Byte]:
     return out
 
 
+def _search_transposed(
+    search: Callable[[npt.NDArray[np.uint8], npt.NDArray[np.bool_]], list[_Rack]],
+    obstacle: npt.NDArray[np.uint8],
+    solid: npt.NDArray[np.bool_],
+) -> list[_Rack]:
+    """``search`` across: on the transposed images (transposed on the thread that searches them)."""
+    return search(_transposed(obstacle), _transposed(solid))
+
+
 def find_racks(
     occupied: npt.NDArray[np.bool_],
     known: npt.NDArray[np.bool_],
@@ -703,7 +713,7 @@ def find_racks(
             off_pitch=off_pitch,
         )
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="racks") as beside:  # the second core
-            across = beside.submit(lambda: search(_transposed(obstacle), _transposed(solid_turned)))
+            across = beside.submit(_search_transposed, search, obstacle, solid_turned)
             along = search(obstacle, solid_turned)
             found = ((False, along), (True, across.result()))
         if along or found[1][1]:
