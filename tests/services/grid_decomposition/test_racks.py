@@ -173,7 +173,10 @@ def test_a_cross_aisle_one_bay_wide_between_loaded_racks_is_no_row_of_pallet_cel
 def test_a_turned_image_is_transposed_as_numpy_transposes_it() -> None:
     rng = np.random.default_rng(0)
     image = rng.random((37, 53)) < 0.3
-    for x in (image, image.astype(np.uint8) * 3, image[3:, ::2]):
-        out = _transposed(x)
-        assert out.dtype == x.dtype and out.flags.c_contiguous
-        assert np.array_equal(out, np.ascontiguousarray(x.T))
+    for mask in (image, image[3:, ::2]):
+        out = _transposed(mask)
+        assert out.dtype == np.bool_ and out.flags.c_contiguous
+        assert np.array_equal(out, np.ascontiguousarray(mask.T))
+    codes = image.astype(np.uint8) * 3
+    turned = _transposed(codes)
+    assert turned.dtype == np.uint8 and np.array_equal(turned, np.ascontiguousarray(codes.T))
