@@ -105,16 +105,11 @@ def _fit_mixture(x: npt.NDArray[np.float64], k: int) -> _Mixture:
     scikit-learn's EM for one feature and full covariances, step for step and with the same
     numpy expressions (so the same floating-point results), without its validation and array-API
     dispatch, which cost many times the arithmetic on 1,500 samples; the start is scikit-learn's
-    own k-means++ seeding.
+    k-means++ seeding (:func:`_kmeans_plusplus`).
     """
-    from sklearn.cluster._kmeans import _kmeans_plusplus  # scikit-learn is imported when first needed
-    from sklearn.utils.extmath import row_norms
-
     n = x.shape[0]
     resp = np.zeros((n, k), dtype=x.dtype)
-    # sklearn.cluster.kmeans_plusplus less its input checks (a pandas/narwhals probe per call)
-    _, indices = _kmeans_plusplus(x, k, row_norms(x, squared=True), np.ones(n, dtype=x.dtype), np.random.RandomState(0))
-    resp[indices, np.arange(k)] = 1
+    resp[_kmeans_plusplus(x, k), np.arange(k)] = 1
     weights, means, prec_chol = _m_step(x, resp)
     weights /= n
     lower_bound = -np.inf
@@ -127,6 +122,45 @@ def _fit_mixture(x: npt.NDArray[np.float64], k: int) -> _Mixture:
         if abs(lower_bound - previous) < _TOL:
             break
     return _Mixture(weights, means, prec_chol)
+
+
+def _squared_distances(
+    centres: npt.NDArray[np.float64], x: npt.NDArray[np.float64], x_norms: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """scikit-learn's ``_euclidean_distances(centres, x, Y_norm_squared=x_norms, squared=True)`` of float64 arrays."""
+    distances: npt.NDArray[np.float64] = -2 * (centres @ x.T)
+    distances += np.einsum("ij,ij->i", centres, centres)[:, None]
+    distances += x_norms.reshape(1, -1)
+    np.maximum(distances, np.asarray(0, dtype=distances.dtype), out=distances)
+    return distances
+
+
+def _kmeans_plusplus(x: npt.NDArray[np.float64], k: int) -> npt.NDArray[np.int64]:
+    """Indices of the ``k`` seeds of scikit-learn's ``_kmeans_plusplus(x, k, row_norms(x, squared=True),
+    np.ones(n), np.random.RandomState(0))`` for a dense float64 ``x``: its steps with the same numpy expressions
+    (the same random draws and floats), so the line search needs no scikit-learn (whose import, with the
+    clustering modules, is a long step of a fresh process's start; the place categories still load it)."""
+    n = x.shape[0]
+    weight = np.ones(n, dtype=x.dtype)
+    x_norms = np.einsum("ij,ij->i", x, x)
+    random_state = np.random.RandomState(0)
+    n_local_trials = 2 + int(np.log(k))
+    indices = np.full(k, -1, dtype=int)
+    indices[0] = random_state.choice(n, p=weight / weight.sum())
+    closest_dist_sq = _squared_distances(x[indices[0]][np.newaxis], x, x_norms)
+    current_pot = closest_dist_sq @ weight
+    for c in range(1, k):
+        rand_vals = random_state.uniform(size=n_local_trials) * current_pot
+        candidate_ids = np.searchsorted(np.cumsum(weight * closest_dist_sq), rand_vals)
+        np.clip(candidate_ids, None, closest_dist_sq.size - 1, out=candidate_ids)
+        distance_to_candidates = _squared_distances(x[candidate_ids], x, x_norms)
+        np.minimum(closest_dist_sq, distance_to_candidates, out=distance_to_candidates)
+        candidates_pot = distance_to_candidates @ weight.reshape(-1, 1)
+        best = np.argmin(candidates_pot)
+        current_pot = candidates_pot[best]
+        closest_dist_sq = distance_to_candidates[best]
+        indices[c] = candidate_ids[best]
+    return indices
 
 
 def _m_step(

@@ -62,7 +62,7 @@ from services.grid_decomposition.rooms import (
     segment_rooms,
     wall_furniture,
 )
-from services.grid_decomposition.segments import fill_from_neighbours, merge_passages, segment_image
+from services.grid_decomposition.segments import border_closure, fill_from_neighbours, merge_passages, segment_image
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.short_walls import split_at_short_walls
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -89,17 +89,11 @@ _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them alon
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
-# at once can deadlock on its partly loaded modules. networkx (only the region graph, at the end,
-# needs it) is loaded on that thread later, where it would wait
-_STEP_MODULES = (
-    "scipy.ndimage",
-    "scipy.optimize",
-    "scipy.signal",
-    "scipy.stats",
-    "sklearn.cluster",
-    "sklearn.decomposition",
-    "sklearn.preprocessing",
-)
+# at once can deadlock on its partly loaded modules. The line search needs the first batch; scikit-learn
+# (the place categories on that thread, the texture regions when a map has several) is loaded after it,
+# while the line search runs; networkx (only the region graph, at the end, needs it) later still
+_STEP_MODULES = ("scipy.ndimage", "scipy.optimize", "scipy.signal", "scipy.stats")
+_CLUSTERING_MODULES = ("sklearn.cluster", "sklearn.decomposition", "sklearn.preprocessing")
 
 
 class Resolution(enum.Enum):
@@ -464,6 +458,7 @@ def decompose(
     # graph beside the label image; each step gives the same result as run in turn
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
         loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
+        learned = beside.submit(lambda: [importlib.import_module(name) for name in _CLUSTERING_MODULES])
         streaks = rays = np.zeros(occ.shape, dtype=bool)
         if clean:
             cleaned, cleaning = clean_occupancy(occ, resolution_m=resolution_m)
@@ -477,7 +472,7 @@ def decompose(
         def soon(fn: Callable[..., _T], *args: object, **kwargs: object) -> Future[_T]:
             """A step that needs no step library: on the other thread, or on this one (done) while that one is
             still loading the libraries (the first call in a process: this thread would wait for it)."""
-            if loaded.done():
+            if learned.done():
                 return beside.submit(fn, *args, **kwargs)
             here: Future[_T] = Future()
             here.set_result(fn(*args, **kwargs))
@@ -515,9 +510,11 @@ def decompose(
         structure = _masked(
             gradients, _structure(obstacle_parts, max(1, round(structure_min_area_m2 / resolution_m**2))) & ~ray_sides
         )
-        loaded.result()  # the line search imports scipy.signal and scikit-learn
+        loaded.result()  # the line search imports scipy.signal and scipy.ndimage
         global_lines = _lines(gradients, structure, None, resolution_m)
         n_tex = _texture_count(global_lines) if n_texture_regions is None else n_texture_regions
+        if n_tex > 1:
+            learned.result()  # the texture regions are clustered by scikit-learn
         texture = segment_texture_regions(obstacle, known, resolution_m=resolution_m, n_regions=n_tex, seed=seed)
         groups: list[LineGroup] = []
         for t in range(n_tex):
@@ -581,7 +578,6 @@ def decompose(
         elongation = _elongation(component, sub.face_image, clearance_job.result(), resolution_m)
         rack_place = face_places(sub.face_image, sub.n_faces, racks, free)  # while the other thread finds geometry
         geometry = geometry_job.result()
-        beside.submit(importlib.import_module, "networkx")  # for the region graph, while the other thread waits
         found = evidence_labels(connected, geometry, component, elongation, cog.face_free_px, resolution_m=resolution_m)
         evidence = found.label.copy()
         # racks seen only as rows of dashes, and the aisles between them (no line lies on a dash end)
@@ -600,6 +596,9 @@ def decompose(
         roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
         structured = warehouse_floors(component, cog.face_free_px, automatic.label) | roads
         region_of_face = face_regions(sub, cog, component, automatic.label, structured)
+        # for the region graph, on the other thread (idle till the pairs) while this one draws the segments in long
+        # numpy calls: the import holds the GIL, which the labelling steps before need between their short calls
+        beside.submit(importlib.import_module, "networkx")
         segments = segment_image(
             sub.face_image, region_of_face, free, min_area_px=max(1, round(min_region_area_m2 / resolution_m**2))
         )
@@ -706,6 +705,8 @@ def decompose(
                     wide_neck_m=door_max_width_m,
                 )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
+        doorways = door | cuts
+        closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records
         pairs = _pairs(segments, sub)
         racked = floor_px | banks.storage | on_places  # the only floor a storage region may stand on
         regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked, resolution_m,
@@ -729,6 +730,7 @@ def decompose(
             lut[list(merges)] = list(merges.values())
             segments = lookup(lut[lut], segments)
             grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)
+            closure = beside.submit(border_closure, segments, doorways)
             pairs = _pairs(segments, sub)
             regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked,
                                               resolution_m, origin_xy_m)
@@ -752,15 +754,12 @@ def decompose(
                 k: r._replace(label=label_overrides[r.category]) if r.category in label_overrides else r
                 for k, r in regions.items()
             }
-        topology_job = beside.submit(
-            region_topology,
-            sub,
-            cog,
-            _final_face_regions(pairs, sub.n_faces),
-            regions,
-            segments=segments,
-            doorways=door | cuts,
-            min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)),
+        face_region = _final_face_regions(pairs, sub.n_faces)
+        topology_job = beside.submit(  # (none of these names is bound again below)
+            lambda: region_topology(
+                sub, cog, face_region, regions, segments=segments, doorways=doorways,
+                min_border_px=max(1, round(_MIN_PASSAGE_M / resolution_m)), closure=closure.result(),
+            )
         )
         region_label = np.zeros(int(segments.max()) + 1, dtype=np.uint8)
         for k, r in regions.items():

@@ -152,6 +152,7 @@ def region_topology(
     segments: npt.NDArray[np.int32] | None = None,
     doorways: npt.NDArray[np.bool_] | None = None,
     min_border_px: int = 1,
+    closure: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None,
 ) -> nx.Graph:
     """Graph of regions; an edge per touching pair with attribute ``connection`` (a Connection value).
 
@@ -161,7 +162,7 @@ def region_topology(
     closed doorway pixels, also those found off the lines), regions whose pixels touch along at
     least ``min_border_px`` border pixel pairs are linked by a door when at least half of their
     shared border is on a doorway, else by their labels (two road pieces touching at the corner of
-    a crossing are no passage).
+    a crossing are no passage). ``closure`` is :func:`border_closure` of ``segments`` and ``doorways``, when known.
     """
     import networkx as nx  # imported when first needed (decompose loads it early)
 
@@ -190,7 +191,7 @@ def region_topology(
         conn = link_connection(regions[p].label, regions[q].label, cogent=not open_edges, door=door)
         graph.add_edge(p, q, connection=conn.value)
     if segments is not None and doorways is not None:
-        touching, total, shut = border_closure(segments, doorways)
+        touching, total, shut = border_closure(segments, doorways) if closure is None else closure
         for (p, q), t, c in zip(touching.tolist(), total.tolist(), shut.tolist(), strict=True):
             if p in regions and q in regions and t >= min_border_px:
                 door = 2 * c >= t

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition import dominant_orientations, oriented_gradients
-from services.grid_decomposition.orientations import _gmm_smooth, _sharpness
+from services.grid_decomposition.orientations import _gmm_smooth, _kmeans_plusplus, _sharpness
 
 
 def _angle_error(a: float, b: float) -> float:
@@ -81,6 +81,20 @@ def test_orientation_histogram_mixture_is_scikit_learns(seed: int) -> None:
     for centre in rng.integers(0, 180, 1 + seed):
         hist += rng.uniform(10, 100) * np.exp(-0.5 * ((bins - centre) / rng.uniform(0.5, 5.0)) ** 2)
     assert np.array_equal(_gmm_smooth(hist, 4), _sklearn_smooth(hist, 4))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_kmeans_plusplus_seeds_are_scikit_learns(seed: int) -> None:
+    """The seeds the line search draws without scikit-learn are the ones scikit-learn draws (ties and repeats too)."""
+    from sklearn.cluster._kmeans import _kmeans_plusplus as sklearn_seeds
+    from sklearn.utils.extmath import row_norms
+
+    rng = np.random.default_rng(seed)
+    for n, k in ((1500, 1), (1500, 2), (1400, 4), (7, 7), (300, 6)):
+        values = rng.normal(90, 40, n) if seed % 2 else np.repeat(rng.uniform(0, 180, 5), n // 5 + 1)[:n]
+        x = (values + np.tile(np.linspace(-0.45, 0.45, 7), n // 7 + 1)[:n]).reshape(-1, 1)
+        _, want = sklearn_seeds(x, k, row_norms(x, squared=True), np.ones(n), np.random.RandomState(0))
+        assert np.array_equal(_kmeans_plusplus(x, k), want)
 
 
 @pytest.mark.parametrize("seed", range(4))

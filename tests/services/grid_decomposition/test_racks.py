@@ -11,7 +11,7 @@ import pytest
 
 from services.grid_decomposition import decompose
 from services.grid_decomposition.arrays import components
-from services.grid_decomposition.racks import _interval_image, _turn, find_racks, floor_objects
+from services.grid_decomposition.racks import _interval_image, _transposed, _turn, find_racks, floor_objects
 from services.simulator import ground_truth_grids, load_world
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
 from shared.vocabulary import PlaceLabel
@@ -168,3 +168,15 @@ def test_a_cross_aisle_one_bay_wide_between_loaded_racks_is_no_row_of_pallet_cel
         if area.kind.name == "JUNCTION":  # every crossing of an aisle and a cross aisle
             assert d.regions[int(np.bincount(d.segments[cells(area.polygon)]).argmax())].label is (
                 PlaceLabel.JUNCTION), area.id
+
+
+def test_a_turned_image_is_transposed_as_numpy_transposes_it() -> None:
+    rng = np.random.default_rng(0)
+    image = rng.random((37, 53)) < 0.3
+    for mask in (image, image[3:, ::2]):
+        out = _transposed(mask)
+        assert out.dtype == np.bool_ and out.flags.c_contiguous
+        assert np.array_equal(out, np.ascontiguousarray(mask.T))
+    codes = image.astype(np.uint8) * 3
+    turned = _transposed(codes)
+    assert turned.dtype == np.uint8 and np.array_equal(turned, np.ascontiguousarray(codes.T))
