@@ -498,6 +498,9 @@ def interchange(a: Rect, b: Rect, wall_cells: int) -> tuple[Rect, Rect] | None:
 
     ``a``'s id goes to the part that keeps ``a``'s far corner.
     """
+    t = wall_cells
+    if not (a.r1 - t + 1 == b.r0 or b.r1 - t + 1 == a.r0 or a.c1 - t + 1 == b.c0 or b.c1 - t + 1 == a.c0):
+        return None  # no shared wall line: no symmetry can bring them to the canonical case (cheap early out)
     for fwd, inv in _SYMMETRIES:
         for x, y, swap in ((a, b, False), (b, a, True)):
             out = _canonical_interchange(fwd(x), fwd(y), wall_cells)
