@@ -100,7 +100,9 @@ class Chain:
         out: set[int] = set()
         for door in (move.door_added, move.door_removed):
             if door is not None:
-                out.update(uid for uid, r in world.units.items() if in_wall(r, door, self.wall_cells))
+                out.update(uid for uid, r in world.units.items()  # the bounds test first: most units are elsewhere
+                           if r.r0 <= door.r0 and door.r1 <= r.r1 and r.c0 <= door.c0 and door.c1 <= r.c1
+                           and in_wall(r, door, self.wall_cells))
         return out
 
     def evaluate(self, move: Move, probabilities: Mapping[Kernel, float]) -> Evaluated | None:
@@ -153,6 +155,10 @@ def run_chain(chain: Chain, classes_map: npt.NDArray[np.uint8], settings: ChainS
     rng = np.random.default_rng([settings.seed, stream] if stream else settings.seed)
     chooser = RandomChooser(rng)
     allowed = set(settings.kernels)
+    phases: dict[int, tuple[dict[Kernel, float], list[Kernel], npt.NDArray[np.float64]]] = {}
+    for phase in settings.schedule:  # each phase's allowed kernels and their weights, built once
+        probs = {k: p for k, p in phase.probabilities.items() if k in allowed and p > 0}
+        phases[id(phase)] = probs, list(probs), np.array(list(probs.values()))
     start, cpu_start = time.perf_counter(), time.process_time()
     best, best_score = chain.world.copy(), chain.log_posterior
     accepted = 0
@@ -168,9 +174,8 @@ def run_chain(chain: Chain, classes_map: npt.NDArray[np.uint8], settings: ChainS
                                    min_inner_cells=chain.proposer.settings.min_inner_cells,
                                    positions_rc=positions_rc)
             chain.proposer.set_candidates(base_candidates, extra)
-        probs = {k: p for k, p in phase_at(settings.schedule, it).probabilities.items() if k in allowed and p > 0}
-        kernels = list(probs)
-        kernel = kernels[chooser.pick(np.array([probs[k] for k in kernels]))]
+        probs, kernels, weights = phases[id(phase_at(settings.schedule, it))]
+        kernel = kernels[chooser.pick(weights)]
         move = chain.proposer.draw(kernel, chain.world, chooser)
         if move is None:
             continue

@@ -145,10 +145,13 @@ class ContextPrior:
 
     def neighbours(self, world: World, uid: int) -> list[tuple[int, Rect]]:
         rect = world.units[uid]
+        t = self.wall_cells
+        top, bottom, left, right = rect.r0, rect.r1 - t + 1, rect.c0, rect.c1 - t + 1
         out = []
         for other, r in world.units.items():
-            if other != uid:
-                band = shared_band(rect, r, self.wall_cells)
+            # shared_band's own first test (walls stacked or side by side), inlined: most units fail it
+            if other != uid and (bottom == r.r0 or r.r1 - t + 1 == top or right == r.c0 or r.c1 - t + 1 == left):
+                band = shared_band(rect, r, t)
                 if band is not None:
                     out.append((other, band))
         return out
