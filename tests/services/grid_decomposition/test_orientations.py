@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from services.grid_decomposition import dominant_orientations, oriented_gradients
+from services.grid_decomposition import dominant_orientations, orientations, oriented_gradients
 from services.grid_decomposition.orientations import _gmm_smooth, _kmeans_plusplus, _sharpness
 
 
@@ -53,6 +53,39 @@ def test_dominant_orientations_follow_a_rotated_building() -> None:
 
 def test_dominant_orientations_of_a_map_without_edges_is_empty() -> None:
     assert dominant_orientations(oriented_gradients(np.zeros((20, 20), dtype=bool))).size == 0
+
+
+def _whole_image_gradients(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rows, columns, magnitudes and phases of the edge pixels, filtered in one pass over the whole image."""
+    image = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.0)
+    gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)
+    near = np.flatnonzero(cv2.magnitude(gx, gy) > 0.05 * (1 - 1e-5))
+    if near.size == 0:
+        return near, near, np.zeros(0), np.zeros(0)
+    magnitude, phase = (a.ravel() for a in cv2.cartToPolar(gx.ravel()[near], gy.ravel()[near]))
+    keep = magnitude > 0.05
+    rows, cols = np.divmod(near[keep], mask.shape[1])
+    return rows, cols, magnitude[keep].astype(np.float64), phase[keep].astype(np.float64)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_gradients_in_strips_are_those_of_one_pass_over_the_whole_image(
+    seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Strips of one row up to the whole image, edges on the strips' borders and on the image's, random masks."""
+    rng = np.random.default_rng(seed)
+    for _ in range(40):
+        height, width = (int(n) for n in rng.integers(1, 120, 2))
+        mask = rng.random((height, width)) < rng.uniform(0.0, 0.6)
+        if rng.random() < 0.5:  # blocks: long straight edges
+            mask = np.kron(mask[: height // 5 + 1, : width // 5 + 1], np.ones((5, 5), bool))[:height, :width]
+        monkeypatch.setattr(orientations, "_STRIP_PX", int(rng.integers(1, 3 * height * width + 2)))
+        got = oriented_gradients(mask)
+        rows, cols, magnitude, phase = _whole_image_gradients(mask)
+        assert np.array_equal(got.rows, rows) and np.array_equal(got.cols, cols)
+        assert np.array_equal(got.magnitude, magnitude)
+        assert np.array_equal(got.direction, (phase + math.pi / 2 + math.pi / 2) % math.pi - math.pi / 2)
 
 
 def _sklearn_smooth(hist: np.ndarray, max_components: int) -> np.ndarray:
