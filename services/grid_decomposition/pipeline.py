@@ -62,7 +62,13 @@ from services.grid_decomposition.rooms import (
     segment_rooms,
     wall_furniture,
 )
-from services.grid_decomposition.segments import border_closure, fill_from_neighbours, merge_passages, segment_image
+from services.grid_decomposition.segments import (
+    border_closure,
+    fill_bytes_from_neighbours,
+    fill_from_neighbours,
+    merge_passages,
+    segment_image,
+)
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.short_walls import split_at_short_walls
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
@@ -835,18 +841,20 @@ def _final_face_regions(pairs: _Pairs, n_faces: int) -> npt.NDArray[np.int64]:
 
 def _grown_face_labels(
     segments: npt.NDArray[np.int32], face_labels: FaceLabels, face_image: npt.NDArray[np.int32]
-) -> npt.NDArray[np.int32]:
+) -> npt.NDArray[np.uint8]:
     """Each segment pixel's face label; line pixels take a neighbour's (0 where none reaches)."""
     inside = segments > 0
-    # gathered as bytes (labels are below 256); the fill works on its own int32 copy
-    return fill_from_neighbours(np.where(inside, np.take(face_labels.label.astype(np.uint8), face_image), 0), inside)
+    # gathered and filled as bytes (labels are below 256); the fill works on its own copy
+    return fill_bytes_from_neighbours(
+        np.where(inside, np.take(face_labels.label.astype(np.uint8), face_image), np.uint8(0)), inside
+    )
 
 
 def _region_records(
     segments: npt.NDArray[np.int32],
     pairs: _Pairs,
     face_labels: FaceLabels,
-    grown_labels: npt.NDArray[np.int32],
+    grown_labels: npt.NDArray[np.uint8],
     racked: npt.NDArray[np.bool_],
     resolution_m: float,
     origin_xy_m: tuple[float, float],
@@ -887,8 +895,8 @@ def _region_records(
         )
     labels = grown_labels  # its holes filled in place
     hole = (segments > 0) & (labels == 0)
-    labels[hole] = seg_label[segments[hole]]
-    return regions, labels.astype(np.uint8)
+    labels[hole] = seg_label[segments[hole]]  # label values, below 256
+    return regions, labels
 
 
 def _share_in(segments: npt.NDArray[np.int32], mask: npt.NDArray[np.bool_], n_seg: int) -> npt.NDArray[np.float64]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TypeVar
+
 import cv2
 import numpy as np
 import numpy.typing as npt
@@ -19,6 +21,8 @@ from services.grid_decomposition.arrays import (
     value_runs,
 )
 
+_Id = TypeVar("_Id", np.int32, np.uint8)
+
 
 def fill_from_neighbours(
     segments: npt.NDArray[np.int32], target: npt.NDArray[np.bool_], *, max_iterations: int = 200
@@ -29,11 +33,23 @@ def fill_from_neighbours(
     8-neighbours (a grey dilation restricted to the holes). Only the front moves: the work is
     proportional to the pixels filled, not to the image (a few streak pixels on a 9 Mpx hall).
     """
-    segments = np.asarray(segments)
+    return _fill(np.asarray(segments), target, max_iterations, np.int32)
+
+
+def fill_bytes_from_neighbours(
+    labels: npt.NDArray[np.uint8], target: npt.NDArray[np.bool_], *, max_iterations: int = 200
+) -> npt.NDArray[np.uint8]:
+    """:func:`fill_from_neighbours` of ids below 256, worked and returned in uint8 (a quarter of the memory)."""
+    return _fill(np.asarray(labels, dtype=np.uint8), target, max_iterations, np.uint8)
+
+
+def _fill(
+    segments: npt.NDArray[np.integer], target: npt.NDArray[np.bool_], max_iterations: int, dtype: type[_Id]
+) -> npt.NDArray[_Id]:
     hole = target & (segments == 0)
     rows = np.flatnonzero(hole.any(axis=1))
     if rows.size == 0:
-        return segments.astype(np.int32)  # a copy
+        return segments.astype(dtype)  # a copy
     cols = np.flatnonzero(hole.any(axis=0))
     # the holes' bounding box and one pixel around it: every labelled pixel next to a hole
     height, width = segments.shape
@@ -43,24 +59,24 @@ def fill_from_neighbours(
     if min(rows[0], cols[0]) >= 2 and rows[-1] < height - 2 and cols[-1] < width - 2 and 2 * framed_size >= hole.size:
         # holes two pixels or more inside the image, their box most of it: the copy returned is the working image
         # (the front is a pixel or more inside it, so its neighbours' flat indices never leave it or wrap a row)
-        out = segments.astype(np.int32)  # a copy
+        out = segments.astype(dtype)  # a copy
         _grow(out, hole, width, framed_size, int(out[r0:r1, c0:c1].max()), max_iterations)
         return out
     # the box framed by zeros is the working copy (the image's own copy only when the box is not all of it)
-    lab: npt.NDArray[np.int32] = np.asarray(cv2.copyMakeBorder(
-        segments[r0:r1, c0:c1].astype(np.int32, copy=False), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0
-    ), dtype=np.int32)
+    lab: npt.NDArray[_Id] = np.asarray(cv2.copyMakeBorder(
+        segments[r0:r1, c0:c1].astype(dtype, copy=False), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0
+    ), dtype=dtype)
     open_ = cv2.copyMakeBorder(hole[r0:r1, c0:c1].view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0).view(bool)
     _grow(lab, open_, c1 - c0 + 2, framed_size, int(lab.max()), max_iterations)
     if (r1 - r0, c1 - c0) == (height, width):
         return np.ascontiguousarray(lab[1:-1, 1:-1])
-    out = segments.astype(np.int32)  # a copy
+    out = segments.astype(dtype)  # a copy
     out[r0:r1, c0:c1] = lab[1:-1, 1:-1]
     return out
 
 
 def _grow(
-    lab: npt.NDArray[np.int32], open_: npt.NDArray[np.bool_], stride: int, framed_size: int, top: int, steps: int
+    lab: npt.NDArray[np.integer], open_: npt.NDArray[np.bool_], stride: int, framed_size: int, top: int, steps: int
 ) -> None:
     """:func:`fill_from_neighbours` in place on ``lab``, whose holes are ``open_`` (taken as they fill): images
     ``stride`` wide in which every neighbour of a pixel next to a hole lies (a frame of zeros, or a margin);
@@ -71,9 +87,9 @@ def _grow(
         # many holes (the lines through a map): the first step at once, as a grey dilation of the
         # box (ids below 2**8 in uint8, below 2**16 in uint16, below 2**24 exact in float32)
         dtype = np.uint8 if top < 2**8 else np.uint16 if top < 2**16 else np.float32
-        grown = cv2.dilate(lab.astype(dtype), np.ones((3, 3), np.uint8))
+        grown = cv2.dilate(lab.astype(dtype, copy=False), np.ones((3, 3), np.uint8))
         front = np.flatnonzero(open_ & (grown > 0))
-        lab_flat[front] = grown.ravel()[front].astype(np.int32)
+        lab_flat[front] = grown.ravel()[front].astype(lab.dtype, copy=False)
         open_flat[front] = False
         steps -= 1
         # the holes left touch no pixel labelled before: only those just filled next to them move on

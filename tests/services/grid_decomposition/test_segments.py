@@ -9,6 +9,7 @@ import pytest
 from services.grid_decomposition.regions import warehouse_floors
 from services.grid_decomposition.segments import (
     border_closure,
+    fill_bytes_from_neighbours,
     fill_from_neighbours,
     merge_open_segments,
     merge_passages,
@@ -181,12 +182,18 @@ def test_fill_from_neighbours_grows_a_step_at_a_time_through_lines_and_wide_gaps
     target[66:70, 10:20] = True
     filled = fill_from_neighbours(seg, target, max_iterations=steps)
     assert np.array_equal(filled, _grown_step_by_step(seg, target, steps))
+    if top <= 256:  # ids below 256 the same in bytes
+        as_bytes = fill_bytes_from_neighbours(seg.astype(np.uint8), target, max_iterations=steps)
+        assert as_bytes.dtype == np.uint8 and np.array_equal(as_bytes, filled)
     # the same inside a labelled margin: the holes two pixels or more from the image's edge (no frame is needed)
     for margin in (2, 3):
         inner = np.pad(seg, margin, constant_values=1)
         inside = np.pad(target, margin, constant_values=False)
         filled = fill_from_neighbours(inner, inside, max_iterations=steps)
         assert filled.dtype == np.int32 and np.array_equal(filled, _grown_step_by_step(inner, inside, steps))
+        if top <= 256:
+            as_bytes = fill_bytes_from_neighbours(inner.astype(np.uint8), inside, max_iterations=steps)
+            assert as_bytes.dtype == np.uint8 and np.array_equal(as_bytes, filled)
 
 
 def test_a_strip_between_two_cuts_joins_a_room_and_a_small_room_behind_a_door_stays() -> None:
