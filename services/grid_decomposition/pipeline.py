@@ -654,8 +654,10 @@ def decompose(
             segments = join_furnished_pieces(segments, clutter, floor_px, resolution_m=resolution_m)
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)
-        grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
-        segments = np.where(against_walls, grown, segments)
+        off_floors = (segments > 0) & ~floor_px
+        if off_floors.any():  # else nothing grows (a hall whose every region is on a warehouse floor): as it is
+            grown = fill_from_neighbours(np.where(off_floors, segments, 0), against_walls, max_iterations=60)
+            segments = np.where(against_walls, grown, segments)
         # the streaks the cleaning took out are free space: they take the region they grow from
         segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
         if fan_max_neck_m > 0:  # a room seen only through its door (rays or floor), not the corridor's floor
