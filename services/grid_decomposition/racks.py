@@ -863,11 +863,23 @@ def face_places(
     if layout.cell_labels.size <= 1:
         return out
     n_lab = len(PlaceLabel)
-    # free pixels per (face, place label), counted from the runs of equal keys along the rows
-    dtype = np.dtype(np.int32 if (n_faces + 1) * n_lab < 2**31 else np.int64)
-    key = np.multiply(face_image, n_lab, dtype=dtype)
-    key += lookup(layout.cell_labels.astype(dtype), layout.cells)  # in place: one fresh whole-image array fewer
-    votes = label_counts(key, (n_faces + 1) * n_lab, free)[1].reshape(n_faces + 1, n_lab)
+    # free pixels per (face, place label), counted from the runs of equal face, place and freedom in raster order
+    # (whole numbers summed: the counts of the (face, label) key image's runs, without drawing that image)
+    face, cell, on = (np.ascontiguousarray(a).ravel() for a in (face_image, layout.cells, free))
+    start = np.empty(face.size, dtype=bool)
+    start[0] = True
+    np.not_equal(face[1:], face[:-1], out=start[1:])
+    changed = np.empty(face.size - 1, dtype=bool)
+    for image in (cell, on):
+        np.not_equal(image[1:], image[:-1], out=changed)
+        start[1:] |= changed
+    first = np.flatnonzero(start)
+    length = np.diff(np.append(first, face.size))
+    first, length = first[on[first]], length[on[first]]
+    key = face[first].astype(np.int64) * n_lab + layout.cell_labels[cell[first]]
+    votes = (
+        np.bincount(key, weights=length, minlength=(n_faces + 1) * n_lab).astype(np.int64).reshape(n_faces + 1, n_lab)
+    )
     best = votes[:, 1:].argmax(axis=1) + 1
     majority = votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1)
     out[majority] = best[majority]

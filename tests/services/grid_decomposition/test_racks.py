@@ -11,7 +11,15 @@ import pytest
 
 from services.grid_decomposition import decompose
 from services.grid_decomposition.arrays import components
-from services.grid_decomposition.racks import _interval_image, _transposed, _turn, find_racks, floor_objects
+from services.grid_decomposition.racks import (
+    RackLayout,
+    _interval_image,
+    _transposed,
+    _turn,
+    face_places,
+    find_racks,
+    floor_objects,
+)
 from services.simulator import ground_truth_grids, load_world
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
 from shared.vocabulary import PlaceLabel
@@ -180,3 +188,24 @@ def test_a_turned_image_is_transposed_as_numpy_transposes_it() -> None:
     codes = image.astype(np.uint8) * 3
     turned = _transposed(codes)
     assert turned.dtype == np.uint8 and np.array_equal(turned, np.ascontiguousarray(codes.T))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_face_places_is_the_majority_place_label_of_each_faces_free_pixels(seed: int) -> None:
+    """Counted from runs, the votes are those of a bincount over every free pixel (faces cut across places)."""
+    rng = np.random.default_rng(seed)
+    h, w, n_faces, n_places = 60, 90, 12, 7
+    faces = np.kron(rng.integers(0, n_faces + 1, (6, 9)), np.ones((10, 10), np.int64)).astype(np.int32)
+    cells = np.kron(rng.integers(0, n_places + 1, (4, 5)), np.ones((15, 18), np.int64)).astype(np.int32)
+    cells[rng.random((h, w)) < 0.05] = 0
+    free = rng.random((h, w)) < 0.8
+    labels = np.r_[0, rng.choice([PlaceLabel.STORAGE.value, PlaceLabel.CORRIDOR.value], n_places)].astype(np.int64)
+    layout = RackLayout(cells, labels, np.zeros((h, w), dtype=bool), np.zeros((0, 4, 2)))
+    n_lab = len(PlaceLabel)
+    votes = np.bincount(
+        faces[free].astype(np.int64) * n_lab + labels[cells[free]], minlength=(n_faces + 1) * n_lab
+    ).reshape(n_faces + 1, n_lab)
+    best = votes[:, 1:].argmax(axis=1) + 1
+    want = np.where(votes[np.arange(n_faces + 1), best] > 0.5 * votes.sum(axis=1), best, 0)
+    want[0] = 0
+    assert np.array_equal(face_places(faces, n_faces, layout, free), want)
