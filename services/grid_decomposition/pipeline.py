@@ -846,9 +846,9 @@ def _grown_face_labels(
 ) -> npt.NDArray[np.uint8]:
     """Each segment pixel's face label; line pixels take a neighbour's (0 where none reaches)."""
     inside = segments > 0
-    # gathered and filled as bytes (labels are below 256); the fill works on its own copy
+    # gathered and filled as bytes (labels are below 256), in the image gathered
     return fill_bytes_from_neighbours(
-        np.where(inside, np.take(face_labels.label.astype(np.uint8), face_image), np.uint8(0)), inside
+        np.where(inside, np.take(face_labels.label.astype(np.uint8), face_image), np.uint8(0)), inside, overwrite=True
     )
 
 

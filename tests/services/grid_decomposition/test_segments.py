@@ -182,6 +182,12 @@ def test_fill_from_neighbours_grows_a_step_at_a_time_through_lines_and_wide_gaps
     target[66:70, 10:20] = True
     filled = fill_from_neighbours(seg, target, max_iterations=steps)
     assert np.array_equal(filled, _grown_step_by_step(seg, target, steps))
+    # in place when allowed (an image of the caller's own), else in a copy: the same ids either way
+    own = seg.copy()
+    assert np.array_equal(fill_from_neighbours(own, target, max_iterations=steps, overwrite=True), filled)
+    strided = np.asfortranarray(seg)
+    assert np.array_equal(fill_from_neighbours(strided, target, max_iterations=steps, overwrite=True), filled)
+    assert np.array_equal(strided, seg)
     if top <= 256:  # ids below 256 the same in bytes
         as_bytes = fill_bytes_from_neighbours(seg.astype(np.uint8), target, max_iterations=steps)
         assert as_bytes.dtype == np.uint8 and np.array_equal(as_bytes, filled)
