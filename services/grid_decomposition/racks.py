@@ -39,10 +39,8 @@ from services.grid_decomposition.arrays import (
     components_stats,
     label_boxes,
     label_counts,
-    lookup,
     nonzero_rc,
     unique_inverse,
-    value_runs,
 )
 from shared.vocabulary import PlaceLabel
 
@@ -940,19 +938,20 @@ def place_segments(
             lut[nearest[seeds]] = cells[seeds]
             place[joining] = lut[nearest[joining]]
             inside |= joining & (place > 0)
-    # in place with ``where``: a boolean-indexed write over a hall's 9 Mpx costs ten times more
-    out = segments.astype(np.int32)  # ids stay far below 2**31
-    np.copyto(out, 0, where=in_cells & ~free)  # uprights and pallets in a rack place belong to no region
-    np.add(place, n_old, out=out, where=inside)
+    # each run of equal segment, place, membership and dropped pixel along the rows takes one id, renumbered and
+    # spread once: no whole-image copy of the segments written over, gathered from and renumbered (raster order, so
+    # the pallet cells' keys and their order are those of the pixels)
+    dropped = in_cells & ~free  # uprights and pallets in a rack place belong to no region
+    run_at, run_length = _joint_runs(segments, place, inside, dropped)
+    seg_run = np.ascontiguousarray(segments).ravel()[run_at].astype(np.int64)
+    place_run, inside_run = place.ravel()[run_at], inside.ravel()[run_at]  # (arrays of this function's own)
+    value = np.where(dropped.ravel()[run_at], 0, seg_run)
+    np.copyto(value, place_run + np.int64(n_old), where=inside_run)
     # a rack keeps the pallet cells the warehouse floor cut it into (a region per bay and side)
-    cell = inside & lookup(rack, place) & (segments > 0)
+    cell = inside_run & rack[place_run] & (seg_run > 0)
     if cell.any():
-        # the (place, segment) keys of the cell pixels from the runs of equal place, segment and cell along the
-        # rows: far fewer than the pixels (raster order, so the keys and their order are those of the pixels)
-        run_at, run_length = _joint_runs(place, segments, cell)
-        on = cell.ravel()[run_at]
-        keys, pieces = unique_inverse(place.ravel()[run_at[on]].astype(np.int64) * n_old + segments.ravel()[run_at[on]])
-        size = np.bincount(pieces, weights=run_length[on]).astype(np.int64)
+        keys, pieces = unique_inverse(place_run[cell].astype(np.int64) * n_old + seg_run[cell])
+        size = np.bincount(pieces, weights=run_length[cell]).astype(np.int64)
         # a crumb joins the largest piece of its rack
         owner = keys // n_old
         order = np.lexsort((-size, owner))
@@ -960,13 +959,12 @@ def place_segments(
         largest = np.zeros(int(owner.max()) + 1, dtype=np.int64)
         largest[owner[order][first]] = order[first]
         target = np.where(size >= min_area_px, np.arange(size.size), largest[owner])
-        out[cell] = np.repeat(n_old + layout.cell_labels.size + target[pieces], run_length[on])
-    runs = value_runs(out)
-    present = np.bincount(runs[0]) > 0
+        value[cell] = n_old + layout.cell_labels.size + target[pieces]
+    present = np.bincount(value) > 0
     present[0] = True
     lut = (np.cumsum(present) - 1).astype(np.int32)
     np.multiply(place, inside, out=place)  # its own copy (int32): 0 off the free pixels in a place
-    return lookup(lut, out, runs), place
+    return np.repeat(lut[value], run_length).reshape(segments.shape), place
 
 
 def _joint_runs(
