@@ -658,8 +658,11 @@ def decompose(
         if off_floors.any():  # else nothing grows (a hall whose every region is on a warehouse floor): as it is
             grown = fill_from_neighbours(np.where(off_floors, segments, 0), against_walls, max_iterations=60)
             segments = np.where(against_walls, grown, segments)
-        # the streaks the cleaning took out are free space: they take the region they grow from
-        segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
+        # the streaks the cleaning took out are free space: they take the region they grow from (in place: every step
+        # since the segment image returned a new array or the one it was given, read nowhere else)
+        segments = fill_from_neighbours(
+            segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)), overwrite=True
+        )
         if fan_max_neck_m > 0:  # a room seen only through its door (rays or floor), not the corridor's floor
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
             floors = on_floor > 0.5 * size
