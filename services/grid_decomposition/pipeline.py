@@ -492,8 +492,10 @@ def decompose(
                 distance=clearance_job.result(),
             )
         )
-        occupancy01_job = soon(_occupancy01, occ, known)  # for the cogency
-        against_walls_job = soon(wall_furniture, obstacle, resolution_m=resolution_m)
+        # needed only from the cogency and the room stage on: queued on the other thread behind the libraries even in
+        # a fresh process (a whole float64 image and a labelling fewer before the line search on this one)
+        occupancy01_job = beside.submit(_occupancy01, occ, known)  # for the cogency
+        against_walls_job = beside.submit(wall_furniture, obstacle, resolution_m=resolution_m)
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
         standing_job = (
             soon(
