@@ -33,6 +33,7 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
+from services.grid_decomposition.loose import join_isolated_pieces
 from services.grid_decomposition.openings import join_unseen_openings
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -87,6 +88,7 @@ _POST_WALL_M = 0.75
 _POST_MIN_RUN_M = 0.1
 _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
+_FAN_GAP_M = 0.5  # rays this close are one fan (the cleaning bridges the unknown between them: twice its fan gap)
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules. The line search needs the first batch; scikit-learn
@@ -704,6 +706,11 @@ def decompose(
                     resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
                     wide_neck_m=door_max_width_m,
                 )
+        # pieces of one fan of rays that touch nothing, each a region too small to be a room, are one room
+        segments = join_isolated_pieces(
+            segments, occupied, max_area_px=round(room_min_area_m2 / resolution_m**2),
+            gap_px=max(1, round(_FAN_GAP_M / resolution_m)),
+        )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         doorways = door | cuts
         closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records
