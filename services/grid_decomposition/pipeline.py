@@ -377,7 +377,10 @@ def decompose(
         Regions off warehouse floors smaller than this (door slivers, strips between close lines)
         join the neighbour they share the longest border with
         (:func:`~services.grid_decomposition.rooms.segment_rooms`: rooms off warehouse floors
-        are face regions joined across open borders, with their furniture, cut at doorways).
+        are face regions joined across open borders, with their furniture, cut at doorways). Such
+        regions that touch no other and lie within 0.5 m of each other through unknown space (pieces
+        of one fan of laser rays) join each other
+        (:func:`~services.grid_decomposition.loose.join_isolated_pieces`).
     structure_min_area_m2 : float
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
