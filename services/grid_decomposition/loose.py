@@ -39,16 +39,7 @@ def join_isolated_pieces(
     small[0] = False
     if np.count_nonzero(small) < 2:
         return segments
-    padded = np.pad(segments, 1)
-    centre = padded[1:-1, 1:-1]
-    touches = np.zeros(n, dtype=bool)
-    height, width = segments.shape
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        other = padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width]
-        meet = (centre > 0) & (other > 0) & (centre != other)
-        touches[centre[meet]] = True
-        touches[other[meet]] = True
-    isolated = small & ~touches
+    isolated = small & ~_touching(segments, n)
     if np.count_nonzero(isolated) < 2:
         return segments
     seeds = np.where(lookup(isolated, segments), segments, 0)
@@ -69,3 +60,54 @@ def join_isolated_pieces(
     lut = lowest[group].astype(np.int32)
     out: npt.NDArray[np.int32] = lookup(lut, segments)
     return out
+
+
+def fill_lone_regions(
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    *,
+    reach_px: int,
+    min_area_px: int,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with the loose free cells within ``reach_px`` of a region that touches no other given to it.
+
+    A region no other touches (8-neighbours) is a room seen alone, through the gaps of its walls: the dots of
+    its rays round it (free cells no region holds, with unknown between them) are its floor. They join it when
+    it reaches them within ``reach_px`` through unknown and loose cells, never through an obstacle. Regions
+    under ``min_area_px`` (specks) take none, nor does any region that touches another: the rays round a room
+    with neighbours also leave it through its windows and doors, where the ground truth draws no room.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    free, occupied : (H, W) bool
+    reach_px, min_area_px : int
+    """
+    loose = free & (segments == 0)
+    n = int(segments.max(initial=0)) + 1
+    lone = label_counts(segments, n)[0] >= min_area_px
+    lone[0] = False
+    lone &= ~_touching(segments, n)
+    if not lone.any() or not loose.any():
+        return segments
+    seeds = np.where(lookup(lone, segments), segments, 0)
+    way = ~occupied & (segments == 0) & near(seeds > 0, reach_px)
+    grown = fill_from_neighbours(seeds, way, max_iterations=reach_px)
+    out: npt.NDArray[np.int32] = np.where(loose, grown, segments)
+    return out
+
+
+def _touching(segments: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.bool_]:
+    """(n,) whether each region has an 8-neighbour cell of another region."""
+    padded = np.pad(segments, 1)
+    centre = padded[1:-1, 1:-1]
+    touches = np.zeros(n, dtype=bool)
+    height, width = segments.shape
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        other = padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width]
+        meet = (centre > 0) & (other > 0) & (centre != other)
+        touches[centre[meet]] = True
+        touches[other[meet]] = True
+    return touches

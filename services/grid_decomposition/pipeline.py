@@ -33,7 +33,7 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.loose import join_isolated_pieces
+from services.grid_decomposition.loose import fill_lone_regions, join_isolated_pieces
 from services.grid_decomposition.openings import join_unseen_openings
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -709,10 +709,14 @@ def decompose(
                     resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
                     wide_neck_m=door_max_width_m,
                 )
-        # pieces of one fan of rays that touch nothing, each a region too small to be a room, are one room
+        # pieces of one fan of rays that touch nothing, each a region too small to be a room, are one room; a room
+        # seen alone through the gaps of its walls (touching no region) takes the dots of its rays round it
+        fan_gap_px = max(1, round(_FAN_GAP_M / resolution_m))
         segments = join_isolated_pieces(
-            segments, occupied, max_area_px=round(room_min_area_m2 / resolution_m**2),
-            gap_px=max(1, round(_FAN_GAP_M / resolution_m)),
+            segments, occupied, max_area_px=round(room_min_area_m2 / resolution_m**2), gap_px=fan_gap_px
+        )
+        segments = fill_lone_regions(
+            segments, free, occupied, reach_px=fan_gap_px, min_area_px=round(min_region_area_m2 / resolution_m**2)
         )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         doorways = door | cuts
