@@ -86,11 +86,13 @@ def fill_lone_regions(
     reach_px, min_area_px : int
     """
     loose = free & (segments == 0)
+    if not loose.any():
+        return segments
     n = int(segments.max(initial=0)) + 1
     lone = label_counts(segments, n)[0] >= min_area_px
     lone[0] = False
     lone &= ~_touching(segments, n)
-    if not lone.any() or not loose.any():
+    if not lone.any():
         return segments
     seeds = np.where(lookup(lone, segments), segments, 0)
     way = ~occupied & (segments == 0) & near(seeds > 0, reach_px)
