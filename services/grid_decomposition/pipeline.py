@@ -380,7 +380,9 @@ def decompose(
         are face regions joined across open borders, with their furniture, cut at doorways). Such
         regions that touch no other and lie within 0.5 m of each other through unknown space (pieces
         of one fan of laser rays) join each other
-        (:func:`~services.grid_decomposition.loose.join_isolated_pieces`).
+        (:func:`~services.grid_decomposition.loose.join_isolated_pieces`); a region that touches no other
+        (a room seen alone through the gaps of its walls) takes the free cells no region holds within
+        0.5 m of it, the dots of its rays (:func:`~services.grid_decomposition.loose.fill_lone_regions`).
     structure_min_area_m2 : float
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
