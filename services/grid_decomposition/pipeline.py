@@ -33,6 +33,7 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
+from services.grid_decomposition.loose import fill_lone_regions, join_isolated_pieces
 from services.grid_decomposition.openings import join_unseen_openings
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -93,6 +94,7 @@ _POST_WALL_M = 0.75
 _POST_MIN_RUN_M = 0.1
 _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
+_FAN_GAP_M = 0.5  # rays this close are one fan (the cleaning bridges the unknown between them: twice its fan gap)
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules. The line search needs the first batch; scikit-learn
@@ -381,7 +383,12 @@ def decompose(
         Regions off warehouse floors smaller than this (door slivers, strips between close lines)
         join the neighbour they share the longest border with
         (:func:`~services.grid_decomposition.rooms.segment_rooms`: rooms off warehouse floors
-        are face regions joined across open borders, with their furniture, cut at doorways).
+        are face regions joined across open borders, with their furniture, cut at doorways). Such
+        regions that touch no other and lie within 0.5 m of each other through unknown space (pieces
+        of one fan of laser rays) join each other
+        (:func:`~services.grid_decomposition.loose.join_isolated_pieces`); a region that touches no other
+        (a room seen alone through the gaps of its walls) takes the free cells no region holds within
+        0.5 m of it, the dots of its rays (:func:`~services.grid_decomposition.loose.fill_lone_regions`).
     structure_min_area_m2 : float
         Dominant orientations come from the edges of obstacle components at least this large
         (walls, blocks, unknown space); furniture and rack uprights, whose blob edges point every
@@ -717,6 +724,15 @@ def decompose(
                     resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
                     wide_neck_m=door_max_width_m,
                 )
+        # pieces of one fan of rays that touch nothing, each a region too small to be a room, are one room; a room
+        # seen alone through the gaps of its walls (touching no region) takes the dots of its rays round it
+        fan_gap_px = max(1, round(_FAN_GAP_M / resolution_m))
+        segments = join_isolated_pieces(
+            segments, occupied, max_area_px=round(room_min_area_m2 / resolution_m**2), gap_px=fan_gap_px
+        )
+        segments = fill_lone_regions(
+            segments, free, occupied, reach_px=fan_gap_px, min_area_px=round(min_region_area_m2 / resolution_m**2)
+        )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         doorways = door | cuts
         closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records

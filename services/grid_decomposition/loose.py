@@ -1,0 +1,115 @@
+"""Free space the regions leave loose on real maps: the dots of sparse rays, pieces of a room seen only in rays.
+
+A lidar looking through the gaps of a wall into a room it never enters leaves a few thin fans of rays there,
+each ray a dotted line of free cells with unknown between the dots. The regions are 4-connected pieces of free
+space: a dot is a piece too small to be a region and is dropped, and a fan whose rays are a few cells apart
+falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from services.grid_decomposition.arrays import label_counts, lookup, near
+from services.grid_decomposition.segments import fill_from_neighbours
+
+
+def join_isolated_pieces(
+    segments: npt.NDArray[np.int32], occupied: npt.NDArray[np.bool_], *, max_area_px: int, gap_px: int
+) -> npt.NDArray[np.int32]:
+    """``segments`` with small regions that touch no other region joined when at most ``gap_px`` apart.
+
+    A region under ``max_area_px`` that no other region touches (8-neighbours) is a piece of free space with
+    unknown space round it: pieces of one fan of rays when they lie within ``gap_px`` of each other through
+    unknown or loose free cells (never through an obstacle or another region). Each joins the lowest id of
+    its group. Regions that touch another are left alone (the room stage joins those).
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    occupied : (H, W) bool
+    max_area_px, gap_px : int
+    """
+    n = int(segments.max(initial=0)) + 1
+    small = label_counts(segments, n)[0] < max_area_px
+    small[0] = False
+    if np.count_nonzero(small) < 2:
+        return segments
+    isolated = small & ~_touching(segments, n)
+    if np.count_nonzero(isolated) < 2:
+        return segments
+    seeds = np.where(lookup(isolated, segments), segments, 0)
+    half = max(1, (gap_px + 1) // 2)
+    grown = fill_from_neighbours(seeds, ~occupied & (segments == 0) & near(seeds > 0, half), max_iterations=half)
+    a_parts, b_parts = [], []
+    for a, b in ((grown[:, 1:], grown[:, :-1]), (grown[1:, :], grown[:-1, :])):
+        meet = (a > 0) & (b > 0) & (a != b)
+        a_parts.append(a[meet])
+        b_parts.append(b[meet])
+    a_ids, b_ids = np.concatenate(a_parts), np.concatenate(b_parts)
+    if a_ids.size == 0:
+        return segments
+    graph = coo_matrix((np.ones(a_ids.size), (a_ids, b_ids)), shape=(n, n))
+    _, group = connected_components(graph, directed=False)
+    lowest = np.full(n, n, dtype=np.int64)
+    np.minimum.at(lowest, group, np.arange(n))
+    lut = lowest[group].astype(np.int32)
+    out: npt.NDArray[np.int32] = lookup(lut, segments)
+    return out
+
+
+def fill_lone_regions(
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    *,
+    reach_px: int,
+    min_area_px: int,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with the loose free cells within ``reach_px`` of a region that touches no other given to it.
+
+    A region no other touches (8-neighbours) is a room seen alone, through the gaps of its walls: the dots of
+    its rays round it (free cells no region holds, with unknown between them) are its floor. They join it when
+    it reaches them within ``reach_px`` through unknown and loose cells, never through an obstacle. Regions
+    under ``min_area_px`` (specks) take none, nor does any region that touches another: the rays round a room
+    with neighbours also leave it through its windows and doors, where the ground truth draws no room.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    free, occupied : (H, W) bool
+    reach_px, min_area_px : int
+    """
+    loose = free & (segments == 0)
+    if not loose.any():
+        return segments
+    n = int(segments.max(initial=0)) + 1
+    lone = label_counts(segments, n)[0] >= min_area_px
+    lone[0] = False
+    lone &= ~_touching(segments, n)
+    if not lone.any():
+        return segments
+    seeds = np.where(lookup(lone, segments), segments, 0)
+    way = ~occupied & (segments == 0) & near(seeds > 0, reach_px)
+    grown = fill_from_neighbours(seeds, way, max_iterations=reach_px)
+    out: npt.NDArray[np.int32] = np.where(loose, grown, segments)
+    return out
+
+
+def _touching(segments: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.bool_]:
+    """(n,) whether each region has an 8-neighbour cell of another region."""
+    padded = np.pad(segments, 1)
+    centre = padded[1:-1, 1:-1]
+    touches = np.zeros(n, dtype=bool)
+    height, width = segments.shape
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        other = padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width]
+        meet = (centre > 0) & (other > 0) & (centre != other)
+        touches[centre[meet]] = True
+        touches[other[meet]] = True
+    return touches

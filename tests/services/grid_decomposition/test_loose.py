@@ -1,0 +1,51 @@
+"""Pieces of one fan of rays that touch nothing join; a room seen alone takes the dots of its rays round it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.grid_decomposition.loose import fill_lone_regions, join_isolated_pieces
+
+
+def test_pieces_of_one_fan_that_touch_nothing_join_and_a_piece_touching_a_room_does_not() -> None:
+    seg = np.zeros((60, 80), dtype=np.int32)
+    occupied = np.zeros(seg.shape, dtype=bool)
+    seg[5:55, 2:20] = 1  # a room
+    seg[10:30, 30:33] = 2  # three rays of one fan, 3-4 cells apart, unknown between them
+    seg[12:32, 36:39] = 3
+    seg[10:28, 42:44] = 4
+    seg[10:30, 60:63] = 5  # a ray 16 cells off: another fan
+    seg[40:50, 20:23] = 6  # a piece touching the room
+    out = join_isolated_pieces(seg, occupied, max_area_px=100, gap_px=6)
+    assert len({int(out[20, 31]), int(out[20, 37]), int(out[20, 43])}) == 1
+    assert out[20, 61] == 5
+    assert out[45, 21] == 6 and out[20, 10] == 1
+
+
+def test_a_wall_between_two_pieces_keeps_them_apart() -> None:
+    seg = np.zeros((40, 40), dtype=np.int32)
+    occupied = np.zeros(seg.shape, dtype=bool)
+    seg[10:30, 10:13] = 1
+    seg[10:30, 16:19] = 2
+    occupied[:, 14] = True  # a wall in the gap
+    out = join_isolated_pieces(seg, occupied, max_area_px=100, gap_px=6)
+    assert np.array_equal(out, seg)
+
+
+def test_a_room_seen_alone_takes_the_dots_of_its_rays_and_a_room_with_neighbours_does_not() -> None:
+    seg = np.zeros((60, 90), dtype=np.int32)
+    occupied = np.zeros(seg.shape, dtype=bool)
+    seg[10:30, 10:20] = 1  # a room of rays seen alone: unknown all round it
+    seg[10:30, 50:60] = 2  # two rooms side by side
+    seg[10:30, 60:70] = 3
+    occupied[:, 26] = True  # a wall beside the lone room
+    dots = np.zeros(seg.shape, dtype=bool)
+    dots[20, 21:26:2] = True  # the lone room's ray dots, up to the wall (within 0.5 m, 10 cells)
+    dots[20, 28] = True  # one behind the wall
+    dots[35, 12:19:3] = True  # below it
+    dots[35, 52:59:3] = True  # below room 2
+    out = fill_lone_regions(seg, (seg > 0) | dots, occupied, reach_px=10, min_area_px=50)
+    assert np.all(out[20, 21:26:2] == 1) and np.all(out[35, 12:19:3] == 1)
+    assert out[20, 28] == 0  # behind the wall
+    assert np.all(out[35, 52:59:3] == 0)  # rooms with neighbours take no dots
+    assert np.array_equal(out[~dots], seg[~dots])
