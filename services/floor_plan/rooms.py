@@ -497,7 +497,7 @@ def furniture_pockets(unknown: npt.NDArray[np.bool_], traces: npt.NDArray[np.boo
     if settings.pocket_max_m2 <= 0:
         return np.zeros(unknown.shape, np.bool_)
     mask = np.asarray(unknown, np.uint8)
-    n, found, found_stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    _, found, found_stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     parts, stats = np.asarray(found, np.int32), np.asarray(found_stats, np.int32)
     h, w = mask.shape
     x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
