@@ -46,6 +46,7 @@ from services.floor_plan.rooms import (
     fill_free,
     furniture,
     furniture_insides,
+    furniture_pockets,
     furniture_reach,
     group_rooms,
     join_insides,
@@ -212,6 +213,12 @@ class FloorPlan(NamedTuple):
     """The insides of furniture (map cells, GridLayer order; :func:`~services.floor_plan.rooms.furniture_reach`, 2 on
     an inside, 1 on the furniture round it within ``fringe_inside_reach_m``): ``rooms.png`` gives each the room label
     nearest to it through that furniture (``FloorPlanSettings.fringe_inside_m2``); None: none."""
+    pockets: npt.NDArray[np.bool_] | None = None
+    """Furniture drawn in the map's unknown grey against a wall (map cells, GridLayer order;
+    :func:`~services.floor_plan.rooms.furniture_pockets`): ``rooms.png`` labels each pocket with the one room touching
+    it, or within ``pocket_reach_cells`` of it; None: none."""
+    pocket_reach_cells: int = 1
+    """``FurnitureSettings.pocket_reach_m`` in cells."""
 
     @property
     def slanted_walls(self) -> int:
@@ -460,7 +467,11 @@ def describe(
                      np.zeros(classes_map.shape, np.bool_) if fringe is None else fringe, traces,
                      None if settings.furniture is None else furniture(
                          (classes_map != CellClass.FREE) & ~traces, resolution_m=resolution_m,
-                         settings=settings.furniture), _insides(classes_map, traces, settings, resolution_m))
+                         settings=settings.furniture), _insides(classes_map, traces, settings, resolution_m),
+                     None if settings.furniture is None or settings.furniture.pocket_max_m2 <= 0 else furniture_pockets(
+                         classes_map == CellClass.UNKNOWN, traces, resolution_m=resolution_m,
+                         settings=settings.furniture),
+                     1 if settings.furniture is None else _cells(settings.furniture.pocket_reach_m, resolution_m))
 
 
 def _insides(classes_map: npt.NDArray[np.uint8], traces: npt.NDArray[np.bool_], settings: FloorPlanSettings,
@@ -510,13 +521,21 @@ def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
 def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
     """A label image like :func:`unit_labels` with one id per room (1..R in the order of ``plan.rooms``): each
     room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds, the
-    furniture standing in it (``plan.furniture``) and the insides of furniture, with the room nearest to them through
-    the furniture (``plan.insides``)."""
+    furniture standing in it (``plan.furniture``), the insides of furniture, with the room nearest to them through
+    the furniture (``plan.insides``), and the furniture the map draws in its unknown grey against a wall, with the one
+    room touching it or within reach of it (``plan.pockets``)."""
     cells = to_map(plan.frame, plan.room_cells.astype(np.float32), fill=0.0).astype(np.int32)
     out = fill_free(cells, (plan.classes_map == CellClass.FREE) | plan.traces)
     out[plan.fringe] = 0
     out = out if plan.furniture is None else label_furniture(out, plan.furniture)
-    return out if plan.insides is None else join_insides(out, plan.insides)
+    out = out if plan.insides is None else join_insides(out, plan.insides)
+    if plan.pockets is None:
+        return out
+    # a pocket takes the one room touching it; one no room touches (a cupboard drawn with a dark outline), the one
+    # room within reach
+    pockets = plan.pockets & (out == 0)
+    touched = label_furniture(out, pockets)
+    return label_furniture(touched, pockets & (touched == 0), reach_cells=plan.pocket_reach_cells)
 
 
 def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.int32]:

@@ -449,6 +449,21 @@ class FurnitureSettings(FurnitureRule):
     """A piece on a dotted wall is no furniture: pieces that, with gaps up to this long closed along rows or columns,
     make a line at least ``dots_line_m`` long."""
     dots_line_m: float = 1.0
+    pocket_max_m2: float = 4.0
+    """Furniture fused to a wall: a pocket of unseen space inside the building (an 8-connected piece of unknown cells
+    that unknown cells and beam traces do not link to the map's border) at most this large, shaped like a piece of
+    furniture (:func:`furniture_pockets`); 0: none. A cupboard drawn in the map's unknown grey against a wall drawn
+    black is such a pocket; the clutter obstacles' cap."""
+    pocket_min_fill: float = 0.8
+    """... rectangular: it fills at least this share of its minimum-area rectangle (not a triangle of unseen space
+    where walls meet at an angle, nor the L or T of a wall's grey core at a junction) ..."""
+    pocket_min_thickness_m: float = 0.25
+    """... at least this thick (the rectangle's shorter side; a thinner grey line is the core of a wall drawn grey
+    between two black faces) ..."""
+    pocket_max_elongation: float = 5.0
+    """... and at most this many times as long as thick (a longer thin pocket is a wall's grey core)."""
+    pocket_reach_m: float = 0.15
+    """A pocket no room touches (a cupboard drawn with a dark outline) takes the one room label within this of it."""
 
 
 def furniture(cells: npt.NDArray[np.bool_], *, resolution_m: float,
@@ -466,6 +481,39 @@ def furniture(cells: npt.NDArray[np.bool_], *, resolution_m: float,
         keep[np.unique(parts[dotted & (mask > 0)])] = False
     keep[0] = False
     out: npt.NDArray[np.bool_] = keep[parts]
+    return out
+
+
+def furniture_pockets(unknown: npt.NDArray[np.bool_], traces: npt.NDArray[np.bool_], *, resolution_m: float,
+                      settings: FurnitureSettings) -> npt.NDArray[np.bool_]:
+    """Furniture the map draws in its unknown grey, fused to a wall (:class:`FurnitureSettings` ``pocket_*``): the
+    8-connected pieces of ``unknown`` (C_M's unknown cells, ``traces`` among them) off the map's border, at most
+    ``pocket_max_m2``, rectangular, thick and short enough to be furniture rather than a triangle of unseen space or a
+    wall's grey core; their cells that are not ``traces``.
+
+    In ipa's furnished maps nearly all furniture is drawn in the map's unknown grey; against a wall drawn black it
+    is a piece of its own, which the non-free pieces of :func:`furniture` (the wall and the cupboard are one piece)
+    cannot tell from the wall."""
+    if settings.pocket_max_m2 <= 0:
+        return np.zeros(unknown.shape, np.bool_)
+    mask = np.asarray(unknown, np.uint8)
+    _, found, found_stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    parts, stats = np.asarray(found, np.int32), np.asarray(found_stats, np.int32)
+    h, w = mask.shape
+    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    bw, bh, area = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT], stats[:, cv2.CC_STAT_AREA]
+    min_cells = settings.pocket_min_thickness_m / resolution_m
+    keep = ((x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (area <= settings.pocket_max_m2 / resolution_m**2)
+            & (np.minimum(bw, bh) >= min_cells))  # the box's shorter side bounds the rectangle's from above
+    keep[0] = False
+    for k in np.flatnonzero(keep).tolist():
+        box = parts[y[k] : y[k] + bh[k], x[k] : x[k] + bw[k]] == k
+        rows, cols = np.divmod(np.flatnonzero(box), box.shape[1])
+        _, (side_a, side_b), _ = cv2.minAreaRect(np.stack([cols, rows], axis=1).astype(np.float32))
+        long_side, short_side = max(side_a, side_b) + 1, min(side_a, side_b) + 1
+        keep[k] = (area[k] >= settings.pocket_min_fill * long_side * short_side and short_side >= min_cells
+                   and long_side <= settings.pocket_max_elongation * short_side)
+    out: npt.NDArray[np.bool_] = keep[parts] & ~traces
     return out
 
 
@@ -498,14 +546,19 @@ def join_insides(labels: npt.NDArray[np.integer], reach: npt.NDArray[np.uint8]) 
     return np.where(target & (grown > 0), grown, lab).astype(np.int32)
 
 
-def label_furniture(labels: npt.NDArray[np.integer], pieces: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
-    """``labels`` with each 8-connected piece of ``pieces`` given the label of the cells round it, where they hold one
-    label only (furniture standing in one room; a piece between two rooms keeps none)."""
+def label_furniture(labels: npt.NDArray[np.integer], pieces: npt.NDArray[np.bool_], *,
+                    reach_cells: int = 1) -> npt.NDArray[np.int32]:
+    """``labels`` with each 8-connected piece of ``pieces`` given the label of the cells round it (within
+    ``reach_cells``), where they hold one label only (furniture standing in one room; a piece between two rooms keeps
+    none)."""
     out = np.asarray(labels, np.int32).copy()
     n, parts = cv2.connectedComponents(pieces.astype(np.uint8), connectivity=8)
     if n < 2:
         return out
-    ring = cv2.dilate(parts.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int64)  # ids exact in float32
+    size = 2 * max(1, reach_cells) + 1
+    near_piece = np.ones((3, 3), np.uint8) if reach_cells <= 1 else cv2.getStructuringElement(cv2.MORPH_ELLIPSE,
+                                                                                               (size, size))
+    ring = cv2.dilate(parts.astype(np.float32), near_piece).astype(np.int64)  # ids exact in float32
     near = (ring > 0) & (parts == 0) & (out > 0)
     pairs = np.unique(np.stack([ring[near], out[near].astype(np.int64)], axis=1), axis=0)
     label = np.zeros(n, np.int64)

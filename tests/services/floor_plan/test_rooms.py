@@ -12,6 +12,7 @@ from services.floor_plan.rooms import (
     fill_free,
     furniture,
     furniture_insides,
+    furniture_pockets,
     furniture_reach,
     join_insides,
     label_furniture,
@@ -245,6 +246,37 @@ def test_furniture_in_a_room_takes_its_label_and_a_dotted_wall_stays_unlabelled(
     out = label_furniture(labels, found)
     assert (out[20:32, 15:27] == 1).all() and (out[40:43, 70:73] == 2).all()
     assert (out[classes == CellClass.FREE] == labels[classes == CellClass.FREE]).all()
+
+
+def test_furniture_drawn_unknown_against_a_wall_takes_its_room_and_a_walls_grey_core_does_not() -> None:
+    classes = np.full((80, 120), CellClass.UNKNOWN, np.uint8)  # the unseen outside
+    classes[5:75, 5:115] = CellClass.WALL
+    classes[7:73, 7:113] = CellClass.FREE  # a building of two rooms ...
+    classes[7:73, 58:64] = CellClass.WALL  # ... parted by a wall drawn with two black faces ...
+    classes[7:73, 59:63] = CellClass.UNKNOWN  # ... and a grey core 0.2 m thick between them
+    classes[7:17, 10:40] = CellClass.UNKNOWN  # a 0.5 m x 1.5 m cupboard drawn grey against the top wall
+    classes[62:73, 70:92] = CellClass.WALL  # a cupboard drawn with a dark outline against the bottom wall ...
+    classes[63:73, 71:91] = CellClass.UNKNOWN  # ... filled grey
+    rows, cols = np.mgrid[0:80, 0:120]
+    triangle = (rows >= 55) & (rows < 73) & (cols >= 7) & (cols < 25) & (rows - cols >= 48)
+    classes[triangle] = CellClass.UNKNOWN  # unseen space where two walls meet at an angle
+    traces = np.zeros(classes.shape, np.bool_)
+    pockets = furniture_pockets(classes == CellClass.UNKNOWN, traces, resolution_m=RES, settings=FurnitureSettings())
+    assert pockets[7:17, 10:40].all() and pockets[63:73, 71:91].all(), "both cupboards"
+    assert not pockets[7:73, 59:63].any(), "the wall's grey core is long and thin: no furniture"
+    assert not pockets[triangle].any(), "a triangle is no piece of furniture"
+    assert not pockets[:5].any(), "the outside reaches the map's border"
+    assert not furniture_pockets(classes == CellClass.UNKNOWN, traces, resolution_m=RES,
+                                 settings=FurnitureSettings(pocket_max_m2=0.0)).any(), "0: none"
+    labels = np.zeros(classes.shape, np.int32)
+    labels[:, :58], labels[:, 64:] = 1, 2
+    labels[classes != CellClass.FREE] = 0
+    touched = label_furniture(labels, pockets)
+    assert (touched[7:17, 10:40] == 1).all(), "the grey cupboard touches its office"
+    assert (touched[63:73, 71:91] == 0).all(), "the outlined one touches no room ..."
+    near = label_furniture(touched, pockets & (touched == 0), reach_cells=3)
+    assert (near[63:73, 71:91] == 2).all(), "... but lies within reach of one"
+    assert (near[7:73, 59:63] == 0).all() and (near[triangle] == 0).all()
 
 
 def test_a_piece_between_two_rooms_takes_no_label() -> None:
