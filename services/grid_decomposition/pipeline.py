@@ -648,10 +648,12 @@ def decompose(
             segments = join_furnished_pieces(segments, clutter, floor_px, resolution_m=resolution_m)
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         against_walls = against_walls_job.result() & (segments == 0)
-        grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60)
+        grown = fill_from_neighbours(np.where(floor_px, 0, segments), against_walls, max_iterations=60, overwrite=True)
         segments = np.where(against_walls, grown, segments)
         # the streaks the cleaning took out are free space: they take the region they grow from
-        segments = fill_from_neighbours(segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)))
+        segments = fill_from_neighbours(  # segments is np.where's new image: filled in place
+            segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)), overwrite=True
+        )
         if fan_max_neck_m > 0:  # a room seen only through its door (rays or floor), not the corridor's floor
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
             floors = on_floor > 0.5 * size

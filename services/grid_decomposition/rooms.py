@@ -187,7 +187,8 @@ def segment_rooms(
     cut = np.zeros(seg.shape, dtype=bool)
     cuts = np.zeros((0, 2, 2))
     fixed = _share(seg, floor) > 0.5
-    seg = fill_from_neighbours(seg, clutter)  # its own copy: furniture on a fixed segment is cleared in place
+    # filled in place (merge_open_segments' own image, so furniture on a fixed segment is cleared in this one)
+    seg = fill_from_neighbours(seg, clutter, overwrite=True)
     on_fixed = lookup(fixed, seg)
     np.copyto(seg, 0, where=clutter & on_fixed)
     space = (seg > 0) & ~on_fixed  # a pixel cleared here is no space either way

@@ -21,19 +21,27 @@ from services.grid_decomposition.arrays import (
 
 
 def fill_from_neighbours(
-    segments: npt.NDArray[np.int32], target: npt.NDArray[np.bool_], *, max_iterations: int = 200
+    segments: npt.NDArray[np.int32],
+    target: npt.NDArray[np.bool_],
+    *,
+    max_iterations: int = 200,
+    overwrite: bool = False,
 ) -> npt.NDArray[np.int32]:
     """Give unlabelled (0) ``target`` pixels the id of a labelled 8-neighbour, growing outwards.
 
     Each step, every hole next to a labelled pixel takes the largest id among its labelled
     8-neighbours (a grey dilation restricted to the holes). Only the front moves: the work is
     proportional to the pixels filled, not to the image (a few streak pixels on a 9 Mpx hall).
+
+    Returns a new image; with ``overwrite`` (the caller's own image, read no more) an int32 C-ordered
+    ``segments`` is filled in place and returned instead (no whole-image copy).
     """
     segments = np.asarray(segments)
     hole = target & (segments == 0)
     rows = np.flatnonzero(hole.any(axis=1))
+    own = overwrite and segments.dtype == np.int32 and segments.flags.c_contiguous and segments.flags.writeable
     if rows.size == 0:
-        return segments.astype(np.int32)  # a copy
+        return segments if own else segments.astype(np.int32)  # a copy unless it is the caller's own
     cols = np.flatnonzero(hole.any(axis=0))
     # the holes' bounding box and one pixel around it: every labelled pixel next to a hole
     height, width = segments.shape
@@ -43,7 +51,7 @@ def fill_from_neighbours(
     if min(rows[0], cols[0]) >= 2 and rows[-1] < height - 2 and cols[-1] < width - 2 and 2 * framed_size >= hole.size:
         # holes two pixels or more inside the image, their box most of it: the copy returned is the working image
         # (the front is a pixel or more inside it, so its neighbours' flat indices never leave it or wrap a row)
-        out = segments.astype(np.int32)  # a copy
+        out = segments if own else segments.astype(np.int32)  # a copy unless it is the caller's own
         _grow(out, hole, width, framed_size, int(out[r0:r1, c0:c1].max()), max_iterations)
         return out
     # the box framed by zeros is the working copy (the image's own copy only when the box is not all of it)
@@ -54,7 +62,7 @@ def fill_from_neighbours(
     _grow(lab, open_, c1 - c0 + 2, framed_size, int(lab.max()), max_iterations)
     if (r1 - r0, c1 - c0) == (height, width):
         return np.ascontiguousarray(lab[1:-1, 1:-1])
-    out = segments.astype(np.int32)  # a copy
+    out = segments if own else segments.astype(np.int32)  # a copy unless it is the caller's own
     out[r0:r1, c0:c1] = lab[1:-1, 1:-1]
     return out
 
@@ -133,7 +141,7 @@ def segment_image(
     """
     seg = lookup(face_segment.astype(np.int32), face_image)  # ids are far below 2**31
     np.multiply(seg, free, out=seg)  # 0 off free space, in place
-    seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3)
+    seg = fill_from_neighbours(seg, free & (face_image == 0), max_iterations=3, overwrite=True)  # seg is ours
     piece_of_run, length, n_pieces, owner, area = _piece_runs(seg)
     # ids in the order of their segment, then of their first pixel (cv2 numbers pieces in scan order)
     order = np.lexsort((np.arange(n_pieces + 1), owner))
@@ -146,14 +154,14 @@ def segment_image(
     out = np.repeat(lut[piece_of_run], length).reshape(seg.shape)
     small = np.repeat(((owner > 0) & ~big)[piece_of_run], length).reshape(seg.shape)
     if small.any():
-        out = fill_from_neighbours(out, small)
+        out = fill_from_neighbours(out, small, overwrite=True)  # out is ours
         alone = small & (out == 0)
         if alone.any():
             _n, pieces, stats = components_stats(alone.astype(np.uint8), 4)
             keep = stats[:, cv2.CC_STAT_AREA] >= min_area_px // 2
             keep[0] = False
             ids = np.where(keep, np.cumsum(keep) + next_id - 1, 0)
-            out[alone] = ids[pieces[alone]]  # out is fill_from_neighbours' own copy
+            out[alone] = ids[pieces[alone]]  # out is ours
     return out
 
 
@@ -448,7 +456,7 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
         more = pieces >= 2  # piece 1 keeps the segment's id, piece k >= 2 gets the next id in turn
         view[more] = pieces[more] + (next_id - 2)
         next_id += max(n - 2, 0)
-    return fill_from_neighbours(out, barrier & (seg > 0))
+    return fill_from_neighbours(out, barrier & (seg > 0), overwrite=True)  # out is ours
 
 
 def border_closure(
