@@ -128,7 +128,7 @@ def join_room_pieces(
             break
         pieces.known = {ab: s for ab, s in pieces.known.items() if not (used[ab[0]] or used[ab[1]])}
         pairs, saddle, furnished = _merge_pairs(lut[pairs].astype(np.int64), saddle, furnished, n)
-    return renumber(pieces.current)
+    return renumber(pieces.current, copy=False)  # its own copy of the segments
 
 
 def _saddles(

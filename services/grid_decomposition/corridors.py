@@ -317,7 +317,9 @@ def part_rooms_from_corridors(
             window[box][piece] = next_id
             next_id += 1
         if joinable is not None:
-            out = _join_along(out, int(k), bands, joinable, min_share=join_min_share, tolerance_px=cut_thickness_px + 1)
+            out = _join_along(  # out is ours: joined in place
+                out, int(k), bands, joinable, min_share=join_min_share, tolerance_px=cut_thickness_px + 1
+            )
     return out
 
 
@@ -334,7 +336,7 @@ def _join_along(
 
     A ``joinable`` region touching ``k`` (or a region joined before it) joins when at least ``min_share``
     of it lies between the lines of a band (widened by ``tolerance_px``), wherever along them, and that
-    part holds a square of the band's width.
+    part holds a square of the band's width. ``segments`` (the caller's own) is joined in place and returned.
     """
     n = int(segments.max()) + 1
     offered = np.zeros(n, dtype=bool)  # the rooms parted just now (ids past ``joinable``) never join
@@ -367,8 +369,7 @@ def _join_along(
         touching = np.bincount(window[cv2.dilate(corridor.view(np.uint8), ring).view(bool)], minlength=n) > 0
         new = touching & along
         if not new.any():
-            joined = segments.copy()
-            joined[box][corridor] = k
-            return joined
+            window[corridor] = k  # a view of segments
+            return segments
         along &= ~new
         corridor |= lookup(new, window)

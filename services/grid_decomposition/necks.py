@@ -78,4 +78,4 @@ def split_at_necks(
     )
     out = seg.copy()
     out[box] = np.where(inside & (grown > 0), grown, seg[box])
-    return renumber(out)
+    return renumber(out, copy=False)  # out is ours
