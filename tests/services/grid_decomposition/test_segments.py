@@ -205,11 +205,11 @@ def test_fill_from_neighbours_in_the_callers_own_image_fills_that_image_alike(ho
     own = seg.copy()
     filled = fill_from_neighbours(own, target, overwrite=True)
     assert filled is own and np.array_equal(filled, expected)
-    # an image of another type is not the caller's int32 one: it is converted, left as it was
-    small = seg.astype(np.int16)
-    filled = fill_from_neighbours(small, target, overwrite=True)
-    assert filled.dtype == np.int32 and np.array_equal(filled, expected)
-    assert np.array_equal(small, seg)
+    # an image not in C order is not filled where it lies: a C-ordered copy is, and the image is left as it was
+    columns = np.asfortranarray(seg)
+    filled = fill_from_neighbours(columns, target, overwrite=True)
+    assert filled is not columns and np.array_equal(filled, expected)
+    assert np.array_equal(columns, seg)
 
 
 def test_a_strip_between_two_cuts_joins_a_room_and_a_small_room_behind_a_door_stays() -> None:
