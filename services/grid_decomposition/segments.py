@@ -51,7 +51,8 @@ def fill_from_neighbours(
     if min(rows[0], cols[0]) >= 2 and rows[-1] < height - 2 and cols[-1] < width - 2 and 2 * framed_size >= hole.size:
         # holes two pixels or more inside the image, their box most of it: the copy returned is the working image
         # (the front is a pixel or more inside it, so its neighbours' flat indices never leave it or wrap a row)
-        out = segments if own else segments.astype(np.int32)  # a copy unless it is the caller's own
+        # a copy unless it is the caller's own; C-ordered, since the fill works on its flat view
+        out = segments if own else np.array(segments, dtype=np.int32, order="C")
         _grow(out, hole, width, framed_size, int(out[r0:r1, c0:c1].max()), max_iterations)
         return out
     # the box framed by zeros is the working copy (the image's own copy only when the box is not all of it)
