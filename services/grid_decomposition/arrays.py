@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 _DENSE_PER_VALUE = 4  # a count per id while the ids' range is at most this many times the values
+_SPARSE_MASK = 32  # label_counts counts a mask's pixels one by one when at most this share of the image (1 / 32)
 _Value = TypeVar("_Value", bound=np.generic)
 
 
@@ -140,10 +141,15 @@ def label_counts(
     flat = np.ascontiguousarray(labels).ravel()
     if flat.size == 0:
         return np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    m = None if mask is None else np.ascontiguousarray(mask, dtype=bool).ravel()
+    if m is not None and np.count_nonzero(m) * _SPARSE_MASK <= flat.size:
+        # a sparse mask (a few warehouse-floor or ray pixels on an office map): its pixels counted by their labels
+        # (whole numbers, the same counts), the labels' own runs alone, without the mask's run ends
+        inside = np.bincount(flat[np.flatnonzero(m)], minlength=n).astype(np.int64)
+        return label_counts(labels, n)[0], inside
     start = np.empty(flat.size, dtype=bool)
     start[0] = True
     np.not_equal(flat[1:], flat[:-1], out=start[1:])
-    m = None if mask is None else np.ascontiguousarray(mask, dtype=bool).ravel()
     if m is not None:
         start[1:] |= m[1:] != m[:-1]
     first = np.flatnonzero(start)

@@ -128,7 +128,7 @@ def join_room_pieces(
             break
         pieces.known = {ab: s for ab, s in pieces.known.items() if not (used[ab[0]] or used[ab[1]])}
         pairs, saddle, furnished = _merge_pairs(lut[pairs].astype(np.int64), saddle, furnished, n)
-    return renumber(pieces.current)
+    return renumber(pieces.current, copy=False)  # its own copy of the segments
 
 
 def _saddles(
@@ -370,7 +370,12 @@ def join_furnished_groups(
     if not (members >= 2).any():  # no group to look at: the furniture is not labelled
         return renumber(seg)
     lut = np.arange(n, dtype=np.int32)
-    standing = np.asarray(cv2.connectedComponents(standing_bytes, connectivity=8)[1], dtype=np.int32)
+    # the furniture's pieces, labelled in the box round it and a pixel more (the same pieces; only which pixels
+    # share a piece is read, not its number)
+    rows, cols = np.flatnonzero(standing_bytes.any(axis=1)), np.flatnonzero(standing_bytes.any(axis=0))
+    box = (slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2), slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2))
+    standing = np.zeros((h, w), dtype=np.int32)
+    standing[box] = cv2.connectedComponents(standing_bytes[box], connectivity=8)[1]
     boxes = _boxes(seg, n)
     for g in np.flatnonzero(members >= 2).tolist():
         ids = np.flatnonzero(group == g)

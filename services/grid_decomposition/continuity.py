@@ -242,4 +242,4 @@ def _largest_pieces(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.ND
     drop = np.take(small, pieces)
     if not drop.any():
         return segments
-    return fill_from_neighbours(np.where(drop, 0, segments), drop)
+    return fill_from_neighbours(np.where(drop, 0, segments), drop, overwrite=True)

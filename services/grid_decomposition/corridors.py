@@ -74,29 +74,31 @@ def _row_runs(
 def _walls_along(
     across: npt.NDArray[np.intp],
     along: npt.NDArray[np.int32],
-    occupied: npt.NDArray[np.bool_],
+    at: npt.NDArray[np.intp],
     rows: npt.NDArray[np.int64],
+    n_across: int,
+    along_start: int,
     n_along: int,
     tolerance_px: int,
 ) -> npt.NDArray[np.bool_]:
     """Per offset in ``rows`` (sorted, distinct) and along place: an occupied pixel within ``tolerance_px`` across.
 
-    ``across`` and ``along`` are the pixels' offset and along-line place, from 0. Only the offsets within the
-    tolerance of ``rows`` are rastered (each such offset once, in order, so a row's neighbours are consecutive).
+    ``across`` is the pixels' offset (0 to ``n_across`` - 1), ``along`` their along-line place (``along_start`` to
+    ``along_start + n_along - 1``: read at the occupied pixels only), ``at`` the occupied pixels' flat indices.
+    Only the offsets within the tolerance of ``rows`` are rastered (each such offset once, in order, so a row's
+    neighbours are consecutive).
     """
-    n_across = int(across.max()) + 1
     lo, hi = np.maximum(rows - tolerance_px, 0), np.minimum(rows + tolerance_px + 1, n_across)
     marks = np.zeros(n_across + 1, dtype=np.int32)
     np.add.at(marks, lo, 1)
     np.add.at(marks, hi, -1)
     near = np.cumsum(marks[:-1]) > 0
     compact = np.cumsum(near) - 1  # the raster row of a near offset
-    at = np.flatnonzero(occupied)  # the offsets looked up at the occupied pixels only
-    offset = np.take(across, at)
+    offset = np.take(across, at)  # the offsets looked up at the occupied pixels only
     pick = near[offset]
     raster_c = np.zeros((int(compact[-1]) + 2, n_along), dtype=np.int32)
     raster = np.zeros((int(compact[-1]) + 1, n_along), dtype=bool)
-    raster[compact[offset[pick]], np.take(along, at[pick])] = True
+    raster[compact[offset[pick]], np.take(along, at[pick]) - along_start] = True
     np.cumsum(raster, axis=0, out=raster_c[1:])
     return np.asarray(raster_c[compact[hi - 1] + 1] - raster_c[compact[lo]] > 0, dtype=bool)
 
@@ -137,6 +139,7 @@ def corridor_bands(
     found: list[tuple[float, Band]] = []
     if coordinates is None:
         coordinates = window_coordinates(shape, top, left, lines)
+    occupied_at: npt.NDArray[np.intp] | None = None  # the occupied pixels' flat indices, once for every angle
     for angle, (u, t) in sorted(coordinates.items()):
         u0, t0 = int(u.min()), int(t.min())
         nu, nt = int(u.max()) - u0 + 1, int(t.max()) - t0 + 1
@@ -158,8 +161,12 @@ def corridor_bands(
         across = np.subtract(u, u0, dtype=np.intp)
         block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, across)
         block += t
-        every_c = np.cumsum(np.bincount(block.ravel(), minlength=(bounds.size + 1) * nt).reshape(-1, nt), axis=0)
-        inside_c = np.cumsum(np.bincount(block[region], minlength=(bounds.size + 1) * nt).reshape(-1, nt), axis=0)
+        # the pixels per (block, along) place and of them those in the region: one count of block * 2 + region
+        block *= 2
+        block += region
+        counts = np.bincount(block.ravel(), minlength=2 * (bounds.size + 1) * nt).reshape(-1, 2 * nt)
+        every_c = np.cumsum(counts[:, 0::2] + counts[:, 1::2], axis=0)
+        inside_c = np.cumsum(counts[:, 1::2], axis=0)
         lo, hi = np.searchsorted(bounds, lo), np.searchsorted(bounds, hi)
         total = every_c[hi] - every_c[lo]
         clear = (total > 0) & (inside_c[hi] - inside_c[lo] >= min_clear * np.maximum(total, 1))
@@ -172,7 +179,9 @@ def corridor_bands(
         # the share of a run walled along each line: prefix sums along the lines that bound a long run
         rows, row_of = np.unique(np.concatenate([a_px[pair], b_px[pair]]), return_inverse=True)
         walls_c = np.zeros((rows.size, nt + 1), np.int32)
-        np.cumsum(_walls_along(across, t - t0, occupied, rows, nt, tolerance_px), axis=1, out=walls_c[:, 1:])
+        if occupied_at is None:
+            occupied_at = np.flatnonzero(occupied)
+        np.cumsum(_walls_along(across, t, occupied_at, rows, nu, t0, nt, tolerance_px), axis=1, out=walls_c[:, 1:])
         row_a, row_b = row_of[: pair.size], row_of[pair.size :]
         n_run = (ends - starts).astype(np.float64)
         side_a = (walls_c[row_a, ends] - walls_c[row_a, starts]).astype(np.float64) / n_run
@@ -317,7 +326,9 @@ def part_rooms_from_corridors(
             window[box][piece] = next_id
             next_id += 1
         if joinable is not None:
-            out = _join_along(out, int(k), bands, joinable, min_share=join_min_share, tolerance_px=cut_thickness_px + 1)
+            out = _join_along(  # out is ours: joined in place
+                out, int(k), bands, joinable, min_share=join_min_share, tolerance_px=cut_thickness_px + 1
+            )
     return out
 
 
@@ -334,7 +345,7 @@ def _join_along(
 
     A ``joinable`` region touching ``k`` (or a region joined before it) joins when at least ``min_share``
     of it lies between the lines of a band (widened by ``tolerance_px``), wherever along them, and that
-    part holds a square of the band's width.
+    part holds a square of the band's width. ``segments`` (the caller's own) is joined in place and returned.
     """
     n = int(segments.max()) + 1
     offered = np.zeros(n, dtype=bool)  # the rooms parted just now (ids past ``joinable``) never join
@@ -367,8 +378,7 @@ def _join_along(
         touching = np.bincount(window[cv2.dilate(corridor.view(np.uint8), ring).view(bool)], minlength=n) > 0
         new = touching & along
         if not new.any():
-            joined = segments.copy()
-            joined[box][corridor] = k
-            return joined
+            window[corridor] = k  # a view of segments
+            return segments
         along &= ~new
         corridor |= lookup(new, window)

@@ -101,7 +101,7 @@ def split_fans(
         pad = max(radius, wide_radius)
         box = tuple(slice(max(0, s.start - pad), s.stop + pad) for s in found)
         mine = segments[box] == k
-        area = mine.sum() * resolution_m**2
+        area = np.count_nonzero(mine) * resolution_m**2
         if area < floor_m2:
             continue
         thin_here = None if thin is None else thin[box]
@@ -145,18 +145,18 @@ def _beyond_core(
         return parts, mine, []
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     core = mine & (cv2.distanceTransform((parts != largest).view(np.uint8), cv2.DIST_L2, 5) <= radius)
-    n, parts, stats = components_stats((mine & ~core).astype(np.uint8), 8)
+    n, parts, stats = components_stats((mine & ~core).view(np.uint8), 8)  # 0/1 bytes as they are
     big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_m2 / resolution_m**2)
     big = big[big > 0]
     if big.size == 0:
         return parts, core, []
-    neck = np.bincount(parts[cv2.dilate(core.astype(np.uint8), _RING).astype(bool)], minlength=n)
+    neck = np.bincount(parts[cv2.dilate(core.view(np.uint8), _RING).view(bool)], minlength=n)
     fans = [int(c) for c in big if 0 < neck[c] * resolution_m <= max_neck_m]
     if fans and thin is not None:
         thin_share = np.bincount(parts[thin], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
         fans = [c for c in fans if thin_share[c] >= min_thin_share]
     if fans:
-        depth = cv2.distanceTransform((~core).astype(np.uint8), cv2.DIST_L2, 5)
+        depth = cv2.distanceTransform((~core).view(np.uint8), cv2.DIST_L2, 5)
         fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]
     if fans:
         fans = [c for c, share in zip(fans, open_share(

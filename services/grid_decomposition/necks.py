@@ -73,7 +73,9 @@ def split_at_necks(
     inside, cores = in_split[box], parts[box]
     marker = np.where(inside & big[cores], cores + n_seg, 0).astype(np.int32)
     # one fill: it stops by itself once every reachable pixel is taken
-    grown = fill_from_neighbours(marker, inside, max_iterations=10 * max(1, round(max_growth_m / resolution_m / 10)))
+    grown = fill_from_neighbours(
+        marker, inside, max_iterations=10 * max(1, round(max_growth_m / resolution_m / 10)), overwrite=True
+    )
     out = seg.copy()
     out[box] = np.where(inside & (grown > 0), grown, seg[box])
-    return renumber(out)
+    return renumber(out, copy=False)  # out is ours

@@ -665,7 +665,9 @@ def decompose(
         against_walls = against_walls_job.result() & (segments == 0)
         off_floors = (segments > 0) & ~floor_px
         if off_floors.any():  # else nothing grows (a hall whose every region is on a warehouse floor): as it is
-            grown = fill_from_neighbours(np.where(off_floors, segments, 0), against_walls, max_iterations=60)
+            grown = fill_from_neighbours(  # np.where's new image: filled in place
+                np.where(off_floors, segments, 0), against_walls, max_iterations=60, overwrite=True
+            )
             segments = np.where(against_walls, grown, segments)
         # the streaks the cleaning took out are free space: they take the region they grow from (in place: every step
         # since the segment image returned a new array or the one it was given, read nowhere else)

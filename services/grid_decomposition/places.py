@@ -82,9 +82,14 @@ def cast_rays(
         at[outside] = off_map
         d = np.take(flat, at)
         go = (d >= 1.0) & (ta < max_range_px)
-        active, x0, y0, ux, uy = active[go], x0[go], y0[go], ux[go], uy[go]
-        ta = ta[go] + np.maximum(d[go] - 0.5, 1.0)
-        t[active] = ta
+        # a beam's range is where it stops: written once then (not every step), and the survivors' indices found
+        # once for the six compactions (a boolean index finds them again each time)
+        stop = np.flatnonzero(~go)
+        t[active[stop]] = ta[stop]
+        keep = np.flatnonzero(go)
+        active, x0, y0, ux, uy, d = (np.take(v, keep) for v in (active, x0, y0, ux, uy, d))
+        ta = np.take(ta, keep) + np.maximum(d - 0.5, 1.0)
+    t[active] = ta  # beams still going after the last step
     return np.minimum(t, max_range_px).reshape(n, n_beams).astype(np.float64)
 
 

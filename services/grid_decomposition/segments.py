@@ -58,7 +58,7 @@ def _working(segments: npt.NDArray[np.integer], dtype: type[_Id], overwrite: boo
     (the fill writes through flat views)."""
     if overwrite and segments.dtype == dtype and segments.flags.c_contiguous and segments.flags.writeable:
         return segments  # type: ignore[return-value]  # checked: of dtype
-    return segments.astype(dtype)
+    return np.array(segments, dtype=dtype, order="C")  # C-ordered: a column-ordered image's flat view would be a copy
 
 
 def _fill(

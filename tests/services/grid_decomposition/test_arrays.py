@@ -61,10 +61,12 @@ def test_label_sums_are_the_weighted_counts_per_label(shape: tuple[int, int]) ->
 def test_label_counts_are_the_pixel_counts_per_label_in_and_out_of_a_mask(shape: tuple[int, int]) -> None:
     rng = np.random.default_rng(shape[1])
     labels = np.repeat(rng.integers(0, 6, (shape[0], shape[1] // 3 + 1)), 3, axis=1)[:, : shape[1]].astype(np.int32)
-    mask = rng.random(shape) < 0.4
-    count, inside = label_counts(labels, 8, mask)
-    assert np.array_equal(count, np.bincount(labels.ravel(), minlength=8))
-    assert np.array_equal(inside, np.bincount(labels[mask], minlength=8))
+    for density in (0.4, 0.01, 0.0):  # dense and sparse masks (counted by runs, or pixel by pixel), and none
+        mask = rng.random(shape) < density
+        count, inside = label_counts(labels, 8, mask)
+        assert np.array_equal(count, np.bincount(labels.ravel(), minlength=8))
+        assert np.array_equal(inside, np.bincount(labels[mask], minlength=8))
+        assert count.dtype == inside.dtype == np.int64
     alone, nothing = label_counts(labels, 8)
     assert np.array_equal(alone, count)
     assert not nothing.any()

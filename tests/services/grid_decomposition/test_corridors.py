@@ -193,7 +193,9 @@ def test_walls_along_a_few_lines_are_the_dilated_raster_at_them() -> None:
     occupied = rng.random((60, 50)) < 0.05
     rows = np.array([0, 3, 5, 30, 58, 59])
     raster = cv2.dilate(occupied.astype(np.uint8), np.ones((5, 1), np.uint8)).astype(bool)
-    assert np.array_equal(_walls_along(across, along, occupied, rows, 50, 2), raster[rows])
+    # along places from 7 (a window's own coordinates), the occupied pixels by their flat indices
+    walls = _walls_along(across, along + 7, np.flatnonzero(occupied), rows, 60, 7, 50, 2)
+    assert np.array_equal(walls, raster[rows])
 
 
 @pytest.mark.parametrize("angle", [-0.0001, 0.3, 1.5707, 2.5, -1.2])

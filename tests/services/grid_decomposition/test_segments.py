@@ -202,6 +202,29 @@ def test_fill_from_neighbours_grows_a_step_at_a_time_through_lines_and_wide_gaps
             assert as_bytes.dtype == np.uint8 and np.array_equal(as_bytes, filled)
 
 
+@pytest.mark.parametrize("holes", ["box", "spread", "none"])
+def test_fill_from_neighbours_in_the_callers_own_image_fills_that_image_alike(holes: str) -> None:
+    # a small box of holes (framed), holes over most of the image two pixels in (filled where they lie), none
+    rng = np.random.default_rng(1)
+    seg = np.repeat(np.repeat(rng.integers(1, 50, (8, 9)), 5, axis=0), 5, axis=1).astype(np.int32)
+    if holes == "box":
+        seg[10:16, 3:30] = 0
+    elif holes == "spread":
+        seg[2:-2:5, 2:-2] = 0
+        seg[2:-2, 2:-2:7] = 0
+    target = seg == 0
+    expected = fill_from_neighbours(seg, target)
+    assert expected is not seg
+    own = seg.copy()
+    filled = fill_from_neighbours(own, target, overwrite=True)
+    assert filled is own and np.array_equal(filled, expected)
+    # an image not in C order is not filled where it lies: a C-ordered copy is, and the image is left as it was
+    columns = np.asfortranarray(seg)
+    filled = fill_from_neighbours(columns, target, overwrite=True)
+    assert filled is not columns and np.array_equal(filled, expected)
+    assert np.array_equal(columns, seg)
+
+
 def test_a_strip_between_two_cuts_joins_a_room_and_a_small_room_behind_a_door_stays() -> None:
     # 0.05 m cells: a 4 m wide room cut twice across 0.8 m apart (a strip of 3.2 m²: no room), the lower cut 0.2 m
     # shorter, and a 1.5 m x 1.5 m store room behind a door off the upper part (borders one region only)
