@@ -160,30 +160,45 @@ def unit_parts(
         inner = rect.inner(wall_cells)
         if inner.r0 > inner.r1 or inner.c0 > inner.c1:
             continue
-        for piece in _cut(barrier.along_rows, inner, least, most, settings.cut_share, rows=True):
-            out.extend(Part(uid, p) for p in _cut(barrier.along_cols, piece, least, most, settings.cut_share,
-                                                  rows=False))
+        for piece in _cut(barrier, inner, least, most, settings.cut_share, rows=True):
+            out.extend(Part(uid, p) for p in _cut(barrier, piece, least, most, settings.cut_share, rows=False))
     return out
 
 
-def _cut(blocked: npt.NDArray[np.bool_], rect: Rect, least: int, most: int, share: float, *,
-         rows: bool) -> list[Rect]:
-    """``rect`` cut at its bands of at most ``most`` rows (or columns) whose share of blocked cells reaches
-    ``share``, leaving no piece under ``least``."""
+def _cut(barrier: Barriers, rect: Rect, least: int, most: int, share: float, *, rows: bool) -> list[Rect]:
+    """``rect`` cut at its bands of at most ``most`` rows (or columns) whose share of barrier cells running along
+    them reaches ``share``, leaving no piece under ``least``; a band is cut only where some of those cells lie off
+    the wall lines across the band at the rectangle's edges (within ``least``, the unit's own wall drawn a little
+    inside it). A wall as thick as ``barrier_m`` runs across itself too: a corridor unit that covers the thick wall at
+    its side has every column through it blocked by that wall alone about as much as by a cross wall with a door in
+    it, and would be cut at each door jamb into door-wide pieces, each open over its whole width to the room behind
+    the door (and so one room with it)."""
+    blocked = barrier.along_rows if rows else barrier.along_cols
     crop = blocked[rect.r0 : rect.r1 + 1, rect.c0 : rect.c1 + 1]
+    walls = (barrier.along_rows | barrier.along_cols)[rect.r0 : rect.r1 + 1, rect.c0 : rect.c1 + 1]
+    edge = walls.mean(axis=0 if rows else 1) >= share  # the wall lines across the bands
+    start, stop = _edge_run(edge[:least]), edge.size - _edge_run(edge[::-1][:least])
     line = crop.mean(axis=1 if rows else 0) >= share
+    inside: npt.NDArray[np.bool_] = line.copy()  # a rectangle all edge (a thin unit along a wall): the share alone
+    if start < stop:
+        inside = np.asarray((crop[:, start:stop] if rows else crop[start:stop]).any(axis=1 if rows else 0))
     n = line.size
     line[:least] = line[n - least :] = False  # a wall a little inside the unit's own is no cut
     edges = np.flatnonzero(np.diff(np.r_[False, line, False].astype(np.int8)))
     lo, out = 0, list[tuple[int, int]]()
     for s, e in zip(edges[::2], edges[1::2], strict=True):
-        if s - lo >= least and e - s <= most:
+        if s - lo >= least and e - s <= most and inside[s:e].any():
             out.append((lo, int(s) - 1))
             lo = int(e)
     out.append((lo, n - 1))
     first = rect.r0 if rows else rect.c0
     return [rect._replace(r0=first + a, r1=first + b) if rows else rect._replace(c0=first + a, c1=first + b)
             for a, b in out]
+
+
+def _edge_run(line: npt.NDArray[np.bool_]) -> int:
+    """How many of ``line``'s first entries are True before the first False."""
+    return int(line.size if line.all() else np.argmin(line))
 
 
 def boundaries(parts: list[Part], barrier: Barriers, *, resolution_m: float,

@@ -227,6 +227,21 @@ def test_a_corridor_a_unit_stands_over_stays_one_room_across_the_offices_cross_w
     assert min(p.r0 for p in corridor[0].parts) < 45 and max(p.r1 for p in corridor[0].parts) > 54
 
 
+def test_a_corridor_unit_over_the_thick_wall_at_its_side_is_not_cut_into_door_wide_pieces() -> None:
+    # a 1.2 m corridor between thick walls (0.5 m below, 0.3 m above), each with a 0.9 m door into a room; the
+    # corridor's unit covers 5 cells of the wall below and 2 of the wall above, so each column through both walls is
+    # 7 / 31 wall, as much as a cross wall with a door in it; the corridor must not be cut at the doors' jambs into a
+    # door-wide piece open over its whole width to the room behind the door
+    classes = np.full((120, 120), CellClass.WALL, np.uint8)
+    classes[2:32, 50:100] = CellClass.FREE  # the room below
+    classes[32:42, 66:84] = CellClass.FREE  # its door
+    classes[42:66, 2:118] = CellClass.FREE  # the corridor
+    classes[66:72, 30:48] = CellClass.FREE  # the door of the room above
+    classes[72:110, 20:60] = CellClass.FREE  # the room above
+    world = World({1: Rect(35, 69, 0, 119), 2: Rect(0, 33, 48, 101), 3: Rect(70, 111, 18, 61)}, set(), 4)
+    assert _rooms(world, classes) == [(1,), (2,), (3,)]
+
+
 def test_furniture_in_a_room_takes_its_label_and_a_dotted_wall_stays_unlabelled() -> None:
     classes = _walled((60, 100), Rect(0, 59, 0, 99))
     classes[2:58, 50] = CellClass.FREE  # a dotted wall across the room: dots of 2 cells, gaps of 3
