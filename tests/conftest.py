@@ -17,12 +17,17 @@ from shared.store import MapStore
 from tests.helpers import free_port
 
 POSTGRES_URL_ENV = "AISLE_TEST_POSTGRES_URL"
+LONGEST = ("tests/test_wms_end_to_end.py", "tests/test_scaleout.py")
+"""The two longest modules (2.6 and 1.7 minutes of the 12.7 of ``make test`` on the 2-core machine, 27 November),
+one for each of the two processes from the start: either, started after the other end-to-end modules, could end
+the run on its own."""
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Run the end-to-end modules (every test slow) first, then the modules with some slow tests, then the rest;
-    each module keeps its tests' order. ``make test`` hands modules to two processes in this order (pytest-xdist,
-    ``--dist loadscope``), so the long runs start early instead of ending last, each on its own."""
+    """Run the :data:`LONGEST` modules first, then the other end-to-end modules (every test slow), then the modules
+    with some slow tests, then the rest; each module keeps its tests' order. ``make test`` hands modules to two
+    processes in this order (pytest-xdist, ``--dist loadscope``), so the long runs start early instead of ending
+    last, each on its own."""
     def module(item: pytest.Item) -> str:
         return item.nodeid.split("::")[0]
 
@@ -31,7 +36,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         slow.setdefault(module(item), []).append(item.get_closest_marker("slow") is not None)
     weight = {name: 2 if all(marks) else int(any(marks)) for name, marks in slow.items()}
     order = {name: index for index, name in enumerate(slow)}
-    items.sort(key=lambda item: (-weight[module(item)], order[module(item)]))
+    first = {name: LONGEST.index(name) if name in LONGEST else len(LONGEST) for name in slow}
+    items.sort(key=lambda item: (first[module(item)], -weight[module(item)], order[module(item)]))
 
 
 @pytest.fixture

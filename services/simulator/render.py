@@ -138,10 +138,20 @@ def render_boxes(boxes: Boxes, world_from_optical: FloatArray, camera: PinholeCa
     lengths = np.linalg.norm(normals, axis=-1, keepdims=True)
     normals = normals / np.where(lengths > 0, lengths, 1.0)
     visible = np.einsum("mfk,mfk->mf", normals, faces[:, :, 0] - centre) < -1e-9
-    visible &= (cam[:, _FACES, 2] > near_m).any(axis=2)
+    face_z = cam[:, _FACES, 2]
+    visible &= (face_z > near_m).any(axis=2)
+    # a face wholly in front of the near plane needs no clipping, and one whose projection lies over a pixel off
+    # the image is left out before the loop (its bounds check would drop it: the margin covers rounding), which
+    # is most faces of a wide scene seen through a narrow cube face; the images are the same
+    in_front = np.all(face_z >= near_m, axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.fx * cam[:, _FACES, 0] / face_z + camera.cx
+        v = camera.fy * cam[:, _FACES, 1] / face_z + camera.cy
+    off_image = (u.max(axis=2) < -2.0) | (u.min(axis=2) > w + 1.0) | (v.max(axis=2) < -2.0) | (v.min(axis=2) > h + 1.0)
+    visible &= ~(in_front & off_image)
     k = camera.k()
     for m_i, f_i in zip(*np.nonzero(visible), strict=True):
-        poly = _clip_near(cam[m_i, _FACES[f_i]], near_m)
+        poly = cam[m_i, _FACES[f_i]] if in_front[m_i, f_i] else _clip_near(cam[m_i, _FACES[f_i]], near_m)
         if len(poly) < 3:
             continue
         uv = (poly @ k.T)[:, :2] / poly[:, 2:3]
