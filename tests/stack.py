@@ -33,7 +33,9 @@ def aisle_run(tmp_path: Path, *args: str, stop_signal: signal.Signals = signal.S
     process = subprocess.Popen([sys.executable, "-m", "services.cli", "run", *args], env=env, stdout=log,
                                stderr=subprocess.STDOUT)
     try:
-        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=5.0) as client:
+        # a request may wait behind the stages on a loaded 2-core machine (a 5 s limit timed out a /bins at load 25);
+        # how long the run may take is bounded by each wait_for, not by one request
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30.0) as client:
             wait_for(lambda: answers(client), timeout_s=60, what="the API to answer")
             yield client
         process.send_signal(stop_signal)
