@@ -10,6 +10,7 @@ from collections.abc import Iterator
 import pytest
 
 from api.background import background_work
+from shared.collector import collector_held
 
 
 @pytest.fixture
@@ -58,3 +59,13 @@ def test_a_collector_switched_off_before_stays_off(collector_on: None) -> None:
     with background_work():
         pass
     assert not gc.isenabled()
+
+
+def test_a_decomposition_that_ends_during_an_import_leaves_the_collector_off_until_the_import_ends(
+    collector_on: None,
+) -> None:
+    with background_work():
+        with collector_held():  # a decomposition in the same process
+            pass
+        assert not gc.isenabled()
+    assert gc.isenabled()
