@@ -249,10 +249,13 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
         case "sim":
             _sim(args, settings, stop)
         case "decompose":
-            from services.grid_decomposition import decompose_map_file, parse_label_overrides
+            from shared.collector import collector_held
 
-            overrides = parse_label_overrides(args.labels) if args.labels else None
-            decompose_map_file(args.map, args.out, resolution_m=args.resolution, label_overrides=overrides)
+            with collector_held():  # the package's and its step libraries' imports and one decomposition
+                from services.grid_decomposition import decompose_map_file, parse_label_overrides
+
+                overrides = parse_label_overrides(args.labels) if args.labels else None
+                decompose_map_file(args.map, args.out, resolution_m=args.resolution, label_overrides=overrides)
             log.info("wrote the decomposition of %s to %s", args.map, args.out)
         case "floor-plan":
             _floor_plan(args)

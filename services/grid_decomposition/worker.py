@@ -30,6 +30,7 @@ from services.grid_decomposition.known_racks import KNOWN_RACKS_STAGE, KnownRack
 from services.grid_decomposition.pipeline import decompose
 from services.grid_decomposition.records import decomposition_features, decomposition_layers, decomposition_topology
 from services.grid_decomposition.semantics import parse_label_table
+from shared.collector import collector_held
 from shared.places import LABEL_OVERRIDES_KEY, LABEL_TABLE_STAGE
 from shared.settings import DecompositionSettings
 from shared.store import GridLayer, Revision, RevisionWrite, StoredLayer, StoreUnavailableError
@@ -165,12 +166,13 @@ class DecompositionStage:
             racks = self.racks.on_grid(layer)
             kept = (region_prior(previous, self._decomposed, layer)
                     if prior and previous is not None and self._decomposed is not None else None)
-            result, ids = carry_keys(decompose(layer.data, resolution_m=layer.resolution_m,
-                                               origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
-                                               neck_half_width_m=self.settings.neck_half_width_m,
-                                               door_max_width_m=self.settings.door_max_width_m,
-                                               label_overrides=self._overrides or None,
-                                               known_places=racks, prior=kept), previous)
+            with collector_held():  # the first in a process imports the step libraries: no full collections
+                result = decompose(layer.data, resolution_m=layer.resolution_m,
+                                   origin_xy_m=(layer.origin_x_m, layer.origin_y_m),
+                                   neck_half_width_m=self.settings.neck_half_width_m,
+                                   door_max_width_m=self.settings.door_max_width_m,
+                                   label_overrides=self._overrides or None, known_places=racks, prior=kept)
+            result, ids = carry_keys(result, previous)
             source = {"source_layer": self.source_layer, "source_revision": stored.revision_id}
             layers = decomposition_layers(result, label_layer=self.layer_names[0], segment_layer=self.layer_names[1],
                                           meta={**source, NEXT_ID_KEY: ids.next_id})
