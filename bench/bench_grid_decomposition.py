@@ -1,7 +1,9 @@
 """Grid decomposition on warehouses: label accuracy, junctions, pallet cells, speed and peak memory.
 
 Prints ``name value unit`` lines, one BLAS thread, seconds as wall time and CPU time
-(``time.process_time``) with the load average, since the machine may be shared.
+(``time.process_time``) with the load average, since the machine may be shared. Every decomposition runs as the
+worker and ``aisle decompose`` run it: with the cyclic garbage collector held off
+(:func:`shared.collector.collector_held`).
 
 * Synthetic warehouses from the seeded generator of the tests
   (``tests/services/grid_decomposition/warehouse.py``), seeds 0-2 of: ``plain`` (aisles
@@ -25,7 +27,8 @@ Prints ``name value unit`` lines, one BLAS thread, seconds as wall time and CPU 
   similar area), rooms (a depot's pallets must not make any), seconds. ``--racks-only`` runs only
   these and the large hall below.
 * A 250 m x 90 m pallet-height hall at 5 cm (5000 x 1800 px): wall seconds of a fresh process
-  reading it and decomposing it (start-up and imports included) and its figures.
+  reading it and decomposing it (start-up and imports included; the package's import and the decomposition with
+  the collector held off, as ``aisle decompose``) and its figures.
 
 ``--overview docs/solid_rack_hall_overview.png`` writes the overview picture of a turned solid-rack
 hall instead. ``--stages MAP [MAP ...]`` prints instead the CPU seconds of every step of the pipeline
@@ -62,6 +65,7 @@ from threadpoolctl import threadpool_limits
 from bench.eval_ipa import ROSE2, rose2_occupancy
 from services.grid_decomposition import Decomposition, decompose, overview_image, pipeline, read_map_file
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
+from shared.collector import collector_held
 from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse, tuw_truth
 
@@ -75,7 +79,8 @@ def _accuracy(labels: npt.NDArray[np.uint8], truth: npt.NDArray[np.uint8], free:
 
 def _timed(occupancy: npt.NDArray[np.int8], resolution_m: float) -> tuple[Decomposition, float, float]:
     wall, cpu = time.perf_counter(), time.process_time()
-    d = decompose(occupancy, resolution_m=resolution_m)
+    with collector_held():  # as the worker and ``aisle decompose`` run it
+        d = decompose(occupancy, resolution_m=resolution_m)
     return d, time.perf_counter() - wall, time.process_time() - cpu
 
 
@@ -251,9 +256,10 @@ def big_rack_hall() -> RackMap:
 _CHILD = """
 import sys, time, numpy as np
 from threadpoolctl import threadpool_limits
-from services.grid_decomposition import decompose
+from shared.collector import collector_held
 occ = np.load(sys.argv[1])
-with threadpool_limits(1):
+with threadpool_limits(1), collector_held():  # as aisle decompose runs it
+    from services.grid_decomposition import decompose
     d = decompose(occ, resolution_m=0.05)
 np.save(sys.argv[2], d.labels)
 np.save(sys.argv[3], d.segments)
@@ -326,7 +332,8 @@ def stage_seconds(occupancy: npt.NDArray[np.int8], resolution_m: float) -> dict[
         for name, fn in steps.items():
             setattr(pipeline, name, timed(name, fn))
         start, wall = time.process_time(), time.perf_counter()
-        pipeline.decompose(occupancy, resolution_m=resolution_m)
+        with collector_held():  # as the worker and ``aisle decompose`` run it
+            pipeline.decompose(occupancy, resolution_m=resolution_m)
         seconds["total"] = time.process_time() - start
         seconds["wall"] = time.perf_counter() - wall
     finally:

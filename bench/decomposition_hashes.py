@@ -34,6 +34,7 @@ from services.grid_decomposition.keys import NEXT_ID_KEY, carry_keys, region_pri
 from services.grid_decomposition.mapfile import read_map_file
 from services.grid_decomposition.records import decomposition_layers
 from services.simulator.rackmaps import rack_hall_map
+from shared.collector import collector_held
 from shared.store import GridLayer
 
 SETS = ("rose2", "partial", "ipa", "racks", "hall")
@@ -48,6 +49,12 @@ def _digest(*parts: Any) -> str:
         else:
             h.update(repr(part).encode())
     return h.hexdigest()[:16]
+
+
+def _decompose(occupancy: npt.NDArray[np.int8], **kwargs: Any) -> Decomposition:
+    """``decompose`` as the product calls it (``aisle decompose``, the worker): the cyclic collector held off."""
+    with collector_held():
+        return decompose(occupancy, **kwargs)
 
 
 def hashes(d: Decomposition) -> dict[str, str]:
@@ -70,7 +77,7 @@ def _outputs(sets: list[str]) -> Iterator[tuple[str, dict[str, str]]]:
     if "rose2" in sets:
         for folder in sorted(p for p in (eval_ipa.ROSE2 / "full").iterdir() if p.is_dir()):
             occ = eval_ipa.rose2_occupancy(eval_ipa._grey(folder / "map.png"))
-            yield f"rose2/{folder.name}", hashes(decompose(occ, resolution_m=0.05))
+            yield f"rose2/{folder.name}", hashes(_decompose(occ, resolution_m=0.05))
     if "partial" in sets:
         yield from _partial()
     if "ipa" in sets:
@@ -80,17 +87,17 @@ def _outputs(sets: list[str]) -> Iterator[tuple[str, dict[str, str]]]:
                 path = eval_ipa.IPA / f"{name}{variant}.png"
                 if path.exists():
                     occ = read_map_file(path, resolution_m=0.05)[0]
-                    yield f"ipa/{name}{variant}", hashes(decompose(occ, resolution_m=0.05))
+                    yield f"ipa/{name}{variant}", hashes(_decompose(occ, resolution_m=0.05))
     if "racks" in sets:
         for style_name, style in grid_bench.RACK_SETS.items():
             for seed in (0, 1, 2):
                 for turned in (False, True):
                     hall = rack_hall_map(seed, style=style, rotation_rad=0.2 + 0.16 * seed if turned else 0.0)
                     yield (f"racks/{style_name}{'_turned' if turned else ''}_{seed}",
-                           hashes(decompose(hall.occupancy, resolution_m=hall.resolution_m)))
+                           hashes(_decompose(hall.occupancy, resolution_m=hall.resolution_m)))
     if "hall" in sets:
         hall = grid_bench.big_rack_hall()
-        yield "hall/250m", hashes(decompose(hall.occupancy, resolution_m=hall.resolution_m))
+        yield "hall/250m", hashes(_decompose(hall.occupancy, resolution_m=hall.resolution_m))
 
 
 def _partial() -> Iterator[tuple[str, dict[str, str]]]:
@@ -109,8 +116,8 @@ def _partial() -> Iterator[tuple[str, dict[str, str]]]:
                               float(-corner[0] * 0.05))
         prior = None if previous is None else region_prior(previous[0], previous[1], occupancy)
         result, ids = carry_keys(
-            decompose(occupancy.data, resolution_m=0.05, origin_xy_m=(occupancy.origin_x_m, occupancy.origin_y_m),
-                      prior=prior),
+            _decompose(occupancy.data, resolution_m=0.05, origin_xy_m=(occupancy.origin_x_m, occupancy.origin_y_m),
+                       prior=prior),
             None if previous is None else previous[0])
         layer = decomposition_layers(result, meta={NEXT_ID_KEY: ids.next_id})[1]
         yield f"partial/{folder.name}", {**hashes(result), "keyed": _digest(layer.data)}
