@@ -199,6 +199,9 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
     if args.command in ("pillars", "racks"):  # offline on files: neither bus nor store
         _pillars(args, settings)
         return 0
+    if args.command == "decompose":  # offline on files: neither the bus's nor the store's libraries are loaded
+        _decompose(args)
+        return 0
     from services import runtime
 
     stop = threading.Event()
@@ -248,15 +251,6 @@ def _dispatch(args: argparse.Namespace, settings: Settings) -> int:
             return _map_build(args, settings)
         case "sim":
             _sim(args, settings, stop)
-        case "decompose":
-            from shared.collector import collector_held
-
-            with collector_held():  # the package's and its step libraries' imports and one decomposition
-                from services.grid_decomposition import decompose_map_file, parse_label_overrides
-
-                overrides = parse_label_overrides(args.labels) if args.labels else None
-                decompose_map_file(args.map, args.out, resolution_m=args.resolution, label_overrides=overrides)
-            log.info("wrote the decomposition of %s to %s", args.map, args.out)
         case "floor-plan":
             _floor_plan(args)
         case "train-classifier" | "eval-classifier":
@@ -277,6 +271,17 @@ def _until_signal(stop: threading.Event, run: Callable[[], list[str]]) -> None:
         busy = run()
     if busy:
         runtime.exit_now(0)
+
+
+def _decompose(args: argparse.Namespace) -> None:
+    from shared.collector import collector_held
+
+    with collector_held():  # the package's and its step libraries' imports and one decomposition
+        from services.grid_decomposition import decompose_map_file, parse_label_overrides
+
+        overrides = parse_label_overrides(args.labels) if args.labels else None
+        decompose_map_file(args.map, args.out, resolution_m=args.resolution, label_overrides=overrides)
+    log.info("wrote the decomposition of %s to %s", args.map, args.out)
 
 
 def _floor_plan(args: argparse.Namespace) -> None:

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 
 from services.cli import main
@@ -102,6 +106,26 @@ def test_decompose_writes_every_output(tmp_path: Path) -> None:
     for name in ("labels.png", "segments.png", "layout.geojson", "topology.json", "overview.png"):
         assert (tmp_path / "dec" / name).is_file()
     assert main(["decompose", str(tmp_path / "demo" / "world.geojson"), "--out", str(tmp_path / "bad")]) == 1
+
+
+def test_decompose_loads_neither_the_bus_nor_the_store_and_leaves_the_collector_on(tmp_path: Path) -> None:
+    # a fresh interpreter, as a user's shell starts it: what the command loads is what it pays for
+    image = np.full((100, 180), 205, dtype=np.uint8)  # unknown
+    image[5:95, 5:175] = 0  # walls
+    image[8:92, 8:172] = 254  # free
+    image[8:92, 88:91] = 0  # a wall with a door
+    image[40:58, 88:91] = 254
+    cv2.imwrite(str(tmp_path / "map.png"), image)
+    code = ("import gc, sys\n"
+            "from services.cli import main\n"
+            f"code = main(['decompose', {str(tmp_path / 'map.png')!r}, '--resolution', '0.05', '--out', "
+            f"{str(tmp_path / 'dec')!r}])\n"
+            "print(code, sorted(m for m in ('sqlalchemy', 'zenoh') if m in sys.modules), gc.isenabled())\n")
+    done = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[2], capture_output=True,
+                          text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["0", "[]", "True"]
+    assert (tmp_path / "dec" / "segments.png").is_file()
 
 
 def test_floor_plan_writes_every_output_and_prints_k(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
