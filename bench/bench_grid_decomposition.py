@@ -28,7 +28,7 @@ worker and ``aisle decompose`` run it: with the cyclic garbage collector held of
   these and the large hall below.
 * A 250 m x 90 m pallet-height hall at 5 cm (5000 x 1800 px): wall seconds of a fresh process
   reading it and decomposing it (start-up and imports included; the package's import and the decomposition with
-  the collector held off, as ``aisle decompose``) and its figures.
+  the collector held off and what the process holds then frozen, as ``aisle decompose``) and its figures.
 
 ``--overview docs/solid_rack_hall_overview.png`` writes the overview picture of a turned solid-rack
 hall instead. ``--stages MAP [MAP ...]`` prints instead the CPU seconds of every step of the pipeline
@@ -254,15 +254,16 @@ def big_rack_hall() -> RackMap:
 
 
 _CHILD = """
-import sys, time, numpy as np
+import gc, sys, time, numpy as np
 from threadpoolctl import threadpool_limits
 from shared.collector import collector_held
 occ = np.load(sys.argv[1])
 with threadpool_limits(1), collector_held():  # as aisle decompose runs it
     from services.grid_decomposition import decompose
     d = decompose(occ, resolution_m=0.05)
-np.save(sys.argv[2], d.labels)
-np.save(sys.argv[3], d.segments)
+    np.save(sys.argv[2], d.labels)
+    np.save(sys.argv[3], d.segments)
+    gc.freeze()
 """
 
 
