@@ -682,7 +682,7 @@ def decompose(
             segments = split_fans(
                 segments, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
-                wide_neck_m=door_max_width_m,
+                wide_neck_m=door_max_width_m, lobe_max_area_m2=room_min_area_m2,
             )
             door_rooms = segments > last_id  # the rooms it parted, under ids above the others
         if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
@@ -729,7 +729,7 @@ def decompose(
                 segments = split_fans(
                     segments, occupied, on_floor > 0.5 * size,
                     resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
-                    wide_neck_m=door_max_width_m,
+                    wide_neck_m=door_max_width_m, lobe_max_area_m2=room_min_area_m2,
                 )
         # pieces of one fan of rays that touch nothing, each a region too small to be a room, are one room; a room
         # seen alone through the gaps of its walls (touching no region) takes the dots of its rays round it
