@@ -93,6 +93,8 @@ def keep_regions(
     min_area_px: int = 1,
     join_min_border_px: int = 0,
     join_min_width_share: float = 0.6,
+    door_rooms: npt.NDArray[np.bool_] | None = None,
+    sliver_max_px: int = 0,
 ) -> npt.NDArray[np.int32]:
     """``segments`` with the regions of ``prior`` kept where the map did not change.
 
@@ -104,7 +106,11 @@ def keep_regions(
     else is as ``segments`` has it. A region left in pieces keeps its largest; smaller pieces than
     ``min_area_px`` join a neighbouring region. Settled regions the new decomposition holds as one are one
     previous region when their border allows it (:func:`joined_regions`, at ``join_min_border_px`` and
-    ``join_min_width_share``; a border of 0 cells keeps every previous border).
+    ``join_min_width_share``; a border of 0 cells keeps every previous border). A room the new decomposition
+    parted at the door it is seen through (mostly on ``door_rooms``) and that continues a settled region takes
+    the kept cells of other settled regions inside it when they are fewer than ``sliver_max_px`` per region:
+    floor just inside its door that a hall or corridor held while the room was seen in part is no room of its own,
+    and the door's line is where the room ends (:func:`_slivers_to_door_rooms`; 0 keeps them all).
 
     Parameters
     ----------
@@ -112,6 +118,9 @@ def keep_regions(
         Region id per cell of the new decomposition, 0 where no region.
     prior : RegionPrior
         On the same grid.
+    door_rooms : (H, W) bool, optional
+        Cells of the rooms the new decomposition parted from a hall or corridor at a door's line
+        (:func:`~services.grid_decomposition.fans.split_fans`).
 
     Returns
     -------
@@ -139,6 +148,8 @@ def keep_regions(
             lut[new] = base + old
     out = np.take(lut, seg)
     keep = settled[before] & prior.unchanged & (seg > 0)
+    if door_rooms is not None and sliver_max_px > 0:
+        keep &= ~_slivers_to_door_rooms(seg, before, keep, door_rooms, lut - base, max_px=sliver_max_px)
     # a new region that continues no previous one and lies mostly on ground the settled regions do not hold is
     # a place found anew (a room seen through its door before, now entered): it stands whole
     continues = np.zeros(base, dtype=bool)
@@ -150,6 +161,34 @@ def keep_regions(
     present = np.bincount(out.ravel()) > 0
     present[0] = False
     return _largest_pieces(np.where(present, np.cumsum(present), 0).astype(np.int32)[out], min_area_px)
+
+
+def _slivers_to_door_rooms(
+    seg: npt.NDArray[np.int64],
+    before: npt.NDArray[np.int64],
+    keep: npt.NDArray[np.bool_],
+    door_rooms: npt.NDArray[np.bool_],
+    continued: npt.NDArray[np.int64],
+    *,
+    max_px: int,
+) -> npt.NDArray[np.bool_]:
+    """The kept cells (``keep``) that a door room of ``seg`` takes from other previous regions that a new region
+    continues too: per door room and previous region, fewer than ``max_px`` of them (a border moved, no region taken
+    over). A door room is a new region mostly on ``door_rooms`` that continues a settled region (``continued[k]``, the
+    previous id of new region ``k``, below 1 for none)."""
+    n = continued.size
+    size = np.bincount(seg.ravel(), minlength=n)
+    door_room = (2 * np.bincount(seg[door_rooms], minlength=n) > size) & (continued > 0)
+    goes_on = np.zeros(int(before.max()) + 1, dtype=bool)  # previous regions a new region continues
+    goes_on[continued[continued > 0]] = True
+    taken: npt.NDArray[np.bool_] = keep & np.take(door_room, seg) & np.take(goes_on, before)
+    taken &= before != np.take(continued, seg)
+    if not taken.any():
+        return taken
+    pair = seg[taken] * (int(before.max()) + 1) + before[taken]
+    _, inverse, count = np.unique(pair, return_inverse=True, return_counts=True)
+    taken[taken] = (count < max_px)[inverse]
+    return taken
 
 
 def joined_regions(

@@ -42,6 +42,8 @@ def split_fans(
     min_room_area_m2: float = 15.0,
     min_thin_share: float = 0.2,
     wide_neck_m: float = 0.0,
+    lobe_max_area_m2: float = 0.0,
+    lobe_min_border_m: float = 0.25,
 ) -> npt.NDArray[np.int32]:
     """Give every room that leaves a segment through a doorway-wide neck a segment of its own.
 
@@ -68,6 +70,11 @@ def split_fans(
     leave so: a corridor or a bay narrower than that disc is dense floor. A room found by the narrow disc inside
     such a room is a room of its own.
 
+    A part smaller than ``lobe_max_area_m2`` (a room's least area) that also touches a segment other than the one
+    it leaves, along at least ``lobe_min_border_m`` (a corner or the end of a ray is no border), is a beam of a fan
+    that segment holds (a room seen through its door in several beams): it joins the segment it touches along most
+    pixels rather than standing as a room too small to be one.
+
     Parameters
     ----------
     segments : (H, W) int32
@@ -83,6 +90,9 @@ def split_fans(
         at least ``min_segment_area_m2`` lose rooms.
     wide_neck_m : float
         The widest door, for rooms of rays behind doors wider than ``max_neck_m``; 0 (or without ``thin``): none.
+    lobe_max_area_m2, lobe_min_border_m : float
+        Parts smaller than ``lobe_max_area_m2`` join another segment they touch along ``lobe_min_border_m``; 0: none
+        do.
 
     Returns
     -------
@@ -93,6 +103,8 @@ def split_fans(
     radius = max(1, round(max_neck_m / 2 / resolution_m))
     wide_radius = round(wide_neck_m / 2 / resolution_m)
     next_id = int(segments.max()) + 1
+    lobe_max_px = lobe_max_area_m2 / resolution_m**2
+    lobe_border_px = max(1, round(lobe_min_border_m / resolution_m))
     floor_m2 = min_segment_area_m2 if thin is None else min(min_segment_area_m2, min_room_area_m2)
     tests = _FanTests(occupied, resolution_m, min_area_m2, min_depth_m, outside_reach_m, max_open_share, min_thin_share)
     for k, found in enumerate(label_boxes(segments), start=1):
@@ -119,9 +131,25 @@ def split_fans(
         parts, _, fans = _beyond_core(mine, inside, radius, max_neck_m, offset, tests, small)
         rooms += [parts == c for c in fans]  # a room behind a narrow door inside one behind a wide door: its own
         for room in rooms:
-            out[box][room] = next_id
-            next_id += 1
+            lobe_of = _lobe_of(out[box], room, k, fixed, lobe_border_px) if np.count_nonzero(room) < lobe_max_px else 0
+            out[box][room] = lobe_of or next_id
+            next_id += 0 if lobe_of else 1
     return out
+
+
+def _lobe_of(
+    labels: npt.NDArray[np.int32], part: npt.NDArray[np.bool_], host: int, fixed: npt.NDArray[np.bool_], min_border: int
+) -> int:
+    """The segment of ``labels`` other than ``host`` (and not ``fixed``) that ``part`` touches along most pixels
+    (4-connected), when along at least ``min_border`` of them; else 0."""
+    ring = cv2.dilate(part.view(np.uint8), _RING).view(bool) & ~part
+    touched = labels[ring]
+    touched = touched[(touched > 0) & (touched != host)]
+    touched = touched[(touched >= fixed.size) | ~fixed[np.minimum(touched, fixed.size - 1)]]
+    if touched.size < min_border:
+        return 0
+    counts = np.bincount(touched)
+    return int(np.argmax(counts)) if counts.max() >= min_border else 0
 
 
 def _beyond_core(

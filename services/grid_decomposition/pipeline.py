@@ -674,14 +674,17 @@ def decompose(
         segments = fill_from_neighbours(
             segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)), overwrite=True
         )
+        door_rooms = None
         if fan_max_neck_m > 0:  # a room seen only through its door (rays or floor), not the corridor's floor
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
             floors = on_floor > 0.5 * size
+            last_id = int(segments.max())
             segments = split_fans(
                 segments, occupied, floors,
                 resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
-                wide_neck_m=door_max_width_m,
+                wide_neck_m=door_max_width_m, lobe_max_area_m2=room_min_area_m2,
             )
+            door_rooms = segments > last_id  # the rooms it parted, under ids above the others
         if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
             segments = inside_furniture(
@@ -717,6 +720,8 @@ def decompose(
                 max_changed_share=settled_max_changed_share,
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
                 join_min_border_px=round(door_max_width_m / resolution_m),
+                door_rooms=door_rooms,
+                sliver_max_px=round(room_min_area_m2 / resolution_m**2),
             )
             if fan_max_neck_m > 0:  # a settled region holds a room seen through its door as it held it before the
                 # room's walls were seen: the rooms behind doors are parted from the regions as kept, too
@@ -724,7 +729,7 @@ def decompose(
                 segments = split_fans(
                     segments, occupied, on_floor > 0.5 * size,
                     resolution_m=resolution_m, max_neck_m=fan_max_neck_m, thin=rays | streaks,
-                    wide_neck_m=door_max_width_m,
+                    wide_neck_m=door_max_width_m, lobe_max_area_m2=room_min_area_m2,
                 )
         # pieces of one fan of rays that touch nothing, each a region too small to be a room, are one room; a room
         # seen alone through the gaps of its walls (touching no region) takes the dots of its rays round it

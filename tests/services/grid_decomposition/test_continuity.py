@@ -111,6 +111,33 @@ def test_a_room_open_wider_than_a_door_but_narrow_for_its_size_stays_apart() -> 
     assert _same_partition(out, before)
 
 
+def test_a_room_parted_at_its_door_takes_the_floor_inside_the_door_the_corridor_held() -> None:
+    # a corridor (rows 0..9) and a room behind a 1 m door; when the room was seen in part, the corridor's region
+    # took the floor just inside the door (rows 10..14 of the door's columns) and the room's region began beyond it
+    before = _grid((4, slice(0, 10), slice(None)), (4, slice(10, 15), slice(20, 40)), (9, slice(15, 40), slice(10, 50)),
+                   (9, slice(10, 15), slice(10, 20)), (9, slice(10, 15), slice(40, 50)), shape=(40, 60))
+    unchanged = np.ones(before.shape, dtype=bool)
+    # now the fan rule parts the whole room from the corridor at the door's line
+    after = _grid((1, slice(0, 10), slice(None)), (2, slice(10, 40), slice(10, 50)), shape=(40, 60))
+    prior = RegionPrior(before, unchanged)
+    sliver = 5 * 20  # the floor inside the door, 0.25 m^2 at 0.05 m a cell: no room of its own
+    out = keep_regions(after, prior, door_rooms=after == 2, sliver_max_px=sliver + 1)
+    assert _same_partition(out, after)
+    # a room found otherwise (no door room), or floor as large as a room, stays where the prior had it
+    assert _same_partition(keep_regions(after, prior, sliver_max_px=sliver + 1), before)
+    assert _same_partition(keep_regions(after, prior, door_rooms=after == 2, sliver_max_px=sliver), before)
+
+
+def test_a_room_parted_at_its_door_does_not_take_a_room_the_prior_kept_inside_it() -> None:
+    # a closet (region 7) beside the room's door that no new region continues: it is a region of its own still
+    before = _grid((4, slice(0, 10), slice(None)), (9, slice(10, 40), slice(10, 50)), (7, slice(10, 15), slice(40, 50)),
+                   shape=(40, 60))
+    after = _grid((1, slice(0, 10), slice(None)), (2, slice(10, 40), slice(10, 50)), shape=(40, 60))
+    out = keep_regions(after, RegionPrior(before, np.ones(before.shape, dtype=bool)), door_rooms=after == 2,
+                       sliver_max_px=600)
+    assert _same_partition(out, before)
+
+
 def test_a_prior_on_another_grid_is_refused() -> None:
     with pytest.raises(DecompositionError, match="prior"):
         keep_regions(np.zeros((3, 3), np.int32), RegionPrior(np.zeros((3, 4), np.int32), np.ones((3, 4), bool)))

@@ -97,6 +97,30 @@ def test_split_fans_parts_a_room_behind_a_neck_and_leaves_rays_out_of_the_buildi
     assert np.array_equal(split(room, np.array([False, True])), segments)  # a warehouse floor
 
 
+def test_a_beam_smaller_than_a_room_joins_the_room_it_touches_and_stands_alone_otherwise() -> None:
+    """A bay 0.5 m wide and 2.5 m deep off the hall (1.25 m^2, under a room's least area of 1.5 m^2): beside another
+    region along its side it is a beam of that region's room; touching nothing but the hall, a room of its own."""
+    segments = np.zeros((200, 300), dtype=np.int32)
+    segments[22:120, 22:260] = 1
+    segments[120:170, 134:144] = 1
+    occupied = np.zeros(segments.shape, dtype=bool)
+    occupied[[20, 121], 20:262] = occupied[20:122, [20, 261]] = True
+    occupied[170, 100:180] = occupied[120:170, [120, 160]] = True
+
+    def split(beside: np.ndarray) -> np.ndarray:
+        return split_fans(beside, occupied, np.zeros(3, dtype=bool), resolution_m=RESOLUTION_M, lobe_max_area_m2=1.5)
+
+    alone = split(segments)
+    assert len(np.unique(alone[125:170, 134:144])) == 1 and alone[150, 139] not in (0, 1)
+    room = segments.copy()
+    room[125:170, 144:159] = 2  # the rest of the room behind the opening, another region, along the bay's side
+    lobe = split(room)
+    assert np.all(lobe[125:170, 134:144] == 2)
+    corner = segments.copy()
+    corner[169:171, 144:159] = 2  # another region touching the bay at one corner only
+    assert split(corner)[150, 139] not in (0, 1, 2)
+
+
 def test_a_room_the_previous_decomposition_left_in_the_hall_parts_once_its_walls_are_seen() -> None:
     """A growing map: first the robot saw the rays through the door but none of the room's walls (they could be
     rays out of the building), so the room was the hall's; then it saw the walls, and nothing else changed. With the
