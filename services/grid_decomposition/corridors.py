@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -202,6 +203,82 @@ def corridor_bands(
     return bands
 
 
+def _tilt_of(t: npt.NDArray[np.float64], u: npt.NDArray[np.float64]) -> float:
+    """The angle (radians) of the least-squares line ``u`` on ``t``: the pixels' tilt off the along direction."""
+    dt = t - t.mean()
+    return float(np.arctan(np.dot(dt, u - u.mean()) / max(float(np.dot(dt, dt)), 1e-9)))
+
+
+def tilted_lines(
+    walls: npt.NDArray[np.bool_],
+    lines: list[Line],
+    *,
+    top: int,
+    left: int,
+    resolution_m: float,
+    max_tilt_deg: float = 3.0,
+    tilt_step_deg: float = 0.5,
+    min_support_m: float = 3.0,
+    fit_px: int = 4,
+    min_thin: float = 0.6,
+    max_gap_m: float = 1.0,
+) -> list[Line]:
+    """Lines along walls a few degrees off the lines' angles: a wing of a building the map drew askew.
+
+    For every angle of ``lines``, the ``walls`` pixels (a window whose top-left pixel is (``top``, ``left``) of
+    the image the lines were drawn in) within one pixel of every offset are counted at tilts of
+    ``tilt_step_deg`` up to ``max_tilt_deg`` either side of the angle (a Hough transform in a narrow fan). A
+    tilted line is a maximum of those counts over its neighbours in tilt and offset whose longest stretch of
+    wall pixels within one pixel of it (gaps up to ``max_gap_m``) holds at least ``min_support_m`` of them and
+    at least ``min_thin`` of the wall pixels within ``fit_px`` of it over that stretch (a wall, not a cloud of
+    clutter), and those pixels run at its tilt within half a step (least squares): a wall at the angle itself
+    lies on tilted lines too, but runs at the angle.
+    """
+    rows, cols = np.nonzero(walls)
+    if rows.size == 0:
+        return []
+    x = (cols + left).astype(np.float64)
+    y = (rows + top).astype(np.float64)
+    steps = round(max_tilt_deg / tilt_step_deg)
+    tilts = np.radians(tilt_step_deg * np.arange(-steps, steps + 1))
+    half_step = math.radians(tilt_step_deg) / 2
+    min_support = min_support_m / resolution_m
+    max_gap_px = max_gap_m / resolution_m
+    out: list[Line] = []
+    for angle in sorted({round(ln.angle_rad, 4) for ln in lines}):
+        across = np.rint(-np.sin(angle + tilts)[:, None] * x[None, :] + np.cos(angle + tilts)[:, None] * y[None, :])
+        start = int(across.min()) - 1
+        n = int(across.max()) - start + 2
+        flat = (across.astype(np.int64) - start) + n * np.arange(tilts.size)[:, None]
+        counts = np.bincount(flat.ravel(), minlength=n * tilts.size).reshape(tilts.size, n).astype(np.float32)
+        near = counts.copy()
+        near[:, 1:] += counts[:, :-1]
+        near[:, :-1] += counts[:, 1:]
+        peak = (near == cv2.dilate(near, np.ones((3, 5), np.uint8))) & (near >= min_support)
+        peak[steps] = False
+        if not peak.any():
+            continue
+        t = np.cos(angle) * x + np.sin(angle) * y
+        u = -np.sin(angle) * x + np.cos(angle) * y
+        for i, o in zip(*np.nonzero(peak), strict=True):
+            off = np.abs(across[i] - (o + start))
+            # the longest stretch of wall along the line (gaps up to max_gap_px), and the pixels beside it
+            along = np.sort(t[off <= 1])
+            breaks = np.flatnonzero(np.diff(along) > max_gap_px)
+            first, last = np.r_[0, breaks + 1], np.r_[breaks, along.size - 1]
+            best = int(np.argmax(last - first))
+            if last[best] - first[best] + 1 < min_support:
+                continue
+            span = (t >= along[first[best]]) & (t <= along[last[best]])
+            on = span & (off <= fit_px)
+            if last[best] - first[best] + 1 < min_thin * np.count_nonzero(on):
+                continue
+            if abs(_tilt_of(t[on], u[on]) - tilts[i]) <= half_step:
+                out.append(Line(round(angle + float(tilts[i]), 4), float(o + start), float(near[i, o]) * resolution_m,
+                                resolution_m, True))
+    return out
+
+
 def band_box(
     u: npt.NDArray[np.int32], t: npt.NDArray[np.int32], across: tuple[int, int], along: tuple[int, int]
 ) -> tuple[slice, slice]:
@@ -264,7 +341,8 @@ def part_rooms_from_corridors(
 ) -> npt.NDArray[np.int32]:
     """Part the rooms from the corridor bands of candidate regions, along the bands' side lines.
 
-    In every region ``k`` with ``candidates[k]`` the corridor bands (:func:`corridor_bands`) are found and
+    In every region ``k`` with ``candidates[k]`` the corridor bands (:func:`corridor_bands`, of ``lines`` and the
+    :func:`tilted_lines` of the walls round the region: a corridor in a wing the map drew askew) are found and
     the region is cut along both side lines of every band over its run. A 4-connected piece that holds no
     square of a band's strip (at most, say, the end of a band crossing the other's side line) becomes a
     region of its own when it is room-like: at least ``room_min_area_m2``, a disc
@@ -293,10 +371,11 @@ def part_rooms_from_corridors(
         bottom, right = own[0].stop + margin_px, own[1].stop + margin_px
         region = segments[top:bottom, left:right] == k
         shape = (region.shape[0], region.shape[1])
-        coordinates = window_coordinates(shape, top, left, lines)
+        walls = occupied[top:bottom, left:right]
+        here = lines + tilted_lines(walls, lines, top=top, left=left, resolution_m=resolution_m)
+        coordinates = window_coordinates(shape, top, left, here)
         bands = corridor_bands(
-            region, occupied[top:bottom, left:right], lines, top=top, left=left, resolution_m=resolution_m,
-            coordinates=coordinates,
+            region, walls, here, top=top, left=left, resolution_m=resolution_m, coordinates=coordinates,
         )
         if not bands:
             continue
