@@ -216,6 +216,7 @@ def tilted_lines(
     top: int,
     left: int,
     resolution_m: float,
+    min_tilt_deg: float = 1.0,
     max_tilt_deg: float = 3.0,
     tilt_step_deg: float = 0.5,
     min_support_m: float = 3.0,
@@ -228,11 +229,12 @@ def tilted_lines(
     For every angle of ``lines``, the ``walls`` pixels (a window whose top-left pixel is (``top``, ``left``) of
     the image the lines were drawn in) within one pixel of every offset are counted at tilts of
     ``tilt_step_deg`` up to ``max_tilt_deg`` either side of the angle (a Hough transform in a narrow fan). A
-    tilted line is a maximum of those counts over its neighbours in tilt and offset whose longest stretch of
-    wall pixels within one pixel of it (gaps up to ``max_gap_m``) holds at least ``min_support_m`` of them and
-    at least ``min_thin`` of the wall pixels within ``fit_px`` of it over that stretch (a wall, not a cloud of
-    clutter), and those pixels run at its tilt within half a step (least squares): a wall at the angle itself
-    lies on tilted lines too, but runs at the angle.
+    tilted line is a maximum of those counts over its neighbours in tilt and offset, at least ``min_tilt_deg``
+    off the angle (closer, the angle's own lines follow the wall within a band's tolerance) and with at least
+    ``min_support_m`` of wall on it, whose longest stretch of wall pixels within one pixel of it (gaps up to
+    ``max_gap_m``) is at least ``min_support_m`` long and holds at least ``min_thin`` of the wall pixels within
+    ``fit_px`` of it there (a wall, not a cloud of clutter), and those pixels run at its tilt within half a
+    step (least squares): a wall at the angle itself lies on tilted lines too, but runs at the angle.
     """
     rows, cols = np.nonzero(walls)
     if rows.size == 0:
@@ -255,7 +257,7 @@ def tilted_lines(
         near[:, 1:] += counts[:, :-1]
         near[:, :-1] += counts[:, 1:]
         peak = (near == cv2.dilate(near, np.ones((3, 5), np.uint8))) & (near >= min_support)
-        peak[steps] = False
+        peak[np.abs(tilts) < math.radians(min_tilt_deg)] = False
         if not peak.any():
             continue
         t = np.cos(angle) * x + np.sin(angle) * y
@@ -266,8 +268,8 @@ def tilted_lines(
             along = np.sort(t[off <= 1])
             breaks = np.flatnonzero(np.diff(along) > max_gap_px)
             first, last = np.r_[0, breaks + 1], np.r_[breaks, along.size - 1]
-            best = int(np.argmax(last - first))
-            if last[best] - first[best] + 1 < min_support:
+            best = int(np.argmax(along[last] - along[first]))
+            if along[last[best]] - along[first[best]] < min_support:
                 continue
             span = (t >= along[first[best]]) & (t <= along[last[best]])
             on = span & (off <= fit_px)
