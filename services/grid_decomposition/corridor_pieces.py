@@ -104,8 +104,8 @@ def join_corridor_pieces(
     The bands (:func:`~services.grid_decomposition.corridors.corridor_bands`) are looked for in the union
     of the ``joinable`` regions (per region id: a room region, no warehouse floor), with every pixel in no
     region as wall: a corridor's walls are often drawn as a grey band with few occupied cells. With
-    ``occupied``, the :func:`~services.grid_decomposition.corridors.tilted_lines` of its walls round those regions
-    join ``lines`` (a corridor in a wing the map drew askew). A band ends
+    ``occupied``, bands are looked for along the :func:`~services.grid_decomposition.corridors.tilted_lines` of its
+    walls round those regions too (a corridor in a wing the map drew askew), after those of ``lines``. A band ends
     where both its sides are open over more than ``max_open_m`` (a junction, a hall it enters) and where
     one side is open over more than ``max_side_open_m`` between walled stretches (a hall along it). A band is
     a corridor cut in pieces when the regions lying at least ``min_piece_share`` inside its strip hold at
@@ -135,12 +135,13 @@ def join_corridor_pieces(
     inside = region[box]
     walls = window == 0
     shape = (window.shape[0], window.shape[1])
-    if occupied is not None:
-        lines = lines + tilted_lines(occupied[box], lines, top=top, left=left, resolution_m=resolution_m)
-    coordinates = window_coordinates(shape, top, left, lines)
+    tilted = [] if occupied is None else tilted_lines(
+        occupied[box], lines, top=top, left=left, resolution_m=resolution_m
+    )
+    coordinates = window_coordinates(shape, top, left, lines + tilted)
     found = corridor_bands(
         inside, walls, lines, top=top, left=left, resolution_m=resolution_m, min_length_m=min_length_m,
-        min_length_widths=min_length_widths, tolerance_px=tolerance_px, coordinates=coordinates,
+        min_length_widths=min_length_widths, tolerance_px=tolerance_px, coordinates=coordinates, tilted=tilted,
     )
     if not found:
         return segments

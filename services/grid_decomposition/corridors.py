@@ -121,6 +121,7 @@ def corridor_bands(
     min_wall: float = 0.35,
     tolerance_px: int = 2,
     coordinates: dict[float, tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]] | None = None,
+    tilted: list[Line] | None = None,
 ) -> list[Band]:
     """Corridor bands of one region: long clear strips between two parallel lines with walls on both.
 
@@ -130,12 +131,16 @@ def corridor_bands(
     an occupied cell lies within ``tolerance_px`` of each line over at least ``min_side_wall`` of the run
     and of both lines together over ``min_wall``: a side may open onto rooms over long stretches. Bands
     are taken best walled first; one whose strip lies mostly inside a band already taken is left out (a
-    narrower pair of lines inside a corridor).
+    narrower pair of lines inside a corridor). The bands of the ``tilted`` lines (:func:`tilted_lines`, at angles
+    of their own) are taken after all those of ``lines``: only where the building's own lines find no corridor.
 
     ``region`` and ``occupied`` are windows whose top-left pixel is (``top``, ``left``) of the image the
-    lines were drawn in; ``coordinates`` are :func:`window_coordinates` of that window when the caller has them.
+    lines were drawn in; ``coordinates`` are :func:`window_coordinates` of that window (for ``lines`` and
+    ``tilted``) when the caller has them.
     """
     shape = (region.shape[0], region.shape[1])
+    later = {round(ln.angle_rad, 4) for ln in tilted or []} - {round(ln.angle_rad, 4) for ln in lines}
+    lines = lines + (tilted or [])
     min_w, max_w = round(min_width_m / resolution_m), round(max_width_m / resolution_m)
     found: list[tuple[float, Band]] = []
     if coordinates is None:
@@ -195,7 +200,7 @@ def corridor_bands(
             found.append((score, Band(angle, int(a_px[p]) + u0, int(b_px[p]) + u0, s + t0, e - 1 + t0)))
     bands: list[Band] = []
     taken = np.zeros(shape, dtype=bool)
-    for _, band in sorted(found, key=lambda f: -f[0]):
+    for _, band in sorted(found, key=lambda f: (f[1].angle_rad in later, -f[0])):
         strip = band_mask(band, *coordinates[band.angle_rad])
         if taken[strip].mean() <= 0.5:
             bands.append(band)
@@ -231,8 +236,8 @@ def tilted_lines(
     ``tilt_step_deg`` up to ``max_tilt_deg`` either side of the angle (a Hough transform in a narrow fan). A
     tilted line is a maximum of those counts over its neighbours in tilt and offset, at least ``min_tilt_deg``
     off the angle (closer, the angle's own lines follow the wall within a band's tolerance) and with at least
-    ``min_support_m`` of wall on it, whose longest stretch of wall pixels within one pixel of it (gaps up to
-    ``max_gap_m``) is at least ``min_support_m`` long and holds at least ``min_thin`` of the wall pixels within
+    ``min_support_m`` of wall on it, where one stretch of wall within one pixel of it (gaps up to ``max_gap_m``)
+    is seen at ``min_support_m`` of places along it, holds at least ``min_thin`` of the wall pixels within
     ``fit_px`` of it there (a wall, not a cloud of clutter), and those pixels run at its tilt within half a
     step (least squares): a wall at the angle itself lies on tilted lines too, but runs at the angle.
     """
@@ -264,16 +269,16 @@ def tilted_lines(
         u = -np.sin(angle) * x + np.cos(angle) * y
         for i, o in zip(*np.nonzero(peak), strict=True):
             off = np.abs(across[i] - (o + start))
-            # the longest stretch of wall along the line (gaps up to max_gap_px), and the pixels beside it
-            along = np.sort(t[off <= 1])
+            # the stretch of wall along the line (gaps up to max_gap_px) seen at most places along it
+            along = np.unique(np.rint(t[off <= 1]))
             breaks = np.flatnonzero(np.diff(along) > max_gap_px)
             first, last = np.r_[0, breaks + 1], np.r_[breaks, along.size - 1]
-            best = int(np.argmax(along[last] - along[first]))
-            if along[last[best]] - along[first[best]] < min_support:
+            best = int(np.argmax(last - first))
+            if last[best] - first[best] + 1 < min_support:
                 continue
-            span = (t >= along[first[best]]) & (t <= along[last[best]])
+            span = (t >= along[first[best]] - 0.5) & (t <= along[last[best]] + 0.5)
             on = span & (off <= fit_px)
-            if last[best] - first[best] + 1 < min_thin * np.count_nonzero(on):
+            if np.count_nonzero(span & (off <= 1)) < min_thin * np.count_nonzero(on):
                 continue
             if abs(_tilt_of(t[on], u[on]) - tilts[i]) <= half_step:
                 out.append(Line(round(angle + float(tilts[i]), 4), float(o + start), float(near[i, o]) * resolution_m,
@@ -374,10 +379,11 @@ def part_rooms_from_corridors(
         region = segments[top:bottom, left:right] == k
         shape = (region.shape[0], region.shape[1])
         walls = occupied[top:bottom, left:right]
-        here = lines + tilted_lines(walls, lines, top=top, left=left, resolution_m=resolution_m)
-        coordinates = window_coordinates(shape, top, left, here)
+        tilted = tilted_lines(walls, lines, top=top, left=left, resolution_m=resolution_m)
+        coordinates = window_coordinates(shape, top, left, lines + tilted)
         bands = corridor_bands(
-            region, walls, here, top=top, left=left, resolution_m=resolution_m, coordinates=coordinates,
+            region, walls, lines, top=top, left=left, resolution_m=resolution_m, coordinates=coordinates,
+            tilted=tilted,
         )
         if not bands:
             continue
