@@ -228,6 +228,7 @@ def tilted_lines(
     fit_px: int = 4,
     min_thin: float = 0.6,
     max_gap_m: float = 1.0,
+    pair_width_m: tuple[float, float] = (1.0, 3.0),
 ) -> list[Line]:
     """Lines along walls a few degrees off the lines' angles: a wing of a building the map drew askew.
 
@@ -239,7 +240,8 @@ def tilted_lines(
     ``min_support_m`` of wall on it, where one stretch of wall within one pixel of it (gaps up to ``max_gap_m``)
     is seen at ``min_support_m`` of places along it, holds at least ``min_thin`` of the wall pixels within
     ``fit_px`` of it there (a wall, not a cloud of clutter), and those pixels run at its tilt within half a
-    step (least squares): a wall at the angle itself lies on tilted lines too, but runs at the angle.
+    step (least squares): a wall at the angle itself lies on tilted lines too, but runs at the angle. Only
+    lines with another of their tilt ``pair_width_m`` away (the two sides a corridor band needs) are returned.
     """
     rows, cols = np.nonzero(walls)
     if rows.size == 0:
@@ -267,23 +269,33 @@ def tilted_lines(
             continue
         t = np.cos(angle) * x + np.sin(angle) * y
         u = -np.sin(angle) * x + np.cos(angle) * y
+        # per tilt the pixels in order of offset: those near a line are one slice of them
+        order = np.argsort(across, axis=1, kind="stable")
+        ordered = np.take_along_axis(across, order, axis=1)
         for i, o in zip(*np.nonzero(peak), strict=True):
-            off = np.abs(across[i] - (o + start))
+            lo, hi = np.searchsorted(ordered[i], [o + start - fit_px - 0.5, o + start + fit_px + 0.5])
+            near_px = order[i, lo:hi]
+            off = np.abs(ordered[i, lo:hi] - (o + start))
+            t_near = t[near_px]
             # the stretch of wall along the line (gaps up to max_gap_px) seen at most places along it
-            along = np.unique(np.rint(t[off <= 1]))
-            breaks = np.flatnonzero(np.diff(along) > max_gap_px)
-            first, last = np.r_[0, breaks + 1], np.r_[breaks, along.size - 1]
+            along = np.unique(np.rint(t_near[off <= 1]))
+            cuts = np.flatnonzero(np.diff(along) > max_gap_px)
+            first = np.concatenate(([0], cuts + 1))
+            last = np.concatenate((cuts, [along.size - 1]))
             best = int(np.argmax(last - first))
             if last[best] - first[best] + 1 < min_support:
                 continue
-            span = (t >= along[first[best]] - 0.5) & (t <= along[last[best]] + 0.5)
-            on = span & (off <= fit_px)
-            if np.count_nonzero(span & (off <= 1)) < min_thin * np.count_nonzero(on):
+            span = (t_near >= along[first[best]] - 0.5) & (t_near <= along[last[best]] + 0.5)
+            if np.count_nonzero(span & (off <= 1)) < min_thin * np.count_nonzero(span):
                 continue
-            if abs(_tilt_of(t[on], u[on]) - tilts[i]) <= half_step:
+            if abs(_tilt_of(t_near[span], u[near_px][span]) - tilts[i]) <= half_step:
                 out.append(Line(round(angle + float(tilts[i]), 4), float(o + start), float(near[i, o]) * resolution_m,
                                 resolution_m, True))
-    return out
+    lo, hi = round(pair_width_m[0] / resolution_m), round(pair_width_m[1] / resolution_m)
+    return [
+        a for a in out
+        if any(b.angle_rad == a.angle_rad and lo <= abs(b.offset_px - a.offset_px) <= hi for b in out)
+    ]
 
 
 def band_box(
