@@ -15,6 +15,7 @@ from services.grid_decomposition.corridors import (
     band_box,
     band_mask,
     corridor_bands,
+    tilted_lines,
     window_coordinates,
 )
 from services.grid_decomposition.radiogram import Line
@@ -96,12 +97,15 @@ def join_corridor_pieces(
     min_length_widths: float = 3.0,
     tolerance_px: int = 2,
     margin_px: int = 4,
+    occupied: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.int32]:
     """Make every corridor band that the room stage cut in pieces one region; part the rooms leaking into it.
 
     The bands (:func:`~services.grid_decomposition.corridors.corridor_bands`) are looked for in the union
     of the ``joinable`` regions (per region id: a room region, no warehouse floor), with every pixel in no
-    region as wall: a corridor's walls are often drawn as a grey band with few occupied cells. A band ends
+    region as wall: a corridor's walls are often drawn as a grey band with few occupied cells. With
+    ``occupied``, bands are looked for along the :func:`~services.grid_decomposition.corridors.tilted_lines` of its
+    walls round those regions too (a corridor in a wing the map drew askew), after those of ``lines``. A band ends
     where both its sides are open over more than ``max_open_m`` (a junction, a hall it enters) and where
     one side is open over more than ``max_side_open_m`` between walled stretches (a hall along it). A band is
     a corridor cut in pieces when the regions lying at least ``min_piece_share`` inside its strip hold at
@@ -131,10 +135,13 @@ def join_corridor_pieces(
     inside = region[box]
     walls = window == 0
     shape = (window.shape[0], window.shape[1])
-    coordinates = window_coordinates(shape, top, left, lines)
+    tilted = [] if occupied is None else tilted_lines(
+        occupied[box], lines, top=top, left=left, resolution_m=resolution_m
+    )
+    coordinates = window_coordinates(shape, top, left, lines + tilted)
     found = corridor_bands(
         inside, walls, lines, top=top, left=left, resolution_m=resolution_m, min_length_m=min_length_m,
-        min_length_widths=min_length_widths, tolerance_px=tolerance_px, coordinates=coordinates,
+        min_length_widths=min_length_widths, tolerance_px=tolerance_px, coordinates=coordinates, tilted=tilted,
     )
     if not found:
         return segments

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -120,6 +121,7 @@ def corridor_bands(
     min_wall: float = 0.35,
     tolerance_px: int = 2,
     coordinates: dict[float, tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]] | None = None,
+    tilted: list[Line] | None = None,
 ) -> list[Band]:
     """Corridor bands of one region: long clear strips between two parallel lines with walls on both.
 
@@ -129,12 +131,16 @@ def corridor_bands(
     an occupied cell lies within ``tolerance_px`` of each line over at least ``min_side_wall`` of the run
     and of both lines together over ``min_wall``: a side may open onto rooms over long stretches. Bands
     are taken best walled first; one whose strip lies mostly inside a band already taken is left out (a
-    narrower pair of lines inside a corridor).
+    narrower pair of lines inside a corridor). The bands of the ``tilted`` lines (:func:`tilted_lines`, at angles
+    of their own) are taken after all those of ``lines``: only where the building's own lines find no corridor.
 
     ``region`` and ``occupied`` are windows whose top-left pixel is (``top``, ``left``) of the image the
-    lines were drawn in; ``coordinates`` are :func:`window_coordinates` of that window when the caller has them.
+    lines were drawn in; ``coordinates`` are :func:`window_coordinates` of that window (for ``lines`` and
+    ``tilted``) when the caller has them.
     """
     shape = (region.shape[0], region.shape[1])
+    later = {round(ln.angle_rad, 4) for ln in tilted or []} - {round(ln.angle_rad, 4) for ln in lines}
+    lines = lines + (tilted or [])
     min_w, max_w = round(min_width_m / resolution_m), round(max_width_m / resolution_m)
     found: list[tuple[float, Band]] = []
     if coordinates is None:
@@ -194,12 +200,102 @@ def corridor_bands(
             found.append((score, Band(angle, int(a_px[p]) + u0, int(b_px[p]) + u0, s + t0, e - 1 + t0)))
     bands: list[Band] = []
     taken = np.zeros(shape, dtype=bool)
-    for _, band in sorted(found, key=lambda f: -f[0]):
+    for _, band in sorted(found, key=lambda f: (f[1].angle_rad in later, -f[0])):
         strip = band_mask(band, *coordinates[band.angle_rad])
         if taken[strip].mean() <= 0.5:
             bands.append(band)
             taken |= strip
     return bands
+
+
+def _tilt_of(t: npt.NDArray[np.float64], u: npt.NDArray[np.float64]) -> float:
+    """The angle (radians) of the least-squares line ``u`` on ``t``: the pixels' tilt off the along direction."""
+    dt = t - t.mean()
+    return float(np.arctan(np.dot(dt, u - u.mean()) / max(float(np.dot(dt, dt)), 1e-9)))
+
+
+def tilted_lines(
+    walls: npt.NDArray[np.bool_],
+    lines: list[Line],
+    *,
+    top: int,
+    left: int,
+    resolution_m: float,
+    min_tilt_deg: float = 1.0,
+    max_tilt_deg: float = 3.0,
+    tilt_step_deg: float = 0.5,
+    min_support_m: float = 3.0,
+    fit_px: int = 4,
+    min_thin: float = 0.6,
+    max_gap_m: float = 1.0,
+    pair_width_m: tuple[float, float] = (1.0, 3.0),
+) -> list[Line]:
+    """Lines along walls a few degrees off the lines' angles: a wing of a building the map drew askew.
+
+    For every angle of ``lines``, the ``walls`` pixels (a window whose top-left pixel is (``top``, ``left``) of
+    the image the lines were drawn in) within one pixel of every offset are counted at tilts of
+    ``tilt_step_deg`` up to ``max_tilt_deg`` either side of the angle (a Hough transform in a narrow fan). A
+    tilted line is a maximum of those counts over its neighbours in tilt and offset, at least ``min_tilt_deg``
+    off the angle (closer, the angle's own lines follow the wall within a band's tolerance) and with at least
+    ``min_support_m`` of wall on it, where one stretch of wall within one pixel of it (gaps up to ``max_gap_m``)
+    is seen at ``min_support_m`` of places along it, holds at least ``min_thin`` of the wall pixels within
+    ``fit_px`` of it there (a wall, not a cloud of clutter), and those pixels run at its tilt within half a
+    step (least squares): a wall at the angle itself lies on tilted lines too, but runs at the angle. Only
+    lines with another of their tilt ``pair_width_m`` away (the two sides a corridor band needs) are returned.
+    """
+    rows, cols = np.nonzero(walls)
+    if rows.size == 0:
+        return []
+    x = (cols + left).astype(np.float64)
+    y = (rows + top).astype(np.float64)
+    steps = round(max_tilt_deg / tilt_step_deg)
+    tilts = np.radians(tilt_step_deg * np.arange(-steps, steps + 1))
+    half_step = math.radians(tilt_step_deg) / 2
+    min_support = min_support_m / resolution_m
+    max_gap_px = max_gap_m / resolution_m
+    out: list[Line] = []
+    for angle in sorted({round(ln.angle_rad, 4) for ln in lines}):
+        across = np.rint(-np.sin(angle + tilts)[:, None] * x[None, :] + np.cos(angle + tilts)[:, None] * y[None, :])
+        start = int(across.min()) - 1
+        n = int(across.max()) - start + 2
+        flat = (across.astype(np.int64) - start) + n * np.arange(tilts.size)[:, None]
+        counts = np.bincount(flat.ravel(), minlength=n * tilts.size).reshape(tilts.size, n).astype(np.float32)
+        near = counts.copy()
+        near[:, 1:] += counts[:, :-1]
+        near[:, :-1] += counts[:, 1:]
+        peak = (near == cv2.dilate(near, np.ones((3, 5), np.uint8))) & (near >= min_support)
+        peak[np.abs(tilts) < math.radians(min_tilt_deg)] = False
+        if not peak.any():
+            continue
+        t = np.cos(angle) * x + np.sin(angle) * y
+        u = -np.sin(angle) * x + np.cos(angle) * y
+        # per tilt the pixels in order of offset: those near a line are one slice of them
+        order = np.argsort(across, axis=1, kind="stable")
+        ordered = np.take_along_axis(across, order, axis=1)
+        for i, o in zip(*np.nonzero(peak), strict=True):
+            lo, hi = np.searchsorted(ordered[i], [o + start - fit_px - 0.5, o + start + fit_px + 0.5])
+            near_px = order[i, lo:hi]
+            off = np.abs(ordered[i, lo:hi] - (o + start))
+            t_near = t[near_px]
+            # the stretch of wall along the line (gaps up to max_gap_px) seen at most places along it
+            along = np.unique(np.rint(t_near[off <= 1]))
+            cuts = np.flatnonzero(np.diff(along) > max_gap_px)
+            first = np.concatenate(([0], cuts + 1))
+            last = np.concatenate((cuts, [along.size - 1]))
+            best = int(np.argmax(last - first))
+            if last[best] - first[best] + 1 < min_support:
+                continue
+            span = (t_near >= along[first[best]] - 0.5) & (t_near <= along[last[best]] + 0.5)
+            if np.count_nonzero(span & (off <= 1)) < min_thin * np.count_nonzero(span):
+                continue
+            if abs(_tilt_of(t_near[span], u[near_px][span]) - tilts[i]) <= half_step:
+                out.append(Line(round(angle + float(tilts[i]), 4), float(o + start), float(near[i, o]) * resolution_m,
+                                resolution_m, True))
+    lo, hi = round(pair_width_m[0] / resolution_m), round(pair_width_m[1] / resolution_m)
+    return [
+        a for a in out
+        if any(b.angle_rad == a.angle_rad and lo <= abs(b.offset_px - a.offset_px) <= hi for b in out)
+    ]
 
 
 def band_box(
@@ -264,7 +360,8 @@ def part_rooms_from_corridors(
 ) -> npt.NDArray[np.int32]:
     """Part the rooms from the corridor bands of candidate regions, along the bands' side lines.
 
-    In every region ``k`` with ``candidates[k]`` the corridor bands (:func:`corridor_bands`) are found and
+    In every region ``k`` with ``candidates[k]`` the corridor bands (:func:`corridor_bands`, of ``lines`` and the
+    :func:`tilted_lines` of the walls round the region: a corridor in a wing the map drew askew) are found and
     the region is cut along both side lines of every band over its run. A 4-connected piece that holds no
     square of a band's strip (at most, say, the end of a band crossing the other's side line) becomes a
     region of its own when it is room-like: at least ``room_min_area_m2``, a disc
@@ -293,10 +390,12 @@ def part_rooms_from_corridors(
         bottom, right = own[0].stop + margin_px, own[1].stop + margin_px
         region = segments[top:bottom, left:right] == k
         shape = (region.shape[0], region.shape[1])
-        coordinates = window_coordinates(shape, top, left, lines)
+        walls = occupied[top:bottom, left:right]
+        tilted = tilted_lines(walls, lines, top=top, left=left, resolution_m=resolution_m)
+        coordinates = window_coordinates(shape, top, left, lines + tilted)
         bands = corridor_bands(
-            region, occupied[top:bottom, left:right], lines, top=top, left=left, resolution_m=resolution_m,
-            coordinates=coordinates,
+            region, walls, lines, top=top, left=left, resolution_m=resolution_m, coordinates=coordinates,
+            tilted=tilted,
         )
         if not bands:
             continue

@@ -656,7 +656,8 @@ def decompose(
         if corridor_pieces:  # a corridor cut where rooms open onto it is one region again
             on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)[1]
             segments = join_corridor_pieces(
-                segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m
+                segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m,
+                occupied=occupied,
             )
         if rejoin_room_pieces:  # pieces of one room that were pieces of the corridor's region when the room stage
             # joined them: with the corridor parted from the rooms, its union with a room is a T, no longer their L

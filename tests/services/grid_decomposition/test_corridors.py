@@ -16,6 +16,7 @@ from services.grid_decomposition.corridors import (
     band_box,
     corridor_bands,
     part_rooms_from_corridors,
+    tilted_lines,
 )
 from services.grid_decomposition.radiogram import Line
 
@@ -208,3 +209,38 @@ def test_a_bands_box_holds_all_its_pixels(angle: float) -> None:
         everywhere = (u >= a) & (u <= b) & (t >= t0) & (t <= t1)
         box = band_box(u, t, (a, b), (t0, t1))
         assert np.count_nonzero(everywhere[box]) == np.count_nonzero(everywhere)
+
+
+def _turned(image: np.ndarray, degrees: float) -> np.ndarray:
+    """``image`` (uint8) turned by ``degrees`` about its centre (nearest pixel), in a frame 60 px larger each way."""
+    big = np.zeros((image.shape[0] + 120, image.shape[1] + 120), dtype=np.uint8)
+    big[60:-60, 60:-60] = image
+    turn = cv2.getRotationMatrix2D((big.shape[1] / 2, big.shape[0] / 2), degrees, 1.0)
+    return np.asarray(cv2.warpAffine(big, turn, (big.shape[1], big.shape[0]), flags=cv2.INTER_NEAREST))
+
+
+def test_a_corridor_in_a_wing_drawn_askew_parts_from_its_room_along_its_own_walls() -> None:
+    # the corridor and room of the first test turned by 2 degrees (a wing of a building the map drew askew) while
+    # the building's lines stay at 0 and 90 degrees: over its 33 m the corridor drifts 1.2 m off them
+    walls, lines = _corridor_and_room(seen_wall_m=14.0)
+    truth = np.zeros(walls.shape, dtype=np.uint8)
+    truth[105:145, 25:675] = 1  # well inside the corridor
+    truth[160:245, 305:415] = 2  # and the room
+    segments = _turned(_one_region(walls).astype(np.uint8), 2.0).astype(np.int32)
+    walls, truth = _turned(walls.astype(np.uint8), 2.0) > 0, _turned(truth, 2.0)
+    segments[walls] = 0
+    assert not corridor_bands(segments == 1, walls, lines, top=0, left=0, resolution_m=RESOLUTION_M)
+    out = part_rooms_from_corridors(segments, walls, lines, np.array([False, True]), resolution_m=RESOLUTION_M)
+    room, corridor = np.unique(out[truth == 2]), np.unique(out[truth == 1])
+    assert room.size == 1 and corridor.size == 1, "the room and the whole corridor are one region each"
+    assert room[0] != corridor[0] and room[0] > 0 and corridor[0] > 0
+
+
+def test_walls_along_the_lines_give_no_tilted_line() -> None:
+    # the walls of the first test, square to the lines: a wall lies on tilted lines too, but runs at the angle
+    walls, lines = _corridor_and_room(seen_wall_m=14.0)
+    assert tilted_lines(walls, lines, top=0, left=0, resolution_m=RESOLUTION_M) == []
+    tilted = tilted_lines(_turned(walls.astype(np.uint8), 2.0) > 0, lines, top=0, left=0, resolution_m=RESOLUTION_M)
+    assert tilted, "the turned walls give lines"
+    off = [abs(math.degrees(ln.angle_rad) - round(math.degrees(ln.angle_rad) / 90) * 90) for ln in tilted]
+    assert all(abs(o - 2.0) <= 0.5 for o in off), "at the walls' own angle (within a step), 2 degrees off the lines'"
