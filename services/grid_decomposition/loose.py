@@ -113,3 +113,82 @@ def _touching(segments: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.bool_]:
         touches[centre[meet]] = True
         touches[other[meet]] = True
     return touches
+
+
+def fill_between(
+    segments: npt.NDArray[np.int32], free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], *, reach_px: int
+) -> npt.NDArray[np.int32]:
+    """``segments`` with each loose free cell that one region flanks on two opposite sides given to that region.
+
+    A dot of a ray (a free cell no region holds) with cells of one region within ``reach_px`` straight ahead
+    and straight behind it, along a row, a column or a diagonal, and no occupied cell between them, lies
+    between two pieces of that region's floor: between two rays of its fan, in a notch of its outline. The
+    dots of rays that leave a region through its windows and doors lie beyond it, flanked by it on one side
+    only, and stay loose. The four directions are taken in turn, each seeing the cells the ones before gave.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    free, occupied : (H, W) bool
+    reach_px : int
+        Along a diagonal a step counts as sqrt(2) cells.
+    """
+    loose = free & (segments == 0)
+    if not loose.any() or not segments.any():
+        return segments
+    rows, cols = np.flatnonzero(loose.any(axis=1)), np.flatnonzero(loose.any(axis=0))
+    h, w = segments.shape
+    box = (slice(max(int(rows[0]) - reach_px, 0), min(int(rows[-1]) + reach_px + 1, h)),
+           slice(max(int(cols[0]) - reach_px, 0), min(int(cols[-1]) + reach_px + 1, w)))
+    region, dots, stop = segments[box].copy(), loose[box], occupied[box]
+    diagonal_px = int(reach_px / np.sqrt(2.0))
+    region = _flanked(region, dots, stop, reach_px)  # rows
+    region = _flanked(region.T, dots.T, stop.T, reach_px).T  # columns
+    if diagonal_px >= 1:
+        for step in (1, -1):  # the two diagonals, each made the rows of a sheared image
+            lines = _sheared(region, step, 0)
+            lines = _flanked(lines, _sheared(dots, step, False), _sheared(stop, step, True), diagonal_px)
+            region = _unsheared(lines, region.shape, step)
+    out = segments.copy()
+    out[box] = region
+    return out
+
+
+def _flanked(
+    region: npt.NDArray[np.int32], dots: npt.NDArray[np.bool_], stop: npt.NDArray[np.bool_], reach: int
+) -> npt.NDArray[np.int32]:
+    """``region`` with each ``dots`` cell whose nearest region cells left and right along its row, within
+    ``reach`` and with no ``stop`` cell before them, are of one region given to it."""
+    left = _nearest(region, stop, reach)
+    right = _nearest(region[:, ::-1], stop[:, ::-1], reach)[:, ::-1]
+    take = dots & (region == 0) & (left > 0) & (left == right)
+    return np.where(take, left, region)
+
+
+def _nearest(region: npt.NDArray[np.int32], stop: npt.NDArray[np.bool_], reach: int) -> npt.NDArray[np.int32]:
+    """Per cell, the region of the nearest region cell at or left of it along its row when it is within
+    ``reach`` and no ``stop`` cell is nearer; 0 otherwise."""
+    h, w = region.shape
+    col = np.broadcast_to(np.arange(w, dtype=np.int64), (h, w))
+    last = np.maximum.accumulate(np.where((region > 0) | stop, col, -1), axis=1)
+    seen = np.take_along_axis(region, np.maximum(last, 0), axis=1)
+    out: npt.NDArray[np.int32] = np.where((last >= 0) & (col - last <= reach), seen, 0).astype(np.int32)
+    return out
+
+
+def _sheared(a: npt.NDArray[np.generic], step: int, fill: object) -> npt.NDArray[np.generic]:
+    """(H + W - 1, W) image whose rows are the diagonals of ``a`` (row r + c for step 1, r - c + W - 1 for -1)."""
+    h, w = a.shape
+    out = np.full((h + w - 1, w), fill, dtype=a.dtype)
+    r, c = np.indices((h, w))
+    out[r + c if step == 1 else r - c + w - 1, c] = a
+    return out
+
+
+def _unsheared(lines: npt.NDArray[np.int32], shape: tuple[int, int], step: int) -> npt.NDArray[np.int32]:
+    """The image :func:`_sheared` made ``lines`` of."""
+    h, w = shape
+    r, c = np.indices((h, w))
+    out: npt.NDArray[np.int32] = lines[r + c if step == 1 else r - c + w - 1, c]
+    return out
