@@ -13,7 +13,7 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import label_counts, lookup, near
+from services.grid_decomposition.arrays import label_counts, lookup, near, nonzero_rc
 from services.grid_decomposition.segments import fill_from_neighbours
 
 
@@ -137,58 +137,38 @@ def fill_between(
     loose = free & (segments == 0)
     if not loose.any() or not segments.any():
         return segments
-    rows, cols = np.flatnonzero(loose.any(axis=1)), np.flatnonzero(loose.any(axis=0))
-    h, w = segments.shape
-    box = (slice(max(int(rows[0]) - reach_px, 0), min(int(rows[-1]) + reach_px + 1, h)),
-           slice(max(int(cols[0]) - reach_px, 0), min(int(cols[-1]) + reach_px + 1, w)))
-    region, dots, stop = segments[box].copy(), loose[box], occupied[box]
-    diagonal_px = int(reach_px / np.sqrt(2.0))
-    region = _flanked(region, dots, stop, reach_px)  # rows
-    region = _flanked(region.T, dots.T, stop.T, reach_px).T  # columns
-    if diagonal_px >= 1:
-        for step in (1, -1):  # the two diagonals, each made the rows of a sheared image
-            lines = _sheared(region, step, 0)
-            lines = _flanked(lines, _sheared(dots, step, False), _sheared(stop, step, True), diagonal_px)
-            region = _unsheared(lines, region.shape, step)
+    rows, cols = nonzero_rc(loose)
     out = segments.copy()
-    out[box] = region
+    diagonal_px = int(reach_px / np.sqrt(2.0))
+    for dr, dc, reach in ((0, 1, reach_px), (1, 0, reach_px), (1, 1, diagonal_px), (1, -1, diagonal_px)):
+        ahead = _nearest(out, occupied, rows, cols, dr, dc, reach)
+        behind = _nearest(out, occupied, rows, cols, -dr, -dc, reach)
+        take = (ahead > 0) & (ahead == behind) & (out[rows, cols] == 0)
+        out[rows[take], cols[take]] = ahead[take]
     return out
 
 
-def _flanked(
-    region: npt.NDArray[np.int32], dots: npt.NDArray[np.bool_], stop: npt.NDArray[np.bool_], reach: int
+def _nearest(
+    region: npt.NDArray[np.int32],
+    stop: npt.NDArray[np.bool_],
+    rows: npt.NDArray[np.int64],
+    cols: npt.NDArray[np.int64],
+    dr: int,
+    dc: int,
+    reach: int,
 ) -> npt.NDArray[np.int32]:
-    """``region`` with each ``dots`` cell whose nearest region cells left and right along its row, within
-    ``reach`` and with no ``stop`` cell before them, are of one region given to it."""
-    left = _nearest(region, stop, reach)
-    right = _nearest(region[:, ::-1], stop[:, ::-1], reach)[:, ::-1]
-    take = dots & (region == 0) & (left > 0) & (left == right)
-    return np.where(take, left, region)
-
-
-def _nearest(region: npt.NDArray[np.int32], stop: npt.NDArray[np.bool_], reach: int) -> npt.NDArray[np.int32]:
-    """Per cell, the region of the nearest region cell at or left of it along its row when it is within
-    ``reach`` and no ``stop`` cell is nearer; 0 otherwise."""
+    """Per cell (rows, cols), the region of the first region cell in steps of (dr, dc) when it comes within
+    ``reach`` steps and before any ``stop`` cell or the image's edge; 0 otherwise."""
     h, w = region.shape
-    col = np.broadcast_to(np.arange(w, dtype=np.int64), (h, w))
-    last = np.maximum.accumulate(np.where((region > 0) | stop, col, -1), axis=1)
-    seen = np.take_along_axis(region, np.maximum(last, 0), axis=1)
-    out: npt.NDArray[np.int32] = np.where((last >= 0) & (col - last <= reach), seen, 0).astype(np.int32)
-    return out
-
-
-def _sheared(a: npt.NDArray[np.generic], step: int, fill: object) -> npt.NDArray[np.generic]:
-    """(H + W - 1, W) image whose rows are the diagonals of ``a`` (row r + c for step 1, r - c + W - 1 for -1)."""
-    h, w = a.shape
-    out = np.full((h + w - 1, w), fill, dtype=a.dtype)
-    r, c = np.indices((h, w))
-    out[r + c if step == 1 else r - c + w - 1, c] = a
-    return out
-
-
-def _unsheared(lines: npt.NDArray[np.int32], shape: tuple[int, int], step: int) -> npt.NDArray[np.int32]:
-    """The image :func:`_sheared` made ``lines`` of."""
-    h, w = shape
-    r, c = np.indices((h, w))
-    out: npt.NDArray[np.int32] = lines[r + c if step == 1 else r - c + w - 1, c]
-    return out
+    found = np.zeros(rows.size, dtype=np.int32)
+    open_ = np.arange(rows.size)  # the cells still looking
+    for k in range(1, reach + 1):
+        r, c = rows[open_] + k * dr, cols[open_] + k * dc
+        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        open_, r, c = open_[inside], r[inside], c[inside]
+        seen = region[r, c]
+        found[open_] = seen
+        open_ = open_[(seen == 0) & ~stop[r, c]]
+        if open_.size == 0:
+            break
+    return found
