@@ -137,7 +137,7 @@ def fill_between(
     loose = free & (segments == 0)
     if not loose.any() or not segments.any():
         return segments
-    rows, cols = nonzero_rc(loose)
+    rows, cols = nonzero_rc(loose & near(segments > 0, reach_px))  # a flanked cell has a region within reach
     out = segments.copy()
     diagonal_px = int(reach_px / np.sqrt(2.0))
     for dr, dc, reach in ((0, 1, reach_px), (1, 0, reach_px), (1, 1, diagonal_px), (1, -1, diagonal_px)):
