@@ -3,7 +3,8 @@
 A lidar looking through the gaps of a wall into a room it never enters leaves a few thin fans of rays there,
 each ray a dotted line of free cells with unknown between the dots. The regions are 4-connected pieces of free
 space: a dot is a piece too small to be a region and is dropped, and a fan whose rays are a few cells apart
-falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there.
+falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there. The
+dots between the rays of a region's own fan, flanked by it on both sides, are its floor too.
 """
 
 from __future__ import annotations
