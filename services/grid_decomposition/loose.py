@@ -3,7 +3,8 @@
 A lidar looking through the gaps of a wall into a room it never enters leaves a few thin fans of rays there,
 each ray a dotted line of free cells with unknown between the dots. The regions are 4-connected pieces of free
 space: a dot is a piece too small to be a region and is dropped, and a fan whose rays are a few cells apart
-falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there.
+falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there. The
+dots between the rays of a region's own fan, flanked by it on both sides, are its floor too.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import label_counts, lookup, near
+from services.grid_decomposition.arrays import label_counts, lookup, near, nonzero_rc
 from services.grid_decomposition.segments import fill_from_neighbours
 
 
@@ -113,3 +114,62 @@ def _touching(segments: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.bool_]:
         touches[centre[meet]] = True
         touches[other[meet]] = True
     return touches
+
+
+def fill_between(
+    segments: npt.NDArray[np.int32], free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], *, reach_px: int
+) -> npt.NDArray[np.int32]:
+    """``segments`` with each loose free cell that one region flanks on two opposite sides given to that region.
+
+    A dot of a ray (a free cell no region holds) with cells of one region within ``reach_px`` straight ahead
+    and straight behind it, along a row, a column or a diagonal, and no occupied cell between them, lies
+    between two pieces of that region's floor: between two rays of its fan, in a notch of its outline. The
+    dots of rays that leave a region through its windows and doors lie beyond it, flanked by it on one side
+    only, and stay loose. The four directions are taken in turn, each seeing the cells the ones before gave.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    free, occupied : (H, W) bool
+    reach_px : int
+        Along a diagonal a step counts as sqrt(2) cells.
+    """
+    loose = free & (segments == 0)
+    if not loose.any() or not segments.any():
+        return segments
+    rows, cols = nonzero_rc(loose & near(segments > 0, reach_px))  # a flanked cell has a region within reach
+    out = segments.copy()
+    diagonal_px = int(reach_px / np.sqrt(2.0))
+    for dr, dc, reach in ((0, 1, reach_px), (1, 0, reach_px), (1, 1, diagonal_px), (1, -1, diagonal_px)):
+        ahead = _nearest(out, occupied, rows, cols, dr, dc, reach)
+        behind = _nearest(out, occupied, rows, cols, -dr, -dc, reach)
+        take = (ahead > 0) & (ahead == behind) & (out[rows, cols] == 0)
+        out[rows[take], cols[take]] = ahead[take]
+    return out
+
+
+def _nearest(
+    region: npt.NDArray[np.int32],
+    stop: npt.NDArray[np.bool_],
+    rows: npt.NDArray[np.int64],
+    cols: npt.NDArray[np.int64],
+    dr: int,
+    dc: int,
+    reach: int,
+) -> npt.NDArray[np.int32]:
+    """Per cell (rows, cols), the region of the first region cell in steps of (dr, dc) when it comes within
+    ``reach`` steps and before any ``stop`` cell or the image's edge; 0 otherwise."""
+    h, w = region.shape
+    found = np.zeros(rows.size, dtype=np.int32)
+    open_ = np.arange(rows.size)  # the cells still looking
+    for k in range(1, reach + 1):
+        r, c = rows[open_] + k * dr, cols[open_] + k * dc
+        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        open_, r, c = open_[inside], r[inside], c[inside]
+        seen = region[r, c]
+        found[open_] = seen
+        open_ = open_[(seen == 0) & ~stop[r, c]]
+        if open_.size == 0:
+            break
+    return found

@@ -33,7 +33,7 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.loose import fill_lone_regions, join_isolated_pieces
+from services.grid_decomposition.loose import fill_between, fill_lone_regions, join_isolated_pieces
 from services.grid_decomposition.openings import join_unseen_openings
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -741,6 +741,8 @@ def decompose(
         segments = fill_lone_regions(
             segments, free, occupied, reach_px=fan_gap_px, min_area_px=round(min_region_area_m2 / resolution_m**2)
         )
+        # a dot of a ray between two cells of one region (between two rays of its fan, in a notch of its outline)
+        segments = fill_between(segments, free, occupied, reach_px=fan_gap_px)
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         doorways = door | cuts
         closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records

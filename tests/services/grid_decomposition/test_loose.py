@@ -1,10 +1,11 @@
-"""Pieces of one fan of rays that touch nothing join; a room seen alone takes the dots of its rays round it."""
+"""Pieces of one fan of rays that touch nothing join; a room seen alone takes the dots of its rays round it; a dot
+between two rays of one region is that region's."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from services.grid_decomposition.loose import fill_lone_regions, join_isolated_pieces
+from services.grid_decomposition.loose import fill_between, fill_lone_regions, join_isolated_pieces
 
 
 def test_pieces_of_one_fan_that_touch_nothing_join_and_a_piece_touching_a_room_does_not() -> None:
@@ -49,3 +50,36 @@ def test_a_room_seen_alone_takes_the_dots_of_its_rays_and_a_room_with_neighbours
     assert out[20, 28] == 0  # behind the wall
     assert np.all(out[35, 52:59:3] == 0)  # rooms with neighbours take no dots
     assert np.array_equal(out[~dots], seg[~dots])
+
+
+def test_a_dot_between_two_rays_of_one_fan_is_its_floor_and_one_beyond_the_fan_is_not() -> None:
+    seg = np.zeros((60, 80), dtype=np.int32)
+    occupied = np.zeros(seg.shape, dtype=bool)
+    seg[5:25, 5:30] = 1  # a room with a neighbour (so it is no room seen alone)
+    seg[5:25, 30:50] = 2
+    rr = np.arange(25, 55)
+    seg[rr, 10 + (rr - 25) // 6] = 1  # two rays of room 1's fan, spreading downwards, unknown between them
+    seg[rr, 20 + (rr - 25) // 6] = 1
+    dots = np.zeros(seg.shape, dtype=bool)
+    dots[30, 15] = dots[40, 17] = True  # dots of a third ray between them (4-7 cells from each)
+    dots[40, 35] = dots[50, 40] = True  # dots of a ray below room 2, flanked by nothing
+    dots[40, 2] = True  # a dot left of the fan: room 1 on one side only
+    dots[45, 60] = True  # a dot between two rays of room 1 ...
+    seg[42:48, 55] = 1
+    seg[42:48, 65] = 1
+    occupied[45, 62] = True  # ... with an obstacle between
+    out = fill_between(seg, (seg > 0) | dots, occupied, reach_px=10)
+    assert out[30, 15] == 1 and out[40, 17] == 1
+    assert out[40, 35] == 0 and out[50, 40] == 0 and out[40, 2] == 0
+    assert out[45, 60] == 0
+    assert np.array_equal(out[~dots], seg[~dots])
+
+
+def test_a_dot_between_two_regions_is_neither_s() -> None:
+    seg = np.zeros((20, 40), dtype=np.int32)
+    seg[:, :15] = 1
+    seg[:, 22:] = 2
+    dots = np.zeros(seg.shape, dtype=bool)
+    dots[10, 18] = True
+    out = fill_between(seg, (seg > 0) | dots, np.zeros(seg.shape, dtype=bool), reach_px=10)
+    assert out[10, 18] == 0
