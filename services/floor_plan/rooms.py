@@ -479,12 +479,12 @@ class FurnitureSettings(FurnitureRule):
     """... and at most this many times as long as thick (a longer thin pocket is a wall's grey core)."""
     pocket_reach_m: float = 0.15
     """A pocket no room touches (a cupboard drawn with a dark outline) takes the one room label within this of it."""
-    pocket_cut_thickness_m: float | None = 0.55
+    pocket_cut_thickness_m: float | None = 0.65
     """Furniture joined to a wall's grey core, or to other unseen space by a wall's antialiased edge (a line of grey
     cells along a black wall), is no pocket of its own: the unknown cells are also opened by a square
     ``pocket_min_thickness_m`` wide (links thinner than a pocket fall away) and the opening's pieces are pockets by the
-    same guards when they are at least this thick (thinner pieces cut out of a larger one are a wall's stub or a
-    pillar against a wall); None: no opening."""
+    same guards when they are at least this thick (thinner pieces cut out of a larger one are a wall's stub, 0.3-0.4 m,
+    or a pillar against a wall, up to 0.6 m across on ipa's NLB); None: no opening."""
 
 
 def furniture(cells: npt.NDArray[np.bool_], *, resolution_m: float,
