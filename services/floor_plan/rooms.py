@@ -479,6 +479,12 @@ class FurnitureSettings(FurnitureRule):
     """... and at most this many times as long as thick (a longer thin pocket is a wall's grey core)."""
     pocket_reach_m: float = 0.15
     """A pocket no room touches (a cupboard drawn with a dark outline) takes the one room label within this of it."""
+    pocket_cut_thickness_m: float | None = 0.65
+    """Furniture joined to a wall's grey core, or to other unseen space by a wall's antialiased edge (a line of grey
+    cells along a black wall), is no pocket of its own: the unknown cells are also opened by a square
+    ``pocket_min_thickness_m`` wide (links thinner than a pocket fall away) and the opening's pieces are pockets by the
+    same guards when they are at least this thick (thinner pieces cut out of a larger one are a wall's stub, 0.3-0.4 m,
+    or a pillar against a wall, up to 0.6 m across on ipa's NLB); None: no opening."""
 
 
 def furniture(cells: npt.NDArray[np.bool_], *, resolution_m: float,
@@ -504,20 +510,36 @@ def furniture_pockets(unknown: npt.NDArray[np.bool_], traces: npt.NDArray[np.boo
     """Furniture the map draws in its unknown grey, fused to a wall (:class:`FurnitureSettings` ``pocket_*``): the
     8-connected pieces of ``unknown`` (C_M's unknown cells, ``traces`` among them) off the map's border, at most
     ``pocket_max_m2``, rectangular, thick and short enough to be furniture rather than a triangle of unseen space or a
-    wall's grey core; their cells that are not ``traces``.
+    wall's grey core; and the pieces, at least ``pocket_cut_thickness_m`` thick, that an opening of ``unknown`` by a
+    square ``pocket_min_thickness_m`` wide cuts from a wall's grey core or from the line of grey cells along a wall;
+    their cells that are not ``traces``.
 
     In ipa's furnished maps nearly all furniture is drawn in the map's unknown grey; against a wall drawn black it
     is a piece of its own, which the non-free pieces of :func:`furniture` (the wall and the cupboard are one piece)
     cannot tell from the wall."""
     if settings.pocket_max_m2 <= 0:
         return np.zeros(unknown.shape, np.bool_)
+    min_cells = settings.pocket_min_thickness_m / resolution_m
+    out = _pockets(unknown, resolution_m=resolution_m, settings=settings, min_cells=min_cells)
+    if settings.pocket_cut_thickness_m is not None:
+        side = max(1, round(min_cells))
+        opened = cv2.morphologyEx(unknown.astype(np.uint8), cv2.MORPH_OPEN, np.ones((side, side), np.uint8)) > 0
+        out |= _pockets(opened, resolution_m=resolution_m, settings=settings,
+                        min_cells=settings.pocket_cut_thickness_m / resolution_m)
+    cells: npt.NDArray[np.bool_] = out & ~traces
+    return cells
+
+
+def _pockets(unknown: npt.NDArray[np.bool_], *, resolution_m: float, settings: FurnitureSettings,
+             min_cells: float) -> npt.NDArray[np.bool_]:
+    """The 8-connected pieces of ``unknown`` off the map's border that pass :func:`furniture_pockets`' guards, at least
+    ``min_cells`` thick."""
     mask = np.asarray(unknown, np.uint8)
     _, found, found_stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     parts, stats = np.asarray(found, np.int32), np.asarray(found_stats, np.int32)
     h, w = mask.shape
     x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
     bw, bh, area = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT], stats[:, cv2.CC_STAT_AREA]
-    min_cells = settings.pocket_min_thickness_m / resolution_m
     keep = ((x > 0) & (y > 0) & (x + bw < w) & (y + bh < h) & (area <= settings.pocket_max_m2 / resolution_m**2)
             & (np.minimum(bw, bh) >= min_cells))  # the box's shorter side bounds the rectangle's from above
     keep[0] = False
@@ -528,7 +550,7 @@ def furniture_pockets(unknown: npt.NDArray[np.bool_], traces: npt.NDArray[np.boo
         long_side, short_side = max(side_a, side_b) + 1, min(side_a, side_b) + 1
         keep[k] = (area[k] >= settings.pocket_min_fill * long_side * short_side and short_side >= min_cells
                    and long_side <= settings.pocket_max_elongation * short_side)
-    out: npt.NDArray[np.bool_] = keep[parts] & ~traces
+    out: npt.NDArray[np.bool_] = keep[parts]
     return out
 
 

@@ -301,3 +301,22 @@ def test_a_piece_between_two_rooms_takes_no_label() -> None:
     piece = np.zeros((20, 20), np.bool_)
     piece[8:12, 9:11] = True
     assert (label_furniture(labels, piece)[piece] == 0).all()
+
+
+def test_a_cupboard_joined_to_a_walls_grey_core_is_furniture_and_a_stub_of_that_wall_is_not() -> None:
+    classes = np.full((80, 120), CellClass.UNKNOWN, np.uint8)  # the unseen outside
+    classes[5:75, 5:115] = CellClass.WALL
+    classes[7:73, 7:113] = CellClass.FREE  # a building of two rooms ...
+    classes[7:73, 58:64] = CellClass.WALL  # ... parted by a wall drawn with two black faces ...
+    classes[7:73, 59:63] = CellClass.UNKNOWN  # ... and a grey core 0.2 m thick between them
+    classes[20:40, 63:83] = CellClass.UNKNOWN  # a 1 m x 1 m cupboard drawn grey against it, one piece with its core
+    classes[50:73, 56:66] = CellClass.WALL  # a stub of that wall 0.5 m thick above the bottom wall ...
+    classes[50:73, 57:65] = CellClass.UNKNOWN  # ... its grey core one piece with the parting wall's
+    traces = np.zeros(classes.shape, np.bool_)
+    unknown = classes == CellClass.UNKNOWN
+    pockets = furniture_pockets(unknown, traces, resolution_m=RES, settings=FurnitureSettings())
+    assert pockets[20:40, 63:83].all(), "the cupboard comes apart from the wall's core"
+    assert not pockets[50:73].any(), "a stub of wall 0.4 m thick is no furniture"
+    assert not furniture_pockets(unknown, traces, resolution_m=RES,
+                                 settings=FurnitureSettings(pocket_cut_thickness_m=None))[20:40, 63:83].any(), \
+        "without the opening the cupboard is one piece with the wall's core"
