@@ -165,11 +165,13 @@ def corridor_bands(
         # the counts below each strip's edges: per block of offsets between two edges, summed down the blocks
         bounds = np.unique(np.concatenate([lo, hi]))
         across = np.subtract(u, u0, dtype=np.intp)
-        block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, across)
-        block += t
+        # only the rows and columns that hold a strip's pixels are counted: no other pixel is in any strip
+        box = band_box(u, t, (int(bounds[0]) + u0, int(bounds[-1]) - 1 + u0), (t0, t0 + nt - 1))
+        block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, across[box])
+        block += t[box]
         # the pixels per (block, along) place and of them those in the region: one count of block * 2 + region
         block *= 2
-        block += region
+        block += region[box]
         counts = np.bincount(block.ravel(), minlength=2 * (bounds.size + 1) * nt).reshape(-1, 2 * nt)
         every_c = np.cumsum(counts[:, 0::2] + counts[:, 1::2], axis=0)
         inside_c = np.cumsum(counts[:, 1::2], axis=0)
@@ -230,13 +232,13 @@ def _longest_stretches(
     """
     a0 = int(along.min())
     n_along = int(along.max()) - a0 + 1
-    which = np.full((offset.shape[0], n_offsets), -1, dtype=np.int64)  # per tilt and offset: its peak
-    which[peak_i, peak_o] = np.arange(peak_i.size)
-    rows = np.unique(peak_i)
-    place = np.broadcast_to(along - a0, (rows.size, along.size))
+    which = np.full(offset.shape[0] * n_offsets, -1, dtype=np.int64)  # per tilt and offset (flat): its peak
+    which[peak_i * n_offsets + peak_o] = np.arange(peak_i.size)
+    flat = offset + n_offsets * np.arange(offset.shape[0])[:, None]
+    place = np.broadcast_to(along - a0, offset.shape)
     seen = np.zeros((peak_i.size, n_along), dtype=bool)  # per peak: the places of the pixels within one offset
     for step in (-1, 0, 1):
-        peak = np.take_along_axis(which[rows], offset[rows] + step, axis=1)
+        peak = which[flat + step]
         hit = peak >= 0
         seen[peak[hit], place[hit]] = True
     # per peak its distinct places in order: a new stretch where the peak changes or after a gap
