@@ -235,7 +235,13 @@ def _longest_stretches(
     which = np.full(offset.shape[0] * n_offsets, -1, dtype=np.int64)  # per tilt and offset (flat): its peak
     which[peak_i * n_offsets + peak_o] = np.arange(peak_i.size)
     flat = offset + n_offsets * np.arange(offset.shape[0])[:, None]
-    place = np.broadcast_to(along - a0, offset.shape)
+    # only the pixels within one offset of some peak are looked at
+    close = which >= 0
+    close[1:] |= close[:-1].copy()
+    close[:-1] |= which[1:] >= 0
+    tilt, pixel = np.nonzero(close[flat])
+    flat = flat[tilt, pixel]
+    place = along[pixel] - a0
     seen = np.zeros((peak_i.size, n_along), dtype=bool)  # per peak: the places of the pixels within one offset
     for step in (-1, 0, 1):
         peak = which[flat + step]
