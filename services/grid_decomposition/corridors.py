@@ -165,11 +165,13 @@ def corridor_bands(
         # the counts below each strip's edges: per block of offsets between two edges, summed down the blocks
         bounds = np.unique(np.concatenate([lo, hi]))
         across = np.subtract(u, u0, dtype=np.intp)
-        block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, across)
-        block += t
+        # only the rows and columns that hold a strip's pixels are counted: no other pixel is in any strip
+        box = band_box(u, t, (int(bounds[0]) + u0, int(bounds[-1]) - 1 + u0), (t0, t0 + nt - 1))
+        block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, across[box])
+        block += t[box]
         # the pixels per (block, along) place and of them those in the region: one count of block * 2 + region
         block *= 2
-        block += region
+        block += region[box]
         counts = np.bincount(block.ravel(), minlength=2 * (bounds.size + 1) * nt).reshape(-1, 2 * nt)
         every_c = np.cumsum(counts[:, 0::2] + counts[:, 1::2], axis=0)
         inside_c = np.cumsum(counts[:, 1::2], axis=0)
@@ -212,6 +214,49 @@ def _tilt_of(t: npt.NDArray[np.float64], u: npt.NDArray[np.float64]) -> float:
     """The angle (radians) of the least-squares line ``u`` on ``t``: the pixels' tilt off the along direction."""
     dt = t - t.mean()
     return float(np.arctan(np.dot(dt, u - u.mean()) / max(float(np.dot(dt, dt)), 1e-9)))
+
+
+def _longest_stretches(
+    offset: npt.NDArray[np.int64],
+    along: npt.NDArray[np.int64],
+    peak_i: npt.NDArray[np.intp],
+    peak_o: npt.NDArray[np.intp],
+    n_offsets: int,
+    max_gap_px: float,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Per peak (tilt ``peak_i``, offset ``peak_o``): the first longest stretch of the places along the lines
+    (``along``, per pixel) of the pixels within one offset of it (``offset``, per tilt and pixel), with gaps
+    up to ``max_gap_px``: its first and last place and how many places it holds.
+
+    Every peak must have a pixel within one offset of it; the offsets lie from 1 to ``n_offsets`` - 2.
+    """
+    a0 = int(along.min())
+    n_along = int(along.max()) - a0 + 1
+    which = np.full(offset.shape[0] * n_offsets, -1, dtype=np.int64)  # per tilt and offset (flat): its peak
+    which[peak_i * n_offsets + peak_o] = np.arange(peak_i.size)
+    flat = offset + n_offsets * np.arange(offset.shape[0])[:, None]
+    # only the pixels within one offset of some peak are looked at
+    close = which >= 0
+    close[1:] |= close[:-1].copy()
+    close[:-1] |= which[1:] >= 0
+    tilt, pixel = np.nonzero(close[flat])
+    flat = flat[tilt, pixel]
+    place = along[pixel] - a0
+    seen = np.zeros((peak_i.size, n_along), dtype=bool)  # per peak: the places of the pixels within one offset
+    for step in (-1, 0, 1):
+        peak = which[flat + step]
+        hit = peak >= 0
+        seen[peak[hit], place[hit]] = True
+    # per peak its distinct places in order: a new stretch where the peak changes or after a gap
+    peaks, places = np.nonzero(seen)
+    starts = np.flatnonzero(np.r_[True, (peaks[1:] != peaks[:-1]) | (np.diff(places) > max_gap_px)])
+    sizes = np.diff(np.r_[starts, places.size])
+    owner = peaks[starts]
+    longest = np.maximum.reduceat(sizes, np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]]))
+    best = np.flatnonzero(sizes == longest[owner])
+    best = best[np.unique(owner[best], return_index=True)[1]]  # the first of a peak's longest
+    first = starts[best]
+    return places[first] + a0, places[first + sizes[best] - 1] + a0, sizes[best]
 
 
 def tilted_lines(
@@ -258,7 +303,8 @@ def tilted_lines(
         across = np.rint(-np.sin(angle + tilts)[:, None] * x[None, :] + np.cos(angle + tilts)[:, None] * y[None, :])
         start = int(across.min()) - 1
         n = int(across.max()) - start + 2
-        flat = (across.astype(np.int64) - start) + n * np.arange(tilts.size)[:, None]
+        offset = across.astype(np.int64) - start  # per tilt and pixel: its offset's index, 1 to n - 2
+        flat = offset + n * np.arange(tilts.size)[:, None]
         counts = np.bincount(flat.ravel(), minlength=n * tilts.size).reshape(tilts.size, n).astype(np.float32)
         near = counts.copy()
         near[:, 1:] += counts[:, :-1]
@@ -269,23 +315,18 @@ def tilted_lines(
             continue
         t = np.cos(angle) * x + np.sin(angle) * y
         u = -np.sin(angle) * x + np.cos(angle) * y
-        # per tilt the pixels in order of offset: those near a line are one slice of them
-        order = np.argsort(across, axis=1, kind="stable")
-        ordered = np.take_along_axis(across, order, axis=1)
-        for i, o in zip(*np.nonzero(peak), strict=True):
-            lo, hi = np.searchsorted(ordered[i], [o + start - fit_px - 0.5, o + start + fit_px + 0.5])
-            near_px = order[i, lo:hi]
-            off = np.abs(ordered[i, lo:hi] - (o + start))
+        peak_i, peak_o = np.nonzero(peak)
+        # the stretch of wall along each line (gaps up to max_gap_px) seen at most places along it
+        first_along, last_along, places = _longest_stretches(
+            offset, np.rint(t).astype(np.int64), peak_i, peak_o, n, max_gap_px
+        )
+        for p in np.flatnonzero(places >= min_support).tolist():
+            i, o = int(peak_i[p]), int(peak_o[p])
+            near_px = np.flatnonzero(np.abs(offset[i] - o) <= fit_px)
+            near_px = near_px[np.argsort(offset[i, near_px], kind="stable")]  # in order of offset, as ever
+            off = np.abs(offset[i, near_px] - o)
             t_near = t[near_px]
-            # the stretch of wall along the line (gaps up to max_gap_px) seen at most places along it
-            along = np.unique(np.rint(t_near[off <= 1]))
-            cuts = np.flatnonzero(np.diff(along) > max_gap_px)
-            first = np.concatenate(([0], cuts + 1))
-            last = np.concatenate((cuts, [along.size - 1]))
-            best = int(np.argmax(last - first))
-            if last[best] - first[best] + 1 < min_support:
-                continue
-            span = (t_near >= along[first[best]] - 0.5) & (t_near <= along[last[best]] + 0.5)
+            span = (t_near >= first_along[p] - 0.5) & (t_near <= last_along[p] + 0.5)
             if np.count_nonzero(span & (off <= 1)) < min_thin * np.count_nonzero(span):
                 continue
             if abs(_tilt_of(t_near[span], u[near_px][span]) - tilts[i]) <= half_step:

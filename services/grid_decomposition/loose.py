@@ -142,9 +142,12 @@ def fill_between(
     out = segments.copy()
     diagonal_px = int(reach_px / np.sqrt(2.0))
     for dr, dc, reach in ((0, 1, reach_px), (1, 0, reach_px), (1, 1, diagonal_px), (1, -1, diagonal_px)):
+        loose_now = out[rows, cols] == 0  # the cells given in a direction before are no longer looked at
+        rows, cols = rows[loose_now], cols[loose_now]
         ahead = _nearest(out, occupied, rows, cols, dr, dc, reach)
-        behind = _nearest(out, occupied, rows, cols, -dr, -dc, reach)
-        take = (ahead > 0) & (ahead == behind) & (out[rows, cols] == 0)
+        flanked = np.flatnonzero(ahead > 0)  # only these are looked behind
+        behind = _nearest(out, occupied, rows[flanked], cols[flanked], -dr, -dc, reach)
+        take = flanked[behind == ahead[flanked]]
         out[rows[take], cols[take]] = ahead[take]
     return out
 
@@ -161,15 +164,22 @@ def _nearest(
     """Per cell (rows, cols), the region of the first region cell in steps of (dr, dc) when it comes within
     ``reach`` steps and before any ``stop`` cell or the image's edge; 0 otherwise."""
     h, w = region.shape
+    # per cell the steps the image's edge leaves it, at most reach; the cells looked up by flat index
+    room = np.full(rows.size, reach)
+    if dr:
+        np.minimum(room, h - 1 - rows if dr > 0 else rows, out=room)
+    if dc:
+        np.minimum(room, w - 1 - cols if dc > 0 else cols, out=room)
+    at, step = rows * w + cols, dr * w + dc
+    flat_region, flat_stop = region.ravel(), stop.ravel()
     found = np.zeros(rows.size, dtype=np.int32)
     open_ = np.arange(rows.size)  # the cells still looking
     for k in range(1, reach + 1):
-        r, c = rows[open_] + k * dr, cols[open_] + k * dc
-        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        open_, r, c = open_[inside], r[inside], c[inside]
-        seen = region[r, c]
-        found[open_] = seen
-        open_ = open_[(seen == 0) & ~stop[r, c]]
+        open_ = open_[room[open_] >= k]
         if open_.size == 0:
             break
+        cell = at[open_] + k * step
+        seen = flat_region[cell]
+        found[open_] = seen
+        open_ = open_[(seen == 0) & ~flat_stop[cell]]
     return found
