@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 import uuid
 from collections.abc import Iterator
@@ -96,3 +97,13 @@ def store(store_url: str) -> Iterator[MapStore]:
     map_store.upgrade()
     yield map_store
     map_store.close()
+
+
+@pytest.fixture
+def collector_on() -> Iterator[None]:
+    """CPython's cyclic garbage collector switched on for the test, and back as it was after it."""
+    was_enabled = gc.isenabled()
+    gc.enable()
+    yield
+    if not was_enabled:
+        gc.disable()

@@ -5,21 +5,11 @@ from __future__ import annotations
 import gc
 import sys
 import threading
-from collections.abc import Iterator
 
 import pytest
 
 from api.background import background_work
 from shared.collector import collector_held
-
-
-@pytest.fixture
-def collector_on() -> Iterator[None]:
-    was_enabled = gc.isenabled()
-    gc.enable()
-    yield
-    if not was_enabled:
-        gc.disable()
 
 
 def test_the_collector_is_held_off_until_the_last_of_overlapping_pauses_ends(collector_on: None) -> None:
