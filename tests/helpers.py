@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -69,3 +72,25 @@ def with_literal(document: Any, path: tuple[Any, ...], literal: str) -> bytes:
         return json.dumps(document).replace(json.dumps(marker), literal).encode()
     finally:
         parent[path[-1]] = saved
+
+
+def collector_after_first_of_overlapping_blocks(block: Callable[[], AbstractContextManager[None]]) -> bool:
+    """Whether the cyclic collector is on inside the second of two overlapping ``block()``s, in two threads, once
+    the first of them (begun first) has ended."""
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+
+    def first() -> None:
+        with block():
+            first_in.set()
+            second_in.wait(10)
+        first_out.set()
+
+    thread = threading.Thread(target=first)
+    thread.start()
+    first_in.wait(10)
+    with block():
+        second_in.set()
+        first_out.wait(10)
+        enabled = gc.isenabled()
+    thread.join()
+    return enabled

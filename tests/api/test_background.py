@@ -4,33 +4,16 @@ from __future__ import annotations
 
 import gc
 import sys
-import threading
 
 import pytest
 
 from api.background import background_work
 from shared.collector import collector_held
+from tests.helpers import collector_after_first_of_overlapping_blocks
 
 
 def test_the_collector_is_held_off_until_the_last_of_overlapping_pauses_ends(collector_on: None) -> None:
-    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
-    seen: dict[str, bool] = {}
-
-    def first() -> None:
-        with background_work():
-            first_in.set()
-            second_in.wait(10)
-        first_out.set()
-
-    thread = threading.Thread(target=first)
-    thread.start()
-    first_in.wait(10)
-    with background_work():
-        second_in.set()
-        first_out.wait(10)
-        seen["after the first ended"] = gc.isenabled()
-    thread.join()
-    assert seen == {"after the first ended": False}
+    assert not collector_after_first_of_overlapping_blocks(background_work)
     assert gc.isenabled()
 
 

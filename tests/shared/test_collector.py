@@ -9,6 +9,7 @@ import weakref
 import pytest
 
 from shared.collector import collector_held
+from tests.helpers import collector_after_first_of_overlapping_blocks
 
 
 def test_the_collector_is_off_in_the_block_and_on_again_after_it(collector_on: None) -> None:
@@ -18,24 +19,7 @@ def test_the_collector_is_off_in_the_block_and_on_again_after_it(collector_on: N
 
 
 def test_the_collector_stays_off_until_the_last_of_overlapping_blocks_in_two_threads_ends(collector_on: None) -> None:
-    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
-    seen: dict[str, bool] = {}
-
-    def first() -> None:
-        with collector_held():
-            first_in.set()
-            second_in.wait(10)
-        first_out.set()
-
-    thread = threading.Thread(target=first)
-    thread.start()
-    first_in.wait(10)
-    with collector_held():
-        second_in.set()
-        first_out.wait(10)
-        seen["after the first ended"] = gc.isenabled()
-    thread.join()
-    assert seen == {"after the first ended": False}
+    assert not collector_after_first_of_overlapping_blocks(collector_held)
     assert gc.isenabled()
 
 
