@@ -340,6 +340,31 @@ def near(mask: npt.NDArray[np.bool_], radius_px: float, mask_size: int = 3) -> n
     return np.asarray(cv2.dilate(flags, _chamfer_ball(radius_px, mask_size))).view(bool)
 
 
+def near_at(
+    mask: npt.NDArray[np.bool_],
+    rows: npt.NDArray[np.integer],
+    cols: npt.NDArray[np.integer],
+    radius_px: float,
+    mask_size: int = 3,
+) -> npt.NDArray[np.bool_]:
+    """:func:`near` read at the pixels ``(rows, cols)`` of the image only: whether a pixel of ``mask`` lies in the
+    transform's ball round each (offsets off the image hold none, as the transform has no pixel there).
+
+    A whole-image transform read at a few pixels costs a pass over every pixel; this looks at the ball round each.
+    """
+    ball = _chamfer_ball(radius_px, mask_size)  # square, the pixel at its middle
+    r = ball.shape[0] // 2
+    ball_rows, ball_cols = nonzero_rc(ball)
+    h, w = mask.shape
+    at_r = np.asarray(rows, dtype=np.intp)[:, None] + (ball_rows - r)[None, :]
+    at_c = np.asarray(cols, dtype=np.intp)[:, None] + (ball_cols - r)[None, :]
+    on = (at_r >= 0) & (at_r < h) & (at_c >= 0) & (at_c < w)
+    hit = np.zeros(at_r.shape, dtype=bool)
+    hit[on] = mask[at_r[on], at_c[on]]
+    out: npt.NDArray[np.bool_] = np.any(hit, axis=1)
+    return out
+
+
 @functools.lru_cache(maxsize=32, typed=True)
 def _short_of_ball(
     scale: float | np.floating[Any], limit: float | np.floating[Any], mask_size: int

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import nonzero_rc
+from services.grid_decomposition.arrays import near_at, nonzero_rc
 from services.grid_decomposition.segments import renumber
 
 
@@ -131,8 +130,9 @@ def join_unseen_openings(
     if not keep.any():
         return renumber(seg)
     h, w = seg.shape
-    far = np.asarray(cv2.distanceTransform((~occupied).astype(np.uint8), cv2.DIST_L2, 5), dtype=np.float32)
     x = np.clip(np.rint(cuts.ends[..., 0]).astype(np.int64), 0, w - 1)
     y = np.clip(np.rint(cuts.ends[..., 1]).astype(np.int64), 0, h - 1)
-    keep &= (far[y, x] > unseen_m / resolution_m).all(axis=1)
+    # the chamfer distance to the occupied cells above unseen_m, read at the ends only (no whole-image transform)
+    seen = near_at(occupied, y.ravel(), x.ravel(), unseen_m / resolution_m, 5).reshape(y.shape)
+    keep &= ~seen.any(axis=1)
     return join_pairs(seg, cuts.first[keep], cuts.second[keep])

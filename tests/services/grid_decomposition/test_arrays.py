@@ -18,6 +18,7 @@ from services.grid_decomposition.arrays import (
     label_sums,
     lookup,
     near,
+    near_at,
     nonzero_rc,
     short_of,
     unique_inverse,
@@ -81,6 +82,21 @@ def test_near_is_the_distance_transform_within_a_radius(mask_size: int, radius: 
         mask = rng.random((int(rng.integers(3, 90)), int(rng.integers(3, 90)))) < density
         expected = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, mask_size) <= radius
         assert np.array_equal(near(mask, radius, mask_size), expected)
+
+
+@pytest.mark.parametrize("mask_size", [3, 5])
+@pytest.mark.parametrize("radius", [0, 1, 2.5, 10.000000000000002, 15.000000000000002])
+def test_near_at_reads_the_distance_transform_at_the_points(mask_size: int, radius: float) -> None:
+    """Points anywhere (corners and borders too, some repeated), sparse and dense masks, none, and no point."""
+    rng = np.random.default_rng(mask_size * 100 + round(radius * 10))
+    for density in (0.0, 0.002, 0.05, 0.6):
+        h, w = (int(v) for v in rng.integers(1, 90, 2))
+        mask = rng.random((h, w)) < density
+        rows = np.r_[rng.integers(0, h, 60), 0, h - 1, 0, h - 1]
+        cols = np.r_[rng.integers(0, w, 60), 0, 0, w - 1, w - 1]
+        expected = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, mask_size) <= radius
+        assert np.array_equal(near_at(mask, rows, cols, radius, mask_size), expected[rows, cols])
+        assert near_at(mask, rows[:0], cols[:0], radius, mask_size).shape == (0,)
 
 
 @pytest.mark.parametrize("seed", range(4))
