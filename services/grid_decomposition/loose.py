@@ -18,6 +18,29 @@ from services.grid_decomposition.arrays import label_counts, lookup, near, nonze
 from services.grid_decomposition.segments import fill_from_neighbours
 
 
+class _Regions:
+    """A segment image and what both loose steps read of it, each found once: the regions' sizes and whether each
+    touches another (8-neighbours)."""
+
+    def __init__(self, segments: npt.NDArray[np.int32]) -> None:
+        self.segments = segments
+        self.n = int(segments.max(initial=0)) + 1
+        self._size: npt.NDArray[np.int64] | None = None
+        self._touching: npt.NDArray[np.bool_] | None = None
+
+    @property
+    def size(self) -> npt.NDArray[np.int64]:
+        if self._size is None:
+            self._size = label_counts(self.segments, self.n)[0]
+        return self._size
+
+    @property
+    def touching(self) -> npt.NDArray[np.bool_]:
+        if self._touching is None:
+            self._touching = _touching(self.segments, self.n)
+        return self._touching
+
+
 def join_isolated_pieces(
     segments: npt.NDArray[np.int32], occupied: npt.NDArray[np.bool_], *, max_area_px: int, gap_px: int
 ) -> npt.NDArray[np.int32]:
@@ -35,14 +58,19 @@ def join_isolated_pieces(
     occupied : (H, W) bool
     max_area_px, gap_px : int
     """
-    n = int(segments.max(initial=0)) + 1
-    small = label_counts(segments, n)[0] < max_area_px
+    return _join_isolated(_Regions(segments), occupied, max_area_px=max_area_px, gap_px=gap_px).segments
+
+
+def _join_isolated(regions: _Regions, occupied: npt.NDArray[np.bool_], *, max_area_px: int, gap_px: int) -> _Regions:
+    """:func:`join_isolated_pieces` of ``regions``: the same object when none join."""
+    segments, n = regions.segments, regions.n
+    small = regions.size < max_area_px
     small[0] = False
     if np.count_nonzero(small) < 2:
-        return segments
-    isolated = small & ~_touching(segments, n)
+        return regions
+    isolated = small & ~regions.touching
     if np.count_nonzero(isolated) < 2:
-        return segments
+        return regions
     seeds = np.where(lookup(isolated, segments), segments, 0)
     half = max(1, (gap_px + 1) // 2)
     grown = fill_from_neighbours(seeds, ~occupied & (segments == 0) & near(seeds > 0, half), max_iterations=half)
@@ -53,14 +81,13 @@ def join_isolated_pieces(
         b_parts.append(b[meet])
     a_ids, b_ids = np.concatenate(a_parts), np.concatenate(b_parts)
     if a_ids.size == 0:
-        return segments
+        return regions
     graph = coo_matrix((np.ones(a_ids.size), (a_ids, b_ids)), shape=(n, n))
     _, group = connected_components(graph, directed=False)
     lowest = np.full(n, n, dtype=np.int64)
     np.minimum.at(lowest, group, np.arange(n))
     lut = lowest[group].astype(np.int32)
-    out: npt.NDArray[np.int32] = lookup(lut, segments)
-    return out
+    return _Regions(lookup(lut, segments))
 
 
 def fill_lone_regions(
@@ -86,13 +113,20 @@ def fill_lone_regions(
     free, occupied : (H, W) bool
     reach_px, min_area_px : int
     """
+    return _fill_lone(_Regions(segments), free, occupied, reach_px=reach_px, min_area_px=min_area_px)
+
+
+def _fill_lone(
+    regions: _Regions, free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], *, reach_px: int, min_area_px: int
+) -> npt.NDArray[np.int32]:
+    """:func:`fill_lone_regions` of ``regions``."""
+    segments = regions.segments
     loose = free & (segments == 0)
     if not loose.any():
         return segments
-    n = int(segments.max(initial=0)) + 1
-    lone = label_counts(segments, n)[0] >= min_area_px
+    lone = regions.size >= min_area_px
     lone[0] = False
-    lone &= ~_touching(segments, n)
+    lone &= ~regions.touching
     if not lone.any():
         return segments
     seeds = np.where(lookup(lone, segments), segments, 0)
@@ -102,17 +136,40 @@ def fill_lone_regions(
     return out
 
 
+def join_and_fill_loose(
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    *,
+    max_area_px: int,
+    gap_px: int,
+    reach_px: int,
+    min_area_px: int,
+) -> npt.NDArray[np.int32]:
+    """:func:`join_isolated_pieces` then :func:`fill_lone_regions`, the regions' sizes and touching flags found
+    once when no piece joins (the same segments then)."""
+    joined = _join_isolated(_Regions(segments), occupied, max_area_px=max_area_px, gap_px=gap_px)
+    return _fill_lone(joined, free, occupied, reach_px=reach_px, min_area_px=min_area_px)
+
+
 def _touching(segments: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.bool_]:
-    """(n,) whether each region has an 8-neighbour cell of another region."""
-    padded = np.pad(segments, 1)
-    centre = padded[1:-1, 1:-1]
+    """(n,) whether each region has an 8-neighbour cell of another region.
+
+    Each pair of 8-neighbours is compared once (4 of the 8 offsets), with the region mask made once.
+    """
+    inside = segments > 0
     touches = np.zeros(n, dtype=bool)
-    height, width = segments.shape
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        other = padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width]
-        meet = (centre > 0) & (other > 0) & (centre != other)
-        touches[centre[meet]] = True
-        touches[other[meet]] = True
+    for a, b, a_in, b_in in (
+        (segments[:, :-1], segments[:, 1:], inside[:, :-1], inside[:, 1:]),
+        (segments[:-1, :], segments[1:, :], inside[:-1, :], inside[1:, :]),
+        (segments[:-1, :-1], segments[1:, 1:], inside[:-1, :-1], inside[1:, 1:]),
+        (segments[:-1, 1:], segments[1:, :-1], inside[:-1, 1:], inside[1:, :-1]),
+    ):
+        meet = a != b
+        meet &= a_in
+        meet &= b_in
+        touches[a[meet]] = True
+        touches[b[meet]] = True
     return touches
 
 

@@ -33,7 +33,7 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.loose import fill_between, fill_lone_regions, join_isolated_pieces
+from services.grid_decomposition.loose import fill_between, join_and_fill_loose
 from services.grid_decomposition.openings import join_unseen_openings
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -735,11 +735,9 @@ def decompose(
         # pieces of one fan of rays that touch nothing, each a region too small to be a room, are one room; a room
         # seen alone through the gaps of its walls (touching no region) takes the dots of its rays round it
         fan_gap_px = max(1, round(_FAN_GAP_M / resolution_m))
-        segments = join_isolated_pieces(
-            segments, occupied, max_area_px=round(room_min_area_m2 / resolution_m**2), gap_px=fan_gap_px
-        )
-        segments = fill_lone_regions(
-            segments, free, occupied, reach_px=fan_gap_px, min_area_px=round(min_region_area_m2 / resolution_m**2)
+        segments = join_and_fill_loose(
+            segments, free, occupied, max_area_px=round(room_min_area_m2 / resolution_m**2), gap_px=fan_gap_px,
+            reach_px=fan_gap_px, min_area_px=round(min_region_area_m2 / resolution_m**2),
         )
         # a dot of a ray between two cells of one region (between two rays of its fan, in a notch of its outline)
         segments = fill_between(segments, free, occupied, reach_px=fan_gap_px)

@@ -5,7 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.grid_decomposition.loose import fill_between, fill_lone_regions, join_isolated_pieces
+from services.grid_decomposition.loose import (
+    _touching,
+    fill_between,
+    fill_lone_regions,
+    join_and_fill_loose,
+    join_isolated_pieces,
+)
 
 
 def test_pieces_of_one_fan_that_touch_nothing_join_and_a_piece_touching_a_room_does_not() -> None:
@@ -83,3 +89,33 @@ def test_a_dot_between_two_regions_is_neither_s() -> None:
     dots[10, 18] = True
     out = fill_between(seg, (seg > 0) | dots, np.zeros(seg.shape, dtype=bool), reach_px=10)
     assert out[10, 18] == 0
+
+
+def test_joining_and_filling_at_once_is_the_two_steps_in_turn() -> None:
+    """Pieces of a fan that join (the regions found anew after) and scenes where none join (found once)."""
+    rng = np.random.default_rng(0)
+    for gap in (0, 3, 6):
+        seg = np.zeros((60, 90), dtype=np.int32)
+        seg[10:30, 10:20] = 1  # a room seen alone
+        seg[40:55, 10:13] = 2  # rays of a fan, ``gap`` cells apart
+        seg[40:55, 13 + gap : 16 + gap] = 3
+        seg[10:30, 50:60] = 4  # two rooms side by side
+        seg[10:30, 60:70] = 5
+        occupied = rng.random(seg.shape) < 0.01
+        free = (seg > 0) | (rng.random(seg.shape) < 0.05) & ~occupied
+        kwargs = {"max_area_px": 100, "gap_px": 6}
+        expected = fill_lone_regions(join_isolated_pieces(seg, occupied, **kwargs), free, occupied, reach_px=10,
+                                     min_area_px=50)
+        got = join_and_fill_loose(seg, free, occupied, reach_px=10, min_area_px=50, **kwargs)
+        assert np.array_equal(got, expected)
+
+
+def test_touching_flags_every_region_with_an_8_neighbour_of_another() -> None:
+    rng = np.random.default_rng(1)
+    seg = rng.integers(0, 12, (30, 40)).astype(np.int32) * (rng.random((30, 40)) < 0.3)
+    padded = np.pad(seg, 1)
+    expected = np.zeros(12, dtype=bool)
+    for r, c in zip(*np.nonzero(seg), strict=True):
+        around = padded[r : r + 3, c : c + 3]
+        expected[seg[r, c]] |= bool(np.any((around > 0) & (around != seg[r, c])))
+    assert np.array_equal(_touching(seg, 12), expected)
