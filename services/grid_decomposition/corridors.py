@@ -288,7 +288,7 @@ def tilted_lines(
     step (least squares): a wall at the angle itself lies on tilted lines too, but runs at the angle. Only
     lines with another of their tilt ``pair_width_m`` away (the two sides a corridor band needs) are returned.
     """
-    rows, cols = np.nonzero(walls)
+    rows, cols = nonzero_rc(walls)
     if rows.size == 0:
         return []
     x = (cols + left).astype(np.float64)
