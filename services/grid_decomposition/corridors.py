@@ -73,9 +73,8 @@ def _row_runs(
 
 
 def _walls_along(
-    across: npt.NDArray[np.intp],
+    offset: npt.NDArray[np.int32],
     along: npt.NDArray[np.int32],
-    at: npt.NDArray[np.intp],
     rows: npt.NDArray[np.int64],
     n_across: int,
     along_start: int,
@@ -84,10 +83,9 @@ def _walls_along(
 ) -> npt.NDArray[np.bool_]:
     """Per offset in ``rows`` (sorted, distinct) and along place: an occupied pixel within ``tolerance_px`` across.
 
-    ``across`` is the pixels' offset (0 to ``n_across`` - 1), ``along`` their along-line place (``along_start`` to
-    ``along_start + n_along - 1``: read at the occupied pixels only), ``at`` the occupied pixels' flat indices.
-    Only the offsets within the tolerance of ``rows`` are rastered (each such offset once, in order, so a row's
-    neighbours are consecutive).
+    ``offset`` and ``along`` are the occupied pixels' offsets across (0 to ``n_across`` - 1) and along-line places
+    (``along_start`` to ``along_start + n_along - 1``). Only the offsets within the tolerance of ``rows`` are
+    rastered (each such offset once, in order, so a row's neighbours are consecutive).
     """
     lo, hi = np.maximum(rows - tolerance_px, 0), np.minimum(rows + tolerance_px + 1, n_across)
     marks = np.zeros(n_across + 1, dtype=np.int32)
@@ -95,13 +93,18 @@ def _walls_along(
     np.add.at(marks, hi, -1)
     near = np.cumsum(marks[:-1]) > 0
     compact = np.cumsum(near) - 1  # the raster row of a near offset
-    offset = np.take(across, at)  # the offsets looked up at the occupied pixels only
     pick = near[offset]
     raster_c = np.zeros((int(compact[-1]) + 2, n_along), dtype=np.int32)
     raster = np.zeros((int(compact[-1]) + 1, n_along), dtype=bool)
-    raster[compact[offset[pick]], np.take(along, at[pick]) - along_start] = True
+    raster[compact[offset[pick]], along[pick] - along_start] = True
     np.cumsum(raster, axis=0, out=raster_c[1:])
     return np.asarray(raster_c[compact[hi - 1] + 1] - raster_c[compact[lo]] > 0, dtype=bool)
+
+
+def _corner_range(values: npt.NDArray[np.int32]) -> tuple[int, int]:
+    """Least and largest of a window's :func:`_coordinates` (monotone along every row and every column: at corners)."""
+    corners = values[:: max(values.shape[0] - 1, 1), :: max(values.shape[1] - 1, 1)]
+    return int(corners.min()), int(corners.max())
 
 
 def corridor_bands(
@@ -147,8 +150,8 @@ def corridor_bands(
         coordinates = window_coordinates(shape, top, left, lines)
     occupied_at: npt.NDArray[np.intp] | None = None  # the occupied pixels' flat indices, once for every angle
     for angle, (u, t) in sorted(coordinates.items()):
-        u0, t0 = int(u.min()), int(t.min())
-        nu, nt = int(u.max()) - u0 + 1, int(t.max()) - t0 + 1
+        (u0, u1), (t0, t1) = _corner_range(u), _corner_range(t)
+        nu, nt = u1 - u0 + 1, t1 - t0 + 1
         offsets = np.array(
             sorted({round(ln.offset_px) - u0 for ln in lines if round(ln.angle_rad, 4) == angle} & set(range(nu))),
             dtype=np.int64,
@@ -164,10 +167,9 @@ def corridor_bands(
         lo, hi = a_px + tolerance_px + 1, b_px - tolerance_px
         # the counts below each strip's edges: per block of offsets between two edges, summed down the blocks
         bounds = np.unique(np.concatenate([lo, hi]))
-        across = np.subtract(u, u0, dtype=np.intp)
         # only the rows and columns that hold a strip's pixels are counted: no other pixel is in any strip
         box = band_box(u, t, (int(bounds[0]) + u0, int(bounds[-1]) - 1 + u0), (t0, t0 + nt - 1))
-        block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, across[box])
+        block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, u[box] - u0)
         block += t[box]
         # the pixels per (block, along) place and of them those in the region: one count of block * 2 + region
         block *= 2
@@ -189,7 +191,8 @@ def corridor_bands(
         walls_c = np.zeros((rows.size, nt + 1), np.int32)
         if occupied_at is None:
             occupied_at = np.flatnonzero(occupied)
-        np.cumsum(_walls_along(across, t, occupied_at, rows, nu, t0, nt, tolerance_px), axis=1, out=walls_c[:, 1:])
+        walls = _walls_along(np.take(u, occupied_at) - u0, np.take(t, occupied_at), rows, nu, t0, nt, tolerance_px)
+        np.cumsum(walls, axis=1, out=walls_c[:, 1:])
         row_a, row_b = row_of[: pair.size], row_of[pair.size :]
         n_run = (ends - starts).astype(np.float64)
         side_a = (walls_c[row_a, ends] - walls_c[row_a, starts]).astype(np.float64) / n_run

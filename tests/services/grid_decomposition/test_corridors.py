@@ -10,6 +10,7 @@ import pytest
 
 from services.grid_decomposition.corridors import (
     _coordinates,
+    _corner_range,
     _row_runs,
     _runs,
     _walls_along,
@@ -195,8 +196,16 @@ def test_walls_along_a_few_lines_are_the_dilated_raster_at_them() -> None:
     rows = np.array([0, 3, 5, 30, 58, 59])
     raster = cv2.dilate(occupied.astype(np.uint8), np.ones((5, 1), np.uint8)).astype(bool)
     # along places from 7 (a window's own coordinates), the occupied pixels by their flat indices
-    walls = _walls_along(across, along + 7, np.flatnonzero(occupied), rows, 60, 7, 50, 2)
+    at = np.flatnonzero(occupied)
+    walls = _walls_along(np.take(across, at), np.take(along, at) + 7, rows, 60, 7, 50, 2)
     assert np.array_equal(walls, raster[rows])
+
+
+@pytest.mark.parametrize("angle", [-0.0001, 0.0, 0.3, 0.7854, 1.5707, 2.5, -1.2, -0.035])
+@pytest.mark.parametrize("shape", [(1, 1), (1, 40), (30, 1), (90, 130)])
+def test_a_windows_coordinates_range_is_at_its_corners(angle: float, shape: tuple[int, int]) -> None:
+    for coordinate in _coordinates(shape, 17, -40, angle):
+        assert _corner_range(coordinate) == (int(coordinate.min()), int(coordinate.max()))
 
 
 @pytest.mark.parametrize("angle", [-0.0001, 0.3, 1.5707, 2.5, -1.2])
