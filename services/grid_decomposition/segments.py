@@ -349,11 +349,11 @@ def merge_passages(
     candidate &= width <= max_width_px
     if not candidate.any():
         return _relabel(seg, np.arange(n), area > 0)
-    pairs, border, _ = border_closure(seg, None)
-    outline = np.zeros(n, dtype=np.int64)  # 4-neighbour pixel pairs of another id (0 too), the image's edge
-    for a, b in ((seg[:, :-1], seg[:, 1:]), (seg[:-1], seg[1:])):
-        differ = a != b
-        outline += np.bincount(a[differ], minlength=n) + np.bincount(b[differ], minlength=n)
+    a, b, shut_px = _differing_pairs(seg, None)  # the borders' pixel pairs, and the outlines' (with 0)
+    # 4-neighbour pixel pairs of another id (0 too), the image's edge
+    outline = np.bincount(a, minlength=n) + np.bincount(b, minlength=n)
+    ok = (a > 0) & (b > 0)
+    pairs, border, _ = _pair_borders(a[ok], b[ok], shut_px[ok], n)
     for edge in (seg[0], seg[-1], seg[:, 0], seg[:, -1]):
         outline += np.bincount(edge, minlength=n)
     shared = np.bincount(pairs.ravel(), weights=np.repeat(border, 2), minlength=n)
@@ -506,6 +506,18 @@ def border_closure(
     """
     seg = np.ascontiguousarray(segments)
     n = int(seg.max()) + 1
+    a, b, shut_px = _differing_pairs(seg, closed)
+    ok = (a > 0) & (b > 0)
+    a, b, shut_px = a[ok], b[ok], shut_px[ok]
+    return _pair_borders(a, b, shut_px, n)
+
+
+def _differing_pairs(
+    segments: npt.NDArray[np.int32], closed: npt.NDArray[np.bool_] | None
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.bool_]]:
+    """The ids of every pair of 4-neighbour pixels with different ids (0 too), rows then columns in raster order,
+    and whether either pixel is on ``closed`` (``None``: nothing is)."""
+    seg = np.ascontiguousarray(segments)
     h, w = seg.shape
     flat = seg.ravel()
     shut_flat = None if closed is None else np.ascontiguousarray(closed, dtype=bool).ravel()
@@ -523,10 +535,16 @@ def border_closure(
         seconds.append(flat[second].astype(np.int64))
         shuts.append(np.zeros(k.size, dtype=bool) if shut_flat is None else shut_flat[first] | shut_flat[second])
     if not firsts:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
+    return np.concatenate(firsts), np.concatenate(seconds), np.concatenate(shuts)
+
+
+def _pair_borders(
+    a: npt.NDArray[np.int64], b: npt.NDArray[np.int64], shut_px: npt.NDArray[np.bool_], n: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """:func:`border_closure` of the border pixel pairs' ids ``a``, ``b`` (both > 0, different) and closed flags."""
+    if a.size == 0:
         return np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    a, b, shut_px = np.concatenate(firsts), np.concatenate(seconds), np.concatenate(shuts)
-    ok = (a > 0) & (b > 0)
-    a, b, shut_px = a[ok], b[ok], shut_px[ok]
     codes, inverse = unique_inverse(np.minimum(a, b) * n + np.maximum(a, b))
     total = np.bincount(inverse, minlength=len(codes)).astype(np.int64)
     shut = np.bincount(inverse, weights=shut_px, minlength=len(codes)).astype(np.int64)
