@@ -428,17 +428,14 @@ def bumps_a_strip(
     bump = np.ones((len(ends), 2), dtype=bool)
     seen = np.zeros(len(ends), dtype=bool)
     for sign in (1.0, -1.0):
-        reachable = _free_depth(blocked, mid, sign * normal, max_depth_px)
-        for depth in depths:
-            at = reachable >= depth
-            if not at.any():
-                continue
-            points = mid[at] + sign * depth * normal[at]
-            seen[at] = True
-            for end, direction in ((0, -u[at]), (1, u[at])):
-                run = _free_depth(blocked, points, direction, reach)
-                flush[at, end] &= run <= half[at] + tolerance_px
-                bump[at, end] &= run <= half[at] + bump_px
+        at = _free_depth(blocked, mid, sign * normal, max_depth_px)[:, None] >= depths[None, :]  # (G, D)
+        which, step = np.nonzero(at)
+        points = mid[which] + sign * depths[step, None] * normal[which]
+        seen |= at.any(axis=1)
+        for end, direction in ((0, -u[which]), (1, u[which])):
+            run = _free_depth(blocked, points, direction, reach)
+            flush[:, end] &= np.bincount(which, run > half[which] + tolerance_px, minlength=len(ends)) == 0
+            bump[:, end] &= np.bincount(which, run > half[which] + bump_px, minlength=len(ends)) == 0
     out: npt.NDArray[np.bool_] = seen & ((flush[:, 0] & bump[:, 1]) | (flush[:, 1] & bump[:, 0]))
     return out
 
