@@ -239,6 +239,8 @@ def find_doorways(
     neck_tolerance_m: float = 0.05,
     room_margin_m: float = 0.0,
     corridor_length_m: float = 2.0,
+    bump_max_m: float = 0.6,
+    flush_tolerance_m: float = 0.1,
 ) -> npt.NDArray[np.float64]:
     """Doorways of a floor: cuts across the narrow passages between walls, independent of any line.
 
@@ -276,6 +278,11 @@ def find_doorways(
     corridor_length_m : float
         A cut across a corridor, whose space goes on as a band about as wide as the cut for this
         long on both sides, is no doorway (:func:`across_a_corridor`); 0 turns it off.
+    bump_max_m, flush_tolerance_m : float
+        A cut across a strip that an obstacle against one wall narrows is no doorway (:func:`bumps_a_strip`): on
+        both sides, up to ``max_depth_m`` from the cut, the strip's one wall runs on in line with one end of the cut
+        (within ``flush_tolerance_m``) and its other wall lies at most ``bump_max_m`` beyond the other end (furniture
+        or a bin against a wall, as deep as a wall is thick); 0 turns it off.
 
     Returns
     -------
@@ -302,6 +309,8 @@ def find_doorways(
         neck_tolerance_m=neck_tolerance_m,
         room_margin_m=room_margin_m,
         corridor_length_m=corridor_length_m,
+        bump_max_m=bump_max_m,
+        flush_tolerance_m=flush_tolerance_m,
     ) + np.array([c0, r0], dtype=np.float64)
 
 
@@ -321,6 +330,8 @@ def _find_doorways(
     neck_tolerance_m: float,
     room_margin_m: float,
     corridor_length_m: float,
+    bump_max_m: float,
+    flush_tolerance_m: float,
 ) -> npt.NDArray[np.float64]:
     """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
     dist, wall_x, wall_y = _nearest_walls(space, reach_px=math.ceil(max_width_m / resolution_m) + 2)
@@ -366,7 +377,67 @@ def _find_doorways(
         room_margin_px=room_margin_m / resolution_m,
         corridor_length_px=round(corridor_length_m / resolution_m),
     )
-    return pairs[keep]
+    pairs = pairs[keep]
+    if bump_max_m > 0 and len(pairs):
+        pairs = pairs[
+            ~bumps_a_strip(
+                walls,
+                pairs,
+                bump_px=bump_max_m / resolution_m,
+                tolerance_px=flush_tolerance_m / resolution_m,
+                max_depth_px=max(1, round(max_depth_m / resolution_m)),
+                depth_step_px=max(1, round(max_depth_m / resolution_m / 4)),
+            )
+        ]
+    return pairs
+
+
+def bumps_a_strip(
+    blocked: npt.NDArray[np.bool_],
+    ends: npt.NDArray[np.float64],
+    *,
+    bump_px: float,
+    tolerance_px: float,
+    max_depth_px: int,
+    depth_step_px: int,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: gaps across a strip that an obstacle against one of its walls narrows, not doorways.
+
+    On each side of a gap, at depths ``depth_step_px, 2 * depth_step_px, ... <= max_depth_px`` along its normal
+    (those the free space reaches straight from the gap's middle), the free run through the gap's middle parallel to
+    the gap ends within ``tolerance_px`` of one end of the gap and at most ``bump_px`` beyond the other, at every
+    depth on both sides: one wall of the strip runs on straight through that end, and the other end is a bump on the
+    facing wall (a cupboard, a bin), no thinner strip of wall. A doorway is an opening in a wall: the space behind
+    it reaches past both of its ends, or past one by more than a wall is thick.
+
+    Parameters
+    ----------
+    blocked : (H, W) bool
+        Walls.
+    ends : (G, 2, 2) float64
+        The two ends (x, y) of each gap, pixels.
+    """
+    if len(ends) == 0:
+        return np.zeros(0, dtype=bool)
+    width, u, normal, mid = _gap_frame(ends)
+    half = width / 2.0
+    depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
+    reach = math.ceil(float(half.max() + bump_px)) + 2
+    # per end: the run never passes that end by more than the tolerance, or the other end by more than a bump
+    flush = np.ones((len(ends), 2), dtype=bool)
+    bump = np.ones((len(ends), 2), dtype=bool)
+    seen = np.zeros(len(ends), dtype=bool)
+    for sign in (1.0, -1.0):
+        at = _free_depth(blocked, mid, sign * normal, max_depth_px)[:, None] >= depths[None, :]  # (G, D)
+        which, step = np.nonzero(at)
+        points = mid[which] + sign * depths[step, None] * normal[which]
+        seen |= at.any(axis=1)
+        for end, direction in ((0, -u[which]), (1, u[which])):
+            run = _free_depth(blocked, points, direction, reach)
+            flush[:, end] &= np.bincount(which, run > half[which] + tolerance_px, minlength=len(ends)) == 0
+            bump[:, end] &= np.bincount(which, run > half[which] + bump_px, minlength=len(ends)) == 0
+    out: npt.NDArray[np.bool_] = seen & ((flush[:, 0] & bump[:, 1]) | (flush[:, 1] & bump[:, 0]))
+    return out
 
 
 def _nearest_walls(

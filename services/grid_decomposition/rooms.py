@@ -135,8 +135,9 @@ def segment_rooms(
     3. Rooms joined through a neck are split (:func:`split_at_necks`, when
        ``neck_half_width_m`` > 0), and doorways found from the free space itself
        (:func:`find_doorways`) cut rooms apart; a cut across a corridor, which goes on for
-       ``corridor_length_m`` on both sides about as wide as the cut, is no doorway; nor is a cut
-       with an end on a table (when ``table_min_thickness_m`` > 0): an obstacle island the laser
+       ``corridor_length_m`` on both sides about as wide as the cut, is no doorway, nor is a cut across a strip
+       that furniture against one of its walls narrows (:func:`~services.grid_decomposition.doorways.bumps_a_strip`),
+       nor a cut with an end on a table (when ``table_min_thickness_m`` > 0): an obstacle island the laser
        hit, at most ``island_max_extent_m`` across, of which at least 0.3 survives an opening
        with a disc ``table_min_thickness_m`` wide (a dash of wall is thinner), compact (its
        minimum-area rectangle at most ``desk_max_elongation`` times as long as wide), with floor

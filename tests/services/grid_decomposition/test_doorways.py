@@ -13,6 +13,7 @@ from services.grid_decomposition.doorways import (
     _centre_runs,
     _nearest_walls,
     across_a_corridor,
+    bumps_a_strip,
     draw_cuts,
     find_doorways,
     widens,
@@ -110,6 +111,40 @@ def test_a_gap_across_a_corridor_beside_an_office_door_is_no_doorway_a_door_into
     assert not across_a_corridor(hall, across, widening_px=6, length_px=40).any()
     gaps = np.concatenate([door, across, door])  # each gap's answer is its own, however they are chunked
     assert across_a_corridor(walls, gaps, widening_px=6, length_px=40, chunk=1).tolist() == [False, True, False]
+
+
+def _strip_with_a_bump() -> np.ndarray:
+    """Free space of a 1 m wide, 5 m long dead-end strip with a 0.35 m deep, 0.4 m long cupboard against its right
+    wall half-way along it (the strip narrows to 0.65 m there)."""
+    free = np.zeros((120, 40), dtype=bool)
+    free[10:110, 10:30] = True
+    free[56:64, 23:30] = False
+    return free
+
+
+def test_a_strip_narrowed_by_a_cupboard_against_one_wall_is_no_doorway() -> None:
+    free = _strip_with_a_bump()
+    assert len(find_doorways(free, resolution_m=RES, bump_max_m=0.0)) >= 1  # widens by 0.35 m on both sides
+    assert len(find_doorways(free, resolution_m=RES)) == 0
+    gap = np.array([[[9.0, 60.0], [23.0, 60.0]]])  # from the left wall to the cupboard
+    assert bumps_a_strip(~free, gap, bump_px=12, tolerance_px=2, max_depth_px=20, depth_step_px=5).all()
+
+
+def test_a_door_beside_a_corner_and_a_door_into_a_closet_as_wide_as_its_corridor_stay_doorways() -> None:
+    free = np.zeros((100, 200), dtype=bool)
+    free[10:90, 10:98] = True  # two 4.4 x 4 m rooms in a row, the 0.15 m wall between them
+    free[10:90, 101:190] = True
+    free[10:28, 98:101] = True  # a 0.9 m door right beside the top outer wall
+    cuts = find_doorways(free, resolution_m=RES)
+    _, pieces = cv2.connectedComponents((free & ~draw_cuts(cuts, free.shape)).astype(np.uint8), connectivity=4)
+    assert pieces[50, 40] != pieces[50, 150]
+    closet = np.zeros((140, 40), dtype=bool)
+    closet[10:70, 10:30] = True  # a 1 m corridor
+    closet[70:73, 14:26] = True  # a 0.6 m door between 0.2 m jambs in a 0.15 m wall
+    closet[73:100, 10:30] = True  # a closet as wide as the corridor behind it
+    cuts = find_doorways(closet, resolution_m=RES)
+    _, pieces = cv2.connectedComponents((closet & ~draw_cuts(cuts, closet.shape)).astype(np.uint8), connectivity=4)
+    assert pieces[30, 20] != pieces[90, 20]
 
 
 def test_distances_to_walls_are_scipys_exact_ones() -> None:
