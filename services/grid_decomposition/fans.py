@@ -73,7 +73,11 @@ def split_fans(
     A part smaller than ``lobe_max_area_m2`` (a room's least area) that also touches a segment other than the one
     it leaves, along at least ``lobe_min_border_m`` (a corner or the end of a ray is no border), is a beam of a fan
     that segment holds (a room seen through its door in several beams): it joins the segment it touches along most
-    pixels rather than standing as a room too small to be one.
+    pixels rather than standing as a room too small to be one. With ``thin``, such a part beyond a door-wide neck
+    that fails the fan tests (too shallow, dense floor) joins the segment it so touches when at least
+    ``min_thin_share`` of that segment is ``thin``: a room seen only through its door is rays beyond the floor just
+    inside the door, which the laser saw densely from the corridor (a closet as wide as its door, whose door line the
+    room stage found no doorway: the cut lies where the rays widen, inside).
 
     Parameters
     ----------
@@ -124,17 +128,32 @@ def split_fans(
             # a door wider than the disc: a disc wider than the door stops at its line and bulges through it
             # (the room takes the floor between that bulge and its chord); only rays leave so, since a corridor
             # narrower than that disc is dense floor
-            parts, core, fans = _beyond_core(mine, inside, wide_radius, wide_neck_m, offset, tests, thin_here)
+            parts, core, fans, _ = _beyond_core(mine, inside, wide_radius, wide_neck_m, offset, tests, thin_here)
             rooms = [(parts == c) | _door_lens(parts == c, core) for c in fans]
         # a room's own floor beyond a neck stays in a small segment: only rays leave it
         small = thin_here if area < min_segment_area_m2 else None
-        parts, _, fans = _beyond_core(mine, inside, radius, max_neck_m, offset, tests, small)
+        parts, _, fans, necked = _beyond_core(mine, inside, radius, max_neck_m, offset, tests, small)
         rooms += [parts == c for c in fans]  # a room behind a narrow door inside one behind a wide door: its own
         for room in rooms:
             lobe_of = _lobe_of(out[box], room, k, fixed, lobe_border_px) if np.count_nonzero(room) < lobe_max_px else 0
             out[box][room] = lobe_of or next_id
             next_id += 0 if lobe_of else 1
+        if thin is None:
+            continue
+        for c in necked:  # the floor just inside the door of a room seen only as rays: that room's
+            pocket = parts == c
+            if c in fans or np.count_nonzero(pocket) >= lobe_max_px:
+                continue
+            lobe_of = _lobe_of(out[box], pocket, k, fixed, lobe_border_px)
+            if lobe_of and _thin_share(out, lobe_of, thin) >= min_thin_share:
+                out[box][pocket] = lobe_of
     return out
+
+
+def _thin_share(labels: npt.NDArray[np.int32], label: int, thin: npt.NDArray[np.bool_]) -> float:
+    """The share of the pixels of ``label`` in ``labels`` that are ``thin``."""
+    mine = labels == label
+    return int(np.count_nonzero(thin & mine)) / max(1, int(np.count_nonzero(mine)))
 
 
 def _lobe_of(
@@ -160,26 +179,28 @@ def _beyond_core(
     offset: tuple[int, int],
     tests: _FanTests,
     thin: npt.NDArray[np.bool_] | None,
-) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], list[int]]:
-    """The parts of ``mine`` beyond its core (what a disc of ``radius`` sweeps), the core, and the parts that pass
-    the fan tests of :func:`split_fans` (``inside``: the distance transform of ``mine``; ``offset``: its top-left
-    corner in ``tests.occupied``)."""
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], list[int], list[int]]:
+    """The parts of ``mine`` beyond its core (what a disc of ``radius`` sweeps), the core, the parts that pass
+    the fan tests of :func:`split_fans` and those of at least its least area beyond a neck no wider than
+    ``max_neck_m`` (``inside``: the distance transform of ``mine``; ``offset``: its top-left corner in
+    ``tests.occupied``)."""
     occupied, resolution_m, min_area_m2, min_depth_m, outside_reach_m, max_open_share, min_thin_share = tests
     # the opening by distances: a disc's erosion and dilation are thresholds of the distance transform (``near``
     # by one transform each: a dilation by a ball as wide as a door is slower)
     inner = inside > radius
     n, parts, stats = components_stats(inner.view(np.uint8), 8)
     if n < 2:
-        return parts, mine, []
+        return parts, mine, [], []
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     core = mine & (cv2.distanceTransform((parts != largest).view(np.uint8), cv2.DIST_L2, 5) <= radius)
     n, parts, stats = components_stats((mine & ~core).view(np.uint8), 8)  # 0/1 bytes as they are
     big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_m2 / resolution_m**2)
     big = big[big > 0]
     if big.size == 0:
-        return parts, core, []
+        return parts, core, [], []
     neck = np.bincount(parts[cv2.dilate(core.view(np.uint8), _RING).view(bool)], minlength=n)
-    fans = [int(c) for c in big if 0 < neck[c] * resolution_m <= max_neck_m]
+    necked = [int(c) for c in big if 0 < neck[c] * resolution_m <= max_neck_m]
+    fans = necked
     if fans and thin is not None:
         thin_share = np.bincount(parts[thin], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
         fans = [c for c in fans if thin_share[c] >= min_thin_share]
@@ -190,7 +211,7 @@ def _beyond_core(
         fans = [c for c, share in zip(fans, open_share(
             occupied, np.array([_middle(parts == c) for c in fans]) + np.array(offset),
             reach_px=round(outside_reach_m / resolution_m)), strict=True) if share < max_open_share]
-    return parts, core, fans
+    return parts, core, fans, necked
 
 
 def _door_lens(room: npt.NDArray[np.bool_], core: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:

@@ -405,7 +405,8 @@ def decompose(
         room of its own (:func:`~services.grid_decomposition.fans.split_fans`), in the new decomposition and again
         in the regions the ``prior`` kept; a region under a hall's size loses only fans of laser rays (the
         cleaning's rays and streaks), never its own floor beyond a neck; a hall also loses a room of rays behind a
-        door up to ``door_max_width_m`` wide, cut at the door's line; 0 turns it off.
+        door up to ``door_max_width_m`` wide, cut at the door's line; floor too shallow for a room just inside a door,
+        beside such a room of rays, is that room's; 0 turns it off.
     short_wall_min_m : float
         After the rooms are parted from their corridors, a room region of at least
         ``corridor_min_region_m2`` parts along a wall at least this long that stops short of the

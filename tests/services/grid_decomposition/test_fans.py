@@ -121,6 +121,31 @@ def test_a_beam_smaller_than_a_room_joins_the_room_it_touches_and_stands_alone_o
     assert split(corner)[150, 139] not in (0, 1, 2)
 
 
+def test_the_floor_inside_a_closet_door_goes_with_the_room_of_rays_beyond_it() -> None:
+    """A closet as wide as its 1 m door: the floor 1.2 m deep just inside the door (dense, seen from the hall) is the
+    hall's, and the closet beyond it another region. When that region is laser rays (a room seen only through its
+    door) the floor inside the door is its floor; when it is dense floor (a room of its own the robot entered, a bay)
+    the hall keeps it."""
+    segments = np.zeros((200, 300), dtype=np.int32)
+    segments[22:120, 22:260] = 1
+    segments[120:144, 134:154] = 1  # the floor inside the door, 1 m wide and 1.2 m deep
+    segments[144:184, 120:170] = 2  # the closet beyond it
+    occupied = np.zeros(segments.shape, dtype=bool)
+    occupied[[20, 120], 20:262] = occupied[20:122, [20, 261]] = True
+    occupied[120:144, [133, 154]] = occupied[144:185, [119, 170]] = occupied[184, 119:171] = True
+    occupied[120, 134:154] = False  # the door
+    rays = np.zeros(segments.shape, dtype=bool)
+    rays[144:184:2, 120:170] = True  # every other row of the closet: rays
+
+    def split(thin: np.ndarray | None) -> np.ndarray:
+        return split_fans(segments, occupied, np.zeros(3, dtype=bool), resolution_m=RESOLUTION_M, thin=thin,
+                          lobe_max_area_m2=1.5)
+
+    assert np.all(split(rays)[128:144, 134:154] == 2)
+    assert np.array_equal(split(np.zeros(segments.shape, dtype=bool)), segments)  # a dense room: the hall's floor
+    assert np.array_equal(split(None), segments)
+
+
 def test_a_room_the_previous_decomposition_left_in_the_hall_parts_once_its_walls_are_seen() -> None:
     """A growing map: first the robot saw the rays through the door but none of the room's walls (they could be
     rays out of the building), so the room was the hall's; then it saw the walls, and nothing else changed. With the
