@@ -4,7 +4,8 @@ A lidar looking through the gaps of a wall into a room it never enters leaves a 
 each ray a dotted line of free cells with unknown between the dots. The regions are 4-connected pieces of free
 space: a dot is a piece too small to be a region and is dropped, and a fan whose rays are a few cells apart
 falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there. The
-dots between the rays of a region's own fan, flanked by it on both sides, are its floor too.
+dots between the rays of a region's own fan, flanked by it on both sides, are its floor too, and so are the dots
+beyond a fan's end that walls and floor close in, inside the room's walls.
 """
 
 from __future__ import annotations
@@ -183,3 +184,57 @@ def _nearest(
         found[open_] = seen
         open_ = open_[(seen == 0) & ~flat_stop[cell]]
     return found
+
+
+def fill_enclosed(
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    doorways: npt.NDArray[np.bool_],
+    *,
+    reach_px: int,
+    enclosed_px: int,
+    min_area_px: int,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with the loose free cells that walls and floor close in given to the region reaching them.
+
+    A dot of a ray (a free cell no region holds) within ``reach_px`` of a region, through unknown and loose cells
+    and never through an obstacle or a doorway line, takes the region that reaches it first (8-neighbour growth)
+    when it lies inside a room's walls: looking along its row and its column, at least three of the four ways
+    meet an obstacle or a region's floor within ``enclosed_px`` (the dots beyond a building's outer wall see
+    nothing outwards), and one of them meets the region it would take (a room's dots lie in that room's view,
+    not behind the floor of another). Regions under ``min_area_px`` (specks) take none.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    free, occupied, doorways : (H, W) bool
+        ``doorways``: the closed doorway lines and cuts between regions.
+    reach_px, enclosed_px, min_area_px : int
+    """
+    loose = free & (segments == 0)
+    if not loose.any() or not segments.any():
+        return segments
+    n = int(segments.max()) + 1
+    takes = label_counts(segments, n)[0] >= min_area_px
+    takes[0] = False
+    seeds = np.where(lookup(takes, segments), segments, 0)
+    way = ~occupied & ~doorways & (segments == 0) & near(seeds > 0, reach_px)
+    grown = fill_from_neighbours(seeds, way, max_iterations=reach_px)
+    rows, cols = nonzero_rc(loose & (grown > 0))
+    if rows.size == 0:
+        return segments
+    region = grown[rows, cols]
+    seen = np.where(occupied, -1, segments).astype(np.int32)  # an obstacle is -1, a region its id
+    never = np.zeros_like(occupied)
+    met = np.zeros(rows.size, dtype=np.int64)
+    in_view = np.zeros(rows.size, dtype=bool)
+    for dr, dc in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        first = _nearest(seen, never, rows, cols, dr, dc, enclosed_px)
+        met += first != 0
+        in_view |= first == region
+    take = (met >= 3) & in_view
+    out = segments.copy()
+    out[rows[take], cols[take]] = region[take]
+    return out
