@@ -95,7 +95,7 @@ _POST_MIN_RUN_M = 0.1
 _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 _FAN_GAP_M = 0.5  # rays this close are one fan (the cleaning bridges the unknown between them: twice its fan gap)
-_DOT_REACH_M = 1.0  # a region takes the dots closed in by walls this far beyond its floor (two fan gaps)
+_DOT_REACH_M = 1.0  # a dot that walls close in takes the region it sees this near along its row or column
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules. The line search needs the first batch; scikit-learn
@@ -436,10 +436,9 @@ def decompose(
         in a wall the laser saw) join (:func:`~services.grid_decomposition.openings.join_unseen_openings`); 0 turns
         it off.
     enclosed_dots_m : float
-        A free cell no region holds (a dot of a laser ray) within 1 m of a region, through unknown and loose cells and
-        across no obstacle or doorway line, takes the region reaching it first when, along its row and column, three
-        of the four ways meet an obstacle or a region within this distance, one of them that region: the dot lies
-        inside a room's walls, not beyond the building's outer wall
+        A free cell no region holds (a dot of a laser ray) looks along its row and column, four ways, to the first
+        obstacle, doorway line or region cell; when three of the four meet one within this distance (it lies inside
+        a room's walls, not beyond the building's outer wall), it takes the region it meets nearest within 1 m
         (:func:`~services.grid_decomposition.loose.fill_enclosed`); 0 turns it off.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
