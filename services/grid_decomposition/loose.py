@@ -4,11 +4,13 @@ A lidar looking through the gaps of a wall into a room it never enters leaves a 
 each ray a dotted line of free cells with unknown between the dots. The regions are 4-connected pieces of free
 space: a dot is a piece too small to be a region and is dropped, and a fan whose rays are a few cells apart
 falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there. The
-dots between the rays of a region's own fan, flanked by it on both sides, are its floor too.
+dots between the rays of a region's own fan, flanked by it on both sides, are its floor too, and so are the dots
+beyond a fan's end that walls and floor close in, inside the room's walls.
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse import coo_matrix
@@ -240,3 +242,75 @@ def _nearest(
         found[open_] = seen
         open_ = open_[(seen == 0) & ~flat_stop[cell]]
     return found
+
+
+
+def fill_enclosed(
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    doorways: npt.NDArray[np.bool_],
+    *,
+    reach_px: int,
+    enclosed_px: int,
+    min_area_px: int,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with the loose free cells that walls and floor close in given to the nearest region in view.
+
+    A dot of a ray (a free cell no region holds) looks along its row and its column, four ways, each up to the
+    first obstacle, doorway line or region cell. When at least three of the four ways meet one within
+    ``enclosed_px``, the dot lies inside a room's walls (a dot beyond a building's outer wall sees nothing
+    outwards), and it takes the region it meets nearest within ``reach_px``: the floor of its room seen beyond
+    the fan's end, never across a wall or a doorway line. Regions under ``min_area_px`` (specks) take none.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    free, occupied, doorways : (H, W) bool
+        ``doorways``: the closed doorway lines and cuts between regions; they close a room as its walls do.
+    reach_px, enclosed_px, min_area_px : int
+    """
+    loose = free & (segments == 0)
+    if not loose.any() or not segments.any():
+        return segments
+    takes = label_counts(segments, int(segments.max()) + 1)[0] >= min_area_px
+    takes[0] = False
+    seen = np.where(occupied | doorways, np.int32(-1), segments)  # a wall or doorway -1, a region its id
+    rows, cols = nonzero_rc(loose)
+    met, steps = _first_met(seen, rows, cols)  # (4, N): right, left, down, up
+    within = met != 0
+    within[within] = steps[within] <= enclosed_px
+    enclosed = np.count_nonzero(within, axis=0) >= 3
+    may_take = (met > 0) & (steps <= reach_px)
+    may_take[may_take] = takes[met[may_take]]
+    way = np.argmin(np.where(may_take, steps, enclosed_px + reach_px + 1), axis=0)  # the nearest region that may take
+    region = np.take_along_axis(np.where(may_take, met, 0), way[None], axis=0)[0]
+    take = enclosed & (region > 0)
+    out = segments.copy()
+    out[rows[take], cols[take]] = region[take]
+    return out
+
+
+def _first_met(
+    seen: npt.NDArray[np.int32], rows: npt.NDArray[np.int64], cols: npt.NDArray[np.int64]
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64]]:
+    """(4, N) the first nonzero ``seen`` value right, left, down and up of each cell (rows, cols) on its row or
+    column (0 if none before the image's edge), and the steps to it: the nonzero cells in row and in column order,
+    each cell's neighbours among them by one binary search."""
+    h, w = seen.shape
+    met = np.zeros((4, rows.size), dtype=np.int32)
+    steps = np.zeros((4, rows.size), dtype=np.int64)
+    for k, (image, line, at, length) in enumerate(((seen, rows, cols, w), (cv2.transpose(seen), cols, rows, h))):
+        flat = image.ravel()
+        hits = np.flatnonzero(flat)
+        query = line * length + at
+        after = np.searchsorted(hits, query)  # the first nonzero cell after the query (the query cell is 0)
+        for side, index in ((0, after), (1, after - 1)):
+            ok = (index >= 0) & (index < hits.size)
+            cell = hits[np.clip(index, 0, hits.size - 1)]  # (a region's cells are nonzero: never empty)
+            ok &= cell // length == line
+            met[2 * k + side] = np.where(ok, flat[cell], 0)
+            steps[2 * k + side] = np.where(ok, np.abs(cell - query), 0)
+    return met, steps
+

@@ -33,7 +33,7 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.loose import fill_between, join_and_fill_loose
+from services.grid_decomposition.loose import fill_between, fill_enclosed, join_and_fill_loose
 from services.grid_decomposition.openings import join_unseen_openings
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -95,6 +95,7 @@ _POST_MIN_RUN_M = 0.1
 _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 _FAN_GAP_M = 0.5  # rays this close are one fan (the cleaning bridges the unknown between them: twice its fan gap)
+_DOT_REACH_M = 1.0  # a dot that walls close in takes the region it sees this near along its row or column
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules. The line search needs the first batch; scikit-learn
@@ -327,6 +328,7 @@ def decompose(
     inside_furniture_max_m2: float = 1.5,
     passage_max_m2: float = 3.0,
     unseen_opening_m: float = 0.75,
+    enclosed_dots_m: float = 5.0,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -434,6 +436,11 @@ def decompose(
         this distance of either end (from unknown space to unknown space: across a strip of laser rays, no doorway
         in a wall the laser saw) join (:func:`~services.grid_decomposition.openings.join_unseen_openings`); 0 turns
         it off.
+    enclosed_dots_m : float
+        A free cell no region holds (a dot of a laser ray) looks along its row and column, four ways, to the first
+        obstacle, doorway line or region cell; when three of the four meet one within this distance (it lies inside
+        a room's walls, not beyond the building's outer wall), it takes the region it meets nearest within 1 m
+        (:func:`~services.grid_decomposition.loose.fill_enclosed`); 0 turns it off.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -742,8 +749,14 @@ def decompose(
         )
         # a dot of a ray between two cells of one region (between two rays of its fan, in a notch of its outline)
         segments = fill_between(segments, free, occupied, reach_px=fan_gap_px)
-        grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         doorways = door | cuts
+        if enclosed_dots_m > 0:  # the dots beyond a fan's end that walls and floor close in: inside the room's walls
+            segments = fill_enclosed(
+                segments, free, occupied, doorways, reach_px=max(1, round(_DOT_REACH_M / resolution_m)),
+                enclosed_px=max(1, round(enclosed_dots_m / resolution_m)),
+                min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+            )
+        grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records
         pairs = _pairs(segments, sub)
         racked = floor_px | banks.storage | on_places  # the only floor a storage region may stand on

@@ -8,6 +8,7 @@ import numpy as np
 from services.grid_decomposition.loose import (
     _touching,
     fill_between,
+    fill_enclosed,
     fill_lone_regions,
     join_and_fill_loose,
     join_isolated_pieces,
@@ -119,3 +120,48 @@ def test_touching_flags_every_region_with_an_8_neighbour_of_another() -> None:
         around = padded[r : r + 3, c : c + 3]
         expected[seg[r, c]] |= bool(np.any((around > 0) & (around != seg[r, c])))
     assert np.array_equal(_touching(seg, 12), expected)
+
+
+def _room_behind_a_door() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A corridor (region 1) below a room whose region (2) is a fan by its door; walls left, right and on top."""
+    seg = np.zeros((70, 60), dtype=np.int32)
+    occupied = np.zeros(seg.shape, dtype=bool)
+    doorways = np.zeros(seg.shape, dtype=bool)
+    seg[50:62, 2:58] = 1  # the corridor
+    occupied[10:50, 10] = occupied[10:50, 50] = occupied[10, 10:51] = True  # the room's walls
+    occupied[49, 10:51] = True  # its wall on the corridor, with a door
+    occupied[49, 25:35] = False
+    doorways[49, 25:35] = True
+    seg[40:49, 22:38] = 2  # the floor seen through the door: 9 x 16 cells
+    return seg, occupied, doorways, np.zeros(seg.shape, dtype=bool)
+
+
+def test_the_dots_beyond_a_fan_inside_the_room_s_walls_are_its_floor_and_those_beyond_its_wall_are_not() -> None:
+    seg, occupied, doorways, dots = _room_behind_a_door()
+    dots[33, 30] = dots[36, 24] = True  # ray dots beyond the fan's end, inside the walls (4-7 cells)
+    dots[5, 30] = True  # beyond the top wall, within reach of nothing
+    dots[30, 53] = True  # beyond the right wall, next to it
+    seg[28:34, 53:56] = 0
+    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20)
+    assert out[33, 30] == 2 and out[36, 24] == 2
+    assert out[5, 30] == 0 and out[30, 53] == 0
+    assert np.array_equal(out[~dots], seg[~dots])
+
+
+def test_a_dot_the_region_reaches_only_round_a_corner_or_a_speck_reaches_is_not_taken() -> None:
+    seg, occupied, doorways, dots = _room_behind_a_door()
+    dots[38, 40] = True  # diagonal to the fan's corner: the ways along its row and column meet walls, not the fan
+    seg[20:23, 15:18] = 3  # a speck of 9 cells in the room's corner
+    dots[21, 19] = True  # next to the speck, out of the fan's reach
+    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=4, enclosed_px=100, min_area_px=20)
+    assert out[38, 40] == 0
+    assert out[21, 19] == 0
+    assert np.array_equal(out, seg)
+
+
+def test_a_dot_in_a_room_behind_a_doorway_line_is_not_the_corridor_s() -> None:
+    seg, occupied, doorways, dots = _room_behind_a_door()
+    seg[40:49, 22:38] = 0  # the room not seen at all: only the corridor
+    dots[45, 30] = True  # a dot in the room, 5 cells above the corridor through the door
+    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20)
+    assert out[45, 30] == 0
