@@ -25,6 +25,7 @@ from services.floor_plan.frame import (
     to_map,
     to_work,
 )
+from services.floor_plan.fronts import open_fronts, split_at_fronts
 from services.floor_plan.kernels import KernelSettings, Proposer
 from services.floor_plan.likelihood import (
     SEED_SENSOR_MODEL,
@@ -502,11 +503,14 @@ def _rooms(world: World, classes_map: npt.NDArray[np.uint8], traces: npt.NDArray
            wall_cells: int) -> tuple[list[Room], npt.NDArray[np.int32]]:
     """The room level of a world (:mod:`services.floor_plan.rooms`, re-cut along slanted walls) and its cells."""
     seen_work = to_work(frame, np.where(traces, np.uint8(CellClass.FREE), classes_map), fill=CellClass.UNKNOWN)
-    return split_at_slanted_walls(
+    rooms, cells = split_at_slanted_walls(
         group_rooms(world, seen_work, types, wall_cells=wall_cells, resolution_m=frame.resolution_m,
                     settings=settings.rooms),
         world, seen_work, lines, resolution_m=frame.resolution_m, reach_m=0.5 * settings.slant_gap_m,
         settings=settings.rooms)
+    free = seen_work == CellClass.FREE
+    fronts = open_fronts(free, resolution_m=frame.resolution_m, settings=settings.rooms)
+    return split_at_fronts(rooms, cells, world, free, fronts, resolution_m=frame.resolution_m, settings=settings.rooms)
 
 
 def unit_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:

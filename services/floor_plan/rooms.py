@@ -81,7 +81,24 @@ class RoomSettings:
     from both axes of the frame split rooms (axis-parallel walls cut the units already); None: rooms are made of
     rectangles only."""
     slant_min_piece_m2: float = 1.0
-    """A room is re-cut where a slanted line splits it into pieces at least this large."""
+    """A room is re-cut where a slanted line or an open front splits it into pieces at least this large."""
+    front_max_m: float | None = 4.0
+    """An open front (:mod:`services.floor_plan.fronts`: the line joining two side walls' free ends, an office's whole
+    front onto a corridor) is at most this wide between the walls; None: rooms are not cut at open fronts."""
+    front_min_m: float = 1.5
+    """... and at least this wide (narrower: a passage, the aisle between two rows of cubicles)."""
+    front_side_m: float = 2.0
+    """Both side walls run back from the front at least this far."""
+    front_offset_m: float = 0.15
+    """The two walls' ends lie on one line within this much."""
+    front_cap_m: float = 0.2
+    """A wall's end may be capped by a short wall across it this thick (a T at the end of an office wall)..."""
+    front_corner_m: float = 0.75
+    """... reaching at most this far beyond the wall's side: a wall running on along the front is a corner (an
+    alcove, a hall's side wall turning into its neighbours' fronts), not a free end."""
+    front_ahead_m: float = 1.2
+    """Free space runs on ahead of the front, over its whole width, at least this far: a corridor or a hall in front,
+    not a door jamb (a door is narrower) nor a passage between furniture."""
 
 
 class Boundary(NamedTuple):

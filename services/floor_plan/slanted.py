@@ -110,8 +110,16 @@ def split_at_slanted_walls(
     region, _ = ndimage.label(free & ~line_mask(lines, classes.shape, reach_cells=reach))
     size = np.bincount(region.ravel())
     size[0] = 0
-    recut = np.isin(cells, split)
-    region = np.where(recut & (size[region] >= least), region, 0)
+    region = np.where(np.isin(cells, split) & (size[region] >= least), region, 0)
+    return recut(rooms, world, cells, split, region, resolution_m=resolution_m)
+
+
+def recut(rooms: list[Room], world: World, cells: npt.NDArray[np.int32], split: list[int],
+          region: npt.NDArray[np.int32], *, resolution_m: float) -> tuple[list[Room], npt.NDArray[np.int32]]:
+    """The rooms ``split`` (indices + 1 in ``cells``) replaced by the regions of ``region`` (labels > 0 over their
+    cells), one room each: a re-cut room keeps its type, its units and parts are those of the room it came from that
+    its free space overlaps. Returns the rooms, sorted, and each room's index + 1 on its cells (0 on the cells of a
+    split room that no region holds)."""
     kept = [(room, k) for k, room in enumerate(rooms, start=1) if k not in split]
     recut_rooms: list[tuple[Room, tuple[slice, slice], npt.NDArray[np.bool_]]] = []
     for r, box in enumerate(ndimage.find_objects(region), start=1):
