@@ -82,6 +82,15 @@ class RoomSettings:
     rectangles only."""
     slant_min_piece_m2: float = 1.0
     """A room is re-cut where a slanted line or an open front splits it into pieces at least this large."""
+    slant_join_max_m2: float | None = 50.0
+    """A room holding a piece (``slant_min_piece_m2`` or more) of a region the wall lines enclose that a re-cut room
+    holds a piece of too is re-cut as well, where the region is at most this large: the rectangles of two units cut
+    a room between slanted walls in two where no wall stands, and the re-cut makes it one region. A larger region
+    is a hall, or space that leaks past the lines (a real scan's beams): no join through it. None: only the rooms a
+    slanted line splits are re-cut."""
+    slant_join_share: float = 0.25
+    """... and where slanted lines are at least this share of the wall lines round the region: a room between
+    slanted walls, not a corridor or room of walls along the frame with a chamfered corner."""
     front_max_m: float | None = 4.0
     """An open front (:mod:`services.floor_plan.fronts`: the line joining two side walls' free ends, an office's whole
     front onto a corridor) is at most this wide between the walls; None: rooms are not cut at open fronts."""

@@ -7,7 +7,9 @@ the map that run slanted (:func:`~services.floor_plan.detectors.wall_line_segmen
 :mod:`services.floor_plan.walls` are cut along too; drawn by :func:`line_mask`). Where such a line splits a room
 into pieces of ``slant_min_piece_m2`` or more, the room is no longer made of its rectangles: its free space is
 re-cut into the regions that the map's wall lines of every direction enclose, one room each
-(:func:`split_at_slanted_walls`). A room no slanted line splits keeps its parts as they are.
+(:func:`split_at_slanted_walls`). A room that shares such a region with a re-cut room (the rectangles of two units
+cut the space between slanted walls where no wall stands) is re-cut too, so that the region is one room; a room
+neither splits nor joins keeps its parts as they are.
 """
 
 from __future__ import annotations
@@ -110,6 +112,12 @@ def split_at_slanted_walls(
     region, _ = ndimage.label(free & ~line_mask(lines, classes.shape, reach_cells=reach))
     size = np.bincount(region.ravel())
     size[0] = 0
+    if settings.slant_join_max_m2 is not None:
+        small = size <= settings.slant_join_max_m2 / resolution_m**2
+        split = _sharing(cells, region, small, split, least,
+                         walls=(line_mask(across, classes.shape, reach_cells=reach),
+                                line_mask(lines, classes.shape, reach_cells=reach)),
+                         min_share=settings.slant_join_share)
     region = np.where(np.isin(cells, split) & (size[region] >= least), region, 0)
     return recut(rooms, world, cells, split, region, resolution_m=resolution_m)
 
@@ -143,6 +151,43 @@ def recut(rooms: list[Room], world: World, cells: npt.NDArray[np.int32], split: 
         labels[box][at] = rank[i]
     ordered = [every[i] for i in order]
     return ordered, labels
+
+
+def _sharing(cells: npt.NDArray[np.int32], region: npt.NDArray[np.int32], small: npt.NDArray[np.bool_],
+             split: list[int], least: int, *, walls: tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]],
+             min_share: float) -> list[int]:
+    """``split`` and every room joined to it through a region (index of ``region``) that ``small`` allows and that
+    slanted lines (``walls[0]``) outline over at least ``min_share`` of the wall lines (``walls[1]``) round it: two
+    rooms (indices + 1 in ``cells``) are joined where each holds at least ``least`` cells of such a region."""
+    at = (cells > 0) & (region > 0)
+    at &= small[region]
+    n = int(cells.max()) + 1
+    keys, count = np.unique(region[at].astype(np.int64) * n + cells[at], return_counts=True)
+    keys = keys[count >= least]
+    regions, rooms = keys // n, keys % n
+    boxes = ndimage.find_objects(region)
+    held = np.unique(regions[np.diff(regions, prepend=-1) == 0])  # regions two or more rooms hold
+    outlined = [r for r in held.tolist() if _slanted_share(region, r, boxes[r - 1], walls) >= min_share]
+    keep = np.isin(regions, outlined)
+    regions, rooms = regions[keep], rooms[keep]
+    out = set(split)
+    while True:
+        more = set(rooms[np.isin(regions, regions[np.isin(rooms, list(out))])].tolist()) - out
+        if not more:
+            return sorted(out)
+        out |= more
+
+
+def _slanted_share(region: npt.NDArray[np.int32], r: int, box: tuple[slice, slice],
+                   walls: tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]) -> float:
+    """The share of the wall lines (``walls[1]``) beside region ``r`` (within ``_LINE_CELLS`` - 1 cells, the lines
+    it stops at) that are slanted (``walls[0]``)."""
+    reach = _LINE_CELLS - 1
+    rows = slice(max(box[0].start - reach, 0), box[0].stop + reach)
+    cols = slice(max(box[1].start - reach, 0), box[1].stop + reach)
+    near = ndimage.binary_dilation(region[rows, cols] == r, iterations=reach)
+    every = np.count_nonzero(near & walls[1][rows, cols])
+    return np.count_nonzero(near & walls[0][rows, cols]) / every if every else 0.0
 
 
 def _covers(rect: Rect, box: tuple[slice, slice], at: npt.NDArray[np.bool_]) -> bool:

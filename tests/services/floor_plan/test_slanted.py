@@ -12,6 +12,7 @@ import numpy.typing as npt
 from services.floor_plan import (
     CellClass,
     Rect,
+    Room,
     RoomSettings,
     UnitType,
     World,
@@ -88,3 +89,27 @@ def test_a_room_without_slanted_walls_keeps_its_rectangles() -> None:
 def test_slanted_cuts_can_be_turned_off() -> None:
     n, _ = _split(_room_with_slanted_wall(dashed=False), dataclasses.replace(RoomSettings(), slant_min_angle_rad=None))
     assert n == 1
+
+
+def _two_units_over_a_slanted_wall(settings: RoomSettings) -> npt.NDArray[np.int32]:
+    """Two units side by side, kept apart as two rooms, where a slanted wall cuts the first one only: the space
+    right of the wall lies in both."""
+    classes = _room_with_slanted_wall(dashed=False)
+    world = World({1: Rect(0, 99, 0, 101), 2: Rect(0, 99, 100, 139)}, set(), 3)
+    rooms = [Room((1,), (Rect(T, 99 - T, T, 101 - T),), UnitType.ROOM, 20.0),
+             Room((2,), (Rect(T, 99 - T, 100 + T, 139 - T),), UnitType.ROOM, 8.0)]
+    _, cells = split_at_slanted_walls(rooms, world, classes, _lines(classes), resolution_m=RES, reach_m=0.6,
+                                      settings=settings)
+    return cells
+
+
+def test_the_space_between_slanted_walls_two_units_hold_is_one_room() -> None:
+    cells = _two_units_over_a_slanted_wall(RoomSettings())
+    left, right_of_wall, second_unit = cells[80, 10], cells[20, 80], cells[20, 130]
+    assert right_of_wall == second_unit, "no wall between the two units' pieces right of the slanted wall"
+    assert left != right_of_wall, "the slanted wall still parts the rooms"
+
+
+def test_rooms_that_share_space_between_slanted_walls_stay_apart_without_the_join() -> None:
+    cells = _two_units_over_a_slanted_wall(dataclasses.replace(RoomSettings(), slant_join_max_m2=None))
+    assert cells[20, 80] != cells[20, 130]
