@@ -263,12 +263,19 @@ def test_furniture_in_a_room_takes_its_label_and_a_dotted_wall_stays_unlabelled(
     assert (out[classes == CellClass.FREE] == labels[classes == CellClass.FREE]).all()
 
 
-def test_furniture_drawn_unknown_against_a_wall_takes_its_room_and_a_walls_grey_core_does_not() -> None:
+def _two_rooms_parted_by_a_grey_cored_wall() -> npt.NDArray[np.uint8]:
+    """A building of two rooms in unseen outside, parted by a wall drawn with two black faces and a grey core 0.2 m
+    thick between them (columns 59-62)."""
     classes = np.full((80, 120), CellClass.UNKNOWN, np.uint8)  # the unseen outside
     classes[5:75, 5:115] = CellClass.WALL
     classes[7:73, 7:113] = CellClass.FREE  # a building of two rooms ...
     classes[7:73, 58:64] = CellClass.WALL  # ... parted by a wall drawn with two black faces ...
     classes[7:73, 59:63] = CellClass.UNKNOWN  # ... and a grey core 0.2 m thick between them
+    return classes
+
+
+def test_furniture_drawn_unknown_against_a_wall_takes_its_room_and_a_walls_grey_core_does_not() -> None:
+    classes = _two_rooms_parted_by_a_grey_cored_wall()
     classes[7:17, 10:40] = CellClass.UNKNOWN  # a 0.5 m x 1.5 m cupboard drawn grey against the top wall
     classes[62:73, 70:92] = CellClass.WALL  # a cupboard drawn with a dark outline against the bottom wall ...
     classes[63:73, 71:91] = CellClass.UNKNOWN  # ... filled grey
@@ -304,11 +311,7 @@ def test_a_piece_between_two_rooms_takes_no_label() -> None:
 
 
 def test_a_cupboard_joined_to_a_walls_grey_core_is_furniture_and_a_stub_of_that_wall_is_not() -> None:
-    classes = np.full((80, 120), CellClass.UNKNOWN, np.uint8)  # the unseen outside
-    classes[5:75, 5:115] = CellClass.WALL
-    classes[7:73, 7:113] = CellClass.FREE  # a building of two rooms ...
-    classes[7:73, 58:64] = CellClass.WALL  # ... parted by a wall drawn with two black faces ...
-    classes[7:73, 59:63] = CellClass.UNKNOWN  # ... and a grey core 0.2 m thick between them
+    classes = _two_rooms_parted_by_a_grey_cored_wall()
     classes[20:40, 63:83] = CellClass.UNKNOWN  # a 1 m x 1 m cupboard drawn grey against it, one piece with its core
     classes[50:73, 56:66] = CellClass.WALL  # a stub of that wall 0.5 m thick above the bottom wall ...
     classes[50:73, 57:65] = CellClass.UNKNOWN  # ... its grey core one piece with the parting wall's
