@@ -405,7 +405,7 @@ def opens_an_arm(
 
     Just beyond each end of the gap (1 to ``from_px`` - 1 pixels along it) the wall is looked at beside the end, on
     each side along the gap's normal from ``from_px`` to ``to_px``: it runs on that way when at least ``share`` of
-    those pixels are ``blocked`` at one of those distances beyond the end (a thin wall is crossed in a pixel or two).
+    those pixels are ``blocked``.
     At the mouth of an L-shaped room's arm (or across a corridor's bend) one end meets a straight wall side-on,
     which runs on both ways, and the other is a corner, whose wall runs on at least one way: both walls go on beside
     the free space on one side, the arm. A doorway's jambs are the ends of its wall, which runs on along the gap, not
@@ -440,7 +440,7 @@ def opens_an_arm(
             inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
             hit: npt.NDArray[np.bool_] = ~inside  # off the image is wall
             hit[inside] = blocked[y[inside], x[inside]]
-            runs_on[:, end, side] = np.any(hit.mean(axis=2) >= share, axis=1)  # at one distance beyond the end
+            runs_on[:, end, side] = hit.reshape(wide.size, -1).mean(axis=1) >= share
     flat: npt.NDArray[np.bool_] = np.all(runs_on, axis=2)  # per gap and end: the wall runs on both ways
     corner: npt.NDArray[np.bool_] = np.any(runs_on, axis=2)  # ... at least one way
     out[wide] = (flat[:, 0] & corner[:, 1]) | (flat[:, 1] & corner[:, 0])

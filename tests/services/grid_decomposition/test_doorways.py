@@ -152,7 +152,7 @@ def test_the_mouth_of_a_rooms_arm_is_no_doorway_a_gap_beside_a_partition_and_a_w
     ell = np.zeros((170, 150), dtype=bool)
     ell[80:160, 20:140] = True  # a 6 x 4 m room
     ell[20:80, 20:64] = True  # its 2.2 m wide arm, the arm's left wall the room's run on
-    ell[20:77, 67:140] = True  # a room beside the arm behind 0.15 m walls
+    ell[20:75, 69:140] = True  # a room beside the arm behind 0.25 m walls
 
     def arm(blocked: np.ndarray, gap: list[list[float]], min_width_px: float = 40.0) -> bool:
         flags = opens_an_arm(blocked, np.array([gap]), min_width_px=min_width_px, from_px=4, to_px=16, share=0.8)

@@ -442,12 +442,12 @@ def test_segments_on_warehouse_floors_stay_as_they_are() -> None:
 def _room_with_an_arm() -> tuple[np.ndarray, np.ndarray]:
     """Free space at 5 cm of an L-shaped room (a 6 x 4 m body, a 2.2 m wide arm 3 m long off its top left, the arm's
     left wall the body's left wall run on, the arm 0.5 m wider from 0.8 m up) beside a room behind
-    0.15 m walls, and the face stage's regions: the arm, the body and the room beside."""
+    0.25 m walls, and the face stage's regions: the arm, the body and the room beside."""
     free = np.zeros((170, 150), dtype=bool)
     free[80:160, 20:140] = True  # the body
     free[20:80, 20:64] = True  # the arm
     free[20:64, 10:20] = True  # the arm wider from 0.8 m up
-    free[20:77, 67:140] = True  # the room beside the arm, above the body
+    free[20:75, 69:140] = True  # the room beside the arm, above the body
     regions = np.where(free, 2, 0).astype(np.int32)
     regions[:80, :64][free[:80, :64]] = 1
     regions[:80, 64:][free[:80, 64:]] = 3
