@@ -392,6 +392,61 @@ def _find_doorways(
     return pairs
 
 
+def opens_an_arm(
+    blocked: npt.NDArray[np.bool_],
+    ends: npt.NDArray[np.float64],
+    *,
+    min_width_px: float,
+    from_px: int,
+    to_px: int,
+    share: float,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: gaps at least ``min_width_px`` wide across the mouth of an arm of a room, not doorways.
+
+    Just beyond each end of the gap (1 to ``from_px`` - 1 pixels along it) the wall is looked at beside the end, on
+    each side along the gap's normal from ``from_px`` to ``to_px``: it runs on that way when at least ``share`` of
+    those pixels are ``blocked``.
+    At the mouth of an L-shaped room's arm (or across a corridor's bend) one end meets a straight wall side-on,
+    which runs on both ways, and the other is a corner, whose wall runs on at least one way: both walls go on beside
+    the free space on one side, the arm. A doorway's jambs are the ends of its wall, which runs on along the gap, not
+    across it; a partition that stops short of a wall has a free end (its wall runs on neither way), so the gap
+    between it and the wall stays a doorway.
+
+    Parameters
+    ----------
+    blocked : (H, W) bool
+        Walls.
+    ends : (G, 2, 2) float64
+        The two ends (x, y) of each gap, pixels.
+    """
+    out = np.zeros(len(ends), dtype=bool)
+    width, u, normal, _ = _gap_frame(ends)
+    wide = np.flatnonzero(width >= min_width_px)
+    if wide.size == 0 or to_px < from_px:
+        return out
+    h, w = blocked.shape
+    k = np.arange(1, max(from_px, 2), dtype=np.float64)
+    s = np.arange(from_px, to_px + 1, dtype=np.float64)
+    runs_on = np.zeros((wide.size, 2, 2), dtype=bool)  # gap, end, side
+    for end, outward in ((0, -u[wide]), (1, u[wide])):
+        for side, sign in ((0, 1.0), (1, -1.0)):
+            pts = (
+                ends[wide, end, None, None, :]
+                + k[None, :, None, None] * outward[:, None, None, :]
+                + sign * s[None, None, :, None] * normal[wide, None, None, :]
+            )
+            x = np.rint(pts[..., 0]).astype(np.int64)
+            y = np.rint(pts[..., 1]).astype(np.int64)
+            inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+            hit: npt.NDArray[np.bool_] = ~inside  # off the image is wall
+            hit[inside] = blocked[y[inside], x[inside]]
+            runs_on[:, end, side] = hit.reshape(wide.size, -1).mean(axis=1) >= share
+    flat: npt.NDArray[np.bool_] = np.all(runs_on, axis=2)  # per gap and end: the wall runs on both ways
+    corner: npt.NDArray[np.bool_] = np.any(runs_on, axis=2)  # ... at least one way
+    out[wide] = (flat[:, 0] & corner[:, 1]) | (flat[:, 1] & corner[:, 0])
+    return out
+
+
 def bumps_a_strip(
     blocked: npt.NDArray[np.bool_],
     ends: npt.NDArray[np.float64],

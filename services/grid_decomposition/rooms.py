@@ -19,8 +19,9 @@ from services.grid_decomposition.arrays import (
     short_of,
 )
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
-from services.grid_decomposition.doorways import draw_cuts, find_doorways
+from services.grid_decomposition.doorways import draw_cuts, find_doorways, opens_an_arm
 from services.grid_decomposition.necks import split_at_necks
+from services.grid_decomposition.openings import join_pairs
 from services.grid_decomposition.segments import (
     fill_from_neighbours,
     merge_open_segments,
@@ -124,6 +125,10 @@ def segment_rooms(
     lone_max_ray_share: float = 0.5,
     outside_min_open_share: float = 0.4,
     outside_reach_m: float = 6.0,
+    arm_min_width_m: float = 2.0,
+    arm_wall_from_m: float = 0.2,
+    arm_wall_m: float = 0.8,
+    arm_wall_share: float = 0.8,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
     """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
 
@@ -144,6 +149,11 @@ def segment_rooms(
        all round it within ``table_clearance_m`` and no obstacles there on two opposite sides (an
        obstacle standing in a doorway, between its jambs, is no table). A
        doorway is an opening in a wall; the gap between a table and a wall is a passage round it.
+       Nor is a cut at least ``arm_min_width_m`` wide across the mouth of a room's arm
+       (:func:`~services.grid_decomposition.doorways.opens_an_arm`: one end meets a straight wall side-on, the other
+       a corner; ``arm_wall_share`` of the wall beside an end, ``arm_wall_from_m`` to ``arm_wall_m`` from it along
+       the cut's normal, shows where it runs on): the pieces met along its normal within ``arm_wall_m`` of its
+       middle are one room, even where a line closed the mouth as a doorway (``arm_min_width_m`` 0 turns this off).
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
@@ -221,8 +231,21 @@ def segment_rooms(
                     clearance_px=round(table_clearance_m / resolution_m),
                 )
             ]
+        mouths = np.zeros((0, 2, 2))
+        if arm_min_width_m > 0 and cuts.size:
+            mouth = opens_an_arm(
+                ~space,
+                cuts,
+                min_width_px=arm_min_width_m / resolution_m,
+                from_px=max(1, round(arm_wall_from_m / resolution_m)),
+                to_px=round(arm_wall_m / resolution_m),
+                share=arm_wall_share,
+            )
+            cuts, mouths = cuts[~mouth], cuts[mouth]
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
+        if len(mouths):
+            seg = _join_across(seg, mouths, fixed=_share(seg, floor) > 0.5, reach_px=round(arm_wall_m / resolution_m))
     widest = label_max(seg, clearance, int(seg.max()) + 1)[0]  # clearance >= 0: a max per segment
     narrow = widest * resolution_m < room_min_half_width_m
     rooms = merge_small_segments(
@@ -446,6 +469,30 @@ def ends_on_tables(
         hit = np.bincount(np.floor((angle + np.pi) / (np.pi / 6)).astype(np.int64) % 12, minlength=12) > 0
         standing[k] = not bool((hit & np.roll(hit, 6)).any())
     return np.asarray(standing[at].any(axis=1), dtype=bool)
+
+
+def _join_across(
+    seg: npt.NDArray[np.int32], cuts: npt.NDArray[np.float64], *, fixed: npt.NDArray[np.bool_], reach_px: int
+) -> npt.NDArray[np.int32]:
+    """``seg`` with the segments met along each cut's normal through its middle, up to ``reach_px`` each way or the
+    first pixel in no segment, one segment (but no fixed one); ids 1..M in order."""
+    width = np.linalg.norm(cuts[:, 1] - cuts[:, 0], axis=1)
+    u = (cuts[:, 1] - cuts[:, 0]) / np.maximum(width, 1e-9)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    h, w = seg.shape
+    t = np.arange(-reach_px, reach_px + 1, dtype=np.float64)
+    pts = cuts.mean(axis=1)[:, None, :] + t[None, :, None] * normal[:, None, :]
+    x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+    y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+    ids = seg[y, x].astype(np.int64)  # (G, 2 * reach + 1), the middle at reach_px
+    # each way from the middle, only up to the first pixel in no segment
+    gone = np.zeros_like(ids, dtype=bool)
+    gone[:, reach_px:] = np.cumsum(ids[:, reach_px:] == 0, axis=1) > 0
+    gone[:, : reach_px + 1] |= np.cumsum((ids[:, : reach_px + 1] == 0)[:, ::-1], axis=1)[:, ::-1] > 0
+    ids[gone | fixed[ids]] = 0
+    a, b = ids[:, :-1].ravel(), ids[:, 1:].ravel()
+    ok = (a > 0) & (b > 0) & (a != b)
+    return join_pairs(seg, a[ok], b[ok])
 
 
 def _wall_doors(

@@ -16,6 +16,7 @@ from services.grid_decomposition.doorways import (
     bumps_a_strip,
     draw_cuts,
     find_doorways,
+    opens_an_arm,
     widens,
 )
 
@@ -145,6 +146,26 @@ def test_a_door_beside_a_corner_and_a_door_into_a_closet_as_wide_as_its_corridor
     cuts = find_doorways(closet, resolution_m=RES)
     _, pieces = cv2.connectedComponents((closet & ~draw_cuts(cuts, closet.shape)).astype(np.uint8), connectivity=4)
     assert pieces[30, 20] != pieces[90, 20]
+
+
+def test_the_mouth_of_a_rooms_arm_is_no_doorway_a_gap_beside_a_partition_and_a_wide_door_are() -> None:
+    ell = np.zeros((170, 150), dtype=bool)
+    ell[80:160, 20:140] = True  # a 6 x 4 m room
+    ell[20:80, 20:64] = True  # its 2.2 m wide arm, the arm's left wall the room's run on
+    ell[20:75, 69:140] = True  # a room beside the arm behind 0.25 m walls
+
+    def arm(blocked: np.ndarray, gap: list[list[float]], min_width_px: float = 40.0) -> bool:
+        flags = opens_an_arm(blocked, np.array([gap]), min_width_px=min_width_px, from_px=4, to_px=16, share=0.8)
+        return bool(flags[0])
+
+    mouth = [[19.0, 80.0], [64.0, 79.0]]  # from the left wall to the corner, (x, y) ends
+    assert arm(~ell, mouth)
+    assert not arm(~ell, mouth, min_width_px=50.0)  # narrower than the cuts looked at
+    two = np.zeros((100, 180), dtype=bool)
+    two[10:90, 10:170] = True  # two 4 x 4 m rooms
+    two[54:90, 88:91] = False  # the 0.15 m partition between them stops 2.2 m short of the top wall
+    assert not arm(~two, [[89.0, 53.0], [89.0, 9.0]])  # the partition's end is free
+    assert not arm(~_two_rooms(2.2), [[100.0, 27.0], [100.0, 72.0]])  # a 2.2 m door in a wall between jambs
 
 
 def test_distances_to_walls_are_scipys_exact_ones() -> None:

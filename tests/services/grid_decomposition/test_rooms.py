@@ -437,3 +437,39 @@ def test_segments_on_warehouse_floors_stay_as_they_are() -> None:
     seg, desks = _office_cut_beside_a_corridor()
     for floor in (seg > 0, seg >= 2):
         assert np.array_equal(join_furnished_pieces(seg, desks, floor, resolution_m=RES), seg)
+
+
+def _room_with_an_arm() -> tuple[np.ndarray, np.ndarray]:
+    """Free space at 5 cm of an L-shaped room (a 6 x 4 m body, a 2.2 m wide arm 3 m long off its top left, the arm's
+    left wall the body's left wall run on, the arm 0.5 m wider from 0.8 m up) beside a room behind
+    0.25 m walls, and the face stage's regions: the arm, the body and the room beside."""
+    free = np.zeros((170, 150), dtype=bool)
+    free[80:160, 20:140] = True  # the body
+    free[20:80, 20:64] = True  # the arm
+    free[20:64, 10:20] = True  # the arm wider from 0.8 m up
+    free[20:75, 69:140] = True  # the room beside the arm, above the body
+    regions = np.where(free, 2, 0).astype(np.int32)
+    regions[:80, :64][free[:80, :64]] = 1
+    regions[:80, 64:][free[:80, 64:]] = 3
+    return free, regions
+
+
+def test_the_arm_of_an_l_shaped_room_is_the_rooms_even_where_a_line_closed_its_mouth() -> None:
+    free, regions = _room_with_an_arm()
+    none = np.zeros(free.shape, dtype=bool)
+    closed = none.copy()
+    closed[79:82, 20:64] = True  # the line across the mouth, closed as a doorway
+
+    def rooms(arm_min_width_m: float) -> np.ndarray:
+        seg, _ = segment_rooms(
+            regions, none, none, closed, resolution_m=RES, occupied=~free, rays=none, join_saddle_ratio=0.0,
+            desk_max_extent_m=0.0, arm_min_width_m=arm_min_width_m,
+        )
+        return seg
+
+    seg = rooms(2.0)
+    arm, body, beside = seg[50, 40], seg[120, 80], seg[50, 100]
+    assert arm == body and beside not in (0, body)  # arm and body one room, the room beside another
+    seg = rooms(0.0)
+    assert seg[50, 40] != seg[120, 80]  # the mouth taken for a doorway: the arm a room of its own
+
