@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.grid_decomposition.arrays import label_counts
-from services.grid_decomposition.doorways import across_a_corridor, widens
+from services.grid_decomposition.doorways import across_a_corridor, block_beside_a_wall, widens
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, line_endpoints
 
 DOOR_MIN_PX = 5
@@ -201,6 +201,9 @@ def wall_evidence(
     post_wall_px: int = 0,
     post_min_px: int = 1,
     corridor_length_px: int = 0,
+    hit: npt.NDArray[np.bool_] | None = None,
+    max_thickness_px: int = 0,
+    block_max_run_px: int = 0,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
 
@@ -230,6 +233,12 @@ def wall_evidence(
         A post splits a gap when the line runs through it for at least this many samples (:func:`close_doorways`).
     corridor_length_px : int
         See :func:`~services.grid_decomposition.doorways.across_a_corridor`; 0 turns it off.
+    hit, max_thickness_px, block_max_run_px : (H, W) bool, int, int
+        With ``hit`` (the occupied cells) and ``block_max_run_px`` > 0, a gap between a wall running straight past
+        one end and a block at the other (thicker than ``max_thickness_px`` across the line, ending along it within
+        ``block_max_run_px``, hit by the laser) is left open
+        (:func:`~services.grid_decomposition.doorways.block_beside_a_wall`): a cupboard or table standing out into
+        a room is no jamb.
 
     Returns
     -------
@@ -277,6 +286,14 @@ def wall_evidence(
             depth_step_px=max(1, max_depth_px // 4),
             corridor_length_px=corridor_length_px,
         )
+        if hit is not None and block_max_run_px > 0 and doorway.any():
+            # a cupboard standing out beside a side wall is no jamb (walls and hits widened by the lines' tolerance)
+            doorway[doorway] = ~block_beside_a_wall(
+                near, ends[doorway], hit=cv2.dilate(hit.astype(np.uint8), disk) > 0, run_px=min_wall_px,
+                max_thickness_px=max_thickness_px + 2 * tolerance_px, max_run_px=block_max_run_px,
+                tolerance_px=tolerance_px, max_depth_px=max_depth_px, depth_step_px=max(1, max_depth_px // 4),
+                widening_px=widening_px, corridor_length_px=corridor_length_px,
+            )
         split = np.flatnonzero(doorway & (g1 - g0 > max_door_px))
         if post_profile is not None and corridor_length_px > 0 and split.size:
             # doors side by side are doors of one wall: no part of the gap from post to post spans a corridor's

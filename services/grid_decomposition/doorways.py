@@ -241,6 +241,8 @@ def find_doorways(
     corridor_length_m: float = 2.0,
     bump_max_m: float = 0.6,
     flush_tolerance_m: float = 0.1,
+    hit: npt.NDArray[np.bool_] | None = None,
+    block_max_run_m: float = 1.5,
 ) -> npt.NDArray[np.float64]:
     """Doorways of a floor: cuts across the narrow passages between walls, independent of any line.
 
@@ -283,6 +285,11 @@ def find_doorways(
         both sides, up to ``max_depth_m`` from the cut, the strip's one wall runs on in line with one end of the cut
         (within ``flush_tolerance_m``) and its other wall lies at most ``bump_max_m`` beyond the other end (furniture
         or a bin against a wall, as deep as a wall is thick); 0 turns it off.
+    hit, block_max_run_m : (H, W) bool, float
+        With ``hit`` (the occupied cells), a cut between a wall running straight past one end (within
+        ``flush_tolerance_m``) and a block at the other (thicker than ``max_wall_thickness_m`` over the next
+        ``wall_run_m``, ending along the cut within ``block_max_run_m``, hit by the laser) is no doorway
+        (:func:`block_beside_a_wall`): a cupboard or table standing out into a room; 0 turns it off.
 
     Returns
     -------
@@ -293,9 +300,9 @@ def find_doorways(
         return np.zeros((0, 2, 2))
     rows, cols = np.flatnonzero(space.any(axis=1)), np.flatnonzero(space.any(axis=0))
     r0, c0 = max(int(rows[0]) - 1, 0), max(int(cols[0]) - 1, 0)
-    box = space[r0 : int(rows[-1]) + 2, c0 : int(cols[-1]) + 2]
+    crop = (slice(r0, int(rows[-1]) + 2), slice(c0, int(cols[-1]) + 2))
     return _find_doorways(
-        box,
+        space[crop],
         resolution_m=resolution_m,
         min_width_m=min_width_m,
         max_width_m=max_width_m,
@@ -311,6 +318,8 @@ def find_doorways(
         corridor_length_m=corridor_length_m,
         bump_max_m=bump_max_m,
         flush_tolerance_m=flush_tolerance_m,
+        hit=None if hit is None or block_max_run_m <= 0 else hit[crop],
+        block_max_run_m=block_max_run_m,
     ) + np.array([c0, r0], dtype=np.float64)
 
 
@@ -332,6 +341,8 @@ def _find_doorways(
     corridor_length_m: float,
     bump_max_m: float,
     flush_tolerance_m: float,
+    hit: npt.NDArray[np.bool_] | None,
+    block_max_run_m: float,
 ) -> npt.NDArray[np.float64]:
     """:func:`find_doorways` on a crop around the free space (a wall border of at least one pixel)."""
     dist, wall_x, wall_y = _nearest_walls(space, reach_px=math.ceil(max_width_m / resolution_m) + 2)
@@ -387,6 +398,22 @@ def _find_doorways(
                 tolerance_px=flush_tolerance_m / resolution_m,
                 max_depth_px=max(1, round(max_depth_m / resolution_m)),
                 depth_step_px=max(1, round(max_depth_m / resolution_m / 4)),
+            )
+        ]
+    if hit is not None and len(pairs):
+        pairs = pairs[
+            ~block_beside_a_wall(
+                walls,
+                pairs,
+                hit=hit,
+                run_px=round(wall_run_m / resolution_m),
+                max_thickness_px=round(max_wall_thickness_m / resolution_m),
+                max_run_px=round(block_max_run_m / resolution_m),
+                tolerance_px=flush_tolerance_m / resolution_m,
+                max_depth_px=max(1, round(max_depth_m / resolution_m)),
+                depth_step_px=max(1, round(max_depth_m / resolution_m / 4)),
+                widening_px=widening_m / resolution_m,
+                corridor_length_px=round(corridor_length_m / resolution_m),
             )
         ]
     return pairs
@@ -492,6 +519,104 @@ def bumps_a_strip(
             flush[:, end] &= np.bincount(which, run > half[which] + tolerance_px, minlength=len(ends)) == 0
             bump[:, end] &= np.bincount(which, run > half[which] + bump_px, minlength=len(ends)) == 0
     out: npt.NDArray[np.bool_] = seen & ((flush[:, 0] & bump[:, 1]) | (flush[:, 1] & bump[:, 0]))
+    return out
+
+
+def block_beside_a_wall(
+    blocked: npt.NDArray[np.bool_],
+    ends: npt.NDArray[np.float64],
+    *,
+    hit: npt.NDArray[np.bool_],
+    run_px: int,
+    max_thickness_px: int,
+    max_run_px: int,
+    tolerance_px: float,
+    max_depth_px: int,
+    depth_step_px: int,
+    widening_px: float = 0.0,
+    corridor_length_px: int = 0,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: gaps between a wall running straight past one end and a block at the other, not doorways.
+
+    At one end the obstacle beyond the gap, along it, is a block: over the next ``run_px`` it is thicker across the
+    gap than ``max_thickness_px`` (the median of those samples: a rounded corner is thin only at its tip), it ends
+    along the gap within ``max_run_px`` (free space beyond it: furniture standing out into the room, not a wall
+    that runs on to the next one), and the laser hit it (a ``hit`` cell on those samples: a mass of unknown space is
+    no block). At the other end a wall runs straight past the gap on at least one side: at every depth
+    ``depth_step_px, 2 * depth_step_px, ... <= max_depth_px`` along its normal on that side (all reached straight
+    from its middle), the free run through its middle parallel to it ends within ``tolerance_px`` of that end. The
+    gap is the passage between a room's side wall and a cupboard or table standing out from the facing wall: a
+    doorway is an opening in a wall, whose jamb is the end of a wall that runs on. With ``corridor_length_px`` > 0, a
+    gap from which a corridor goes on, on either side (:func:`_band_beside`), is a corridor's cross-section or a door
+    into it, no passage inside a room: it is left alone.
+
+    Parameters
+    ----------
+    blocked : (H, W) bool
+        Walls (everything but free space).
+    ends : (G, 2, 2) float64
+        The two ends (x, y) of each gap, pixels.
+    hit : (H, W) bool
+        Cells the laser hit (occupied).
+    """
+    if len(ends) == 0:
+        return np.zeros(0, dtype=bool)
+    width, u, normal, mid = _gap_frame(ends)
+    half = width / 2.0
+    h, w = hit.shape
+    k = np.arange(1, run_px + 1, dtype=np.float64)
+    block = np.zeros((len(ends), 2), dtype=bool)
+    for end, sign in ((0, -1.0), (1, 1.0)):
+        pts = ends[:, end, None, :] + sign * k[None, :, None] * u[:, None, :]
+        thickness = _centre_runs(~blocked, pts, np.broadcast_to(normal[:, None, :], pts.shape), max_thickness_px + 1)
+        length = _free_depth(~blocked, ends[:, end] + sign * u, sign * u, max_run_px + 1)
+        x = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+        y = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+        thick = np.median(thickness, axis=1) > max_thickness_px
+        block[:, end] = thick & (length < max_run_px) & hit[y, x].any(axis=1)
+    if not block.any():
+        return np.zeros(len(ends), dtype=bool)
+    depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
+    reach = math.ceil(float(half.max() + tolerance_px)) + 2
+    flush = np.zeros((len(ends), 2), dtype=bool)
+    for sign in (1.0, -1.0):
+        at = _free_depth(blocked, mid, sign * normal, max_depth_px)[:, None] >= depths[None, :]  # (G, D)
+        which, step = np.nonzero(at)
+        points = mid[which] + sign * depths[step, None] * normal[which]
+        for end, direction in ((0, -u[which]), (1, u[which])):
+            run = _free_depth(blocked, points, direction, reach)
+            past = np.bincount(which, run > half[which] + tolerance_px, minlength=len(ends)) > 0
+            flush[:, end] |= at.all(axis=1) & ~past
+    out: npt.NDArray[np.bool_] = (block[:, 0] & flush[:, 1]) | (block[:, 1] & flush[:, 0])
+    if corridor_length_px > 0 and out.any():
+        out[out] = ~_band_beside(blocked, ends[out], widening_px=widening_px, length_px=corridor_length_px)
+    return out
+
+
+def _band_beside(
+    blocked: npt.NDArray[np.bool_],
+    ends: npt.NDArray[np.float64],
+    *,
+    widening_px: float,
+    length_px: int,
+    max_wide_share: float = 0.5,
+    step_px: int = 2,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: on at least one side of the gap the free space goes on straight along its normal for ``length_px``
+    as a band about as wide as the gap (wider by ``widening_px`` at fewer than ``max_wide_share`` of the depths, every
+    ``step_px``: narrow over most of its length): a corridor, as :func:`across_a_corridor` asks of both sides."""
+    width, u, normal, mid = _gap_frame(ends)
+    need = width + widening_px
+    depths = np.arange(step_px, length_px + 1, step_px, dtype=np.float64)
+    reach = math.ceil(float(need.max())) + 1
+    out = np.zeros(len(ends), dtype=bool)
+    for sign in (1.0, -1.0):
+        long = _free_depth(blocked, mid, sign * normal, length_px) >= length_px
+        if not long.any():
+            continue
+        points = mid[long, None, :] + sign * depths[None, :, None] * normal[long, None, :]
+        runs = _centre_runs(blocked, points, np.broadcast_to(u[long, None, :], points.shape), reach)
+        out[long] |= (runs >= need[long, None]).sum(axis=1) < max_wide_share * depths.size
     return out
 
 

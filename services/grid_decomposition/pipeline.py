@@ -90,6 +90,7 @@ _MIN_PASSAGE_M = 0.3  # regions touching along less than this are not linked by 
 # doors side by side with posts between them lie in a wall: the runs beside them are longer than a wall crossing the
 # line is thick (read with the lines' 0.1 m tolerance each side, a 0.5 m thick wall is a 0.7 m run)
 _POST_WALL_M = 0.75
+_WALL_MAX_THICKNESS_M = 0.6  # a wall beside a doorway is at most this thick (find_doorways' max_wall_thickness_m)
 # ... and a post is one the line passes through, not the rim of its tolerance disc (one sample at the line's 0.1 m)
 _POST_MIN_RUN_M = 0.1
 _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
@@ -329,6 +330,7 @@ def decompose(
     passage_max_m2: float = 3.0,
     unseen_opening_m: float = 0.75,
     enclosed_dots_m: float = 5.0,
+    block_max_run_m: float = 1.5,
     seed: int = 0,
 ) -> Decomposition:
     """Decompose an occupancy grid into labelled regions (papers B and C plus doorway closing).
@@ -441,6 +443,11 @@ def decompose(
         obstacle, doorway line or region cell; when three of the four meet one within this distance (it lies inside
         a room's walls, not beyond the building's outer wall), it takes the region it meets nearest within 1 m
         (:func:`~services.grid_decomposition.loose.fill_enclosed`); 0 turns it off.
+    block_max_run_m : float
+        A gap between a room's side wall (running straight past one end) and a block at the other (thicker than a
+        wall, hit by the laser, ending along the gap within this: a cupboard or table standing out from the facing
+        wall) is no doorway, on the lines and off them
+        (:func:`~services.grid_decomposition.doorways.block_beside_a_wall`); 0 turns it off.
     known_places : RackLayout, optional
         Racks and aisles another stage knows on this grid (the pillar stage's bins and aisles,
         :func:`~services.grid_decomposition.known_racks.known_layout`): they are places as they say,
@@ -567,6 +574,9 @@ def decompose(
             post_wall_px=round(_POST_WALL_M / resolution_m),
             post_min_px=max(1, round(_POST_MIN_RUN_M / resolution_m)),
             corridor_length_px=round(corridor_length_m / resolution_m),
+            hit=occupied,
+            max_thickness_px=round(_WALL_MAX_THICKNESS_M / resolution_m),
+            block_max_run_px=round(block_max_run_m / resolution_m),
         )
         known_obstacle = obstacle & known
         racks = find_racks_by_region(  # each texture region with its own directions

@@ -218,6 +218,7 @@ def segment_rooms(
             widening_m=door_widening_m,
             max_depth_m=door_max_depth_m,
             corridor_length_m=corridor_length_m,
+            hit=occupied,
         )
         if table_min_thickness_m > 0 and cuts.size:  # passing a table is no doorway: a cut ending on one is dropped
             cuts = cuts[

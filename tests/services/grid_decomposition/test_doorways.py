@@ -13,6 +13,7 @@ from services.grid_decomposition.doorways import (
     _centre_runs,
     _nearest_walls,
     across_a_corridor,
+    block_beside_a_wall,
     bumps_a_strip,
     draw_cuts,
     find_doorways,
@@ -129,6 +130,60 @@ def test_a_strip_narrowed_by_a_cupboard_against_one_wall_is_no_doorway() -> None
     assert len(find_doorways(free, resolution_m=RES)) == 0
     gap = np.array([[[9.0, 60.0], [23.0, 60.0]]])  # from the left wall to the cupboard
     assert bumps_a_strip(~free, gap, bump_px=12, tolerance_px=2, max_depth_px=20, depth_step_px=5).all()
+
+
+def _room_beside_a_block(partition: bool) -> np.ndarray:
+    """Occupancy (-1 / 0 / 100) of a 4.2 x 7.7 m room whose left wall runs straight, with a 0.15 m wall from its right
+    wall ending 1.25 m short of the left one (``partition``), or a hollow 1.2 x 1.1 m table standing 1.25 m from the
+    left wall with a cupboard against the right wall beside it (the laser saw their outlines)."""
+    occ = np.full((180, 110), -1, dtype=np.int8)
+    occ[10:170, 10:100] = 100
+    occ[13:167, 13:97] = 0
+    if partition:
+        occ[88:91, 38:97] = 100
+    else:
+        occ[70:92, 38:62] = 100
+        occ[72:90, 40:60] = -1
+        occ[90:106, 55:97] = 100
+        occ[92:104, 57:97] = -1
+    return occ
+
+
+def _parted(free: np.ndarray, cuts: np.ndarray) -> bool:
+    _, pieces = cv2.connectedComponents((free & ~draw_cuts(cuts, free.shape)).astype(np.uint8), connectivity=4)
+    return bool(pieces[40, 50] != pieces[140, 50])
+
+
+def test_a_passage_between_a_side_wall_and_a_table_is_no_doorway_a_door_in_a_wall_is() -> None:
+    furnished = _room_beside_a_block(partition=False)
+    free, hit = furnished == 0, furnished == 100
+    assert _parted(free, find_doorways(free, resolution_m=RES, block_max_run_m=0.0, hit=hit))  # cut at the table
+    assert not _parted(free, find_doorways(free, resolution_m=RES, hit=hit))
+    assert _parted(free, find_doorways(free, resolution_m=RES, hit=np.zeros_like(hit)))  # unknown masses: no block
+    walled = _room_beside_a_block(partition=True)
+    free, hit = walled == 0, walled == 100
+    assert _parted(free, find_doorways(free, resolution_m=RES, hit=hit))
+
+
+def test_a_gap_across_a_corridor_from_the_block_at_a_partitions_end_is_left_to_the_corridor_tests() -> None:
+    blocked = np.ones((100, 200), dtype=bool)
+    blocked[60:85, 5:195] = False  # a 1.25 m corridor
+    blocked[10:60, 5:103] = False  # a room open onto it
+    blocked[10:57, 107:195] = False  # the next room, behind a wall
+    hit = np.zeros_like(blocked)
+    hit[36:60, 95:116] = True  # a hollow block at the end of the partition between the two rooms
+    hit[38:58, 97:114] = False
+    blocked[36:60, 95:116] = True
+    gap = np.array([[[96.0, 60.0], [96.0, 84.0]]])  # from the block across the corridor to its straight far wall
+
+    def block(corridor_length_px: int) -> np.ndarray:
+        return block_beside_a_wall(
+            blocked, gap, hit=hit, run_px=10, max_thickness_px=12, max_run_px=30, tolerance_px=2, max_depth_px=20,
+            depth_step_px=5, widening_px=6, corridor_length_px=corridor_length_px,
+        )
+
+    assert block(0).all()  # a block beside a wall that runs straight past
+    assert not block(40).any()  # but the corridor goes on
 
 
 def test_a_door_beside_a_corner_and_a_door_into_a_closet_as_wide_as_its_corridor_stay_doorways() -> None:
