@@ -653,6 +653,7 @@ def decompose(
             occupied=occupied,
             line_doors=door,
             desk_max_extent_m=desk_max_extent_m,
+            block_max_run_m=block_max_run_m,
         )
         if corridor_min_region_m2 > 0:  # rooms open onto a corridor where the map never drew their wall
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)

@@ -129,6 +129,7 @@ def segment_rooms(
     arm_wall_from_m: float = 0.2,
     arm_wall_m: float = 0.8,
     arm_wall_share: float = 0.8,
+    block_max_run_m: float = 1.5,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
     """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
 
@@ -154,6 +155,9 @@ def segment_rooms(
        a corner; ``arm_wall_share`` of the wall beside an end, ``arm_wall_from_m`` to ``arm_wall_m`` from it along
        the cut's normal, shows where it runs on): the pieces met along its normal within ``arm_wall_m`` of its
        middle are one room, even where a line closed the mouth as a doorway (``arm_min_width_m`` 0 turns this off).
+       Nor is a cut between a side wall and a block standing out from the facing wall, ending along the cut within
+       ``block_max_run_m`` (with ``occupied``; :func:`~services.grid_decomposition.doorways.block_beside_a_wall`,
+       0 turns it off).
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
@@ -219,6 +223,7 @@ def segment_rooms(
             max_depth_m=door_max_depth_m,
             corridor_length_m=corridor_length_m,
             hit=occupied,
+            block_max_run_m=block_max_run_m,
         )
         if table_min_thickness_m > 0 and cuts.size:  # passing a table is no doorway: a cut ending on one is dropped
             cuts = cuts[

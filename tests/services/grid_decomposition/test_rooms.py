@@ -464,8 +464,8 @@ def test_the_arm_of_an_l_shaped_room_is_the_rooms_even_where_a_line_closed_its_m
     def rooms(arm_min_width_m: float) -> np.ndarray:
         seg, _ = segment_rooms(
             regions, none, none, closed, resolution_m=RES, occupied=~free, rays=none, join_saddle_ratio=0.0,
-            desk_max_extent_m=0.0, arm_min_width_m=arm_min_width_m,
-        )
+            desk_max_extent_m=0.0, arm_min_width_m=arm_min_width_m, block_max_run_m=0.0,
+        )  # the block test off: with every cell round the free space occupied, the arm's corner reads as a block
         return seg
 
     seg = rooms(2.0)
