@@ -679,7 +679,9 @@ def decompose(
             grown = fill_from_neighbours(  # np.where's new image: filled in place
                 np.where(off_floors, segments, 0), against_walls, max_iterations=60, overwrite=True
             )
-            segments = np.where(against_walls, grown, segments)
+            # in place, as the streaks below: every step since the segment image returned a new array or the one it
+            # was given, read nowhere else
+            np.copyto(segments, grown, where=against_walls)
         # the streaks the cleaning took out are free space: they take the region they grow from (in place: every step
         # since the segment image returned a new array or the one it was given, read nowhere else)
         segments = fill_from_neighbours(
