@@ -163,6 +163,36 @@ def label_counts(
     return count, inside
 
 
+class MaskCounts:
+    """:func:`label_counts` of one mask over the label images of several steps: a sparse mask's pixels found once.
+
+    ``counts(labels)`` is ``label_counts(labels, int(labels.max()) + 1, mask)``; ``inside(labels)`` is its second
+    array alone, without counting every label's pixels (a sparse mask: the labels at its pixels counted, whole
+    numbers, the same counts).
+    """
+
+    def __init__(self, mask: npt.NDArray[np.bool_]) -> None:
+        self.mask = mask
+        sparse = np.count_nonzero(mask) * _SPARSE_MASK <= mask.size
+        self.at = np.flatnonzero(mask) if sparse else None  # the sparse mask's flat indices
+
+    def counts(self, labels: npt.NDArray[np.integer]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """Pixels of every label ``0..labels.max()``, and of them those inside the mask."""
+        n = int(labels.max()) + 1
+        if self.at is None:
+            return label_counts(labels, n, self.mask)
+        return label_counts(labels, n)[0], self._inside(labels, n)
+
+    def inside(self, labels: npt.NDArray[np.integer]) -> npt.NDArray[np.int64]:
+        """Pixels of every label ``0..labels.max()`` inside the mask."""
+        n = int(labels.max()) + 1
+        return label_counts(labels, n, self.mask)[1] if self.at is None else self._inside(labels, n)
+
+    def _inside(self, labels: npt.NDArray[np.integer], n: int) -> npt.NDArray[np.int64]:
+        assert self.at is not None
+        return np.bincount(np.ascontiguousarray(labels).ravel()[self.at], minlength=n).astype(np.int64)
+
+
 def label_max(
     labels: npt.NDArray[np.integer], values: npt.NDArray[np.floating], n: int
 ) -> tuple[npt.NDArray[np.floating], npt.NDArray[np.int64]]:

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, label_boxes, label_counts, lookup
+from services.grid_decomposition.arrays import components_stats_runs, label_boxes, label_counts, lookup
 from services.grid_decomposition.corridors import (
     Band,
     _runs,
@@ -187,7 +187,7 @@ def join_corridor_pieces(
         for k in crossed.tolist():
             own = boxes[k - 1]
             assert own is not None  # k holds pixels of the strip
-            n_parts, parts, stats = components_stats(((out[own] == k) & ~strip[own]).astype(np.uint8), 4)
+            n_parts, parts, stats, runs = components_stats_runs(((out[own] == k) & ~strip[own]).view(np.uint8), 4)
             areas = stats[:, cv2.CC_STAT_AREA].copy()
             areas[0] = 0
             no_room = np.ones(n_parts, dtype=bool)
@@ -210,7 +210,7 @@ def join_corridor_pieces(
                     if k == corridor_id:
                         parted_from[next_id] = corridor_id
                     next_id += 1
-            corridor[own] |= lookup(no_room, parts)
+            corridor[own] |= lookup(no_room, parts, runs)  # spread by the labelling's own runs
         # the pieces that are no room join the corridor only where they touch it
         n_parts, parts = cv2.connectedComponents(corridor.astype(np.uint8), connectivity=4)
         touching = np.zeros(n_parts, dtype=bool)

@@ -107,6 +107,17 @@ def _corner_range(values: npt.NDArray[np.int32]) -> tuple[int, int]:
     return int(corners.min()), int(corners.max())
 
 
+def _by_offset(table: npt.NDArray[np.int64], first: int) -> npt.NDArray[np.int64]:
+    """``table`` (one entry per offset from ``first`` on) indexed by the offset itself, as ``np.take`` reads an index:
+    ``np.take(_by_offset(table, first), offsets)`` is ``np.take(table, offsets - first)`` for offsets from ``first`` to
+    ``first + table.size - 1``, without the whole-window subtraction (a negative offset is taken from the end)."""
+    # offsets from the end up to -first (negative ones), from the start up to first + table.size (the others)
+    size = max(table.size, -first) if first < 0 else first + table.size
+    out = np.zeros(size, dtype=table.dtype)
+    out[np.arange(first, first + table.size) % size] = table  # an offset's place as np.take reads it
+    return out
+
+
 def corridor_bands(
     region: npt.NDArray[np.bool_],
     occupied: npt.NDArray[np.bool_],
@@ -169,7 +180,7 @@ def corridor_bands(
         bounds = np.unique(np.concatenate([lo, hi]))
         # only the rows and columns that hold a strip's pixels are counted: no other pixel is in any strip
         box = band_box(u, t, (int(bounds[0]) + u0, int(bounds[-1]) - 1 + u0), (t0, t0 + nt - 1))
-        block = np.take(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, u[box] - u0)
+        block = np.take(_by_offset(np.searchsorted(bounds, np.arange(nu), side="right") * nt - t0, u0), u[box])
         block += t[box]
         # the pixels per (block, along) place and of them those in the region: one count of block * 2 + region
         block *= 2

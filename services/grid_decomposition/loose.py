@@ -73,9 +73,11 @@ def _join_isolated(regions: _Regions, occupied: npt.NDArray[np.bool_], *, max_ar
     isolated = small & ~regions.touching
     if np.count_nonzero(isolated) < 2:
         return regions
-    seeds = np.where(lookup(isolated, segments), segments, 0)
+    seeds = lookup(_own_ids(isolated), segments)  # their ids, 0 elsewhere: one lookup by runs
     half = max(1, (gap_px + 1) // 2)
-    grown = fill_from_neighbours(seeds, ~occupied & (segments == 0) & near(seeds > 0, half), max_iterations=half)
+    grown = fill_from_neighbours(  # in the seeds' own image, read no more
+        seeds, ~occupied & (segments == 0) & near(seeds > 0, half), max_iterations=half, overwrite=True
+    )
     a_parts, b_parts = [], []
     for a, b in ((grown[:, 1:], grown[:, :-1]), (grown[1:, :], grown[:-1, :])):
         meet = (a > 0) & (b > 0) & (a != b)
@@ -90,6 +92,11 @@ def _join_isolated(regions: _Regions, occupied: npt.NDArray[np.bool_], *, max_ar
     np.minimum.at(lowest, group, np.arange(n))
     lut = lowest[group].astype(np.int32)
     return _Regions(lookup(lut, segments))
+
+
+def _own_ids(flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
+    """Per region id: the id itself where flagged, else 0 (``lookup`` of it is ``np.where(lookup(flags), ids, 0)``)."""
+    return np.where(flags, np.arange(flags.size, dtype=np.int32), np.int32(0))
 
 
 def fill_lone_regions(
@@ -131,9 +138,9 @@ def _fill_lone(
     lone &= ~regions.touching
     if not lone.any():
         return segments
-    seeds = np.where(lookup(lone, segments), segments, 0)
+    seeds = lookup(_own_ids(lone), segments)  # their ids, 0 elsewhere: one lookup by runs
     way = ~occupied & (segments == 0) & near(seeds > 0, reach_px)
-    grown = fill_from_neighbours(seeds, way, max_iterations=reach_px)
+    grown = fill_from_neighbours(seeds, way, max_iterations=reach_px, overwrite=True)  # the seeds' own image
     out: npt.NDArray[np.int32] = np.where(loose, grown, segments)
     return out
 

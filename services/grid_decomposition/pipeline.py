@@ -17,6 +17,7 @@ import numpy.typing as npt
 
 from services.grid_decomposition.arrays import (
     Components,
+    MaskCounts,
     components,
     label_counts,
     label_max,
@@ -637,6 +638,7 @@ def decompose(
         )
         # the room stage leaves racks alone (a flag per face first: one gather of the face image)
         floor_px = lookup(structured[component], sub.face_image) | (racks.cells > 0)
+        on_floors = MaskCounts(floor_px)  # each step's segments' pixels and those on the floors (often few)
         segments, cuts = segment_rooms(
             segments,
             clutter,
@@ -656,7 +658,7 @@ def decompose(
             block_max_run_m=block_max_run_m,
         )
         if corridor_min_region_m2 > 0:  # rooms open onto a corridor where the map never drew their wall
-            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            size, on_floor = on_floors.counts(segments)
             candidates = (size >= corridor_min_region_m2 / resolution_m**2) & (on_floor == 0)
             candidates[0] = False
             if candidates.any():
@@ -665,7 +667,7 @@ def decompose(
                     joinable=on_floor == 0,
                 )
             if short_wall_min_m > 0:  # two rooms one region where the wall between them stops short
-                size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+                size, on_floor = on_floors.counts(segments)
                 candidates = (size >= corridor_min_region_m2 / resolution_m**2) & (on_floor == 0)
                 candidates[0] = False
                 segments = split_at_short_walls(
@@ -673,7 +675,7 @@ def decompose(
                     wall_min_m=short_wall_min_m,
                 )
         if corridor_pieces:  # a corridor cut where rooms open onto it is one region again
-            on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)[1]
+            on_floor = on_floors.inside(segments)
             segments = join_corridor_pieces(
                 segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m,
                 occupied=occupied,
@@ -688,7 +690,9 @@ def decompose(
             grown = fill_from_neighbours(  # np.where's new image: filled in place
                 np.where(off_floors, segments, 0), against_walls, max_iterations=60, overwrite=True
             )
-            segments = np.where(against_walls, grown, segments)
+            # in place, as the streaks below: every step since the segment image returned a new array or the one it
+            # was given, read nowhere else
+            np.copyto(segments, grown, where=against_walls)
         # the streaks the cleaning took out are free space: they take the region they grow from (in place: every step
         # since the segment image returned a new array or the one it was given, read nowhere else)
         segments = fill_from_neighbours(
@@ -696,7 +700,7 @@ def decompose(
         )
         door_rooms = None
         if fan_max_neck_m > 0:  # a room seen only through its door (rays or floor), not the corridor's floor
-            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            size, on_floor = on_floors.counts(segments)
             floors = on_floor > 0.5 * size
             last_id = int(segments.max())
             segments = split_fans(
@@ -706,19 +710,19 @@ def decompose(
             )
             door_rooms = segments > last_id  # the rooms it parted, under ids above the others
         if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
-            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            size, on_floor = on_floors.counts(segments)
             segments = inside_furniture(
                 segments, on_floor > 0.5 * size, resolution_m=resolution_m, max_area_m2=inside_furniture_max_m2
             )
         if passage_max_m2 > 0:  # a strip between two cuts is no room: it joins the piece it borders most
-            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            size, on_floor = on_floors.counts(segments)
             segments = merge_passages(
                 segments, max_area_px=round(passage_max_m2 / resolution_m**2),
                 max_width_px=_PASSAGE_MAX_WIDTH_M / resolution_m,
                 min_border_px=round(_PASSAGE_MIN_BORDER_M / resolution_m), fixed=on_floor > 0.5 * size,
             )
         if unseen_opening_m > 0:  # a cut from unknown space to unknown space parts nothing the laser saw
-            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px)
+            size, on_floor = on_floors.counts(segments)
             segments = join_unseen_openings(
                 segments, obstacle, occupied, resolution_m=resolution_m, fixed=on_floor > 0.5 * size,
                 max_width_m=cut_max_width_m, unseen_m=unseen_opening_m,
@@ -775,7 +779,7 @@ def decompose(
                                           origin_xy_m)
         # pockets of floor between pallets are no rooms; open floor off a rack or warehouse floor is no storage
         structured_segments = set(
-            np.flatnonzero(label_counts(segments, int(segments.max()) + 1, on_places | floor_px)[1]).tolist()
+            np.flatnonzero(MaskCounts(on_places | floor_px).inside(segments)).tolist()
         )
         rooms = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM and k not in structured_segments]
         open_areas = {k for k, r in regions.items() if r.label is PlaceLabel.OPEN_AREA}
@@ -797,10 +801,11 @@ def decompose(
             regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked,
                                               resolution_m, origin_xy_m)
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
-        if room_ids:  # a room mostly on rack places is no room: it takes their label
-            n_seg = int(segments.max()) + 1
-            size, in_places = label_counts(segments, n_seg, on_places)
-            for k in room_ids:
+        in_places = MaskCounts(on_places).inside(segments) if room_ids else np.zeros(1, dtype=np.int64)
+        on_rack_places = [k for k in room_ids if in_places[k] > 0]  # (every pixel counted only for these)
+        if on_rack_places:  # a room mostly on rack places is no room: it takes their label
+            size = label_counts(segments, in_places.size)[0]
+            for k in on_rack_places:
                 if in_places[k] > 0.5 * size[k]:
                     held = places[segments == k]
                     label = PlaceLabel(int(np.bincount(racks.cell_labels[held[held > 0]]).argmax()))

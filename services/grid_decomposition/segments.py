@@ -486,7 +486,7 @@ def split_along(segments: npt.NDArray[np.int32], barrier: npt.NDArray[np.bool_])
         more = pieces >= 2  # piece 1 keeps the segment's id, piece k >= 2 gets the next id in turn
         view[more] = pieces[more] + (next_id - 2)
         next_id += max(n - 2, 0)
-    return fill_from_neighbours(out, barrier & (seg > 0))
+    return fill_from_neighbours(out, barrier & (seg > 0), overwrite=True)  # out is this function's own copy
 
 
 def border_closure(

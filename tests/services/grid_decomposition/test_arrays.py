@@ -8,6 +8,7 @@ import pytest
 from scipy import ndimage
 
 from services.grid_decomposition.arrays import (
+    MaskCounts,
     components,
     components_stats,
     components_stats_runs,
@@ -71,6 +72,21 @@ def test_label_counts_are_the_pixel_counts_per_label_in_and_out_of_a_mask(shape:
     alone, nothing = label_counts(labels, 8)
     assert np.array_equal(alone, count)
     assert not nothing.any()
+
+
+@pytest.mark.parametrize("density", [0.4, 0.01, 0.0])
+def test_mask_counts_are_the_label_counts_of_each_label_image(density: float) -> None:
+    """One mask (dense, sparse, empty) over label images whose largest label differs: the counts of each image."""
+    rng = np.random.default_rng(round(density * 100))
+    mask = rng.random((50, 70)) < density
+    counts = MaskCounts(mask)
+    for top in (1, 9, 3):
+        labels = rng.integers(0, top + 1, mask.shape).astype(np.int32)
+        count, inside = counts.counts(labels)
+        assert np.array_equal(count, np.bincount(labels.ravel(), minlength=top + 1))
+        assert np.array_equal(inside, np.bincount(labels[mask], minlength=top + 1))
+        assert np.array_equal(counts.inside(labels), inside)
+        assert count.dtype == inside.dtype == counts.inside(labels).dtype == np.int64
 
 
 @pytest.mark.parametrize("mask_size", [3, 5])

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from services.grid_decomposition.corridors import (
+    _by_offset,
     _coordinates,
     _corner_range,
     _row_runs,
@@ -199,6 +200,17 @@ def test_walls_along_a_few_lines_are_the_dilated_raster_at_them() -> None:
     at = np.flatnonzero(occupied)
     walls = _walls_along(np.take(across, at), np.take(along, at) + 7, rows, 60, 7, 50, 2)
     assert np.array_equal(walls, raster[rows])
+
+
+@pytest.mark.parametrize("angle", [-0.0001, 1.5707, 2.5, -1.2])
+@pytest.mark.parametrize("left", [-300, -40, 0, 25])
+def test_a_table_by_offset_reads_as_the_table_by_offset_from_the_least(angle: float, left: int) -> None:
+    """A window's across offsets, negative, from 0 and positive: the same entries as with the least subtracted."""
+    u, _ = _coordinates((40, 70), 5, left, angle)
+    u0, u1 = _corner_range(u)
+    table = np.random.default_rng(left + 400).integers(-1000, 1000, u1 - u0 + 1)
+    box = (slice(3, 31), slice(2, 70))
+    assert np.array_equal(np.take(_by_offset(table, u0), u[box]), np.take(table, u[box] - u0))
 
 
 @pytest.mark.parametrize("angle", [-0.0001, 0.0, 0.3, 0.7854, 1.5707, 2.5, -1.2, -0.035])
