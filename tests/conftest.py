@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import gc
 import os
+import shutil
 import uuid
 from collections.abc import Iterator
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import pytest
@@ -14,7 +15,7 @@ import sqlalchemy as sa
 
 from shared.bus import Bus
 from shared.settings import ZenohSettings
-from shared.store import MapStore
+from shared.store import MapStore, schema
 from tests.helpers import free_port
 
 POSTGRES_URL_ENV = "AISLE_TEST_POSTGRES_URL"
@@ -64,10 +65,9 @@ def _postgres_url() -> str:
     return url
 
 
-@pytest.fixture
-def postgres_url() -> Iterator[str]:
-    """A URL to a fresh, empty schema in the test PostgreSQL; dropped afterwards."""
-    base = _postgres_url()
+@contextmanager
+def _fresh_schema(base: str) -> Iterator[str]:
+    """A URL to a new, empty schema in the PostgreSQL database at ``base``; dropped afterwards."""
     schema_name = f"aisle_test_{uuid.uuid4().hex[:12]}"
     admin = sa.create_engine(base)
     with admin.begin() as connection:
@@ -81,20 +81,72 @@ def postgres_url() -> Iterator[str]:
         admin.dispose()
 
 
+def _migrated(url: str) -> None:
+    map_store = MapStore(url)
+    try:
+        assert map_store.upgrade() is True, f"{url}: not a fresh database"
+    finally:
+        map_store.close()
+
+
+@pytest.fixture
+def postgres_url() -> Iterator[str]:
+    """A URL to a fresh, empty schema in the test PostgreSQL; dropped afterwards."""
+    with _fresh_schema(_postgres_url()) as url:
+        yield url
+
+
 @pytest.fixture(params=["sqlite", "postgresql"])
 def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
-    """A database URL per backend: a SQLite file, or a fresh PostgreSQL schema."""
+    """A database URL per backend: a SQLite file, or a fresh PostgreSQL schema; both empty, not migrated."""
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'aisle.db'}"
     url: str = request.getfixturevalue("postgres_url")
     return url
 
 
+@pytest.fixture(scope="session")
+def _sqlite_at_head(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A SQLite file migrated to the newest schema once per test process, copied for each test."""
+    path = tmp_path_factory.mktemp("schema_at_head") / "aisle.db"
+    _migrated(f"sqlite:///{path}")
+    assert not path.with_name(f"{path.name}-wal").exists(), "the closed store left a write-ahead log"
+    return path
+
+
+@pytest.fixture(scope="session")
+def _postgres_at_head() -> Iterator[tuple[str, sa.Engine]]:
+    """A PostgreSQL schema migrated to the newest revision once per test process (each pytest-xdist worker has
+    its own), emptied for each test; its URL and an engine on it."""
+    with _fresh_schema(_postgres_url()) as url:
+        _migrated(url)
+        engine = sa.create_engine(url, pool_size=1)
+        yield url, engine
+        engine.dispose()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def migrated_store_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """A database URL per backend with the newest schema and no rows, as a fresh database after ``upgrade()``.
+
+    The migrations run once per test process (:func:`_sqlite_at_head`, :func:`_postgres_at_head`); each test gets a
+    copy of the SQLite file, or the PostgreSQL schema with every table emptied and its ids restarted.
+    """
+    if request.param == "sqlite":
+        path = tmp_path / "aisle.db"
+        shutil.copyfile(request.getfixturevalue("_sqlite_at_head"), path)
+        return f"sqlite:///{path}"
+    url, engine = request.getfixturevalue("_postgres_at_head")
+    tables = ", ".join(f'"{table.name}"' for table in schema.metadata.sorted_tables)
+    with engine.begin() as connection:
+        connection.execute(sa.text(f"TRUNCATE {tables} RESTART IDENTITY CASCADE"))
+    return str(url)
+
+
 @pytest.fixture
-def store(store_url: str) -> Iterator[MapStore]:
+def store(migrated_store_url: str) -> Iterator[MapStore]:
     """A migrated map store on each backend."""
-    map_store = MapStore(store_url, layer_history=3)
-    map_store.upgrade()
+    map_store = MapStore(migrated_store_url, layer_history=3)
     yield map_store
     map_store.close()
 

@@ -1,7 +1,7 @@
 """Fixtures for API tests: a TestClient over the real ``store`` of tests/conftest.py and a sample map.
 
-``store`` runs each test on a SQLite file and, when ``AISLE_TEST_POSTGRES_URL`` is set, on a fresh
-PostgreSQL schema too.
+``store`` runs each test on a SQLite file and, when ``AISLE_TEST_POSTGRES_URL`` is set, on a PostgreSQL schema
+too; both at the newest schema and empty (migrated once per test process, see ``migrated_store_url``).
 """
 
 from __future__ import annotations

@@ -36,10 +36,9 @@ class _BrokenStore(MapStore):
         raise RuntimeError("bug")
 
 
-def test_store_refusal_is_400_with_its_message(store_url: str,
+def test_store_refusal_is_400_with_its_message(migrated_store_url: str,
                                                make_client: Callable[..., TestClient]) -> None:
-    store = _RefusingStore(store_url)
-    store.upgrade()
+    store = _RefusingStore(migrated_store_url)
     store.ensure_map("site")
 
     response = make_client(store).get("/v1/maps/site/features")
@@ -49,10 +48,9 @@ def test_store_refusal_is_400_with_its_message(store_url: str,
     assert response.json() == {"detail": "bbox too complex for this store"}
 
 
-def test_unexpected_failure_is_json_500_without_internals(store_url: str,
+def test_unexpected_failure_is_json_500_without_internals(migrated_store_url: str,
                                                           make_client: Callable[..., TestClient]) -> None:
-    store = _BrokenStore(store_url)
-    store.upgrade()
+    store = _BrokenStore(migrated_store_url)
     store.ensure_map("site")
 
     response = make_client(store, raise_server_exceptions=False).get("/v1/maps/site/features")

@@ -59,9 +59,8 @@ def test_a_policy_with_a_negative_or_infinite_window_is_refused() -> None:
 
 
 @pytest.fixture
-def history_store(store_url: str) -> Iterator[MapStore]:
-    map_store = MapStore(store_url, layer_history=1000)
-    map_store.upgrade()
+def history_store(migrated_store_url: str) -> Iterator[MapStore]:
+    map_store = MapStore(migrated_store_url, layer_history=1000)
     yield map_store
     map_store.close()
 
