@@ -108,6 +108,12 @@ class RoomSettings:
     front_ahead_m: float = 1.2
     """Free space runs on ahead of the front, over its whole width, at least this far: a corridor or a hall in front,
     not a door jamb (a door is narrower) nor a passage between furniture."""
+    free_piece_min_m2: float | None = 0.25
+    """A piece of free space at least this large that no room reaches through free space (a laser beam's streak cut
+    off from its room by a cell or two of grey, the space past a gap in a wall) takes, in ``rooms.png``, the one room
+    within ``free_piece_reach_m`` of it; smaller pieces (speckle) and None: such space stays unlabelled."""
+    free_piece_reach_m: float = 0.15
+    """... at most this far from the piece (a piece with no room or two rooms that near stays unlabelled)."""
 
 
 class Boundary(NamedTuple):
@@ -660,3 +666,15 @@ def fill_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_]) -> n
             return out  # free cells free space links to no label
         out[box][take] = grown[take].astype(np.int32)
         hole[box] &= ~take
+
+
+def cut_off_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_], *,
+                 min_cells: int) -> npt.NDArray[np.bool_]:
+    """The 8-connected pieces of ``free`` cells that hold no label and have at least ``min_cells`` cells: free space
+    that no labelled cell reaches through free space."""
+    _, parts, stats, _ = cv2.connectedComponentsWithStats((free & (np.asarray(labels) == 0)).astype(np.uint8),
+                                                          connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] >= min_cells
+    keep[0] = False
+    out: npt.NDArray[np.bool_] = keep[parts]
+    return out

@@ -9,6 +9,7 @@ import numpy.typing as npt
 from services.floor_plan import CellClass, Rect, RoomSettings, UnitType, World, group_rooms, room_keys
 from services.floor_plan.rooms import (
     FurnitureSettings,
+    cut_off_free,
     fill_free,
     furniture,
     furniture_insides,
@@ -323,3 +324,21 @@ def test_a_cupboard_joined_to_a_walls_grey_core_is_furniture_and_a_stub_of_that_
     assert not furniture_pockets(unknown, traces, resolution_m=RES,
                                  settings=FurnitureSettings(pocket_cut_thickness_m=None))[20:40, 63:83].any(), \
         "without the opening the cupboard is one piece with the wall's core"
+
+
+def test_free_space_cut_off_from_its_room_by_a_cell_of_grey_takes_that_room() -> None:
+    free = np.zeros((40, 60), bool)
+    free[2:20, 2:30] = True  # a room
+    free[2:20, 34:58] = True  # another room
+    free[22:38, 10:18] = True  # a streak past the first room's wall, one cell of grey between them
+    free[30:38, 31:33] = True  # a piece far from both rooms
+    free[25, 45] = True  # a speck
+    labels = np.zeros(free.shape, np.int32)
+    labels[2:20, 2:30] = 1
+    labels[2:20, 34:58] = 2
+    labels[21, 10:18] = 0
+    pieces = cut_off_free(labels, free, min_cells=10)
+    assert pieces[22:38, 10:18].all() and not pieces[25, 45], "a speck smaller than min_cells is no piece"
+    out = label_furniture(labels, pieces, reach_cells=3)
+    assert (out[22:38, 10:18] == 1).all()
+    assert (out[30:38, 31:33] == 0).all(), "a piece no room is near stays unlabelled"
