@@ -326,6 +326,21 @@ def test_a_cupboard_joined_to_a_walls_grey_core_is_furniture_and_a_stub_of_that_
         "without the opening the cupboard is one piece with the wall's core"
 
 
+def test_a_unit_standing_in_a_doorway_does_not_join_the_two_rooms() -> None:
+    left, right = Rect(0, 59, 0, 39), Rect(0, 59, 38, 79)
+    door = Rect(20, 39, 36, 41)  # its free inside is the 0.8 m door in the wall at columns 38-39
+    world = World({1: left, 2: right, 3: door}, set(), 4)
+    types = dict.fromkeys(world.units, UnitType.ROOM)
+
+    def room_of(settings: RoomSettings) -> dict[int, int]:
+        rooms = group_rooms(world, _two_rooms_with_a_door(), types, wall_cells=T, resolution_m=RES, settings=settings)
+        return {u: k for k, room in enumerate(rooms) for u in room.units}
+
+    assert room_of(RoomSettings())[1] != room_of(RoomSettings())[2]
+    off = room_of(RoomSettings(doorway_max_m=None))
+    assert off[1] == off[2] == off[3], "without the rule the doorway's unit joins both rooms"
+
+
 def test_free_space_cut_off_from_its_room_by_a_cell_of_grey_takes_that_room() -> None:
     free = np.zeros((40, 60), bool)
     free[2:20, 2:30] = True  # a room
