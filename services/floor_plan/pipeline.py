@@ -44,6 +44,7 @@ from services.floor_plan.rooms import (
     FurnitureSettings,
     Room,
     RoomSettings,
+    cut_off_free,
     fill_free,
     furniture,
     furniture_insides,
@@ -220,6 +221,11 @@ class FloorPlan(NamedTuple):
     it, or within ``pocket_reach_cells`` of it; None: none."""
     pocket_reach_cells: int = 1
     """``FurnitureSettings.pocket_reach_m`` in cells."""
+    free_piece_min_cells: int | None = None
+    """``RoomSettings.free_piece_min_m2`` in cells: ``rooms.png`` gives each piece of free space no room reaches
+    through free space and at least this large the one room within ``free_piece_reach_cells``; None: none."""
+    free_piece_reach_cells: int = 1
+    """``RoomSettings.free_piece_reach_m`` in cells."""
 
     @property
     def slanted_walls(self) -> int:
@@ -472,7 +478,10 @@ def describe(
                      None if settings.furniture is None or settings.furniture.pocket_max_m2 <= 0 else furniture_pockets(
                          classes_map == CellClass.UNKNOWN, traces, resolution_m=resolution_m,
                          settings=settings.furniture),
-                     1 if settings.furniture is None else _cells(settings.furniture.pocket_reach_m, resolution_m))
+                     1 if settings.furniture is None else _cells(settings.furniture.pocket_reach_m, resolution_m),
+                     None if settings.rooms.free_piece_min_m2 is None else max(
+                         1, round(settings.rooms.free_piece_min_m2 / resolution_m**2)),
+                     _cells(settings.rooms.free_piece_reach_m, resolution_m))
 
 
 def _insides(classes_map: npt.NDArray[np.uint8], traces: npt.NDArray[np.bool_], settings: FloorPlanSettings,
@@ -527,19 +536,24 @@ def room_labels(plan: FloorPlan) -> npt.NDArray[np.int32]:
     room's free cells (``plan.room_cells``), grown through free space to the free cells no room holds, the
     furniture standing in it (``plan.furniture``), the insides of furniture, with the room nearest to them through
     the furniture (``plan.insides``), and the furniture the map draws in its unknown grey against a wall, with the one
-    room touching it or within reach of it (``plan.pockets``)."""
+    room touching it or within reach of it (``plan.pockets``); then each piece of free space no room reaches through
+    free space (``plan.free_piece_min_cells`` or more) with the one room within ``plan.free_piece_reach_cells``."""
     cells = to_map(plan.frame, plan.room_cells.astype(np.float32), fill=0.0).astype(np.int32)
-    out = fill_free(cells, (plan.classes_map == CellClass.FREE) | plan.traces)
+    free = (plan.classes_map == CellClass.FREE) | plan.traces
+    out = fill_free(cells, free)
     out[plan.fringe] = 0
     out = out if plan.furniture is None else label_furniture(out, plan.furniture)
     out = out if plan.insides is None else join_insides(out, plan.insides)
-    if plan.pockets is None:
+    if plan.pockets is not None:
+        # a pocket takes the one room touching it; one no room touches (a cupboard drawn with a dark outline), the
+        # one room within reach
+        pockets = plan.pockets & (out == 0)
+        touched = label_furniture(out, pockets)
+        out = label_furniture(touched, pockets & (touched == 0), reach_cells=plan.pocket_reach_cells)
+    if plan.free_piece_min_cells is None:
         return out
-    # a pocket takes the one room touching it; one no room touches (a cupboard drawn with a dark outline), the one
-    # room within reach
-    pockets = plan.pockets & (out == 0)
-    touched = label_furniture(out, pockets)
-    return label_furniture(touched, pockets & (touched == 0), reach_cells=plan.pocket_reach_cells)
+    return label_furniture(out, cut_off_free(out, free & ~plan.fringe, min_cells=plan.free_piece_min_cells),
+                           reach_cells=plan.free_piece_reach_cells)
 
 
 def _labels(plan: FloorPlan, items: list[tuple[Rect, int]]) -> npt.NDArray[np.int32]:

@@ -108,6 +108,16 @@ class RoomSettings:
     front_ahead_m: float = 1.2
     """Free space runs on ahead of the front, over its whole width, at least this far: a corridor or a hall in front,
     not a door jamb (a door is narrower) nor a passage between furniture."""
+    doorway_max_m: float | None = 1.2
+    """A part at most this wide that open boundaries join to parts on two opposite sides, each of them wider than it
+    by more than ``min_open_share`` (a unit filling a doorway between two rooms), joins neither through them; None:
+    no such rule."""
+    free_piece_min_m2: float | None = 0.25
+    """A piece of free space at least this large that no room reaches through free space (a laser beam's streak cut
+    off from its room by a cell or two of grey, the space past a gap in a wall) takes, in ``rooms.png``, the one room
+    within ``free_piece_reach_m`` of it; smaller pieces (speckle) and None: such space stays unlabelled."""
+    free_piece_reach_m: float = 0.15
+    """... at most this far from the piece (a piece with no room or two rooms that near stays unlabelled)."""
 
 
 class Boundary(NamedTuple):
@@ -365,6 +375,10 @@ def group_rooms(
         if (b.open_share >= settings.min_open_share and b.depth_share >= settings.min_depth_share
                 and not b.corridor_end):
             joined.append(b.units)
+    if settings.doorway_max_m is not None:
+        door = _doorways(parts, joined, most=round(settings.doorway_max_m / resolution_m),
+                         share=settings.min_open_share)
+        joined = [u for u in joined if u[0] not in door and u[1] not in door]
     edges = np.array(joined, np.int64).reshape(-1, 2)
     n = len(parts)
     _, component = connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
@@ -382,6 +396,36 @@ def group_rooms(
         rooms.append(Room(tuple(sorted({m.unit for m in members})), tuple(m.rect for m in members), room_type,
                           sum(area)))
     return sorted(rooms)
+
+
+def _doorways(parts: list[Part], joined: list[tuple[int, int]], *, most: int, share: float) -> set[int]:
+    """The parts (indices) at most ``most`` cells wide along their boundaries that ``joined`` links to parts on both
+    opposite sides (above and below, or left and right), each of those wider than the part by more than ``share``
+    (the part is a short opening in their walls): units standing in a doorway."""
+    sides: dict[int, list[tuple[int, int]]] = {}
+    for i, j in joined:
+        sides.setdefault(i, []).append((i, j))
+        sides.setdefault(j, []).append((j, i))
+    out = set()
+    for p, pairs in sides.items():
+        a = parts[p].rect
+        for along_rows in (True, False):  # neighbours above / below (boundary along the rows), left / right
+            width = a.cols if along_rows else a.rows
+            if width > most:
+                continue
+            before = after = False
+            for _, q in pairs:
+                b = parts[q].rect
+                lo, hi = (b.r1 < a.r0, b.r0 > a.r1) if along_rows else (b.c1 < a.c0, b.c0 > a.c1)
+                if not (lo or hi):
+                    continue
+                if width >= share * (b.cols if along_rows else b.rows):
+                    break
+                before, after = before or lo, after or hi
+            else:
+                if before and after:
+                    out.add(p)
+    return out
 
 
 def _absorb_small(component: npt.NDArray[np.int32], parts: list[Part], found: list[Boundary], *, least_m2: float,
@@ -660,3 +704,15 @@ def fill_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_]) -> n
             return out  # free cells free space links to no label
         out[box][take] = grown[take].astype(np.int32)
         hole[box] &= ~take
+
+
+def cut_off_free(labels: npt.NDArray[np.integer], free: npt.NDArray[np.bool_], *,
+                 min_cells: int) -> npt.NDArray[np.bool_]:
+    """The 8-connected pieces of ``free`` cells that hold no label and have at least ``min_cells`` cells: free space
+    that no labelled cell reaches through free space."""
+    _, parts, stats, _ = cv2.connectedComponentsWithStats((free & (np.asarray(labels) == 0)).astype(np.uint8),
+                                                          connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] >= min_cells
+    keep[0] = False
+    out: npt.NDArray[np.bool_] = keep[parts]
+    return out

@@ -9,6 +9,7 @@ import numpy.typing as npt
 from services.floor_plan import CellClass, Rect, RoomSettings, UnitType, World, group_rooms, room_keys
 from services.floor_plan.rooms import (
     FurnitureSettings,
+    cut_off_free,
     fill_free,
     furniture,
     furniture_insides,
@@ -323,3 +324,36 @@ def test_a_cupboard_joined_to_a_walls_grey_core_is_furniture_and_a_stub_of_that_
     assert not furniture_pockets(unknown, traces, resolution_m=RES,
                                  settings=FurnitureSettings(pocket_cut_thickness_m=None))[20:40, 63:83].any(), \
         "without the opening the cupboard is one piece with the wall's core"
+
+
+def test_a_unit_standing_in_a_doorway_does_not_join_the_two_rooms() -> None:
+    left, right = Rect(0, 59, 0, 39), Rect(0, 59, 38, 79)
+    door = Rect(20, 39, 36, 41)  # its free inside is the 0.8 m door in the wall at columns 38-39
+    world = World({1: left, 2: right, 3: door}, set(), 4)
+    types = dict.fromkeys(world.units, UnitType.ROOM)
+
+    def room_of(settings: RoomSettings) -> dict[int, int]:
+        rooms = group_rooms(world, _two_rooms_with_a_door(), types, wall_cells=T, resolution_m=RES, settings=settings)
+        return {u: k for k, room in enumerate(rooms) for u in room.units}
+
+    assert room_of(RoomSettings())[1] != room_of(RoomSettings())[2]
+    off = room_of(RoomSettings(doorway_max_m=None))
+    assert off[1] == off[2] == off[3], "without the rule the doorway's unit joins both rooms"
+
+
+def test_free_space_cut_off_from_its_room_by_a_cell_of_grey_takes_that_room() -> None:
+    free = np.zeros((40, 60), bool)
+    free[2:20, 2:30] = True  # a room
+    free[2:20, 34:58] = True  # another room
+    free[22:38, 10:18] = True  # a streak past the first room's wall, one cell of grey between them
+    free[30:38, 31:33] = True  # a piece far from both rooms
+    free[25, 45] = True  # a speck
+    labels = np.zeros(free.shape, np.int32)
+    labels[2:20, 2:30] = 1
+    labels[2:20, 34:58] = 2
+    labels[21, 10:18] = 0
+    pieces = cut_off_free(labels, free, min_cells=10)
+    assert pieces[22:38, 10:18].all() and not pieces[25, 45], "a speck smaller than min_cells is no piece"
+    out = label_furniture(labels, pieces, reach_cells=3)
+    assert (out[22:38, 10:18] == 1).all()
+    assert (out[30:38, 31:33] == 0).all(), "a piece no room is near stays unlabelled"
