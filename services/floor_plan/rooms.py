@@ -64,7 +64,15 @@ class RoomSettings:
     min_part_m: float = 0.5
     """No part thinner than this is cut off a unit."""
     max_wall_m: float = 1.0
-    """A band of lines across a unit thicker than this is no wall (furniture, unexplored space): no cut."""
+    """A band of lines across a unit thicker than this is no wall (furniture, unexplored space): no cut, unless its
+    core (``cut_core_share``) is thin enough."""
+    cut_core_share: float | None = 0.75
+    """A band thicker than ``max_wall_m`` is cut at its core where that is no thicker: the lines whose share of
+    barrier cells is at least this share of the band's highest (a wall with cupboards against it: the wall's lines
+    are nearly all barrier, the cupboards' much less); None: a thick band is never cut."""
+    cut_core_step: float = 0.6
+    """... where the band's lines next to the core are at most this share of its highest: the share steps up into the
+    core (from the cupboards to the wall); a slanted wall across the unit ramps up line by line and is not cut."""
     corridor_length_ratio: float | None = 3.0
     """A part at least this many times as long (away from a boundary) as it is wide (along it) is a corridor
     there; None: no corridor ends (:func:`corridor_end`)."""
@@ -196,25 +204,33 @@ def unit_parts(
         inner = rect.inner(wall_cells)
         if inner.r0 > inner.r1 or inner.c0 > inner.c1:
             continue
-        for piece in _cut(barrier, inner, least, most, settings.cut_share, rows=True):
-            out.extend(Part(uid, p) for p in _cut(barrier, piece, least, most, settings.cut_share, rows=False))
+        core = None if settings.cut_core_share is None else (settings.cut_core_share, settings.cut_core_step)
+        for piece in _cut(barrier, inner, least, most, settings.cut_share, core, rows=True):
+            out.extend(Part(uid, p) for p in _cut(barrier, piece, least, most, settings.cut_share, core, rows=False))
     return out
 
 
-def _cut(barrier: Barriers, rect: Rect, least: int, most: int, share: float, *, rows: bool) -> list[Rect]:
+def _cut(barrier: Barriers, rect: Rect, least: int, most: int, share: float, core: tuple[float, float] | None, *,
+         rows: bool) -> list[Rect]:
     """``rect`` cut at its bands of at most ``most`` rows (or columns) whose share of barrier cells running along
     them reaches ``share``, leaving no piece under ``least``; a band is cut only where some of those cells lie off
     the wall lines across the band at the rectangle's edges (within ``least``, the unit's own wall drawn a little
     inside it). A wall as thick as ``barrier_m`` runs across itself too: a corridor unit that covers the thick wall at
     its side has every column through it blocked by that wall alone about as much as by a cross wall with a door in
     it, and would be cut at each door jamb into door-wide pieces, each open over its whole width to the room behind
-    the door (and so one room with it)."""
+    the door (and so one room with it). A band thicker than ``most`` is cut at its core instead (the lines of at least
+    ``core[0]`` times its highest share, where those are at most ``most`` thick and the lines next to them at most
+    ``core[1]`` times it): a wall with cupboards standing
+    against it is one band, thicker than a wall, but its own lines are far more barrier than the cupboards'."""
     blocked = barrier.along_rows if rows else barrier.along_cols
     crop = blocked[rect.r0 : rect.r1 + 1, rect.c0 : rect.c1 + 1]
     walls = (barrier.along_rows | barrier.along_cols)[rect.r0 : rect.r1 + 1, rect.c0 : rect.c1 + 1]
     edge = walls.mean(axis=0 if rows else 1) >= share  # the wall lines across the bands
     start, stop = _edge_run(edge[:least]), edge.size - _edge_run(edge[::-1][:least])
-    line = crop.mean(axis=1 if rows else 0) >= share
+    shares = crop.mean(axis=1 if rows else 0)
+    line = shares >= share
+    if core is not None:
+        line = _cores(line, shares, *core, most=most)
     inside: npt.NDArray[np.bool_] = line.copy()  # a rectangle all edge (a thin unit along a wall): the share alone
     if start < stop:
         inside = np.asarray((crop[:, start:stop] if rows else crop[start:stop]).any(axis=1 if rows else 0))
@@ -230,6 +246,25 @@ def _cut(barrier: Barriers, rect: Rect, least: int, most: int, share: float, *, 
     first = rect.r0 if rows else rect.c0
     return [rect._replace(r0=first + a, r1=first + b) if rows else rect._replace(c0=first + a, c1=first + b)
             for a, b in out]
+
+
+def _cores(line: npt.NDArray[np.bool_], shares: npt.NDArray[np.float64], core: float, step: float, *,
+           most: int) -> npt.NDArray[np.bool_]:
+    """``line`` with each run longer than ``most`` narrowed to the span of its lines of at least ``core`` times the
+    run's highest share, where that span is at most ``most`` lines and the run's lines next to it at most ``step``
+    times that highest share."""
+    out = line.copy()
+    edges = np.flatnonzero(np.diff(np.r_[False, line, False].astype(np.int8)))
+    for s, e in zip(edges[::2], edges[1::2], strict=True):
+        if e - s <= most:
+            continue
+        run = shares[s:e]
+        hit = np.flatnonzero(run >= core * run.max())
+        beside = run[[i for i in (hit[0] - 1, hit[-1] + 1) if 0 <= i < run.size]]
+        if hit[-1] - hit[0] < most and (beside <= step * run.max()).all():
+            out[s:e] = False
+            out[s + hit[0] : s + hit[-1] + 1] = True
+    return out
 
 
 def _edge_run(line: npt.NDArray[np.bool_]) -> int:

@@ -357,3 +357,46 @@ def test_free_space_cut_off_from_its_room_by_a_cell_of_grey_takes_that_room() ->
     out = label_furniture(labels, pieces, reach_cells=3)
     assert (out[22:38, 10:18] == 1).all()
     assert (out[30:38, 31:33] == 0).all(), "a piece no room is near stays unlabelled"
+
+
+def _corridor_above_two_offices_with_cupboards() -> tuple[World, npt.NDArray[np.uint8]]:
+    """One unit over a 1.2 m corridor and the two offices below it, behind a 0.5 m wall with a 0.9 m door into each;
+    in each office a 0.8 m deep cupboard (drawn in the unknown grey) stands against that wall beside the door."""
+    classes = np.full((100, 124), CellClass.WALL, np.uint8)
+    classes[70:94, 2:122] = CellClass.FREE  # the corridor
+    classes[4:60, 2:60] = CellClass.FREE  # the left office
+    classes[4:60, 64:122] = CellClass.FREE  # the right office
+    classes[60:70, 20:38] = classes[60:70, 80:98] = CellClass.FREE  # the doors
+    classes[44:60, 40:60] = classes[44:60, 100:122] = CellClass.UNKNOWN  # the cupboards
+    return World({1: Rect(0, 97, 0, 123)}, set(), 2), classes
+
+
+def test_a_unit_over_a_corridor_and_offices_is_cut_at_the_wall_the_offices_cupboards_stand_against() -> None:
+    # the wall and the cupboards are one band of lines across the unit, 1.3 m thick: thicker than a wall, so without
+    # its core the unit is not cut there and the corridor is one room with the offices behind its doors
+    world, classes = _corridor_above_two_offices_with_cupboards()
+
+    def corridor(settings: RoomSettings) -> tuple[Rect, ...]:
+        groups = group_rooms(world, classes, {1: UnitType.ROOM}, wall_cells=T, resolution_m=RES, settings=settings)
+        (room,) = [room for room in groups if any(p.r0 <= 80 <= p.r1 and p.c0 <= 10 for p in room.parts)]
+        return room.parts
+
+    assert all(p.r0 >= 60 for p in corridor(RoomSettings())), "the corridor is a room of its own"
+    assert any(p.r0 < 44 for p in corridor(RoomSettings(cut_core_share=None))), "no core: one room with the offices"
+
+
+def test_a_slanted_wall_across_a_unit_is_not_cut_at_its_densest_lines() -> None:
+    # the side of a slanted wall running into a unit: each line across the unit is a little more wall than the one
+    # before, one band 1.55 m thick that ramps up with no step into a core; no line of it is cut as a wall
+    classes = np.full((60, 60), CellClass.FREE, np.uint8)
+    for r in range(10, 41):
+        classes[r, 2 : 14 + round(0.8 * (r - 10))] = CellClass.WALL
+    classes[[0, 1, 58, 59], :] = classes[:, [0, 1, 58, 59]] = CellClass.WALL
+    world = World({1: Rect(0, 59, 0, 59)}, set(), 2)
+
+    def parts(settings: RoomSettings) -> list[tuple[Rect, ...]]:
+        return [room.parts for room in group_rooms(world, classes, {1: UnitType.ROOM}, wall_cells=T, resolution_m=RES,
+                                                   settings=settings)]
+
+    assert parts(RoomSettings()) == parts(RoomSettings(cut_core_share=None))
+    assert parts(RoomSettings(cut_core_step=1.0)) != parts(RoomSettings()), "without the step it would be cut"
