@@ -639,25 +639,29 @@ def decompose(
         # the room stage leaves racks alone (a flag per face first: one gather of the face image)
         floor_px = lookup(structured[component], sub.face_image) | (racks.cells > 0)
         on_floors = MaskCounts(floor_px)  # each step's segments' pixels and those on the floors (often few)
-        segments, cuts = segment_rooms(
-            segments,
-            clutter,
-            floor_px,
-            wall | door,
-            resolution_m=resolution_m,
-            door_max_width_m=cut_max_width_m,
-            door_widening_m=door_widening_m,
-            door_max_depth_m=door_max_depth_m,
-            corridor_length_m=corridor_length_m,
-            room_min_area_m2=room_min_area_m2,
-            neck_half_width_m=neck_half_width_m,
-            rays=rays,
-            occupied=occupied,
-            line_doors=door,
-            desk_max_extent_m=desk_max_extent_m,
-            block_max_run_m=block_max_run_m,
-        )
-        if corridor_min_region_m2 > 0:  # rooms open onto a corridor where the map never drew their wall
+        # a rack hall (every segment on the floors): the room stage and the corridor steps are not run, nor their counts
+        room_stage = not _on_floors_only(segments, floor_px)
+        cuts = np.zeros(occ.shape, dtype=bool)  # the doorways the room stage finds off the lines
+        if room_stage:
+            segments, cuts = segment_rooms(
+                segments,
+                clutter,
+                floor_px,
+                wall | door,
+                resolution_m=resolution_m,
+                door_max_width_m=cut_max_width_m,
+                door_widening_m=door_widening_m,
+                door_max_depth_m=door_max_depth_m,
+                corridor_length_m=corridor_length_m,
+                room_min_area_m2=room_min_area_m2,
+                neck_half_width_m=neck_half_width_m,
+                rays=rays,
+                occupied=occupied,
+                line_doors=door,
+                desk_max_extent_m=desk_max_extent_m,
+                block_max_run_m=block_max_run_m,
+            )
+        if corridor_min_region_m2 > 0 and room_stage:  # rooms open onto a corridor where the map never drew their wall
             size, on_floor = on_floors.counts(segments)
             candidates = (size >= corridor_min_region_m2 / resolution_m**2) & (on_floor == 0)
             candidates[0] = False
@@ -674,19 +678,21 @@ def decompose(
                     segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m,
                     wall_min_m=short_wall_min_m,
                 )
-        if corridor_pieces:  # a corridor cut where rooms open onto it is one region again
+        if corridor_pieces and room_stage:  # a corridor cut where rooms open onto it is one region again
             on_floor = on_floors.inside(segments)
             segments = join_corridor_pieces(
                 segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m,
                 occupied=occupied,
             )
-        if rejoin_room_pieces:  # pieces of one room that were pieces of the corridor's region when the room stage
-            # joined them: with the corridor parted from the rooms, its union with a room is a T, no longer their L
+        if rejoin_room_pieces and room_stage:  # pieces of one room that were pieces of the corridor's region when the
+            # room stage joined them: with the corridor parted from the rooms, its union with a room is a T, no longer
+            # their L
             segments = join_furnished_pieces(segments, clutter, floor_px, resolution_m=resolution_m)
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
-        against_walls = against_walls_job.result() & (segments == 0)
-        off_floors = (segments > 0) & ~floor_px
-        if off_floors.any():  # else nothing grows (a hall whose every region is on a warehouse floor): as it is
+        off_floors = (segments > 0) & ~floor_px if room_stage else None
+        if off_floors is not None and off_floors.any():  # else nothing grows (a hall whose every region is on a
+            # warehouse floor): as it is
+            against_walls = against_walls_job.result() & (segments == 0)
             grown = fill_from_neighbours(  # np.where's new image: filled in place
                 np.where(off_floors, segments, 0), against_walls, max_iterations=60, overwrite=True
             )
@@ -698,8 +704,16 @@ def decompose(
         segments = fill_from_neighbours(
             segments, streaks, max_iterations=max(1, round(streak_reach_m / resolution_m)), overwrite=True
         )
+        # on a rack hall every region still mostly on the floors with its streaks: the fans, the insides of furniture,
+        # the passages and the unseen openings leave it as it is (ids 1..N still): not run, nor their counts
+        settled = False
+        if not room_stage:
+            size, on_floor = on_floors.counts(segments)
+            settled = bool(np.all(on_floor[1:] > 0.5 * size[1:]))
         door_rooms = None
-        if fan_max_neck_m > 0:  # a room seen only through its door (rays or floor), not the corridor's floor
+        if fan_max_neck_m > 0 and settled:
+            door_rooms = np.zeros(occ.shape, dtype=bool)  # no room parted
+        elif fan_max_neck_m > 0:  # a room seen only through its door (rays or floor), not the corridor's floor
             size, on_floor = on_floors.counts(segments)
             floors = on_floor > 0.5 * size
             last_id = int(segments.max())
@@ -709,19 +723,19 @@ def decompose(
                 wide_neck_m=door_max_width_m, lobe_max_area_m2=room_min_area_m2,
             )
             door_rooms = segments > last_id  # the rooms it parted, under ids above the others
-        if inside_furniture_max_m2 > 0:  # the inside of a cupboard or a hollow pillar is its room's floor
+        if inside_furniture_max_m2 > 0 and not settled:  # the inside of a cupboard or a hollow pillar: its room's floor
             size, on_floor = on_floors.counts(segments)
             segments = inside_furniture(
                 segments, on_floor > 0.5 * size, resolution_m=resolution_m, max_area_m2=inside_furniture_max_m2
             )
-        if passage_max_m2 > 0:  # a strip between two cuts is no room: it joins the piece it borders most
+        if passage_max_m2 > 0 and not settled:  # a strip between two cuts is no room: it joins the piece it borders
             size, on_floor = on_floors.counts(segments)
             segments = merge_passages(
                 segments, max_area_px=round(passage_max_m2 / resolution_m**2),
                 max_width_px=_PASSAGE_MAX_WIDTH_M / resolution_m,
                 min_border_px=round(_PASSAGE_MIN_BORDER_M / resolution_m), fixed=on_floor > 0.5 * size,
             )
-        if unseen_opening_m > 0:  # a cut from unknown space to unknown space parts nothing the laser saw
+        if unseen_opening_m > 0 and not settled:  # a cut from unknown space to unknown space parts nothing seen
             size, on_floor = on_floors.counts(segments)
             segments = join_unseen_openings(
                 segments, obstacle, occupied, resolution_m=resolution_m, fixed=on_floor > 0.5 * size,
@@ -857,6 +871,16 @@ def decompose(
             origin_xy_m=origin_xy_m,
             rack_rows_px=racks.rows_px,
         )
+
+
+def _on_floors_only(segments: npt.NDArray[np.int32], floor: npt.NDArray[np.bool_]) -> bool:
+    """Whether every segment pixel lies on ``floor`` (warehouse floors and rack places: a rack hall).
+
+    The room stage and the corridor steps leave such segments as they are (each passes over a segment mostly on
+    the floors, and the segment image's ids are 1..N already), and so do the fans, the insides of furniture, the
+    passages and the unseen openings while every segment stays mostly on them: ``decompose`` then runs none of them.
+    """
+    return not np.any((segments > 0) & ~floor)
 
 
 class _Pairs(NamedTuple):

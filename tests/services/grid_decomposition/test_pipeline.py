@@ -213,3 +213,36 @@ def test_open_floor_of_a_real_home_map_is_never_storage() -> None:
     assert not (d.labels == PlaceLabel.STORAGE.value).any()
     assert all(r.label is not PlaceLabel.STORAGE for r in d.regions.values())
     assert len(d.regions) > 3  # and it is not one region
+
+
+@pytest.mark.parametrize("rotation_rad", [0.0, 0.3])
+def test_a_rack_hall_skips_the_room_stage_with_the_same_regions(
+    monkeypatch: pytest.MonkeyPatch, rotation_rad: float
+) -> None:
+    """Every region of a rack hall lies on its warehouse floors: the room stage and the steps after it that leave such
+    regions alone are not run, and the decomposition is the same as with them run."""
+    from services.grid_decomposition import pipeline
+    from services.simulator.rackmaps import RackStyle, rack_hall_map
+
+    hall = rack_hall_map(
+        0, style=RackStyle.PALLET_HEIGHT, rotation_rad=rotation_rad, n_double_rows=2, bays_per_section=4
+    )
+    called: list[str] = []
+
+    def spy(name: str, step: Any) -> Any:
+        def run(*args: Any, **kwargs: Any) -> Any:
+            called.append(name)
+            return step(*args, **kwargs)
+        return run
+
+    for name in ("segment_rooms", "split_at_short_walls", "join_furnished_pieces", "split_fans", "merge_passages"):
+        monkeypatch.setattr(pipeline, name, spy(name, getattr(pipeline, name)))
+    skipped = decompose(hall.occupancy, resolution_m=hall.resolution_m)
+    assert called == []
+    monkeypatch.setattr(pipeline, "_on_floors_only", lambda segments, floor: False)  # the room stage run
+    run = decompose(hall.occupancy, resolution_m=hall.resolution_m)
+    assert "segment_rooms" in called and "split_fans" in called
+    assert np.array_equal(skipped.segments, run.segments)
+    assert np.array_equal(skipped.labels, run.labels)
+    assert skipped.regions == run.regions
+    assert sorted(skipped.topology.edges(data=True)) == sorted(run.topology.edges(data=True))
