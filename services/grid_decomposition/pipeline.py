@@ -848,14 +848,15 @@ def decompose(
         own = lookup(region_label, segments)  # by runs: a faster gather than indexing, the same values
         loose = (labels == PlaceLabel.ROOM.value) | (labels == PlaceLabel.STORAGE.value) & ~floor_px & ~banks.storage
         loose |= (own == PlaceLabel.OPEN_AREA.value) & ~floor_px  # passages between pallets on open floor
-        labels = np.where(loose & (own > 0), own, labels)
+        # written into the record step's label image (its own uint8 array, read nowhere else): no fresh image per step
+        np.copyto(labels, own, where=loose & (own > 0))
         # a rack place's label, unless a person renamed the category of the face there
         kept_place = on_places
         if label_overrides:
             kept_place = kept_place & ~np.isin(face_labels.category[sub.face_image], list(label_overrides))
         if kept_place.any():
-            labels = np.where(kept_place, lookup(racks.cell_labels.astype(np.uint8), places), labels)  # below 256
-        labels = np.where(floor_space, labels, 0).astype(np.uint8, copy=False)
+            np.copyto(labels, lookup(racks.cell_labels.astype(np.uint8), places), where=kept_place)  # below 256
+        np.multiply(labels, floor_space, out=labels)  # 0 off the floor space
         return Decomposition(
             labels=labels,
             segments=segments,
