@@ -64,8 +64,10 @@ def radiogram(
     """
     # (v % pi) by its cases, the same floats as numpy's remainder (fmod, then + pi below 0): directions and
     # angles lie in [-pi/2, pi/2), so v in (-pi/2, 3pi/2), and v - pi above pi is exact (Sterbenz)
-    v = gradients.direction - angle_rad + math.pi / 2
-    folded = np.where(v < 0, v + math.pi, np.where(v >= math.pi, v - math.pi, v))
+    folded = gradients.direction - angle_rad + math.pi / 2  # v, folded in place (each case read from v)
+    low, high = folded < 0, folded >= math.pi
+    np.add(folded, math.pi, out=folded, where=low)
+    np.subtract(folded, math.pi, out=folded, where=high)
     keep = np.abs(folded - math.pi / 2) <= max_gradient_tilt_rad
     if mask is not None:
         keep &= mask[gradients.rows, gradients.cols]
