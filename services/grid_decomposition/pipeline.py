@@ -518,7 +518,6 @@ def decompose(
         # needed only from the cogency and the room stage on: queued on the other thread behind the libraries even in
         # a fresh process (a whole float64 image and a labelling fewer before the line search on this one)
         occupancy01_job = beside.submit(_occupancy01, occ, known)  # for the cogency
-        against_walls_job = beside.submit(wall_furniture, obstacle, resolution_m=resolution_m)
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
         standing_job = (
             soon(
@@ -641,6 +640,8 @@ def decompose(
         on_floors = MaskCounts(floor_px)  # each step's segments' pixels and those on the floors (often few)
         # a rack hall (every segment on the floors): the room stage and the corridor steps are not run, nor their counts
         room_stage = not _on_floors_only(segments, floor_px)
+        # furniture against walls (needed only after the room stage: on the other thread beside it, on a room map)
+        against_walls_job = beside.submit(wall_furniture, obstacle, resolution_m=resolution_m) if room_stage else None
         cuts = np.zeros(occ.shape, dtype=bool)  # the doorways the room stage finds off the lines
         if room_stage:
             segments, cuts = segment_rooms(
@@ -689,16 +690,16 @@ def decompose(
             # their L
             segments = join_furnished_pieces(segments, clutter, floor_px, resolution_m=resolution_m)
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
-        off_floors = (segments > 0) & ~floor_px if room_stage else None
-        if off_floors is not None and off_floors.any():  # else nothing grows (a hall whose every region is on a
-            # warehouse floor): as it is
-            against_walls = against_walls_job.result() & (segments == 0)
-            grown = fill_from_neighbours(  # np.where's new image: filled in place
-                np.where(off_floors, segments, 0), against_walls, max_iterations=60, overwrite=True
-            )
-            # in place, as the streaks below: every step since the segment image returned a new array or the one it
-            # was given, read nowhere else
-            np.copyto(segments, grown, where=against_walls)
+        if against_walls_job is not None:  # (on a hall every region is on a warehouse floor: nothing grows)
+            off_floors = (segments > 0) & ~floor_px
+            if off_floors.any():  # else nothing grows either: as it is
+                against_walls = against_walls_job.result() & (segments == 0)
+                grown = fill_from_neighbours(  # np.where's new image: filled in place
+                    np.where(off_floors, segments, 0), against_walls, max_iterations=60, overwrite=True
+                )
+                # in place, as the streaks below: every step since the segment image returned a new array or the one
+                # it was given, read nowhere else
+                np.copyto(segments, grown, where=against_walls)
         # the streaks the cleaning took out are free space: they take the region they grow from (in place: every step
         # since the segment image returned a new array or the one it was given, read nowhere else)
         segments = fill_from_neighbours(

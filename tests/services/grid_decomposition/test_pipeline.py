@@ -235,13 +235,14 @@ def test_a_rack_hall_skips_the_room_stage_with_the_same_regions(
             return step(*args, **kwargs)
         return run
 
-    for name in ("segment_rooms", "split_at_short_walls", "join_furnished_pieces", "split_fans", "merge_passages"):
+    steps = ("segment_rooms", "split_at_short_walls", "join_furnished_pieces", "split_fans", "merge_passages")
+    for name in (*steps, "wall_furniture"):
         monkeypatch.setattr(pipeline, name, spy(name, getattr(pipeline, name)))
     skipped = decompose(hall.occupancy, resolution_m=hall.resolution_m)
     assert called == []
     monkeypatch.setattr(pipeline, "_on_floors_only", lambda segments, floor: False)  # the room stage run
     run = decompose(hall.occupancy, resolution_m=hall.resolution_m)
-    assert "segment_rooms" in called and "split_fans" in called
+    assert {"segment_rooms", "split_fans", "wall_furniture"} <= set(called)
     assert np.array_equal(skipped.segments, run.segments)
     assert np.array_equal(skipped.labels, run.labels)
     assert skipped.regions == run.regions
