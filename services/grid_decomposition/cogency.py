@@ -322,7 +322,7 @@ def wall_evidence(
 
 def edge_cogency(
     sub: Subdivision,
-    occupancy01: npt.NDArray[np.float64],
+    occupancy: npt.NDArray[np.int16],
     free: npt.NDArray[np.bool_],
     wall: npt.NDArray[np.bool_],
     door: npt.NDArray[np.bool_],
@@ -335,8 +335,8 @@ def edge_cogency(
     Parameters
     ----------
     sub : Subdivision
-    occupancy01 : (H, W) float64
-        Occupancy in [0, 1] (unknown counted as 1).
+    occupancy : (H, W) int16
+        Occupancy percent, -1 unknown (counted as 100).
     free : (H, W) bool
     wall, door : (H, W) bool
         From :func:`wall_evidence`.
@@ -347,11 +347,13 @@ def edge_cogency(
     n = sub.n_faces + 1
     count, free_px = label_counts(sub.face_image, n, free)
     area = count.astype(np.float64)
-    # a face's sum over its pixels in raster order, as bincount adds them, without the zeros (adding 0.0
-    # changes no sum: the same bits); face 0 (lines and obstacles) is set to 1 below
-    weights = occupancy01.ravel()
-    some = np.flatnonzero((faces > 0) & (weights != 0))
-    occ_sum = np.bincount(faces[some], weights=weights[some], minlength=n)
+    # a face's sum of its pixels' occupancy in [0, 1] in raster order, as bincount adds them, without the zeros (adding
+    # 0.0 changes no sum: the same bits), each the percent / 100 (unknown 1) at those pixels alone: no float image;
+    # face 0 (lines and obstacles) is set to 1 below
+    grid = occupancy.ravel()
+    some = np.flatnonzero((faces > 0) & (grid != 0))
+    percent = grid[some]
+    occ_sum = np.bincount(faces[some], weights=np.where(percent < 0, 1.0, percent / 100.0), minlength=n)
     face_occ = np.divide(occ_sum, area, out=np.ones(n), where=area > 0)
     free_px[0] = 0
     face_occ[0] = 1.0

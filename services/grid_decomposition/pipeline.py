@@ -226,13 +226,6 @@ def _core(mask: npt.NDArray[np.bool_], depth_px: int) -> npt.NDArray[np.bool_]:
     return inner if inner.any() else mask
 
 
-def _occupancy01(occ: npt.NDArray[np.int16], known: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
-    """``np.where(known, occ / 100.0, 1.0)``: the quotients written over in place (one float image, not two)."""
-    out: npt.NDArray[np.float64] = np.divide(occ, 100.0)
-    np.copyto(out, 1.0, where=~known)
-    return out
-
-
 def _structure(obstacle: Components, min_area_px: int) -> npt.NDArray[np.bool_]:
     """Pixels near obstacle components of at least ``min_area_px`` (walls, blocks), not furniture or uprights."""
     big = obstacle.stats[:, cv2.CC_STAT_AREA] >= min_area_px
@@ -515,9 +508,6 @@ def decompose(
                 distance=clearance_job.result(),
             )
         )
-        # needed only from the cogency and the room stage on: queued on the other thread behind the libraries even in
-        # a fresh process (a whole float64 image and a labelling fewer before the line search on this one)
-        occupancy01_job = beside.submit(_occupancy01, occ, known)  # for the cogency
         obstacle_parts = components(obstacle)  # labelled once: furniture, structure, free-standing obstacles
         standing_job = (
             soon(
@@ -598,7 +588,7 @@ def decompose(
         wall, door = evidence_job.result()
         cog = edge_cogency(
             sub,
-            occupancy01_job.result(),
+            occ,
             free,
             wall,
             door,

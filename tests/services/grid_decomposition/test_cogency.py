@@ -112,7 +112,7 @@ def test_wall_with_a_door_is_cogent_and_an_open_line_is_not() -> None:
     wall, door = wall_evidence(
         occ, groups, tolerance_px=1, min_wall_px=5, max_door_px=25, widening_px=6, max_depth_px=20
     )
-    cog = edge_cogency(sub, occ.astype(float), free, wall, door)
+    cog = edge_cogency(sub, occ.astype(np.int16) * 100, free, wall, door)
     assert sub.n_edges >= 3
     crosses_wall = np.array(
         [
@@ -168,14 +168,16 @@ def test_a_speck_beside_a_line_is_no_post_between_two_doors_one_on_it_is() -> No
 
 def test_face_occupancy_is_the_mean_of_its_pixels_as_summed_in_raster_order() -> None:
     rng = np.random.default_rng(5)
-    occ = rng.integers(0, 25, (90, 120)) / 100.0  # free cells of every occupancy below 25 %
-    occ[rng.random(occ.shape) < 0.5] = 0.0
-    occ[:, 60] = 1.0
+    percent = rng.integers(0, 25, (90, 120)).astype(np.int16)  # free cells of every occupancy below 25 %
+    percent[rng.random(percent.shape) < 0.5] = 0
+    percent[:, 60] = 100
+    percent[:3, 60] = -1  # unknown: occupied
+    occ = np.where(percent < 0, 1.0, percent / 100.0)
     free = occ < 0.25
     lines = (Line(0.0, 30.0, 1.0, 0.1, True), Line(math.pi / 2, -90.0, 1.0, 0.1, True))
     sub = subdivide([LineGroup(lines, None)], occ.shape, domain=free)
     none = np.zeros(occ.shape, dtype=bool)
-    cog = edge_cogency(sub, occ, free, none, none)
+    cog = edge_cogency(sub, percent, free, none, none)
     faces = sub.face_image.ravel()
     area = np.bincount(faces, minlength=sub.n_faces + 1)
     mean = np.bincount(faces, weights=occ.ravel(), minlength=sub.n_faces + 1)[1:] / area[1:]
