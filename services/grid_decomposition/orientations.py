@@ -245,11 +245,11 @@ def _logsumexp(array: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """Log of the sum of exponentials along axis 1, as scikit-learn computes it (the same floats)."""
     array_max = _columns(array, np.maximum)
     index_max = array == array_max
-    array = np.array(array, copy=True)
-    array[index_max] = -np.inf
     m = _columns(index_max.astype(array.dtype), np.add)
     shift = np.where(np.isfinite(array_max), array_max, 0)
+    # scikit-learn sets the maxima to -inf before the exponentials: their exp(-inf) is the 0 written after
     exp = np.exp(array - shift)
+    exp[index_max] = 0.0
     s = _columns(exp, np.add)
     s = np.where(s == 0, s, s / m)
     out: npt.NDArray[np.float64] = np.squeeze(np.log1p(s) + np.log(m) + array_max, axis=1)
