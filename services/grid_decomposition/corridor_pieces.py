@@ -121,7 +121,7 @@ def join_corridor_pieces(
     max_side_open_m: float = 6.0,
     min_length_m: float = 6.0,
     min_length_widths: float = 3.0,
-    wall_step_m: float = 0.5,
+    wall_step_m: float = 0.75,
     room_min_depth_ratio: float = 0.4,
     tolerance_px: int = 2,
     margin_px: int = 4,
