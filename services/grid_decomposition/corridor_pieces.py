@@ -30,6 +30,24 @@ def _room_like(piece: npt.NDArray[np.bool_], *, min_area_px: float, min_radius_p
     return bool(cv2.distanceTransform(filled, cv2.DIST_L2, 5).max() >= min_radius_px)
 
 
+def _shallow(strip: npt.NDArray[np.bool_], part: npt.NDArray[np.bool_], top: int, left: int, ratio: float) -> bool:
+    """``part`` (placed at ``top``, ``left`` in the window of ``strip``) reaches less than ``ratio`` times the length
+    of its front on the strip away from it (its front: its pixels 4-connected to the strip's; its reach: its
+    largest distance from the strip's pixels in its box, one pixel round)."""
+    h, w = part.shape
+    y0, x0 = max(top - 1, 0), max(left - 1, 0)
+    y1, x1 = min(top + h + 1, strip.shape[0]), min(left + w + 1, strip.shape[1])
+    placed = np.zeros((y1 - y0, x1 - x0), dtype=bool)
+    placed[top - y0 : top - y0 + h, left - x0 : left - x0 + w] = part
+    near = strip[y0:y1, x0:x1].astype(np.uint8)
+    beside = cv2.dilate(near, np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8)) > 0
+    front = np.count_nonzero(placed & beside)
+    if front == 0:
+        return False
+    depth = cv2.distanceTransform(1 - near, cv2.DIST_L2, 5)[placed].max()
+    return bool(depth < ratio * front)
+
+
 def _long_runs(flags: npt.NDArray[np.bool_], min_length: int, *, inner: bool = False) -> npt.NDArray[np.bool_]:
     """The runs of True longer than ``min_length``; with ``inner`` only those with False on both ends."""
     starts, ends = _runs(flags)
@@ -53,21 +71,29 @@ def _walled_parts(
     max_side_open_px: int,
     min_length_px: int,
     min_length_widths: float,
+    step_px: int,
 ) -> list[Band]:
     """The parts of a band between its junctions and the halls open onto it.
 
-    A side is walled at ``t`` where a wall pixel lies within ``tolerance_px`` of its line. Where both sides are
-    open over more than ``max_open_px`` the corridor meets a hall or crosses another corridor; where one side
-    is open over more than ``max_side_open_px`` between two walled stretches of it a hall lies along it (wider
-    than an office's open front): it is no corridor there. Parts shorter than ``min_length_px`` and
+    A side is walled at ``t`` where a wall pixel lies within ``tolerance_px`` of its line, or up to ``step_px``
+    beyond it along more than ``max_open_px`` (a wall standing back a little, where the corridor widens in front
+    of a room whose wall is further out, still walls it; a jamb or a wall's end beyond the line does not). Where
+    both sides are open over more than ``max_open_px`` the corridor meets a hall or crosses another corridor;
+    where one side is open over more than ``max_side_open_px`` between two walled stretches of it a hall lies
+    along it (wider than an office's open front): it is no corridor there. Parts shorter than ``min_length_px`` and
     ``min_length_widths`` widths are left out.
     """
-    box = band_box(u, t, (band.offset_a_px - tolerance_px, band.offset_b_px + tolerance_px), (band.t0_px, band.t1_px))
+    out_px = max(tolerance_px, step_px)
+    box = band_box(u, t, (band.offset_a_px - out_px, band.offset_b_px + out_px), (band.t0_px, band.t1_px))
     u, t = u[box], t[box]
     along = (t >= band.t0_px) & (t <= band.t1_px) & walls[box]
     n = band.t1_px - band.t0_px + 1
-    side_a = np.bincount(t[along & (np.abs(u - band.offset_a_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
-    side_b = np.bincount(t[along & (np.abs(u - band.offset_b_px) <= tolerance_px)] - band.t0_px, minlength=n) > 0
+    sides = []
+    for beyond in (band.offset_a_px - u, u - band.offset_b_px):  # how far past the side's line, outwards
+        on_line = np.bincount(t[along & (np.abs(beyond) <= tolerance_px)] - band.t0_px, minlength=n) > 0
+        back = np.bincount(t[along & (beyond > tolerance_px) & (beyond <= out_px)] - band.t0_px, minlength=n) > 0
+        sides.append(on_line | _long_runs(back, max_open_px))
+    side_a, side_b = sides
     length = max(min_length_px, round(min_length_widths * (band.offset_b_px - band.offset_a_px)))
     parts = []
     for s0, e0 in zip(*_runs(~_long_runs(~side_a & ~side_b, max_open_px)), strict=True):
@@ -95,6 +121,8 @@ def join_corridor_pieces(
     max_side_open_m: float = 6.0,
     min_length_m: float = 6.0,
     min_length_widths: float = 3.0,
+    wall_step_m: float = 0.75,
+    room_min_depth_ratio: float = 0.4,
     tolerance_px: int = 2,
     margin_px: int = 4,
     occupied: npt.NDArray[np.bool_] | None = None,
@@ -107,14 +135,18 @@ def join_corridor_pieces(
     ``occupied``, bands are looked for along the :func:`~services.grid_decomposition.corridors.tilted_lines` of its
     walls round those regions too (a corridor in a wing the map drew askew), after those of ``lines``. A band ends
     where both its sides are open over more than ``max_open_m`` (a junction, a hall it enters) and where
-    one side is open over more than ``max_side_open_m`` between walled stretches (a hall along it). A band is
+    one side is open over more than ``max_side_open_m`` between walled stretches (a hall along it); a side is
+    walled where a wall lies on its line, or up to ``wall_step_m`` beyond it for more than ``max_open_m`` (a wall
+    stepping back a little, in front of a room whose wall stands further out, is no opening). A band is
     a corridor cut in pieces when the regions lying at least ``min_piece_share`` inside its strip hold at
     least ``min_pieces_share`` of the strip: a band through the middle of a room (an aisle beside desks)
     is a small part of the room's region and is left alone. The strip of such a band becomes one region;
     what each region it crossed keeps outside the strip splits into 4-connected parts. A region the strip
     only clipped (less than ``min_piece_share`` inside) keeps its largest part; other parts stay regions
     when room-like (at least ``room_min_area_m2``, a ``room_min_radius_m`` disc fits with its furniture
-    holes filled), the largest keeping the region's id, and the rest (a door's niche, a sliver along the
+    holes filled, and reaching away from the strip at least ``room_min_depth_ratio`` times the length of its front
+    on it: a room lies off the corridor, a piece along it shallower than that is the corridor widening in front
+    of the doors beside it), the largest keeping the region's id, and the rest (a door's niche, a sliver along the
     wall) joins the corridor where it touches it. The rest of the corridor's own region parted off where
     the corridor turns is its other arm when that arm's band is taken too (an L); the bands are passed
     twice, so the order they are found in does not matter.
@@ -152,7 +184,7 @@ def join_corridor_pieces(
             band, walls, *coordinates[band.angle_rad], tolerance_px=tolerance_px,
             max_open_px=round(max_open_m / resolution_m), max_side_open_px=round(max_side_open_m / resolution_m),
             min_length_px=round(min_length_m / resolution_m),
-            min_length_widths=min_length_widths,
+            min_length_widths=min_length_widths, step_px=round(wall_step_m / resolution_m),
         )
     ]
     out = window.copy()
@@ -202,6 +234,8 @@ def join_corridor_pieces(
                 part = parts[y : y + h, x : x + w] == p
                 if not _room_like(part, **limits):
                     continue
+                if _shallow(strip, part, own[0].start + y, own[1].start + x, room_min_depth_ratio):
+                    continue  # a widening of the corridor along it, in front of the rooms beside it
                 no_room[p] = False
                 if keeps:
                     keeps = False

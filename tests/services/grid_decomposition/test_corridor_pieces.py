@@ -101,3 +101,59 @@ def test_a_hall_open_along_the_corridor_keeps_the_corridor_in_front_of_it() -> N
     lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 299, 460, 820)]
     out = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
     assert np.array_equal(out == out[200, 380], segments == 3), "the hall stays as it was, with its front"
+
+
+def _corridor_end_beside_an_arm() -> tuple[np.ndarray, list[Line]]:
+    """Segments of a 33 m x 2 m corridor (rows 100..139, columns 20..679) whose left end (columns 20..79) meets a
+    3 m arm going up (rows 0..99), as a room stage cut them: the arm with the corridor's end, and the rest of the
+    corridor. Along its first 7 m the lower wall stands 0.3 m further out (the wall of the room below it, rows
+    140..145 free, no line of its own found) than further on."""
+    segments = np.zeros((170, 700), dtype=np.int32)
+    segments[0:100, 20:80] = 1
+    segments[100:146, 20:160] = 1
+    segments[100:140, 160:680] = 2
+    lines = [Line(0.0, float(y), 30.0, 0.1, True) for y in (99, 140)]
+    lines += [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (19, 80, 680)]
+    return segments, lines
+
+
+def test_a_corridor_runs_on_to_its_end_where_one_wall_steps_back_a_little() -> None:
+    segments, lines = _corridor_end_beside_an_arm()
+    out = join_corridor_pieces(segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:139, 21:679])
+    assert corridor.size == 1, "the corridor is one region up to its end below the arm"
+    arm = np.unique(out[5:95, 25:75])
+    assert arm.size == 1 and arm[0] != corridor[0], "the arm is a region of its own"
+    out = join_corridor_pieces(segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M, wall_step_m=0)
+    assert out[120, 50] == out[50, 50], "without the step the corridor's end, open on both sides, is the arm's"
+
+
+def _corridor_with_lobby() -> tuple[np.ndarray, list[Line]]:
+    """Segments of a 33 m x 2 m corridor (rows 100..139, columns 20..679) widening below its middle into an 8 m x
+    2.25 m lobby (rows 140..184, columns 300..459, a post on its front at columns 378..381) in front of two rooms
+    (rows 185..280, their walls drawn), as a room stage cut them: the corridor in three pieces, the middle one
+    holding the lobby too."""
+    segments = np.zeros((300, 700), dtype=np.int32)
+    segments[100:140, 20:200] = 1
+    segments[100:140, 200:600] = 2
+    segments[140:185, 300:460] = 2
+    segments[140:146, 378:382] = 0  # the post
+    segments[100:140, 600:680] = 3
+    segments[190:280, 300:378] = 4
+    segments[190:280, 382:460] = 5
+    segments[185:190, 320:360] = 4  # their doors
+    segments[185:190, 400:440] = 5
+    lines = [Line(0.0, float(y), 30.0, 0.1, True) for y in (99, 140, 185, 280)]
+    lines += [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (19, 299, 380, 460, 680)]
+    return segments, lines
+
+
+def test_a_lobby_along_the_corridor_in_front_of_doors_is_the_corridors() -> None:
+    segments, lines = _corridor_with_lobby()
+    out = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:139, 21:679])
+    assert corridor.size == 1, "the corridor is one region"
+    assert np.all(out[147:184, 301:459] == corridor[0]), "the lobby no deeper than a third of its front is in it"
+    out = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M,
+                               room_min_depth_ratio=0)
+    assert out[160, 380] != out[120, 380], "taken for a room, the lobby is a region of its own"
