@@ -520,11 +520,15 @@ def off_a_door_jamb(
         px = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
         py = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
         runs_on[:, end] = 1.0 - space[py, px].mean(axis=1) >= share
-    across = np.abs(u @ u.T) <= max_cos
+    cand = np.flatnonzero(~seen.all(axis=1))  # a cut toward nothing seen, from a jamb of a wall running on
+    jambs = np.flatnonzero(runs_on.any(axis=1))
+    if cand.size == 0 or jambs.size == 0:
+        return out
+    across = np.abs(u[cand] @ u[jambs].T) <= max_cos
     for end in (0, 1):
-        near = np.linalg.norm(ends[:, None, None, end, :] - ends[None, :, :, :], axis=3) <= reach_px  # gap, other, end
-        jamb = (near & runs_on[None, :, :]).any(axis=2) & across
-        out |= jamb.any(axis=1) & ~runs_on[:, end] & ~seen[:, 1 - end]
+        near = np.linalg.norm(ends[cand, None, None, end, :] - ends[None, jambs], axis=3) <= reach_px
+        jamb = (near & runs_on[None, jambs, :]).any(axis=2) & across
+        out[cand] |= jamb.any(axis=1) & ~runs_on[cand, end] & ~seen[cand, 1 - end]
     return out
 
 
