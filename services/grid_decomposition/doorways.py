@@ -474,6 +474,64 @@ def opens_an_arm(
     return out
 
 
+def off_a_door_jamb(
+    ends: npt.NDArray[np.float64],
+    space: npt.NDArray[np.bool_],
+    hit: npt.NDArray[np.bool_],
+    *,
+    reach_px: float,
+    run_px: int,
+    share: float,
+    seen_px: int,
+    max_cos: float,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: gaps that run from a doorway's jamb into the room behind it, toward nothing the laser hit.
+
+    A gap is such a cut when one of its ends lies within ``reach_px`` of an end of another gap crossing it at an
+    angle (the cosine between them at most ``max_cos``) whose wall runs on beyond that end along it (``share`` of the
+    next ``run_px`` pixels off ``space``: the end is a jamb of the other gap's wall) while its own does not, and its
+    other end has no ``hit`` cell within ``seen_px`` (it ends on the room's unseen inside). A door's jamb is the end
+    of the wall the door is in; the free space just behind the door reaches round that jamb into the room, so a cut
+    from the jamb at an angle to the door, off its wall, to a shadow of the laser is the room's inside, not a second
+    opening.
+
+    Parameters
+    ----------
+    ends : (G, 2, 2) float64
+        The two ends (x, y) of each gap, pixels.
+    space, hit : (H, W) bool
+        Free space (everything else is wall); cells the laser hit (occupied).
+    """
+    out = np.zeros(len(ends), dtype=bool)
+    if len(ends) < 2:
+        return out
+    h, w = hit.shape
+    x = np.clip(np.rint(ends[..., 0]).astype(np.int64), 0, w - 1)
+    y = np.clip(np.rint(ends[..., 1]).astype(np.int64), 0, h - 1)
+    seen = np.zeros(ends.shape[:2], dtype=bool)
+    for dy in range(-seen_px, seen_px + 1):
+        for dx in range(-seen_px, seen_px + 1):
+            seen |= hit[np.clip(y + dy, 0, h - 1), np.clip(x + dx, 0, w - 1)]
+    _, u, _, _ = _gap_frame(ends)
+    k = np.arange(1, run_px + 1, dtype=np.float64)
+    runs_on = np.zeros(ends.shape[:2], dtype=bool)  # gap, end: its wall goes on beyond that end along it
+    for end, outward in ((0, -u), (1, u)):
+        pts = ends[:, end, None, :] + k[None, :, None] * outward[:, None, :]
+        px = np.clip(np.rint(pts[..., 0]).astype(np.int64), 0, w - 1)
+        py = np.clip(np.rint(pts[..., 1]).astype(np.int64), 0, h - 1)
+        runs_on[:, end] = 1.0 - space[py, px].mean(axis=1) >= share
+    cand = np.flatnonzero(~seen.all(axis=1))  # a cut toward nothing seen, from a jamb of a wall running on
+    jambs = np.flatnonzero(runs_on.any(axis=1))
+    if cand.size == 0 or jambs.size == 0:
+        return out
+    across = np.abs(u[cand] @ u[jambs].T) <= max_cos
+    for end in (0, 1):
+        near = np.linalg.norm(ends[cand, None, None, end, :] - ends[None, jambs], axis=3) <= reach_px
+        jamb = (near & runs_on[None, jambs, :]).any(axis=2) & across
+        out[cand] |= jamb.any(axis=1) & ~runs_on[cand, end] & ~seen[cand, 1 - end]
+    return out
+
+
 def bumps_a_strip(
     blocked: npt.NDArray[np.bool_],
     ends: npt.NDArray[np.float64],

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 import numpy.typing as npt
@@ -19,7 +21,7 @@ from services.grid_decomposition.arrays import (
     short_of,
 )
 from services.grid_decomposition.basins import join_furnished_groups, join_room_pieces
-from services.grid_decomposition.doorways import draw_cuts, find_doorways, opens_an_arm
+from services.grid_decomposition.doorways import draw_cuts, find_doorways, off_a_door_jamb, opens_an_arm
 from services.grid_decomposition.necks import split_at_necks
 from services.grid_decomposition.openings import join_pairs
 from services.grid_decomposition.segments import (
@@ -130,6 +132,11 @@ def segment_rooms(
     arm_wall_m: float = 0.8,
     arm_wall_share: float = 0.8,
     block_max_run_m: float = 1.5,
+    jamb_reach_m: float = 0.4,
+    jamb_seen_m: float = 0.1,
+    jamb_run_m: float = 0.5,
+    jamb_run_share: float = 0.9,
+    jamb_min_angle_deg: float = 60.0,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
     """Rooms from the face regions: join open borders, take in furniture, cut at doorways, absorb slivers.
 
@@ -157,7 +164,13 @@ def segment_rooms(
        middle are one room, even where a line closed the mouth as a doorway (``arm_min_width_m`` 0 turns this off).
        Nor is a cut between a side wall and a block standing out from the facing wall, ending along the cut within
        ``block_max_run_m`` (with ``occupied``; :func:`~services.grid_decomposition.doorways.block_beside_a_wall`,
-       0 turns it off).
+       0 turns it off). Nor is a cut from a doorway's jamb into the room behind it
+       (:func:`~services.grid_decomposition.doorways.off_a_door_jamb`, with ``occupied``): one end within
+       ``jamb_reach_m`` of an end of another cut at least ``jamb_min_angle_deg`` across it, whose wall runs on beyond
+       that end along it (``jamb_run_share`` of the next ``jamb_run_m`` not free) while this cut's does not, and the
+       other end with no occupied cell within ``jamb_seen_m``: the free space behind a door reaches round its jamb
+       down the room's side to a shadow the laser left, which is the room's inside, not a second opening
+       (``jamb_reach_m`` 0 turns it off).
     4. Pieces smaller than ``room_min_area_m2``, or narrower than twice ``room_min_half_width_m``
        everywhere (aisles between shelves, strips along a wall), join the neighbour they share the
        longest border with (:func:`merge_small_segments`). Such a piece with no neighbour is no
@@ -248,6 +261,14 @@ def segment_rooms(
                 share=arm_wall_share,
             )
             cuts, mouths = cuts[~mouth], cuts[mouth]
+        if jamb_reach_m > 0 and occupied is not None and cuts.size:
+            cuts = cuts[
+                ~off_a_door_jamb(
+                    cuts, space, occupied, reach_px=jamb_reach_m / resolution_m,
+                    run_px=max(1, round(jamb_run_m / resolution_m)), share=jamb_run_share,
+                    seen_px=round(jamb_seen_m / resolution_m), max_cos=math.cos(math.radians(jamb_min_angle_deg)),
+                )
+            ]
         cut = draw_cuts(cuts, seg.shape) & space
         seg = split_along(seg, cut)
         if len(mouths):

@@ -17,6 +17,7 @@ from services.grid_decomposition.doorways import (
     bumps_a_strip,
     draw_cuts,
     find_doorways,
+    off_a_door_jamb,
     opens_an_arm,
     widens,
 )
@@ -221,6 +222,26 @@ def test_the_mouth_of_a_rooms_arm_is_no_doorway_a_gap_beside_a_partition_and_a_w
     two[54:90, 88:91] = False  # the 0.15 m partition between them stops 2.2 m short of the top wall
     assert not arm(~two, [[89.0, 53.0], [89.0, 9.0]])  # the partition's end is free
     assert not arm(~_two_rooms(2.2), [[100.0, 27.0], [100.0, 72.0]])  # a 2.2 m door in a wall between jambs
+
+
+def test_a_cut_off_a_door_jamb_to_nothing_seen_is_flagged_the_door_and_a_cut_to_a_seen_wall_are_not() -> None:
+    space = np.zeros((120, 160), dtype=bool)
+    space[5:40, 5:155] = True  # a corridor
+    space[43:115, 10:150] = True  # a room behind its 0.15 m wall
+    space[40:43, 30:60] = True  # a 1.5 m door
+    hit = ~space
+    door = [[29.0, 41.0], [60.0, 41.0]]  # (x, y) ends on the jambs, the wall running on beyond both
+    down = [[60.0, 42.0], [60.0, 69.0]]  # from the right jamb down into the room, to a point the laser never hit
+
+    def flags(*gaps: list[list[float]], seen: np.ndarray = hit) -> list[bool]:
+        out = off_a_door_jamb(np.array(gaps), space, seen, reach_px=8.0, run_px=10, share=0.9, seen_px=2, max_cos=0.5)
+        return [bool(f) for f in out]
+
+    assert flags(door, down) == [False, True]
+    seen = hit.copy()
+    seen[68:71, 58:63] = True  # something the laser hit at the cut's lower end: a doorway as before
+    assert flags(door, down, seen=seen) == [False, False]
+    assert flags(door) == [False]
 
 
 def test_distances_to_walls_are_scipys_exact_ones() -> None:

@@ -474,3 +474,44 @@ def test_the_arm_of_an_l_shaped_room_is_the_rooms_even_where_a_line_closed_its_m
     seg = rooms(0.0)
     assert seg[50, 40] != seg[120, 80]  # the mouth taken for a doorway: the arm a room of its own
 
+
+
+def _room_behind_a_door_with_a_shadow() -> tuple[np.ndarray, np.ndarray]:
+    """Free space and occupied cells at 5 cm: a 1.75 m corridor along the top, behind a 0.15 m wall with a 1.5 m door a
+    7 x 5.85 m room, whose lower left the laser never saw from the door (a shadow of unknown space from 1.35 m below
+    the door's right jamb down to the bottom left)."""
+    free = np.zeros((170, 160), dtype=bool)
+    occupied = np.zeros(free.shape, dtype=bool)
+    free[5:40, 5:155] = True  # the corridor
+    occupied[40:43, 5:155] = True  # its wall
+    free[43:160, 10:150] = True  # the room
+    occupied[40:43, 30:60] = False
+    free[40:43, 30:60] = True  # the door
+    shadow = np.zeros(free.shape, dtype=np.uint8)
+    corners = np.array([[60, 69], [10, 110], [10, 160], [150, 160], [150, 130], [100, 90]], dtype=np.int32)
+    cv2.fillPoly(shadow, [corners], 1)
+    free &= shadow == 0
+    return free, occupied
+
+
+def test_a_cut_from_a_door_jamb_to_the_lasers_shadow_leaves_the_room_whole_the_door_stays() -> None:
+    free, occupied = _room_behind_a_door_with_a_shadow()
+    regions = np.where(free, 1, 0).astype(np.int32)
+    regions[:40][free[:40]] = 2
+    none = np.zeros(free.shape, dtype=bool)
+
+    def rooms(jamb_reach_m: float, seen: np.ndarray) -> np.ndarray:
+        seg, _ = segment_rooms(
+            regions, none, none, none, resolution_m=RES, occupied=seen, rays=none, join_saddle_ratio=0.0,
+            desk_max_extent_m=0.0, jamb_reach_m=jamb_reach_m,
+        )
+        return seg
+
+    seg = rooms(0.4, occupied)
+    corridor, under_door, beside_door = seg[20, 80], seg[50, 40], seg[50, 120]
+    assert under_door == beside_door and corridor not in (0, under_door)  # one room behind the corridor's door
+    seg = rooms(0.0, occupied)
+    assert seg[50, 40] != seg[50, 120]  # the cut from the jamb to the shadow taken for a doorway
+    seen = occupied | (~free & (np.arange(free.shape[0])[:, None] > 43))  # the laser hit what stands there
+    seg = rooms(0.4, seen)
+    assert seg[50, 40] != seg[50, 120]  # a cut from the jamb to something seen is a doorway as before
