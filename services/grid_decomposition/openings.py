@@ -136,3 +136,71 @@ def join_unseen_openings(
     seen = near_at(occupied, y.ravel(), x.ravel(), unseen_m / resolution_m, 5).reshape(y.shape)
     keep &= ~seen.any(axis=1)
     return join_pairs(seg, cuts.first[keep], cuts.second[keep])
+
+
+def join_unseen_passages(
+    segments: npt.NDArray[np.int32],
+    obstacle: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    *,
+    resolution_m: float,
+    fixed: npt.NDArray[np.bool_] | None = None,
+    max_area_m2: float = 3.0,
+    min_border_m: float = 0.5,
+    seen_min_m: float = 0.5,
+    max_spread_px: float = 1.5,
+) -> npt.NDArray[np.int32]:
+    """Join a short piece of corridor between two cuts to both its sides when the laser hit no wall beside it.
+
+    A piece smaller than ``max_area_m2`` that borders exactly two other segments, each along a straight cut at least
+    ``min_border_m`` long (:func:`straight_openings`), lies between two doorways, each a gap between jambs. A jamb
+    the laser saw is occupied cells at the floor's edge; where the cells touching the piece (8-neighbours) are
+    occupied along less than ``seen_min_m`` in all, its walls are the grey (unknown) fringe of walls seen from afar
+    and its cuts end on bumps of that fringe: they part nothing seen, so the piece and both its sides are one
+    region. ``fixed`` (per segment id, warehouse floors) segments never join. Ids 1..M (consecutive).
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max()) + 1
+    if n < 4:  # a piece and two sides
+        return renumber(seg)
+    area = np.bincount(seg.ravel(), minlength=n)
+    piece = (area > 0) & (area < max_area_m2 / resolution_m**2)
+    piece[0] = False
+    if fixed is not None:
+        piece &= ~np.asarray(fixed[:n], dtype=bool)
+    if not piece.any():
+        return renumber(seg)
+    # every segment's neighbours (4-neighbour pairs of two segments, on any pixels)
+    h, w = seg.shape
+    keys = []
+    for dy, dx in ((0, 1), (1, 0)):
+        p, q = seg[: h - dy, : w - dx], seg[dy:, dx:]
+        touch = (p != q) & (p > 0) & (q > 0)
+        a, b = p[touch].astype(np.int64), q[touch].astype(np.int64)
+        keys.append(np.concatenate([a * n + b, b * n + a]))
+    pair = np.unique(np.concatenate(keys))
+    piece &= np.bincount(pair // n, minlength=n) == 2
+    cuts = straight_openings(seg, obstacle, max_spread_px=max_spread_px)
+    long = cuts.width_px * resolution_m >= min_border_m
+    ends = np.concatenate([cuts.first[long], cuts.second[long]])
+    piece &= np.bincount(ends, minlength=n) == 2  # both its borders are long straight cuts
+    first, second = cuts.first[long], cuts.second[long]
+    if fixed is not None:  # a piece beside a warehouse floor stays
+        held = np.asarray(fixed[:n], dtype=bool)
+        piece[first[held[second]]] = False
+        piece[second[held[first]]] = False
+    if not piece.any():
+        return renumber(seg)
+    # the occupied cells touching each piece (8-neighbours), each counted once per piece
+    r, c = nonzero_rc(occupied)
+    cell = np.arange(r.size, dtype=np.int64)
+    touching = []
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            label = seg[np.clip(r + dy, 0, h - 1), np.clip(c + dx, 0, w - 1)].astype(np.int64)
+            at = piece[label]
+            touching.append(cell[at] * n + label[at])
+    seen = np.bincount(np.unique(np.concatenate(touching)) % n, minlength=n)
+    piece &= seen * resolution_m < seen_min_m
+    take = piece[first] | piece[second]
+    return join_pairs(seg, first[take], second[take])

@@ -35,7 +35,7 @@ from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
 from services.grid_decomposition.loose import fill_between, fill_enclosed, join_and_fill_loose
-from services.grid_decomposition.openings import join_unseen_openings
+from services.grid_decomposition.openings import join_unseen_openings, join_unseen_passages
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
 from services.grid_decomposition.racks import (
@@ -431,7 +431,10 @@ def decompose(
         Two regions whose border is one straight cut at most ``cut_max_width_m`` long with no occupied cell within
         this distance of either end (from unknown space to unknown space: across a strip of laser rays, no doorway
         in a wall the laser saw) join (:func:`~services.grid_decomposition.openings.join_unseen_openings`); 0 turns
-        it off.
+        it off. With ``passage_max_m2`` above 0 too, a piece smaller than that between two straight cuts (at least
+        0.5 m each) whose floor's edge the laser hit along less than 0.5 m (cuts ending on bumps of the grey fringe
+        of unseen walls) joins both its sides
+        (:func:`~services.grid_decomposition.openings.join_unseen_passages`).
     enclosed_dots_m : float
         A free cell no region holds (a dot of a laser ray) looks along its row and column, four ways, to the first
         obstacle, doorway line or region cell; when three of the four meet one within this distance (it lies inside
@@ -732,6 +735,12 @@ def decompose(
                 segments, obstacle, occupied, resolution_m=resolution_m, fixed=on_floor > 0.5 * size,
                 max_width_m=cut_max_width_m, unseen_m=unseen_opening_m,
             )
+            if passage_max_m2 > 0:  # a piece of corridor between two cuts on the grey fringe of unseen walls
+                size, on_floor = on_floors.counts(segments)
+                segments = join_unseen_passages(
+                    segments, obstacle, occupied, resolution_m=resolution_m, fixed=on_floor > 0.5 * size,
+                    max_area_m2=passage_max_m2, min_border_m=_PASSAGE_MIN_BORDER_M, seen_min_m=_PASSAGE_MIN_BORDER_M,
+                )
         # racks, aisles, cross aisles and junctions: a region each, labelled as the racks say
         floor_space = free | streaks
         segments, places = place_segments(

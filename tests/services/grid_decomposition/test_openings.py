@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.grid_decomposition.openings import join_unseen_openings, straight_openings
+from services.grid_decomposition.openings import join_unseen_openings, join_unseen_passages, straight_openings
 
 RES = 0.05
 
@@ -49,3 +49,41 @@ def test_only_straight_borders_are_openings() -> None:
     for k, row in enumerate(range(20, 180, 10)):
         seg[row : row + 10, 15 + k % 2 * 10 : 45] = 2  # a border stepping 0.5 m back and forth down the strip
     assert straight_openings(seg, obstacle).first.size == 0
+
+
+def _corridor_with_a_piece() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A 1.5 m wide corridor, 10 m long, between grey (unknown) walls whose occupied cells lie 0.15 m behind the
+    floor's edge, cut twice 1.5 m apart: two long pieces and a 1.5 x 1.5 m piece between them (segments 1, 3, 2);
+    segments, obstacles, occupied cells."""
+    obstacle = np.ones((60, 220), dtype=bool)
+    obstacle[15:45, 10:210] = False
+    occupied = np.zeros(obstacle.shape, dtype=bool)
+    occupied[[11, 48], 10:210] = True  # the walls seen from afar: three grey cells between them and the floor
+    seg = np.zeros(obstacle.shape, dtype=np.int32)
+    seg[15:45, 10:100] = 1
+    seg[15:45, 100:130] = 2
+    seg[15:45, 130:210] = 3
+    return seg, obstacle, occupied
+
+
+def test_a_corridor_piece_between_cuts_on_unseen_walls_joins_both_sides() -> None:
+    seg, obstacle, occupied = _corridor_with_a_piece()
+    out = join_unseen_passages(seg, obstacle, occupied, resolution_m=RES)
+    assert out[30, 50] == out[30, 115] == out[30, 170] > 0
+    assert np.array_equal(out > 0, seg > 0)
+    fixed = np.array([False, False, False, True])  # beside a warehouse floor it stays
+    assert join_unseen_passages(seg, obstacle, occupied, resolution_m=RES, fixed=fixed).max() == 3
+
+
+def test_a_corridor_piece_with_seen_jambs_or_a_third_neighbour_stays() -> None:
+    seg, obstacle, occupied = _corridor_with_a_piece()
+    seen = occupied.copy()
+    seen[14, 100:130] = True  # the wall beside the piece hit by the laser at the floor's edge (1.5 m)
+    assert join_unseen_passages(seg, obstacle, seen, resolution_m=RES).max() == 3
+    side = seg.copy()
+    obstacle[5:15, 105:125] = False
+    side[5:15, 105:125] = 4  # a room opening off the piece: a junction, not a piece of corridor
+    assert join_unseen_passages(side, obstacle, occupied, resolution_m=RES).max() == 4
+    big = seg.copy()
+    big[15:45, 70:100] = 2  # a 3 m piece is a room's length, not a strip between two cuts
+    assert join_unseen_passages(big, obstacle, occupied, resolution_m=RES).max() == 3
