@@ -9,7 +9,7 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import near_at, nonzero_rc
+from services.grid_decomposition.arrays import label_counts, lookup, near_at, nonzero_rc
 from services.grid_decomposition.segments import renumber
 
 
@@ -91,12 +91,12 @@ def join_pairs(
         return renumber(seg)
     n = int(seg.max()) + 1
     _, group = connected_components(coo_matrix((np.ones(first.size), (first, second)), shape=(n, n)), directed=False)
-    present = np.bincount(seg.ravel(), minlength=n) > 0
+    present = label_counts(seg, n)[0] > 0
     present[0] = False
     _, dense = np.unique(group[present], return_inverse=True)
     lut = np.zeros(n, dtype=np.int32)
     lut[present] = dense + 1
-    return np.asarray(lut[seg], dtype=np.int32)
+    return lookup(lut, seg)
 
 
 def join_unseen_openings(
@@ -163,23 +163,28 @@ def join_unseen_passages(
     n = int(seg.max()) + 1
     if n < 4:  # a piece and two sides
         return renumber(seg)
-    area = np.bincount(seg.ravel(), minlength=n)
+    area = label_counts(seg, n)[0]
     piece = (area > 0) & (area < max_area_m2 / resolution_m**2)
     piece[0] = False
     if fixed is not None:
         piece &= ~np.asarray(fixed[:n], dtype=bool)
     if not piece.any():
         return renumber(seg)
-    # every segment's neighbours (4-neighbour pairs of two segments, on any pixels)
+    # the pieces' pixels (few): their neighbours and the occupied cells beside them are looked up from these alone
     h, w = seg.shape
-    keys = []
-    for dy, dx in ((0, 1), (1, 0)):
-        p, q = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        touch = (p != q) & (p > 0) & (q > 0)
-        a, b = p[touch].astype(np.int64), q[touch].astype(np.int64)
-        keys.append(np.concatenate([a * n + b, b * n + a]))
+    r, c = nonzero_rc(lookup(piece, seg))
+    own = seg[r, c].astype(np.int64)
+    keys = []  # each piece's 4-neighbour segments
+    for dy, dx in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+        rr, cc = r + dy, c + dx
+        ok = (rr >= 0) & (rr < h) & (cc >= 0) & (cc < w)
+        other = seg[rr[ok], cc[ok]].astype(np.int64)
+        diff = (other != own[ok]) & (other > 0)
+        keys.append(own[ok][diff] * n + other[diff])
     pair = np.unique(np.concatenate(keys))
     piece &= np.bincount(pair // n, minlength=n) == 2
+    if not piece.any():
+        return renumber(seg)
     cuts = straight_openings(seg, obstacle, max_spread_px=max_spread_px)
     long = cuts.width_px * resolution_m >= min_border_m
     ends = np.concatenate([cuts.first[long], cuts.second[long]])
@@ -191,15 +196,15 @@ def join_unseen_passages(
         piece[second[held[first]]] = False
     if not piece.any():
         return renumber(seg)
-    # the occupied cells touching each piece (8-neighbours), each counted once per piece
-    r, c = nonzero_rc(occupied)
-    cell = np.arange(r.size, dtype=np.int64)
+    # the occupied cells touching each piece (8-neighbours of its pixels), each counted once per piece
+    on = piece[own]
+    r, c, own = r[on], c[on], own[on]
     touching = []
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
-            label = seg[np.clip(r + dy, 0, h - 1), np.clip(c + dx, 0, w - 1)].astype(np.int64)
-            at = piece[label]
-            touching.append(cell[at] * n + label[at])
+            rr, cc = np.clip(r + dy, 0, h - 1), np.clip(c + dx, 0, w - 1)
+            hit = occupied[rr, cc]
+            touching.append((rr[hit].astype(np.int64) * w + cc[hit]) * n + own[hit])
     seen = np.bincount(np.unique(np.concatenate(touching)) % n, minlength=n)
     piece &= seen * resolution_m < seen_min_m
     take = piece[first] | piece[second]
