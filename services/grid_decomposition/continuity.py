@@ -98,6 +98,7 @@ def keep_regions(
     first_seen_max_px: int = 0,
     first_seen_min_border_px: int = 0,
     first_seen_min_px: int = 1,
+    first_seen_apart: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.int32]:
     """``segments`` with the regions of ``prior`` kept where the map did not change.
 
@@ -116,7 +117,8 @@ def keep_regions(
     and the door's line is where the room ends (:func:`_slivers_to_door_rooms`; 0 keeps them all). Two regions
     of the result first seen at this step, touching along more than a door's width, are one room the frontier
     of what was seen cut at a line (:func:`_join_first_seen`, at ``first_seen_max_px``,
-    ``first_seen_min_border_px`` and ``first_seen_min_px``; 0 keeps them apart).
+    ``first_seen_min_border_px`` and ``first_seen_min_px``; 0 keeps them apart); regions mostly on
+    ``first_seen_apart`` (places found anew at every step, such as racks) never join so.
 
     Parameters
     ----------
@@ -169,7 +171,8 @@ def keep_regions(
     kept = _largest_pieces(np.where(present, np.cumsum(present), 0).astype(np.int32)[out], min_area_px)
     if first_seen_max_px <= 0:
         return kept
-    return _join_first_seen(kept, before > 0, max_seen_share=min_overlap, max_px=first_seen_max_px,
+    seen = before > 0 if first_seen_apart is None else (before > 0) | first_seen_apart
+    return _join_first_seen(kept, seen, max_seen_share=min_overlap, max_px=first_seen_max_px,
                             min_border_px=first_seen_min_border_px, min_px=first_seen_min_px)
 
 
@@ -184,7 +187,8 @@ def _join_first_seen(
 ) -> npt.NDArray[np.int32]:
     """``segments`` with pairs of first-seen regions that one room's frontier parted made one region.
 
-    A region is first seen when at most ``max_seen_share`` of it lies on ``seen`` (the previous regions' cells).
+    A region is first seen when at most ``max_seen_share`` of it lies on ``seen`` (the previous regions' cells
+    and any that must stay apart).
     Two first-seen regions, each of at least ``min_px`` cells and together of at most ``max_px`` (a room, not a
     wing), whose border (4-connected pairs of cells) is at least ``min_border_px`` long are one: a room seen for
     the first time whose unexplored side left a door's line across it; the prior holds it whole from the next

@@ -768,6 +768,7 @@ def decompose(
                 first_seen_min_px=round(first_seen_piece_min_m2 / resolution_m**2),
                 first_seen_max_px=round(first_seen_room_max_m2 / resolution_m**2),
                 first_seen_min_border_px=round(door_max_width_m / resolution_m),
+                first_seen_apart=on_places,
             )
             if fan_max_neck_m > 0:  # a settled region holds a room seen through its door as it held it before the
                 # room's walls were seen: the rooms behind doors are parted from the regions as kept, too
