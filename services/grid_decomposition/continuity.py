@@ -95,6 +95,10 @@ def keep_regions(
     join_min_width_share: float = 0.6,
     door_rooms: npt.NDArray[np.bool_] | None = None,
     sliver_max_px: int = 0,
+    first_seen_max_px: int = 0,
+    first_seen_min_border_px: int = 0,
+    first_seen_min_px: int = 1,
+    first_seen_apart: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.int32]:
     """``segments`` with the regions of ``prior`` kept where the map did not change.
 
@@ -110,7 +114,11 @@ def keep_regions(
     parted at the door it is seen through (mostly on ``door_rooms``) and that continues a settled region takes
     the kept cells of other settled regions inside it when they are fewer than ``sliver_max_px`` per region:
     floor just inside its door that a hall or corridor held while the room was seen in part is no room of its own,
-    and the door's line is where the room ends (:func:`_slivers_to_door_rooms`; 0 keeps them all).
+    and the door's line is where the room ends (:func:`_slivers_to_door_rooms`; 0 keeps them all). Two regions
+    of the result first seen at this step, touching along more than a door's width, are one room the frontier
+    of what was seen cut at a line (:func:`_join_first_seen`, at ``first_seen_max_px``,
+    ``first_seen_min_border_px`` and ``first_seen_min_px``; 0 keeps them apart); regions mostly on
+    ``first_seen_apart`` (places found anew at every step, such as racks) never join so.
 
     Parameters
     ----------
@@ -160,7 +168,55 @@ def keep_regions(
     out[keep] = base + before[keep]
     present = np.bincount(out.ravel()) > 0
     present[0] = False
-    return _largest_pieces(np.where(present, np.cumsum(present), 0).astype(np.int32)[out], min_area_px)
+    kept = _largest_pieces(np.where(present, np.cumsum(present), 0).astype(np.int32)[out], min_area_px)
+    if first_seen_max_px <= 0:
+        return kept
+    seen = before > 0 if first_seen_apart is None else (before > 0) | first_seen_apart
+    return _join_first_seen(kept, seen, max_seen_share=min_overlap, max_px=first_seen_max_px,
+                            min_border_px=first_seen_min_border_px, min_px=first_seen_min_px)
+
+
+def _join_first_seen(
+    segments: npt.NDArray[np.int32],
+    seen: npt.NDArray[np.bool_],
+    *,
+    max_seen_share: float,
+    max_px: int,
+    min_border_px: int,
+    min_px: int,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with pairs of first-seen regions that one room's frontier parted made one region.
+
+    A region is first seen when at most ``max_seen_share`` of it lies on ``seen`` (the previous regions' cells
+    and any that must stay apart).
+    Two first-seen regions, each of at least ``min_px`` cells and together of at most ``max_px`` (a room, not a
+    wing), whose border (4-connected pairs of cells) is at least ``min_border_px`` long are one: a room seen for
+    the first time whose unexplored side left a door's line across it; the prior holds it whole from the next
+    step on. Groups chained by such pairs take the number of their lowest member; the others keep theirs.
+    """
+    n = int(segments.max(initial=0)) + 1
+    size = np.bincount(segments.ravel(), minlength=n)
+    on_seen = np.bincount(segments[seen], minlength=n)
+    first_seen = (size >= max(min_px, 1)) & (on_seen <= max_seen_share * size)
+    first_seen[0] = False
+    a = np.concatenate([segments[:, :-1].ravel(), segments[:-1, :].ravel()]).astype(np.int64)
+    b = np.concatenate([segments[:, 1:].ravel(), segments[1:, :].ravel()]).astype(np.int64)
+    both = (a != b) & first_seen[a] & first_seen[b]
+    if not both.any():
+        return segments
+    pair, border = np.unique(np.minimum(a[both], b[both]) * n + np.maximum(a[both], b[both]), return_counts=True)
+    lo, hi = pair // n, pair % n
+    join = (border >= min_border_px) & (size[lo] + size[hi] <= max_px)
+    if not join.any():
+        return segments
+    graph = coo_matrix((np.ones(int(join.sum())), (lo[join], hi[join])), shape=(n, n))
+    component = np.asarray(connected_components(graph, directed=False)[1], dtype=np.int64)
+    lowest = np.full(int(component.max()) + 1, n, dtype=np.int64)
+    np.minimum.at(lowest, component, np.arange(n))
+    lut = lowest[component]
+    present = np.bincount(lut, minlength=n) > 0  # number the regions 1..m again
+    present[0] = False
+    return np.where(present, np.cumsum(present), 0).astype(np.int32)[lut][segments]
 
 
 def _slivers_to_door_rooms(

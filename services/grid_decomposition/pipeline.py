@@ -316,6 +316,8 @@ def decompose(
     known_places: RackLayout | None = None,
     prior: RegionPrior | None = None,
     settled_max_changed_share: float = 0.2,
+    first_seen_room_max_m2: float = 16.0,
+    first_seen_piece_min_m2: float = 2.5,
     corridor_min_region_m2: float = 100.0,
     short_wall_min_m: float = 3.0,
     corridor_pieces: bool = True,
@@ -459,7 +461,10 @@ def decompose(
         join when their border is wider than ``door_max_width_m`` and not narrow for the smaller
         (:func:`~services.grid_decomposition.continuity.joined_regions`). Racks, aisles and warehouse floors are
         the new decomposition's. A room behind a door that a kept region holds is parted from it as from a new one
-        (``fan_max_neck_m``).
+        (``fan_max_neck_m``). Two neighbouring regions both seen for the first time (at most half of each in a
+        previous region), each of at least ``first_seen_piece_min_m2`` and together of at most
+        ``first_seen_room_max_m2`` (0: never), along a border at least ``door_max_width_m`` long, are one room
+        the edge of what was seen cut at a door's line, and join (``continuity._join_first_seen``).
     seed : int
         Seed of the clusterings.
 
@@ -760,6 +765,10 @@ def decompose(
                 join_min_border_px=round(door_max_width_m / resolution_m),
                 door_rooms=door_rooms,
                 sliver_max_px=round(room_min_area_m2 / resolution_m**2),
+                first_seen_min_px=round(first_seen_piece_min_m2 / resolution_m**2),
+                first_seen_max_px=round(first_seen_room_max_m2 / resolution_m**2),
+                first_seen_min_border_px=round(door_max_width_m / resolution_m),
+                first_seen_apart=on_places,
             )
             if fan_max_neck_m > 0:  # a settled region holds a room seen through its door as it held it before the
                 # room's walls were seen: the rooms behind doors are parted from the regions as kept, too

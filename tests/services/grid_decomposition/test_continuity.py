@@ -138,9 +138,57 @@ def test_a_room_parted_at_its_door_does_not_take_a_room_the_prior_kept_inside_it
     assert _same_partition(out, before)
 
 
+def test_places_found_anew_at_every_step_do_not_join_as_first_seen() -> None:
+    before = _grid((4, slice(0, 10), slice(None)), shape=(40, 60))
+    after = _grid((1, slice(0, 10), slice(None)), (2, slice(10, 40), slice(0, 30)), (3, slice(10, 40), slice(30, 60)),
+                  shape=(40, 60))
+    out = keep_regions(after, RegionPrior(before, np.ones(before.shape, dtype=bool)), first_seen_max_px=1800,
+                       first_seen_min_border_px=30, first_seen_apart=after == 3)
+    assert _same_partition(out, after)
+
+
 def test_a_prior_on_another_grid_is_refused() -> None:
     with pytest.raises(DecompositionError, match="prior"):
         keep_regions(np.zeros((3, 3), np.int32), RegionPrior(np.zeros((3, 4), np.int32), np.ones((3, 4), bool)))
     with pytest.raises(DecompositionError, match="max_changed_share"):
         keep_regions(np.zeros((3, 3), np.int32), RegionPrior(np.zeros((3, 3), np.int32), np.ones((3, 3), bool)),
                      max_changed_share=2.0)
+
+
+def _first_seen(after: np.ndarray, max_px: int, min_border_px: int, min_px: int) -> np.ndarray:
+    """``after`` kept over a prior that held columns 0..5 only (a corridor); columns 6.. are seen for the first time."""
+    before = _grid((4, slice(None), slice(0, 6)))
+    unchanged = np.zeros(before.shape, dtype=bool)
+    unchanged[:, :6] = True
+    return keep_regions(after, RegionPrior(before, unchanged), first_seen_max_px=max_px,
+                        first_seen_min_border_px=min_border_px, first_seen_min_px=min_px)
+
+
+_CUT_ROOM = _grid((1, slice(None), slice(0, 6)), (2, slice(None), slice(6, 13)), (3, slice(None), slice(13, 20)))
+
+
+def test_a_room_seen_for_the_first_time_and_cut_in_two_is_one_region() -> None:
+    out = _first_seen(_CUT_ROOM, 200, 5, 30)
+    assert _same_partition(out, _grid((1, slice(None), slice(0, 6)), (2, slice(None), slice(6, 20))))
+
+
+@pytest.mark.parametrize(
+    ("max_px", "min_border_px", "min_px"),
+    [
+        (0, 5, 1),  # off
+        (100, 5, 1),  # together larger than a room
+        (200, 11, 1),  # a border shorter than asked
+        (200, 5, 80),  # a piece too small
+    ],
+)
+def test_first_seen_pieces_stay_apart_outside_the_settings(max_px: int, min_border_px: int, min_px: int) -> None:
+    assert _same_partition(_first_seen(_CUT_ROOM, max_px, min_border_px, min_px), _CUT_ROOM)
+
+
+def test_a_region_mostly_seen_before_does_not_join_a_first_seen_one() -> None:
+    before = _grid((4, slice(None), slice(0, 13)))
+    unchanged = np.zeros(before.shape, dtype=bool)
+    unchanged[:, :13] = True
+    after = _grid((2, slice(None), slice(0, 13)), (3, slice(None), slice(13, 20)))
+    out = keep_regions(after, RegionPrior(before, unchanged), first_seen_max_px=200, first_seen_min_border_px=5)
+    assert _same_partition(out, after)
