@@ -3,7 +3,8 @@
 Prints ``name value unit`` lines, one BLAS thread, seconds as wall time and CPU time
 (``time.process_time``) with the load average, since the machine may be shared. Every decomposition runs as the
 worker and ``aisle decompose`` run it: with the cyclic garbage collector held off
-(:func:`shared.collector.collector_held`).
+(:func:`shared.collector.collector_held`) and the allocator keeping freed memory for the next arrays
+(:func:`shared.heap.keep_freed_memory`, ``heap_kept_bytes`` of the settings).
 
 * Synthetic warehouses from the seeded generator of the tests
   (``tests/services/grid_decomposition/warehouse.py``), seeds 0-2 of: ``plain`` (aisles
@@ -36,7 +37,9 @@ hall instead. ``--stages MAP [MAP ...]`` prints instead the CPU seconds of every
 total CPU, all threads, printed with its wall seconds; ``inline`` is the rest: ``decompose``'s own
 lines and what steps ran on threads of their own) for ``big_rack_hall``,
 ``large_warehouse``, ``rose2:<name>`` (a ROSE\u00b2 full map, read as ``eval_ipa.py`` reads it) or a
-map file (0.05 m a pixel unless its YAML says otherwise).
+map file (0.05 m a pixel unless its YAML says otherwise). Issue 20's speed target is CPU on one core: run
+``--stages`` under ``taskset -c 0`` (the ``cores`` line says how many the process had; OpenCV sizes its thread pool
+by them, and on two cores its second thread's hand-offs count as CPU too).
 
 Run from the repository root: ``PYTHONPATH=. .venv/bin/python bench/bench_grid_decomposition.py``.
 """
@@ -66,6 +69,8 @@ from bench.eval_ipa import ROSE2, rose2_occupancy
 from services.grid_decomposition import Decomposition, decompose, overview_image, pipeline, read_map_file
 from services.simulator.rackmaps import RackMap, RackStyle, rack_hall_map
 from shared.collector import collector_held
+from shared.heap import keep_freed_memory
+from shared.settings import get_settings
 from shared.vocabulary import PlaceLabel
 from tests.services.grid_decomposition.warehouse import Warehouse, cell_labels, synthetic_warehouse, tuw_truth
 
@@ -257,6 +262,9 @@ _CHILD = """
 import gc, sys, time, numpy as np
 from threadpoolctl import threadpool_limits
 from shared.collector import collector_held
+from shared.heap import keep_freed_memory
+from shared.settings import get_settings
+keep_freed_memory(get_settings().heap_kept_bytes)  # as the aisle command sets it
 occ = np.load(sys.argv[1])
 with threadpool_limits(1), collector_held():  # as aisle decompose runs it
     from services.grid_decomposition import decompose
@@ -349,6 +357,7 @@ def _stages(names: list[str]) -> None:
         runs = [stage_seconds(occ, res) for _ in range(3)]
         best = min(runs, key=lambda r: r["total"])
         tag = name.replace("rose2:", "rose2_").replace("/", "_").replace(".", "_")
+        print(f"stages_{tag}_cores {len(os.sched_getaffinity(0))} cores")
         print(f"stages_{tag}_total_cpu_seconds {best['total']:.3f} s")
         print(f"stages_{tag}_wall_seconds {best['wall']:.3f} s")
         rest = best["total"] - sum(v for k, v in best.items() if k not in ("total", "wall"))
@@ -365,6 +374,7 @@ def main() -> None:
     parser.add_argument("--overview", type=Path, help="write the overview picture of a solid-rack hall here and stop")
     parser.add_argument("--stages", nargs="+", metavar="MAP", help="print CPU seconds per pipeline step and stop")
     args = parser.parse_args()
+    keep_freed_memory(get_settings().heap_kept_bytes)  # as the aisle command sets it for every stage
     if args.stages:
         with threadpool_limits(1):
             _stages(args.stages)

@@ -35,6 +35,8 @@ from services.grid_decomposition.mapfile import read_map_file
 from services.grid_decomposition.records import decomposition_layers
 from services.simulator.rackmaps import rack_hall_map
 from shared.collector import collector_held
+from shared.heap import keep_freed_memory
+from shared.settings import get_settings
 from shared.store import GridLayer
 
 SETS = ("rose2", "partial", "ipa", "racks", "hall")
@@ -135,6 +137,7 @@ def main() -> None:
     diff.add_argument("b", type=Path)
     args = parser.parse_args()
     if args.command == "run":
+        keep_freed_memory(get_settings().heap_kept_bytes)  # as the aisle command runs every stage
         result: dict[str, dict[str, str]] = {}
         with threadpool_limits(1):
             for name, h in _outputs(args.sets):

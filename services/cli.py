@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
+from shared.heap import keep_freed_memory
 from shared.settings import STAGES, RackProfileSettings, Settings, get_settings
 
 if TYPE_CHECKING:
@@ -189,6 +190,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"aisle: bad settings: {err}", file=sys.stderr)
         return 2
     _configure_logging(settings.log_level)
+    keep_freed_memory(settings.heap_kept_bytes)
     try:
         return _dispatch(args, settings)
     except (ValueError, OSError, ConnectionError) as err:

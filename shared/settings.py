@@ -337,6 +337,12 @@ class Settings(BaseSettings):
         2, ge=1, le=1000, description="Views a bin needs before `GET …/wms-stock/discrepancies` reports it (agreeing "
         "or not): a bin the robots saw fewer times is left unchecked.")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    heap_kept_bytes: int = Field(
+        512 * 2**20, ge=0, le=2**31 - 1,
+        description="Freed memory a process keeps for its next large arrays rather than handing it back to the "
+        "kernel, and the largest array that reuses it, bytes (glibc only; 0: the allocator's own thresholds). "
+        "Saves a tenth of a decomposition's CPU in page faults; the price is up to this much memory held between "
+        "runs.")
     shutdown_grace_s: float = Field(
         5.0, ge=0, le=600, description="After SIGINT or SIGTERM, how long the stages get to finish and store their "
         "work in progress, seconds; a process whose stages are still busy then exits without that work (every "
