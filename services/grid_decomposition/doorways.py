@@ -168,16 +168,32 @@ def across_a_corridor(
     candidates = np.flatnonzero(out)
     for first in range(0, candidates.size, chunk):
         at = candidates[first : first + chunk]
-        need = width[at] + widening_px
-        depths = np.arange(step_px, float(length[at].max()) + 1, step_px, dtype=np.float64)
-        inside = depths[None, :] <= length[at, None]
-        reach = math.ceil(float(need.max())) + 1
         for sign in (1.0, -1.0):
-            points = mid[at, None, :] + sign * depths[None, :, None] * normal[at, None, :]
-            runs = _centre_runs(blocked, points, np.broadcast_to(u[at, None, :], points.shape), reach)
-            wide = (runs >= need[:, None]) & inside
-            out[at] &= wide.sum(axis=1) < max_wide_share * inside.sum(axis=1)
+            out[at] &= _narrow_behind(blocked, width[at] + widening_px, u[at], sign * normal[at], mid[at], length[at],
+                                      max_wide_share=max_wide_share, step_px=step_px)
     return out
+
+
+def _narrow_behind(
+    blocked: npt.NDArray[np.bool_],
+    need: npt.NDArray[np.float64],
+    u: npt.NDArray[np.float64],
+    direction: npt.NDArray[np.float64],
+    mid: npt.NDArray[np.float64],
+    length: npt.NDArray[np.float64],
+    *,
+    max_wide_share: float,
+    step_px: int,
+) -> npt.NDArray[np.bool_]:
+    """(G,) bool: going from each gap's middle along ``direction`` (every ``step_px`` up to its ``length``), the free
+    run through the middle parallel to the gap (along ``u``) reaches ``need`` at fewer than ``max_wide_share`` of
+    the depths: the space behind the gap is a band no wider than that over most of its length."""
+    depths = np.arange(step_px, float(length.max()) + 1, step_px, dtype=np.float64)
+    inside = depths[None, :] <= length[:, None]
+    points = mid[:, None, :] + depths[None, :, None] * direction[:, None, :]
+    runs = _centre_runs(blocked, points, np.broadcast_to(u[:, None, :], points.shape), math.ceil(float(need.max())) + 1)
+    wide = (runs >= need[:, None]) & inside
+    return np.asarray(wide.sum(axis=1) < max_wide_share * inside.sum(axis=1))
 
 
 def _room_on_both_sides(
@@ -664,17 +680,13 @@ def _band_beside(
     as a band about as wide as the gap (wider by ``widening_px`` at fewer than ``max_wide_share`` of the depths, every
     ``step_px``: narrow over most of its length): a corridor, as :func:`across_a_corridor` asks of both sides."""
     width, u, normal, mid = _gap_frame(ends)
-    need = width + widening_px
-    depths = np.arange(step_px, length_px + 1, step_px, dtype=np.float64)
-    reach = math.ceil(float(need.max())) + 1
     out = np.zeros(len(ends), dtype=bool)
     for sign in (1.0, -1.0):
         long = _free_depth(blocked, mid, sign * normal, length_px) >= length_px
-        if not long.any():
-            continue
-        points = mid[long, None, :] + sign * depths[None, :, None] * normal[long, None, :]
-        runs = _centre_runs(blocked, points, np.broadcast_to(u[long, None, :], points.shape), reach)
-        out[long] |= (runs >= need[long, None]).sum(axis=1) < max_wide_share * depths.size
+        if long.any():
+            out[long] |= _narrow_behind(blocked, width[long] + widening_px, u[long], sign * normal[long], mid[long],
+                                        np.full(np.count_nonzero(long), float(length_px)),
+                                        max_wide_share=max_wide_share, step_px=step_px)
     return out
 
 
