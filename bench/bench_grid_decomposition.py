@@ -38,8 +38,8 @@ total CPU, all threads, printed with its wall seconds; ``inline`` is the rest: `
 lines and what steps ran on threads of their own) for ``big_rack_hall``,
 ``large_warehouse``, ``rose2:<name>`` (a ROSE\u00b2 full map, read as ``eval_ipa.py`` reads it) or a
 map file (0.05 m a pixel unless its YAML says otherwise). Issue 20's speed target is CPU on one core: run
-``--stages`` under ``taskset -c 0`` (the ``cores`` line says how many the process had; OpenCV sizes its thread pool
-by them, and on two cores its second thread's hand-offs count as CPU too).
+``--stages`` under ``taskset -c 0`` (the ``cores`` line says how many the process had: on two, the steps that run
+on a thread of their own beside the others count as CPU too).
 
 Run from the repository root: ``PYTHONPATH=. .venv/bin/python bench/bench_grid_decomposition.py``.
 """

@@ -12,42 +12,26 @@ of the last, and back as it was before the first (a collector switched off by so
 from __future__ import annotations
 
 import gc
-import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager
+
+from shared.holds import SharedHold
 
 
-class _Holds:
-    """How many blocks hold the collector off now, and whether it was on when the first began."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._count = 0
-        self._resume = False
-
-    def hold(self) -> None:
-        with self._lock:
-            if self._count == 0:
-                self._resume = gc.isenabled()
-                gc.disable()
-            self._count += 1
-
-    def release(self) -> None:
-        with self._lock:
-            self._count -= 1
-            if self._count == 0 and self._resume:
-                gc.enable()
+def _collector_off() -> bool:
+    was_on = gc.isenabled()
+    gc.disable()
+    return was_on
 
 
-_HOLDS = _Holds()
+def _collector_back(was_on: bool) -> None:
+    if was_on:  # a collector switched off by someone else stays off
+        gc.enable()
 
 
-@contextmanager
-def collector_held() -> Iterator[None]:
+_COLLECTOR = SharedHold(_collector_off, _collector_back)
+
+
+def collector_held() -> AbstractContextManager[None]:
     """Run the block with the cyclic garbage collector off (see the module docstring); overlapping blocks, in any
     threads, share one hold, which ends with the last of them."""
-    _HOLDS.hold()
-    try:
-        yield
-    finally:
-        _HOLDS.release()
+    return _COLLECTOR.held()

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gc
 import json
 import socket
 import threading
@@ -10,10 +9,11 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 
+T = TypeVar("T")
 DATA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
@@ -74,9 +74,9 @@ def with_literal(document: Any, path: tuple[Any, ...], literal: str) -> bytes:
         parent[path[-1]] = saved
 
 
-def collector_after_first_of_overlapping_blocks(block: Callable[[], AbstractContextManager[None]]) -> bool:
-    """Whether the cyclic collector is on inside the second of two overlapping ``block()``s, in two threads, once
-    the first of them (begun first) has ended."""
+def after_first_of_overlapping_blocks(block: Callable[[], AbstractContextManager[None]], read: Callable[[], T]) -> T:
+    """``read()`` inside the second of two overlapping ``block()``s, in two threads, once the first of them (begun
+    first) has ended."""
     first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
 
     def first() -> None:
@@ -91,6 +91,6 @@ def collector_after_first_of_overlapping_blocks(block: Callable[[], AbstractCont
     with block():
         second_in.set()
         first_out.wait(10)
-        enabled = gc.isenabled()
+        value = read()
     thread.join()
-    return enabled
+    return value

@@ -75,6 +75,7 @@ from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.short_walls import split_at_short_walls
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
+from shared.opencv_threads import opencv_on_one_thread
 from shared.vocabulary import PlaceLabel
 
 if TYPE_CHECKING:  # networkx is imported by the steps that build graphs, when first needed
@@ -485,8 +486,9 @@ def decompose(
     # steps' modules while this one cleans the map and finds its furniture and shelf banks, then
     # runs steps beside the line search (place categories, furniture against walls, free-standing
     # obstacles), the rack search and the cogency that do not need their results, and the region
-    # graph beside the label image; each step gives the same result as run in turn
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
+    # graph beside the label image; each step gives the same result as run in turn. OpenCV's own pool is held to
+    # one thread meanwhile: its second thread would only compete with ``beside`` for the second core
+    with opencv_on_one_thread(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="decompose") as beside:
         loaded = beside.submit(lambda: [importlib.import_module(name) for name in _STEP_MODULES])
         learned = beside.submit(lambda: [importlib.import_module(name) for name in _CLUSTERING_MODULES])
         streaks = rays = np.zeros(occ.shape, dtype=bool)

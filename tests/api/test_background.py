@@ -9,11 +9,11 @@ import pytest
 
 from api.background import background_work
 from shared.collector import collector_held
-from tests.helpers import collector_after_first_of_overlapping_blocks
+from tests.helpers import after_first_of_overlapping_blocks
 
 
 def test_the_collector_is_held_off_until_the_last_of_overlapping_pauses_ends(collector_on: None) -> None:
-    assert not collector_after_first_of_overlapping_blocks(background_work)
+    assert not after_first_of_overlapping_blocks(background_work, gc.isenabled)
     assert gc.isenabled()
 
 

@@ -9,7 +9,7 @@ import weakref
 import pytest
 
 from shared.collector import collector_held
-from tests.helpers import collector_after_first_of_overlapping_blocks
+from tests.helpers import after_first_of_overlapping_blocks
 
 
 def test_the_collector_is_off_in_the_block_and_on_again_after_it(collector_on: None) -> None:
@@ -19,7 +19,7 @@ def test_the_collector_is_off_in_the_block_and_on_again_after_it(collector_on: N
 
 
 def test_the_collector_stays_off_until_the_last_of_overlapping_blocks_in_two_threads_ends(collector_on: None) -> None:
-    assert not collector_after_first_of_overlapping_blocks(collector_held)
+    assert not after_first_of_overlapping_blocks(collector_held, gc.isenabled)
     assert gc.isenabled()
 
 
