@@ -208,9 +208,14 @@ def _beyond_core(
         depth = cv2.distanceTransform((~core).view(np.uint8), cv2.DIST_L2, 5)
         fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]
     if fans:
+        # a beam back through the door crosses the segment the part leaves, inside the building: its core walls it
+        reach = round(outside_reach_m / resolution_m)
+        top, left = (max(0, o - reach) for o in offset)
+        walled = occupied[top : offset[0] + mine.shape[0] + reach, left : offset[1] + mine.shape[1] + reach].copy()
+        walled[offset[0] - top : offset[0] - top + mine.shape[0], offset[1] - left : offset[1] - left + mine.shape[1]] |= core
         fans = [c for c, share in zip(fans, open_share(
-            occupied, np.array([_middle(parts == c) for c in fans]) + np.array(offset),
-            reach_px=round(outside_reach_m / resolution_m)), strict=True) if share < max_open_share]
+            walled, np.array([_middle(parts == c) for c in fans]) + np.array([offset[0] - top, offset[1] - left]),
+            reach_px=reach), strict=True) if share < max_open_share]
     return parts, core, fans, necked
 
 
