@@ -54,9 +54,11 @@ def split_fans(
     passes the door, so the floor just behind it is no part of the core); a part of the rest is a
     room when it is at least ``min_area_m2``, touches the core along at most ``max_neck_m``, reaches
     at least ``min_depth_m`` beyond it and has walls round it: less than ``max_open_share`` of 32
-    beams from its middle meet no ``occupied`` cell within ``outside_reach_m``
+    beams from its middle meet no ``occupied`` cell nor the core within ``outside_reach_m``
     (:func:`~services.grid_decomposition.rooms.open_share`; rays through a gap in an outer wall
-    have none beyond them). Only segments of at least ``min_segment_area_m2`` (halls, corridors)
+    have none beyond them, while a beam from a room back through its door, or through a wall the
+    laser never hit, into the segment it leaves is inside the building: a room seen only through
+    its door has walls the laser never hit). Only segments of at least ``min_segment_area_m2`` (halls, corridors)
     lose rooms so, and, when ``thin`` is given, smaller ones of at least ``min_room_area_m2`` (a room
     or a corridor's piece) lose such parts of which at least ``min_thin_share`` is ``thin``: a room
     seen from inside another only through its door is a fan of rays, while a part of a room's own
@@ -208,9 +210,16 @@ def _beyond_core(
         depth = cv2.distanceTransform((~core).view(np.uint8), cv2.DIST_L2, 5)
         fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]
     if fans:
-        fans = [c for c, share in zip(fans, open_share(
-            occupied, np.array([_middle(parts == c) for c in fans]) + np.array(offset),
-            reach_px=round(outside_reach_m / resolution_m)), strict=True) if share < max_open_share]
+        # a beam back through the door, or through an unseen wall into the segment, crosses the building: the core
+        # the part leaves walls it as the map's walls do
+        reach = round(outside_reach_m / resolution_m)
+        top, left = (max(0, o - reach) for o in offset)
+        walled = occupied[top : offset[0] + mine.shape[0] + reach, left : offset[1] + mine.shape[1] + reach].copy()
+        y0, x0 = offset[0] - top, offset[1] - left
+        walled[y0 : y0 + mine.shape[0], x0 : x0 + mine.shape[1]] |= core
+        middles = np.array([_middle(parts == c) for c in fans]) + np.array([y0, x0])
+        fans = [c for c, share in zip(fans, open_share(walled, middles, reach_px=reach), strict=True)
+                if share < max_open_share]
     return parts, core, fans, necked
 
 

@@ -213,3 +213,24 @@ def test_a_room_of_rays_behind_a_door_wider_than_the_disc_parts_from_the_hall_at
     assert np.all(parted[22:120, 22:260] == 1)  # the hall keeps all its floor
     assert np.array_equal(split(rays, wide_neck_m=0.0), segments)  # the 1.2 m disc alone passes the door
     assert np.array_equal(split(np.zeros(segments.shape, dtype=bool)), segments)  # dense floor: a bay of the hall
+
+
+def test_a_room_whose_side_walls_the_laser_never_hit_parts_from_the_hall_it_is_seen_from() -> None:
+    """A bay 0.6 m wide and 2.5 m deep off a 12.7 m hall, with only the room's far wall and the door's jambs hit (its
+    side walls and the rest of the hall's wall unseen): a beam from the room's middle back through the door, or
+    through the unseen wall into the hall, crosses the building, not the outside. Out of the building (no far wall)
+    the rays stay the hall's."""
+    segments = np.zeros((200, 300), dtype=np.int32)
+    segments[22:120, 22:278] = 1
+    segments[120:170, 134:146] = 1
+    jambs = np.zeros(segments.shape, dtype=bool)
+    jambs[120:122, 110:134] = jambs[120:122, 146:170] = True
+    far_wall = jambs.copy()
+    far_wall[170, 120:160] = True
+
+    def split(occupied: np.ndarray) -> np.ndarray:
+        return split_fans(segments, occupied, np.zeros(2, dtype=bool), resolution_m=RESOLUTION_M)
+
+    room = split(far_wall)
+    assert len(np.unique(room[125:170, 134:146])) == 1 and room[150, 140] != 1
+    assert np.array_equal(split(jambs), segments)
