@@ -44,15 +44,25 @@ def _centre_runs(
         begin, length = 0, 8
         while todo.size and begin <= reach_px:
             t = sign * np.arange(begin, min(begin + length, reach_px + 1), dtype=np.float64)
-            x = np.rint(px[todo, None] + t * dx[todo, None]).astype(np.int64)
-            y = np.rint(py[todo, None] + t * dy[todo, None]).astype(np.int64)
-            outside = (x.view(np.uint64) >= w) | (y.view(np.uint64) >= h)  # negative ones too
-            at = np.multiply(y, w, out=y)
-            at += x  # off the image a sample is a stop whatever it reads: the index is only kept in the image
-            stop = np.take(flat, at, mode="clip")
-            stop |= outside
-            hit = stop.any(axis=1)
-            first[todo[hit]] = begin + np.argmax(stop[hit], axis=1)
+            # the samples' whole-number columns and rows, in place, then the flat index from them in float64 (whole
+            # numbers far below 2**53: the same integers)
+            x = np.multiply(t, dx[todo, None])
+            x += px[todo, None]
+            np.rint(x, out=x)
+            y = np.multiply(t, dy[todo, None])
+            y += py[todo, None]
+            np.rint(y, out=y)
+            stop = x >= 0  # off the image (or not a number) a sample is a stop whatever it reads
+            stop &= x < w
+            stop &= y >= 0
+            stop &= y < h
+            np.logical_not(stop, out=stop)
+            y *= w
+            y += x  # the index is only kept in the image
+            stop |= np.take(flat, y.astype(np.int64), mode="clip")
+            step = np.argmax(stop, axis=1)  # the first stop, or 0 where there is none
+            hit = stop[np.arange(todo.size), step]
+            first[todo[hit]] = begin + step[hit]
             todo = todo[~hit]
             begin, length = begin + t.size, 2 * length
         run += first
