@@ -238,13 +238,25 @@ def _free_depth(
     """(N,) how far, in pixels, each point sees free space along its direction (up to ``max_px``)."""
     h, w = blocked.shape
     t = np.arange(0, max_px + 1, dtype=np.float64)
-    pts = points[:, None, :] + t[None, :, None] * direction[:, None, :]
-    x = np.rint(pts[..., 0]).astype(np.int64)
-    y = np.rint(pts[..., 1]).astype(np.int64)
-    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-    stop = ~inside
-    stop[inside] = blocked[y[inside], x[inside]]
-    stop = np.concatenate([stop, np.ones((len(points), 1), dtype=bool)], axis=1)
+    # the samples' whole-number columns and rows (the same floats as of (N, T, 2) points), in place, and their flat
+    # index in float64 (whole numbers far below 2**53)
+    x = np.multiply(t, direction[:, 0, None])
+    x += points[:, 0, None]
+    np.rint(x, out=x)
+    y = np.multiply(t, direction[:, 1, None])
+    y += points[:, 1, None]
+    np.rint(y, out=y)
+    stop = np.ones((len(points), t.size + 1), dtype=bool)  # a stop after the last sample
+    inside = stop[:, :-1]
+    np.greater_equal(x, 0, out=inside)
+    inside &= x < w
+    inside &= y >= 0
+    inside &= y < h
+    y *= w
+    y += x
+    # off the image (or not a number) a sample is a stop whatever it reads: the index is only kept in the image
+    np.logical_not(inside, out=inside)
+    inside |= np.take(np.ascontiguousarray(blocked).ravel(), y.astype(np.int64), mode="clip")
     depth: npt.NDArray[np.float64] = np.argmax(stop, axis=1).astype(np.float64) - 1.0
     return depth
 
