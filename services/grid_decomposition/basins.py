@@ -182,16 +182,18 @@ def _near(furniture: npt.NDArray[np.bool_], pixels: npt.NDArray[np.int64], reach
     table = cv2.integral(furniture.view(np.uint8), sdepth=cv2.CV_32S if furniture.size < 2**31 else cv2.CV_64F)
     table, stride = table.ravel(), w + 1
     at, inverse = np.unique(pixels, return_inverse=True)
-    y, x = np.divmod(at, w)
+    y, x = np.divmod(at, w)  # y ascending: the pixels whose row y + dy lies in the image are one slice
     out = np.zeros(at.size, dtype=bool)
+    ends: dict[int, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]] = {}  # per half width: the rows' ends
     for dy, row in zip(range(-reach, reach + 1), disc, strict=True):
         half = (int(np.count_nonzero(row)) - 1) // 2
         if half < 0:
             continue
-        yy = y + dy
-        on = (yy >= 0) & (yy < h)
-        x0, x1 = np.clip(x[on] - half, 0, w), np.clip(x[on] + half + 1, 0, w)
-        above = yy[on] * stride  # row yy of the table; row yy + 1 is a stride further
+        if half not in ends:  # x - half < w and x + half + 1 > 0: one bound each
+            ends[half] = np.maximum(x - half, 0), np.minimum(x + half + 1, w)
+        on = slice(int(np.searchsorted(y, -dy)), int(np.searchsorted(y, h - dy)))
+        x0, x1 = ends[half][0][on], ends[half][1][on]
+        above = (y[on] + dy) * stride  # row y + dy of the table; row y + dy + 1 is a stride further
         below = above + stride
         out[on] |= table[below + x1] - table[above + x1] > table[below + x0] - table[above + x0]
     return out[inverse.ravel()]

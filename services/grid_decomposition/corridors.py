@@ -334,11 +334,18 @@ def tilted_lines(
         first_along, last_along, places = _longest_stretches(
             offset, np.rint(t).astype(np.int64), peak_i, peak_o, n, max_gap_px
         )
+        # per tilt, its pixels in order of offset (then of pixel): the pixels within ``fit_px`` of a peak's offset
+        # are one slice of them, in the order a stable sort of those pixels by offset gives
+        by_offset: dict[int, tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]]] = {}
         for p in np.flatnonzero(places >= min_support).tolist():
             i, o = int(peak_i[p]), int(peak_o[p])
-            near_px = np.flatnonzero(np.abs(offset[i] - o) <= fit_px)
-            near_px = near_px[np.argsort(offset[i, near_px], kind="stable")]  # in order of offset, as ever
-            off = np.abs(offset[i, near_px] - o)
+            if i not in by_offset:
+                order = np.argsort(offset[i].astype(np.int16) if n < 2**15 else offset[i], kind="stable")  # radix
+                by_offset[i] = order, offset[i, order]
+            order, ordered = by_offset[i]
+            lo, hi = int(np.searchsorted(ordered, o - fit_px)), int(np.searchsorted(ordered, o + fit_px, side="right"))
+            near_px = order[lo:hi]
+            off = np.abs(ordered[lo:hi] - o)
             t_near = t[near_px]
             span = (t_near >= first_along[p] - 0.5) & (t_near <= last_along[p] + 0.5)
             if np.count_nonzero(span & (off <= 1)) < min_thin * np.count_nonzero(span):

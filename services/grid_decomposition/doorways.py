@@ -44,15 +44,25 @@ def _centre_runs(
         begin, length = 0, 8
         while todo.size and begin <= reach_px:
             t = sign * np.arange(begin, min(begin + length, reach_px + 1), dtype=np.float64)
-            x = np.rint(px[todo, None] + t * dx[todo, None]).astype(np.int64)
-            y = np.rint(py[todo, None] + t * dy[todo, None]).astype(np.int64)
-            outside = (x.view(np.uint64) >= w) | (y.view(np.uint64) >= h)  # negative ones too
-            at = np.multiply(y, w, out=y)
-            at += x  # off the image a sample is a stop whatever it reads: the index is only kept in the image
-            stop = np.take(flat, at, mode="clip")
-            stop |= outside
-            hit = stop.any(axis=1)
-            first[todo[hit]] = begin + np.argmax(stop[hit], axis=1)
+            # the samples' whole-number columns and rows, in place, then the flat index from them in float64 (whole
+            # numbers far below 2**53: the same integers)
+            x = np.multiply(t, dx[todo, None])
+            x += px[todo, None]
+            np.rint(x, out=x)
+            y = np.multiply(t, dy[todo, None])
+            y += py[todo, None]
+            np.rint(y, out=y)
+            stop = x >= 0  # off the image (or not a number) a sample is a stop whatever it reads
+            stop &= x < w
+            stop &= y >= 0
+            stop &= y < h
+            np.logical_not(stop, out=stop)
+            y *= w
+            y += x  # the index is only kept in the image
+            stop |= np.take(flat, y.astype(np.int64), mode="clip")
+            step = np.argmax(stop, axis=1)  # the first stop, or 0 where there is none
+            hit = stop[np.arange(todo.size), step]
+            first[todo[hit]] = begin + step[hit]
             todo = todo[~hit]
             begin, length = begin + t.size, 2 * length
         run += first
@@ -228,13 +238,25 @@ def _free_depth(
     """(N,) how far, in pixels, each point sees free space along its direction (up to ``max_px``)."""
     h, w = blocked.shape
     t = np.arange(0, max_px + 1, dtype=np.float64)
-    pts = points[:, None, :] + t[None, :, None] * direction[:, None, :]
-    x = np.rint(pts[..., 0]).astype(np.int64)
-    y = np.rint(pts[..., 1]).astype(np.int64)
-    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-    stop = ~inside
-    stop[inside] = blocked[y[inside], x[inside]]
-    stop = np.concatenate([stop, np.ones((len(points), 1), dtype=bool)], axis=1)
+    # the samples' whole-number columns and rows (the same floats as of (N, T, 2) points), in place, and their flat
+    # index in float64 (whole numbers far below 2**53)
+    x = np.multiply(t, direction[:, 0, None])
+    x += points[:, 0, None]
+    np.rint(x, out=x)
+    y = np.multiply(t, direction[:, 1, None])
+    y += points[:, 1, None]
+    np.rint(y, out=y)
+    stop = np.ones((len(points), t.size + 1), dtype=bool)  # a stop after the last sample
+    inside = stop[:, :-1]
+    np.greater_equal(x, 0, out=inside)
+    inside &= x < w
+    inside &= y >= 0
+    inside &= y < h
+    y *= w
+    y += x
+    # off the image (or not a number) a sample is a stop whatever it reads: the index is only kept in the image
+    np.logical_not(inside, out=inside)
+    inside |= np.take(np.ascontiguousarray(blocked).ravel(), y.astype(np.int64), mode="clip")
     depth: npt.NDArray[np.float64] = np.argmax(stop, axis=1).astype(np.float64) - 1.0
     return depth
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import cv2
@@ -194,7 +195,12 @@ def _beyond_core(
     if n < 2:
         return parts, mine, [], []
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    core = mine & (cv2.distanceTransform((parts != largest).view(np.uint8), cv2.DIST_L2, 5) <= radius)
+    # the transform's distances are chamfer sums, each step at least a pixel in row or column: only within ``radius``
+    # rows and columns of the largest part's box are they within ``radius`` of it, and there they are the same
+    # measured in that box widened by ``radius`` (the part lies in it whole)
+    box = _widened(stats[largest], radius + 1, mine.shape)
+    core = np.zeros(mine.shape, dtype=bool)
+    core[box] = mine[box] & (cv2.distanceTransform((parts[box] != largest).view(np.uint8), cv2.DIST_L2, 5) <= radius)
     n, parts, stats = components_stats((mine & ~core).view(np.uint8), 8)  # 0/1 bytes as they are
     big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area_m2 / resolution_m**2)
     big = big[big > 0]
@@ -207,8 +213,12 @@ def _beyond_core(
         thin_share = np.bincount(parts[thin], minlength=n) / np.maximum(stats[:, cv2.CC_STAT_AREA], 1)
         fans = [c for c in fans if thin_share[c] >= min_thin_share]
     if fans:
-        depth = cv2.distanceTransform((~core).view(np.uint8), cv2.DIST_L2, 5)
-        fans = [c for c in fans if depth[parts == c].max() * resolution_m >= min_depth_m]
+        # a pixel of a part less than ``reach`` from the core has its nearest core pixel within ``reach`` rows and
+        # columns (as above), so in the part's box widened by ``reach`` its depth is the same; a deeper one is at least
+        # ``reach`` deep there too, deep enough either way
+        reach = math.ceil(min_depth_m / resolution_m) + 1
+        fans = [c for c in fans if _depth(core, parts, c, _widened(stats[c], reach, mine.shape)) * resolution_m
+                >= min_depth_m]
     if fans:
         # a beam back through the door, or through an unseen wall into the segment, crosses the building: the core
         # the part leaves walls it as the map's walls do
@@ -221,6 +231,21 @@ def _beyond_core(
         fans = [c for c, share in zip(fans, open_share(walled, middles, reach_px=reach), strict=True)
                 if share < max_open_share]
     return parts, core, fans, necked
+
+
+def _widened(stat: npt.NDArray[np.int32], margin: int, shape: tuple[int, ...]) -> tuple[slice, slice]:
+    """The box of a component's ``cv2.CC_STAT_*`` row widened by ``margin`` pixels on each side, within ``shape``."""
+    left, top = int(stat[cv2.CC_STAT_LEFT]), int(stat[cv2.CC_STAT_TOP])
+    right, bottom = left + int(stat[cv2.CC_STAT_WIDTH]), top + int(stat[cv2.CC_STAT_HEIGHT])
+    return (slice(max(top - margin, 0), min(bottom + margin, shape[0])),
+            slice(max(left - margin, 0), min(right + margin, shape[1])))
+
+
+def _depth(core: npt.NDArray[np.bool_], parts: npt.NDArray[np.int32], c: int, box: tuple[slice, slice]) -> float:
+    """The greatest distance (``cv2.DIST_L2``, mask 5) from ``core`` of a pixel of part ``c`` of ``parts``, the
+    distances measured within ``box`` (round the part)."""
+    depth = cv2.distanceTransform((~core[box]).view(np.uint8), cv2.DIST_L2, 5)
+    return float(depth[parts[box] == c].max())
 
 
 def _door_lens(room: npt.NDArray[np.bool_], core: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
