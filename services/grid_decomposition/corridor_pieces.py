@@ -8,7 +8,13 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats, components_stats_runs, label_boxes, label_counts, lookup
+from services.grid_decomposition.arrays import (
+    components_stats,
+    components_stats_runs,
+    label_boxes,
+    label_counts,
+    lookup,
+)
 from services.grid_decomposition.corridors import (
     Band,
     _runs,
@@ -306,8 +312,9 @@ def join_corridor_pieces(
     for i in sorted(set(range(len(bands))) - made) if beyond_min_area_m2 > 0 else []:  # no corridor cut in pieces
         t = coordinates[bands[i].angle_rad][1]
         next_id = _part_beyond(
-            out, wholes[i] & ~taken, (t >= bands[i].t0_px) & (t <= bands[i].t1_px), size, next_id, min_piece_share=min_piece_share,
-            min_area_px=beyond_min_area_m2 / resolution_m**2, min_depth_ratio=beyond_min_depth_ratio,
+            out, wholes[i] & ~taken, (t >= bands[i].t0_px) & (t <= bands[i].t1_px), size, next_id,
+            min_piece_share=min_piece_share, min_area_px=beyond_min_area_m2 / resolution_m**2,
+            min_depth_ratio=beyond_min_depth_ratio,
         )
         size = label_counts(out, int(out.max()) + 1)[0]
     result = segments.copy()

@@ -157,3 +157,38 @@ def test_a_lobby_along_the_corridor_in_front_of_doors_is_the_corridors() -> None
     out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M,
                                room_min_depth_ratio=0)
     assert out[160, 380] != out[120, 380], "taken for a room, the lobby is a region of its own"
+
+
+def _corridor_end_with_small_room() -> tuple[np.ndarray, list[Line]]:
+    """A 34 m x 2 m corridor (rows 100..139, columns 20..699) whose west half is in a hall's region (a 10 m x 10 m
+    hall below its west end, rows 140..339, columns 20..219, open onto it), its east end a region of its own that
+    also holds a 1.6 m x 2 m room above it (rows 60..99, columns 560..591) seen through a gap in the corridor's
+    upper wall, and a 3 m x 0.4 m niche in that wall (rows 92..99, columns 440..499)."""
+    segments = np.zeros((360, 720), dtype=np.int32)
+    segments[100:140, 20:420] = 1
+    segments[140:340, 20:220] = 1
+    segments[100:140, 420:700] = 2
+    segments[60:100, 560:592] = 2
+    segments[92:100, 440:500] = 2
+    lines = [Line(0.0, float(y), 30.0, 0.1, True) for y in (59, 99, 140, 340)]
+    lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 219, 699)]
+    return segments, lines
+
+
+def test_a_small_room_seen_through_a_gap_in_the_corridor_wall_parts_from_the_corridor_end() -> None:
+    segments, lines = _corridor_end_with_small_room()
+    out, first = join_corridor_pieces(
+        segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M, beyond_min_area_m2=1.5
+    )
+    room = np.unique(out[62:98, 562:590])
+    corridor = np.unique(out[102:138, 430:690])
+    assert room.size == 1 and corridor.size == 1 and room[0] != corridor[0], "the room is a region of its own"
+    assert room[0] >= first, "numbered as a room seen beyond the corridor's wall"
+    assert np.all(out[93:99, 442:498] == corridor[0]), "the shallow niche is the corridor widening"
+    assert np.array_equal(out > 0, segments > 0), "every pixel stays in a region"
+
+
+def test_without_the_rule_the_small_room_stays_in_the_corridor_end() -> None:
+    segments, lines = _corridor_end_with_small_room()
+    out, _ = join_corridor_pieces(segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.unique(out[62:138, 562:590]).size == 1
