@@ -687,9 +687,11 @@ def decompose(
                 )
         beyond = None  # the rooms seen through a gap in a corridor's wall: apart from it
         if corridor_pieces and room_stage:  # a corridor cut where rooms open onto it is one region again
-            on_floor = on_floors.inside(segments)
+            # a region mostly off the warehouse floors is a room's (as the steps below tell them): a few cells of a
+            # floor found in a corridor-and-halls region do not keep its corridor from being looked for
+            size, on_floor = on_floors.counts(segments)
             segments, first_beyond = join_corridor_pieces(
-                segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m,
+                segments, [ln for g in used for ln in g.lines], 2 * on_floor <= size, resolution_m=resolution_m,
                 occupied=occupied, beyond_min_area_m2=corridor_beyond_min_m2,
             )
             if first_beyond <= int(segments.max()):
