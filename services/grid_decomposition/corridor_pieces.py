@@ -8,7 +8,13 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import components_stats_runs, label_boxes, label_counts, lookup
+from services.grid_decomposition.arrays import (
+    components_stats,
+    components_stats_runs,
+    label_boxes,
+    label_counts,
+    lookup,
+)
 from services.grid_decomposition.corridors import (
     Band,
     _runs,
@@ -107,6 +113,42 @@ def _walled_parts(
     return parts
 
 
+def _part_beyond(
+    out: npt.NDArray[np.int32],
+    strip: npt.NDArray[np.bool_],
+    along: npt.NDArray[np.bool_],
+    size: npt.NDArray[np.int64],
+    next_id: int,
+    *,
+    min_piece_share: float,
+    min_area_px: float,
+    min_depth_ratio: float,
+) -> int:
+    """Part from every region lying at least ``min_piece_share`` in a band's ``strip`` each 8-connected part it holds
+    outside the strip, wholly ``along`` the band's run (beyond its side lines, not past its ends), of at least
+    ``min_area_px`` and reaching away from the strip at least ``min_depth_ratio`` times its front on it: a room seen
+    through a gap in the corridor's wall, not the corridor widening. A ray is a diagonal line of cells: 8-connected,
+    the rays of the room's fan stay with it. ``out`` is parted in place (new ids from ``next_id``); returns the next
+    free id."""
+    held = np.bincount(out[strip], minlength=size.size)
+    held[0] = 0
+    boxes = label_boxes(out)
+    for k in np.flatnonzero(held >= min_piece_share * np.maximum(size, 1)).tolist():
+        own = boxes[k - 1]
+        assert own is not None  # k holds pixels of the strip
+        _, parts, stats = components_stats(((out[own] == k) & ~strip[own]).view(np.uint8), 8)
+        for p in np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_area_px).tolist():
+            x, y, w, h = stats[p + 1, :4]
+            part = parts[y : y + h, x : x + w] == p + 1
+            if not along[own][y : y + h, x : x + w][part].all():
+                continue
+            if _shallow(strip, part, own[0].start + y, own[1].start + x, min_depth_ratio):
+                continue
+            out[own][y : y + h, x : x + w][part] = next_id
+            next_id += 1
+    return next_id
+
+
 def join_corridor_pieces(
     segments: npt.NDArray[np.int32],
     lines: list[Line],
@@ -123,10 +165,12 @@ def join_corridor_pieces(
     min_length_widths: float = 3.0,
     wall_step_m: float = 0.75,
     room_min_depth_ratio: float = 0.4,
+    beyond_min_area_m2: float = 0.0,
+    beyond_min_depth_ratio: float = 1.0,
     tolerance_px: int = 2,
     margin_px: int = 4,
     occupied: npt.NDArray[np.bool_] | None = None,
-) -> npt.NDArray[np.int32]:
+) -> tuple[npt.NDArray[np.int32], int]:
     """Make every corridor band that the room stage cut in pieces one region; part the rooms leaking into it.
 
     The bands (:func:`~services.grid_decomposition.corridors.corridor_bands`) are looked for in the union
@@ -151,15 +195,24 @@ def join_corridor_pieces(
     the corridor turns is its other arm when that arm's band is taken too (an L); the bands are passed
     twice, so the order they are found in does not matter.
 
+    With ``beyond_min_area_m2`` above 0, a band that is no corridor cut in pieces still parts, from each region
+    lying at least ``min_piece_share`` in its strip (the corridor's own piece), every 8-connected part it holds
+    beyond the band's side lines and within its run of at least that area that reaches away from the strip at least
+    ``beyond_min_depth_ratio`` times its front on it: a room seen through a gap in the corridor's wall (the gap no
+    doorway: the room's side did not widen), not the corridor widening in front of a door nor its going on past
+    the band's end (:func:`_part_beyond`).
+
     Returns
     -------
     (H, W) int32
         The segments; the corridor takes the id of the region that held most of its strip, parted
         rooms beyond the first of a region are numbered after the existing ids.
+    int
+        The first id of the rooms parted beyond a band's side line (every id from it on is one).
     """
     region = lookup(np.r_[False, joinable[1:]], segments)  # a joinable region's pixels (a lookup per run)
     if not region.any():
-        return segments
+        return segments, int(segments.max()) + 1
     rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))
     top, left = max(0, int(rows[0]) - margin_px), max(0, int(cols[0]) - margin_px)
     box = slice(top, int(rows[-1]) + 1 + margin_px), slice(left, int(cols[-1]) + 1 + margin_px)
@@ -176,7 +229,7 @@ def join_corridor_pieces(
         min_length_widths=min_length_widths, tolerance_px=tolerance_px, coordinates=coordinates, tilted=tilted,
     )
     if not found:
-        return segments
+        return segments, int(segments.max()) + 1
     bands = [
         part
         for band in found
@@ -255,6 +308,15 @@ def join_corridor_pieces(
         taken |= corridor
         made.add(i)
         size = label_counts(out, int(out.max()) + 1)[0]
+    first_beyond = next_id
+    for i in sorted(set(range(len(bands))) - made) if beyond_min_area_m2 > 0 else []:  # no corridor cut in pieces
+        t = coordinates[bands[i].angle_rad][1]
+        next_id = _part_beyond(
+            out, wholes[i] & ~taken, (t >= bands[i].t0_px) & (t <= bands[i].t1_px), size, next_id,
+            min_piece_share=min_piece_share, min_area_px=beyond_min_area_m2 / resolution_m**2,
+            min_depth_ratio=beyond_min_depth_ratio,
+        )
+        size = label_counts(out, int(out.max()) + 1)[0]
     result = segments.copy()
     result[box] = out
-    return result
+    return result, first_beyond

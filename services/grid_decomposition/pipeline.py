@@ -322,6 +322,7 @@ def decompose(
     corridor_min_region_m2: float = 100.0,
     short_wall_min_m: float = 3.0,
     corridor_pieces: bool = True,
+    corridor_beyond_min_m2: float = 1.5,
     rejoin_room_pieces: bool = True,
     inside_furniture_max_m2: float = 1.5,
     passage_max_m2: float = 3.0,
@@ -417,6 +418,11 @@ def decompose(
         A corridor band (parallel lines with walls on both sides) that the room stage cut in pieces is one
         region again, and the rooms that leak into its strip part from it
         (:func:`~services.grid_decomposition.corridor_pieces.join_corridor_pieces`).
+    corridor_beyond_min_m2 : float
+        With ``corridor_pieces``, the corridor's own region parts what it holds beyond a band's side line and
+        along its run when that is at least this large and reaches away from the band at least its front's length:
+        a room seen through a gap in the corridor's wall that no doorway closed. Such rooms stay apart from the
+        corridor when furnished pieces join again; 0 turns it off.
     rejoin_room_pieces : bool
         After the corridor steps, pieces of one furnished room join again as the room stage joins them
         (:func:`~services.grid_decomposition.rooms.join_furnished_pieces`): pieces the room stage left apart because
@@ -679,16 +685,23 @@ def decompose(
                     segments, occupied, [ln for g in used for ln in g.lines], candidates, resolution_m=resolution_m,
                     wall_min_m=short_wall_min_m,
                 )
+        beyond = None  # the rooms seen through a gap in a corridor's wall: apart from it
         if corridor_pieces and room_stage:  # a corridor cut where rooms open onto it is one region again
-            on_floor = on_floors.inside(segments)
-            segments = join_corridor_pieces(
-                segments, [ln for g in used for ln in g.lines], on_floor == 0, resolution_m=resolution_m,
-                occupied=occupied,
+            # a region mostly off the warehouse floors is a room's (as the steps below tell them): a few cells of a
+            # floor found in a corridor-and-halls region do not keep its corridor from being looked for
+            size, on_floor = on_floors.counts(segments)
+            segments, first_beyond = join_corridor_pieces(
+                segments, [ln for g in used for ln in g.lines], 2 * on_floor <= size, resolution_m=resolution_m,
+                occupied=occupied, beyond_min_area_m2=corridor_beyond_min_m2,
             )
+            if first_beyond <= int(segments.max()):
+                beyond = segments >= first_beyond
         if rejoin_room_pieces and room_stage:  # pieces of one room that were pieces of the corridor's region when the
             # room stage joined them: with the corridor parted from the rooms, its union with a room is a T, no longer
             # their L
-            segments = join_furnished_pieces(segments, clutter, floor_px, resolution_m=resolution_m)
+            segments = join_furnished_pieces(
+                segments, clutter, floor_px if beyond is None else floor_px | beyond, resolution_m=resolution_m
+            )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         if against_walls_job is not None:  # (on a hall every region is on a warehouse floor: nothing grows)
             off_floors = (segments > 0) & ~floor_px

@@ -30,7 +30,7 @@ def _corridor_with_open_room() -> tuple[np.ndarray, list[Line]]:
 
 def test_a_corridor_cut_in_pieces_is_one_region_and_the_room_open_onto_it_is_not_in_it() -> None:
     segments, lines = _corridor_with_open_room()
-    out = join_corridor_pieces(segments, lines, np.ones(5, dtype=bool), resolution_m=RESOLUTION_M)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(5, dtype=bool), resolution_m=RESOLUTION_M)
     corridor = np.unique(out[101:149, 21:679])
     assert corridor.size == 1 and corridor[0] > 0, "the corridor is one region from end to end"
     room = np.unique(out[155:245, 305:395])
@@ -40,7 +40,7 @@ def test_a_corridor_cut_in_pieces_is_one_region_and_the_room_open_onto_it_is_not
 
 def test_regions_that_may_not_join_are_left_alone() -> None:
     segments, lines = _corridor_with_open_room()
-    out = join_corridor_pieces(segments, lines, np.zeros(5, dtype=bool), resolution_m=RESOLUTION_M)
+    out, _ = join_corridor_pieces(segments, lines, np.zeros(5, dtype=bool), resolution_m=RESOLUTION_M)
     assert np.array_equal(out, segments)
 
 
@@ -53,7 +53,7 @@ def test_an_aisle_beside_a_row_of_desks_in_an_open_office_stays_in_the_office() 
         segments[40:56, x : x + 32] = 0  # a desk
     lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (9, 40, 56, 170)]
     lines += [Line(math.pi / 2, -float(x), 8.0, 0.1, True) for x in (9, 410)]
-    out = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
     assert np.array_equal(out, segments)
 
 
@@ -66,7 +66,7 @@ def test_a_corridor_entering_a_hall_does_not_cut_the_hall() -> None:
     segments[20:220, 420:660] = 3
     lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (19, 99, 140, 220)]
     lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 419, 660)]
-    out = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
     corridor = np.unique(out[101:139, 21:419])
     assert corridor.size == 1, "the corridor is one region"
     hall = np.unique(out[21:219, 425:659])
@@ -83,7 +83,7 @@ def test_an_l_shaped_corridor_stays_one_region() -> None:
     segments[0:100, 200:300] = 1
     lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (99, 148, 388)]
     lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 199, 300, 563, 620)]
-    out = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(2, dtype=bool), resolution_m=RESOLUTION_M)
     corridor = np.unique(np.r_[out[101:147, 21:619].ravel(), out[149:387, 565:619].ravel()])
     assert corridor.size == 1, "both arms of the corridor are one region"
     room = np.unique(out[5:95, 205:295])
@@ -99,7 +99,7 @@ def test_a_hall_open_along_the_corridor_keeps_the_corridor_in_front_of_it() -> N
     segments[100:300, 300:460] = 3
     lines = [Line(0.0, float(y), 20.0, 0.1, True) for y in (99, 140, 300)]
     lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 299, 460, 820)]
-    out = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(4, dtype=bool), resolution_m=RESOLUTION_M)
     assert np.array_equal(out == out[200, 380], segments == 3), "the hall stays as it was, with its front"
 
 
@@ -119,12 +119,12 @@ def _corridor_end_beside_an_arm() -> tuple[np.ndarray, list[Line]]:
 
 def test_a_corridor_runs_on_to_its_end_where_one_wall_steps_back_a_little() -> None:
     segments, lines = _corridor_end_beside_an_arm()
-    out = join_corridor_pieces(segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M)
     corridor = np.unique(out[101:139, 21:679])
     assert corridor.size == 1, "the corridor is one region up to its end below the arm"
     arm = np.unique(out[5:95, 25:75])
     assert arm.size == 1 and arm[0] != corridor[0], "the arm is a region of its own"
-    out = join_corridor_pieces(segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M, wall_step_m=0)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M, wall_step_m=0)
     assert out[120, 50] == out[50, 50], "without the step the corridor's end, open on both sides, is the arm's"
 
 
@@ -150,10 +150,45 @@ def _corridor_with_lobby() -> tuple[np.ndarray, list[Line]]:
 
 def test_a_lobby_along_the_corridor_in_front_of_doors_is_the_corridors() -> None:
     segments, lines = _corridor_with_lobby()
-    out = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M)
     corridor = np.unique(out[101:139, 21:679])
     assert corridor.size == 1, "the corridor is one region"
     assert np.all(out[147:184, 301:459] == corridor[0]), "the lobby no deeper than a third of its front is in it"
-    out = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M,
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M,
                                room_min_depth_ratio=0)
     assert out[160, 380] != out[120, 380], "taken for a room, the lobby is a region of its own"
+
+
+def _corridor_end_with_small_room() -> tuple[np.ndarray, list[Line]]:
+    """A 34 m x 2 m corridor (rows 100..139, columns 20..699) whose west half is in a hall's region (a 10 m x 10 m
+    hall below its west end, rows 140..339, columns 20..219, open onto it), its east end a region of its own that
+    also holds a 1.6 m x 2 m room above it (rows 60..99, columns 560..591) seen through a gap in the corridor's
+    upper wall, and a 3 m x 0.4 m niche in that wall (rows 92..99, columns 440..499)."""
+    segments = np.zeros((360, 720), dtype=np.int32)
+    segments[100:140, 20:420] = 1
+    segments[140:340, 20:220] = 1
+    segments[100:140, 420:700] = 2
+    segments[60:100, 560:592] = 2
+    segments[92:100, 440:500] = 2
+    lines = [Line(0.0, float(y), 30.0, 0.1, True) for y in (59, 99, 140, 340)]
+    lines += [Line(math.pi / 2, -float(x), 10.0, 0.1, True) for x in (19, 219, 699)]
+    return segments, lines
+
+
+def test_a_small_room_seen_through_a_gap_in_the_corridor_wall_parts_from_the_corridor_end() -> None:
+    segments, lines = _corridor_end_with_small_room()
+    out, first = join_corridor_pieces(
+        segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M, beyond_min_area_m2=1.5
+    )
+    room = np.unique(out[62:98, 562:590])
+    corridor = np.unique(out[102:138, 430:690])
+    assert room.size == 1 and corridor.size == 1 and room[0] != corridor[0], "the room is a region of its own"
+    assert room[0] >= first, "numbered as a room seen beyond the corridor's wall"
+    assert np.all(out[93:99, 442:498] == corridor[0]), "the shallow niche is the corridor widening"
+    assert np.array_equal(out > 0, segments > 0), "every pixel stays in a region"
+
+
+def test_without_the_rule_the_small_room_stays_in_the_corridor_end() -> None:
+    segments, lines = _corridor_end_with_small_room()
+    out, _ = join_corridor_pieces(segments, lines, np.ones(3, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.unique(out[62:138, 562:590]).size == 1
