@@ -216,7 +216,11 @@ def wall_evidence(
     (with ``corridor_length_px`` > 0, :func:`~services.grid_decomposition.doorways.across_a_corridor`).
     With both, a gap split by posts into doors side by side is left open when a part of it from
     post to post lies across a corridor: doors side by side are doors of one wall, and a corridor's
-    width is no door (a line from a room's floor through its door and on across the corridor).
+    width is no door (a line from a room's floor through its door and on across the corridor). Doors side by side are
+    each a door, too: a gap split by posts is left open when behind a stretch between its posts at least
+    ``min_wall_px`` wide the floor does not widen on both sides with the posts in the way (:func:`widens` with
+    ``posts`` as its furniture): the line of a side wall drawn on across a corridor into the hall it opens onto,
+    the hall's furniture beside the line taken for posts.
 
     Parameters
     ----------
@@ -307,6 +311,23 @@ def wall_evidence(
             ).astype(np.float64)
             corridor = across_a_corridor(near, stretch_ends, widening_px=widening_px, length_px=corridor_length_px)
             doorway[split[np.unique(of_gap[corridor])]] = False
+        split = np.flatnonzero(doorway & (g1 - g0 > max_door_px))
+        if post_profile is not None and near_post is not None and split.size:
+            # doors side by side are each a door: behind every stretch between the posts that one can pass (at least
+            # a wall's least run wide) the floor widens on both sides, its furniture and posts in the way. A stretch
+            # between a wall and a block of furniture the line runs along (a side wall's line drawn on across a
+            # corridor into the hall it opens onto, the hall's furniture its "posts") stays as narrow on one side
+            r0, r1, of_run = post_stretches(post_profile, g0[split], g1[split], post_min_px=post_min_px)
+            passable = r1 - r0 >= min_wall_px
+            r0, r1, of_run = r0[passable], r1[passable], of_run[passable]
+            stretch_ends = np.stack(
+                [np.stack([xs[r0], ys[r0]], axis=1), np.stack([xs[r1 - 1], ys[r1 - 1]], axis=1)], axis=1
+            ).astype(np.float64)
+            each = widens(
+                near, stretch_ends, widening_px=widening_px, max_depth_px=max_depth_px + tolerance_px,
+                depth_step_px=max(1, max_depth_px // 4), furniture=near_post,
+            )
+            doorway[split[np.unique(of_run[~each])]] = False
         cover = np.zeros(xs.size + 1, dtype=np.int64)
         np.add.at(cover, g0[doorway], 1)
         np.add.at(cover, g1[doorway], -1)

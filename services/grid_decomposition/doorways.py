@@ -91,6 +91,7 @@ def widens(
     clearance: npt.NDArray[np.floating] | None = None,
     room_margin_px: float = 0.0,
     corridor_length_px: int = 0,
+    furniture: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.bool_]:
     """Gaps behind which the free space widens on both sides: doorways, not corridors or passages.
 
@@ -103,7 +104,9 @@ def widens(
     normal (a parallel run can leak through another doorway of a corridor; a disc cannot).
     With ``corridor_length_px`` > 0, a gap across a stretch of corridor is no doorway either
     (:func:`across_a_corridor`): a run that widens only through a door in the corridor's side
-    wall, or a notch of a ragged wall, does not make the corridor a doorway.
+    wall, or a notch of a ragged wall, does not make the corridor a doorway. With ``furniture``,
+    the runs stop at it too (the floor's width beside the gap, furniture standing on it), while
+    the depth reached along the normal is the walls' (a path passes beside a table).
 
     Parameters
     ----------
@@ -113,6 +116,8 @@ def widens(
         The two ends (x, y) of each gap, pixels.
     clearance : (H, W) float, optional
         Distance to the nearest wall, pixels.
+    furniture : (H, W) bool, optional
+        Obstacles standing on the floor: they bound the runs, not the depth reached.
 
     Returns
     -------
@@ -128,7 +133,8 @@ def widens(
     for sign in (1.0, -1.0):
         reachable = _free_depth(blocked, mid, sign * normal, max_depth_px)
         points = mid[:, None, :] + sign * depths[None, :, None] * normal[:, None, :]
-        runs = _centre_runs(blocked, points, np.broadcast_to(u[:, None, :], points.shape), reach)
+        runs = _centre_runs(blocked if furniture is None else blocked | furniture, points,
+                            np.broadcast_to(u[:, None, :], points.shape), reach)
         runs[depths[None, :] > reachable[:, None]] = 0
         door &= runs.max(axis=1) >= need
     if clearance is not None:
