@@ -215,3 +215,33 @@ def test_a_line_through_a_door_and_across_the_corridor_beyond_is_no_row_of_doors
     rooms[:, 48:53] = True
     rooms[31:101, 48:53] = False
     assert closed(rooms, 40)
+
+
+def test_a_block_the_line_runs_along_is_no_post_between_two_doors_a_post_on_it_is() -> None:
+    # 5 cm pixels. A 1.5 m corridor (rows 20-49) under a wall block (rows 0-19: the line x = 50 continues a side wall
+    # of the rooms above it) opens onto a hall below (rows 50-149, the corridor's lower wall only east of x 100); a
+    # pillar of wall stands in the hall at rows 88-120. The line from the wall down to the pillar is a 3.4 m gap. A
+    # block of furniture beside the line (rows 50-75, x 51-70: the line runs along its face) leaves between it and
+    # the wall a stretch the floor does not widen behind on the block's side (the corridor, between wall and block):
+    # no doors side by side, the corridor and the hall stay one. A post on the line (a speck) splits it into two
+    # stretches that each open onto the hall on both sides: doors side by side, as before.
+    occ = np.zeros((150, 200), dtype=bool)
+    occ[:20] = True
+    occ[50:53, 100:] = True
+    occ[53:, 100:] = True
+    occ[88:121, 45:56] = True
+    line = [LineGroup((Line(math.pi / 2, -50.0, 5.0, 0.1, True),), None)]
+
+    def closed(posts: np.ndarray) -> bool:
+        _, door = wall_evidence(
+            occ, line, tolerance_px=2, min_wall_px=10, max_door_px=40, widening_px=6, max_depth_px=20, posts=posts,
+            post_wall_px=15, post_min_px=2, corridor_length_px=40,
+        )
+        return bool(door[22:45, 50].any())
+
+    block = np.zeros(occ.shape, dtype=bool)
+    block[50:76, 51:71] = True
+    speck = np.zeros(occ.shape, dtype=bool)
+    speck[55:59, 50:52] = True
+    assert not closed(block)
+    assert closed(speck)
