@@ -216,11 +216,11 @@ def wall_evidence(
     (with ``corridor_length_px`` > 0, :func:`~services.grid_decomposition.doorways.across_a_corridor`).
     With both, a gap split by posts into doors side by side is left open when a part of it from
     post to post lies across a corridor: doors side by side are doors of one wall, and a corridor's
-    width is no door (a line from a room's floor through its door and on across the corridor). Doors side by side are
-    each a door, too: a gap split by posts is left open when behind a stretch between its posts at least
-    ``min_wall_px`` wide the floor does not widen on both sides with the posts in the way (:func:`widens` with
-    ``posts`` as its furniture): the line of a side wall drawn on across a corridor into the hall it opens onto,
-    the hall's furniture beside the line taken for posts.
+    width is no door (a line from a room's floor through its door and on across the corridor). And doors side by side
+    are doors: a gap split by posts is left open when behind none of its stretches between posts at least
+    ``min_wall_px`` wide the floor widens on both sides with the posts in the way (:func:`widens` with ``posts`` as
+    its furniture): the line of a side wall drawn on across a corridor into the hall it opens onto, the hall's
+    furniture beside the line taken for posts.
 
     Parameters
     ----------
@@ -313,21 +313,22 @@ def wall_evidence(
             doorway[split[np.unique(of_gap[corridor])]] = False
         split = np.flatnonzero(doorway & (g1 - g0 > max_door_px))
         if post_profile is not None and near_post is not None and split.size:
-            # doors side by side are each a door: behind every stretch between the posts that one can pass (at least
-            # a wall's least run wide) the floor widens on both sides, its furniture and posts in the way. A stretch
-            # between a wall and a block of furniture the line runs along (a side wall's line drawn on across a
-            # corridor into the hall it opens onto, the hall's furniture its "posts") stays as narrow on one side
+            # doors side by side are doors: behind at least one stretch between the posts that one can pass (at least
+            # a wall's least run wide) the floor widens on both sides, its furniture and posts in the way. Where none
+            # does, the line crosses open floor between furniture: a side wall's line drawn on across a corridor into
+            # the hall it opens onto, each stretch between a wall or a block the line runs along and the next block
             r0, r1, of_run = post_stretches(post_profile, g0[split], g1[split], post_min_px=post_min_px)
             passable = r1 - r0 >= min_wall_px
             r0, r1, of_run = r0[passable], r1[passable], of_run[passable]
             stretch_ends = np.stack(
                 [np.stack([xs[r0], ys[r0]], axis=1), np.stack([xs[r1 - 1], ys[r1 - 1]], axis=1)], axis=1
             ).astype(np.float64)
-            each = widens(
+            door_like = widens(
                 near, stretch_ends, widening_px=widening_px, max_depth_px=max_depth_px + tolerance_px,
                 depth_step_px=max(1, max_depth_px // 4), furniture=near_post,
             )
-            doorway[split[np.unique(of_run[~each])]] = False
+            judged = np.bincount(of_run, minlength=split.size) > 0
+            doorway[split[judged & (np.bincount(of_run[door_like], minlength=split.size) == 0)]] = False
         cover = np.zeros(xs.size + 1, dtype=np.int64)
         np.add.at(cover, g0[doorway], 1)
         np.add.at(cover, g1[doorway], -1)

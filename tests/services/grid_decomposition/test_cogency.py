@@ -220,16 +220,17 @@ def test_a_line_through_a_door_and_across_the_corridor_beyond_is_no_row_of_doors
 def test_a_block_the_line_runs_along_is_no_post_between_two_doors_a_post_on_it_is() -> None:
     # 5 cm pixels. A 1.5 m corridor (rows 20-49) under a wall block (rows 0-19: the line x = 50 continues a side wall
     # of the rooms above it) opens onto a hall below (rows 50-149, the corridor's lower wall only east of x 100); a
-    # pillar of wall stands in the hall at rows 88-120. The line from the wall down to the pillar is a 3.4 m gap. A
+    # pillar of wall stands in the hall at rows 82-120. The line from the wall down to the pillar is a 3.1 m gap. A
     # block of furniture beside the line (rows 50-75, x 51-70: the line runs along its face) leaves between it and
-    # the wall a stretch the floor does not widen behind on the block's side (the corridor, between wall and block):
-    # no doors side by side, the corridor and the hall stay one. A post on the line (a speck) splits it into two
-    # stretches that each open onto the hall on both sides: doors side by side, as before.
+    # the wall a stretch the floor does not widen behind on the block's side (the corridor, between wall and block)
+    # and between it and the pillar a sliver no one passes: no doors side by side, the corridor and the hall stay
+    # one. A post on the line (a speck) splits it into two stretches that each open onto the hall on both sides:
+    # doors side by side, as before.
     occ = np.zeros((150, 200), dtype=bool)
     occ[:20] = True
     occ[50:53, 100:] = True
     occ[53:, 100:] = True
-    occ[88:121, 45:56] = True
+    occ[82:121, 45:56] = True
     line = [LineGroup((Line(math.pi / 2, -50.0, 5.0, 0.1, True),), None)]
 
     def closed(posts: np.ndarray) -> bool:
