@@ -130,11 +130,11 @@ def widens(
     depths = np.arange(depth_step_px, max_depth_px + 1, depth_step_px, dtype=np.float64)
     reach = math.ceil(float(need.max())) + 1
     door = np.ones(len(ends), dtype=bool)
+    bounds = blocked if furniture is None else blocked | furniture
     for sign in (1.0, -1.0):
         reachable = _free_depth(blocked, mid, sign * normal, max_depth_px)
         points = mid[:, None, :] + sign * depths[None, :, None] * normal[:, None, :]
-        runs = _centre_runs(blocked if furniture is None else blocked | furniture, points,
-                            np.broadcast_to(u[:, None, :], points.shape), reach)
+        runs = _centre_runs(bounds, points, np.broadcast_to(u[:, None, :], points.shape), reach)
         runs[depths[None, :] > reachable[:, None]] = 0
         door &= runs.max(axis=1) >= need
     if clearance is not None:
