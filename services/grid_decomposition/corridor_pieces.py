@@ -25,6 +25,7 @@ from services.grid_decomposition.corridors import (
     window_coordinates,
 )
 from services.grid_decomposition.radiogram import Line
+from services.grid_decomposition.segments import fill_from_neighbours
 
 
 def _room_like(piece: npt.NDArray[np.bool_], *, min_area_px: float, min_radius_px: float) -> bool:
@@ -52,6 +53,31 @@ def _shallow(strip: npt.NDArray[np.bool_], part: npt.NDArray[np.bool_], top: int
         return False
     depth = cv2.distanceTransform(1 - near, cv2.DIST_L2, 5)[placed].max()
     return bool(depth < ratio * front)
+
+
+def _mouths(
+    out: npt.NDArray[np.int32],
+    corridor: npt.NDArray[np.bool_],
+    widening: npt.NDArray[np.bool_],
+    band: Band,
+    u: npt.NDArray[np.int32],
+    t: npt.NDArray[np.int32],
+    step_px: int,
+) -> npt.NDArray[np.bool_]:
+    """The pixels of ``widening`` (room-like pieces along a band's strip, shallower than their front, about to join
+    its ``corridor``) lying more than ``step_px`` beyond a side line within the band's run, given in ``out`` (in
+    place) to the regions other than the corridor's they reach through such pixels: a corridor's side is at most a
+    wall's step beyond its line, and the floor further out is the mouths of the rooms beside it. Returns the pixels
+    given."""
+    far = corridor & widening & (t >= band.t0_px) & (t <= band.t1_px)
+    far &= (u < band.offset_a_px - step_px) | (u > band.offset_b_px + step_px)
+    if not far.any():
+        return far
+    rooms = np.where(corridor, 0, out).astype(np.int32)
+    grown = fill_from_neighbours(rooms, far, max_iterations=10**6)
+    given = far & (grown > 0)
+    out[given] = grown[given]
+    return given
 
 
 def _long_runs(flags: npt.NDArray[np.bool_], min_length: int, *, inner: bool = False) -> npt.NDArray[np.bool_]:
@@ -170,6 +196,7 @@ def join_corridor_pieces(
     tolerance_px: int = 2,
     margin_px: int = 4,
     occupied: npt.NDArray[np.bool_] | None = None,
+    mouths_to_rooms: bool = True,
 ) -> tuple[npt.NDArray[np.int32], int]:
     """Make every corridor band that the room stage cut in pieces one region; part the rooms leaking into it.
 
@@ -224,6 +251,7 @@ def join_corridor_pieces(
         occupied[box], lines, top=top, left=left, resolution_m=resolution_m
     )
     coordinates = window_coordinates(shape, top, left, lines + tilted)
+    step_px = round(wall_step_m / resolution_m)
     found = corridor_bands(
         inside, walls, lines, top=top, left=left, resolution_m=resolution_m, min_length_m=min_length_m,
         min_length_widths=min_length_widths, tolerance_px=tolerance_px, coordinates=coordinates, tilted=tilted,
@@ -237,7 +265,7 @@ def join_corridor_pieces(
             band, walls, *coordinates[band.angle_rad], tolerance_px=tolerance_px,
             max_open_px=round(max_open_m / resolution_m), max_side_open_px=round(max_side_open_m / resolution_m),
             min_length_px=round(min_length_m / resolution_m),
-            min_length_widths=min_length_widths, step_px=round(wall_step_m / resolution_m),
+            min_length_widths=min_length_widths, step_px=step_px,
         )
     ]
     out = window.copy()
@@ -268,6 +296,7 @@ def join_corridor_pieces(
         corridor_id = parted_from.get(corridor_id, corridor_id)
         crossed = np.flatnonzero(held)
         corridor = strip.copy()
+        widening = np.zeros(shape, dtype=bool)  # the room-like pieces along the strip shallower than their front
         boxes = label_boxes(out)
         for k in crossed.tolist():
             own = boxes[k - 1]
@@ -288,6 +317,7 @@ def join_corridor_pieces(
                 if not _room_like(part, **limits):
                     continue
                 if _shallow(strip, part, own[0].start + y, own[1].start + x, room_min_depth_ratio):
+                    widening[own][y : y + h, x : x + w] |= part
                     continue  # a widening of the corridor along it, in front of the rooms beside it
                 no_room[p] = False
                 if keeps:
@@ -304,6 +334,8 @@ def join_corridor_pieces(
         touching[parts[strip]] = True
         touching[0] = False
         corridor = lookup(touching, parts)
+        if mouths_to_rooms:
+            corridor &= ~_mouths(out, corridor, widening, bands[i], *coordinates[bands[i].angle_rad], step_px)
         out[corridor] = corridor_id
         taken |= corridor
         made.add(i)
