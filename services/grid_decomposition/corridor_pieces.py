@@ -65,17 +65,30 @@ def _mouths(
     step_px: int,
 ) -> npt.NDArray[np.bool_]:
     """The pixels of ``widening`` (room-like pieces along a band's strip, shallower than their front, about to join
-    its ``corridor``) lying more than ``step_px`` beyond a side line within the band's run, given in ``out`` (in
-    place) to the regions other than the corridor's they reach through such pixels: a corridor's side is at most a
-    wall's step beyond its line, and the floor further out is the mouths of the rooms beside it. Returns the pixels
-    given."""
+    its ``corridor``) lying more than ``step_px`` beyond a side line within the band's run, where such floor opens
+    onto other regions along more of its outline than walls close it: given in ``out`` (in place) to the regions
+    they reach. A corridor's side is at most a wall's step beyond its line; floor further out that walls close
+    (a recess in front of doors) is the corridor's, floor open onto the rooms beside it is their mouths. Returns the
+    pixels given."""
     far = corridor & widening & (t >= band.t0_px) & (t <= band.t1_px)
     far &= (u < band.offset_a_px - step_px) | (u > band.offset_b_px + step_px)
     if not far.any():
         return far
-    rooms = np.where(corridor, 0, out).astype(np.int32)
-    grown = fill_from_neighbours(rooms, far, max_iterations=10**6)
-    given = far & (grown > 0)
+    rooms = np.where(corridor, 0, out).astype(np.int32)  # the regions the mouths may go to
+    n, parts, stats = components_stats(far.view(np.uint8), 8)
+    cross = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8)
+    mouths = np.zeros(far.shape, dtype=bool)
+    for p in range(1, n):
+        x, y, w, h = stats[p, :4]
+        box = slice(max(y - 1, 0), y + h + 1), slice(max(x - 1, 0), x + w + 1)
+        piece = parts[box] == p
+        ring = (cv2.dilate(piece.view(np.uint8), cross) > 0) & ~piece & ~corridor[box]  # its outline off the corridor
+        if np.count_nonzero(ring & (rooms[box] > 0)) > np.count_nonzero(ring & (out[box] == 0)):
+            mouths[box] |= piece
+    if not mouths.any():
+        return mouths
+    grown = fill_from_neighbours(rooms, mouths, max_iterations=10**6)
+    given = mouths & (grown > 0)
     out[given] = grown[given]
     return given
 

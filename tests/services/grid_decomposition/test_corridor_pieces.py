@@ -159,6 +159,38 @@ def test_a_lobby_along_the_corridor_in_front_of_doors_is_the_corridors() -> None
     assert out[160, 380] != out[120, 380], "taken for a room, the lobby is a region of its own"
 
 
+def _corridor_with_rooms_open_onto_a_widening() -> tuple[np.ndarray, list[Line]]:
+    """A 33 m x 2 m corridor (rows 100..139, columns 20..679) widening below its middle by 2.1 m over 5.5 m (rows
+    140..181, columns 300..409) into two rooms (rows 182..280) open onto it over their whole width: no wall drawn
+    between the widening and the rooms, only the partition between them (columns 353..356), which stops 0.75 m
+    short of the corridor's wall line; as a room stage cut them, the corridor in three pieces, the middle one holding
+    the widening."""
+    segments = np.zeros((300, 700), dtype=np.int32)
+    segments[100:140, 20:200] = 1
+    segments[100:140, 200:600] = 2
+    segments[140:182, 300:410] = 2
+    segments[100:140, 600:680] = 3
+    segments[182:280, 300:353] = 4
+    segments[182:280, 357:410] = 5
+    segments[155:280, 353:357] = 0  # the partition's end
+    lines = [Line(0.0, float(y), 30.0, 0.1, True) for y in (99, 140, 280)]
+    lines += [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (19, 299, 355, 410, 680)]
+    return segments, lines
+
+
+def test_the_floor_beyond_a_wall_step_open_onto_rooms_is_their_mouth_not_the_corridors() -> None:
+    segments, lines = _corridor_with_rooms_open_onto_a_widening()
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:139, 21:679])
+    assert corridor.size == 1, "the corridor is one region"
+    assert np.all(out[141:153, 301:409] == corridor[0]), "up to a wall's step beyond its line the floor is its"
+    assert np.all(out[160:182, 301:345] == out[200, 320]), "further out, the left room's mouth is the left room's"
+    assert np.all(out[160:182, 365:409] == out[200, 390]), "and the right room's the right room's"
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M,
+                                  mouths_to_rooms=False)
+    assert np.all(out[141:182, 301:353] == corridor[0]), "without the rule the whole widening is the corridor's"
+
+
 def _corridor_end_with_small_room() -> tuple[np.ndarray, list[Line]]:
     """A 34 m x 2 m corridor (rows 100..139, columns 20..699) whose west half is in a hall's region (a 10 m x 10 m
     hall below its west end, rows 140..339, columns 20..219, open onto it), its east end a region of its own that
