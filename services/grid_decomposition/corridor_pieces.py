@@ -230,7 +230,10 @@ def join_corridor_pieces(
     when room-like (at least ``room_min_area_m2``, a ``room_min_radius_m`` disc fits with its furniture
     holes filled, and reaching away from the strip at least ``room_min_depth_ratio`` times the length of its front
     on it: a room lies off the corridor, a piece along it shallower than that is the corridor widening in front
-    of the doors beside it), the largest keeping the region's id, and the rest (a door's niche, a sliver along the
+    of the doors beside it; with ``mouths_to_rooms``, such a widening's floor more than ``wall_step_m`` beyond the
+    band's side line that opens onto other regions along more of its outline than walls close it goes to the
+    regions it opens onto, the mouths of rooms whose walls stop at the corridor's wall line, :func:`_mouths`),
+    the largest keeping the region's id, and the rest (a door's niche, a sliver along the
     wall) joins the corridor where it touches it. The rest of the corridor's own region parted off where
     the corridor turns is its other arm when that arm's band is taken too (an L); the bands are passed
     twice, so the order they are found in does not matter.
@@ -309,7 +312,7 @@ def join_corridor_pieces(
         corridor_id = parted_from.get(corridor_id, corridor_id)
         crossed = np.flatnonzero(held)
         corridor = strip.copy()
-        widening = np.zeros(shape, dtype=bool)  # the room-like pieces along the strip shallower than their front
+        widening = None  # the room-like pieces along the strip shallower than their front (seldom any)
         boxes = label_boxes(out)
         for k in crossed.tolist():
             own = boxes[k - 1]
@@ -330,6 +333,8 @@ def join_corridor_pieces(
                 if not _room_like(part, **limits):
                     continue
                 if _shallow(strip, part, own[0].start + y, own[1].start + x, room_min_depth_ratio):
+                    if widening is None:
+                        widening = np.zeros(shape, dtype=bool)
                     widening[own][y : y + h, x : x + w] |= part
                     continue  # a widening of the corridor along it, in front of the rooms beside it
                 no_room[p] = False
@@ -347,7 +352,7 @@ def join_corridor_pieces(
         touching[parts[strip]] = True
         touching[0] = False
         corridor = lookup(touching, parts)
-        if mouths_to_rooms:
+        if mouths_to_rooms and widening is not None:
             corridor &= ~_mouths(out, corridor, widening, bands[i], *coordinates[bands[i].angle_rad], step_px)
         out[corridor] = corridor_id
         taken |= corridor
