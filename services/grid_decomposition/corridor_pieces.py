@@ -106,28 +106,33 @@ def _beyond_the_wall_line(
 
 def _open_onto_rooms(
     out: npt.NDArray[np.int32], corridor: npt.NDArray[np.bool_], beyond: npt.NDArray[np.bool_]
-) -> npt.NDArray[np.bool_]:
+) -> None:
     """Each 8-connected piece of ``beyond`` (floor past the corridor's wall line) whose outline off the ``corridor``
     meets other regions of ``out`` along more pixels than walls (pixels in no region): the mouth or the inside of
-    a doorway of the rooms it opens onto, given to them in ``out`` (in place, grown from them). Floor the walls
-    close (a recess, a niche in front of a wall) stays the corridor's. Returns the pixels given."""
-    rooms = np.where(corridor, 0, out).astype(np.int32)  # the regions the pieces may go to
-    n, parts, stats = components_stats(beyond.view(np.uint8), 8)
+    a doorway of the rooms it opens onto, given to them in ``out`` and taken out of ``corridor`` (both in place,
+    grown from those regions). Floor the walls close (a recess, a niche in front of a wall) stays the corridor's."""
+    rows, cols = np.flatnonzero(beyond.any(axis=1)), np.flatnonzero(beyond.any(axis=0))
+    if rows.size == 0:
+        return
+    window = slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2), slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2)
+    labels, near, far = out[window], corridor[window], beyond[window]
+    rooms = np.where(near, 0, labels).astype(np.int32)  # the regions the pieces may go to
+    n, parts, stats = components_stats(far.view(np.uint8), 8)
     cross = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8)
-    open_pieces = np.zeros(beyond.shape, dtype=bool)
+    open_pieces = np.zeros(far.shape, dtype=bool)
     for p in range(1, n):
         x, y, w, h = stats[p, :4]
         box = slice(max(y - 1, 0), y + h + 1), slice(max(x - 1, 0), x + w + 1)
         piece = parts[box] == p
-        ring = (cv2.dilate(piece.view(np.uint8), cross) > 0) & ~piece & ~corridor[box]
-        if np.count_nonzero(ring & (rooms[box] > 0)) > np.count_nonzero(ring & (out[box] == 0)):
+        ring = (cv2.dilate(piece.view(np.uint8), cross) > 0) & ~piece & ~near[box]
+        if np.count_nonzero(ring & (rooms[box] > 0)) > np.count_nonzero(ring & (labels[box] == 0)):
             open_pieces[box] |= piece
     if not open_pieces.any():
-        return open_pieces
+        return
     grown = fill_from_neighbours(rooms, open_pieces, max_iterations=10**6)
     given = open_pieces & (grown > 0)
-    out[given] = grown[given]
-    return given
+    labels[given] = grown[given]
+    near[given] = False
 
 
 def _long_runs(flags: npt.NDArray[np.bool_], min_length: int, *, inner: bool = False) -> npt.NDArray[np.bool_]:
@@ -401,8 +406,7 @@ def join_corridor_pieces(
                 step_px=step_px, max_open_px=round(max_open_m / resolution_m),
                 doorway_depth_px=round(doorway_depth_m / resolution_m),
             )
-            if beyond.any():
-                corridor &= ~_open_onto_rooms(out, corridor, beyond)
+            _open_onto_rooms(out, corridor, beyond)
         out[corridor] = corridor_id
         taken |= corridor
         made.add(i)
