@@ -25,6 +25,7 @@ from services.grid_decomposition.corridors import (
     window_coordinates,
 )
 from services.grid_decomposition.radiogram import Line
+from services.grid_decomposition.segments import fill_from_neighbours
 
 
 def _room_like(piece: npt.NDArray[np.bool_], *, min_area_px: float, min_radius_px: float) -> bool:
@@ -52,6 +53,86 @@ def _shallow(strip: npt.NDArray[np.bool_], part: npt.NDArray[np.bool_], top: int
         return False
     depth = cv2.distanceTransform(1 - near, cv2.DIST_L2, 5)[placed].max()
     return bool(depth < ratio * front)
+
+
+def _beyond_the_wall_line(
+    corridor: npt.NDArray[np.bool_],
+    widening: npt.NDArray[np.bool_] | None,
+    band: Band,
+    walls: npt.NDArray[np.bool_],
+    u: npt.NDArray[np.int32],
+    t: npt.NDArray[np.int32],
+    *,
+    tolerance_px: int,
+    step_px: int,
+    max_open_px: int,
+    doorway_depth_px: int,
+) -> npt.NDArray[np.bool_]:
+    """The pixels of ``corridor`` (a band's strip and the pieces about to join it) that lie beyond the corridor's
+    wall line within the band's run: up to ``step_px`` beyond a side line along which no wall stands back, in
+    8-connected pieces reaching more than ``doorway_depth_px`` beyond it (the room's floor inside a doorway in a wall
+    on the line; a piece no deeper is the doorway itself), and more than ``step_px`` beyond it in a ``widening``
+    (floor past the step a wall standing back may take). A side's wall stands back at ``t`` where walls lie more
+    than ``tolerance_px`` and up to ``step_px`` beyond its line along more than ``max_open_px``, openings (doors)
+    of at most ``max_open_px`` between such stretches included: floor in front of it (between cupboards along the
+    corridor) is the corridor's."""
+    out_px = max(tolerance_px, step_px)
+    box = band_box(u, t, (band.offset_a_px - out_px, band.offset_b_px + out_px), (band.t0_px, band.t1_px))
+    ub, tb = u[box], t[box]
+    run = (tb >= band.t0_px) & (tb <= band.t1_px)
+    along = run & walls[box]
+    n = band.t1_px - band.t0_px + 1
+    at = np.clip(tb - band.t0_px, 0, n - 1)
+    doors = np.zeros(ub.shape, dtype=bool)
+    for beyond in (band.offset_a_px - ub, ub - band.offset_b_px):  # how far past the side's line, outwards
+        back = np.bincount(tb[along & (beyond > tolerance_px) & (beyond <= out_px)] - band.t0_px, minlength=n) > 0
+        stepped = ~_long_runs(~_long_runs(back, max_open_px), max_open_px)
+        doors |= (beyond > 0) & (beyond <= step_px) & ~stepped[at]
+    doors &= run & corridor[box]
+    if widening is not None:  # a widening's floor is the corridor's up to the step, beyond it the rooms' mouths
+        doors &= ~widening[box]
+    if doors.any():  # a piece no deeper than a wall is the doorway itself; one reaching further is in the room
+        n_d, parts, _ = components_stats(doors.view(np.uint8), 8)
+        reach = np.zeros(n_d, dtype=np.int64)
+        np.maximum.at(reach, parts[doors], np.maximum(band.offset_a_px - ub, ub - band.offset_b_px)[doors])
+        doors &= (reach > doorway_depth_px)[parts]
+    found = np.zeros(corridor.shape, dtype=bool)
+    found[box] = doors
+    if widening is not None:
+        far = (u < band.offset_a_px - step_px) | (u > band.offset_b_px + step_px)
+        found |= widening & corridor & far & (t >= band.t0_px) & (t <= band.t1_px)
+    return found
+
+
+def _open_onto_rooms(
+    out: npt.NDArray[np.int32], corridor: npt.NDArray[np.bool_], beyond: npt.NDArray[np.bool_]
+) -> None:
+    """Each 8-connected piece of ``beyond`` (floor past the corridor's wall line) whose outline off the ``corridor``
+    meets other regions of ``out`` along more pixels than walls (pixels in no region): the mouth or the inside of
+    a doorway of the rooms it opens onto, given to them in ``out`` and taken out of ``corridor`` (both in place,
+    grown from those regions). Floor the walls close (a recess, a niche in front of a wall) stays the corridor's."""
+    rows, cols = np.flatnonzero(beyond.any(axis=1)), np.flatnonzero(beyond.any(axis=0))
+    if rows.size == 0:
+        return
+    window = slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2), slice(max(int(cols[0]) - 1, 0), int(cols[-1]) + 2)
+    labels, near, far = out[window], corridor[window], beyond[window]
+    rooms = np.where(near, 0, labels).astype(np.int32)  # the regions the pieces may go to
+    n, parts, stats = components_stats(far.view(np.uint8), 8)
+    cross = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8)
+    open_pieces = np.zeros(far.shape, dtype=bool)
+    for p in range(1, n):
+        x, y, w, h = stats[p, :4]
+        box = slice(max(y - 1, 0), y + h + 1), slice(max(x - 1, 0), x + w + 1)
+        piece = parts[box] == p
+        ring = (cv2.dilate(piece.view(np.uint8), cross) > 0) & ~piece & ~near[box]
+        if np.count_nonzero(ring & (rooms[box] > 0)) > np.count_nonzero(ring & (labels[box] == 0)):
+            open_pieces[box] |= piece
+    if not open_pieces.any():
+        return
+    grown = fill_from_neighbours(rooms, open_pieces, max_iterations=10**6)
+    given = open_pieces & (grown > 0)
+    labels[given] = grown[given]
+    near[given] = False
 
 
 def _long_runs(flags: npt.NDArray[np.bool_], min_length: int, *, inner: bool = False) -> npt.NDArray[np.bool_]:
@@ -170,6 +251,8 @@ def join_corridor_pieces(
     tolerance_px: int = 2,
     margin_px: int = 4,
     occupied: npt.NDArray[np.bool_] | None = None,
+    past_wall_line_to_rooms: bool = True,
+    doorway_depth_m: float = 0.3,
 ) -> tuple[npt.NDArray[np.int32], int]:
     """Make every corridor band that the room stage cut in pieces one region; part the rooms leaking into it.
 
@@ -194,6 +277,14 @@ def join_corridor_pieces(
     wall) joins the corridor where it touches it. The rest of the corridor's own region parted off where
     the corridor turns is its other arm when that arm's band is taken too (an L); the bands are passed
     twice, so the order they are found in does not matter.
+
+    With ``past_wall_line_to_rooms``, the floor about to join the corridor that lies beyond its wall line goes to
+    the rooms it opens onto (:func:`_beyond_the_wall_line`, :func:`_open_onto_rooms`): where a side's wall is on
+    its line, a piece inside a doorway reaching more than ``doorway_depth_m`` (a wall's thickness) past the line
+    (the room stage cut the room along the furniture behind its door); in a widening, the floor more than
+    ``wall_step_m`` past the line (the mouths of rooms whose walls stop short of the corridor's wall line); each
+    only when it meets other regions along more of its outline than walls. Floor in front of a wall standing back
+    (between cupboards along the corridor) and recesses walls close stay the corridor's.
 
     With ``beyond_min_area_m2`` above 0, a band that is no corridor cut in pieces still parts, from each region
     lying at least ``min_piece_share`` in its strip (the corridor's own piece), every 8-connected part it holds
@@ -224,6 +315,7 @@ def join_corridor_pieces(
         occupied[box], lines, top=top, left=left, resolution_m=resolution_m
     )
     coordinates = window_coordinates(shape, top, left, lines + tilted)
+    step_px = round(wall_step_m / resolution_m)
     found = corridor_bands(
         inside, walls, lines, top=top, left=left, resolution_m=resolution_m, min_length_m=min_length_m,
         min_length_widths=min_length_widths, tolerance_px=tolerance_px, coordinates=coordinates, tilted=tilted,
@@ -237,7 +329,7 @@ def join_corridor_pieces(
             band, walls, *coordinates[band.angle_rad], tolerance_px=tolerance_px,
             max_open_px=round(max_open_m / resolution_m), max_side_open_px=round(max_side_open_m / resolution_m),
             min_length_px=round(min_length_m / resolution_m),
-            min_length_widths=min_length_widths, step_px=round(wall_step_m / resolution_m),
+            min_length_widths=min_length_widths, step_px=step_px,
         )
     ]
     out = window.copy()
@@ -268,6 +360,7 @@ def join_corridor_pieces(
         corridor_id = parted_from.get(corridor_id, corridor_id)
         crossed = np.flatnonzero(held)
         corridor = strip.copy()
+        widening = None  # the room-like pieces along the strip shallower than their front (seldom any)
         boxes = label_boxes(out)
         for k in crossed.tolist():
             own = boxes[k - 1]
@@ -288,6 +381,9 @@ def join_corridor_pieces(
                 if not _room_like(part, **limits):
                     continue
                 if _shallow(strip, part, own[0].start + y, own[1].start + x, room_min_depth_ratio):
+                    if widening is None:
+                        widening = np.zeros(shape, dtype=bool)
+                    widening[own][y : y + h, x : x + w] |= part
                     continue  # a widening of the corridor along it, in front of the rooms beside it
                 no_room[p] = False
                 if keeps:
@@ -304,6 +400,13 @@ def join_corridor_pieces(
         touching[parts[strip]] = True
         touching[0] = False
         corridor = lookup(touching, parts)
+        if past_wall_line_to_rooms:
+            beyond = _beyond_the_wall_line(
+                corridor, widening, bands[i], walls, *coordinates[bands[i].angle_rad], tolerance_px=tolerance_px,
+                step_px=step_px, max_open_px=round(max_open_m / resolution_m),
+                doorway_depth_px=round(doorway_depth_m / resolution_m),
+            )
+            _open_onto_rooms(out, corridor, beyond)
         out[corridor] = corridor_id
         taken |= corridor
         made.add(i)

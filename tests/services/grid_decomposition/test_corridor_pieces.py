@@ -159,6 +159,74 @@ def test_a_lobby_along_the_corridor_in_front_of_doors_is_the_corridors() -> None
     assert out[160, 380] != out[120, 380], "taken for a room, the lobby is a region of its own"
 
 
+def _corridor_with_rooms_open_onto_a_widening() -> tuple[np.ndarray, list[Line]]:
+    """A 33 m x 2 m corridor (rows 100..139, columns 20..679) widening below its middle by 2.1 m over 5.5 m (rows
+    140..181, columns 300..409) into two rooms (rows 182..280) open onto it over their whole width: no wall drawn
+    between the widening and the rooms, only the partition between them (columns 353..356), which stops 0.75 m
+    short of the corridor's wall line; as a room stage cut them, the corridor in three pieces, the middle one holding
+    the widening."""
+    segments = np.zeros((300, 700), dtype=np.int32)
+    segments[100:140, 20:200] = 1
+    segments[100:140, 200:600] = 2
+    segments[140:182, 300:410] = 2
+    segments[100:140, 600:680] = 3
+    segments[182:280, 300:353] = 4
+    segments[182:280, 357:410] = 5
+    segments[155:280, 353:357] = 0  # the partition's end
+    lines = [Line(0.0, float(y), 30.0, 0.1, True) for y in (99, 140, 280)]
+    lines += [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (19, 299, 355, 410, 680)]
+    return segments, lines
+
+
+def test_the_floor_beyond_a_wall_step_open_onto_rooms_is_their_mouth_not_the_corridors() -> None:
+    segments, lines = _corridor_with_rooms_open_onto_a_widening()
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:139, 21:679])
+    assert corridor.size == 1, "the corridor is one region"
+    assert np.all(out[141:153, 301:409] == corridor[0]), "up to a wall's step beyond its line the floor is its"
+    assert np.all(out[160:182, 301:345] == out[200, 320]), "further out, the left room's mouth is the left room's"
+    assert np.all(out[160:182, 365:409] == out[200, 390]), "and the right room's the right room's"
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M,
+                                  past_wall_line_to_rooms=False)
+    assert np.all(out[141:182, 301:353] == corridor[0]), "without the rule the whole widening is the corridor's"
+
+
+def _corridor_with_a_room_cut_behind_its_door(depth_px: int) -> tuple[np.ndarray, list[Line]]:
+    """A 33 m x 2 m corridor (rows 100..139, columns 20..679) in three pieces, its upper wall drawn (rows 97..99)
+    but for a 2 m door (columns 300..339) into a 7.5 m x 3.85 m room above (rows 20..96, columns 250..399); the
+    room stage cut the room along the furniture ``depth_px`` beyond the corridor's wall line, so the middle piece
+    holds the door and the room's floor behind it up to there."""
+    segments = np.zeros((160, 700), dtype=np.int32)
+    segments[100:140, 20:200] = 1
+    segments[100:140, 200:600] = 2
+    segments[100:140, 600:680] = 3
+    segments[20:97, 250:400] = 5
+    segments[100 - depth_px : 100, 300:340] = 2  # the door, and the room's floor behind it cut with the corridor
+    lines = [Line(0.0, float(y), 30.0, 0.1, True) for y in (19, 99, 140)]
+    lines += [Line(math.pi / 2, -float(x), 5.0, 0.1, True) for x in (19, 249, 400, 680)]
+    return segments, lines
+
+
+def test_the_floor_behind_a_door_cut_with_the_corridor_is_the_rooms() -> None:
+    segments, lines = _corridor_with_a_room_cut_behind_its_door(14)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M)
+    corridor = np.unique(out[101:139, 21:679])
+    assert corridor.size == 1, "the corridor is one region"
+    assert np.all(out[86:99, 300:340] == out[50, 320]), "the room's floor 0.7 m past the wall line is the room's"
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M,
+                                  past_wall_line_to_rooms=False)
+    assert np.all(out[86:100, 300:340] == corridor[0]), "without the rule it joins the corridor"
+
+
+def test_a_doorway_no_deeper_than_its_wall_stays_the_corridors() -> None:
+    segments, lines = _corridor_with_a_room_cut_behind_its_door(3)
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M)
+    assert np.all(out[97:100, 300:340] == out[120, 320]), "the doorway in the wall's thickness is the corridor's"
+    out, _ = join_corridor_pieces(segments, lines, np.ones(6, dtype=bool), resolution_m=RESOLUTION_M,
+                                  doorway_depth_m=0)
+    assert np.all(out[97:99, 300:340] == out[50, 320]), "taken for the room's floor, it goes to the room"
+
+
 def _corridor_end_with_small_room() -> tuple[np.ndarray, list[Line]]:
     """A 34 m x 2 m corridor (rows 100..139, columns 20..699) whose west half is in a hall's region (a 10 m x 10 m
     hall below its west end, rows 140..339, columns 20..219, open onto it), its east end a region of its own that
