@@ -8,9 +8,9 @@ import numpy.typing as npt
 
 from services.grid_decomposition.arrays import label_counts, nonzero_rc
 from services.grid_decomposition.openings import join_pairs
-from services.grid_decomposition.segments import renumber
 
 _EIGHT = 8
+_ELONGATED = 2.0  # an obstacle this many times longer than wide has a line of its own
 
 
 def _shifted(mask: npt.NDArray[np.bool_], dy: int, dx: int) -> npt.NDArray[np.bool_]:
@@ -95,17 +95,17 @@ def _border_pixels(
     return np.concatenate(keys), np.concatenate(rows), np.concatenate(cols)
 
 
-def _axis(rows: npt.NDArray[np.intp], cols: npt.NDArray[np.intp]) -> tuple[npt.NDArray[np.float64], ...]:
-    """Centre (row, col), principal direction and the extremes along it of a set of pixels."""
+def _axis(
+    rows: npt.NDArray[np.intp], cols: npt.NDArray[np.intp]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], float]:
+    """Centre (row, col), principal direction, the extremes along it of a set of pixels, and how many times longer
+    than wide they are (the ratio of the spreads along and across it)."""
     pts = np.stack([rows, cols], axis=1).astype(np.float64)
     centre = pts.mean(axis=0)
-    if len(pts) > 1:
-        cov = np.cov((pts - centre).T)
-        direction = np.linalg.eigh(cov)[1][:, -1]
-    else:
-        direction = np.array([1.0, 0.0])
+    spread, axes = np.linalg.eigh(np.cov((pts - centre).T)) if len(pts) > 1 else (np.zeros(2), np.eye(2))
+    direction = axes[:, -1]
     t = (pts - centre) @ direction
-    return centre, direction, np.array([t.min(), t.max()])
+    return centre, direction, np.array([t.min(), t.max()]), float(np.sqrt(spread[1] / max(spread[0], 1e-9)))
 
 
 def join_free_standing_ends(
@@ -134,10 +134,11 @@ def join_free_standing_ends(
     floor, and at least one on such an obstacle: hit cells within ``hit_reach_m`` of the end (8-connected across
     one-pixel gaps) with no seen wall within ``standing_off_m`` of them, the free space round them (one pixel
     beyond that reach) at least ``floor_share`` the two segments', and no seen wall within ``min_border_m`` along
-    their own principal line either way (a piece of wall between two doors lies on its wall's line). An end near
+    their own principal line either way (a piece of wall between two doors lies on its wall's line; a speck no
+    more than twice as long as wide has no line of its own: no seen wall within ``min_border_m`` at all). An end near
     no hit and no seen wall (a jamb the laser never saw) keeps the pair apart, and so does an obstacle reaching the
-    looked-at window's edge. ``fixed`` (per segment id, warehouse floors) segments never join. Ids 1..M
-    (consecutive).
+    looked-at window's edge. ``fixed`` (per segment id, warehouse floors) segments never join. Joined, ids 1..M
+    (consecutive); else the segments as given.
 
     Parameters
     ----------
@@ -150,14 +151,14 @@ def join_free_standing_ends(
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
     if n < 3:
-        return renumber(seg)
+        return seg
     min_border_px = min_border_m / resolution_m
     big = label_counts(seg, n)[0] >= min_area_m2 / resolution_m**2
     big[0] = False
     if fixed is not None:
         big &= ~np.asarray(fixed[:n], dtype=bool)
     if np.count_nonzero(big) < 2:
-        return renumber(seg)
+        return seg
     key, rows, cols = _border_pixels(seg, n)
     keep = big[key // n] & big[key % n]
     key, rows, cols = key[keep], rows[keep], cols[keep]
@@ -165,7 +166,7 @@ def join_free_standing_ends(
     # a piece is no longer than its pixels: pairs with fewer border pixels than the widest door are left at once
     candidates = np.flatnonzero(count > min_border_px)
     if candidates.size == 0:
-        return renumber(seg)
+        return seg
     order = np.argsort(which, kind="stable")
     starts = np.concatenate([[0], np.cumsum(count)])
     h, w = seg.shape
@@ -186,6 +187,8 @@ def join_free_standing_ends(
         ):
             first.append(a)
             second.append(b)
+    if not first:
+        return seg
     return join_pairs(seg, np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64))
 
 
@@ -220,7 +223,7 @@ def _is_one_room(
     label = pieces[pr, pc]
     for p in range(1, n_pieces):
         on = label == p
-        centre, direction, extremes = _axis(pr[on], pc[on])
+        centre, direction, extremes, _ = _axis(pr[on], pc[on])
         length = float(extremes[1] - extremes[0]) + 1
         if length >= min_piece_px:
             total += length
@@ -279,16 +282,18 @@ def _stands_free(
     on_wall_px: float,
 ) -> bool:
     """Whether ``obstacle`` stands free on the floor of ``a`` and ``b``: off every seen wall (``distance`` to them),
-    the free space round it theirs, and no seen wall along its own line within ``in_line_px``."""
+    the free space round it theirs, and no seen wall along its own line within ``in_line_px`` (round it, for a
+    speck)."""
     r, c = nonzero_rc(obstacle)
-    if float(distance[r, c].min()) < standing_off_px:
+    centre, direction, extremes, elongation = _axis(r, c)
+    # a speck has no line of its own: any seen wall within that reach may be the one it is a dot of
+    if float(distance[r, c].min()) < (standing_off_px if elongation >= _ELONGATED else in_line_px):
         return False
     size = 2 * ring_px + 1
     ring = cv2.dilate(obstacle.view(np.uint8), np.ones((size, size), np.uint8)).view(bool) & ~obstacle & free
     around = seg[ring]
     if around.size == 0 or np.count_nonzero((around == a) | (around == b)) < floor_share * around.size:
         return False
-    centre, direction, extremes = _axis(r, c)
     h, w = seg.shape
     steps = np.arange(1, int(in_line_px) + 1, dtype=np.float64)
     for sign, t in ((-1.0, extremes[0]), (1.0, extremes[1])):
