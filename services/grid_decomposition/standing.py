@@ -163,14 +163,13 @@ def join_free_standing_ends(
     keep = big[key // n] & big[key % n]
     key, rows, cols = key[keep], rows[keep], cols[keep]
     pair, which, count = np.unique(key, return_inverse=True, return_counts=True)
-    # a piece is no longer than its pixels: pairs with fewer border pixels than the widest door are left at once
-    candidates = np.flatnonzero(count > min_border_px)
+    # each 4-neighbour pair of pixels (two of them counted) carries at most a pixel of a piece's length: pairs with
+    # fewer than the widest door are left at once
+    candidates = np.flatnonzero(count > 2 * min_border_px)
     if candidates.size == 0:
         return seg
     order = np.argsort(which, kind="stable")
     starts = np.concatenate([[0], np.cumsum(count)])
-    h, w = seg.shape
-    margin = int(np.ceil(min_border_px + wall_min_m / resolution_m))
     first: list[int] = []
     second: list[int] = []
     for k in candidates.tolist():
@@ -178,8 +177,6 @@ def join_free_standing_ends(
         a, b = int(pair[k] // n), int(pair[k] % n)
         if _is_one_room(
             seg, free, occupied, wall, a, b, rows[at], cols[at],
-            box=(max(int(rows[at].min()) - margin, 0), min(int(rows[at].max()) + margin + 1, h),
-                 max(int(cols[at].min()) - margin, 0), min(int(cols[at].max()) + margin + 1, w)),
             min_border_px=min_border_px, min_piece_px=min_piece_m / resolution_m,
             wall_min_px=wall_min_m / resolution_m, on_wall_px=on_wall_m / resolution_m,
             hit_reach_px=max(1, round(hit_reach_m / resolution_m)), standing_off_px=standing_off_m / resolution_m,
@@ -202,7 +199,6 @@ def _is_one_room(
     rows: npt.NDArray[np.intp],
     cols: npt.NDArray[np.intp],
     *,
-    box: tuple[int, int, int, int],
     min_border_px: float,
     min_piece_px: float,
     wall_min_px: float,
@@ -211,90 +207,156 @@ def _is_one_room(
     standing_off_px: float,
     floor_share: float,
 ) -> bool:
-    """Whether the border of ``a`` and ``b`` (its pixels ``rows``, ``cols``) passes :func:`join_free_standing_ends`,
-    everything looked at inside ``box`` (row and column bounds)."""
-    r0, r1, c0, c1 = box
-    border = np.zeros((r1 - r0, c1 - c0), dtype=np.uint8)
-    border[rows - r0, cols - c0] = 1
-    n_pieces, pieces = cv2.connectedComponents(border, connectivity=_EIGHT)
+    """Whether the border of ``a`` and ``b`` (its pixels ``rows``, ``cols``) passes :func:`join_free_standing_ends`.
+
+    Everything is looked at in windows round the border's ends: an obstacle reaching further than ``min_border_px``
+    plus ``wall_min_px`` from its end is no free-standing one; whether the end is on a seen wall is read from the
+    seen walls within ``wall_min_px`` of it, and whether its obstacle stands off them from those within that
+    reach.
+    """
+    top, left = int(rows.min()), int(cols.min())
+    border = np.zeros((int(rows.max()) - top + 1, int(cols.max()) - left + 1), dtype=np.uint8)
+    border[rows - top, cols - left] = 1
+    _, pieces, box, _ = cv2.connectedComponentsWithStats(border, connectivity=_EIGHT)
     ends = []
+    origin = np.array([top, left])
     total = 0.0
+    long = np.flatnonzero(np.hypot(box[:, cv2.CC_STAT_WIDTH], box[:, cv2.CC_STAT_HEIGHT]) >= min_piece_px)
+    if long.size > 0 and long[0] == 0:
+        long = long[1:]
     pr, pc = nonzero_rc(pieces)
     label = pieces[pr, pc]
-    for p in range(1, n_pieces):
+    for p in long.tolist():
         on = label == p
         centre, direction, extremes, _ = _axis(pr[on], pc[on])
         length = float(extremes[1] - extremes[0]) + 1
         if length >= min_piece_px:
             total += length
-            ends += [centre + t * direction for t in extremes]
+            ends.append(np.rint(centre + extremes[:, None] * direction[None, :]).astype(np.intp) + origin)
     if total <= min_border_px:
         return False
-    crop = (slice(r0, r1), slice(c0, c1))
-    free_c, occupied_c = np.ascontiguousarray(free[crop]), np.ascontiguousarray(occupied[crop])
-    seg_c = np.ascontiguousarray(seg[crop])
-    seen = seen_walls(free_c, occupied_c, np.ascontiguousarray(wall[crop]), min_length_px=wall_min_px)
-    distance = np.asarray(cv2.distanceTransform((~seen).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE),
-                          dtype=np.float32)
-    hits = cv2.dilate(occupied_c.view(np.uint8), np.ones((3, 3), np.uint8))
-    _, hit_labels, stats, _ = cv2.connectedComponentsWithStats(hits, connectivity=_EIGHT)
-    reach = np.hypot(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT])
-    height, width = seg_c.shape
-    standing = False
-    for end in ends:
-        y = min(max(round(float(end[0])), 0), height - 1)
-        x = min(max(round(float(end[1])), 0), width - 1)
-        if distance[y, x] <= on_wall_px:
-            continue
-        reach_y, reach_x = slice(max(y - hit_reach_px, 0), y + hit_reach_px + 1), slice(
-            max(x - hit_reach_px, 0), x + hit_reach_px + 1
+    h, w = seg.shape
+    reach = int(np.ceil(min_border_px + wall_min_px))
+    objects = []
+    for y, x in np.concatenate(ends).tolist():
+        window = (slice(max(y - reach, 0), min(y + reach + 1, h)), slice(max(x - reach, 0), min(x + reach + 1, w)))
+        obstacle = _standing_obstacle(
+            seg, free, occupied, a, b, y, x, window, hit_reach_px=hit_reach_px, floor_share=floor_share
         )
-        near = hit_labels[reach_y, reach_x]
-        touched = np.unique(near[near > 0])
-        if touched.size == 0:  # a jamb the laser never saw
-            return False
-        k = int(touched[np.argmax(reach[touched])])
-        left, top = stats[k, cv2.CC_STAT_LEFT], stats[k, cv2.CC_STAT_TOP]
-        right, bottom = left + stats[k, cv2.CC_STAT_WIDTH], top + stats[k, cv2.CC_STAT_HEIGHT]
-        if left == 0 or top == 0 or right == width or bottom == height:  # beyond the window: not looked at
-            return False
-        if not _stands_free(
-            hit_labels == k, seg_c, free_c, distance, a, b, standing_off_px=standing_off_px,
-            ring_px=hit_reach_px + 1, floor_share=floor_share, in_line_px=min_border_px, on_wall_px=on_wall_px,
+        objects.append((y, x, window, obstacle))
+    if all(obstacle is None for *_, obstacle in objects):
+        return False
+    near = int(np.ceil(wall_min_px))
+    stands = False
+    for y, x, window, obstacle in sorted(objects, key=lambda o: o[3] is not None):  # the ends with none first
+        close = (slice(max(y - near, 0), min(y + near + 1, h)), slice(max(x - near, 0), min(x + near + 1, w)))
+        if _seen_distance(free, occupied, wall, close, wall_min_px=wall_min_px)[y - close[0].start,
+                                                                                x - close[1].start] <= on_wall_px:
+            continue
+        if obstacle is None or not _off_the_walls(
+            obstacle, _seen_distance(free, occupied, wall, window, wall_min_px=wall_min_px),
+            standing_off_px=standing_off_px, in_line_px=min_border_px, on_wall_px=on_wall_px,
         ):
-            return False
-        standing = True
-    return standing
+            return False  # a jamb: a seen wall's, or one the laser never hit
+        stands = True
+    return stands
 
 
-def _stands_free(
-    obstacle: npt.NDArray[np.bool_],
+def _seen_distance(
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    wall: npt.NDArray[np.bool_],
+    window: tuple[slice, slice],
+    *,
+    wall_min_px: float,
+) -> npt.NDArray[np.float32]:
+    """The distance (pixels) to the seen walls (:func:`seen_walls`) found in ``window``, over the window."""
+    seen = seen_walls(
+        np.ascontiguousarray(free[window]), np.ascontiguousarray(occupied[window]),
+        np.ascontiguousarray(wall[window]), min_length_px=wall_min_px,
+    )
+    return np.asarray(cv2.distanceTransform((~seen).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE),
+                      dtype=np.float32)
+
+
+def _standing_obstacle(
     seg: npt.NDArray[np.int32],
     free: npt.NDArray[np.bool_],
-    distance: npt.NDArray[np.float32],
+    occupied: npt.NDArray[np.bool_],
+    a: int,
+    b: int,
+    y: int,
+    x: int,
+    window: tuple[slice, slice],
+    *,
+    hit_reach_px: int,
+    floor_share: float,
+) -> npt.NDArray[np.bool_] | None:
+    """The obstacle (hit cells, 8-connected across one-pixel gaps) within ``hit_reach_px`` of the end ``(y, x)``
+    that may stand free on the floor of ``a`` and ``b`` (:func:`_on_their_floor`), as a mask over ``window``;
+    None without one."""
+    if not occupied[max(y - hit_reach_px - 1, 0): y + hit_reach_px + 2, max(x - hit_reach_px - 1, 0): x + hit_reach_px
+                    + 2].any():
+        return None
+    hits = cv2.dilate(np.ascontiguousarray(occupied[window]).view(np.uint8), np.ones((3, 3), np.uint8))
+    _, labelled, stats, _ = cv2.connectedComponentsWithStats(hits, connectivity=_EIGHT)
+    labels = np.asarray(labelled, dtype=np.int32)
+    ly, lx = y - window[0].start, x - window[1].start
+    near = labels[max(ly - hit_reach_px, 0): ly + hit_reach_px + 1, max(lx - hit_reach_px, 0): lx + hit_reach_px + 1]
+    touched = np.unique(near[near > 0])
+    if touched.size == 0:
+        return None
+    k = int(touched[np.argmax(np.hypot(stats[touched, cv2.CC_STAT_WIDTH], stats[touched, cv2.CC_STAT_HEIGHT]))])
+    if not _on_their_floor(labels, stats[k], k, np.ascontiguousarray(seg[window]), np.ascontiguousarray(free[window]),
+                           a, b, ring_px=hit_reach_px + 1, floor_share=floor_share):
+        return None
+    out: npt.NDArray[np.bool_] = labels == k
+    return out
+
+
+def _on_their_floor(
+    labels: npt.NDArray[np.int32],
+    stats: npt.NDArray[np.int32],
+    k: int,
+    seg: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
     a: int,
     b: int,
     *,
-    standing_off_px: float,
     ring_px: int,
     floor_share: float,
+) -> bool:
+    """Whether obstacle ``k`` of ``labels`` (its ``stats`` row) lies inside the window, the free space within
+    ``ring_px`` round it at least ``floor_share`` the floor of ``a`` and ``b``."""
+    left, top = int(stats[cv2.CC_STAT_LEFT]), int(stats[cv2.CC_STAT_TOP])
+    right, bottom = left + int(stats[cv2.CC_STAT_WIDTH]), top + int(stats[cv2.CC_STAT_HEIGHT])
+    h, w = labels.shape
+    if left == 0 or top == 0 or right == w or bottom == h:  # beyond the window: not looked at
+        return False
+    box = (slice(max(top - ring_px, 0), bottom + ring_px), slice(max(left - ring_px, 0), right + ring_px))
+    obstacle = labels[box] == k
+    size = 2 * ring_px + 1
+    ring = cv2.dilate(obstacle.view(np.uint8), np.ones((size, size), np.uint8)).view(bool) & ~obstacle & free[box]
+    around = seg[box][ring]
+    return bool(around.size > 0 and np.count_nonzero((around == a) | (around == b)) >= floor_share * around.size)
+
+
+def _off_the_walls(
+    obstacle: npt.NDArray[np.bool_],
+    distance: npt.NDArray[np.float32],
+    *,
+    standing_off_px: float,
     in_line_px: float,
     on_wall_px: float,
 ) -> bool:
-    """Whether ``obstacle`` stands free on the floor of ``a`` and ``b``: off every seen wall (``distance`` to them),
-    the free space round it theirs, and no seen wall along its own line within ``in_line_px`` (round it, for a
-    speck)."""
+    """Whether ``obstacle`` stands off every seen wall (``distance`` to them, at least ``standing_off_px``) and no
+    seen wall lies along its own line within ``in_line_px`` (round it, for a speck)."""
     r, c = nonzero_rc(obstacle)
     centre, direction, extremes, elongation = _axis(r, c)
     # a speck has no line of its own: any seen wall within that reach may be the one it is a dot of
     if float(distance[r, c].min()) < (standing_off_px if elongation >= _ELONGATED else in_line_px):
         return False
-    size = 2 * ring_px + 1
-    ring = cv2.dilate(obstacle.view(np.uint8), np.ones((size, size), np.uint8)).view(bool) & ~obstacle & free
-    around = seg[ring]
-    if around.size == 0 or np.count_nonzero((around == a) | (around == b)) < floor_share * around.size:
-        return False
-    h, w = seg.shape
+    h, w = distance.shape
     steps = np.arange(1, int(in_line_px) + 1, dtype=np.float64)
     for sign, t in ((-1.0, extremes[0]), (1.0, extremes[1])):
         at = centre[:, None] + direction[:, None] * (t + sign * steps)[None, :]
