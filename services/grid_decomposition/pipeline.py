@@ -819,8 +819,9 @@ def decompose(
         if free_standing_ends and room_stage:  # a wide border ending on an obstacle that stands free: no doorway
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px | on_places)
             segments = join_free_standing_ends(
-                segments, free, occupied, wall, resolution_m=resolution_m, fixed=on_floor > 0.5 * size,
-                min_area_m2=room_min_area_m2, min_border_m=door_max_width_m,
+                segments, free, occupied, wall, resolution_m=resolution_m, min_border_m=door_max_width_m,
+                joinable=(on_floor <= 0.5 * size) & (size >= room_min_area_m2 / resolution_m**2),
+                hit_parts=occupied_parts,
             )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records

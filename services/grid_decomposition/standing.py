@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import label_counts, nonzero_rc
+from services.grid_decomposition.arrays import Components, components, nonzero_rc
 from services.grid_decomposition.openings import join_pairs
 
 _EIGHT = 8
@@ -115,8 +115,8 @@ def join_free_standing_ends(
     wall: npt.NDArray[np.bool_],
     *,
     resolution_m: float,
-    fixed: npt.NDArray[np.bool_] | None = None,
-    min_area_m2: float = 1.5,
+    joinable: npt.NDArray[np.bool_],
+    hit_parts: Components | None = None,
     min_border_m: float = 2.0,
     min_piece_m: float = 0.5,
     wall_min_m: float = 1.0,
@@ -127,17 +127,17 @@ def join_free_standing_ends(
 ) -> npt.NDArray[np.int32]:
     """Join two segments whose border is wider than a door and ends on an obstacle standing free on their floor.
 
-    A doorway is a gap between two jambs, and a jamb is a wall's end. Two segments (each at least ``min_area_m2``)
-    whose border (its 8-connected pieces at least ``min_piece_m`` long, measured along each piece's principal
-    line) is longer than ``min_border_m`` (the widest door) are one room when every end of the border's pieces lies
-    either on a seen wall (:func:`seen_walls`, within ``on_wall_m``) or on an obstacle standing free on their
-    floor, and at least one on such an obstacle: hit cells within ``hit_reach_m`` of the end (8-connected across
-    one-pixel gaps) with no seen wall within ``standing_off_m`` of them, the free space round them (one pixel
-    beyond that reach) at least ``floor_share`` the two segments', and no seen wall within ``min_border_m`` along
-    their own principal line either way (a piece of wall between two doors lies on its wall's line; a speck no
-    more than twice as long as wide has no line of its own: no seen wall within ``min_border_m`` at all). An end near
-    no hit and no seen wall (a jamb the laser never saw) keeps the pair apart, and so does an obstacle reaching the
-    looked-at window's edge. ``fixed`` (per segment id, warehouse floors) segments never join. Joined, ids 1..M
+    A doorway is a gap between two jambs, and a jamb is a wall's end. Two ``joinable`` segments (per segment id:
+    rooms' regions, off the warehouse floors and large enough) whose border (its 8-connected pieces at least
+    ``min_piece_m`` long, measured along each piece's principal line) is longer than ``min_border_m`` (the widest
+    door) are one room when every end of the border's pieces lies either on a seen wall (:func:`seen_walls`,
+    within ``on_wall_m``) or on an obstacle standing free on their floor, and at least one on such an obstacle: hit
+    cells within ``hit_reach_m`` of the end (an 8-connected piece of them) with no seen wall within
+    ``standing_off_m`` of them, the free space round them (one pixel beyond that reach) at least ``floor_share``
+    the two segments', and no seen wall within ``min_border_m`` along their own principal line either way (a piece
+    of wall between two doors lies on its wall's line; a speck no more than twice as long as wide has no line of
+    its own: no seen wall within ``min_border_m`` at all). An end near no hit and no seen wall (a jamb the laser
+    never saw) keeps the pair apart, and so does an obstacle reaching the looked-at window's edge. Joined, ids 1..M
     (consecutive); else the segments as given.
 
     Parameters
@@ -147,18 +147,18 @@ def join_free_standing_ends(
         Free cells, hit cells, the wall evidence along the map's lines.
     resolution_m : float
         Metres per cell.
+    joinable : (N,) bool
+        Per segment id, at least ``segments.max() + 1`` long.
+    hit_parts : Components, optional
+        ``components(occupied)``, when already labelled.
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
-    if n < 3:
-        return seg
-    min_border_px = min_border_m / resolution_m
-    big = label_counts(seg, n)[0] >= min_area_m2 / resolution_m**2
-    big[0] = False
-    if fixed is not None:
-        big &= ~np.asarray(fixed[:n], dtype=bool)
+    big = np.zeros(n, dtype=bool)
+    big[1:] = joinable[1:n]
     if np.count_nonzero(big) < 2:
         return seg
+    min_border_px = min_border_m / resolution_m
     key, rows, cols = _border_pixels(seg, n)
     keep = big[key // n] & big[key % n]
     key, rows, cols = key[keep], rows[keep], cols[keep]
@@ -168,6 +168,7 @@ def join_free_standing_ends(
     candidates = np.flatnonzero(count > 2 * min_border_px)
     if candidates.size == 0:
         return seg
+    parts = components(occupied) if hit_parts is None else hit_parts
     order = np.argsort(which, kind="stable")
     starts = np.concatenate([[0], np.cumsum(count)])
     first: list[int] = []
@@ -176,7 +177,7 @@ def join_free_standing_ends(
         at = order[starts[k]: starts[k + 1]]
         a, b = int(pair[k] // n), int(pair[k] % n)
         if _is_one_room(
-            seg, free, occupied, wall, a, b, rows[at], cols[at],
+            seg, free, occupied, wall, parts, a, b, rows[at], cols[at],
             min_border_px=min_border_px, min_piece_px=min_piece_m / resolution_m,
             wall_min_px=wall_min_m / resolution_m, on_wall_px=on_wall_m / resolution_m,
             hit_reach_px=max(1, round(hit_reach_m / resolution_m)), standing_off_px=standing_off_m / resolution_m,
@@ -194,6 +195,7 @@ def _is_one_room(
     free: npt.NDArray[np.bool_],
     occupied: npt.NDArray[np.bool_],
     wall: npt.NDArray[np.bool_],
+    parts: Components,
     a: int,
     b: int,
     rows: npt.NDArray[np.intp],
@@ -222,9 +224,9 @@ def _is_one_room(
     origin = np.array([top, left])
     total = 0.0
     long = np.flatnonzero(np.hypot(box[:, cv2.CC_STAT_WIDTH], box[:, cv2.CC_STAT_HEIGHT]) >= min_piece_px)
-    if long.size > 0 and long[0] == 0:
-        long = long[1:]
-    pr, pc = nonzero_rc(pieces)
+    long = long[long > 0]
+    flat = np.unique((rows - top) * border.shape[1] + (cols - left))  # each pixel once
+    pr, pc = np.divmod(flat, border.shape[1])
     label = pieces[pr, pc]
     for p in long.tolist():
         on = label == p
@@ -241,7 +243,7 @@ def _is_one_room(
     for y, x in np.concatenate(ends).tolist():
         window = (slice(max(y - reach, 0), min(y + reach + 1, h)), slice(max(x - reach, 0), min(x + reach + 1, w)))
         obstacle = _standing_obstacle(
-            seg, free, occupied, a, b, y, x, window, hit_reach_px=hit_reach_px, floor_share=floor_share
+            seg, free, parts, a, b, y, x, window, hit_reach_px=hit_reach_px, floor_share=floor_share
         )
         objects.append((y, x, window, obstacle))
     if all(obstacle is None for *_, obstacle in objects):
@@ -282,7 +284,7 @@ def _seen_distance(
 def _standing_obstacle(
     seg: npt.NDArray[np.int32],
     free: npt.NDArray[np.bool_],
-    occupied: npt.NDArray[np.bool_],
+    parts: Components,
     a: int,
     b: int,
     y: int,
@@ -292,53 +294,31 @@ def _standing_obstacle(
     hit_reach_px: int,
     floor_share: float,
 ) -> npt.NDArray[np.bool_] | None:
-    """The obstacle (hit cells, 8-connected across one-pixel gaps) within ``hit_reach_px`` of the end ``(y, x)``
-    that may stand free on the floor of ``a`` and ``b`` (:func:`_on_their_floor`), as a mask over ``window``;
-    None without one."""
-    if not occupied[max(y - hit_reach_px - 1, 0): y + hit_reach_px + 2, max(x - hit_reach_px - 1, 0): x + hit_reach_px
-                    + 2].any():
-        return None
-    hits = cv2.dilate(np.ascontiguousarray(occupied[window]).view(np.uint8), np.ones((3, 3), np.uint8))
-    _, labelled, stats, _ = cv2.connectedComponentsWithStats(hits, connectivity=_EIGHT)
-    labels = np.asarray(labelled, dtype=np.int32)
-    ly, lx = y - window[0].start, x - window[1].start
-    near = labels[max(ly - hit_reach_px, 0): ly + hit_reach_px + 1, max(lx - hit_reach_px, 0): lx + hit_reach_px + 1]
+    """The obstacle (an 8-connected piece of hit cells, of ``parts``) within ``hit_reach_px`` of the end ``(y, x)``
+    that lies inside ``window`` and may stand free on the floor of ``a`` and ``b``: the free space one pixel
+    beyond that reach round it at least ``floor_share`` theirs. As a mask over ``window``; None without one."""
+    labels = parts.labels
+    near = labels[max(y - hit_reach_px, 0): y + hit_reach_px + 1, max(x - hit_reach_px, 0): x + hit_reach_px + 1]
     touched = np.unique(near[near > 0])
     if touched.size == 0:
         return None
+    stats = parts.stats
     k = int(touched[np.argmax(np.hypot(stats[touched, cv2.CC_STAT_WIDTH], stats[touched, cv2.CC_STAT_HEIGHT]))])
-    if not _on_their_floor(labels, stats[k], k, np.ascontiguousarray(seg[window]), np.ascontiguousarray(free[window]),
-                           a, b, ring_px=hit_reach_px + 1, floor_share=floor_share):
+    left, top = int(stats[k, cv2.CC_STAT_LEFT]), int(stats[k, cv2.CC_STAT_TOP])
+    right, bottom = left + int(stats[k, cv2.CC_STAT_WIDTH]), top + int(stats[k, cv2.CC_STAT_HEIGHT])
+    rows, cols = window
+    if top <= rows.start or left <= cols.start or bottom >= rows.stop or right >= cols.stop:  # not looked at
         return None
-    out: npt.NDArray[np.bool_] = labels == k
-    return out
-
-
-def _on_their_floor(
-    labels: npt.NDArray[np.int32],
-    stats: npt.NDArray[np.int32],
-    k: int,
-    seg: npt.NDArray[np.int32],
-    free: npt.NDArray[np.bool_],
-    a: int,
-    b: int,
-    *,
-    ring_px: int,
-    floor_share: float,
-) -> bool:
-    """Whether obstacle ``k`` of ``labels`` (its ``stats`` row) lies inside the window, the free space within
-    ``ring_px`` round it at least ``floor_share`` the floor of ``a`` and ``b``."""
-    left, top = int(stats[cv2.CC_STAT_LEFT]), int(stats[cv2.CC_STAT_TOP])
-    right, bottom = left + int(stats[cv2.CC_STAT_WIDTH]), top + int(stats[cv2.CC_STAT_HEIGHT])
-    h, w = labels.shape
-    if left == 0 or top == 0 or right == w or bottom == h:  # beyond the window: not looked at
-        return False
+    ring_px = hit_reach_px + 1
     box = (slice(max(top - ring_px, 0), bottom + ring_px), slice(max(left - ring_px, 0), right + ring_px))
     obstacle = labels[box] == k
     size = 2 * ring_px + 1
     ring = cv2.dilate(obstacle.view(np.uint8), np.ones((size, size), np.uint8)).view(bool) & ~obstacle & free[box]
     around = seg[box][ring]
-    return bool(around.size > 0 and np.count_nonzero((around == a) | (around == b)) >= floor_share * around.size)
+    if around.size == 0 or np.count_nonzero((around == a) | (around == b)) < floor_share * around.size:
+        return None
+    out: npt.NDArray[np.bool_] = labels[window] == k
+    return out
 
 
 def _off_the_walls(

@@ -8,6 +8,7 @@ import numpy as np
 from services.grid_decomposition.standing import join_free_standing_ends, seen_walls
 
 RES = 0.05
+ROOMS = np.ones(4, dtype=bool)  # every segment a room's region
 
 
 def _room_parted_at_a_bench(bench: slice = slice(100, 130)) -> tuple[np.ndarray, ...]:
@@ -31,11 +32,11 @@ def _room_parted_at_a_bench(bench: slice = slice(100, 130)) -> tuple[np.ndarray,
 
 def test_a_border_ending_on_a_free_standing_bench_is_one_room() -> None:
     seg, free, occupied, wall = _room_parted_at_a_bench()
-    out = join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES)
+    out = join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES, joinable=ROOMS)
     assert out[40, 50] == out[100, 50] > 0
     assert np.array_equal(out > 0, seg > 0)
-    fixed = np.array([False, True, False])  # a warehouse floor never joins
-    assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES, fixed=fixed).max() == 2
+    floor = np.array([False, False, True])  # a warehouse floor (or a piece too small for a room) never joins
+    assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES, joinable=floor).max() == 2
 
 
 def test_a_piece_of_wall_between_two_doors_keeps_its_sides_apart() -> None:
@@ -45,7 +46,7 @@ def test_a_piece_of_wall_between_two_doors_keeps_its_sides_apart() -> None:
         occupied[69:71, run] = wall[69:71, run] = True
         free[69:71, run] = False
     seg[~free] = 0
-    assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES).max() == 2
+    assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES, joinable=ROOMS).max() == 2
 
 
 def test_a_border_ending_on_a_wall_or_where_the_laser_saw_nothing_stays() -> None:
@@ -55,11 +56,11 @@ def test_a_border_ending_on_a_wall_or_where_the_laser_saw_nothing_stays() -> Non
     stub_wall = wall | attached & ~occupied
     free_attached = free & ~attached
     assert join_free_standing_ends(
-        np.where(free_attached, seg, 0), free_attached, attached, stub_wall, resolution_m=RES
+        np.where(free_attached, seg, 0), free_attached, attached, stub_wall, resolution_m=RES, joinable=ROOMS
     ).max() == 2
     unseen = occupied.copy()
     unseen[70, 100:130] = False  # the bench is unknown space: a jamb the laser never hit
-    assert join_free_standing_ends(seg, free, unseen, wall, resolution_m=RES).max() == 2
+    assert join_free_standing_ends(seg, free, unseen, wall, resolution_m=RES, joinable=ROOMS).max() == 2
 
 
 def test_a_border_no_wider_than_a_door_stays() -> None:
@@ -70,7 +71,8 @@ def test_a_border_no_wider_than_a_door_stays() -> None:
     occupied[70, 10:200] = False
     occupied[70, 24:27] = True  # a post in the middle
     free = narrow & ~occupied
-    assert join_free_standing_ends(np.where(free, seg, 0), free, occupied, wall, resolution_m=RES).max() == 2
+    out = join_free_standing_ends(np.where(free, seg, 0), free, occupied, wall, resolution_m=RES, joinable=ROOMS)
+    assert out.max() == 2
 
 
 def test_seen_walls_are_hits_along_lines_or_faces_of_solid_obstacle() -> None:
@@ -96,11 +98,11 @@ def test_an_obstacle_beside_a_seen_wall_is_that_wall_s_end() -> None:
     occupied[63:65, 105:141] = wall[63:65, 105:141] = True
     free &= ~occupied
     seg[~free] = 0
-    assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES).max() == 2
+    assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES, joinable=ROOMS).max() == 2
     occupied[63:65, 105:141] = wall[63:65, 105:141] = False  # the same post alone on the floor
     free[63:65, 105:141] = True
     seg[63:65, 105:141] = 1
-    out = join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES)
+    out = join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES, joinable=ROOMS)
     assert out[40, 50] == out[100, 50] > 0
 
 
@@ -109,4 +111,4 @@ def test_a_bench_on_another_region_s_floor_keeps_the_sides_apart() -> None:
     seg, free, occupied, wall = _room_parted_at_a_bench()
     seg[68:73, 98:133] = 3
     seg[~free] = 0
-    assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES).max() == 3
+    assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES, joinable=ROOMS).max() == 3
