@@ -73,6 +73,7 @@ from services.grid_decomposition.segments import (
 )
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.short_walls import split_at_short_walls
+from services.grid_decomposition.standing import join_free_standing_ends
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
 from shared.opencv_threads import opencv_on_one_thread
@@ -328,6 +329,7 @@ def decompose(
     passage_max_m2: float = 3.0,
     unseen_opening_m: float = 0.75,
     enclosed_dots_m: float = 5.0,
+    free_standing_ends: bool = True,
     block_max_run_m: float = 1.5,
     seed: int = 0,
 ) -> Decomposition:
@@ -449,6 +451,11 @@ def decompose(
         obstacle, doorway line or region cell; when three of the four meet one within this distance (it lies inside
         a room's walls, not beyond the building's outer wall), it takes the region it meets nearest within 1 m
         (:func:`~services.grid_decomposition.loose.fill_enclosed`); 0 turns it off.
+    free_standing_ends : bool
+        On a room map, two regions whose border is longer than ``door_max_width_m`` and ends on an obstacle standing
+        free on their floor (the laser's hits off every seen wall and off their line, the free space round them
+        theirs), every other end on a seen wall, are one room: a doorway's jambs are walls' ends
+        (:func:`~services.grid_decomposition.standing.join_free_standing_ends`).
     block_max_run_m : float
         A gap between a room's side wall (running straight past one end) and a block at the other (thicker than a
         wall, hit by the laser, ending along the gap within this: a cupboard or table standing out from the facing
@@ -808,6 +815,13 @@ def decompose(
                 segments, free, occupied, doorways, reach_px=max(1, round(_DOT_REACH_M / resolution_m)),
                 enclosed_px=max(1, round(enclosed_dots_m / resolution_m)),
                 min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+            )
+        if free_standing_ends and room_stage:  # a wide border ending on an obstacle that stands free: no doorway
+            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px | on_places)
+            segments = join_free_standing_ends(
+                segments, free, occupied, wall, resolution_m=resolution_m, min_border_m=door_max_width_m,
+                joinable=(on_floor <= 0.5 * size) & (size >= room_min_area_m2 / resolution_m**2),
+                hit_parts=occupied_parts,
             )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records
