@@ -190,71 +190,6 @@ def across_a_corridor(
     return out
 
 
-def beside_a_side_opening(
-    blocked: npt.NDArray[np.bool_],
-    ends: npt.NDArray[np.float64],
-    *,
-    widening_px: float,
-    bump_px: float,
-    length_px: int,
-    length_ratio: float = 1.5,
-    step_px: int = 2,
-    far_depths: int = 2,
-) -> npt.NDArray[np.bool_]:
-    """(G,) bool: gaps across a corridor from the jamb of an opening in its side wall, not doorways.
-
-    On both sides of the gap the free space goes on straight along its normal for at least ``length_px`` (and
-    ``length_ratio`` times the gap's width); the free run from the gap's middle line past one end stays within
-    ``bump_px`` of that end at every depth (every ``step_px``) on both sides (one wall runs on through the gap, at
-    most a cupboard's depth off it or off a gap a little askew); and past the other end it is back within
-    ``widening_px`` at the last ``far_depths`` depths on both sides. The corridor goes on at the gap's width, and
-    what widens it beside the gap is an opening in its other wall (an office's door, a room's mouth) ending before
-    the band does: the gap runs from that opening's jamb straight across the corridor, the opening's side, not a door
-    (:func:`across_a_corridor` allows a side opening over less than its share of the band; a door-wide one beside a
-    short band passes it). A gap whose two ends both lie within ``bump_px`` of such a gap's is the same crossing
-    askew.
-
-    Parameters
-    ----------
-    blocked : (H, W) bool
-        Walls.
-    ends : (G, 2, 2) float64
-        The two ends (x, y) of each gap, pixels.
-    """
-    out = np.zeros(len(ends), dtype=bool)
-    if len(ends) == 0:
-        return out
-    width, u, normal, mid = _gap_frame(ends)
-    length = np.maximum(float(length_px), np.ceil(length_ratio * width))
-    band = np.ones(len(ends), dtype=bool)
-    for sign in (1.0, -1.0):
-        band &= _free_depth(blocked, mid, sign * normal, int(length.max())) >= length
-    at = np.flatnonzero(band)
-    if at.size == 0:
-        return out
-    half = width[at] / 2.0
-    depths = np.arange(step_px, float(length.max()) + 1, step_px, dtype=np.float64)
-    inside = depths[None, :] <= length[at, None]  # (G', D)
-    last = np.cumsum(inside[:, ::-1], axis=1)[:, ::-1] <= far_depths  # the last far_depths depths inside
-    reach = math.ceil(float(half.max() + max(widening_px, bump_px))) + 2
-    flush = np.ones((at.size, 2), dtype=bool)  # per end: within a bump at every depth on both sides
-    back = np.ones((at.size, 2), dtype=bool)  # per end: within it again at the last depths on both sides
-    for sign in (1.0, -1.0):
-        points = mid[at, None, :] + sign * depths[None, :, None] * normal[at, None, :]
-        for end, direction in ((0, -u[at]), (1, u[at])):
-            run = _free_depth(blocked, points.reshape(-1, 2), np.repeat(direction, depths.size, axis=0), reach)
-            run = run.reshape(at.size, depths.size) - half[:, None]
-            flush[:, end] &= ~((run > bump_px) & inside).any(axis=1)
-            back[:, end] &= ~((run > widening_px) & last & inside).any(axis=1)
-    out[at] = (flush[:, 0] & back[:, 1]) | (flush[:, 1] & back[:, 0])
-    # the same crossing askew (both ends within a bump of such a gap's): measured along its own tilted normal, the
-    # straight wall drifts away from its end
-    if out.any() and not out.all():
-        near = np.linalg.norm(ends[~out, None] - ends[None, out], axis=3) <= bump_px  # (G'', S, 2)
-        out[~out] = near.all(axis=2).any(axis=1)
-    return out
-
-
 def _narrow_behind(
     blocked: npt.NDArray[np.bool_],
     need: npt.NDArray[np.float64],
@@ -507,16 +442,6 @@ def _find_doorways(
                 tolerance_px=flush_tolerance_m / resolution_m,
                 max_depth_px=max(1, round(max_depth_m / resolution_m)),
                 depth_step_px=max(1, round(max_depth_m / resolution_m / 4)),
-            )
-        ]
-    if corridor_length_m > 0 and bump_max_m > 0 and len(pairs):
-        pairs = pairs[
-            ~beside_a_side_opening(
-                walls,
-                pairs,
-                widening_px=widening_m / resolution_m,
-                bump_px=bump_max_m / resolution_m,
-                length_px=round(corridor_length_m / resolution_m),
             )
         ]
     if hit is not None and len(pairs):

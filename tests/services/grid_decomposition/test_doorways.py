@@ -13,7 +13,6 @@ from services.grid_decomposition.doorways import (
     _centre_runs,
     _nearest_walls,
     across_a_corridor,
-    beside_a_side_opening,
     block_beside_a_wall,
     bumps_a_strip,
     draw_cuts,
@@ -115,27 +114,6 @@ def test_a_gap_across_a_corridor_beside_an_office_door_is_no_doorway_a_door_into
     assert not across_a_corridor(hall, across, widening_px=6, length_px=40).any()
     gaps = np.concatenate([door, across, door])  # each gap's answer is its own, however they are chunked
     assert across_a_corridor(walls, gaps, widening_px=6, length_px=40, chunk=1).tolist() == [False, True, False]
-
-
-def test_a_gap_across_a_corridor_from_the_jamb_of_a_door_wide_side_opening_is_no_doorway() -> None:
-    walls = np.ones((120, 220), dtype=bool)
-    walls[10:38, 10:210] = False  # a 1.4 m corridor, 10 m long
-    walls[41:110, 10:210] = False  # rooms above its 3 px side wall
-    walls[38:41, 64:100] = False  # a 1.8 m door in that wall, its right jamb at x = 100
-    across = np.array([[[100.0, 10.0], [100.0, 37.0]]])  # from the jamb straight across the corridor
-    askew = np.array([[[96.0, 10.0], [103.0, 37.0]]])  # the same crossing a little askew
-    # the door-wide opening beside the short band widens it over most of its length: not across a corridor
-    assert not across_a_corridor(walls, across, widening_px=6, length_px=40).any()
-    gaps = np.concatenate([across, askew])
-    assert beside_a_side_opening(walls, gaps, widening_px=6, bump_px=12, length_px=40).all()
-    hall = walls.copy()
-    hall[38:110, 10:100] = False  # the corridor opens into a hall at x = 100, its wall gone over the whole band
-    assert not beside_a_side_opening(hall, across, widening_px=6, bump_px=12, length_px=40).any()
-    jamb = walls.copy()
-    jamb[10:38, 98:103] = True
-    jamb[10:30, 98:103] = False  # the door in the corridor itself: a 0.4 m jamb narrows it at the line
-    gap = np.array([[[100.0, 10.0], [100.0, 29.0]]])
-    assert not beside_a_side_opening(jamb, gap, widening_px=6, bump_px=12, length_px=40).any()
 
 
 def _strip_with_a_bump() -> np.ndarray:
