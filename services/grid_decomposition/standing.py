@@ -371,7 +371,13 @@ def join_across_open_lines(
     if keys.size == 0 or not crossed.any():
         return join_pairs(seg, np.zeros(0, np.int64), np.zeros(0, np.int64))
     k = 2 * reach_px + 1
-    near = cv2.dilate(crossed.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    rs, cs = nonzero_rc(crossed)
+    y0, x0 = max(0, int(rs.min()) - reach_px), max(0, int(cs.min()) - reach_px)
+    y1, x1 = int(rs.max()) + reach_px + 1, int(cs.max()) + reach_px + 1
+    near = np.zeros(seg.shape, dtype=bool)  # the gaps widened by the reach, in their box only
+    near[y0:y1, x0:x1] = cv2.dilate(
+        crossed[y0:y1, x0:x1].astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
+    ) > 0
     key, index = np.unique(keys, return_inverse=True)
     total = np.bincount(index, minlength=key.size)
     on = np.bincount(index, weights=near[rows, cols], minlength=key.size)
