@@ -204,6 +204,7 @@ def wall_evidence(
     hit: npt.NDArray[np.bool_] | None = None,
     max_thickness_px: int = 0,
     block_max_run_px: int = 0,
+    side_by_side_out: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """Rasters of wall evidence and closed doorways along every line.
 
@@ -243,6 +244,9 @@ def wall_evidence(
         ``block_max_run_px``, hit by the laser) is left open
         (:func:`~services.grid_decomposition.doorways.block_beside_a_wall`): a cupboard or table standing out into
         a room is no jamb.
+    side_by_side_out : (H, W) bool, optional
+        Set where a gap split by posts was left open because the floor widens behind none of its stretches (the line
+        pixels, dilated by one pixel as ``wall``): a line across open floor between furniture.
 
     Returns
     -------
@@ -328,7 +332,14 @@ def wall_evidence(
                 depth_step_px=max(1, max_depth_px // 4), furniture=near_post,
             )
             judged = np.bincount(of_run, minlength=split.size) > 0
-            doorway[split[judged & (np.bincount(of_run[door_like], minlength=split.size) == 0)]] = False
+            failed = split[judged & (np.bincount(of_run[door_like], minlength=split.size) == 0)]
+            doorway[failed] = False
+            if side_by_side_out is not None and failed.size:
+                span = np.zeros(xs.size + 1, dtype=np.int64)
+                np.add.at(span, g0[failed], 1)
+                np.add.at(span, g1[failed], -1)
+                crossed = np.cumsum(span)[:-1] > 0
+                side_by_side_out[ys[crossed], xs[crossed]] = True
         cover = np.zeros(xs.size + 1, dtype=np.int64)
         np.add.at(cover, g0[doorway], 1)
         np.add.at(cover, g1[doorway], -1)
@@ -339,6 +350,8 @@ def wall_evidence(
     solid = cv2.dilate((wall & ~door).astype(np.uint8), kernel) > 0
     wall = cv2.dilate(wall.astype(np.uint8), kernel) > 0
     door = (cv2.dilate(door.astype(np.uint8), kernel) > 0) & ~(solid & occupied)
+    if side_by_side_out is not None and side_by_side_out.any():
+        side_by_side_out[:] = cv2.dilate(side_by_side_out.astype(np.uint8), kernel) > 0
     return wall, door
 
 

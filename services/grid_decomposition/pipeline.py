@@ -73,7 +73,7 @@ from services.grid_decomposition.segments import (
 )
 from services.grid_decomposition.shelves import find_shelf_banks, majority_faces
 from services.grid_decomposition.short_walls import split_at_short_walls
-from services.grid_decomposition.standing import join_free_standing_ends
+from services.grid_decomposition.standing import join_across_open_lines, join_free_standing_ends
 from services.grid_decomposition.subdivision import LineGroup, Subdivision, subdivide
 from services.grid_decomposition.texture import segment_texture_regions
 from shared.opencv_threads import opencv_on_one_thread
@@ -574,6 +574,7 @@ def decompose(
         walls = (occupied | ~known) & ~clutter
         if standing_job is not None:
             walls &= ~standing_job.result()
+        side_by_side = np.zeros(occ.shape, dtype=bool)
         evidence_job = beside.submit(
             wall_evidence,
             walls,
@@ -590,6 +591,7 @@ def decompose(
             hit=occupied,
             max_thickness_px=round(_WALL_MAX_THICKNESS_M / resolution_m),
             block_max_run_px=round(block_max_run_m / resolution_m),
+            side_by_side_out=side_by_side,
         )
         known_obstacle = obstacle & known
         racks = find_racks_by_region(  # each texture region with its own directions
@@ -708,6 +710,13 @@ def decompose(
             # their L
             segments = join_furnished_pieces(
                 segments, clutter, floor_px if beyond is None else floor_px | beyond, resolution_m=resolution_m
+            )
+        if room_stage and side_by_side.any():  # a cut beside a line across open floor (no doors side by side)
+            size, on_floor = on_floors.counts(segments)
+            segments = join_across_open_lines(
+                segments, side_by_side, joinable=2 * on_floor <= size,
+                min_border_px=round(_PASSAGE_MIN_BORDER_M / resolution_m),
+                reach_px=max(1, round(door_max_depth_m / resolution_m)),
             )
         # furniture against a wall stands on its room's floor (never a warehouse floor's or a road's)
         if against_walls_job is not None:  # (on a hall every region is on a warehouse floor: nothing grows)

@@ -1,4 +1,5 @@
-"""A wide border that ends on an obstacle standing free on the floor is no doorway: its two regions are one room."""
+"""A wide border that ends on an obstacle standing free on the floor is no doorway: its two regions are one room;
+nor is a cut along a line across open floor between furniture."""
 
 from __future__ import annotations
 
@@ -345,3 +346,41 @@ def _off_the_walls(
         if np.any(distance[yy, xx] <= on_wall_px):
             return False
     return True
+
+
+def join_across_open_lines(
+    segments: npt.NDArray[np.int32],
+    crossed: npt.NDArray[np.bool_],
+    *,
+    joinable: npt.NDArray[np.bool_],
+    min_border_px: int,
+    reach_px: int,
+) -> npt.NDArray[np.int32]:
+    """Join two ``joinable`` segments whose border runs along a line across open floor between furniture.
+
+    ``crossed`` holds the gaps :func:`~services.grid_decomposition.cogency.wall_evidence` left open as no doors side
+    by side: the floor widens behind none of their stretches within the door depth on either side, so the floor
+    within that depth of the line is one stretch of open floor, no doorway. A cut the room stage made there anyway
+    (along the line, a little beside it) parts nothing: two segments whose border lies within ``reach_px`` (the door
+    depth the widening was read over) of such a gap for at least ``min_border_px`` pixel pairs and for at least half
+    its length are one region. Ids 1..M (consecutive).
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max()) + 1
+    keys, rows, cols = _border_pixels(seg, n)
+    if keys.size == 0 or not crossed.any():
+        return join_pairs(seg, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    k = 2 * reach_px + 1
+    rs, cs = nonzero_rc(crossed)
+    y0, x0 = max(0, int(rs.min()) - reach_px), max(0, int(cs.min()) - reach_px)
+    y1, x1 = int(rs.max()) + reach_px + 1, int(cs.max()) + reach_px + 1
+    near = np.zeros(seg.shape, dtype=bool)  # the gaps widened by the reach, in their box only
+    near[y0:y1, x0:x1] = cv2.dilate(
+        crossed[y0:y1, x0:x1].astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
+    ) > 0
+    key, index = np.unique(keys, return_inverse=True)
+    total = np.bincount(index, minlength=key.size)
+    on = np.bincount(index, weights=near[rows, cols], minlength=key.size)
+    first, second = key // n, key % n
+    join = (on >= 2 * min_border_px) & (2 * on >= total) & joinable[first] & joinable[second]
+    return join_pairs(seg, first[join], second[join])

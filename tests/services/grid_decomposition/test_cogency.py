@@ -233,10 +233,13 @@ def test_a_block_the_line_runs_along_is_no_post_between_two_doors_a_post_on_it_i
     occ[82:121, 45:56] = True
     line = [LineGroup((Line(math.pi / 2, -50.0, 5.0, 0.1, True),), None)]
 
+    crossed = np.zeros(occ.shape, dtype=bool)
+
     def closed(posts: np.ndarray) -> bool:
+        crossed[:] = False
         _, door = wall_evidence(
             occ, line, tolerance_px=2, min_wall_px=10, max_door_px=40, widening_px=6, max_depth_px=20, posts=posts,
-            post_wall_px=15, post_min_px=2, corridor_length_px=40,
+            post_wall_px=15, post_min_px=2, corridor_length_px=40, side_by_side_out=crossed,
         )
         return bool(door[22:45, 50].any())
 
@@ -245,4 +248,7 @@ def test_a_block_the_line_runs_along_is_no_post_between_two_doors_a_post_on_it_i
     speck = np.zeros(occ.shape, dtype=bool)
     speck[55:59, 50:52] = True
     assert not closed(block)
+    # the gap left open is marked as a line across open floor (from the wall down to the pillar), nothing else
+    assert crossed[22:80, 50].all() and not crossed[:, :45].any() and not crossed[:, 56:].any()
     assert closed(speck)
+    assert not crossed.any()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.grid_decomposition.standing import join_free_standing_ends, seen_walls
+from services.grid_decomposition.standing import join_across_open_lines, join_free_standing_ends, seen_walls
 
 RES = 0.05
 ROOMS = np.ones(4, dtype=bool)  # every segment a room's region
@@ -112,3 +112,33 @@ def test_a_bench_on_another_region_s_floor_keeps_the_sides_apart() -> None:
     seg[68:73, 98:133] = 3
     seg[~free] = 0
     assert join_free_standing_ends(seg, free, occupied, wall, resolution_m=RES, joinable=ROOMS).max() == 3
+
+
+def _cut_room(crossed_row: int) -> tuple[np.ndarray, np.ndarray]:
+    """A 6 x 9.5 m room's floor (5 cm pixels) cut across at row 70 into two segments, and a line across open floor
+    (a gap ``wall_evidence`` left open: no doors side by side) along ``crossed_row`` over the room's width."""
+    seg = np.zeros((140, 215), dtype=np.int32)
+    seg[10:70, 10:200] = 1
+    seg[70:130, 10:200] = 2
+    crossed = np.zeros(seg.shape, dtype=bool)
+    crossed[crossed_row - 1 : crossed_row + 2, 10:200] = True
+    return seg, crossed
+
+
+def test_a_cut_along_a_line_across_open_floor_is_no_border() -> None:
+    """The room stage's cut 0.4 m beside the line: within the depth the floor was found not to widen, one room."""
+    seg, crossed = _cut_room(78)
+    out = join_across_open_lines(seg, crossed, joinable=ROOMS, min_border_px=10, reach_px=20)
+    assert out.max() == 1 and np.array_equal(out > 0, seg > 0)
+    floor = np.array([False, False, True])  # a warehouse floor never joins
+    assert join_across_open_lines(seg, crossed, joinable=floor, min_border_px=10, reach_px=20).max() == 2
+
+
+def test_a_cut_beyond_the_judged_depth_or_mostly_off_the_line_stays() -> None:
+    seg, crossed = _cut_room(100)  # 1.5 m off the line: beyond the 1 m judged
+    assert join_across_open_lines(seg, crossed, joinable=ROOMS, min_border_px=10, reach_px=20).max() == 2
+    seg, crossed = _cut_room(72)
+    crossed[:, 60:] = False  # the line spans 2.5 m of the 9.5 m border: most of the border is elsewhere
+    assert join_across_open_lines(seg, crossed, joinable=ROOMS, min_border_px=10, reach_px=20).max() == 2
+    seg, crossed = _cut_room(72)
+    assert join_across_open_lines(seg, np.zeros_like(crossed), joinable=ROOMS, min_border_px=10, reach_px=20).max() == 2
