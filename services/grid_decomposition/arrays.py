@@ -83,6 +83,25 @@ def nonzero_rc(array: npt.NDArray[np.generic]) -> tuple[npt.NDArray[np.intp], np
     return rows, cols
 
 
+def border_steps(
+    segments: npt.NDArray[np.int32], n: int, allowed: npt.NDArray[np.bool_] | None = None
+) -> list[tuple[int, int, npt.NDArray[np.intp], npt.NDArray[np.intp], npt.NDArray[np.int64]]]:
+    """The borders between segments, per step (``dy``, ``dx``) right and down: rows and columns of the pixels whose
+    neighbour that step away is in another segment (both ids > 0, both pixels ``allowed`` when given; raster order)
+    and each pair's key ``min(a, b) * n + max(a, b)`` (``n`` above every id)."""
+    h, w = segments.shape
+    found = []
+    for dy, dx in ((0, 1), (1, 0)):
+        p, q = segments[: h - dy, : w - dx], segments[dy:, dx:]
+        differ = (p != q) & (p > 0) & (q > 0)
+        if allowed is not None:
+            differ &= allowed[: h - dy, : w - dx] & allowed[dy:, dx:]
+        r, c = nonzero_rc(differ)
+        a, b = p[r, c].astype(np.int64), q[r, c].astype(np.int64)
+        found.append((dy, dx, r, c, np.minimum(a, b) * n + np.maximum(a, b)))
+    return found
+
+
 def label_sums(
     labels: npt.NDArray[np.integer], n: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:

@@ -9,7 +9,7 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import label_counts, lookup, near_at, nonzero_rc
+from services.grid_decomposition.arrays import border_steps, label_counts, lookup, near_at, nonzero_rc
 from services.grid_decomposition.segments import renumber
 
 
@@ -44,16 +44,11 @@ def straight_openings(
     """
     seg = np.asarray(segments, dtype=np.int32)
     n = int(seg.max()) + 1
-    h, w = seg.shape
     keys: list[npt.NDArray[np.int64]] = []
     xs: list[npt.NDArray[np.float64]] = []
     ys: list[npt.NDArray[np.float64]] = []
-    for dy, dx in ((0, 1), (1, 0)):
-        p, q = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        free = ~obstacle[: h - dy, : w - dx] & ~obstacle[dy:, dx:]
-        r, c = nonzero_rc((p != q) & (p > 0) & (q > 0) & free)
-        a, b = p[r, c].astype(np.int64), q[r, c].astype(np.int64)
-        keys.append(np.minimum(a, b) * n + np.maximum(a, b))
+    for dy, dx, r, c, key in border_steps(seg, n, ~obstacle):
+        keys.append(key)
         xs.append(c.astype(np.float64) + dx / 2)
         ys.append(r.astype(np.float64) + dy / 2)
     key = np.concatenate(keys)

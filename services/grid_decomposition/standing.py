@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from services.grid_decomposition.arrays import Components, components, nonzero_rc
+from services.grid_decomposition.arrays import Components, border_steps, components, nonzero_rc
 from services.grid_decomposition.openings import join_pairs
 
 _EIGHT = 8
@@ -83,13 +83,8 @@ def _border_pixels(
     seg: npt.NDArray[np.int32], n: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.intp], npt.NDArray[np.intp]]:
     """The pixels on both sides of every border between two segments (4-neighbours): pair key, rows, columns."""
-    h, w = seg.shape
     keys, rows, cols = [], [], []
-    for dy, dx in ((0, 1), (1, 0)):
-        p, q = seg[: h - dy, : w - dx], seg[dy:, dx:]
-        r, c = nonzero_rc((p != q) & (p > 0) & (q > 0))
-        a, b = p[r, c].astype(np.int64), q[r, c].astype(np.int64)
-        key = np.minimum(a, b) * n + np.maximum(a, b)
+    for dy, dx, r, c, key in border_steps(seg, n):
         keys += [key, key]
         rows += [r, r + dy]
         cols += [c, c + dx]
