@@ -9,6 +9,7 @@ from scipy import ndimage
 
 from services.grid_decomposition.arrays import (
     MaskCounts,
+    border_steps,
     components,
     components_stats,
     components_stats_runs,
@@ -212,3 +213,27 @@ def test_short_of_is_the_scaled_distance_transform_compared(seed: int) -> None:
                              (0.1, float(rng.uniform(0.0, 1.5))), (0.05, 0.0), (0.05, -1.0)):
             got = short_of(mask, scale, limit)
             assert got.dtype == np.bool_ and np.array_equal(got, ~(distance * scale >= limit))
+
+
+def test_border_steps_finds_every_neighbour_pair_of_two_segments() -> None:
+    """Every 4-neighbour pair of pixels in two different segments (background 0 never counts), keyed by the pair;
+    with ``allowed``, only pairs whose two pixels are allowed."""
+    rng = np.random.default_rng(0)
+    seg = rng.integers(0, 4, (30, 40)).astype(np.int32)
+    allowed = rng.random(seg.shape) < 0.7
+    for mask in (None, allowed):
+        expected = set()
+        for r in range(seg.shape[0]):
+            for c in range(seg.shape[1]):
+                for dy, dx in ((0, 1), (1, 0)):
+                    if r + dy < seg.shape[0] and c + dx < seg.shape[1]:
+                        a, b = int(seg[r, c]), int(seg[r + dy, c + dx])
+                        ok = mask is None or (mask[r, c] and mask[r + dy, c + dx])
+                        if a and b and a != b and ok:
+                            expected.add((dy, dx, r, c, min(a, b) * 4 + max(a, b)))
+        got = {
+            (dy, dx, int(r), int(c), int(k))
+            for dy, dx, rows, cols, keys in border_steps(seg, 4, mask)
+            for r, c, k in zip(rows, cols, keys, strict=True)
+        }
+        assert got == expected
