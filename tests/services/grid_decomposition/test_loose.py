@@ -9,8 +9,8 @@ from services.grid_decomposition.loose import (
     _touching,
     fill_between,
     fill_enclosed,
-    give_far_pieces,
     fill_lone_regions,
+    give_far_pieces,
     join_and_fill_loose,
     join_isolated_pieces,
 )
