@@ -5,7 +5,8 @@ each ray a dotted line of free cells with unknown between the dots. The regions 
 space: a dot is a piece too small to be a region and is dropped, and a fan whose rays are a few cells apart
 falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there. The
 dots between the rays of a region's own fan, flanked by it on both sides, are its floor too, and so are the dots
-beyond a fan's end that walls and floor close in, inside the room's walls.
+beyond a fan's end that walls and floor close in, inside the room's walls. Dots a region's label took far from
+its body, through a door into another room, are that room's.
 """
 
 from __future__ import annotations
