@@ -5,7 +5,8 @@ each ray a dotted line of free cells with unknown between the dots. The regions 
 space: a dot is a piece too small to be a region and is dropped, and a fan whose rays are a few cells apart
 falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there. The
 dots between the rays of a region's own fan, flanked by it on both sides, are its floor too, and so are the dots
-beyond a fan's end that walls and floor close in, inside the room's walls.
+beyond a fan's end that walls and floor close in, inside the room's walls. Dots a region's label took far from
+its body, through a door into another room, are that room's.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import label_counts, lookup, near, nonzero_rc
+from services.grid_decomposition.arrays import label_boxes, label_counts, lookup, near, nonzero_rc
 from services.grid_decomposition.segments import fill_from_neighbours
 
 
@@ -321,3 +322,53 @@ def _first_met(
             steps[2 * k + side] = np.where(ok, np.abs(cell - query), 0)
     return met, steps
 
+
+
+def give_far_pieces(
+    segments: npt.NDArray[np.int32],
+    occupied: npt.NDArray[np.bool_],
+    places: npt.NDArray[np.bool_],
+    *,
+    far_px: int,
+    reach_px: int,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with the pieces of a region lying far from its body given to the region that reaches them.
+
+    A region is floor one can walk: a piece of it that touches its largest piece nowhere (8-neighbours) and lies
+    everywhere more than ``far_px`` from it is dots of rays the region's first labels took with it, seen through
+    a door into another room (a corridor's label on the dots of the rooms along it). Such a piece takes, cell by
+    cell, the region that grows to it first through cells the map does not call occupied, within ``reach_px``
+    steps; a cell none reaches keeps its region. Rack places (racks, aisles) are in pieces by design: their
+    cells neither move nor pass the growth.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    occupied, places : (H, W) bool
+    far_px, reach_px : int
+    """
+    far = np.zeros(segments.shape, dtype=bool)
+    for k, box in enumerate(label_boxes(segments), start=1):
+        if box is None:
+            continue
+        own = (segments[box] == k).astype(np.uint8)
+        n, pieces, stats, _ = cv2.connectedComponentsWithStats(own, connectivity=8)
+        if n <= 2:
+            continue
+        body = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        away = cv2.distanceTransform((pieces != body).astype(np.uint8), cv2.DIST_L2, 5) > far_px
+        # a piece is far when every cell of it is: its cells near the body counted per piece
+        near_count = np.bincount(pieces[~away].ravel(), minlength=n)
+        far_piece = near_count == 0
+        far_piece[0] = False
+        far[box] |= far_piece[pieces]
+    far &= ~places
+    if not far.any():
+        return segments
+    kept = np.where(far, np.int32(0), segments)
+    grown = fill_from_neighbours(kept, ~(occupied | places) & (kept == 0), max_iterations=reach_px)
+    out = segments.copy()
+    take = far & (grown > 0)
+    out[take] = grown[take]
+    return out

@@ -34,7 +34,7 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.loose import fill_between, fill_enclosed, join_and_fill_loose
+from services.grid_decomposition.loose import fill_between, fill_enclosed, give_far_pieces, join_and_fill_loose
 from services.grid_decomposition.openings import join_unseen_openings, join_unseen_passages
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -100,6 +100,8 @@ _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them alon
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 _FAN_GAP_M = 0.5  # rays this close are one fan (the cleaning bridges the unknown between them: twice its fan gap)
 _DOT_REACH_M = 1.0  # a dot that walls close in takes the region it sees this near along its row or column
+_FAR_PIECE_M = 3.0  # a piece of a region this far from its body is dots of another room's rays ...
+_FAR_PIECE_REACH_M = 2.0  # ... given to the region that reaches it this near through cells not occupied
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules. The line search needs the first batch; scikit-learn
@@ -832,6 +834,11 @@ def decompose(
                 joinable=(on_floor <= 0.5 * size) & (size >= room_min_area_m2 / resolution_m**2),
                 hit_parts=occupied_parts,
             )
+        # dots of rays a region's first labels took into another room, far from the region's body: that room's
+        segments = give_far_pieces(
+            segments, occupied, on_places, far_px=round(_FAR_PIECE_M / resolution_m),
+            reach_px=round(_FAR_PIECE_REACH_M / resolution_m),
+        )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records
         pairs = _pairs(segments, sub)

@@ -10,6 +10,7 @@ from services.grid_decomposition.loose import (
     fill_between,
     fill_enclosed,
     fill_lone_regions,
+    give_far_pieces,
     join_and_fill_loose,
     join_isolated_pieces,
 )
@@ -165,3 +166,34 @@ def test_a_dot_in_a_room_behind_a_doorway_line_is_not_the_corridor_s() -> None:
     dots[45, 30] = True  # a dot in the room, 5 cells above the corridor through the door
     out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20)
     assert out[45, 30] == 0
+
+
+def _corridor_dots_in_a_room() -> tuple[np.ndarray, np.ndarray]:
+    """A corridor (1) along the top, a wall below it with a door, a room (2) behind; dots of the corridor's label
+    deep in the room (far from the corridor) and just below the door (near it)."""
+    seg = np.zeros((40, 60), dtype=np.int32)
+    occupied = np.zeros(seg.shape, dtype=bool)
+    seg[0:8, :] = 1
+    occupied[9, :] = True
+    occupied[9, 28:32] = False  # the door
+    seg[10:40, 0:60] = 2
+    seg[30:32, 40:43] = 1  # dots 21 rows below the corridor
+    seg[11, 29] = 1  # a dot just inside the door
+    seg[10, 28:32] = 0
+    return seg, occupied
+
+
+def test_a_piece_of_a_region_far_from_its_body_is_the_room_s_that_reaches_it_and_a_near_one_is_not() -> None:
+    seg, occupied = _corridor_dots_in_a_room()
+    out = give_far_pieces(seg, occupied, np.zeros_like(occupied), far_px=10, reach_px=20)
+    assert (out[30:32, 40:43] == 2).all()
+    assert out[11, 29] == 1
+    assert (out[seg != 1] == seg[seg != 1]).all() and (out[0:8] == 1).all()
+
+
+def test_a_far_piece_on_rack_places_keeps_its_region() -> None:
+    seg, occupied = _corridor_dots_in_a_room()
+    places = np.zeros_like(occupied)
+    places[30:32, 40:43] = True
+    out = give_far_pieces(seg, occupied, places, far_px=10, reach_px=20)
+    assert (out == seg).all()
