@@ -323,7 +323,6 @@ def _first_met(
     return met, steps
 
 
-
 def give_far_pieces(
     segments: npt.NDArray[np.int32],
     occupied: npt.NDArray[np.bool_],
@@ -367,7 +366,10 @@ def give_far_pieces(
     if not far.any():
         return segments
     kept = np.where(far, np.int32(0), segments)
-    grown = fill_from_neighbours(kept, ~(occupied | places) & (kept == 0), max_iterations=reach_px)
+    # a growth of reach_px steps reaching a far cell passes only cells within reach_px of it (chessboard)
+    size = 2 * reach_px + 1
+    within = cv2.dilate(far.view(np.uint8), np.ones((size, size), np.uint8)).view(bool)
+    grown = fill_from_neighbours(kept, within & ~(occupied | places) & (kept == 0), max_iterations=reach_px)
     out = segments.copy()
     take = far & (grown > 0)
     out[take] = grown[take]
