@@ -55,36 +55,6 @@ def _shallow(strip: npt.NDArray[np.bool_], part: npt.NDArray[np.bool_], top: int
     return bool(depth < ratio * front)
 
 
-def _half_walls(
-    band: Band,
-    walls: npt.NDArray[np.bool_],
-    u: npt.NDArray[np.int32],
-    t: npt.NDArray[np.int32],
-    *,
-    max_px: int,
-    min_px: int,
-) -> tuple[int, int]:
-    """Half the thickness of each side's wall, in pixels past the band's line: per side, the median over the stretches
-    of the band's run where a wall lies on the line and floor lies beyond it within ``max_px`` (a wall between the
-    corridor and a room) of the wall pixels from the line to that floor, halved; 0 where such a wall stands along
-    no more than ``min_px`` of the run."""
-    box = band_box(u, t, (band.offset_a_px - max_px, band.offset_b_px + max_px), (band.t0_px, band.t1_px))
-    ub, tb = u[box], t[box]
-    run = (tb >= band.t0_px) & (tb <= band.t1_px)
-    n = band.t1_px - band.t0_px + 1
-    wall = walls[box]
-    depths = []
-    for beyond in (band.offset_a_px - ub, ub - band.offset_b_px):
-        near = run & (beyond > 0) & (beyond <= max_px)
-        first_wall = np.full(n, max_px + 1, dtype=np.int64)
-        first_floor = np.full(n, max_px + 1, dtype=np.int64)
-        np.minimum.at(first_wall, tb[near & wall] - band.t0_px, beyond[near & wall])
-        np.minimum.at(first_floor, tb[near & ~wall] - band.t0_px, beyond[near & ~wall])
-        between = (first_wall == 1) & (first_floor <= max_px)
-        depths.append(int(np.median(first_floor[between] - 1)) // 2 if np.count_nonzero(between) > min_px else 0)
-    return depths[0], depths[1]
-
-
 def _beyond_the_wall_line(
     corridor: npt.NDArray[np.bool_],
     widening: npt.NDArray[np.bool_] | None,
@@ -97,7 +67,6 @@ def _beyond_the_wall_line(
     step_px: int,
     max_open_px: int,
     doorway_depth_px: int,
-    fringe_px: tuple[int, int] = (0, 0),
 ) -> npt.NDArray[np.bool_]:
     """The pixels of ``corridor`` (a band's strip and the pieces about to join it) that lie beyond the corridor's
     wall line within the band's run: up to ``step_px`` beyond a side line along which no wall stands back, in
@@ -115,10 +84,10 @@ def _beyond_the_wall_line(
     n = band.t1_px - band.t0_px + 1
     at = np.clip(tb - band.t0_px, 0, n - 1)
     doors = np.zeros(ub.shape, dtype=bool)
-    for beyond, fringe in zip((band.offset_a_px - ub, ub - band.offset_b_px), fringe_px, strict=True):
+    for beyond in (band.offset_a_px - ub, ub - band.offset_b_px):  # how far past the side's line, outwards
         back = np.bincount(tb[along & (beyond > tolerance_px) & (beyond <= out_px)] - band.t0_px, minlength=n) > 0
         stepped = ~_long_runs(~_long_runs(back, max_open_px), max_open_px)
-        doors |= (beyond > fringe) & (beyond <= step_px) & ~stepped[at]
+        doors |= (beyond > 0) & (beyond <= step_px) & ~stepped[at]
     doors &= run & corridor[box]
     if widening is not None:  # a widening's floor is the corridor's up to the step, beyond it the rooms' mouths
         doors &= ~widening[box]
@@ -282,7 +251,6 @@ def join_corridor_pieces(
     tolerance_px: int = 2,
     margin_px: int = 4,
     occupied: npt.NDArray[np.bool_] | None = None,
-    free: npt.NDArray[np.bool_] | None = None,
     past_wall_line_to_rooms: bool = True,
     doorway_depth_m: float = 0.3,
 ) -> tuple[npt.NDArray[np.int32], int]:
@@ -342,7 +310,6 @@ def join_corridor_pieces(
     window = segments[box]
     inside = region[box]
     walls = window == 0
-    solid = None if free is None else ~free[box]
     shape = (window.shape[0], window.shape[1])
     tilted = [] if occupied is None else tilted_lines(
         occupied[box], lines, top=top, left=left, resolution_m=resolution_m
@@ -433,24 +400,11 @@ def join_corridor_pieces(
         touching[parts[strip]] = True
         touching[0] = False
         corridor = lookup(touching, parts)
-        fringe_px = (0, 0)
-        if solid is not None:  # the floor in a doorway up to its wall's middle is the corridor's
-            u_i, t_i = coordinates[bands[i].angle_rad]
-            fringe_px = _half_walls(
-                bands[i], solid, u_i, t_i, max_px=2 * round(doorway_depth_m / resolution_m),
-                min_px=round(max_open_m / resolution_m),
-            )
-            run = (t_i >= bands[i].t0_px) & (t_i <= bands[i].t1_px)
-            zone = run & (out > 0) & ~taken & (
-                ((bands[i].offset_a_px - u_i > 0) & (bands[i].offset_a_px - u_i <= fringe_px[0]))
-                | ((u_i - bands[i].offset_b_px > 0) & (u_i - bands[i].offset_b_px <= fringe_px[1]))
-            )
-            corridor |= zone
         if past_wall_line_to_rooms:
             beyond = _beyond_the_wall_line(
                 corridor, widening, bands[i], walls, *coordinates[bands[i].angle_rad], tolerance_px=tolerance_px,
                 step_px=step_px, max_open_px=round(max_open_m / resolution_m),
-                doorway_depth_px=round(doorway_depth_m / resolution_m), fringe_px=fringe_px,
+                doorway_depth_px=round(doorway_depth_m / resolution_m),
             )
             _open_onto_rooms(out, corridor, beyond)
         out[corridor] = corridor_id

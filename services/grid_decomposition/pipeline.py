@@ -703,7 +703,7 @@ def decompose(
             size, on_floor = on_floors.counts(segments)
             segments, first_beyond = join_corridor_pieces(
                 segments, [ln for g in used for ln in g.lines], 2 * on_floor <= size, resolution_m=resolution_m,
-                occupied=occupied, free=free, beyond_min_area_m2=corridor_beyond_min_m2,
+                occupied=occupied, beyond_min_area_m2=corridor_beyond_min_m2,
             )
             if first_beyond <= int(segments.max()):
                 beyond = segments >= first_beyond
