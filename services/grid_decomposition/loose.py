@@ -5,8 +5,8 @@ each ray a dotted line of free cells with unknown between the dots. The regions 
 space: a dot is a piece too small to be a region and is dropped, and a fan whose rays are a few cells apart
 falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there. The
 dots between the rays of a region's own fan, flanked by it on both sides, are its floor too, and so are the dots
-beyond a fan's end that walls and floor close in, inside the room's walls. Dots a region's label took far from
-its body, through a door into another room, are that room's.
+beyond a fan's end or beside it that walls and floor close in, inside the room's walls. Dots a region's label took
+far from its body, through a door into another room, are that room's.
 """
 
 from __future__ import annotations
@@ -269,7 +269,8 @@ def fill_enclosed(
     first obstacle, doorway line or region cell. When at least three of the four ways meet one within
     ``enclosed_px``, the dot lies inside a room's walls (a dot beyond a building's outer wall sees nothing
     outwards), and it takes the region it meets nearest within ``reach_px``: the floor of its room seen beyond
-    the fan's end, never across a wall or a doorway line. Regions under ``min_area_px`` (specks) take none.
+    the fan's end, never across a wall or a doorway line. Regions under ``min_area_px`` (specks) take none. The dots
+    it meets no region near in line with are :func:`fill_near`'s.
 
     Parameters
     ----------
@@ -284,12 +285,8 @@ def fill_enclosed(
         return segments
     takes = label_counts(segments, int(segments.max()) + 1)[0] >= min_area_px
     takes[0] = False
-    seen = np.where(occupied | doorways, np.int32(-1), segments)  # a wall or doorway -1, a region its id
     rows, cols = nonzero_rc(loose)
-    met, steps = _first_met(seen, rows, cols)  # (4, N): right, left, down, up
-    within = met != 0
-    within[within] = steps[within] <= enclosed_px
-    enclosed = np.count_nonzero(within, axis=0) >= 3
+    met, steps, enclosed = _enclosed(segments, occupied | doorways, rows, cols, enclosed_px)
     may_take = (met > 0) & (steps <= reach_px)
     may_take[may_take] = takes[met[may_take]]
     way = np.argmin(np.where(may_take, steps, enclosed_px + reach_px + 1), axis=0)  # the nearest region that may take
@@ -298,6 +295,71 @@ def fill_enclosed(
     out = segments.copy()
     out[rows[take], cols[take]] = region[take]
     return out
+
+
+def fill_near(
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    doorways: npt.NDArray[np.bool_],
+    *,
+    reach_px: int,
+    enclosed_px: int,
+    min_area_px: int,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with the loose free cells inside a room's walls given to the region that grows to them first.
+
+    The dots :func:`fill_enclosed` leaves: a free cell no region holds, closed in on three of the four ways along
+    its row and column within ``enclosed_px`` (by an obstacle, a doorway line or a region, the cells that step
+    gave counted), that sees no region in line within reach — beside a fan's end or its outline, off its rows and
+    columns. It is the floor of the room whose walls close it in, seen in dots: it takes the region that grows to
+    it first within ``reach_px`` steps (8-neighbours) through cells no region holds, never through an obstacle or
+    a doorway line. Regions under ``min_area_px`` (specks) take none.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    free, occupied, doorways : (H, W) bool
+        ``free``: the floor seen, streaks the cleaning took out included.
+    reach_px, enclosed_px, min_area_px : int
+    """
+    loose = free & (segments == 0)
+    if not loose.any() or not segments.any():
+        return segments
+    closed = occupied | doorways
+    rows, cols = nonzero_rc(loose)
+    enclosed = _enclosed(segments, closed, rows, cols, enclosed_px)[2]
+    if not enclosed.any():
+        return segments
+    dots = np.zeros(segments.shape, dtype=bool)
+    dots[rows[enclosed], cols[enclosed]] = True
+    takes = label_counts(segments, int(segments.max()) + 1)[0] >= min_area_px
+    takes[0] = False
+    # a growth of reach_px steps to a dot passes only cells within reach_px of it (chessboard)
+    size = 2 * reach_px + 1
+    way = cv2.dilate(dots.view(np.uint8), np.ones((size, size), np.uint8)).view(bool)
+    way &= ~closed
+    way &= segments == 0
+    grown = fill_from_neighbours(lookup(_own_ids(takes), segments), way, max_iterations=reach_px, overwrite=True)
+    out: npt.NDArray[np.int32] = np.where(dots & (grown > 0), grown, segments)
+    return out
+
+
+def _enclosed(
+    segments: npt.NDArray[np.int32],
+    closed: npt.NDArray[np.bool_],
+    rows: npt.NDArray[np.int64],
+    cols: npt.NDArray[np.int64],
+    enclosed_px: int,
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64], npt.NDArray[np.bool_]]:
+    """For each cell (rows, cols): what it meets first right, left, down and up (4, N: -1 a ``closed`` cell, a
+    region's id, 0 nothing before the image's edge), the steps to it, and whether at least three of the four ways
+    meet something within ``enclosed_px`` (the cell lies inside a room's walls)."""
+    met, steps = _first_met(np.where(closed, np.int32(-1), segments), rows, cols)
+    within = met != 0
+    within[within] = steps[within] <= enclosed_px
+    return met, steps, np.count_nonzero(within, axis=0) >= 3
 
 
 def _first_met(

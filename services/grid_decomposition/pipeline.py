@@ -34,7 +34,13 @@ from services.grid_decomposition.errors import DecompositionError
 from services.grid_decomposition.faces import face_geometry
 from services.grid_decomposition.fans import split_fans
 from services.grid_decomposition.labelling import FaceLabels, assign_labels, evidence_labels, face_categories
-from services.grid_decomposition.loose import fill_between, fill_enclosed, give_far_pieces, join_and_fill_loose
+from services.grid_decomposition.loose import (
+    fill_between,
+    fill_enclosed,
+    fill_near,
+    give_far_pieces,
+    join_and_fill_loose,
+)
 from services.grid_decomposition.openings import join_unseen_openings, join_unseen_passages
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
 from services.grid_decomposition.places import categorize_places
@@ -99,7 +105,7 @@ _POST_MIN_RUN_M = 0.1
 _PASSAGE_MIN_BORDER_M = 0.5  # a strip between regions borders each of them along at least this ...
 _PASSAGE_MAX_WIDTH_M = 1.0  # ... and is nowhere wider than this (a cut strip a door deep; a room is wider)
 _FAN_GAP_M = 0.5  # rays this close are one fan (the cleaning bridges the unknown between them: twice its fan gap)
-_DOT_REACH_M = 1.0  # a dot that walls close in takes the region it sees this near along its row or column
+_DOT_REACH_M = 1.0  # a dot walls close in takes the region it sees this near in line (else reaches this near)
 _FAR_PIECE_M = 3.0  # a piece of a region this far from its body is dots of another room's rays ...
 _FAR_PIECE_REACH_M = 2.0  # ... given to the region that reaches it this near through cells not occupied
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
@@ -452,7 +458,9 @@ def decompose(
         A free cell no region holds (a dot of a laser ray) looks along its row and column, four ways, to the first
         obstacle, doorway line or region cell; when three of the four meet one within this distance (it lies inside
         a room's walls, not beyond the building's outer wall), it takes the region it meets nearest within 1 m
-        (:func:`~services.grid_decomposition.loose.fill_enclosed`); 0 turns it off.
+        (:func:`~services.grid_decomposition.loose.fill_enclosed`); such a cell (streaks included) that meets no
+        region so near in line takes the region that grows to it first within 1 m, through no obstacle or doorway
+        line (:func:`~services.grid_decomposition.loose.fill_near`); 0 turns both off.
     free_standing_ends : bool
         On a room map, two regions whose border is longer than ``door_max_width_m`` and ends on an obstacle standing
         free on their floor (the laser's hits off every seen wall and off their line, the free space round them
@@ -822,10 +830,16 @@ def decompose(
         segments = fill_between(segments, free, occupied, reach_px=fan_gap_px)
         doorways = door | cuts
         if enclosed_dots_m > 0:  # the dots beyond a fan's end that walls and floor close in: inside the room's walls
+            dot_reach_px = max(1, round(_DOT_REACH_M / resolution_m))
+            enclosed_px = max(1, round(enclosed_dots_m / resolution_m))
+            speck_px = max(1, round(min_region_area_m2 / resolution_m**2))
             segments = fill_enclosed(
-                segments, free, occupied, doorways, reach_px=max(1, round(_DOT_REACH_M / resolution_m)),
-                enclosed_px=max(1, round(enclosed_dots_m / resolution_m)),
-                min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+                segments, free, occupied, doorways, reach_px=dot_reach_px, enclosed_px=enclosed_px,
+                min_area_px=speck_px,
+            )  # in line with a region's floor; then beside it, the streaks beyond the streak fill too
+            segments = fill_near(
+                segments, free | streaks, occupied, doorways, reach_px=dot_reach_px, enclosed_px=enclosed_px,
+                min_area_px=speck_px,
             )
         if free_standing_ends and room_stage:  # a wide border ending on an obstacle that stands free: no doorway
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px | on_places)

@@ -10,6 +10,7 @@ from services.grid_decomposition.loose import (
     fill_between,
     fill_enclosed,
     fill_lone_regions,
+    fill_near,
     give_far_pieces,
     join_and_fill_loose,
     join_isolated_pieces,
@@ -166,6 +167,36 @@ def test_a_dot_in_a_room_behind_a_doorway_line_is_not_the_corridor_s() -> None:
     dots[45, 30] = True  # a dot in the room, 5 cells above the corridor through the door
     out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20)
     assert out[45, 30] == 0
+
+
+def test_dots_beside_a_fan_inside_the_room_s_walls_are_its_floor_and_dots_through_its_window_are_not() -> None:
+    seg = np.zeros((60, 80), dtype=np.int32)
+    occupied = np.zeros(seg.shape, dtype=bool)
+    occupied[10, 10:51] = occupied[50, 10:51] = occupied[10:51, 10] = occupied[10:51, 50] = True  # outer walls
+    occupied[26:34, 50] = False  # a window in the right wall
+    seg[25:35, 20:48] = 1  # the room's floor seen: a fan towards the window
+    dots = np.zeros(seg.shape, dtype=bool)
+    dots[22, 49] = dots[37, 49] = True  # beside the fan's end, off its rows and columns, inside the walls
+    dots[30, 53] = dots[28, 55] = True  # rays through the window, outside the building, as near the fan
+    free = (seg > 0) | dots
+    doorways = np.zeros(seg.shape, dtype=bool)
+    assert np.array_equal(  # no region in line with the dots beside the fan: the line fill leaves them
+        fill_enclosed(seg, free, occupied, doorways, reach_px=6, enclosed_px=100, min_area_px=20), seg
+    )
+    out = fill_near(seg, free, occupied, doorways, reach_px=6, enclosed_px=100, min_area_px=20)
+    assert out[22, 49] == 1 and out[37, 49] == 1
+    assert out[30, 53] == 0 and out[28, 55] == 0  # one way of four closed (the fan, back through the window)
+    assert np.array_equal(out[~dots], seg[~dots])
+
+
+def test_a_dot_inside_walls_is_not_reached_through_a_doorway_line_nor_by_a_speck() -> None:
+    seg, occupied, doorways, dots = _room_behind_a_door()
+    seg[40:49, 22:38] = 0  # the room not seen at all: only the corridor below its door
+    dots[46, 24] = True  # in the room, 3 cells above the doorway line, beside the door
+    seg[20:23, 15:18] = 3  # a speck of 9 cells in the room's corner
+    dots[24, 19] = True  # beside the speck
+    out = fill_near(seg, (seg > 0) | dots, occupied, doorways, reach_px=8, enclosed_px=100, min_area_px=20)
+    assert np.array_equal(out, seg)
 
 
 def _corridor_dots_in_a_room() -> tuple[np.ndarray, np.ndarray]:
