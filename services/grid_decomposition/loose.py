@@ -184,15 +184,23 @@ def _touching(segments: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.bool_]:
 
 
 def fill_between(
-    segments: npt.NDArray[np.int32], free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], *, reach_px: int
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    *,
+    reach_px: int,
+    floor: npt.NDArray[np.bool_],
 ) -> npt.NDArray[np.int32]:
     """``segments`` with each loose free cell that one region flanks on two opposite sides given to that region.
 
-    A dot of a ray (a free cell no region holds) with cells of one region within ``reach_px`` straight ahead
-    and straight behind it, along a row, a column or a diagonal, and no occupied cell between them, lies
-    between two pieces of that region's floor: between two rays of its fan, in a notch of its outline. The
-    dots of rays that leave a region through its windows and doors lie beyond it, flanked by it on one side
-    only, and stay loose. The four directions are taken in turn, each seeing the cells the ones before gave.
+    A dot of a ray (a free cell no region holds) with cells of one region's floor within ``reach_px`` straight
+    ahead and straight behind it, along a row, a column or a diagonal, and no occupied cell between them, lies
+    between two pieces of that floor: between two rays of its fan, in a notch of its outline. The dots of rays
+    that leave a region through its windows and doors lie beyond it, flanked by it on one side only, and stay
+    loose. A region's cells off ``floor`` (the furniture and unseen pockets a room's segment covers) flank no dot
+    and the look passes them: a pocket between two fans that the furniture fill gave the corridor across its
+    wall does not take the rays along its edge. The four directions are taken in turn, each seeing the cells the
+    ones before gave.
 
     Parameters
     ----------
@@ -201,12 +209,15 @@ def fill_between(
     free, occupied : (H, W) bool
     reach_px : int
         Along a diagonal a step counts as sqrt(2) cells.
+    floor : (H, W) bool
+        The cells where a region's label is floor one walks on: the free cells and the cleaning's streaks.
     """
     loose = free & (segments == 0)
     if not loose.any() or not segments.any():
         return segments
-    rows, cols = nonzero_rc(loose & near(segments > 0, reach_px))  # a flanked cell has a region within reach
-    out = segments.copy()
+    off_floor = (segments > 0) & ~floor
+    out = np.where(off_floor, np.int32(0), segments)  # the regions' floor: this function's own image
+    rows, cols = nonzero_rc(loose & near(out > 0, reach_px))  # a flanked cell has a region's floor within reach
     diagonal_px = int(reach_px / np.sqrt(2.0))
     for dr, dc, reach in ((0, 1, reach_px), (1, 0, reach_px), (1, 1, diagonal_px), (1, -1, diagonal_px)):
         loose_now = out[rows, cols] == 0  # the cells given in a direction before are no longer looked at
@@ -216,7 +227,7 @@ def fill_between(
         behind = _nearest(out, occupied, rows[flanked], cols[flanked], -dr, -dc, reach)
         take = flanked[behind == ahead[flanked]]
         out[rows[take], cols[take]] = ahead[take]
-    return out
+    return np.where(off_floor, segments, out)
 
 
 def _nearest(
@@ -262,14 +273,18 @@ def fill_enclosed(
     reach_px: int,
     enclosed_px: int,
     min_area_px: int,
+    floor: npt.NDArray[np.bool_],
 ) -> npt.NDArray[np.int32]:
     """``segments`` with the loose free cells that walls and floor close in given to the nearest region in view.
 
     A dot of a ray (a free cell no region holds) looks along its row and its column, four ways, each up to the
     first obstacle, doorway line or region cell. When at least three of the four ways meet one within
     ``enclosed_px``, the dot lies inside a room's walls (a dot beyond a building's outer wall sees nothing
-    outwards), and it takes the region it meets nearest within ``reach_px``: the floor of its room seen beyond
-    the fan's end, never across a wall or a doorway line. Regions under ``min_area_px`` (specks) take none.
+    outwards), and it takes the region whose floor it meets nearest within ``reach_px``: the floor of its room
+    seen beyond the fan's end, never across a wall or a doorway line. A region's cells off ``floor`` (furniture
+    and unseen pockets its segment covers) close the room as walls do, and give the dot their region only when
+    no region's floor is in reach: a pocket behind a corridor's wall that the furniture fill gave the corridor
+    does not take the rays of the room it lies in. Regions under ``min_area_px`` (specks) take none.
 
     Parameters
     ----------
@@ -278,6 +293,8 @@ def fill_enclosed(
     free, occupied, doorways : (H, W) bool
         ``doorways``: the closed doorway lines and cuts between regions; they close a room as its walls do.
     reach_px, enclosed_px, min_area_px : int
+    floor : (H, W) bool
+        The cells where a region's label is floor one walks on: the free cells and the cleaning's streaks.
     """
     loose = free & (segments == 0)
     if not loose.any() or not segments.any():
@@ -292,11 +309,26 @@ def fill_enclosed(
     enclosed = np.count_nonzero(within, axis=0) >= 3
     may_take = (met > 0) & (steps <= reach_px)
     may_take[may_take] = takes[met[may_take]]
-    way = np.argmin(np.where(may_take, steps, enclosed_px + reach_px + 1), axis=0)  # the nearest region that may take
+    # the nearest region met on its floor that may take, else the nearest met off it, else none
+    beyond = enclosed_px + reach_px + 1
+    cost = np.where(may_take, steps + np.where(_met_on(floor, rows, cols, steps), 0, beyond), 2 * beyond)
+    way = np.argmin(cost, axis=0)
     region = np.take_along_axis(np.where(may_take, met, 0), way[None], axis=0)[0]
     take = enclosed & (region > 0)
     out = segments.copy()
     out[rows[take], cols[take]] = region[take]
+    return out
+
+
+def _met_on(
+    mask: npt.NDArray[np.bool_], rows: npt.NDArray[np.int64], cols: npt.NDArray[np.int64],
+    steps: npt.NDArray[np.int64],
+) -> npt.NDArray[np.bool_]:
+    """(4, N) ``mask`` at the cell :func:`_first_met` met each way (right, left, down, up of (rows, cols),
+    ``steps`` away; the cell itself where it met none, 0 steps)."""
+    out = np.empty(steps.shape, dtype=bool)
+    for k, (dr, dc) in enumerate(((0, 1), (0, -1), (1, 0), (-1, 0))):
+        out[k] = mask[rows + dr * steps[k], cols + dc * steps[k]]
     return out
 
 

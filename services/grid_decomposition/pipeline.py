@@ -819,13 +819,13 @@ def decompose(
             reach_px=fan_gap_px, min_area_px=round(min_region_area_m2 / resolution_m**2),
         )
         # a dot of a ray between two cells of one region (between two rays of its fan, in a notch of its outline)
-        segments = fill_between(segments, free, occupied, reach_px=fan_gap_px)
+        segments = fill_between(segments, free, occupied, reach_px=fan_gap_px, floor=floor_space)
         doorways = door | cuts
         if enclosed_dots_m > 0:  # the dots beyond a fan's end that walls and floor close in: inside the room's walls
             segments = fill_enclosed(
                 segments, free, occupied, doorways, reach_px=max(1, round(_DOT_REACH_M / resolution_m)),
                 enclosed_px=max(1, round(enclosed_dots_m / resolution_m)),
-                min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)),
+                min_area_px=max(1, round(min_region_area_m2 / resolution_m**2)), floor=floor_space,
             )
         if free_standing_ends and room_stage:  # a wide border ending on an obstacle that stands free: no doorway
             size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px | on_places)
