@@ -215,32 +215,33 @@ def fill_between(
     loose = free & (segments == 0)
     if not loose.any() or not segments.any():
         return segments
-    off_floor = (segments > 0) & ~floor
-    out = np.where(off_floor, np.int32(0), segments)  # the regions' floor: this function's own image
-    rows, cols = nonzero_rc(loose & near(out > 0, reach_px))  # a flanked cell has a region's floor within reach
+    rows, cols = nonzero_rc(loose & near(segments > 0, reach_px))  # a flanked cell has a region within reach
+    out = segments.copy()
     diagonal_px = int(reach_px / np.sqrt(2.0))
     for dr, dc, reach in ((0, 1, reach_px), (1, 0, reach_px), (1, 1, diagonal_px), (1, -1, diagonal_px)):
         loose_now = out[rows, cols] == 0  # the cells given in a direction before are no longer looked at
         rows, cols = rows[loose_now], cols[loose_now]
-        ahead = _nearest(out, occupied, rows, cols, dr, dc, reach)
+        ahead = _nearest(out, occupied, floor, rows, cols, dr, dc, reach)
         flanked = np.flatnonzero(ahead > 0)  # only these are looked behind
-        behind = _nearest(out, occupied, rows[flanked], cols[flanked], -dr, -dc, reach)
+        behind = _nearest(out, occupied, floor, rows[flanked], cols[flanked], -dr, -dc, reach)
         take = flanked[behind == ahead[flanked]]
         out[rows[take], cols[take]] = ahead[take]
-    return np.where(off_floor, segments, out)
+    return out
 
 
 def _nearest(
     region: npt.NDArray[np.int32],
     stop: npt.NDArray[np.bool_],
+    floor: npt.NDArray[np.bool_],
     rows: npt.NDArray[np.int64],
     cols: npt.NDArray[np.int64],
     dr: int,
     dc: int,
     reach: int,
 ) -> npt.NDArray[np.int32]:
-    """Per cell (rows, cols), the region of the first region cell in steps of (dr, dc) when it comes within
-    ``reach`` steps and before any ``stop`` cell or the image's edge; 0 otherwise."""
+    """Per cell (rows, cols), the region of the first region cell on ``floor`` in steps of (dr, dc) when it comes
+    within ``reach`` steps and before any ``stop`` cell or the image's edge; 0 otherwise. Region cells off the
+    floor are passed."""
     h, w = region.shape
     # per cell the steps the image's edge leaves it, at most reach; the cells looked up by flat index
     room = np.full(rows.size, reach)
@@ -249,7 +250,7 @@ def _nearest(
     if dc:
         np.minimum(room, w - 1 - cols if dc > 0 else cols, out=room)
     at, step = rows * w + cols, dr * w + dc
-    flat_region, flat_stop = region.ravel(), stop.ravel()
+    flat_region, flat_stop, flat_floor = region.ravel(), stop.ravel(), floor.ravel()
     found = np.zeros(rows.size, dtype=np.int32)
     open_ = np.arange(rows.size)  # the cells still looking
     for k in range(1, reach + 1):
@@ -257,7 +258,7 @@ def _nearest(
         if open_.size == 0:
             break
         cell = at[open_] + k * step
-        seen = flat_region[cell]
+        seen = flat_region[cell] * flat_floor[cell]
         found[open_] = seen
         open_ = open_[(seen == 0) & ~flat_stop[cell]]
     return found
@@ -306,15 +307,16 @@ def fill_enclosed(
     met, steps = _first_met(seen, rows, cols)  # (4, N): right, left, down, up
     within = met != 0
     within[within] = steps[within] <= enclosed_px
-    enclosed = np.count_nonzero(within, axis=0) >= 3
+    enclosed = np.flatnonzero(np.count_nonzero(within, axis=0) >= 3)  # only these take a region
+    rows, cols, met, steps = rows[enclosed], cols[enclosed], met[:, enclosed], steps[:, enclosed]
     may_take = (met > 0) & (steps <= reach_px)
     may_take[may_take] = takes[met[may_take]]
     # the nearest region met on its floor that may take, else the nearest met off it, else none
     beyond = enclosed_px + reach_px + 1
-    cost = np.where(may_take, steps + np.where(_met_on(floor, rows, cols, steps), 0, beyond), 2 * beyond)
+    cost = np.where(may_take, steps + beyond * ~_met_on(floor, rows, cols, steps, may_take), 2 * beyond)
     way = np.argmin(cost, axis=0)
     region = np.take_along_axis(np.where(may_take, met, 0), way[None], axis=0)[0]
-    take = enclosed & (region > 0)
+    take = region > 0
     out = segments.copy()
     out[rows[take], cols[take]] = region[take]
     return out
@@ -322,13 +324,14 @@ def fill_enclosed(
 
 def _met_on(
     mask: npt.NDArray[np.bool_], rows: npt.NDArray[np.int64], cols: npt.NDArray[np.int64],
-    steps: npt.NDArray[np.int64],
+    steps: npt.NDArray[np.int64], looked: npt.NDArray[np.bool_],
 ) -> npt.NDArray[np.bool_]:
     """(4, N) ``mask`` at the cell :func:`_first_met` met each way (right, left, down, up of (rows, cols),
-    ``steps`` away; the cell itself where it met none, 0 steps)."""
-    out = np.empty(steps.shape, dtype=bool)
+    ``steps`` away) where ``looked`` (4, N), False elsewhere."""
+    out = np.zeros(steps.shape, dtype=bool)
     for k, (dr, dc) in enumerate(((0, 1), (0, -1), (1, 0), (-1, 0))):
-        out[k] = mask[rows + dr * steps[k], cols + dc * steps[k]]
+        i = np.flatnonzero(looked[k])
+        out[k, i] = mask[rows[i] + dr * steps[k, i], cols[i] + dc * steps[k, i]]
     return out
 
 
