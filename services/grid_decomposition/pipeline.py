@@ -451,7 +451,8 @@ def decompose(
     enclosed_dots_m : float
         A free cell no region holds (a dot of a laser ray) looks along its row and column, four ways, to the first
         obstacle, doorway line or region cell; when three of the four meet one within this distance (it lies inside
-        a room's walls, not beyond the building's outer wall), it takes the region it meets nearest within 1 m
+        a room's walls, not beyond the building's outer wall), it takes the region whose floor it meets nearest
+        within 1 m, else the region of the furniture or unseen pocket it meets nearest
         (:func:`~services.grid_decomposition.loose.fill_enclosed`); 0 turns it off.
     free_standing_ends : bool
         On a room map, two regions whose border is longer than ``door_max_width_m`` and ends on an obstacle standing
