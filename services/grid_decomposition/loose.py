@@ -184,15 +184,23 @@ def _touching(segments: npt.NDArray[np.int32], n: int) -> npt.NDArray[np.bool_]:
 
 
 def fill_between(
-    segments: npt.NDArray[np.int32], free: npt.NDArray[np.bool_], occupied: npt.NDArray[np.bool_], *, reach_px: int
+    segments: npt.NDArray[np.int32],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    *,
+    reach_px: int,
+    floor: npt.NDArray[np.bool_],
 ) -> npt.NDArray[np.int32]:
     """``segments`` with each loose free cell that one region flanks on two opposite sides given to that region.
 
-    A dot of a ray (a free cell no region holds) with cells of one region within ``reach_px`` straight ahead
-    and straight behind it, along a row, a column or a diagonal, and no occupied cell between them, lies
-    between two pieces of that region's floor: between two rays of its fan, in a notch of its outline. The
-    dots of rays that leave a region through its windows and doors lie beyond it, flanked by it on one side
-    only, and stay loose. The four directions are taken in turn, each seeing the cells the ones before gave.
+    A dot of a ray (a free cell no region holds) with cells of one region's floor within ``reach_px`` straight
+    ahead and straight behind it, along a row, a column or a diagonal, and no occupied cell between them, lies
+    between two pieces of that floor: between two rays of its fan, in a notch of its outline. The dots of rays
+    that leave a region through its windows and doors lie beyond it, flanked by it on one side only, and stay
+    loose. A region's cells off ``floor`` (the furniture and unseen pockets a room's segment covers) flank no dot
+    and the look passes them: a pocket between two fans that the furniture fill gave the corridor across its
+    wall does not take the rays along its edge. The four directions are taken in turn, each seeing the cells the
+    ones before gave.
 
     Parameters
     ----------
@@ -201,6 +209,8 @@ def fill_between(
     free, occupied : (H, W) bool
     reach_px : int
         Along a diagonal a step counts as sqrt(2) cells.
+    floor : (H, W) bool
+        The cells where a region's label is floor one walks on: the free cells and the cleaning's streaks.
     """
     loose = free & (segments == 0)
     if not loose.any() or not segments.any():
@@ -211,9 +221,9 @@ def fill_between(
     for dr, dc, reach in ((0, 1, reach_px), (1, 0, reach_px), (1, 1, diagonal_px), (1, -1, diagonal_px)):
         loose_now = out[rows, cols] == 0  # the cells given in a direction before are no longer looked at
         rows, cols = rows[loose_now], cols[loose_now]
-        ahead = _nearest(out, occupied, rows, cols, dr, dc, reach)
+        ahead = _nearest(out, occupied, floor, rows, cols, dr, dc, reach)
         flanked = np.flatnonzero(ahead > 0)  # only these are looked behind
-        behind = _nearest(out, occupied, rows[flanked], cols[flanked], -dr, -dc, reach)
+        behind = _nearest(out, occupied, floor, rows[flanked], cols[flanked], -dr, -dc, reach)
         take = flanked[behind == ahead[flanked]]
         out[rows[take], cols[take]] = ahead[take]
     return out
@@ -222,14 +232,16 @@ def fill_between(
 def _nearest(
     region: npt.NDArray[np.int32],
     stop: npt.NDArray[np.bool_],
+    floor: npt.NDArray[np.bool_],
     rows: npt.NDArray[np.int64],
     cols: npt.NDArray[np.int64],
     dr: int,
     dc: int,
     reach: int,
 ) -> npt.NDArray[np.int32]:
-    """Per cell (rows, cols), the region of the first region cell in steps of (dr, dc) when it comes within
-    ``reach`` steps and before any ``stop`` cell or the image's edge; 0 otherwise."""
+    """Per cell (rows, cols), the region of the first region cell on ``floor`` in steps of (dr, dc) when it comes
+    within ``reach`` steps and before any ``stop`` cell or the image's edge; 0 otherwise. Region cells off the
+    floor are passed."""
     h, w = region.shape
     # per cell the steps the image's edge leaves it, at most reach; the cells looked up by flat index
     room = np.full(rows.size, reach)
@@ -238,7 +250,7 @@ def _nearest(
     if dc:
         np.minimum(room, w - 1 - cols if dc > 0 else cols, out=room)
     at, step = rows * w + cols, dr * w + dc
-    flat_region, flat_stop = region.ravel(), stop.ravel()
+    flat_region, flat_stop, flat_floor = region.ravel(), stop.ravel(), floor.ravel()
     found = np.zeros(rows.size, dtype=np.int32)
     open_ = np.arange(rows.size)  # the cells still looking
     for k in range(1, reach + 1):
@@ -246,7 +258,7 @@ def _nearest(
         if open_.size == 0:
             break
         cell = at[open_] + k * step
-        seen = flat_region[cell]
+        seen = flat_region[cell] * flat_floor[cell]
         found[open_] = seen
         open_ = open_[(seen == 0) & ~flat_stop[cell]]
     return found
@@ -262,15 +274,19 @@ def fill_enclosed(
     reach_px: int,
     enclosed_px: int,
     min_area_px: int,
+    floor: npt.NDArray[np.bool_],
 ) -> npt.NDArray[np.int32]:
     """``segments`` with the loose free cells that walls and floor close in given to the nearest region in view.
 
     A dot of a ray (a free cell no region holds) looks along its row and its column, four ways, each up to the
     first obstacle, doorway line or region cell. When at least three of the four ways meet one within
     ``enclosed_px``, the dot lies inside a room's walls (a dot beyond a building's outer wall sees nothing
-    outwards), and it takes the region it meets nearest within ``reach_px``: the floor of its room seen beyond
-    the fan's end, never across a wall or a doorway line. Regions under ``min_area_px`` (specks) take none. The dots
-    it meets no region near in line with are :func:`fill_near`'s.
+    outwards), and it takes the region whose floor it meets nearest within ``reach_px``: the floor of its room
+    seen beyond the fan's end, never across a wall or a doorway line. A region's cells off ``floor`` (furniture
+    and unseen pockets its segment covers) close the room as walls do, and give the dot their region only when
+    no region's floor is in reach: a pocket behind a corridor's wall that the furniture fill gave the corridor
+    does not take the rays of the room it lies in. Regions under ``min_area_px`` (specks) take none. The
+    dots it meets no region near in line with are :func:`fill_near`'s.
 
     Parameters
     ----------
@@ -279,6 +295,8 @@ def fill_enclosed(
     free, occupied, doorways : (H, W) bool
         ``doorways``: the closed doorway lines and cuts between regions; they close a room as its walls do.
     reach_px, enclosed_px, min_area_px : int
+    floor : (H, W) bool
+        The cells where a region's label is floor one walks on: the free cells and the cleaning's streaks.
     """
     loose = free & (segments == 0)
     if not loose.any() or not segments.any():
@@ -287,11 +305,15 @@ def fill_enclosed(
     takes[0] = False
     rows, cols = nonzero_rc(loose)
     met, steps, enclosed = _enclosed(segments, occupied | doorways, rows, cols, enclosed_px)
+    rows, cols, met, steps = rows[enclosed], cols[enclosed], met[:, enclosed], steps[:, enclosed]  # only these take
     may_take = (met > 0) & (steps <= reach_px)
     may_take[may_take] = takes[met[may_take]]
-    way = np.argmin(np.where(may_take, steps, enclosed_px + reach_px + 1), axis=0)  # the nearest region that may take
+    # the nearest region met on its floor that may take, else the nearest met off it, else none
+    beyond = enclosed_px + reach_px + 1
+    cost = np.where(may_take, steps + beyond * ~_met_on(floor, rows, cols, steps, may_take), 2 * beyond)
+    way = np.argmin(cost, axis=0)
     region = np.take_along_axis(np.where(may_take, met, 0), way[None], axis=0)[0]
-    take = enclosed & (region > 0)
+    take = region > 0
     out = segments.copy()
     out[rows[take], cols[take]] = region[take]
     return out
@@ -360,6 +382,19 @@ def _enclosed(
     within = met != 0
     within[within] = steps[within] <= enclosed_px
     return met, steps, np.count_nonzero(within, axis=0) >= 3
+
+
+def _met_on(
+    mask: npt.NDArray[np.bool_], rows: npt.NDArray[np.int64], cols: npt.NDArray[np.int64],
+    steps: npt.NDArray[np.int64], looked: npt.NDArray[np.bool_],
+) -> npt.NDArray[np.bool_]:
+    """(4, N) ``mask`` at the cell :func:`_first_met` met each way (right, left, down, up of (rows, cols),
+    ``steps`` away) where ``looked`` (4, N), False elsewhere."""
+    out = np.zeros(steps.shape, dtype=bool)
+    for k, (dr, dc) in enumerate(((0, 1), (0, -1), (1, 0), (-1, 0))):
+        i = np.flatnonzero(looked[k])
+        out[k, i] = mask[rows[i] + dr * steps[k, i], cols[i] + dc * steps[k, i]]
+    return out
 
 
 def _first_met(

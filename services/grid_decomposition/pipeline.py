@@ -457,7 +457,8 @@ def decompose(
     enclosed_dots_m : float
         A free cell no region holds (a dot of a laser ray) looks along its row and column, four ways, to the first
         obstacle, doorway line or region cell; when three of the four meet one within this distance (it lies inside
-        a room's walls, not beyond the building's outer wall), it takes the region it meets nearest within 1 m
+        a room's walls, not beyond the building's outer wall), it takes the region whose floor it meets nearest
+        within 1 m, else the region of the furniture or unseen pocket it meets nearest
         (:func:`~services.grid_decomposition.loose.fill_enclosed`); such a cell (streaks included) that meets no
         region so near in line takes the region that grows to it first within 1 m, through no obstacle or doorway
         line (:func:`~services.grid_decomposition.loose.fill_near`); 0 turns both off.
@@ -827,7 +828,7 @@ def decompose(
             reach_px=fan_gap_px, min_area_px=round(min_region_area_m2 / resolution_m**2),
         )
         # a dot of a ray between two cells of one region (between two rays of its fan, in a notch of its outline)
-        segments = fill_between(segments, free, occupied, reach_px=fan_gap_px)
+        segments = fill_between(segments, free, occupied, reach_px=fan_gap_px, floor=floor_space)
         doorways = door | cuts
         if enclosed_dots_m > 0:  # the dots beyond a fan's end that walls and floor close in: inside the room's walls
             dot_reach_px = max(1, round(_DOT_REACH_M / resolution_m))
@@ -835,7 +836,7 @@ def decompose(
             speck_px = max(1, round(min_region_area_m2 / resolution_m**2))
             segments = fill_enclosed(
                 segments, free, occupied, doorways, reach_px=dot_reach_px, enclosed_px=enclosed_px,
-                min_area_px=speck_px,
+                min_area_px=speck_px, floor=floor_space,
             )  # in line with a region's floor; then beside it, the streaks beyond the streak fill too
             segments = fill_near(
                 segments, free | streaks, occupied, doorways, reach_px=dot_reach_px, enclosed_px=enclosed_px,

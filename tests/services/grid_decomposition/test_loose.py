@@ -77,11 +77,26 @@ def test_a_dot_between_two_rays_of_one_fan_is_its_floor_and_one_beyond_the_fan_i
     seg[42:48, 55] = 1
     seg[42:48, 65] = 1
     occupied[45, 62] = True  # ... with an obstacle between
-    out = fill_between(seg, (seg > 0) | dots, occupied, reach_px=10)
+    out = fill_between(seg, (seg > 0) | dots, occupied, reach_px=10, floor=(seg > 0) | dots)
     assert out[30, 15] == 1 and out[40, 17] == 1
     assert out[40, 35] == 0 and out[50, 40] == 0 and out[40, 2] == 0
     assert out[45, 60] == 0
     assert np.array_equal(out[~dots], seg[~dots])
+
+
+def test_a_dot_between_two_parts_of_a_pocket_a_region_covers_off_its_floor_is_not_its() -> None:
+    """A pocket of unseen space the furniture fill gave region 1 (its cells off the floor) on both sides of a dot:
+    no floor of region 1 flanks it; its floor on both sides does."""
+    seg = np.zeros((20, 40), dtype=np.int32)
+    seg[:, :15] = 1
+    seg[:, 22:] = 1
+    dots = np.zeros(seg.shape, dtype=bool)
+    dots[10, 18] = True
+    floor = dots.copy()
+    floor[:, :5] = floor[:, 32:] = True  # region 1's floor beyond its pocket, out of reach
+    occupied = np.zeros(seg.shape, dtype=bool)
+    assert fill_between(seg, floor, occupied, reach_px=10, floor=floor)[10, 18] == 0
+    assert fill_between(seg, floor, occupied, reach_px=10, floor=(seg > 0) | dots)[10, 18] == 1
 
 
 def test_a_dot_between_two_regions_is_neither_s() -> None:
@@ -90,7 +105,7 @@ def test_a_dot_between_two_regions_is_neither_s() -> None:
     seg[:, 22:] = 2
     dots = np.zeros(seg.shape, dtype=bool)
     dots[10, 18] = True
-    out = fill_between(seg, (seg > 0) | dots, np.zeros(seg.shape, dtype=bool), reach_px=10)
+    out = fill_between(seg, (seg > 0) | dots, np.zeros(seg.shape, dtype=bool), reach_px=10, floor=(seg > 0) | dots)
     assert out[10, 18] == 0
 
 
@@ -144,9 +159,23 @@ def test_the_dots_beyond_a_fan_inside_the_room_s_walls_are_its_floor_and_those_b
     dots[5, 30] = True  # beyond the top wall, within reach of nothing
     dots[30, 53] = True  # beyond the right wall, next to it
     seg[28:34, 53:56] = 0
-    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20)
+    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20,
+                         floor=(seg > 0) | dots)
     assert out[33, 30] == 2 and out[36, 24] == 2
     assert out[5, 30] == 0 and out[30, 53] == 0
+    assert np.array_equal(out[~dots], seg[~dots])
+
+
+def test_a_dot_takes_the_floor_it_meets_before_a_pocket_another_region_covers_and_the_pocket_when_alone() -> None:
+    seg, occupied, doorways, dots = _room_behind_a_door()
+    seg[30:39, 12:23] = 1  # a pocket of unseen space in the room that the corridor's label covers, off the floor
+    floor = (seg == 2) | (seg == 1) & ~((np.arange(70)[:, None] < 40) & (np.arange(60)[None, :] < 23))
+    dots[36, 24] = True  # the pocket 2 cells left, the room's fan 4 cells below
+    dots[27, 14] = True  # the pocket 3 cells below, walls the other ways: no floor in reach
+    floor |= dots
+    out = fill_enclosed(seg, floor, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20, floor=floor)
+    assert out[36, 24] == 2
+    assert out[27, 14] == 1
     assert np.array_equal(out[~dots], seg[~dots])
 
 
@@ -155,7 +184,8 @@ def test_a_dot_the_region_reaches_only_round_a_corner_or_a_speck_reaches_is_not_
     dots[38, 40] = True  # diagonal to the fan's corner: the ways along its row and column meet walls, not the fan
     seg[20:23, 15:18] = 3  # a speck of 9 cells in the room's corner
     dots[21, 19] = True  # next to the speck, out of the fan's reach
-    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=4, enclosed_px=100, min_area_px=20)
+    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=4, enclosed_px=100, min_area_px=20,
+                         floor=(seg > 0) | dots)
     assert out[38, 40] == 0
     assert out[21, 19] == 0
     assert np.array_equal(out, seg)
@@ -165,7 +195,8 @@ def test_a_dot_in_a_room_behind_a_doorway_line_is_not_the_corridor_s() -> None:
     seg, occupied, doorways, dots = _room_behind_a_door()
     seg[40:49, 22:38] = 0  # the room not seen at all: only the corridor
     dots[45, 30] = True  # a dot in the room, 5 cells above the corridor through the door
-    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20)
+    out = fill_enclosed(seg, (seg > 0) | dots, occupied, doorways, reach_px=20, enclosed_px=100, min_area_px=20,
+                         floor=(seg > 0) | dots)
     assert out[45, 30] == 0
 
 
@@ -181,7 +212,7 @@ def test_dots_beside_a_fan_inside_the_room_s_walls_are_its_floor_and_dots_throug
     free = (seg > 0) | dots
     doorways = np.zeros(seg.shape, dtype=bool)
     assert np.array_equal(  # no region in line with the dots beside the fan: the line fill leaves them
-        fill_enclosed(seg, free, occupied, doorways, reach_px=6, enclosed_px=100, min_area_px=20), seg
+        fill_enclosed(seg, free, occupied, doorways, reach_px=6, enclosed_px=100, min_area_px=20, floor=free), seg
     )
     out = fill_near(seg, free, occupied, doorways, reach_px=6, enclosed_px=100, min_area_px=20)
     assert out[22, 49] == 1 and out[37, 49] == 1
