@@ -643,7 +643,9 @@ def decompose(
         cut_like_cells = np.where(found.off_pitch, PlaceLabel.STORAGE.value, evidence)
         automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
         # warehouse floors and road networks are split by their labels and left alone by the room stage
-        roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
+        roads = road_networks(  # (a fan of rays between unknown cells is no network of roads between blocks)
+            sub, cog, component, cog.face_free_px, automatic.label, free=free, occupied=occupied, known=known, rays=rays
+        )
         structured = warehouse_floors(component, cog.face_free_px, automatic.label) | roads
         region_of_face = face_regions(sub, cog, component, automatic.label, structured)
         # for the region graph, on the other thread (idle till the pairs) while this one draws the segments in long
