@@ -6,7 +6,8 @@ space: a dot is a piece too small to be a region and is dropped, and a fan whose
 falls into pieces that touch nothing, each its own tiny region. The ground truth draws one room there. The
 dots between the rays of a region's own fan, flanked by it on both sides, are its floor too, and so are the dots
 beyond a fan's end or beside it that walls and floor close in, inside the room's walls. Dots a region's label took
-far from its body, through a door into another room, are that room's.
+far from its body, through a door into another room, are that room's. A region mostly of rays whose border with a
+larger region the laser saw through, no occupied cell near any of it, is part of that region's fan.
 """
 
 from __future__ import annotations
@@ -17,7 +18,16 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.grid_decomposition.arrays import label_boxes, label_counts, lookup, near, nonzero_rc
+from services.grid_decomposition.arrays import (
+    border_steps,
+    label_boxes,
+    label_counts,
+    lookup,
+    near,
+    near_at,
+    nonzero_rc,
+)
+from services.grid_decomposition.openings import join_pairs
 from services.grid_decomposition.segments import fill_from_neighbours
 
 
@@ -264,7 +274,6 @@ def _nearest(
     return found
 
 
-
 def fill_enclosed(
     segments: npt.NDArray[np.int32],
     free: npt.NDArray[np.bool_],
@@ -471,3 +480,69 @@ def give_far_pieces(
     take = far & (grown > 0)
     out[take] = grown[take]
     return out
+
+
+def join_ray_pieces(
+    segments: npt.NDArray[np.int32],
+    occupied: npt.NDArray[np.bool_],
+    rays: npt.NDArray[np.bool_],
+    joinable: npt.NDArray[np.bool_],
+    *,
+    seen_px: float,
+    min_border_px: int,
+    min_ray_share: float = 0.5,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with each region of rays joined to a larger region it borders where the laser saw no wall.
+
+    A region at least ``min_ray_share`` of whose cells are ``rays`` (thin free space the cleaning kept) is space the
+    laser looked into, not floor it drove on. Where its border with a larger region (4-neighbour pixel pairs, at
+    least ``min_border_px`` of them) has no ``occupied`` cell within ``seen_px`` of any of its cells, the laser saw
+    through that border along its whole length: no wall and no jamb of a door lies between them (a doorway's jambs
+    are walls the laser hit beside the border, or within it), so the rays are the larger region's own, parted by the
+    lines and cuts drawn through the unknown between them. Such a region joins the larger region with which it
+    shares the longest such border. Only ``joinable`` regions (per id: off the warehouse floors and rack places)
+    join or take others. Ids 1..M (consecutive) when any join; else ``segments`` as given.
+
+    Parameters
+    ----------
+    segments : (H, W) int32
+        Region id per cell, 0 where none.
+    occupied, rays : (H, W) bool
+    joinable : (N + 1,) bool
+    seen_px : float
+        The chamfer radius within which an occupied cell walls a border cell.
+    min_border_px : int
+    min_ray_share : float
+    """
+    n = int(segments.max(initial=0)) + 1
+    if n < 3:
+        return segments
+    size, on_rays = label_counts(segments, n, rays)
+    of_rays = (on_rays >= min_ray_share * np.maximum(size, 1)) & joinable[:n] & (size > 0)
+    of_rays[0] = False
+    if not of_rays.any():
+        return segments
+    keys, rows, cols = [], [], []
+    for dy, dx, r, c, key in border_steps(segments, n):
+        a, b = key // n, key % n
+        mine = (of_rays[a] | of_rays[b]) & joinable[a] & joinable[b]  # (few: the rays' borders)
+        keys += [key[mine], key[mine]]
+        rows += [r[mine], r[mine] + dy]
+        cols += [c[mine], c[mine] + dx]
+    key = np.concatenate(keys)
+    if key.size == 0:
+        return segments
+    walled = near_at(occupied, np.concatenate(rows), np.concatenate(cols), seen_px, 5)
+    pair, which = np.unique(key, return_inverse=True)
+    length = np.bincount(which, minlength=pair.size) // 2  # each pixel pair counted from both its cells
+    open_border = (np.bincount(which, walled, minlength=pair.size) == 0) & (length >= min_border_px)
+    a, b = pair // n, pair % n
+    small, large = np.where(size[a] < size[b], a, b), np.where(size[a] < size[b], b, a)
+    take = open_border & of_rays[small] & (size[small] < size[large])
+    if not take.any():
+        return segments
+    small, large, length = small[take], large[take], length[take]
+    order = np.lexsort((-length, small))  # per region of rays, its longest open border first
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = small[order][1:] != small[order][:-1]
+    return join_pairs(segments, small[order][first], large[order][first])

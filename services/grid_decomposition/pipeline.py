@@ -40,6 +40,7 @@ from services.grid_decomposition.loose import (
     fill_near,
     give_far_pieces,
     join_and_fill_loose,
+    join_ray_pieces,
 )
 from services.grid_decomposition.openings import join_unseen_openings, join_unseen_passages
 from services.grid_decomposition.orientations import Gradients, dominant_orientations, oriented_gradients
@@ -108,6 +109,8 @@ _FAN_GAP_M = 0.5  # rays this close are one fan (the cleaning bridges the unknow
 _DOT_REACH_M = 1.0  # a dot walls close in takes the region it sees this near in line (else reaches this near)
 _FAR_PIECE_M = 3.0  # a piece of a region this far from its body is dots of another room's rays ...
 _FAR_PIECE_REACH_M = 2.0  # ... given to the region that reaches it this near through cells not occupied
+_SEEN_WALL_M = 0.15  # a border of a region of rays with no occupied cell this near the laser saw through
+_RAY_BORDER_MIN_M = 0.25  # ... along at least this (a corner or a ray's end is no border)
 # imported by the steps when first needed (about 0.9 s, once a process), loaded by decompose on its
 # second thread while the first steps run; all on one thread: two threads importing one package
 # at once can deadlock on its partly loaded modules. The line search needs the first batch; scikit-learn
@@ -652,7 +655,9 @@ def decompose(
         cut_like_cells = np.where(found.off_pitch, PlaceLabel.STORAGE.value, evidence)
         automatic = assign_labels(cut_like_cells, face_cat, cog.face_free_px)
         # warehouse floors and road networks are split by their labels and left alone by the room stage
-        roads = road_networks(sub, cog, component, cog.face_free_px, automatic.label)
+        roads = road_networks(  # (a fan of rays between unknown cells is no network of roads between blocks)
+            sub, cog, component, cog.face_free_px, automatic.label, free=free, occupied=occupied, known=known, rays=rays
+        )
         structured = warehouse_floors(component, cog.face_free_px, automatic.label) | roads
         region_of_face = face_regions(sub, cog, component, automatic.label, structured)
         # for the region graph, on the other thread (idle till the pairs) while this one draws the segments in long
@@ -854,6 +859,12 @@ def decompose(
             segments, occupied, on_places, far_px=round(_FAR_PIECE_M / resolution_m),
             reach_px=round(_FAR_PIECE_REACH_M / resolution_m),
         )
+        if room_stage:  # a region of rays whose border with a larger one the laser saw through is that one's
+            size, on_floor = label_counts(segments, int(segments.max()) + 1, floor_px | on_places)
+            segments = join_ray_pieces(
+                segments, occupied, rays, on_floor <= 0.5 * size,
+                seen_px=_SEEN_WALL_M / resolution_m, min_border_px=max(1, round(_RAY_BORDER_MIN_M / resolution_m)),
+            )
         grown_labels = beside.submit(_grown_face_labels, segments, face_labels, sub.face_image)  # beside the pairs
         closure = beside.submit(border_closure, segments, doorways)  # for the region graph, beside the records
         pairs = _pairs(segments, sub)

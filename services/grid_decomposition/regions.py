@@ -9,6 +9,7 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from services.grid_decomposition.arrays import lookup
 from services.grid_decomposition.cogency import EdgeCogency
 from services.grid_decomposition.segments import border_closure
 from services.grid_decomposition.semantics import link_connection
@@ -80,6 +81,10 @@ def road_networks(
     face_label: npt.NDArray[np.int64],
     *,
     min_road_share: float = 0.95,
+    free: npt.NDArray[np.bool_] | None = None,
+    occupied: npt.NDArray[np.bool_] | None = None,
+    known: npt.NDArray[np.bool_] | None = None,
+    rays: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.bool_]:
     """Per component id: a network of roads, at least ``min_road_share`` of its free area corridor
     and junction faces, with at least one junction and no closed doorway on its edges.
@@ -87,6 +92,12 @@ def road_networks(
     A grid of passages between solid blocks (the tuw warehouses) is one such component; split into
     corridors and junctions it gets a topology. An office corridor network has doors to its rooms
     (and rooms joined to corridors are not roads), so it stays one region for the room stage.
+
+    With ``free``, ``occupied``, ``known`` and ``rays`` (cell masks), roads are floor between blocks: a component
+    at least half of whose free cells are ``rays`` (thin free space the map's cleaning kept) and whose free space
+    is bounded (4-neighbours not free) by unknown cells more often than by ``occupied`` ones is no road network.
+    Laser rays fanning into a room the robot never entered are thin free space between unknown cells, which the
+    lines through that unknown cut into a grid of corridor-like and junction-like faces.
 
     Returns
     -------
@@ -103,6 +114,44 @@ def road_networks(
     has_door = np.bincount(component[door_faces], minlength=n_comp) > 0
     out: npt.NDArray[np.bool_] = (road_area >= min_road_share * np.maximum(area, 1)) & (junctions > 0) & ~has_door
     out[0] = False
+    if free is not None and occupied is not None and known is not None and rays is not None and out.any():
+        out &= ~_fans_of_rays(sub.face_image, component, out, free, occupied, known, rays)
+    return out
+
+
+def _fans_of_rays(
+    face_image: npt.NDArray[np.int32],
+    component: npt.NDArray[np.int64],
+    candidate: npt.NDArray[np.bool_],
+    free: npt.NDArray[np.bool_],
+    occupied: npt.NDArray[np.bool_],
+    known: npt.NDArray[np.bool_],
+    rays: npt.NDArray[np.bool_],
+) -> npt.NDArray[np.bool_]:
+    """Per component id (only ``candidate`` ones; the others False): at least half of the free cells of its faces
+    are ``rays``, and the cells bounding them (4-neighbours not free, each counted once per free neighbour) are
+    more often unknown than ``occupied``."""
+    n = int(component.max()) + 1
+    if not rays.any():  # (a map the cleaning left no rays on: a rack hall)
+        return np.zeros(n, dtype=bool)
+    comp = lookup(np.where(candidate[component], component, 0), face_image)  # the candidates' cells (lines: none)
+    comp[~free] = 0
+    rows, cols = np.flatnonzero(comp.any(axis=1)), np.flatnonzero(comp.any(axis=0))
+    box = (slice(max(0, rows[0] - 1), rows[-1] + 2), slice(max(0, cols[0] - 1), cols[-1] + 2))
+    comp, free, occupied, known, rays = comp[box], free[box], occupied[box], known[box], rays[box]
+    size = np.bincount(comp.ravel(), minlength=n)
+    thin = np.bincount(comp[rays], minlength=n)
+    h, w = comp.shape
+    hit = np.zeros(n, dtype=np.int64)
+    unseen = np.zeros(n, dtype=np.int64)
+    for a, b in (((slice(0, h - 1), slice(None)), (slice(1, h), slice(None))),
+                 ((slice(None), slice(0, w - 1)), (slice(None), slice(1, w)))):
+        for inside, beyond in ((a, b), (b, a)):
+            mine = comp[inside]
+            at = (mine > 0) & ~free[beyond]
+            hit += np.bincount(mine[at & occupied[beyond]], minlength=n)
+            unseen += np.bincount(mine[at & ~known[beyond]], minlength=n)
+    out: npt.NDArray[np.bool_] = candidate & (2 * thin >= size) & (unseen > hit)
     return out
 
 

@@ -14,6 +14,7 @@ from services.grid_decomposition.loose import (
     give_far_pieces,
     join_and_fill_loose,
     join_isolated_pieces,
+    join_ray_pieces,
 )
 
 
@@ -259,3 +260,36 @@ def test_a_far_piece_on_rack_places_keeps_its_region() -> None:
     places[30:32, 40:43] = True
     out = give_far_pieces(seg, occupied, places, far_px=10, reach_px=20)
     assert (out == seg).all()
+
+
+def _room_and_its_rays() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A room's floor (1) and, beside it, a piece of rays (2) the lines parted from it; no wall between them."""
+    seg = np.zeros((40, 40), dtype=np.int32)
+    seg[5:35, 2:20] = 1
+    seg[5:35, 20:30] = 2
+    rays = np.zeros(seg.shape, dtype=bool)
+    rays[5:35, 20:30] = True
+    occupied = np.zeros(seg.shape, dtype=bool)
+    occupied[0, :31] = occupied[39, :31] = True  # walls 5 cells off the border's ends
+    occupied[:, 0] = True
+    return seg, occupied, rays
+
+
+def test_a_region_of_rays_joins_the_region_whose_border_with_it_the_laser_saw_through() -> None:
+    seg, occupied, rays = _room_and_its_rays()
+    joinable = np.ones(3, dtype=bool)
+    out = join_ray_pieces(seg, occupied, rays, joinable, seen_px=3, min_border_px=5)
+    assert len(np.unique(out[seg > 0])) == 1 and (out[seg == 0] == 0).all()
+    # a region of floor, a region off the rooms' floors, or a jamb at the border keep theirs
+    assert join_ray_pieces(seg, occupied, np.zeros_like(rays), joinable, seen_px=3, min_border_px=5).max() == 2
+    assert join_ray_pieces(seg, occupied, rays, np.array([True, True, False]), seen_px=3, min_border_px=5).max() == 2
+    jamb = occupied.copy()
+    jamb[20, 19] = True
+    assert join_ray_pieces(seg, jamb, rays, joinable, seen_px=3, min_border_px=5).max() == 2
+
+
+def test_rays_seen_through_a_door_keep_their_region() -> None:
+    seg, occupied, rays = _room_and_its_rays()
+    occupied[:29, 20] = True  # a wall between them, a door 0.3 m wide at its foot: the rays beyond it
+    seg[occupied] = 0
+    assert join_ray_pieces(seg, occupied, rays, np.ones(3, dtype=bool), seen_px=3, min_border_px=5).max() == 2
