@@ -23,7 +23,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from services.grid_decomposition.errors import DecompositionError
-from services.grid_decomposition.segments import fill_from_neighbours
+from services.grid_decomposition.segments import fill_from_neighbours, join_small_regions
 
 IdGrid = npt.NDArray[np.integer]
 
@@ -98,7 +98,7 @@ def keep_regions(
     first_seen_max_px: int = 0,
     first_seen_min_border_px: int = 0,
     first_seen_min_px: int = 1,
-    first_seen_apart: npt.NDArray[np.bool_] | None = None,
+    apart: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.int32]:
     """``segments`` with the regions of ``prior`` kept where the map did not change.
 
@@ -108,17 +108,20 @@ def keep_regions(
     which at most ``min_overlap`` lies on those kept cells is a place found anew (a room seen through its door
     before, entered now) and stands whole; one lying mostly on them is a piece of them and gives way. Everything
     else is as ``segments`` has it. A region left in pieces keeps its largest; smaller pieces than
-    ``min_area_px`` join a neighbouring region. Settled regions the new decomposition holds as one are one
-    previous region when their border allows it (:func:`joined_regions`, at ``join_min_border_px`` and
-    ``join_min_width_share``; a border of 0 cells keeps every previous border). A room the new decomposition
-    parted at the door it is seen through (mostly on ``door_rooms``) and that continues a settled region takes
-    the kept cells of other settled regions inside it when they are fewer than ``sliver_max_px`` per region:
+    ``min_area_px`` join a neighbouring region, and so does a whole region smaller than that (a settled region of
+    which a few cells are unchanged and off ``apart``: the neighbour it shares the longest border with, none when it
+    touches none, :func:`~services.grid_decomposition.segments.join_small_regions`). Settled regions the new
+    decomposition holds as one are one previous region when their border allows it (:func:`joined_regions`, at
+    ``join_min_border_px`` and ``join_min_width_share``; a border of 0 cells keeps every previous border). A room
+    the new decomposition parted at the door it is seen through (mostly on ``door_rooms``) and that continues a
+    settled region takes the kept cells of other settled regions inside it when they are fewer than
+    ``sliver_max_px`` per region:
     floor just inside its door that a hall or corridor held while the room was seen in part is no room of its own,
     and the door's line is where the room ends (:func:`_slivers_to_door_rooms`; 0 keeps them all). Two regions
     of the result first seen at this step, touching along more than a door's width, are one room the frontier
     of what was seen cut at a line (:func:`_join_first_seen`, at ``first_seen_max_px``,
     ``first_seen_min_border_px`` and ``first_seen_min_px``; 0 keeps them apart); regions mostly on
-    ``first_seen_apart`` (places found anew at every step, such as racks) never join so.
+    ``apart`` (places found anew at every step, such as racks) never join so, nor take a small region.
 
     Parameters
     ----------
@@ -169,9 +172,11 @@ def keep_regions(
     present = np.bincount(out.ravel()) > 0
     present[0] = False
     kept = _largest_pieces(np.where(present, np.cumsum(present), 0).astype(np.int32)[out], min_area_px)
+    # a settled region whose unchanged cells are a few (the rest changed, or now on places found anew) is no region
+    kept = join_small_regions(kept, min_area_px=min_area_px, apart=apart)
     if first_seen_max_px <= 0:
         return kept
-    seen = before > 0 if first_seen_apart is None else (before > 0) | first_seen_apart
+    seen = before > 0 if apart is None else (before > 0) | apart
     return _join_first_seen(kept, seen, max_seen_share=min_overlap, max_px=first_seen_max_px,
                             min_border_px=first_seen_min_border_px, min_px=first_seen_min_px)
 

@@ -815,7 +815,7 @@ def decompose(
                 first_seen_min_px=round(first_seen_piece_min_m2 / resolution_m**2),
                 first_seen_max_px=round(first_seen_room_max_m2 / resolution_m**2),
                 first_seen_min_border_px=round(door_max_width_m / resolution_m),
-                first_seen_apart=on_places,
+                apart=on_places,
             )
             if fan_max_neck_m > 0:  # a settled region holds a room seen through its door as it held it before the
                 # room's walls were seen: the rooms behind doors are parted from the regions as kept, too
@@ -894,6 +894,9 @@ def decompose(
             pairs = _pairs(segments, sub)
             regions, labels = _region_records(segments, pairs, face_labels, grown_labels.result(), racked,
                                               resolution_m, origin_xy_m)
+        # a region under a room's least area is no room, whatever its faces say (open floor)
+        regions = {k: r._replace(label=PlaceLabel.OPEN_AREA)
+                   if r.label is PlaceLabel.ROOM and r.area_m2 < room_min_area_m2 else r for k, r in regions.items()}
         room_ids = [k for k, r in regions.items() if r.label is PlaceLabel.ROOM]
         in_places = MaskCounts(on_places).inside(segments) if room_ids else np.zeros(1, dtype=np.int64)
         on_rack_places = [k for k in room_ids if in_places[k] > 0]  # (every pixel counted only for these)

@@ -302,6 +302,48 @@ def merge_small_segments(
     return _relabel(seg, root, (area > 0) & ~dropped[root])
 
 
+def join_small_regions(
+    segments: npt.NDArray[np.int32],
+    *,
+    min_area_px: int,
+    apart: npt.NDArray[np.bool_] | None = None,
+) -> npt.NDArray[np.int32]:
+    """``segments`` with no region under ``min_area_px`` left: each joins the neighbour it shares the longest
+    border with (smallest first, borders adding up as in :func:`merge_small_segments`); one with no neighbour
+    left is no region (its cells 0, loose as specks are).
+
+    Regions mostly (over half) on ``apart`` (places found from racks: a bin is a region however little of its floor
+    was seen) are neither joined nor given a small region: floor is never storage. Returns ``segments`` itself when
+    no region is too small, else ids 1..M in the order of the old ids.
+    """
+    seg = np.asarray(segments, dtype=np.int32)
+    n = int(seg.max(initial=0)) + 1
+    area, on_apart = label_counts(seg, n, apart)
+    held = 2 * on_apart > area
+    small = (area > 0) & (area < min_area_px) & ~held
+    small[0] = False
+    if not small.any():
+        return seg
+    pairs, border, _ = border_closure(seg, None)
+    neighbours: list[dict[int, int]] = [{} for _ in range(n)]
+    for (p, q), c in zip(pairs.tolist(), border.tolist(), strict=True):
+        if not (held[p] or held[q]):
+            neighbours[p][q] = c
+            neighbours[q][p] = c
+    parent = np.arange(n)
+    dropped = np.zeros(n, dtype=bool)
+    area = area.copy()
+    for s in sorted(np.flatnonzero(small).tolist(), key=lambda i: area[i]):
+        if area[s] >= min_area_px:  # it took smaller ones in
+            continue
+        if not neighbours[s]:
+            dropped[s] = True
+            continue
+        _absorb(s, max(neighbours[s], key=lambda k: neighbours[s][k]), parent, area, neighbours)
+    root = _roots(parent)
+    return renumber_mapped(np.where(dropped[root], 0, root).astype(np.int32), seg)
+
+
 def merge_passages(
     segments: npt.NDArray[np.int32],
     *,

@@ -77,6 +77,17 @@ def test_pieces_a_kept_region_cuts_off_join_a_neighbour() -> None:
     assert _same_partition(out, expected)
 
 
+def test_a_settled_region_left_a_few_cells_off_the_places_joins_its_neighbour() -> None:
+    # region 9 of the previous step lies now mostly on a rack place found since (the prior leaves places out):
+    # its 6 unchanged cells left of the place would be a region of their own
+    before = _grid((4, slice(None), slice(0, 10)), (9, slice(0, 3), slice(10, 12)))
+    unchanged = np.ones(before.shape, dtype=bool)
+    unchanged[:, 12:] = False
+    after = _grid((1, slice(None), slice(0, 12)), (2, slice(None), slice(12, 20)))
+    out = keep_regions(after, RegionPrior(before, unchanged), min_area_px=10, apart=after == 2)
+    assert _same_partition(out, after), "no region under the minimum area, and the place keeps its own cells"
+
+
 DOOR_PX = 40  # the widest door, 2 m at 0.05 m a cell (``decompose`` passes ``door_max_width_m``)
 
 
@@ -143,7 +154,7 @@ def test_places_found_anew_at_every_step_do_not_join_as_first_seen() -> None:
     after = _grid((1, slice(0, 10), slice(None)), (2, slice(10, 40), slice(0, 30)), (3, slice(10, 40), slice(30, 60)),
                   shape=(40, 60))
     out = keep_regions(after, RegionPrior(before, np.ones(before.shape, dtype=bool)), first_seen_max_px=1800,
-                       first_seen_min_border_px=30, first_seen_apart=after == 3)
+                       first_seen_min_border_px=30, apart=after == 3)
     assert _same_partition(out, after)
 
 

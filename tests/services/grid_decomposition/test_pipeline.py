@@ -33,6 +33,11 @@ def test_decompose_splits_two_rooms_at_their_door() -> None:
     assert {info.label for info in d.regions.values()} == {PlaceLabel.ROOM}
 
 
+def test_a_region_under_a_rooms_least_area_is_never_a_room() -> None:
+    d = decompose(_two_rooms_and_a_door(), resolution_m=0.05, room_min_area_m2=40.0)  # 34 m² of floor in all
+    assert d.regions and all(info.label is not PlaceLabel.ROOM for info in d.regions.values())
+
+
 def test_two_doors_with_a_post_between_them_keep_two_rooms() -> None:
     # 10 x 13 m at 5 cm, a wall down the middle opened 3 m wide: two 1.4 m doors and a 0.2 m
     # post, drawn as a speck (a real map's door frame), too wide as one doorway

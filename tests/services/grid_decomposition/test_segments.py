@@ -11,6 +11,7 @@ from services.grid_decomposition.segments import (
     border_closure,
     fill_bytes_from_neighbours,
     fill_from_neighbours,
+    join_small_regions,
     merge_open_segments,
     merge_passages,
     merge_small_segments,
@@ -269,3 +270,18 @@ def test_renumber_mapped_is_the_renumbered_lookup(seed: int) -> None:
         assert got.dtype == np.int32 and got.shape == seg.shape and np.array_equal(got, expected)
     empty = np.zeros((0, 3), dtype=np.int32)
     assert renumber_mapped(np.arange(4, dtype=np.int32), empty).shape == (0, 3)
+
+
+def test_join_small_regions_gives_a_small_region_to_its_longest_border_but_never_to_a_place() -> None:
+    seg = np.ones((10, 20), dtype=np.int32)  # a room
+    seg[:, 12:] = seg[0, 8:12] = seg[5, 10:12] = 3  # a place (a bin) round three sides of region 2
+    seg[1:5, 10:12] = 2  # 8 cells: 8 cells of border with the place, 4 with the room
+    out = join_small_regions(seg, min_area_px=10, apart=seg == 3)
+    assert np.array_equal(out == out[9, 0], (seg == 1) | (seg == 2)), "it joins the room"
+    assert np.array_equal(out == out[0, 19], seg == 3), "the place neither joins nor takes a small region"
+    plain = join_small_regions(seg, min_area_px=10)
+    assert np.array_equal(plain == plain[0, 19], seg >= 2), "else it joins the longest border"
+    alone = np.zeros((6, 6), dtype=np.int32)
+    alone[1:3, 1:3] = 1
+    assert not join_small_regions(alone, min_area_px=5).any(), "a small region touching none is loose floor"
+    assert join_small_regions(seg, min_area_px=8) is seg, "nothing too small: as it is"
