@@ -310,8 +310,7 @@ def fill_enclosed(
     loose = free & (segments == 0)
     if not loose.any() or not segments.any():
         return segments
-    takes = label_counts(segments, int(segments.max()) + 1)[0] >= min_area_px
-    takes[0] = False
+    takes = _takers(segments, min_area_px)
     rows, cols = nonzero_rc(loose)
     met, steps, enclosed = _enclosed(segments, occupied | doorways, rows, cols, enclosed_px)
     rows, cols, met, steps = rows[enclosed], cols[enclosed], met[:, enclosed], steps[:, enclosed]  # only these take
@@ -365,8 +364,7 @@ def fill_near(
         return segments
     dots = np.zeros(segments.shape, dtype=bool)
     dots[rows[enclosed], cols[enclosed]] = True
-    takes = label_counts(segments, int(segments.max()) + 1)[0] >= min_area_px
-    takes[0] = False
+    takes = _takers(segments, min_area_px)
     # a growth of reach_px steps to a dot passes only cells within reach_px of it (chessboard)
     size = 2 * reach_px + 1
     way = cv2.dilate(dots.view(np.uint8), np.ones((size, size), np.uint8)).view(bool)
@@ -375,6 +373,13 @@ def fill_near(
     grown = fill_from_neighbours(lookup(_own_ids(takes), segments), way, max_iterations=reach_px, overwrite=True)
     out: npt.NDArray[np.int32] = np.where(dots & (grown > 0), grown, segments)
     return out
+
+
+def _takers(segments: npt.NDArray[np.int32], min_area_px: int) -> npt.NDArray[np.bool_]:
+    """Per region id: whether it may take dots (at least ``min_area_px`` cells: no speck, never id 0)."""
+    takes: npt.NDArray[np.bool_] = label_counts(segments, int(segments.max()) + 1)[0] >= min_area_px
+    takes[0] = False
+    return takes
 
 
 def _enclosed(
